@@ -1,0 +1,1 @@
+//! cpm-calib (work in progress).

@@ -1,0 +1,1 @@
+//! cpm-clearance (work in progress).

@@ -1,0 +1,1 @@
+//! cpm-geometry (work in progress).

@@ -1,0 +1,1 @@
+//! cpm-kinematics (work in progress).

@@ -1,0 +1,1 @@
+//! cpm-lm (work in progress).

@@ -1,0 +1,7 @@
+//! cpm: calibration of parallel manipulators. Facade over the workspace crates.
+
+pub use cpm_calib as calib;
+pub use cpm_clearance as clearance;
+pub use cpm_geometry as geometry;
+pub use cpm_kinematics as kinematics;
+pub use cpm_lm as lm;
