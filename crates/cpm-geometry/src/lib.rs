@@ -1,1 +1,37 @@
-//! cpm-geometry (work in progress).
+//! Poses, rotations, joint tables and installation errors of parallel manipulators.
+//!
+//! Conventions used across `cpm`:
+//! - positions and lengths in millimetres (`_mm`), installation errors in micrometres (`_um`)
+//!   where they cross a boundary, angles in radians inside and degrees in files (`_deg`);
+//! - orientation `R = Rz(yaw) * Ry(pitch) * Rx(roll)`: rotate about the fixed x axis by roll,
+//!   then about the fixed y axis by pitch, then about the fixed z axis by yaw (the paper's eq. 1
+//!   as its text describes it; see [`rotation`]).
+//!
+//! ```
+//! use cpm_geometry::{JointTable, InstallationErrors, Pose};
+//! let nominal = JointTable::paper_cubic();
+//! assert_eq!(nominal.num_links(), 6);
+//! let actual = InstallationErrors::paper_table2().apply(&nominal).unwrap();
+//! // Link 1's base joint moved by (13.7, 1.2, 89.4) um.
+//! let d = actual.links[0].base_mm - nominal.links[0].base_mm;
+//! assert!((d.z - 0.0894).abs() < 1e-12);
+//! let home = nominal.home;
+//! assert_eq!(home.position_mm.z, 410.0);
+//! # let _ = Pose::identity();
+//! ```
+#![warn(missing_docs)]
+
+pub mod description;
+pub mod error;
+pub mod errors;
+pub mod joints;
+pub mod pose;
+#[cfg(feature = "proptest")]
+pub mod strategies;
+pub mod rotation;
+
+pub use error::GeometryError;
+pub use errors::{InstallationErrors, PlatformSign, Side};
+pub use joints::{JointTable, Link, Sensor};
+pub use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+pub use pose::Pose;

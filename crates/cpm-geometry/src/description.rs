@@ -1,0 +1,1 @@
+//! Robot description files (TOML): joint table, sensors, home pose, clearance, load.
