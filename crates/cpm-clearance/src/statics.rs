@@ -1,0 +1,85 @@
+//! Platform statics: the applied wrench and the axial link forces that balance it.
+use cpm_geometry::{JointTable, Pose};
+use nalgebra::{DMatrix, DVector, Vector3, Vector6};
+use serde::{Deserialize, Serialize};
+
+use crate::ClearanceError;
+
+/// The load on the platform: weights at their centres of mass plus an external wrench.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Load {
+    /// Platform mass, kg. Default 20 (an assumption: the paper gives none).
+    pub platform_mass_kg: f64,
+    /// Platform centre of mass in {P}, mm. Default (0, 0, -100).
+    pub platform_com_mm: Vector3<f64>,
+    /// Payload mass, kg. Default 0.
+    pub payload_mass_kg: f64,
+    /// Payload centre of mass in {P}, mm. Default origin.
+    pub payload_com_mm: Vector3<f64>,
+    /// Gravity in {B}, mm/s^2. Default (0, 0, -9806.65).
+    pub gravity_mm_s2: Vector3<f64>,
+    /// External force on the platform at its origin, {B}, N. Default zero.
+    pub external_force_n: Vector3<f64>,
+    /// External moment on the platform, {B}, N mm. Default zero.
+    pub external_moment_nmm: Vector3<f64>,
+}
+
+impl Default for Load {
+    fn default() -> Self {
+        Self {
+            platform_mass_kg: 20.0,
+            platform_com_mm: Vector3::new(0.0, 0.0, -100.0),
+            payload_mass_kg: 0.0,
+            payload_com_mm: Vector3::zeros(),
+            gravity_mm_s2: Vector3::new(0.0, 0.0, -9806.65),
+            external_force_n: Vector3::zeros(),
+            external_moment_nmm: Vector3::zeros(),
+        }
+    }
+}
+
+/// The wrench `[F (N); M (N mm)]` applied to the platform at `pose`, moments about the
+/// platform origin, both in {B}.
+pub fn platform_wrench(load: &Load, pose: &Pose) -> Vector6<f64> {
+    let g_n_per_kg = load.gravity_mm_s2 * 1e-3;
+    let mut f = load.external_force_n;
+    let mut m = load.external_moment_nmm;
+    for (mass, com) in [
+        (load.platform_mass_kg, load.platform_com_mm),
+        (load.payload_mass_kg, load.payload_com_mm),
+    ] {
+        let w = g_n_per_kg * mass;
+        let arm = pose.rotation * com;
+        f += w;
+        m += arm.cross(&w);
+    }
+    Vector6::new(f.x, f.y, f.z, m.x, m.y, m.z)
+}
+
+/// Axial link forces (N, tension positive) that hold the platform at `pose` under `load`:
+/// the solution of `J1^T t = w` (least norm for more than six links).
+///
+/// A link in tension pulls the platform towards its base joint, i.e. applies `-t_i z_i`; the
+/// balance `sum_i -t_i z_i + F = 0`, `sum_i s_i x (-t_i z_i) + M = 0` is `J1^T t = w`.
+pub fn link_forces_n(
+    table: &JointTable,
+    pose: &Pose,
+    load: &Load,
+) -> Result<Vec<f64>, ClearanceError> {
+    let j1: DMatrix<f64> = cpm_kinematics::j1(table, pose);
+    let w = platform_wrench(load, pose);
+    let svd = j1.transpose().svd(true, true);
+    let smax = svd.singular_values.max();
+    let smin = svd.singular_values.min();
+    if !(smin > smax * 1e-10) {
+        return Err(ClearanceError::Singular {
+            condition: smax / smin,
+        });
+    }
+    let t = svd
+        .solve(&DVector::from_column_slice(w.as_slice()), 0.0)
+        .map_err(|_| ClearanceError::Singular {
+            condition: f64::INFINITY,
+        })?;
+    Ok(t.iter().copied().collect())
+}

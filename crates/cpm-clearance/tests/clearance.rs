@@ -1,0 +1,95 @@
+//! Clearance sign logic and statics balance.
+use cpm_clearance::{link_forces_n, platform_wrench, ClearanceModel, Load, SignRule};
+use cpm_geometry::{JointTable, Pose};
+use nalgebra::Vector3;
+
+fn poses() -> Vec<Pose> {
+    let home = JointTable::paper_cubic().home;
+    vec![
+        home,
+        Pose::from_xyz_rpy(50.0, -30.0, 420.0, 0.1, -0.05, 0.2),
+        Pose::from_xyz_rpy(-80.0, 60.0, 390.0, -0.2, 0.1, -0.1),
+    ]
+}
+
+#[test]
+fn forces_balance_the_wrench() {
+    let table = JointTable::paper_cubic();
+    let load = Load {
+        external_force_n: Vector3::new(5.0, -3.0, 2.0),
+        ..Load::default()
+    };
+    for pose in poses() {
+        let t = link_forces_n(&table, &pose, &load).unwrap();
+        let j1 = cpm_kinematics::j1(&table, &pose);
+        let w = platform_wrench(&load, &pose);
+        let back = j1.transpose() * nalgebra::DVector::from_vec(t);
+        for k in 0..6 {
+            assert!((back[k] - w[k]).abs() < 1e-9 * (1.0 + w[k].abs()), "{k}");
+        }
+    }
+}
+
+#[test]
+fn zero_clearance_gives_zero_correction() {
+    let table = JointTable::paper_cubic();
+    for rule in [SignRule::Hard, SignRule::Smooth { force_scale_n: 1.0 }] {
+        let m = ClearanceModel {
+            radius_um: 0.0,
+            rule,
+        };
+        for pose in poses() {
+            let dl = m.link_corrections_mm(&table, &pose, &Load::default()).unwrap();
+            assert!(dl.iter().all(|v| *v == 0.0));
+        }
+    }
+}
+
+#[test]
+fn flipping_the_load_flips_the_sign() {
+    let table = JointTable::paper_cubic();
+    let m = ClearanceModel::default();
+    let down = Load::default();
+    let up = Load {
+        gravity_mm_s2: -down.gravity_mm_s2,
+        ..down
+    };
+    for pose in poses() {
+        let a = m.link_corrections_mm(&table, &pose, &down).unwrap();
+        let b = m.link_corrections_mm(&table, &pose, &up).unwrap();
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(*x, -*y);
+            assert!((x.abs() - 0.020).abs() < 1e-15 || *x == 0.0);
+        }
+    }
+}
+
+#[test]
+fn weight_puts_z_links_in_compression() {
+    let table = JointTable::paper_cubic();
+    let t = link_forces_n(&table, &table.home, &Load::default()).unwrap();
+    // Total weight 20 kg * 9.80665 = 196.1 N carried by links 1-3 (vertical).
+    let sum: f64 = t[..3].iter().sum();
+    assert!((sum + 196.133).abs() < 1e-3, "{sum}");
+}
+
+#[test]
+fn smooth_rule_matches_hard_rule_away_from_zero_and_is_continuous() {
+    let s = SignRule::Smooth { force_scale_n: 1.0 };
+    assert!((s.factor(50.0) - 1.0).abs() < 1e-12);
+    assert!((s.factor(-50.0) + 1.0).abs() < 1e-12);
+    assert!(s.factor(1e-9).abs() < 1e-8);
+    assert_eq!(SignRule::Hard.factor(0.0), 0.0);
+}
+
+#[test]
+fn invalid_radius_is_rejected() {
+    let m = ClearanceModel {
+        radius_um: f64::NAN,
+        rule: SignRule::Hard,
+    };
+    let e = m
+        .link_corrections_mm(&JointTable::paper_cubic(), &Pose::identity(), &Load::default())
+        .unwrap_err();
+    assert!(e.to_string().contains("radius_um"));
+}
