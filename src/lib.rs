@@ -5,3 +5,7 @@ pub use cpm_clearance as clearance;
 pub use cpm_geometry as geometry;
 pub use cpm_kinematics as kinematics;
 pub use cpm_lm as lm;
+
+pub mod output;
+pub mod paper_report;
+pub mod plot;

@@ -1,0 +1,107 @@
+//! Measurement campaigns: commanded poses and the length-sensor readings taken at them.
+use cpm_geometry::Pose;
+use serde::{Deserialize, Serialize};
+
+/// One length-sensor reading.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Reading {
+    /// Index of the commanded pose in [`Campaign::poses`].
+    pub pose: usize,
+    /// Index of the sensor (socket pair) in the joint table's `sensors`.
+    pub sensor: usize,
+    /// The reading (average of its repeats), mm.
+    pub length_mm: f64,
+    /// Acquisition time, s, if logged.
+    pub time_s: Option<f64>,
+    /// Temperature, deg C, if logged.
+    pub temperature_c: Option<f64>,
+}
+
+/// A measurement campaign: commanded poses and readings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+pub struct Campaign {
+    /// Commanded platform poses.
+    pub poses: Vec<Pose>,
+    /// Link lengths actually commanded per pose (mm), when the controller logged them;
+    /// otherwise the nominal inverse kinematics of the commanded pose is used.
+    pub commanded_lengths_mm: Option<Vec<Vec<f64>>>,
+    /// Sensor readings.
+    pub readings: Vec<Reading>,
+    /// True when the readings were simulated, not measured. Carried into every output.
+    pub simulated: bool,
+}
+
+impl Campaign {
+    /// Number of readings.
+    pub fn len(&self) -> usize {
+        self.readings.len()
+    }
+
+    /// True when there are no readings.
+    pub fn is_empty(&self) -> bool {
+        self.readings.is_empty()
+    }
+
+    /// The readings' lengths, mm.
+    pub fn lengths_mm(&self) -> Vec<f64> {
+        self.readings.iter().map(|r| r.length_mm).collect()
+    }
+}
+
+/// A plan: poses to drive and sensors to read at each (every sensor at every pose).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Plan {
+    /// Commanded poses.
+    pub poses: Vec<Pose>,
+    /// Sensor indices read at every pose.
+    pub sensors: Vec<usize>,
+}
+
+impl Plan {
+    /// A campaign skeleton for this plan: readings with zero length (for Jacobians and design).
+    pub fn skeleton(&self) -> Campaign {
+        let mut readings = Vec::with_capacity(self.poses.len() * self.sensors.len());
+        for p in 0..self.poses.len() {
+            for &s in &self.sensors {
+                readings.push(Reading {
+                    pose: p,
+                    sensor: s,
+                    length_mm: 0.0,
+                    time_s: None,
+                    temperature_c: None,
+                });
+            }
+        }
+        Campaign {
+            poses: self.poses.clone(),
+            commanded_lengths_mm: None,
+            readings,
+            simulated: true,
+        }
+    }
+
+    /// Number of readings the plan takes.
+    pub fn num_readings(&self) -> usize {
+        self.poses.len() * self.sensors.len()
+    }
+}
+
+/// The paper's circle: radius 100 mm about `centre` in its xy plane, counter-clockwise,
+/// constant orientation, a pose every 10 degrees from 0 to 350 (36 poses).
+pub fn paper_circle(centre: &Pose) -> Vec<Pose> {
+    circle(centre, 100.0, 36)
+}
+
+/// `n` poses on a circle of `radius_mm` about `centre` (xy plane, counter-clockwise,
+/// orientation of `centre`), starting at angle 0.
+pub fn circle(centre: &Pose, radius_mm: f64, n: usize) -> Vec<Pose> {
+    (0..n)
+        .map(|k| {
+            let a = (k as f64) * std::f64::consts::TAU / n as f64;
+            let mut p = *centre;
+            p.position_mm.x += radius_mm * a.cos();
+            p.position_mm.y += radius_mm * a.sin();
+            p
+        })
+        .collect()
+}

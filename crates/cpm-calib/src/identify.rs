@@ -1,0 +1,274 @@
+//! Rank-aware identification of the installation errors (the cost of eq. 16 with cpm-lm).
+//!
+//! The fit is done in the identifiable subspace only: with `V_r` the identifiable directions
+//! of the Jacobian at the start, the errors are `e = e_0 + V_r theta` and Levenberg-Marquardt
+//! minimises `F = 1/2 sum_j (y_j(e) - y_j^measured)^2` over `theta`. Blind directions are left
+//! at their start value (zero: the nominal), so the estimate is the minimum-norm solution, and
+//! only parameters the data determine on their own are reported as estimates.
+use cpm_lm::{DenseJacobian, ModelError, Problem};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use crate::identifiability::{analyze, physical_patterns, Identifiability, RankOptions};
+use crate::model::{predict, Prepared};
+use crate::{CalibError, Campaign, MeasurementModel};
+
+/// Options of [`identify`].
+#[derive(Debug, Clone)]
+pub struct IdentifyOptions {
+    /// Least-squares options (damping strategy etc.). Default: cpm-lm's defaults (Nielsen).
+    pub lm: cpm_lm::Options,
+    /// Rank thresholds. Default [`RankOptions::default`].
+    pub rank: RankOptions,
+    /// Sensor noise standard deviation, um, if known; otherwise estimated from the residual.
+    pub sigma_um: Option<f64>,
+    /// Start values of the installation errors, um. Default zero (the nominal geometry).
+    pub start_um: Option<Vec<f64>>,
+}
+
+impl Default for IdentifyOptions {
+    fn default() -> Self {
+        Self {
+            lm: cpm_lm::Options::default(),
+            rank: RankOptions::default(),
+            sigma_um: None,
+            start_um: None,
+        }
+    }
+}
+
+/// An identifiable combination `v^T e` of the installation errors and its estimate.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Combination {
+    /// Singular value of the direction (um of reading per um of error, over the campaign).
+    pub singular_value: f64,
+    /// Estimate of `v^T e`, um.
+    pub estimate_um: f64,
+    /// Its standard deviation, um.
+    pub std_um: f64,
+    /// The largest loadings: (parameter index, coefficient).
+    pub loadings: Vec<(usize, f64)>,
+}
+
+/// The result of an identification.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// True when the data were simulated.
+    pub simulated: bool,
+    /// Estimate per parameter, um; `None` where the data do not determine it.
+    pub estimate_um: Vec<Option<f64>>,
+    /// Standard deviation per parameter, um; `None` where not determined.
+    pub std_um: Vec<Option<f64>>,
+    /// The minimum-norm solution (determined parts plus identifiable combinations, blind
+    /// directions at zero), um. Use for compensation, never report its undetermined entries as
+    /// measured values.
+    pub minimum_norm_um: Vec<f64>,
+    /// Identifiable combinations with their estimates.
+    pub combinations: Vec<Combination>,
+    /// Identifiability at the solution (sigma as used for the bounds).
+    pub identifiability: Identifiability,
+    /// Noise standard deviation used for the standard deviations, um.
+    pub sigma_um: f64,
+    /// True when `sigma_um` was estimated from the residual (not declared).
+    pub sigma_estimated: bool,
+    /// Residuals (predicted - measured) at the solution, um.
+    pub residuals_um: Vec<f64>,
+    /// RMS residual at the start, um.
+    pub initial_rms_um: f64,
+    /// RMS residual at the solution, um.
+    pub residual_rms_um: f64,
+    /// The solver's report.
+    pub solver: cpm_lm::Report,
+}
+
+struct Subspace<'a> {
+    model: &'a MeasurementModel,
+    prepared: &'a Prepared,
+    campaign: &'a Campaign,
+    start_um: DVector<f64>,
+    basis: DMatrix<f64>,
+    measured_mm: Vec<f64>,
+    full_jac: DMatrix<f64>,
+}
+
+impl Subspace<'_> {
+    fn errors(&self, theta: &[f64]) -> Vec<f64> {
+        let e = &self.start_um + &self.basis * DVector::from_column_slice(theta);
+        e.iter().copied().collect()
+    }
+}
+
+impl Problem for Subspace<'_> {
+    fn num_params(&self) -> usize {
+        self.basis.ncols()
+    }
+    fn num_residuals(&self) -> usize {
+        self.measured_mm.len()
+    }
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+        let y = predict(self.model, self.prepared, self.campaign, &self.errors(x), None)?;
+        for ((ri, yi), mi) in r.iter_mut().zip(&y).zip(&self.measured_mm) {
+            *ri = (yi - mi) * 1e3;
+        }
+        Ok(())
+    }
+}
+
+impl DenseJacobian for Subspace<'_> {
+    fn jacobian(&mut self, x: &[f64], mut jac: faer::MatMut<'_, f64>) -> Result<(), ModelError> {
+        let e = self.errors(x);
+        predict(
+            self.model,
+            self.prepared,
+            self.campaign,
+            &e,
+            Some(&mut self.full_jac),
+        )?;
+        let reduced = &self.full_jac * &self.basis * 1e3;
+        for c in 0..reduced.ncols() {
+            for r in 0..reduced.nrows() {
+                jac[(r, c)] = reduced[(r, c)];
+            }
+        }
+        Ok(())
+    }
+}
+
+fn rms(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+    }
+}
+
+/// The identification Jacobian (readings x parameters, um of reading per um of error) at
+/// installation errors `errors_um`.
+pub fn identification_jacobian(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    errors_um: &[f64],
+) -> Result<DMatrix<f64>, CalibError> {
+    let prepared = Prepared::new(model, campaign)?;
+    let mut j = DMatrix::zeros(campaign.len(), model.num_params());
+    predict(model, &prepared, campaign, errors_um, Some(&mut j))?;
+    Ok(j * 1e3)
+}
+
+/// Identifiability of a campaign (or plan skeleton) at the nominal geometry.
+pub fn identifiability(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    sigma_um: f64,
+    options: &RankOptions,
+) -> Result<Identifiability, CalibError> {
+    let j = identification_jacobian(model, campaign, &vec![0.0; model.num_params()])?;
+    Ok(analyze(
+        &j,
+        sigma_um,
+        options,
+        &physical_patterns(model, campaign),
+    ))
+}
+
+/// Identifies the installation errors from a campaign.
+pub fn identify(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+) -> Result<Calibration, CalibError> {
+    options.lm.validate()?;
+    let np = model.num_params();
+    let start = options.start_um.clone().unwrap_or_else(|| vec![0.0; np]);
+    if start.len() != np {
+        return Err(CalibError::invalid(
+            "start_um",
+            format!("{} values, expected {np}", start.len()),
+        ));
+    }
+    if let Some(s) = options.sigma_um {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(CalibError::invalid("sigma_um", format!("{s} must be finite and > 0")));
+        }
+    }
+    let prepared = Prepared::new(model, campaign)?;
+    let m = campaign.len();
+    let mut j0 = DMatrix::zeros(m, np);
+    predict(model, &prepared, campaign, &start, Some(&mut j0))?;
+    let patterns = physical_patterns(model, campaign);
+    let first = analyze(&(&j0 * 1e3), 1.0, &options.rank, &patterns);
+    if first.rank == 0 {
+        return Err(CalibError::NoInformation(
+            "the identification Jacobian is zero: the readings do not depend on any installation error".into(),
+        ));
+    }
+    let mut problem = Subspace {
+        model,
+        prepared: &prepared,
+        campaign,
+        start_um: DVector::from_vec(start),
+        basis: first.row_space(),
+        measured_mm: campaign.lengths_mm(),
+        full_jac: DMatrix::zeros(m, np),
+    };
+    let mut theta = vec![0.0; first.rank];
+    let mut r0 = vec![0.0; m];
+    problem
+        .residuals(&theta, &mut r0)
+        .map_err(|e| CalibError::invalid("model at the start", e.to_string()))?;
+    let solver = cpm_lm::minimize(&mut problem, &mut theta, &options.lm)?;
+    let e_hat = problem.errors(&theta);
+    let mut jf = DMatrix::zeros(m, np);
+    let y = predict(model, &prepared, campaign, &e_hat, Some(&mut jf))?;
+    let residuals_um: Vec<f64> = y
+        .iter()
+        .zip(&problem.measured_mm)
+        .map(|(a, b)| (a - b) * 1e3)
+        .collect();
+    let jf = jf * 1e3;
+    let ssr: f64 = residuals_um.iter().map(|r| r * r).sum();
+    let (sigma_um, sigma_estimated) = match options.sigma_um {
+        Some(s) => (s, false),
+        None => {
+            let dof = m.saturating_sub(first.rank).max(1);
+            ((ssr / dof as f64).sqrt(), true)
+        }
+    };
+    let mut ident = analyze(&jf, sigma_um, &options.rank, &[]);
+    // Blind directions are named at the start (the nominal geometry, where the physical
+    // patterns are exact); at the solution the errors tilt them by a few microradians.
+    ident.blind_directions = first.blind_directions.clone();
+    ident.unexplained_null_dimensions = (ident.num_params - ident.rank)
+        .saturating_sub(first.blind_directions.iter().map(|b| b.dimensions).sum());
+    let estimate_um: Vec<Option<f64>> = (0..np)
+        .map(|k| ident.determined[k].then_some(e_hat[k]))
+        .collect();
+    let combinations = (0..ident.rank)
+        .map(|c| {
+            let v = ident.v.column(c);
+            let mut load: Vec<(usize, f64)> = v.iter().copied().enumerate().collect();
+            load.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            load.truncate(4);
+            Combination {
+                singular_value: ident.singular_values[c],
+                estimate_um: v.dot(&DVector::from_column_slice(&e_hat)),
+                std_um: ident.combination_std_um[c],
+                loadings: load,
+            }
+        })
+        .collect();
+    Ok(Calibration {
+        simulated: campaign.simulated,
+        estimate_um,
+        std_um: ident.crlb_std_um.clone(),
+        minimum_norm_um: e_hat,
+        combinations,
+        identifiability: ident,
+        sigma_um,
+        sigma_estimated,
+        initial_rms_um: rms(&r0),
+        residual_rms_um: rms(&residuals_um),
+        residuals_um,
+        solver,
+    })
+}

@@ -1,0 +1,350 @@
+//! The paper's numerical example (Lim et al. 2002, section 6) and a campaign that does
+//! identify all 36 errors: the computations behind `cargo xtask reproduce-paper`.
+//!
+//! Everything here is simulation: the readings are made from the paper's Table 2 through the
+//! measurement model, with the paper's clearance and noise.
+use cpm_geometry::{InstallationErrors, JointTable, Pose, Sensor};
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+
+use crate::campaign::{paper_circle, Plan};
+use crate::identifiability::{Identifiability, RankOptions};
+use crate::model::{predict, Prepared};
+use crate::{
+    accuracy, identify, simulate, AccuracyReport, CalibError, Calibration, IdentifyOptions,
+    MeasurementModel, Noise, SimulationOptions,
+};
+
+/// RMS and max of a difference of two error sets, um.
+pub fn rms_max_diff(a: &[f64], b: &[f64]) -> (f64, f64) {
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len().max(1) as f64).sqrt();
+    let max = d.iter().map(|x| x.abs()).fold(0.0, f64::max);
+    (rms, max)
+}
+
+/// Flips the sign of the platform-side components (the `p - dp` convention expressed in
+/// `p + dp` terms).
+pub fn platform_negated(errors_um: &[f64]) -> Vec<f64> {
+    errors_um
+        .iter()
+        .enumerate()
+        .map(|(k, v)| if (k % 6) >= 3 { -v } else { *v })
+        .collect()
+}
+
+/// Noise-free readings of a campaign plan for installation errors `errors_um`, mm.
+pub fn noise_free_readings(
+    model: &MeasurementModel,
+    plan: &Plan,
+    errors_um: &[f64],
+) -> Result<Vec<f64>, CalibError> {
+    let c = plan.skeleton();
+    let prepared = Prepared::new(model, &c)?;
+    predict(model, &prepared, &c, errors_um, None)
+}
+
+/// RMS difference (um) between the readings predicted with Table 3 and with Table 2 on the
+/// paper's circle, with platform errors applied as `p + dp` (`plus`) and `p - dp` (`minus`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Table3Check {
+    /// Platform side as `p + dp`.
+    pub plus: f64,
+    /// Platform side as `p - dp`.
+    pub minus: f64,
+}
+
+/// Computes [`Table3Check`] for a plan.
+pub fn table3_check(model: &MeasurementModel, plan: &Plan) -> Result<Table3Check, CalibError> {
+    let t2 = InstallationErrors::paper_table2().to_vec_um();
+    let t3 = InstallationErrors::paper_table3().to_vec_um();
+    let diff = |a: &[f64], b: &[f64]| -> Result<f64, CalibError> {
+        let ya = noise_free_readings(model, plan, a)?;
+        let yb = noise_free_readings(model, plan, b)?;
+        Ok(rms_max_diff(&ya, &yb).0 * 1e3)
+    };
+    Ok(Table3Check {
+        plus: diff(&t3, &t2)?,
+        minus: diff(&platform_negated(&t3), &platform_negated(&t2))?,
+    })
+}
+
+/// Extra sensor sockets for the designed campaign: four base sockets around the machine and
+/// four platform sockets, every base socket paired with every platform socket (16 sensors,
+/// named `b{i}p{j}`). The paper's sockets are `b1` and `p1`.
+pub fn designed_sensors() -> Vec<Sensor> {
+    let base = [
+        [-200.0, 500.0, 500.0],
+        [350.0, -350.0, 450.0],
+        [-400.0, -250.0, 250.0],
+        [400.0, 300.0, 250.0],
+    ];
+    let platform = [
+        [-200.0, 205.0, -5.0],
+        [150.0, -150.0, 0.0],
+        [-150.0, -150.0, -150.0],
+        [150.0, 150.0, -250.0],
+    ];
+    let mut out = Vec::new();
+    for (i, b) in base.iter().enumerate() {
+        for (j, p) in platform.iter().enumerate() {
+            out.push(Sensor::new(&format!("b{}p{}", i + 1, j + 1), *b, *p));
+        }
+    }
+    out
+}
+
+/// Random poses around `home`: position uniform in +-`dpos_mm`, roll/pitch/yaw uniform in
+/// +-`dang_deg`, seeded.
+pub fn random_poses(home: &Pose, n: usize, dpos_mm: f64, dang_deg: f64, seed: u64) -> Vec<Pose> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let a = dang_deg.to_radians();
+    (0..n)
+        .map(|_| {
+            let mut u = || rng.random_range(-1.0..=1.0);
+            let (x, y, z) = (u() * dpos_mm, u() * dpos_mm, u() * dpos_mm);
+            let (r, p, w) = (u() * a, u() * a, u() * a);
+            Pose::new(
+                home.position_mm + nalgebra::Vector3::new(x, y, z),
+                cpm_geometry::rotation::from_rpy(r, p, w) * home.rotation,
+            )
+        })
+        .collect()
+}
+
+/// Condition number of J1 at a pose (6x6 only; infinity otherwise).
+pub fn j1_condition(table: &JointTable, pose: &Pose) -> f64 {
+    let j = cpm_kinematics::j1(table, pose);
+    if j.nrows() != 6 {
+        return f64::INFINITY;
+    }
+    let m = nalgebra::Matrix6::from_iterator(j.iter().copied());
+    cpm_kinematics::fk::condition_number(&m)
+}
+
+/// Like [`random_poses`], keeping only poses where the machine is well conditioned: J1's
+/// condition number at most `max_condition_ratio` times its value at home, and link lengths
+/// within their limits where the table has any. Draws until `n` are found (at most 100 n
+/// draws).
+pub fn random_workspace_poses(
+    table: &JointTable,
+    n: usize,
+    dpos_mm: f64,
+    dang_deg: f64,
+    max_condition_ratio: f64,
+    seed: u64,
+) -> Vec<Pose> {
+    let c0 = j1_condition(table, &table.home);
+    let mut out = Vec::with_capacity(n);
+    let mut batch = seed;
+    while out.len() < n && batch < seed + 100 {
+        for p in random_poses(&table.home, n, dpos_mm, dang_deg, batch.wrapping_mul(7919)) {
+            if out.len() == n {
+                break;
+            }
+            let within = cpm_kinematics::inverse_lengths(table, &p)
+                .iter()
+                .zip(&table.links)
+                .all(|(l, link)| match link.length_limits_mm {
+                    Some((lo, hi)) => *l >= lo && *l <= hi,
+                    None => true,
+                });
+            if within && j1_condition(table, &p) <= max_condition_ratio * c0 {
+                out.push(p);
+            }
+        }
+        batch += 1;
+    }
+    out
+}
+
+/// Settings of the reproduction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PaperOptions {
+    /// Seed of the simulated noise. Default 2002.
+    pub seed: u64,
+    /// Noise, default the paper's uniform +-10 um.
+    pub noise: Noise,
+    /// Poses of the designed campaign (16 sensors read at each). Default 125 (2000 readings).
+    pub designed_poses: usize,
+    /// Half range of the designed poses' positions about home, mm. Default 100.
+    pub designed_range_mm: f64,
+    /// Half range of the designed poses' roll, pitch and yaw, deg. Default 25.
+    pub designed_range_deg: f64,
+    /// Validation poses for the accuracy figures. Default 200.
+    pub validation_poses: usize,
+    /// Damping of the paper-design fit. Default: the paper's cubic-interpolation rule.
+    pub paper_damping: cpm_lm::Damping,
+}
+
+impl Default for PaperOptions {
+    fn default() -> Self {
+        Self {
+            seed: 2002,
+            noise: Noise::Uniform {
+                half_width_um: 10.0,
+            },
+            designed_poses: 125,
+            designed_range_mm: 100.0,
+            designed_range_deg: 25.0,
+            validation_poses: 200,
+            paper_damping: cpm_lm::Damping::CubicInterpolation,
+        }
+    }
+}
+
+/// One campaign's outcome.
+#[derive(Debug, Clone)]
+pub struct CampaignOutcome {
+    /// The plan (poses and sensors).
+    pub plan: Plan,
+    /// The calibration.
+    pub calibration: Calibration,
+    /// Estimates against Table 2 over determined parameters: (RMS, max), um.
+    pub error_vs_truth_um: Option<(f64, f64)>,
+    /// Pose accuracy, nominal against calibrated (minimum-norm solution).
+    pub accuracy: AccuracyReport,
+}
+
+/// Everything the reproduction reports.
+#[derive(Debug, Clone)]
+pub struct PaperReproduction {
+    /// Options used.
+    pub options: PaperOptions,
+    /// The paper's design: its circle, one sensor.
+    pub paper: CampaignOutcome,
+    /// Identifiability of the paper's design at a range of rank thresholds (rtol, rank).
+    pub rank_vs_threshold: Vec<(f64, usize)>,
+    /// Table 3 against Table 2 through the paper's own readings.
+    pub table3: Table3Check,
+    /// Table 3 minus Table 2 on the parameters: (RMS, max), um.
+    pub table3_vs_table2_um: (f64, f64),
+    /// The same as seen in the identifiable subspace of the paper's design: norm of the
+    /// projection of Table 3 - Table 2 on that subspace, over the norm of the difference,
+    /// for `plus` and `minus`.
+    pub table3_visible_fraction: (f64, f64),
+    /// The designed campaign.
+    pub designed: CampaignOutcome,
+    /// Identifiability of the designed plan at the nominal geometry (for the bounds).
+    pub designed_identifiability: Identifiability,
+}
+
+fn outcome(
+    model: &MeasurementModel,
+    plan: Plan,
+    truth: &[f64],
+    sim: &SimulationOptions,
+    ident: &IdentifyOptions,
+    validation: &[Pose],
+) -> Result<CampaignOutcome, CalibError> {
+    let data = simulate(model, truth, &plan, sim)?;
+    let calibration = identify(model, &data, ident)?;
+    let det: Vec<(f64, f64)> = calibration
+        .estimate_um
+        .iter()
+        .zip(truth)
+        .filter_map(|(e, t)| e.map(|e| (e, *t)))
+        .collect();
+    let error_vs_truth_um = if det.is_empty() {
+        None
+    } else {
+        let (a, b): (Vec<f64>, Vec<f64>) = det.into_iter().unzip();
+        Some(rms_max_diff(&a, &b))
+    };
+    let accuracy = accuracy(model, truth, &calibration.minimum_norm_um, validation)?;
+    Ok(CampaignOutcome {
+        plan,
+        calibration,
+        error_vs_truth_um,
+        accuracy,
+    })
+}
+
+/// Runs the paper's example and the designed campaign. `progress` is told each stage.
+pub fn reproduce(
+    options: &PaperOptions,
+    mut progress: impl FnMut(&str),
+) -> Result<PaperReproduction, CalibError> {
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let t3 = InstallationErrors::paper_table3().to_vec_um();
+    let sim = SimulationOptions {
+        noise: options.noise,
+        repeats: 1,
+        seed: options.seed,
+    };
+    let sigma = sim.reading_sigma_um();
+    let model = MeasurementModel::new(JointTable::paper_cubic());
+    let home = model.nominal.home;
+    let validation = random_poses(&home, options.validation_poses, 60.0, 8.0, options.seed + 7);
+
+    progress("paper design: the circle, one sensor");
+    let paper_plan = Plan {
+        poses: paper_circle(&home),
+        sensors: vec![0],
+    };
+    let mut ident = IdentifyOptions {
+        sigma_um: Some(sigma),
+        ..IdentifyOptions::default()
+    };
+    ident.lm.damping = options.paper_damping;
+    let paper = outcome(&model, paper_plan.clone(), &truth, &sim, &ident, &validation)?;
+    let j = crate::identification_jacobian(&model, &paper_plan.skeleton(), &vec![0.0; 36])?;
+    let rank_vs_threshold = [1e-3, 3e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6, 1e-8]
+        .iter()
+        .map(|&rtol| {
+            let a = crate::analyze(
+                &j,
+                sigma,
+                &RankOptions {
+                    rank_rtol: rtol,
+                    ..RankOptions::default()
+                },
+                &[],
+            );
+            (rtol, a.rank)
+        })
+        .collect();
+    let table3 = table3_check(&model, &paper_plan)?;
+    let table3_vs_table2_um = rms_max_diff(&t3, &truth);
+    let a = crate::analyze(&j, sigma, &RankOptions::default(), &[]);
+    let vis = |d: Vec<f64>| {
+        let d = nalgebra::DVector::from_vec(d);
+        let proj = a.row_space().transpose() * &d;
+        proj.norm() / d.norm()
+    };
+    let d_plus: Vec<f64> = t3.iter().zip(&truth).map(|(a, b)| a - b).collect();
+    let table3_visible_fraction = (vis(d_plus.clone()), vis(platform_negated(&d_plus)));
+
+    progress("designed campaign: 16 socket pairs, poses with orientation changes");
+    let mut dmodel = model.clone();
+    dmodel.nominal.sensors = designed_sensors();
+    let dplan = Plan {
+        poses: random_workspace_poses(
+            &dmodel.nominal,
+            options.designed_poses,
+            options.designed_range_mm,
+            options.designed_range_deg,
+            3.0,
+            options.seed + 1,
+        ),
+        sensors: (0..dmodel.nominal.sensors.len()).collect(),
+    };
+    let mut dident = IdentifyOptions {
+        sigma_um: Some(sigma),
+        ..IdentifyOptions::default()
+    };
+    dident.lm.damping = cpm_lm::Damping::Nielsen;
+    let designed_identifiability =
+        crate::identifiability(&dmodel, &dplan.skeleton(), sigma, &RankOptions::default())?;
+    let designed = outcome(&dmodel, dplan, &truth, &sim, &dident, &validation)?;
+    Ok(PaperReproduction {
+        options: *options,
+        paper,
+        rank_vs_threshold,
+        table3,
+        table3_vs_table2_um,
+        table3_visible_fraction,
+        designed,
+        designed_identifiability,
+    })
+}
