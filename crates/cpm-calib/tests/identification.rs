@@ -1,0 +1,228 @@
+//! Identification: Jacobian against finite differences, recovery without noise, consistency
+//! with the Cramér-Rao bound, rank of the paper's design.
+use cpm_calib::campaign::paper_circle;
+use cpm_calib::model::{predict, Prepared};
+use cpm_calib::paper::{designed_sensors, random_workspace_poses};
+use cpm_calib::*;
+use cpm_geometry::{InstallationErrors, JointTable};
+
+fn designed_model() -> MeasurementModel {
+    let mut m = MeasurementModel::new(JointTable::paper_cubic());
+    m.nominal.sensors = designed_sensors();
+    m
+}
+
+fn designed_plan(model: &MeasurementModel, poses: usize, seed: u64) -> Plan {
+    Plan {
+        poses: random_workspace_poses(&model.nominal, poses, 100.0, 25.0, 3.0, seed),
+        sensors: (0..model.nominal.sensors.len()).collect(),
+    }
+}
+
+fn paper_plan(model: &MeasurementModel) -> Plan {
+    Plan {
+        poses: paper_circle(&model.nominal.home),
+        sensors: vec![0],
+    }
+}
+
+#[test]
+fn identification_jacobian_matches_central_differences() {
+    let model = designed_model();
+    let plan = designed_plan(&model, 6, 11);
+    let c = plan.skeleton();
+    let e = InstallationErrors::paper_table2().to_vec_um();
+    let prepared = Prepared::new(&model, &c).unwrap();
+    let mut j = nalgebra::DMatrix::zeros(c.len(), 36);
+    predict(&model, &prepared, &c, &e, Some(&mut j)).unwrap();
+    let h = 1e-2; // um
+    let mut worst: f64 = 0.0;
+    for k in 0..36 {
+        let mut ep = e.clone();
+        let mut em = e.clone();
+        ep[k] += h;
+        em[k] -= h;
+        let yp = predict(&model, &prepared, &c, &ep, None).unwrap();
+        let ym = predict(&model, &prepared, &c, &em, None).unwrap();
+        for r in 0..c.len() {
+            let fd = (yp[r] - ym[r]) / (2.0 * h);
+            worst = worst.max((fd - j[(r, k)]).abs());
+        }
+    }
+    // Entries are O(1e-3) mm/um; FK is solved to 1e-11 mm, so differences carry ~1e-9.
+    assert!(worst < 1e-7, "worst |analytic - FD| = {worst:e} mm/um");
+}
+
+#[test]
+fn noise_free_recovery_to_a_micro_micrometre() {
+    let model = designed_model();
+    let plan = designed_plan(&model, 30, 5);
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let sim = SimulationOptions {
+        noise: Noise::None,
+        ..SimulationOptions::default()
+    };
+    let data = simulate(&model, &truth, &plan, &sim).unwrap();
+    let cal = identify(&model, &data, &IdentifyOptions::default()).unwrap();
+    assert_eq!(cal.identifiability.rank, 36);
+    for k in 0..36 {
+        let e = cal.estimate_um[k].expect("determined");
+        assert!((e - truth[k]).abs() < 1e-6, "{k}: {e} vs {}", truth[k]);
+    }
+    assert!(cal.residual_rms_um < 1e-6);
+    assert!(cal.solver.termination.was_successful(), "{}", cal.solver.brief());
+}
+
+#[test]
+fn paper_design_fits_its_readings_but_determines_nothing() {
+    let model = MeasurementModel::new(JointTable::paper_cubic());
+    let plan = paper_plan(&model);
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let sim = SimulationOptions {
+        noise: Noise::None,
+        ..SimulationOptions::default()
+    };
+    let data = simulate(&model, &truth, &plan, &sim).unwrap();
+    let cal = identify(&model, &data, &IdentifyOptions::default()).unwrap();
+    assert_eq!(cal.identifiability.rank, 8);
+    assert!(cal.estimate_um.iter().all(|e| e.is_none()));
+    assert!(cal.std_um.iter().all(|e| e.is_none()));
+    // The residual goes to (nearly) zero: what the readings see is fitted; the blind part of
+    // the truth acts only at second order (errors of 0.1 mm over links of 350 mm).
+    assert!(cal.residual_rms_um < 0.05, "{}", cal.residual_rms_um);
+    // In the identifiable subspace, the estimate matches the truth.
+    let vr = cal.identifiability.row_space();
+    let d = nalgebra::DVector::from_vec(
+        cal.minimum_norm_um
+            .iter()
+            .zip(&truth)
+            .map(|(a, b)| a - b)
+            .collect(),
+    );
+    let seen = vr.transpose() * d;
+    assert!(seen.amax() < 1.0, "identifiable part off by {}", seen.amax());
+    let text = cal.identifiability.summary();
+    assert!(text.contains("rotated about sensor `paper`'s base socket"), "{text}");
+    assert!(text.contains("link 3 moved together by the same vector"), "{text}");
+}
+
+#[test]
+fn paper_design_rank_is_stable_under_threshold_changes() {
+    let model = MeasurementModel::new(JointTable::paper_cubic());
+    let c = paper_plan(&model).skeleton();
+    let j = identification_jacobian(&model, &c, &[0.0; 36]).unwrap();
+    let base = RankOptions::default();
+    let ranks: Vec<usize> = [0.5, 1.0, 2.0]
+        .iter()
+        .map(|f| {
+            analyze(
+                &j,
+                1.0,
+                &RankOptions {
+                    rank_rtol: base.rank_rtol * f,
+                    ..base
+                },
+                &[],
+            )
+            .rank
+        })
+        .collect();
+    assert_eq!(ranks, vec![8, 8, 8]);
+    // And with the errors of Table 2 as the linearisation point.
+    let j2 = identification_jacobian(&model, &c, &InstallationErrors::paper_table2().to_vec_um())
+        .unwrap();
+    assert_eq!(analyze(&j2, 1.0, &base, &[]).rank, 8);
+}
+
+#[test]
+fn estimation_errors_are_consistent_with_the_cramer_rao_bound() {
+    let model = designed_model();
+    let plan = designed_plan(&model, 25, 9);
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let sigma = 3.0;
+    let mut z2 = Vec::new();
+    for seed in 0..16 {
+        let sim = SimulationOptions {
+            noise: Noise::Gaussian { sigma_um: sigma },
+            repeats: 1,
+            seed,
+        };
+        let data = simulate(&model, &truth, &plan, &sim).unwrap();
+        let opts = IdentifyOptions {
+            sigma_um: Some(sigma),
+            ..IdentifyOptions::default()
+        };
+        let cal = identify(&model, &data, &opts).unwrap();
+        for k in 0..36 {
+            let z = (cal.estimate_um[k].unwrap() - truth[k]) / cal.std_um[k].unwrap();
+            z2.push(z * z);
+        }
+    }
+    // Mean squared z-score: 1 for an efficient, unbiased estimator; 576 samples
+    // (correlated within a seed) keep it well inside [0.6, 1.5].
+    let mean = z2.iter().sum::<f64>() / z2.len() as f64;
+    assert!((0.6..1.5).contains(&mean), "mean z^2 = {mean}");
+}
+
+#[test]
+fn first_order_model_agrees_with_exact_to_second_order() {
+    let model = designed_model();
+    let plan = designed_plan(&model, 8, 4);
+    let c = plan.skeleton();
+    let fo = MeasurementModel {
+        kind: ModelKind::FirstOrder,
+        ..model.clone()
+    };
+    let pe = Prepared::new(&model, &c).unwrap();
+    let pf = Prepared::new(&fo, &c).unwrap();
+    let e = InstallationErrors::paper_table2().to_vec_um();
+    let mut gaps = Vec::new();
+    for scale in [1.0, 0.1] {
+        let es: Vec<f64> = e.iter().map(|v| v * scale).collect();
+        let ye = predict(&model, &pe, &c, &es, None).unwrap();
+        let yf = predict(&fo, &pf, &c, &es, None).unwrap();
+        let gap = ye
+            .iter()
+            .zip(&yf)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        gaps.push(gap);
+    }
+    // Quadratic: ten times smaller errors, a hundred times smaller gap (within 30 %).
+    let ratio = gaps[0] / gaps[1];
+    assert!((70.0..130.0).contains(&ratio), "gaps {gaps:?}");
+}
+
+#[test]
+fn table3_is_consistent_with_the_papers_readings_only_as_p_minus_dp() {
+    let model = MeasurementModel::new(JointTable::paper_cubic());
+    let check = cpm_calib::paper::table3_check(&model, &paper_plan(&model)).unwrap();
+    // Under p - dp the readings differ by less than the paper's noise (5.8 um RMS); under
+    // p + dp by far more.
+    assert!(check.minus < 2.0, "{check:?}");
+    assert!(check.plus > 20.0, "{check:?}");
+}
+
+#[test]
+fn bad_inputs_are_errors_not_panics() {
+    let model = MeasurementModel::new(JointTable::paper_cubic());
+    let mut c = paper_plan(&model).skeleton();
+    c.readings[3].sensor = 7;
+    let e = identify(&model, &c, &IdentifyOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("reading 3.sensor"), "{e}");
+    let mut c = paper_plan(&model).skeleton();
+    c.readings[1].length_mm = f64::NAN;
+    let e = identify(&model, &c, &IdentifyOptions::default()).unwrap_err();
+    assert!(e.to_string().contains("reading 1.length_mm"), "{e}");
+    let empty = Campaign::default();
+    assert!(matches!(
+        identify(&model, &empty, &IdentifyOptions::default()),
+        Err(CalibError::NoInformation(_))
+    ));
+    let opts = IdentifyOptions {
+        sigma_um: Some(-1.0),
+        ..IdentifyOptions::default()
+    };
+    let c = paper_plan(&model).skeleton();
+    assert!(identify(&model, &c, &opts).is_err());
+}
