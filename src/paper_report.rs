@@ -74,20 +74,35 @@ fn norms(v: &[f64], side: usize) -> Vec<f64> {
 }
 
 fn cell(v: Option<f64>) -> String {
-    v.map(|x| format!("{x:.1}")).unwrap_or_else(|| "n.d.".into())
+    v.map(|x| format!("{x:.1}"))
+        .unwrap_or_else(|| "n.d.".into())
 }
 
 /// Stages every output file of the reproduction into `out`, under `dir`.
-pub fn render(r: &PaperReproduction, dir: &std::path::Path, out: &mut OutputSet) -> Result<(), plot::PlotError> {
+pub fn render(
+    r: &PaperReproduction,
+    dir: &std::path::Path,
+    out: &mut OutputSet,
+) -> Result<(), plot::PlotError> {
     let t2 = InstallationErrors::paper_table2().to_vec_um();
     let t3 = InstallationErrors::paper_table3().to_vec_um();
     let p = &r.paper.calibration;
     let d = &r.designed.calibration;
-    let dest: Vec<f64> = d.estimate_um.iter().map(|e| e.unwrap_or(f64::NAN)).collect();
+    let dest: Vec<f64> = d
+        .estimate_um
+        .iter()
+        .map(|e| e.unwrap_or(f64::NAN))
+        .collect();
     let links: Vec<String> = (1..=6).map(|i| format!("link {i}")).collect();
-    for (side, name, file) in [(1, "platform", "fig5_platform.svg"), (0, "base", "fig6_base.svg")] {
+    for (side, name, file) in [
+        (1, "platform", "fig5_platform.svg"),
+        (0, "base", "fig6_base.svg"),
+    ] {
         let svg = plot::grouped_bars(
-            &format!("Per-joint error norm, {name} side (simulated; cf. paper Fig. {})", if side == 1 { 5 } else { 6 }),
+            &format!(
+                "Per-joint error norm, {name} side (simulated; cf. paper Fig. {})",
+                if side == 1 { 5 } else { 6 }
+            ),
             "|error| (um)",
             &links,
             &[
@@ -101,10 +116,19 @@ pub fn render(r: &PaperReproduction, dir: &std::path::Path, out: &mut OutputSet)
     let svg = plot::spectrum(
         "Singular values of the identification Jacobian (simulated)",
         &[
-            ("paper design (circle, 1 sensor)".to_string(), p.identifiability.singular_values.clone()),
-            ("designed (16 sensors, orientation changes)".to_string(), d.identifiability.singular_values.clone()),
+            (
+                "paper design (circle, 1 sensor)".to_string(),
+                p.identifiability.singular_values.clone(),
+            ),
+            (
+                "designed (16 sensors, orientation changes)".to_string(),
+                d.identifiability.singular_values.clone(),
+            ),
         ],
-        Some(("paper-design rank threshold".to_string(), p.identifiability.threshold)),
+        Some((
+            "paper-design rank threshold".to_string(),
+            p.identifiability.threshold,
+        )),
     )?;
     out.add(dir.join("singular_values.svg"), svg);
     out.add(
@@ -124,11 +148,17 @@ pub fn report_md(r: &PaperReproduction) -> String {
     let mut s = String::new();
     s.push_str("# Reproduction of Lim et al. (2002): installation error calibration of a cubic parallel manipulator\n\n");
     s.push_str("**All data in this report are simulated** (truth: the paper's Table 2; clearance 10 um per joint from the link force directions; sensor noise ");
-    s.push_str(&format!("{:?}, seed {}). Produced by `cargo xtask reproduce-paper`.\n\n", r.options.noise, r.options.seed));
+    s.push_str(&format!(
+        "{:?}, seed {}). Produced by `cargo xtask reproduce-paper`.\n\n",
+        r.options.noise, r.options.seed
+    ));
     s.push_str("## 1. The paper's design: one sensor, a circle at constant orientation\n\n");
     s.push_str(&format!(
         "- Readings: {}; residual RMS after the fit {:.2} um (start {:.2} um); solver: {}.\n",
-        p.identifiability.num_readings, p.residual_rms_um, p.initial_rms_um, p.solver.brief()
+        p.identifiability.num_readings,
+        p.residual_rms_um,
+        p.initial_rms_um,
+        p.solver.brief()
     ));
     s.push_str(&format!(
         "- **Rank of the identification Jacobian: {} of 36** (threshold {:.1e} x s_max). Rank against the threshold: {}.\n",
@@ -141,7 +171,14 @@ pub fn report_md(r: &PaperReproduction) -> String {
         p.identifiability.num_determined()
     ));
     s.push_str("- Singular values: ");
-    s.push_str(&p.identifiability.singular_values.iter().map(|v| format!("{v:.3e}")).collect::<Vec<_>>().join(", "));
+    s.push_str(
+        &p.identifiability
+            .singular_values
+            .iter()
+            .map(|v| format!("{v:.3e}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+    );
     s.push_str("\n\n### Why the rank is so low (blind directions in physical terms)\n\n");
     s.push_str(&p.identifiability.summary().replace("\n  - ", "\n- "));
     s.push_str("\nWith the orientation constant, a link's base and platform errors enter the link length only through `R dp_i - db_i`, so moving both joints of a link by the same vector changes nothing (3 dimensions per link, 18 in all). One length sensor cannot see the whole mechanism rotating about its base socket, nor the platform joint pattern rotating about its platform socket. What remains is probed by a single scalar per pose along a planar circle, which sees only a few smooth functions of the pose.\n\n");
@@ -153,7 +190,11 @@ pub fn report_md(r: &PaperReproduction) -> String {
             c.singular_value,
             c.estimate_um,
             c.std_um,
-            c.loadings.iter().map(|(k, w)| format!("{:+.2} {}", w, InstallationErrors::component_name(*k))).collect::<Vec<_>>().join(", ")
+            c.loadings
+                .iter()
+                .map(|(k, w)| format!("{:+.2} {}", w, InstallationErrors::component_name(*k)))
+                .collect::<Vec<_>>()
+                .join(", ")
         ));
     }
     s.push_str("\n### Is Table 3 what the paper's data say?\n\n");
@@ -169,7 +210,11 @@ pub fn report_md(r: &PaperReproduction) -> String {
         "- Fraction of the difference Table 3 - Table 2 that lies in the identifiable subspace of the paper's design: {:.3} (p + dp), {:.3} (p - dp).\n",
         r.table3_visible_fraction.0, r.table3_visible_fraction.1
     ));
-    let (lo, hi) = if r.table3.plus < r.table3.minus { ("p + dp", "p - dp") } else { ("p - dp", "p + dp") };
+    let (lo, hi) = if r.table3.plus < r.table3.minus {
+        ("p + dp", "p - dp")
+    } else {
+        ("p - dp", "p + dp")
+    };
     s.push_str(&format!(
         "\nWhat follows: under the {lo} convention Table 3 predicts almost the same readings as Table 2, so the paper's data cannot tell the two tables apart and Table 3 is one of infinitely many equally good fits; its differences from Table 2 lie along blind directions. Under {hi} the two tables predict visibly different readings. Table 3's apparent agreement with Table 2 (most components within 10 %) therefore does not show that the 36 errors were identified: it reflects a start close to the truth or the tables' construction, not information in the 36 readings.\n\n"
     ));
@@ -180,7 +225,10 @@ pub fn report_md(r: &PaperReproduction) -> String {
     ));
     s.push_str(&format!(
         "- Rank {} of 36, {} parameters determined. Residual RMS {:.2} um. Solver: {}.\n",
-        d.identifiability.rank, d.identifiability.num_determined(), d.residual_rms_um, d.solver.brief()
+        d.identifiability.rank,
+        d.identifiability.num_determined(),
+        d.residual_rms_um,
+        d.solver.brief()
     ));
     if let Some((rms, max)) = r.designed.error_vs_truth_um {
         s.push_str(&format!(
@@ -202,7 +250,9 @@ pub fn report_md(r: &PaperReproduction) -> String {
             t3[k],
             cell(p.estimate_um[k]),
             cell(d.estimate_um[k]),
-            d.std_um[k].map(|x| format!("{x:.2}")).unwrap_or_else(|| "n.d.".into())
+            d.std_um[k]
+                .map(|x| format!("{x:.2}"))
+                .unwrap_or_else(|| "n.d.".into())
         ));
     }
     s.push_str("\n## 4. What the user of the robot gets: platform pose error\n\n");

@@ -111,7 +111,12 @@ pub fn spectrum(
             .flat_map(|s| s.1.iter().copied().map(pos))
             .collect();
         let ymax = all.iter().copied().fold(1e-18, f64::max) * 3.0;
-        let ymin = all.iter().copied().fold(f64::INFINITY, f64::min).min(ymax / 10.0) / 3.0;
+        let ymin = all
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min)
+            .min(ymax / 10.0)
+            / 3.0;
         let n = series.iter().map(|s| s.1.len()).max().unwrap_or(1);
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 20))
@@ -130,7 +135,9 @@ pub fn spectrum(
             let c = COLORS[si % COLORS.len()];
             chart
                 .draw_series(LineSeries::new(
-                    vals.iter().enumerate().map(|(i, v)| (i as f64 + 1.0, pos(*v))),
+                    vals.iter()
+                        .enumerate()
+                        .map(|(i, v)| (i as f64 + 1.0, pos(*v))),
                     c.stroke_width(2),
                 ))
                 .map_err(|e| err(title, e))?

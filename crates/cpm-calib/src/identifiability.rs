@@ -162,7 +162,7 @@ pub struct Pattern {
 pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<Pattern> {
     let table = &model.nominal;
     let n = table.num_links();
-    let np = 6 * n;
+    let np = model.num_params();
     let r0 = campaign
         .poses
         .first()

@@ -106,7 +106,13 @@ impl Problem for Subspace<'_> {
         self.measured_mm.len()
     }
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
-        let y = predict(self.model, self.prepared, self.campaign, &self.errors(x), None)?;
+        let y = predict(
+            self.model,
+            self.prepared,
+            self.campaign,
+            &self.errors(x),
+            None,
+        )?;
         for ((ri, yi), mi) in r.iter_mut().zip(&y).zip(&self.measured_mm) {
             *ri = (yi - mi) * 1e3;
         }
@@ -188,7 +194,10 @@ pub fn identify(
     }
     if let Some(s) = options.sigma_um {
         if !(s.is_finite() && s > 0.0) {
-            return Err(CalibError::invalid("sigma_um", format!("{s} must be finite and > 0")));
+            return Err(CalibError::invalid(
+                "sigma_um",
+                format!("{s} must be finite and > 0"),
+            ));
         }
     }
     let prepared = Prepared::new(model, campaign)?;

@@ -26,6 +26,7 @@
 
 pub mod accuracy;
 pub mod campaign;
+pub mod effects;
 pub mod error;
 pub mod identifiability;
 pub mod identify;
@@ -35,8 +36,11 @@ pub mod simulate;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
 pub use campaign::{Campaign, Plan, Reading};
+pub use effects::{Effect, EffectSettings};
 pub use error::CalibError;
 pub use identifiability::{analyze, Identifiability, RankOptions};
-pub use identify::{identifiability, identification_jacobian, identify, Calibration, IdentifyOptions};
+pub use identify::{
+    identifiability, identification_jacobian, identify, Calibration, IdentifyOptions,
+};
 pub use model::{MeasurementModel, ModelKind};
 pub use simulate::{simulate, Noise, SimulationOptions};

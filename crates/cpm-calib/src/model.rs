@@ -2,15 +2,19 @@
 //! effective lengths -> forward kinematics with the candidate joints -> sensor socket distance.
 //!
 //! Parameters are the installation errors in micrometres (order of
-//! [`cpm_geometry::errors`]). The Jacobian of the readings with respect to them comes from
-//! implicit differentiation of the closure `l(x, e) = L`: `dx/de = -J1^-1 J2`, so a reading
-//! `y = |t + R p_s - b_s|` has `dy/de = -(J1^-T g)^T J2` with `g` the sensor's pose gradient.
+//! [`cpm_geometry::errors`]) followed by the parameters of the declared [`Effect`]s, block by
+//! block. The Jacobian comes from implicit differentiation of the closure `l(x, e) = L`:
+//! `J1 dx = dL - J2 de`, so a reading `y = |t + R p_s - b_s|` with sensor pose gradient `g`
+//! and `v = J1^-T g` has `dy/de = -v^T J2` and `dy/dL = v^T`.
 use cpm_clearance::{ClearanceModel, Load};
 use cpm_geometry::{InstallationErrors, JointTable, Pose};
 use cpm_kinematics::{forward, ForwardOptions};
 use nalgebra::{DMatrix, Matrix6, Vector6};
 
-use crate::{Campaign, CalibError};
+use crate::effects::{
+    is_link_effect, link_coefficient, sensor_coefficient, Effect, EffectSettings, PoseContext,
+};
+use crate::{CalibError, Campaign};
 
 /// Exact (nested forward kinematics) or the paper's first-order model (eq. 12/15).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -38,6 +42,21 @@ pub struct MeasurementModel {
     pub kind: ModelKind,
     /// Forward kinematics options.
     pub fk: ForwardOptions,
+    /// Effects modelled beside the installation errors, in parameter order. Default none.
+    pub effects: Vec<Effect>,
+    /// Settings of the effects.
+    pub effect_settings: EffectSettings,
+}
+
+/// Where a block of parameters sits in the parameter vector.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Block {
+    /// The effect (`None` for the installation errors).
+    pub effect: Option<Effect>,
+    /// First index.
+    pub offset: usize,
+    /// Number of parameters.
+    pub len: usize,
 }
 
 impl MeasurementModel {
@@ -50,23 +69,95 @@ impl MeasurementModel {
             sensor_preload_sign: -1.0,
             kind: ModelKind::Exact,
             fk: ForwardOptions::default(),
+            effects: Vec::new(),
+            effect_settings: EffectSettings::default(),
         }
     }
 
     /// Number of installation-error parameters (6 per link).
-    pub fn num_params(&self) -> usize {
+    pub fn num_installation_params(&self) -> usize {
         6 * self.nominal.num_links()
     }
 
-    /// The joint table with installation errors `errors_um` (flat) applied.
-    pub fn table_with(&self, errors_um: &[f64]) -> Result<JointTable, CalibError> {
-        if errors_um.len() != self.num_params() {
+    /// Total number of parameters: installation errors and effect blocks.
+    pub fn num_params(&self) -> usize {
+        self.blocks().iter().map(|b| b.len).sum()
+    }
+
+    /// The parameter blocks in order: installation errors first, then each effect.
+    pub fn blocks(&self) -> Vec<Block> {
+        let (n, s) = (self.nominal.num_links(), self.nominal.sensors.len());
+        let mut out = vec![Block {
+            effect: None,
+            offset: 0,
+            len: 6 * n,
+        }];
+        let mut o = 6 * n;
+        for &e in &self.effects {
+            let len = e.num_params(n, s);
+            out.push(Block {
+                effect: Some(e),
+                offset: o,
+                len,
+            });
+            o += len;
+        }
+        out
+    }
+
+    /// Names of all parameters, with units, e.g. `link 2 platform dy [um]`,
+    /// `link_scale link 3 [ppm]`.
+    pub fn parameter_names(&self) -> Vec<String> {
+        let sensors: Vec<String> = self
+            .nominal
+            .sensors
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
+        let mut out: Vec<String> = (0..self.num_installation_params())
+            .map(|k| format!("{} [um]", InstallationErrors::component_name(k)))
+            .collect();
+        for b in self.blocks().iter().skip(1) {
+            let e = b.effect.expect("effect block");
+            for k in 0..b.len {
+                out.push(format!(
+                    "{} {} [{}]",
+                    e.name(),
+                    e.param_name(k, &sensors),
+                    e.unit()
+                ));
+            }
+        }
+        out
+    }
+
+    /// The joint table with installation errors applied: `params` may be the installation
+    /// errors alone or the whole parameter vector (then socket errors move the sensors).
+    pub fn table_with(&self, params: &[f64]) -> Result<JointTable, CalibError> {
+        let ni = self.num_installation_params();
+        if params.len() != ni && params.len() != self.num_params() {
             return Err(CalibError::invalid(
-                "installation errors",
-                format!("{} components, expected {}", errors_um.len(), self.num_params()),
+                "parameters",
+                format!(
+                    "{} values, expected {ni} (installation errors) or {} (with effects)",
+                    params.len(),
+                    self.num_params()
+                ),
             ));
         }
-        Ok(InstallationErrors::try_from_vec_um(errors_um)?.apply(&self.nominal)?)
+        let mut table = InstallationErrors::try_from_vec_um(&params[..ni])?.apply(&self.nominal)?;
+        if params.len() > ni {
+            for b in self.blocks() {
+                if b.effect == Some(Effect::SocketError) {
+                    for (si, s) in table.sensors.iter_mut().enumerate() {
+                        let q = &params[b.offset + 6 * si..b.offset + 6 * si + 6];
+                        s.base_mm += nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3;
+                        s.platform_mm += nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-3;
+                    }
+                }
+            }
+        }
+        Ok(table)
     }
 
     /// Effective link lengths (mm) the machine has at each commanded pose: the commanded
@@ -115,19 +206,29 @@ impl MeasurementModel {
     /// Checks the campaign against the model: sensor indices, pose indices, finite values.
     pub fn check_campaign(&self, campaign: &Campaign) -> Result<(), CalibError> {
         if campaign.readings.is_empty() {
-            return Err(CalibError::NoInformation("the campaign has no readings".into()));
+            return Err(CalibError::NoInformation(
+                "the campaign has no readings".into(),
+            ));
         }
         for (k, r) in campaign.readings.iter().enumerate() {
             if r.pose >= campaign.poses.len() {
                 return Err(CalibError::invalid(
                     format!("reading {k}.pose"),
-                    format!("{} but the campaign has {} poses", r.pose, campaign.poses.len()),
+                    format!(
+                        "{} but the campaign has {} poses",
+                        r.pose,
+                        campaign.poses.len()
+                    ),
                 ));
             }
             if r.sensor >= self.nominal.sensors.len() {
                 return Err(CalibError::invalid(
                     format!("reading {k}.sensor"),
-                    format!("{} but the robot has {} sensors", r.sensor, self.nominal.sensors.len()),
+                    format!(
+                        "{} but the robot has {} sensors",
+                        r.sensor,
+                        self.nominal.sensors.len()
+                    ),
                 ));
             }
             if !r.length_mm.is_finite() {
@@ -149,8 +250,12 @@ impl MeasurementModel {
 /// Per-pose data that does not depend on the parameters, computed once per campaign.
 #[derive(Debug, Clone)]
 pub struct Prepared {
-    /// Effective link lengths per pose, mm.
+    /// Effective link lengths per pose (commanded plus clearance), mm.
     pub lengths_mm: Vec<Vec<f64>>,
+    /// What the effects need to know about each pose.
+    pub contexts: Vec<PoseContext>,
+    /// Start of the campaign's clock, s (earliest logged time, else 0).
+    pub t0_s: f64,
     /// Readings grouped by pose: `by_pose[j]` lists reading indices taken at pose j.
     pub by_pose: Vec<Vec<usize>>,
     /// First-order model only: nominal reading and its gradient per reading.
@@ -166,8 +271,16 @@ impl Prepared {
         for (k, r) in campaign.readings.iter().enumerate() {
             by_pose[r.pose].push(k);
         }
+        let contexts = contexts(model, campaign, &lengths_mm, &by_pose)?;
+        let t0_s = campaign
+            .readings
+            .iter()
+            .filter_map(|r| r.time_s)
+            .fold(f64::INFINITY, f64::min);
         let mut prepared = Prepared {
             lengths_mm,
+            contexts,
+            t0_s: if t0_s.is_finite() { t0_s } else { 0.0 },
             by_pose,
             first_order: None,
         };
@@ -183,6 +296,69 @@ impl Prepared {
         }
         Ok(prepared)
     }
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
+    let (mut s, mut n) = (0.0, 0usize);
+    for x in v {
+        s += x;
+        n += 1;
+    }
+    (n > 0).then(|| s / n as f64)
+}
+
+fn contexts(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    effective_mm: &[Vec<f64>],
+    by_pose: &[Vec<usize>],
+) -> Result<Vec<PoseContext>, CalibError> {
+    let n = model.nominal.num_links();
+    let home_mm = cpm_kinematics::inverse_lengths(&model.nominal, &model.nominal.home);
+    let mut out: Vec<PoseContext> = Vec::with_capacity(campaign.poses.len());
+    for (j, pose) in campaign.poses.iter().enumerate() {
+        let commanded_mm = match &campaign.commanded_lengths_mm {
+            Some(c) => c[j].clone(),
+            None => effective_mm[j].clone(),
+        };
+        let forces_n = if model
+            .effects
+            .iter()
+            .any(|e| matches!(e, Effect::Clearance | Effect::Compliance))
+        {
+            cpm_clearance::link_forces_n(&model.nominal, pose, &model.load)
+                .map_err(|source| CalibError::Clearance { pose: j, source })?
+        } else {
+            vec![0.0; n]
+        };
+        // A link that did not move keeps the direction of its last motion.
+        let motion_sign = match out.last() {
+            Some(prev) => (0..n)
+                .map(|i| {
+                    let d = commanded_mm[i] - prev.commanded_mm[i];
+                    if d.abs() < 1e-9 {
+                        prev.motion_sign[i]
+                    } else {
+                        d.signum()
+                    }
+                })
+                .collect(),
+            None => vec![0.0; n],
+        };
+        let rs = &by_pose[j];
+        out.push(PoseContext {
+            commanded_mm,
+            home_mm: home_mm.clone(),
+            forces_n,
+            motion_sign,
+            temperature_c: mean(
+                rs.iter()
+                    .filter_map(|&k| campaign.readings[k].temperature_c),
+            ),
+            time_s: mean(rs.iter().filter_map(|&k| campaign.readings[k].time_s)),
+        });
+    }
+    Ok(out)
 }
 
 /// Predicted readings (mm) for installation errors `errors_um`; fills `jacobian`
@@ -211,33 +387,80 @@ fn predict_exact(
     model: &MeasurementModel,
     prepared: &Prepared,
     campaign: &Campaign,
-    errors_um: &[f64],
+    params: &[f64],
     mut jacobian: Option<&mut DMatrix<f64>>,
 ) -> Result<Vec<f64>, CalibError> {
-    let table = model.table_with(errors_um)?;
-    if jacobian.is_some() && table.num_links() != 6 {
+    let np = model.num_params();
+    if params.len() != np {
         return Err(CalibError::invalid(
-            "links",
-            format!("the identification Jacobian needs six links, the table has {}", table.num_links()),
+            "parameters",
+            format!("{} values, expected {np}", params.len()),
         ));
     }
+    let table = model.table_with(params)?;
+    let n = table.num_links();
+    if jacobian.is_some() && n != 6 {
+        return Err(CalibError::invalid(
+            "links",
+            format!("the identification Jacobian needs six links, the table has {n}"),
+        ));
+    }
+    let blocks = model.blocks();
+    let link_blocks: Vec<_> = blocks
+        .iter()
+        .filter(|b| b.effect.is_some_and(is_link_effect))
+        .collect();
+    let sensor_blocks: Vec<_> = blocks
+        .iter()
+        .filter(|b| matches!(b.effect, Some(Effect::SensorOffset | Effect::SensorScale)))
+        .collect();
+    let socket_block = blocks
+        .iter()
+        .find(|b| b.effect == Some(Effect::SocketError));
+    let settings = &model.effect_settings;
     let sensor_corr = model.sensor_correction_mm();
     let mut y = vec![0.0; campaign.len()];
+    // Link-channel coefficients of one pose: links x (link-effect parameters).
+    let mut coeff: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
+    let mut lengths = vec![0.0; n];
     for (j, readings) in prepared.by_pose.iter().enumerate() {
         if readings.is_empty() {
             continue;
         }
+        let ctx = &prepared.contexts[j];
+        lengths.copy_from_slice(&prepared.lengths_mm[j]);
+        for (i, c) in coeff.iter_mut().enumerate() {
+            c.clear();
+            for b in &link_blocks {
+                let e = b.effect.expect("effect");
+                for k in 0..b.len {
+                    let a = link_coefficient(e, k, i, ctx, settings, prepared.t0_s);
+                    if a != 0.0 {
+                        c.push((b.offset + k, a));
+                        lengths[i] += a * params[b.offset + k];
+                    }
+                }
+            }
+        }
         let start: Pose = campaign.poses[j];
-        let (pose, _) = forward(&table, &prepared.lengths_mm[j], &start, &model.fk)
+        let (pose, _) = forward(&table, &lengths, &start, &model.fk)
             .map_err(|source| CalibError::Kinematics { pose: j, source })?;
         for &k in readings {
-            let s = &table.sensors[campaign.readings[k].sensor];
-            y[k] = s.length_mm(&pose) + sensor_corr;
+            let si = campaign.readings[k].sensor;
+            let geometric = table.sensors[si].length_mm(&pose);
+            let mut yk = geometric + sensor_corr;
+            for b in &sensor_blocks {
+                let e = b.effect.expect("effect");
+                for q in 0..b.len {
+                    yk += sensor_coefficient(e, q, si, geometric) * params[b.offset + q];
+                }
+            }
+            y[k] = yk;
         }
         if let Some(jac) = jacobian.as_deref_mut() {
             let links = cpm_kinematics::inverse(&table, &pose);
             let mut j1 = Matrix6::zeros();
-            for (i, ls) in links.iter().enumerate().take(6) {
+            for (i, ls) in links.iter().enumerate() {
                 let m = ls.s_mm.cross(&ls.unit);
                 j1.set_row(
                     i,
@@ -247,7 +470,8 @@ fn predict_exact(
             let lu_t = j1.transpose().lu();
             let rt = pose.rotation.matrix().transpose();
             for &k in readings {
-                let s = &table.sensors[campaign.readings[k].sensor];
+                let si = campaign.readings[k].sensor;
+                let s = &table.sensors[si];
                 let g = cpm_kinematics::sensor_pose_gradient(s, &pose);
                 let v = lu_t.solve(&g).ok_or_else(|| CalibError::Kinematics {
                     pose: j,
@@ -256,12 +480,35 @@ fn predict_exact(
                         condition: cpm_kinematics::fk::condition_number(&j1),
                     },
                 })?;
+                let mut row = jac.row_mut(k);
+                row.fill(0.0);
                 // dy/de = -v^T J2, J2 row i: [-z_i^T, (R^T z_i)^T] in the columns of link i.
                 for (i, ls) in links.iter().enumerate() {
                     let zp = rt * ls.unit;
                     for a in 0..3 {
-                        jac[(k, 6 * i + a)] = v[i] * ls.unit[a] * 1e-3;
-                        jac[(k, 6 * i + 3 + a)] = -v[i] * zp[a] * 1e-3;
+                        row[6 * i + a] = v[i] * ls.unit[a] * 1e-3;
+                        row[6 * i + 3 + a] = -v[i] * zp[a] * 1e-3;
+                    }
+                    for &(p, a) in &coeff[i] {
+                        row[p] += v[i] * a;
+                    }
+                }
+                let geometric = s.length_mm(&pose);
+                for b in &sensor_blocks {
+                    let e = b.effect.expect("effect");
+                    for q in 0..b.len {
+                        row[b.offset + q] += sensor_coefficient(e, q, si, geometric);
+                    }
+                }
+                if let Some(b) = socket_block {
+                    // Direct socket terms plus nothing through the pose (sockets do not
+                    // change the closure).
+                    let q = pose.transform_point(&s.platform_mm) - s.base_mm;
+                    let u = q / q.norm();
+                    let up = rt * u;
+                    for a in 0..3 {
+                        row[b.offset + 6 * si + a] = -u[a] * 1e-3;
+                        row[b.offset + 6 * si + 3 + a] = up[a] * 1e-3;
                     }
                 }
             }

@@ -287,7 +287,14 @@ pub fn reproduce(
         ..IdentifyOptions::default()
     };
     ident.lm.damping = options.paper_damping;
-    let paper = outcome(&model, paper_plan.clone(), &truth, &sim, &ident, &validation)?;
+    let paper = outcome(
+        &model,
+        paper_plan.clone(),
+        &truth,
+        &sim,
+        &ident,
+        &validation,
+    )?;
     let j = crate::identification_jacobian(&model, &paper_plan.skeleton(), &vec![0.0; 36])?;
     let rank_vs_threshold = [1e-3, 3e-4, 2e-4, 1e-4, 5e-5, 2e-5, 1e-5, 1e-6, 1e-8]
         .iter()

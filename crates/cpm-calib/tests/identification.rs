@@ -70,7 +70,11 @@ fn noise_free_recovery_to_a_micro_micrometre() {
         assert!((e - truth[k]).abs() < 1e-6, "{k}: {e} vs {}", truth[k]);
     }
     assert!(cal.residual_rms_um < 1e-6);
-    assert!(cal.solver.termination.was_successful(), "{}", cal.solver.brief());
+    assert!(
+        cal.solver.termination.was_successful(),
+        "{}",
+        cal.solver.brief()
+    );
 }
 
 #[test]
@@ -100,10 +104,20 @@ fn paper_design_fits_its_readings_but_determines_nothing() {
             .collect(),
     );
     let seen = vr.transpose() * d;
-    assert!(seen.amax() < 1.0, "identifiable part off by {}", seen.amax());
+    assert!(
+        seen.amax() < 1.0,
+        "identifiable part off by {}",
+        seen.amax()
+    );
     let text = cal.identifiability.summary();
-    assert!(text.contains("rotated about sensor `paper`'s base socket"), "{text}");
-    assert!(text.contains("link 3 moved together by the same vector"), "{text}");
+    assert!(
+        text.contains("rotated about sensor `paper`'s base socket"),
+        "{text}"
+    );
+    assert!(
+        text.contains("link 3 moved together by the same vector"),
+        "{text}"
+    );
 }
 
 #[test]

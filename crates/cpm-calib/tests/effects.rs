@@ -1,0 +1,106 @@
+//! The effect library: analytic Jacobian of every effect against finite differences, and
+//! recovery of effects from simulated campaigns.
+use cpm_calib::model::{predict, Prepared};
+use cpm_calib::paper::{designed_sensors, random_workspace_poses};
+use cpm_calib::*;
+use cpm_geometry::{InstallationErrors, JointTable};
+
+fn model_with(effects: &[Effect]) -> MeasurementModel {
+    let mut m = MeasurementModel::new(JointTable::paper_cubic());
+    m.nominal.sensors = designed_sensors();
+    m.effects = effects.to_vec();
+    m
+}
+
+fn timed_campaign(model: &MeasurementModel, poses: usize, seed: u64) -> Campaign {
+    let plan = Plan {
+        poses: random_workspace_poses(&model.nominal, poses, 100.0, 25.0, 3.0, seed),
+        sensors: (0..model.nominal.sensors.len()).collect(),
+    };
+    let mut c = plan.skeleton();
+    for r in c.readings.iter_mut() {
+        r.time_s = Some(60.0 * r.pose as f64);
+        r.temperature_c = Some(20.0 + 0.05 * r.pose as f64 + (r.pose as f64 * 0.7).sin());
+    }
+    c
+}
+
+fn params_for(model: &MeasurementModel) -> Vec<f64> {
+    let mut p = InstallationErrors::paper_table2().to_vec_um();
+    p.extend((0..model.num_params() - 36).map(|k| 3.0 + (k as f64 * 1.3).sin() * 2.0));
+    p
+}
+
+#[test]
+fn every_effect_column_matches_central_differences() {
+    let model = model_with(&Effect::ALL);
+    let c = timed_campaign(&model, 8, 21);
+    let prepared = Prepared::new(&model, &c).unwrap();
+    let p = params_for(&model);
+    let np = model.num_params();
+    assert_eq!(model.parameter_names().len(), np);
+    let mut j = nalgebra::DMatrix::zeros(c.len(), np);
+    predict(&model, &prepared, &c, &p, Some(&mut j)).unwrap();
+    let names = model.parameter_names();
+    for k in 0..np {
+        let h = 1e-2;
+        let mut a = p.clone();
+        let mut b = p.clone();
+        a[k] += h;
+        b[k] -= h;
+        let ya = predict(&model, &prepared, &c, &a, None).unwrap();
+        let yb = predict(&model, &prepared, &c, &b, None).unwrap();
+        let mut worst: f64 = 0.0;
+        let mut scale: f64 = 0.0;
+        for r in 0..c.len() {
+            worst = worst.max(((ya[r] - yb[r]) / (2.0 * h) - j[(r, k)]).abs());
+            scale = scale.max(j[(r, k)].abs());
+        }
+        assert!(scale > 0.0, "{}: column is zero", names[k]);
+        assert!(
+            worst < 1e-8 + 1e-5 * scale,
+            "{}: worst {worst:e}, column max {scale:e}",
+            names[k]
+        );
+    }
+}
+
+#[test]
+fn declared_effects_are_recovered_from_noise_free_data() {
+    for effect in [
+        Effect::LinkScale,
+        Effect::SensorOffset,
+        Effect::Backlash,
+        Effect::ThermalDrift,
+        Effect::ScrewPeriodic,
+    ] {
+        let model = model_with(&[effect]);
+        let c = timed_campaign(&model, 40, 3);
+        let truth = params_for(&model);
+        let prepared = Prepared::new(&model, &c).unwrap();
+        let y = predict(&model, &prepared, &c, &truth, None).unwrap();
+        let mut data = c.clone();
+        for (r, v) in data.readings.iter_mut().zip(y) {
+            r.length_mm = v;
+        }
+        let cal = identify(&model, &data, &IdentifyOptions::default()).unwrap();
+        assert_eq!(cal.identifiability.rank, model.num_params(), "{effect}");
+        for k in 36..model.num_params() {
+            let e = cal.estimate_um[k].unwrap();
+            assert!(
+                (e - truth[k]).abs() < 1e-5,
+                "{effect} {k}: {e} vs {}",
+                truth[k]
+            );
+        }
+    }
+}
+
+#[test]
+fn effect_names_parse_and_unknown_names_are_listed() {
+    for e in Effect::ALL {
+        assert_eq!(Effect::parse(e.name()).unwrap(), e);
+    }
+    let err = Effect::parse("link_ofset").unwrap_err();
+    assert!(err.contains("link_offset"), "{err}");
+}
