@@ -26,12 +26,14 @@
 
 pub mod accuracy;
 pub mod campaign;
+pub mod diagnostics;
 pub mod effects;
 pub mod error;
 pub mod identifiability;
 pub mod identify;
 pub mod model;
 pub mod paper;
+pub mod refine;
 pub mod simulate;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
@@ -43,4 +45,5 @@ pub use identify::{
     identifiability, identification_jacobian, identify, Calibration, IdentifyOptions,
 };
 pub use model::{MeasurementModel, ModelKind};
-pub use simulate::{simulate, Noise, SimulationOptions};
+pub use refine::{refine, RefineOptions, Refinement};
+pub use simulate::{simulate, simulate_campaign, Noise, SimulationOptions};

@@ -5,7 +5,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use crate::campaign::{Campaign, Plan, Reading};
+use crate::campaign::{Campaign, Plan};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, MeasurementModel};
 
@@ -83,18 +83,33 @@ impl SimulationOptions {
     }
 }
 
-/// Simulates the readings of `plan` on the machine whose true installation errors are
-/// `truth_um`, measured through `model` (its clearance and load act as the truth's too).
+/// Simulates the readings of `plan` on the machine whose true parameters (installation
+/// errors, then the model's effects) are `truth_um`, measured through `model` (its clearance,
+/// load and effects act as the truth's).
 pub fn simulate(
     model: &MeasurementModel,
     truth_um: &[f64],
     plan: &Plan,
     options: &SimulationOptions,
 ) -> Result<Campaign, CalibError> {
+    simulate_campaign(model, truth_um, &plan.skeleton(), options)
+}
+
+/// Simulates new readings for an existing campaign (its poses, logged commands, times and
+/// temperatures are kept; lengths are replaced).
+pub fn simulate_campaign(
+    model: &MeasurementModel,
+    truth_um: &[f64],
+    skeleton: &Campaign,
+    options: &SimulationOptions,
+) -> Result<Campaign, CalibError> {
     if options.repeats == 0 {
         return Err(CalibError::invalid("repeats", "must be at least 1"));
     }
-    let mut campaign = plan.skeleton();
+    let mut campaign = skeleton.clone();
+    for r in campaign.readings.iter_mut() {
+        r.length_mm = 0.0;
+    }
     let prepared = Prepared::new(model, &campaign)?;
     let exact = MeasurementModel {
         kind: crate::ModelKind::Exact,
@@ -107,10 +122,7 @@ pub fn simulate(
             .map(|_| options.noise.draw_um(&mut rng))
             .sum::<f64>()
             / options.repeats as f64;
-        *r = Reading {
-            length_mm: yk + noise * 1e-3,
-            ..*r
-        };
+        r.length_mm = yk + noise * 1e-3;
     }
     campaign.simulated = true;
     Ok(campaign)

@@ -1,0 +1,262 @@
+//! Residual diagnostics: size against the declared noise (chi-square), whiteness along the
+//! acquisition order (runs test, autocorrelation, Ljung-Box), outliers, and correlation with
+//! regressors (pose coordinates, time, temperature, each link's length, force and motion
+//! direction).
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ChiSquared, ContinuousCDF, Normal, StudentsT};
+
+use crate::model::Prepared;
+use crate::{Campaign, MeasurementModel};
+
+/// A named per-reading quantity that residuals may follow.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Regressor {
+    /// Name, e.g. `pose z`, `link 3 force`, `time`.
+    pub name: String,
+    /// Value per reading.
+    pub values: Vec<f64>,
+}
+
+/// The regressors of a campaign, one value per reading.
+pub fn regressors(
+    model: &MeasurementModel,
+    prepared: &Prepared,
+    campaign: &Campaign,
+) -> Vec<Regressor> {
+    let m = campaign.len();
+    let mut out = Vec::new();
+    let mut push = |name: String, f: &dyn Fn(usize) -> f64| {
+        let values: Vec<f64> = (0..m).map(f).collect();
+        if values.iter().all(|v| v.is_finite()) {
+            out.push(Regressor { name, values });
+        }
+    };
+    let pose = |k: usize| &campaign.poses[campaign.readings[k].pose];
+    let home = model.nominal.home.position_mm;
+    for (a, axis) in ["x", "y", "z"].iter().enumerate() {
+        push(format!("pose {axis}"), &|k| pose(k).position_mm[a]);
+        push(format!("pose {axis} squared"), &|k| {
+            (pose(k).position_mm[a] - home[a]).powi(2)
+        });
+    }
+    for (a, axis) in ["roll", "pitch", "yaw"].iter().enumerate() {
+        push(format!("pose {axis}"), &|k| {
+            let (r, p, y) = pose(k).rpy();
+            [r, p, y][a]
+        });
+    }
+    push("acquisition order".into(), &|k| k as f64);
+    if campaign.readings.iter().all(|r| r.time_s.is_some()) {
+        push("time".into(), &|k| {
+            campaign.readings[k].time_s.unwrap_or(0.0)
+        });
+    }
+    if campaign.readings.iter().all(|r| r.temperature_c.is_some()) {
+        push("temperature".into(), &|k| {
+            campaign.readings[k].temperature_c.unwrap_or(0.0)
+        });
+    }
+    push("reading length".into(), &|k| campaign.readings[k].length_mm);
+    let n = model.nominal.num_links();
+    let forces: Vec<Option<Vec<f64>>> = campaign
+        .poses
+        .iter()
+        .map(|p| cpm_clearance::link_forces_n(&model.nominal, p, &model.load).ok())
+        .collect();
+    let ctx = |k: usize| &prepared.contexts[campaign.readings[k].pose];
+    for i in 0..n {
+        push(format!("link {} length", i + 1), &|k| {
+            ctx(k).commanded_mm[i]
+        });
+        push(format!("link {} motion direction", i + 1), &|k| {
+            ctx(k).motion_sign[i]
+        });
+        push(format!("link {} force", i + 1), &|k| {
+            forces[campaign.readings[k].pose]
+                .as_ref()
+                .map(|t| t[i])
+                .unwrap_or(f64::NAN)
+        });
+    }
+    out
+}
+
+/// Correlation of the residual with one regressor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Correlation {
+    /// Regressor name.
+    pub regressor: String,
+    /// Pearson correlation coefficient.
+    pub r: f64,
+    /// Two-sided p-value of r = 0 (t-test with n - 2 degrees of freedom).
+    pub p_value: f64,
+}
+
+/// The diagnostics of a residual vector.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ResidualDiagnostics {
+    /// Number of residuals.
+    pub n: usize,
+    /// Degrees of freedom (readings minus identifiable parameters).
+    pub dof: usize,
+    /// RMS, um.
+    pub rms_um: f64,
+    /// Declared noise, um, if any.
+    pub sigma_declared_um: Option<f64>,
+    /// `sum r^2 / sigma^2` when the noise is declared.
+    pub chi2: Option<f64>,
+    /// Upper-tail p-value of `chi2` (small: residual larger than the noise explains).
+    pub chi2_p: Option<f64>,
+    /// Wald-Wolfowitz runs test on residual signs along the acquisition order: z statistic.
+    pub runs_z: f64,
+    /// Two-sided p-value of the runs test.
+    pub runs_p: f64,
+    /// Lag-1 autocorrelation along the acquisition order.
+    pub lag1_autocorrelation: f64,
+    /// Ljung-Box p-value over lags 1..=10.
+    pub ljung_box_p: f64,
+    /// Readings whose residual exceeds 5 robust standard deviations (1.4826 MAD).
+    pub outliers: Vec<usize>,
+    /// Correlations with the regressors, most significant first.
+    pub correlations: Vec<Correlation>,
+    /// Regressors significant after a Bonferroni correction at level `alpha`.
+    pub significant: Vec<String>,
+    /// True when the runs and Ljung-Box tests both pass at level `alpha`.
+    pub white: bool,
+    /// True when the residual is consistent with the declared noise (chi-square at `alpha`);
+    /// `None` when no noise is declared.
+    pub consistent_with_noise: Option<bool>,
+}
+
+fn pearson(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let ma = a.iter().sum::<f64>() / n;
+    let mb = b.iter().sum::<f64>() / n;
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma).powi(2);
+        sbb += (y - mb).powi(2);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
+fn normal_two_sided(z: f64) -> f64 {
+    let n = Normal::new(0.0, 1.0).expect("standard normal");
+    2.0 * (1.0 - n.cdf(z.abs()))
+}
+
+/// Diagnoses residuals (um, in acquisition order) with `dof` degrees of freedom.
+pub fn diagnose(
+    residuals_um: &[f64],
+    dof: usize,
+    sigma_um: Option<f64>,
+    regressors: &[Regressor],
+    alpha: f64,
+) -> ResidualDiagnostics {
+    let n = residuals_um.len();
+    let rms_um = (residuals_um.iter().map(|r| r * r).sum::<f64>() / n.max(1) as f64).sqrt();
+    let dofc = dof.max(1);
+    let (chi2, chi2_p) = match sigma_um {
+        Some(s) if s > 0.0 => {
+            let c = residuals_um.iter().map(|r| (r / s).powi(2)).sum::<f64>();
+            let p = ChiSquared::new(dofc as f64)
+                .map(|d| 1.0 - d.cdf(c))
+                .unwrap_or(f64::NAN);
+            (Some(c), Some(p))
+        }
+        _ => (None, None),
+    };
+    // Runs test on signs about the median.
+    let mut sorted = residuals_um.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = if n == 0 { 0.0 } else { sorted[n / 2] };
+    let signs: Vec<bool> = residuals_um.iter().map(|r| *r > median).collect();
+    let n1 = signs.iter().filter(|s| **s).count() as f64;
+    let n2 = n as f64 - n1;
+    let runs = 1.0 + signs.windows(2).filter(|w| w[0] != w[1]).count() as f64;
+    let (runs_z, runs_p) = if n1 > 0.0 && n2 > 0.0 {
+        let mu = 2.0 * n1 * n2 / (n1 + n2) + 1.0;
+        let var = (mu - 1.0) * (mu - 2.0) / (n1 + n2 - 1.0);
+        let z = (runs - mu) / var.max(1e-300).sqrt();
+        (z, normal_two_sided(z))
+    } else {
+        (0.0, 1.0)
+    };
+    // Autocorrelation and Ljung-Box.
+    let mean = residuals_um.iter().sum::<f64>() / n.max(1) as f64;
+    let c0: f64 = residuals_um.iter().map(|r| (r - mean).powi(2)).sum();
+    let acf = |lag: usize| -> f64 {
+        if c0 <= 0.0 || lag >= n {
+            return 0.0;
+        }
+        (0..n - lag)
+            .map(|t| (residuals_um[t] - mean) * (residuals_um[t + lag] - mean))
+            .sum::<f64>()
+            / c0
+    };
+    let lags = 10.min(n.saturating_sub(2)).max(1);
+    let q: f64 = (1..=lags)
+        .map(|h| acf(h).powi(2) / (n as f64 - h as f64).max(1.0))
+        .sum::<f64>()
+        * n as f64
+        * (n as f64 + 2.0);
+    let ljung_box_p = ChiSquared::new(lags as f64)
+        .map(|d| 1.0 - d.cdf(q))
+        .unwrap_or(1.0);
+    // Outliers by the median absolute deviation.
+    let mut dev: Vec<f64> = residuals_um.iter().map(|r| (r - median).abs()).collect();
+    dev.sort_by(f64::total_cmp);
+    let mad = if n == 0 { 0.0 } else { dev[n / 2] * 1.4826 };
+    let outliers = residuals_um
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| mad > 0.0 && (**r - median).abs() > 5.0 * mad)
+        .map(|(k, _)| k)
+        .collect();
+    // Correlations.
+    let mut correlations: Vec<Correlation> = regressors
+        .iter()
+        .filter(|g| g.values.len() == n && n > 3)
+        .map(|g| {
+            let r = pearson(&g.values, residuals_um);
+            let t = r * ((n as f64 - 2.0) / (1.0 - r * r).max(1e-300)).sqrt();
+            let p = StudentsT::new(0.0, 1.0, n as f64 - 2.0)
+                .map(|d| 2.0 * (1.0 - d.cdf(t.abs())))
+                .unwrap_or(1.0);
+            Correlation {
+                regressor: g.name.clone(),
+                r,
+                p_value: p,
+            }
+        })
+        .collect();
+    correlations.sort_by(|a, b| a.p_value.total_cmp(&b.p_value));
+    let bonferroni = alpha / correlations.len().max(1) as f64;
+    let significant = correlations
+        .iter()
+        .filter(|c| c.p_value < bonferroni)
+        .map(|c| c.regressor.clone())
+        .collect();
+    ResidualDiagnostics {
+        n,
+        dof,
+        rms_um,
+        sigma_declared_um: sigma_um,
+        chi2,
+        chi2_p,
+        runs_z,
+        runs_p,
+        lag1_autocorrelation: acf(1),
+        ljung_box_p,
+        outliers,
+        correlations,
+        significant,
+        white: runs_p > alpha && ljung_box_p > alpha,
+        consistent_with_noise: chi2_p.map(|p| p > alpha),
+    }
+}

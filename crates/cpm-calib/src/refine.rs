@@ -1,0 +1,363 @@
+//! Closing the loop: fit, study the residual, find the effect the model lacks, add it, refit,
+//! and report the error before and after (in-sample and cross-validated).
+//!
+//! Each round tries every candidate [`Effect`] not yet in the model:
+//! 1. **confounding**: the part of its Jacobian outside the column space of the current model
+//!    (`novelty`, 0 = entirely explained by what is there, 1 = new); below
+//!    [`RefineOptions::min_novelty`] the effect is skipped as confounded;
+//! 2. the augmented model is fitted, and scored by an F-test on the drop of the residual sum of
+//!    squares per added identifiable dimension, and by the change of BIC
+//!    (`m ln(RSS/m) + k ln m`);
+//! 3. the candidate with the lowest BIC among those significant at `alpha / candidates`
+//!    (Bonferroni) with negative delta BIC is added.
+//!
+//! Rounds stop when no candidate is significant, when the residual is white and consistent with
+//! the declared noise, or after `max_steps`. What remains correlated with a regressor is
+//! reported as unexplained structure, by name, rather than forced into an effect.
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+
+use crate::diagnostics::{diagnose, regressors, ResidualDiagnostics};
+use crate::model::{predict, Prepared};
+use crate::{
+    identify, CalibError, Calibration, Campaign, Effect, IdentifyOptions, MeasurementModel,
+};
+
+/// Options of [`refine`].
+#[derive(Debug, Clone)]
+pub struct RefineOptions {
+    /// Candidate effects. Default: the whole library.
+    pub candidates: Vec<Effect>,
+    /// Significance level (before the Bonferroni correction over candidates). Default 0.01.
+    pub alpha: f64,
+    /// Most effects added. Default 4.
+    pub max_steps: usize,
+    /// Folds of the cross-validation over poses. Default 5.
+    pub folds: usize,
+    /// Smallest fraction of a candidate's Jacobian outside the current model's column space for
+    /// it to be tried. Default 0.05.
+    pub min_novelty: f64,
+    /// Identification options (declared noise in `sigma_um`).
+    pub identify: IdentifyOptions,
+}
+
+impl Default for RefineOptions {
+    fn default() -> Self {
+        Self {
+            candidates: Effect::ALL.to_vec(),
+            alpha: 0.01,
+            max_steps: 4,
+            folds: 5,
+            min_novelty: 0.05,
+            identify: IdentifyOptions::default(),
+        }
+    }
+}
+
+/// How a candidate fared in a round.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CandidateScore {
+    /// The effect.
+    pub effect: Effect,
+    /// Fraction of its Jacobian outside the current model's column space.
+    pub novelty: f64,
+    /// F-test p-value (`None` when skipped as confounded or adding no identifiable dimension).
+    pub p_value: Option<f64>,
+    /// BIC change (negative: better).
+    pub delta_bic: Option<f64>,
+    /// RMS residual with the effect, um.
+    pub rms_um: Option<f64>,
+}
+
+/// One accepted refinement step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RefineStep {
+    /// The effect added.
+    pub effect: Effect,
+    /// Its F-test p-value.
+    pub p_value: f64,
+    /// BIC change.
+    pub delta_bic: f64,
+    /// Residual RMS before and after, um.
+    pub rms_before_um: f64,
+    /// Residual RMS after, um.
+    pub rms_after_um: f64,
+    /// Cross-validated RMS before, um.
+    pub cv_rms_before_um: f64,
+    /// Cross-validated RMS after, um.
+    pub cv_rms_after_um: f64,
+    /// The effect's parameters: (name, estimate or `None` when not determined, std).
+    pub parameters: Vec<(String, Option<f64>, Option<f64>)>,
+    /// All candidates of the round.
+    pub candidates: Vec<CandidateScore>,
+}
+
+/// The outcome of a refinement.
+#[derive(Debug, Clone)]
+pub struct Refinement {
+    /// Accepted steps in order.
+    pub steps: Vec<RefineStep>,
+    /// The final model (declared effects plus those added).
+    pub model: MeasurementModel,
+    /// The final calibration.
+    pub calibration: Calibration,
+    /// Diagnostics of the first fit.
+    pub initial_diagnostics: ResidualDiagnostics,
+    /// Diagnostics of the final fit.
+    pub final_diagnostics: ResidualDiagnostics,
+    /// Final cross-validated RMS, um.
+    pub final_cv_rms_um: f64,
+    /// Regressors the final residual still follows (no library effect explained them).
+    pub unexplained_structure: Vec<String>,
+    /// Residuals of the first fit, um (for plots).
+    pub initial_residuals_um: Vec<f64>,
+}
+
+fn rss(r: &[f64]) -> f64 {
+    r.iter().map(|x| x * x).sum()
+}
+
+fn bic(rss: f64, m: usize, k: usize) -> f64 {
+    let m = m as f64;
+    m * (rss / m).max(1e-300).ln() + k as f64 * m.ln()
+}
+
+/// Cross-validated RMS (um): k folds over poses (pose j in fold j mod k); each fold is fitted on
+/// the other poses and predicts its own readings.
+pub fn cross_validated_rms(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+    folds: usize,
+    start: &[f64],
+) -> Result<f64, CalibError> {
+    let folds = folds.max(2);
+    let mut sq = 0.0;
+    let mut count = 0usize;
+    for f in 0..folds {
+        let split = |held: bool| -> Campaign {
+            let mut c = campaign.clone();
+            c.readings.retain(|r| (r.pose % folds == f) == held);
+            c
+        };
+        let train = split(false);
+        let test = split(true);
+        if test.readings.is_empty() || train.readings.is_empty() {
+            continue;
+        }
+        let opts = IdentifyOptions {
+            start_um: Some(start.to_vec()),
+            ..options.clone()
+        };
+        let cal = identify(model, &train, &opts)?;
+        let prepared = Prepared::new(model, &test)?;
+        let y = predict(model, &prepared, &test, &cal.minimum_norm_um, None)?;
+        for (yk, r) in y.iter().zip(&test.readings) {
+            sq += ((yk - r.length_mm) * 1e3).powi(2);
+            count += 1;
+        }
+    }
+    Ok((sq / count.max(1) as f64).sqrt())
+}
+
+fn with_effect(model: &MeasurementModel, e: Effect) -> MeasurementModel {
+    let mut m = model.clone();
+    m.effects.push(e);
+    m
+}
+
+/// Start vector of an augmented model: the current estimate, zeros for the new block.
+fn extend_start(current: &[f64], augmented: &MeasurementModel) -> Vec<f64> {
+    let mut s = current.to_vec();
+    s.resize(augmented.num_params(), 0.0);
+    s
+}
+
+/// Fraction of the new block's Jacobian outside the identifiable column space of the rest.
+fn novelty(
+    augmented: &MeasurementModel,
+    campaign: &Campaign,
+    at: &[f64],
+    old_params: usize,
+    rank_rtol: f64,
+) -> Result<f64, CalibError> {
+    let prepared = Prepared::new(augmented, campaign)?;
+    let mut j = nalgebra::DMatrix::zeros(campaign.len(), augmented.num_params());
+    predict(augmented, &prepared, campaign, at, Some(&mut j))?;
+    let old = j.columns(0, old_params).into_owned();
+    let new = j.columns(old_params, j.ncols() - old_params).into_owned();
+    let norm = new.norm();
+    if norm == 0.0 {
+        return Ok(0.0);
+    }
+    let svd = old.svd(true, false);
+    let u = svd.u.expect("u requested");
+    let smax = svd.singular_values.max();
+    let keep: Vec<usize> = (0..svd.singular_values.len())
+        .filter(|&i| svd.singular_values[i] > rank_rtol * smax)
+        .collect();
+    let ur = u.select_columns(&keep);
+    let outside = &new - &ur * (ur.transpose() * &new);
+    Ok(outside.norm() / norm)
+}
+
+/// Runs the refinement loop on a campaign, starting from `model` (its declared effects).
+pub fn refine(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &RefineOptions,
+) -> Result<Refinement, CalibError> {
+    if !(options.alpha > 0.0 && options.alpha < 1.0) {
+        return Err(CalibError::invalid(
+            "alpha",
+            format!("{} must be in (0, 1)", options.alpha),
+        ));
+    }
+    let m = campaign.len();
+    let sigma = options.identify.sigma_um;
+    let diag_of =
+        |mdl: &MeasurementModel, cal: &Calibration| -> Result<ResidualDiagnostics, CalibError> {
+            let prepared = Prepared::new(mdl, campaign)?;
+            let regs = regressors(mdl, &prepared, campaign);
+            Ok(diagnose(
+                &cal.residuals_um,
+                m.saturating_sub(cal.identifiability.rank),
+                sigma,
+                &regs,
+                options.alpha,
+            ))
+        };
+    let mut current = model.clone();
+    let mut cal = identify(&current, campaign, &options.identify)?;
+    let initial_residuals_um = cal.residuals_um.clone();
+    let initial_diagnostics = diag_of(&current, &cal)?;
+    let mut diag = initial_diagnostics.clone();
+    let mut cv = cross_validated_rms(
+        &current,
+        campaign,
+        &options.identify,
+        options.folds,
+        &cal.minimum_norm_um,
+    )?;
+    let mut steps = Vec::new();
+    for _ in 0..options.max_steps {
+        if diag.white && diag.consistent_with_noise == Some(true) && diag.significant.is_empty() {
+            break;
+        }
+        let remaining: Vec<Effect> = options
+            .candidates
+            .iter()
+            .copied()
+            .filter(|e| !current.effects.contains(e))
+            .collect();
+        if remaining.is_empty() {
+            break;
+        }
+        let level = options.alpha / remaining.len() as f64;
+        let rss0 = rss(&cal.residuals_um);
+        let k0 = cal.identifiability.rank;
+        let bic0 = bic(rss0, m, k0);
+        let mut scores = Vec::new();
+        let mut best: Option<(usize, MeasurementModel, Calibration)> = None;
+        for e in remaining {
+            let aug = with_effect(&current, e);
+            let start = extend_start(&cal.minimum_norm_um, &aug);
+            let nov = novelty(
+                &aug,
+                campaign,
+                &start,
+                current.num_params(),
+                options.identify.rank.rank_rtol,
+            )?;
+            let mut score = CandidateScore {
+                effect: e,
+                novelty: nov,
+                p_value: None,
+                delta_bic: None,
+                rms_um: None,
+            };
+            if nov < options.min_novelty {
+                scores.push(score);
+                continue;
+            }
+            let opts = IdentifyOptions {
+                start_um: Some(start),
+                ..options.identify.clone()
+            };
+            let Ok(c1) = identify(&aug, campaign, &opts) else {
+                scores.push(score);
+                continue;
+            };
+            let k1 = c1.identifiability.rank;
+            let rss1 = rss(&c1.residuals_um);
+            score.rms_um = Some(c1.residual_rms_um);
+            if k1 > k0 && m > k1 && rss1 > 0.0 {
+                let dk = (k1 - k0) as f64;
+                let f = ((rss0 - rss1).max(0.0) / dk) / (rss1 / (m - k1) as f64);
+                let p = FisherSnedecor::new(dk, (m - k1) as f64)
+                    .map(|d| 1.0 - d.cdf(f))
+                    .unwrap_or(1.0);
+                let db = bic(rss1, m, k1) - bic0;
+                score.p_value = Some(p);
+                score.delta_bic = Some(db);
+                let better = match &best {
+                    None => true,
+                    Some((i, _, _)) => db < scores[*i].delta_bic.unwrap_or(f64::INFINITY),
+                };
+                if p < level && db < 0.0 && better {
+                    best = Some((scores.len(), aug, c1));
+                }
+            }
+            scores.push(score);
+        }
+        let Some((i, aug, c1)) = best else {
+            break;
+        };
+        let cv1 = cross_validated_rms(
+            &aug,
+            campaign,
+            &options.identify,
+            options.folds,
+            &c1.minimum_norm_um,
+        )?;
+        let names = aug.parameter_names();
+        let block = *aug.blocks().last().expect("augmented block");
+        let parameters = (block.offset..block.offset + block.len)
+            .map(|k| (names[k].clone(), c1.estimate_um[k], c1.std_um[k]))
+            .collect();
+        steps.push(RefineStep {
+            effect: scores[i].effect,
+            p_value: scores[i].p_value.unwrap_or(f64::NAN),
+            delta_bic: scores[i].delta_bic.unwrap_or(f64::NAN),
+            rms_before_um: cal.residual_rms_um,
+            rms_after_um: c1.residual_rms_um,
+            cv_rms_before_um: cv,
+            cv_rms_after_um: cv1,
+            parameters,
+            candidates: scores,
+        });
+        current = aug;
+        cal = c1;
+        cv = cv1;
+        diag = diag_of(&current, &cal)?;
+    }
+    let unexplained_structure = if diag.consistent_with_noise == Some(true) && diag.white {
+        Vec::new()
+    } else {
+        let mut u = diag.significant.clone();
+        if u.is_empty() && !diag.white {
+            u.push("acquisition order".to_string());
+        }
+        u
+    };
+    Ok(Refinement {
+        steps,
+        model: current,
+        calibration: cal,
+        initial_diagnostics,
+        final_diagnostics: diag,
+        final_cv_rms_um: cv,
+        unexplained_structure,
+        initial_residuals_um,
+    })
+}
