@@ -17,6 +17,17 @@ pub struct Reading {
     pub temperature_c: Option<f64>,
 }
 
+/// A platform pose measured by a tracker (laser tracker, motion capture) in the tracker's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseMeasurement {
+    /// Index of the configuration in [`Campaign::poses`] (its commanded lengths drive it).
+    pub pose: usize,
+    /// The measured pose, tracker frame (mm, rotation).
+    pub measured: Pose,
+    /// Acquisition time, s, if logged.
+    pub time_s: Option<f64>,
+}
+
 /// A measurement campaign: commanded poses and readings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Campaign {
@@ -27,19 +38,28 @@ pub struct Campaign {
     pub commanded_lengths_mm: Option<Vec<Vec<f64>>>,
     /// Sensor readings.
     pub readings: Vec<Reading>,
+    /// Tracker pose measurements (6 observations each), if any.
+    #[serde(default)]
+    pub pose_measurements: Vec<PoseMeasurement>,
+    /// Standard deviation of a tracker position coordinate, um. Default (when 0) 10.
+    #[serde(default)]
+    pub pose_sigma_um: f64,
+    /// Standard deviation of a tracker orientation component, urad. Default (when 0) 20.
+    #[serde(default)]
+    pub orientation_sigma_urad: f64,
     /// True when the readings were simulated, not measured. Carried into every output.
     pub simulated: bool,
 }
 
 impl Campaign {
-    /// Number of readings.
+    /// Number of observations: length readings plus six per pose measurement.
     pub fn len(&self) -> usize {
-        self.readings.len()
+        self.readings.len() + 6 * self.pose_measurements.len()
     }
 
-    /// True when there are no readings.
+    /// True when there are no observations.
     pub fn is_empty(&self) -> bool {
-        self.readings.is_empty()
+        self.len() == 0
     }
 
     /// The readings' lengths, mm.
@@ -77,6 +97,7 @@ impl Plan {
             commanded_lengths_mm: None,
             readings,
             simulated: true,
+            ..Campaign::default()
         }
     }
 

@@ -24,8 +24,10 @@
 //! | `screw_periodic` | 2 per link (sin, cos), um | periodic screw error with the lead as period: `dL = a sin(2 pi L / lead) + b cos(2 pi L / lead)` | lengths sample the period densely (stroke steps not multiples of the lead) |
 //! | `socket_error` | 6 per sensor (base xyz, platform xyz), um | socket positions off their nominal place | several poses with varied orientation; gauge freedoms as for joints |
 //!
-//! `tracker_frame` (registration of a tracker frame) belongs to pose measurements and is
-//! listed for the command-line tool; it has no length-sensor channel.
+//! `tracker_frame` (6 parameters: translation um, rotation urad) registers a tracker's frame in
+//! the base frame; it acts on pose measurements only and brings 6 gauge freedoms with it (the
+//! whole machine and the tracker frame moved or rotated together), which the identifiability
+//! analysis names.
 use serde::{Deserialize, Serialize};
 
 /// A named effect.
@@ -54,11 +56,14 @@ pub enum Effect {
     ScrewPeriodic,
     /// Sensor socket position errors, um.
     SocketError,
+    /// Registration of the tracker frame in the base frame: translation (um) and small
+    /// rotation (urad); acts on pose measurements only.
+    TrackerFrame,
 }
 
 impl Effect {
     /// Every effect of the library, in a fixed order.
-    pub const ALL: [Effect; 11] = [
+    pub const ALL: [Effect; 12] = [
         Effect::LinkOffset,
         Effect::LinkScale,
         Effect::LinkNonlinearity,
@@ -70,6 +75,7 @@ impl Effect {
         Effect::Compliance,
         Effect::ScrewPeriodic,
         Effect::SocketError,
+        Effect::TrackerFrame,
     ];
 
     /// The effect's name in files and on the command line.
@@ -86,6 +92,7 @@ impl Effect {
             Effect::Compliance => "compliance",
             Effect::ScrewPeriodic => "screw_periodic",
             Effect::SocketError => "socket_error",
+            Effect::TrackerFrame => "tracker_frame",
         }
     }
 
@@ -97,7 +104,7 @@ impl Effect {
             .find(|e| e.name() == name)
             .ok_or_else(|| {
                 format!(
-                    "unknown effect `{name}` (known: {}, tracker_frame for pose data)",
+                    "unknown effect `{name}` (known: {})",
                     Effect::ALL.map(|e| e.name()).join(", ")
                 )
             })
@@ -115,6 +122,7 @@ impl Effect {
             Effect::SensorOffset | Effect::SensorScale => sensors,
             Effect::Clearance => 1,
             Effect::SocketError => 6 * sensors,
+            Effect::TrackerFrame => 6,
         }
     }
 
@@ -124,7 +132,17 @@ impl Effect {
             Effect::LinkScale | Effect::SensorScale => "ppm",
             Effect::ThermalDrift => "ppm/K",
             Effect::Compliance => "um/kN",
+            Effect::TrackerFrame => "um (translation), urad (rotation)",
             _ => "um",
+        }
+    }
+
+    /// Unit of parameter `k`.
+    pub fn param_unit(&self, k: usize) -> &'static str {
+        match self {
+            Effect::TrackerFrame if k >= 3 => "urad",
+            Effect::TrackerFrame => "um",
+            _ => self.unit(),
         }
     }
 
@@ -149,6 +167,7 @@ impl Effect {
                 if k % 6 < 3 { "base" } else { "platform" },
                 ["dx", "dy", "dz"][k % 3]
             ),
+            Effect::TrackerFrame => ["tx", "ty", "tz", "rx", "ry", "rz"][k].to_string(),
             _ => format!("link {}", k + 1),
         }
     }
@@ -253,7 +272,7 @@ pub fn link_coefficient(
 pub fn is_link_effect(effect: Effect) -> bool {
     !matches!(
         effect,
-        Effect::SensorOffset | Effect::SensorScale | Effect::SocketError
+        Effect::SensorOffset | Effect::SensorScale | Effect::SocketError | Effect::TrackerFrame
     )
 }
 
