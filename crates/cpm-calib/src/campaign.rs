@@ -62,9 +62,65 @@ impl Campaign {
         self.len() == 0
     }
 
-    /// The readings' lengths, mm.
-    pub fn lengths_mm(&self) -> Vec<f64> {
-        self.readings.iter().map(|r| r.length_mm).collect()
+    /// The measured observations: every reading's length (mm), then per pose measurement its
+    /// position (mm) and three zeros (orientation observations are the rotation from the
+    /// measured to the predicted orientation, in mrad, measured as zero).
+    pub fn observations(&self) -> Vec<f64> {
+        let mut v: Vec<f64> = self.readings.iter().map(|r| r.length_mm).collect();
+        for pm in &self.pose_measurements {
+            v.extend(pm.measured.position_mm.iter());
+            v.extend([0.0; 3]);
+        }
+        v
+    }
+
+    /// The configuration (index into `poses`) behind observation `k`.
+    pub fn observation_pose(&self, k: usize) -> usize {
+        let m = self.readings.len();
+        if k < m {
+            self.readings[k].pose
+        } else {
+            self.pose_measurements[(k - m) / 6].pose
+        }
+    }
+
+    /// Tracker position noise, um (10 when not set).
+    pub fn pose_sigma(&self) -> f64 {
+        if self.pose_sigma_um > 0.0 {
+            self.pose_sigma_um
+        } else {
+            10.0
+        }
+    }
+
+    /// Tracker orientation noise, urad (20 when not set).
+    pub fn orientation_sigma(&self) -> f64 {
+        if self.orientation_sigma_urad > 0.0 {
+            self.orientation_sigma_urad
+        } else {
+            20.0
+        }
+    }
+
+    /// Weight of each observation so that all residuals share the noise `sigma_ref_um` of a
+    /// length reading: 1 for readings, `sigma_ref / pose_sigma` for tracker positions and
+    /// `sigma_ref / orientation_sigma` (um per urad) for tracker orientations.
+    pub fn observation_weights(&self, sigma_ref_um: f64) -> Vec<f64> {
+        let mut w = vec![1.0; self.readings.len()];
+        for _ in &self.pose_measurements {
+            w.extend([sigma_ref_um / self.pose_sigma(); 3]);
+            w.extend([sigma_ref_um / self.orientation_sigma(); 3]);
+        }
+        w
+    }
+
+    /// The campaign restricted to the configurations for which `keep(pose)` holds (readings
+    /// and pose measurements; pose indices unchanged).
+    pub fn filter_poses(&self, keep: impl Fn(usize) -> bool) -> Campaign {
+        let mut c = self.clone();
+        c.readings.retain(|r| keep(r.pose));
+        c.pose_measurements.retain(|p| keep(p.pose));
+        c
     }
 }
 

@@ -31,7 +31,7 @@ pub fn regressors(
             out.push(Regressor { name, values });
         }
     };
-    let pose = |k: usize| &campaign.poses[campaign.readings[k].pose];
+    let pose = |k: usize| &campaign.poses[campaign.observation_pose(k)];
     let home = model.nominal.home.position_mm;
     for (a, axis) in ["x", "y", "z"].iter().enumerate() {
         push(format!("pose {axis}"), &|k| pose(k).position_mm[a]);
@@ -46,24 +46,24 @@ pub fn regressors(
         });
     }
     push("acquisition order".into(), &|k| k as f64);
-    if campaign.readings.iter().all(|r| r.time_s.is_some()) {
-        push("time".into(), &|k| {
-            campaign.readings[k].time_s.unwrap_or(0.0)
-        });
+    let ctx = |k: usize| &prepared.contexts[campaign.observation_pose(k)];
+    if (0..m).all(|k| ctx(k).time_s.is_some()) {
+        push("time".into(), &|k| ctx(k).time_s.unwrap_or(0.0));
     }
-    if campaign.readings.iter().all(|r| r.temperature_c.is_some()) {
+    if (0..m).all(|k| ctx(k).temperature_c.is_some()) {
         push("temperature".into(), &|k| {
-            campaign.readings[k].temperature_c.unwrap_or(0.0)
+            ctx(k).temperature_c.unwrap_or(0.0)
         });
     }
-    push("reading length".into(), &|k| campaign.readings[k].length_mm);
+    if campaign.pose_measurements.is_empty() {
+        push("reading length".into(), &|k| campaign.readings[k].length_mm);
+    }
     let n = model.nominal.num_links();
     let forces: Vec<Option<Vec<f64>>> = campaign
         .poses
         .iter()
         .map(|p| cpm_clearance::link_forces_n(&model.nominal, p, &model.load).ok())
         .collect();
-    let ctx = |k: usize| &prepared.contexts[campaign.readings[k].pose];
     for i in 0..n {
         push(format!("link {} length", i + 1), &|k| {
             ctx(k).commanded_mm[i]
@@ -72,7 +72,7 @@ pub fn regressors(
             ctx(k).motion_sign[i]
         });
         push(format!("link {} force", i + 1), &|k| {
-            forces[campaign.readings[k].pose]
+            forces[campaign.observation_pose(k)]
                 .as_ref()
                 .map(|t| t[i])
                 .unwrap_or(f64::NAN)

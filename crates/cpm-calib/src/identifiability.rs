@@ -241,6 +241,49 @@ pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<P
             vectors: vs,
         });
     }
+    if let Some(b) = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(crate::Effect::TrackerFrame))
+    {
+        // Moving every base joint by v moves the platform by v; a tracker registration moved
+        // by -v hides it. Likewise for a rotation about the base origin.
+        let trans = (0..3)
+            .map(|a| {
+                let mut v = DVector::zeros(np);
+                for i in 0..n {
+                    v[6 * i + a] = 1.0;
+                }
+                v[b.offset + a] = -1.0;
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description: "all base joints and the tracker frame translated together".into(),
+            vectors: trans,
+        });
+        let rot = (0..3)
+            .map(|a| {
+                let mut w = nalgebra::Vector3::zeros();
+                w[a] = 1.0;
+                let mut v = DVector::zeros(np);
+                for (i, l) in table.links.iter().enumerate() {
+                    let d = w.cross(&l.base_mm) * 1e-3;
+                    for c in 0..3 {
+                        v[6 * i + c] = d[c];
+                    }
+                }
+                v[b.offset + 3 + a] = -1.0;
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description:
+                "all base joints and the tracker frame rotated together about the base origin"
+                    .into(),
+            vectors: rot,
+        });
+    }
     let mut used = Vec::new();
     for s in &campaign.readings {
         if !used.contains(&s.sensor) {

@@ -88,6 +88,7 @@ struct Subspace<'a> {
     start_um: DVector<f64>,
     basis: DMatrix<f64>,
     measured_mm: Vec<f64>,
+    weights: Vec<f64>,
     full_jac: DMatrix<f64>,
 }
 
@@ -113,8 +114,13 @@ impl Problem for Subspace<'_> {
             &self.errors(x),
             None,
         )?;
-        for ((ri, yi), mi) in r.iter_mut().zip(&y).zip(&self.measured_mm) {
-            *ri = (yi - mi) * 1e3;
+        for (((ri, yi), mi), w) in r
+            .iter_mut()
+            .zip(&y)
+            .zip(&self.measured_mm)
+            .zip(&self.weights)
+        {
+            *ri = (yi - mi) * 1e3 * w;
         }
         Ok(())
     }
@@ -133,7 +139,7 @@ impl DenseJacobian for Subspace<'_> {
         let reduced = &self.full_jac * &self.basis * 1e3;
         for c in 0..reduced.ncols() {
             for r in 0..reduced.nrows() {
-                jac[(r, c)] = reduced[(r, c)];
+                jac[(r, c)] = reduced[(r, c)] * self.weights[r];
             }
         }
         Ok(())
@@ -148,17 +154,23 @@ fn rms(v: &[f64]) -> f64 {
     }
 }
 
-/// The identification Jacobian (readings x parameters, um of reading per um of error) at
-/// installation errors `errors_um`.
+/// The identification Jacobian (observations x parameters, um of reading per um of error;
+/// tracker observations weighted to the length-reading noise `sigma_ref_um` = the campaign's
+/// tracker position noise) at parameters `params`.
 pub fn identification_jacobian(
     model: &MeasurementModel,
     campaign: &Campaign,
-    errors_um: &[f64],
+    params: &[f64],
 ) -> Result<DMatrix<f64>, CalibError> {
     let prepared = Prepared::new(model, campaign)?;
     let mut j = DMatrix::zeros(campaign.len(), model.num_params());
-    predict(model, &prepared, campaign, errors_um, Some(&mut j))?;
-    Ok(j * 1e3)
+    predict(model, &prepared, campaign, params, Some(&mut j))?;
+    let w = campaign.observation_weights(campaign.pose_sigma());
+    for (r, wr) in w.iter().enumerate() {
+        let mut row = j.row_mut(r);
+        row *= 1e3 * wr;
+    }
+    Ok(j)
 }
 
 /// Identifiability of a campaign (or plan skeleton) at the nominal geometry.
@@ -202,10 +214,19 @@ pub fn identify(
     }
     let prepared = Prepared::new(model, campaign)?;
     let m = campaign.len();
+    let sigma_ref = options.sigma_um.unwrap_or(campaign.pose_sigma());
+    let weights = campaign.observation_weights(sigma_ref);
+    let weigh = |mut j: DMatrix<f64>| {
+        for (r, w) in weights.iter().enumerate() {
+            let mut row = j.row_mut(r);
+            row *= 1e3 * w;
+        }
+        j
+    };
     let mut j0 = DMatrix::zeros(m, np);
     predict(model, &prepared, campaign, &start, Some(&mut j0))?;
     let patterns = physical_patterns(model, campaign);
-    let first = analyze(&(&j0 * 1e3), 1.0, &options.rank, &patterns);
+    let first = analyze(&weigh(j0), 1.0, &options.rank, &patterns);
     if first.rank == 0 {
         return Err(CalibError::NoInformation(
             "the identification Jacobian is zero: the readings do not depend on any installation error".into(),
@@ -217,7 +238,8 @@ pub fn identify(
         campaign,
         start_um: DVector::from_vec(start),
         basis: first.row_space(),
-        measured_mm: campaign.lengths_mm(),
+        measured_mm: campaign.observations(),
+        weights: weights.clone(),
         full_jac: DMatrix::zeros(m, np),
     };
     let mut theta = vec![0.0; first.rank];
@@ -232,9 +254,10 @@ pub fn identify(
     let residuals_um: Vec<f64> = y
         .iter()
         .zip(&problem.measured_mm)
-        .map(|(a, b)| (a - b) * 1e3)
+        .zip(&weights)
+        .map(|((a, b), w)| (a - b) * 1e3 * w)
         .collect();
-    let jf = jf * 1e3;
+    let jf = weigh(jf);
     let ssr: f64 = residuals_um.iter().map(|r| r * r).sum();
     let (sigma_um, sigma_estimated) = match options.sigma_um {
         Some(s) => (s, false),

@@ -205,10 +205,28 @@ impl MeasurementModel {
 
     /// Checks the campaign against the model: sensor indices, pose indices, finite values.
     pub fn check_campaign(&self, campaign: &Campaign) -> Result<(), CalibError> {
-        if campaign.readings.is_empty() {
+        if campaign.is_empty() {
             return Err(CalibError::NoInformation(
-                "the campaign has no readings".into(),
+                "the campaign has no readings and no pose measurements".into(),
             ));
+        }
+        for (q, pm) in campaign.pose_measurements.iter().enumerate() {
+            if pm.pose >= campaign.poses.len() {
+                return Err(CalibError::invalid(
+                    format!("pose measurement {q}.pose"),
+                    format!(
+                        "{} but the campaign has {} poses",
+                        pm.pose,
+                        campaign.poses.len()
+                    ),
+                ));
+            }
+            if !pm.measured.is_finite() {
+                return Err(CalibError::invalid(
+                    format!("pose measurement {q}"),
+                    "not finite",
+                ));
+            }
         }
         for (k, r) in campaign.readings.iter().enumerate() {
             if r.pose >= campaign.poses.len() {
@@ -258,6 +276,8 @@ pub struct Prepared {
     pub t0_s: f64,
     /// Readings grouped by pose: `by_pose[j]` lists reading indices taken at pose j.
     pub by_pose: Vec<Vec<usize>>,
+    /// Pose measurements grouped by pose.
+    pub measurements_by_pose: Vec<Vec<usize>>,
     /// First-order model only: nominal reading and its gradient per reading.
     first_order: Option<(Vec<f64>, DMatrix<f64>)>,
 }
@@ -271,6 +291,10 @@ impl Prepared {
         for (k, r) in campaign.readings.iter().enumerate() {
             by_pose[r.pose].push(k);
         }
+        let mut measurements_by_pose = vec![Vec::new(); campaign.poses.len()];
+        for (q, pm) in campaign.pose_measurements.iter().enumerate() {
+            measurements_by_pose[pm.pose].push(q);
+        }
         let contexts = contexts(model, campaign, &lengths_mm, &by_pose)?;
         let t0_s = campaign
             .readings
@@ -282,6 +306,7 @@ impl Prepared {
             contexts,
             t0_s: if t0_s.is_finite() { t0_s } else { 0.0 },
             by_pose,
+            measurements_by_pose,
             first_order: None,
         };
         if model.kind == ModelKind::FirstOrder {
@@ -355,7 +380,17 @@ fn contexts(
                 rs.iter()
                     .filter_map(|&k| campaign.readings[k].temperature_c),
             ),
-            time_s: mean(rs.iter().filter_map(|&k| campaign.readings[k].time_s)),
+            time_s: mean(
+                rs.iter()
+                    .filter_map(|&k| campaign.readings[k].time_s)
+                    .chain(
+                        campaign
+                            .pose_measurements
+                            .iter()
+                            .filter(|p| p.pose == j)
+                            .filter_map(|p| p.time_s),
+                    ),
+            ),
         });
     }
     Ok(out)
@@ -417,6 +452,24 @@ fn predict_exact(
     let socket_block = blocks
         .iter()
         .find(|b| b.effect == Some(Effect::SocketError));
+    let tracker_block = blocks
+        .iter()
+        .find(|b| b.effect == Some(Effect::TrackerFrame));
+    let (reg_t, reg_r) = match tracker_block {
+        Some(b) => (
+            nalgebra::Vector3::new(params[b.offset], params[b.offset + 1], params[b.offset + 2])
+                * 1e-3,
+            nalgebra::Rotation3::new(
+                nalgebra::Vector3::new(
+                    params[b.offset + 3],
+                    params[b.offset + 4],
+                    params[b.offset + 5],
+                ) * 1e-6,
+            ),
+        ),
+        None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
+    };
+    let m_readings = campaign.readings.len();
     let settings = &model.effect_settings;
     let sensor_corr = model.sensor_correction_mm();
     let mut y = vec![0.0; campaign.len()];
@@ -424,7 +477,8 @@ fn predict_exact(
     let mut coeff: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
     let mut lengths = vec![0.0; n];
     for (j, readings) in prepared.by_pose.iter().enumerate() {
-        if readings.is_empty() {
+        let measurements = &prepared.measurements_by_pose[j];
+        if readings.is_empty() && measurements.is_empty() {
             continue;
         }
         let ctx = &prepared.contexts[j];
@@ -456,6 +510,21 @@ fn predict_exact(
                 }
             }
             y[k] = yk;
+        }
+        // Tracker observations: position in the tracker frame (mm) and the rotation from the
+        // measured to the predicted orientation (mrad).
+        let tracker_position = reg_r * pose.position_mm + reg_t;
+        let tracker_rotation = reg_r * pose.rotation;
+        let mut omegas = Vec::with_capacity(measurements.len());
+        for &q in measurements {
+            let pm = &campaign.pose_measurements[q];
+            let o = m_readings + 6 * q;
+            let w = (tracker_rotation * pm.measured.rotation.inverse()).scaled_axis();
+            for a in 0..3 {
+                y[o + a] = tracker_position[a];
+                y[o + 3 + a] = w[a] * 1e3;
+            }
+            omegas.push(w);
         }
         if let Some(jac) = jacobian.as_deref_mut() {
             let links = cpm_kinematics::inverse(&table, &pose);
@@ -512,7 +581,83 @@ fn predict_exact(
                     }
                 }
             }
+            if !measurements.is_empty() {
+                // dx/dp = J1^-1 (dL/dp - J2 de/dp): the pose twist per parameter.
+                let lu = j1.lu();
+                let mut dx = DMatrix::zeros(6, np);
+                let mut rhs = Vector6::zeros();
+                for p in 0..np {
+                    rhs.fill(0.0);
+                    let mut any = false;
+                    if p < 6 * n {
+                        let (i, a) = (p / 6, p % 6);
+                        let ls = &links[i];
+                        let zp = rt * ls.unit;
+                        // J2 entry per um: base -z, platform R^T z; dx = -J1^-1 J2 de.
+                        rhs[i] = if a < 3 { ls.unit[a] } else { -zp[a - 3] } * 1e-3;
+                        any = true;
+                    }
+                    for (i, c) in coeff.iter().enumerate() {
+                        for &(q, a) in c {
+                            if q == p {
+                                rhs[i] += a;
+                                any = true;
+                            }
+                        }
+                    }
+                    if any {
+                        let sol = lu.solve(&rhs).ok_or_else(|| CalibError::Kinematics {
+                            pose: j,
+                            source: cpm_kinematics::KinematicsError::Singular {
+                                iteration: 0,
+                                condition: cpm_kinematics::fk::condition_number(&j1),
+                            },
+                        })?;
+                        dx.set_column(p, &sol);
+                    }
+                }
+                let rr = reg_r.matrix();
+                for (&q, w) in measurements.iter().zip(&omegas) {
+                    let o = m_readings + 6 * q;
+                    let jl_inv = left_jacobian_inverse(w);
+                    let top = rr * dx.rows(0, 3);
+                    let bottom = jl_inv * rr * dx.rows(3, 3) * 1e3;
+                    for p in 0..np {
+                        for a in 0..3 {
+                            jac[(o + a, p)] = top[(a, p)];
+                            jac[(o + 3 + a, p)] = bottom[(a, p)];
+                        }
+                    }
+                    if let Some(b) = tracker_block {
+                        let skew = tracker_position - reg_t;
+                        for a in 0..3 {
+                            jac[(o + a, b.offset + a)] = 1e-3;
+                        }
+                        // d(exp(d) R t)/dd = -[R t]x, per urad.
+                        let sk = skew.cross_matrix() * -1e-6;
+                        let jr = jl_inv * 1e-3;
+                        for a in 0..3 {
+                            for c in 0..3 {
+                                jac[(o + a, b.offset + 3 + c)] = sk[(a, c)];
+                                jac[(o + 3 + a, b.offset + 3 + c)] = jr[(a, c)];
+                            }
+                        }
+                    }
+                }
+            }
         }
     }
     Ok(y)
+}
+
+/// Inverse of the left Jacobian of SO(3) at rotation vector `w`: `d log(exp(d) exp(w)) / dd`.
+fn left_jacobian_inverse(w: &nalgebra::Vector3<f64>) -> nalgebra::Matrix3<f64> {
+    let th = w.norm();
+    let k = w.cross_matrix();
+    let i = nalgebra::Matrix3::identity();
+    if th < 1e-8 {
+        return i - k * 0.5 + k * k / 12.0;
+    }
+    let c = 1.0 / (th * th) - (1.0 + th.cos()) / (2.0 * th * th.sin());
+    i - k * 0.5 + k * k * c
 }

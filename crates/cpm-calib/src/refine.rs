@@ -135,14 +135,9 @@ pub fn cross_validated_rms(
     let mut sq = 0.0;
     let mut count = 0usize;
     for f in 0..folds {
-        let split = |held: bool| -> Campaign {
-            let mut c = campaign.clone();
-            c.readings.retain(|r| (r.pose % folds == f) == held);
-            c
-        };
-        let train = split(false);
-        let test = split(true);
-        if test.readings.is_empty() || train.readings.is_empty() {
+        let train = campaign.filter_poses(|p| p % folds != f);
+        let test = campaign.filter_poses(|p| p % folds == f);
+        if test.is_empty() || train.is_empty() {
             continue;
         }
         let opts = IdentifyOptions {
@@ -152,8 +147,9 @@ pub fn cross_validated_rms(
         let cal = identify(model, &train, &opts)?;
         let prepared = Prepared::new(model, &test)?;
         let y = predict(model, &prepared, &test, &cal.minimum_norm_um, None)?;
-        for (yk, r) in y.iter().zip(&test.readings) {
-            sq += ((yk - r.length_mm) * 1e3).powi(2);
+        let w = test.observation_weights(options.sigma_um.unwrap_or(test.pose_sigma()));
+        for ((yk, mk), wk) in y.iter().zip(test.observations()).zip(w) {
+            sq += ((yk - mk) * 1e3 * wk).powi(2);
             count += 1;
         }
     }
