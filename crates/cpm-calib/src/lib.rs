@@ -26,11 +26,13 @@
 
 pub mod accuracy;
 pub mod campaign;
+pub mod design;
 pub mod diagnostics;
 pub mod effects;
 pub mod error;
 pub mod identifiability;
 pub mod identify;
+pub mod implicit;
 pub mod model;
 pub mod paper;
 pub mod refine;

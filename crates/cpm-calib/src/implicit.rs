@@ -1,0 +1,451 @@
+//! Implicit-loop calibration: the actual pose of every configuration is an unknown beside the
+//! global parameters, so no forward kinematics runs inside the residuals.
+//!
+//! Unknowns: per configuration `j` a pose correction `(dt_j in um, dw_j in urad)` about the
+//! commanded pose (`t = t_cmd + dt`, `R = exp(dw) R_cmd`), and the global parameters
+//! (installation errors and declared link- or sensor-channel effects). Residuals, per
+//! configuration: the six link closures `l_i(x_j, e) - L_ij - dL_ij(theta)`, weighted by
+//! `sigma_sensor / sigma_encoder` (commanded lengths are measurements too), and every sensor
+//! reading taken there. Each residual touches one pose block and a few globals, so the
+//! Jacobian is block-sparse and `cpm-lm`'s Schur-complement solver eliminates the pose blocks;
+//! cost and memory grow linearly with the number of configurations.
+//!
+//! As the encoder noise goes to zero the closures become hard constraints and the estimate
+//! approaches the nested (forward kinematics in the loop) formulation of [`crate::identify`].
+use cpm_geometry::Pose;
+use cpm_lm::{LinearSolver, ModelError, Problem, SparseJacobian};
+use nalgebra::{DMatrix, Matrix3, Vector3};
+
+use crate::effects::{is_link_effect, link_coefficient, sensor_coefficient, Effect};
+use crate::identifiability::{analyze, Identifiability, RankOptions};
+use crate::model::Prepared;
+use crate::{CalibError, Campaign, MeasurementModel};
+
+/// Options of [`identify_implicit`].
+#[derive(Debug, Clone)]
+pub struct ImplicitOptions {
+    /// Standard deviation of the commanded link lengths (encoder noise), um. Default 1.
+    pub encoder_sigma_um: f64,
+    /// Standard deviation of a sensor reading, um. Default 10/sqrt(3) (the paper's noise).
+    pub sensor_sigma_um: f64,
+    /// Solver options; the linear solver is set to the Schur complement. Default: cpm-lm's
+    /// defaults with `ftol = xtol = 1e-10` and `gtol = 1e-10` (large problems need no more).
+    pub lm: cpm_lm::Options,
+    /// Rank thresholds for the globals.
+    pub rank: RankOptions,
+}
+
+impl Default for ImplicitOptions {
+    fn default() -> Self {
+        Self {
+            encoder_sigma_um: 1.0,
+            sensor_sigma_um: 10.0 / 3f64.sqrt(),
+            lm: cpm_lm::Options {
+                ftol: 1e-10,
+                xtol: 1e-10,
+                gtol: 1e-10,
+                compute_statistics: false,
+                ..cpm_lm::Options::default()
+            },
+            rank: RankOptions::default(),
+        }
+    }
+}
+
+/// The result of an implicit-loop identification.
+#[derive(Debug, Clone)]
+pub struct ImplicitCalibration {
+    /// All global parameters (installation errors, then effects) at the solution.
+    pub globals: Vec<f64>,
+    /// Estimates of the determined globals; `None` where not determined.
+    pub estimate_um: Vec<Option<f64>>,
+    /// Standard deviations (marginal over the poses) of the determined globals.
+    pub std_um: Vec<Option<f64>>,
+    /// Identifiability of the globals from the reduced (Schur) information.
+    pub identifiability: Identifiability,
+    /// The estimated actual poses.
+    pub poses: Vec<Pose>,
+    /// RMS of the sensor residuals, um.
+    pub reading_rms_um: f64,
+    /// RMS of the closure residuals (unweighted), um.
+    pub closure_rms_um: f64,
+    /// The solver's report.
+    pub solver: cpm_lm::Report,
+}
+
+/// Left Jacobian of SO(3): `exp(w + d) = exp(J_l(w) d) exp(w)` to first order.
+fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
+    let th = w.norm();
+    let k = w.cross_matrix();
+    if th < 1e-8 {
+        return Matrix3::identity() + k * 0.5 + k * k / 6.0;
+    }
+    Matrix3::identity()
+        + k * ((1.0 - th.cos()) / (th * th))
+        + k * k * ((th - th.sin()) / (th * th * th))
+}
+
+struct Implicit<'a> {
+    model: &'a MeasurementModel,
+    campaign: &'a Campaign,
+    prepared: Prepared,
+    /// First residual row of each configuration.
+    row0: Vec<usize>,
+    /// Link-channel coefficients per configuration and link: (global index, mm per unit).
+    link_coeff: Vec<Vec<Vec<(usize, f64)>>>,
+    /// Sensor-channel globals per reading: (global index, effect, index within its block).
+    sensor_params: Vec<Vec<(usize, Effect, usize)>>,
+    num_poses: usize,
+    num_globals: usize,
+    rows: usize,
+    w_enc: f64,
+    sensor_corr: f64,
+}
+
+impl Implicit<'_> {
+    fn pose(&self, x: &[f64], j: usize) -> (Pose, Vector3<f64>) {
+        let c = &self.campaign.poses[j];
+        let dt = Vector3::new(x[6 * j], x[6 * j + 1], x[6 * j + 2]) * 1e-3;
+        let dw = Vector3::new(x[6 * j + 3], x[6 * j + 4], x[6 * j + 5]) * 1e-6;
+        (
+            Pose::new(
+                c.position_mm + dt,
+                nalgebra::Rotation3::new(dw) * c.rotation,
+            ),
+            dw,
+        )
+    }
+}
+
+impl Problem for Implicit<'_> {
+    fn num_params(&self) -> usize {
+        6 * self.num_poses + self.num_globals
+    }
+    fn num_residuals(&self) -> usize {
+        self.rows
+    }
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+        let g0 = 6 * self.num_poses;
+        let globals = &x[g0..];
+        let table = self.model.table_with(globals)?;
+        for j in 0..self.num_poses {
+            let (pose, _) = self.pose(x, j);
+            let o = self.row0[j];
+            let rm = pose.rotation.matrix();
+            for (i, l) in table.links.iter().enumerate() {
+                let q = pose.position_mm + rm * l.platform_mm - l.base_mm;
+                let mut target = self.prepared.lengths_mm[j][i];
+                for &(p, a) in &self.link_coeff[j][i] {
+                    target += a * globals[p];
+                }
+                r[o + i] = (q.norm() - target) * 1e3 * self.w_enc;
+            }
+            for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
+                let rd = &self.campaign.readings[k];
+                let s = &table.sensors[rd.sensor];
+                let geometric = s.length_mm(&pose);
+                let mut y = geometric + self.sensor_corr;
+                for &(p, e, q) in &self.sensor_params[k] {
+                    y += sensor_coefficient(e, q, rd.sensor, geometric) * globals[p];
+                }
+                r[o + 6 + t] = (y - rd.length_mm) * 1e3;
+            }
+        }
+        Ok(())
+    }
+}
+
+impl SparseJacobian for Implicit<'_> {
+    fn pattern(&self) -> Vec<(usize, usize)> {
+        let g0 = 6 * self.num_poses;
+        let mut p = Vec::new();
+        for j in 0..self.num_poses {
+            let o = self.row0[j];
+            for i in 0..6 {
+                for c in 0..6 {
+                    p.push((o + i, 6 * j + c));
+                }
+                for c in 0..6 {
+                    p.push((o + i, g0 + 6 * i + c));
+                }
+                for &(q, _) in &self.link_coeff[j][i] {
+                    p.push((o + i, g0 + q));
+                }
+            }
+            for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
+                for c in 0..6 {
+                    p.push((o + 6 + t, 6 * j + c));
+                }
+                for &(q, _, _) in &self.sensor_params[k] {
+                    p.push((o + 6 + t, g0 + q));
+                }
+            }
+        }
+        p
+    }
+
+    fn jacobian_values(&mut self, x: &[f64], values: &mut [f64]) -> Result<(), ModelError> {
+        let g0 = 6 * self.num_poses;
+        let globals = &x[g0..];
+        let table = self.model.table_with(globals)?;
+        let mut v = 0usize;
+        for j in 0..self.num_poses {
+            let (pose, dw) = self.pose(x, j);
+            let jl = left_jacobian(&dw);
+            let rm = pose.rotation.matrix();
+            let rt = rm.transpose();
+            for (i, l) in table.links.iter().enumerate() {
+                let s = rm * l.platform_mm;
+                let q = pose.position_mm + s - l.base_mm;
+                let z = q / q.norm();
+                let m = jl.transpose() * s.cross(&z);
+                let w = self.w_enc;
+                for c in 0..3 {
+                    values[v + c] = z[c] * w;
+                    values[v + 3 + c] = m[c] * 1e-3 * w;
+                }
+                v += 6;
+                let zp = rt * z;
+                for c in 0..3 {
+                    values[v + c] = -z[c] * w;
+                    values[v + 3 + c] = zp[c] * w;
+                }
+                v += 6;
+                for &(_, a) in &self.link_coeff[j][i] {
+                    values[v] = -a * 1e3 * w;
+                    v += 1;
+                }
+            }
+            for &k in &self.prepared.by_pose[j] {
+                let rd = &self.campaign.readings[k];
+                let s = &table.sensors[rd.sensor];
+                let sp = rm * s.platform_mm;
+                let q = pose.position_mm + sp - s.base_mm;
+                let geometric = q.norm();
+                let u = q / geometric;
+                let m = jl.transpose() * sp.cross(&u);
+                for c in 0..3 {
+                    values[v + c] = u[c];
+                    values[v + 3 + c] = m[c] * 1e-3;
+                }
+                v += 6;
+                for &(_, e, q) in &self.sensor_params[k] {
+                    values[v] = sensor_coefficient(e, q, rd.sensor, geometric) * 1e3;
+                    v += 1;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn build<'a>(
+    model: &'a MeasurementModel,
+    campaign: &'a Campaign,
+    options: &ImplicitOptions,
+) -> Result<Implicit<'a>, CalibError> {
+    if !(options.encoder_sigma_um > 0.0 && options.encoder_sigma_um.is_finite()) {
+        return Err(CalibError::invalid(
+            "encoder_sigma_um",
+            "must be finite and > 0",
+        ));
+    }
+    if !(options.sensor_sigma_um > 0.0 && options.sensor_sigma_um.is_finite()) {
+        return Err(CalibError::invalid(
+            "sensor_sigma_um",
+            "must be finite and > 0",
+        ));
+    }
+    if model.nominal.num_links() != 6 {
+        return Err(CalibError::invalid(
+            "links",
+            "the implicit formulation needs six links",
+        ));
+    }
+    if !campaign.pose_measurements.is_empty() {
+        return Err(CalibError::invalid(
+            "pose_measurements",
+            "the implicit formulation takes length readings only; use identify() for tracker data",
+        ));
+    }
+    if let Some(e) = model
+        .effects
+        .iter()
+        .find(|e| matches!(e, Effect::SocketError | Effect::TrackerFrame))
+    {
+        return Err(CalibError::invalid(
+            "effects",
+            format!("`{e}` is not supported by the implicit formulation"),
+        ));
+    }
+    let prepared = Prepared::new(model, campaign)?;
+    let np = campaign.poses.len();
+    let ng = model.num_params();
+    let blocks = model.blocks();
+    let mut row0 = Vec::with_capacity(np);
+    let mut rows = 0usize;
+    for j in 0..np {
+        row0.push(rows);
+        rows += 6 + prepared.by_pose[j].len();
+    }
+    let link_coeff: Vec<Vec<Vec<(usize, f64)>>> = (0..np)
+        .map(|j| {
+            (0..6)
+                .map(|i| {
+                    let mut c = Vec::new();
+                    for b in blocks
+                        .iter()
+                        .filter(|b| b.effect.is_some_and(is_link_effect))
+                    {
+                        for k in 0..b.len {
+                            let a = link_coefficient(
+                                b.effect.expect("effect"),
+                                k,
+                                i,
+                                &prepared.contexts[j],
+                                &model.effect_settings,
+                                prepared.t0_s,
+                            );
+                            if a != 0.0 {
+                                c.push((b.offset + k, a));
+                            }
+                        }
+                    }
+                    c
+                })
+                .collect()
+        })
+        .collect();
+    let sensor_params: Vec<Vec<(usize, Effect, usize)>> = campaign
+        .readings
+        .iter()
+        .map(|r| {
+            blocks
+                .iter()
+                .filter_map(|b| match b.effect {
+                    Some(e @ (Effect::SensorOffset | Effect::SensorScale)) => {
+                        Some((b.offset + r.sensor, e, r.sensor))
+                    }
+                    _ => None,
+                })
+                .collect()
+        })
+        .collect();
+    Ok(Implicit {
+        model,
+        campaign,
+        prepared,
+        row0,
+        link_coeff,
+        sensor_params,
+        num_poses: np,
+        num_globals: ng,
+        rows,
+        w_enc: options.sensor_sigma_um / options.encoder_sigma_um,
+        sensor_corr: model.sensor_correction_mm(),
+    })
+}
+
+/// Checks the implicit formulation's analytic Jacobian against central differences at `x`
+/// (pose corrections in um and urad, then the globals).
+pub fn check_implicit_jacobian(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &ImplicitOptions,
+    x: &[f64],
+    step: f64,
+) -> Result<cpm_lm::JacobianCheck, CalibError> {
+    let mut problem = build(model, campaign, options)?;
+    Ok(cpm_lm::check_sparse_jacobian(&mut problem, x, step)?)
+}
+
+/// Identifies the global parameters of `model` from a length-sensor campaign with the
+/// implicit-loop formulation (Schur complement over the pose blocks).
+pub fn identify_implicit(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &ImplicitOptions,
+) -> Result<ImplicitCalibration, CalibError> {
+    let mut problem = build(model, campaign, options)?;
+    let (np, ng, rows) = (problem.num_poses, problem.num_globals, problem.rows);
+    let mut lm = options.lm.clone();
+    lm.linear_solver = LinearSolver::Schur {
+        local_block_sizes: vec![6; np],
+    };
+    let mut x = vec![0.0; 6 * np + ng];
+    let solver = cpm_lm::minimize_sparse(&mut problem, &mut x, &lm)?;
+    // Reduced information of the globals: S = sum_j (G_j^T G_j - G_j^T L_j (L_j^T L_j)^-1 L_j^T G_j).
+    let pattern = problem.pattern();
+    let mut values = vec![0.0; pattern.len()];
+    problem
+        .jacobian_values(&x, &mut values)
+        .map_err(|e| CalibError::invalid("implicit Jacobian", e.to_string()))?;
+    let mut s = DMatrix::<f64>::zeros(ng, ng);
+    let mut r = vec![0.0; rows];
+    problem
+        .residuals(&x, &mut r)
+        .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
+    let g0 = 6 * np;
+    let mut k = 0usize;
+    for j in 0..np {
+        let nr = 6 + problem.prepared.by_pose[j].len();
+        let mut local = DMatrix::<f64>::zeros(nr, 6);
+        let mut glob = DMatrix::<f64>::zeros(nr, ng);
+        while k < pattern.len() && pattern[k].0 < problem.row0[j] + nr {
+            let (row, col) = pattern[k];
+            let rr = row - problem.row0[j];
+            if col < g0 {
+                local[(rr, col - 6 * j)] += values[k];
+            } else {
+                glob[(rr, col - g0)] += values[k];
+            }
+            k += 1;
+        }
+        let a = local.transpose() * &local;
+        let b = local.transpose() * &glob;
+        let ainv_b = a
+            .clone()
+            .cholesky()
+            .map(|c| c.solve(&b))
+            .unwrap_or_else(|| DMatrix::zeros(6, ng));
+        s += glob.transpose() * &glob - b.transpose() * ainv_b;
+    }
+    let eig = nalgebra::SymmetricEigen::new(s);
+    let mut pseudo = DMatrix::<f64>::zeros(ng, ng);
+    for c in 0..ng {
+        let l = eig.eigenvalues[c].max(0.0).sqrt();
+        for rr in 0..ng {
+            pseudo[(c, rr)] = l * eig.eigenvectors[(rr, c)];
+        }
+    }
+    let mut ident = analyze(&pseudo, options.sensor_sigma_um, &options.rank, &[]);
+    ident.num_readings = campaign.readings.len();
+    let globals = x[g0..].to_vec();
+    let estimate_um = (0..ng)
+        .map(|k| ident.determined[k].then_some(globals[k]))
+        .collect();
+    let poses = (0..np).map(|j| problem.pose(&x, j).0).collect();
+    let mut sc = 0.0;
+    let mut sr = 0.0;
+    let mut nr = 0usize;
+    for j in 0..np {
+        let o = problem.row0[j];
+        for i in 0..6 {
+            sc += (r[o + i] / problem.w_enc).powi(2);
+        }
+        for t in 0..problem.prepared.by_pose[j].len() {
+            sr += r[o + 6 + t].powi(2);
+            nr += 1;
+        }
+    }
+    Ok(ImplicitCalibration {
+        std_um: ident.crlb_std_um.clone(),
+        estimate_um,
+        identifiability: ident,
+        globals,
+        poses,
+        reading_rms_um: (sr / nr.max(1) as f64).sqrt(),
+        closure_rms_um: (sc / (6 * np).max(1) as f64).sqrt(),
+        solver,
+    })
+}
