@@ -155,85 +155,104 @@ impl Problem for Implicit<'_> {
     }
 }
 
+impl Implicit<'_> {
+    /// Structural non-zeros of configuration `j`'s rows, in value order.
+    fn pose_pattern(&self, j: usize, p: &mut Vec<(usize, usize)>) {
+        let g0 = 6 * self.num_poses;
+        let o = self.row0[j];
+        for i in 0..6 {
+            for c in 0..6 {
+                p.push((o + i, 6 * j + c));
+            }
+            for c in 0..6 {
+                p.push((o + i, g0 + 6 * i + c));
+            }
+            for &(q, _) in &self.link_coeff[j][i] {
+                p.push((o + i, g0 + q));
+            }
+        }
+        for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
+            for c in 0..6 {
+                p.push((o + 6 + t, 6 * j + c));
+            }
+            for &(q, _, _) in &self.sensor_params[k] {
+                p.push((o + 6 + t, g0 + q));
+            }
+        }
+    }
+
+    /// Jacobian values of configuration `j`'s rows (order of [`Self::pose_pattern`]);
+    /// returns how many were written.
+    fn pose_values(
+        &self,
+        x: &[f64],
+        table: &cpm_geometry::JointTable,
+        j: usize,
+        values: &mut [f64],
+    ) -> usize {
+        let mut v = 0usize;
+        let (pose, dw) = self.pose(x, j);
+        let jl = left_jacobian(&dw);
+        let rm = pose.rotation.matrix();
+        let rt = rm.transpose();
+        let w = self.w_enc;
+        for (i, l) in table.links.iter().enumerate() {
+            let s = rm * l.platform_mm;
+            let q = pose.position_mm + s - l.base_mm;
+            let z = q / q.norm();
+            let m = jl.transpose() * s.cross(&z);
+            for c in 0..3 {
+                values[v + c] = z[c] * w;
+                values[v + 3 + c] = m[c] * 1e-3 * w;
+            }
+            v += 6;
+            let zp = rt * z;
+            for c in 0..3 {
+                values[v + c] = -z[c] * w;
+                values[v + 3 + c] = zp[c] * w;
+            }
+            v += 6;
+            for &(_, a) in &self.link_coeff[j][i] {
+                values[v] = -a * 1e3 * w;
+                v += 1;
+            }
+        }
+        for &k in &self.prepared.by_pose[j] {
+            let rd = &self.campaign.readings[k];
+            let s = &table.sensors[rd.sensor];
+            let sp = rm * s.platform_mm;
+            let q = pose.position_mm + sp - s.base_mm;
+            let geometric = q.norm();
+            let u = q / geometric;
+            let m = jl.transpose() * sp.cross(&u);
+            for c in 0..3 {
+                values[v + c] = u[c];
+                values[v + 3 + c] = m[c] * 1e-3;
+            }
+            v += 6;
+            for &(_, e, q) in &self.sensor_params[k] {
+                values[v] = sensor_coefficient(e, q, rd.sensor, geometric) * 1e3;
+                v += 1;
+            }
+        }
+        v
+    }
+}
+
 impl SparseJacobian for Implicit<'_> {
     fn pattern(&self) -> Vec<(usize, usize)> {
-        let g0 = 6 * self.num_poses;
         let mut p = Vec::new();
         for j in 0..self.num_poses {
-            let o = self.row0[j];
-            for i in 0..6 {
-                for c in 0..6 {
-                    p.push((o + i, 6 * j + c));
-                }
-                for c in 0..6 {
-                    p.push((o + i, g0 + 6 * i + c));
-                }
-                for &(q, _) in &self.link_coeff[j][i] {
-                    p.push((o + i, g0 + q));
-                }
-            }
-            for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
-                for c in 0..6 {
-                    p.push((o + 6 + t, 6 * j + c));
-                }
-                for &(q, _, _) in &self.sensor_params[k] {
-                    p.push((o + 6 + t, g0 + q));
-                }
-            }
+            self.pose_pattern(j, &mut p);
         }
         p
     }
 
     fn jacobian_values(&mut self, x: &[f64], values: &mut [f64]) -> Result<(), ModelError> {
-        let g0 = 6 * self.num_poses;
-        let globals = &x[g0..];
-        let table = self.model.table_with(globals)?;
+        let table = self.model.table_with(&x[6 * self.num_poses..])?;
         let mut v = 0usize;
         for j in 0..self.num_poses {
-            let (pose, dw) = self.pose(x, j);
-            let jl = left_jacobian(&dw);
-            let rm = pose.rotation.matrix();
-            let rt = rm.transpose();
-            for (i, l) in table.links.iter().enumerate() {
-                let s = rm * l.platform_mm;
-                let q = pose.position_mm + s - l.base_mm;
-                let z = q / q.norm();
-                let m = jl.transpose() * s.cross(&z);
-                let w = self.w_enc;
-                for c in 0..3 {
-                    values[v + c] = z[c] * w;
-                    values[v + 3 + c] = m[c] * 1e-3 * w;
-                }
-                v += 6;
-                let zp = rt * z;
-                for c in 0..3 {
-                    values[v + c] = -z[c] * w;
-                    values[v + 3 + c] = zp[c] * w;
-                }
-                v += 6;
-                for &(_, a) in &self.link_coeff[j][i] {
-                    values[v] = -a * 1e3 * w;
-                    v += 1;
-                }
-            }
-            for &k in &self.prepared.by_pose[j] {
-                let rd = &self.campaign.readings[k];
-                let s = &table.sensors[rd.sensor];
-                let sp = rm * s.platform_mm;
-                let q = pose.position_mm + sp - s.base_mm;
-                let geometric = q.norm();
-                let u = q / geometric;
-                let m = jl.transpose() * sp.cross(&u);
-                for c in 0..3 {
-                    values[v + c] = u[c];
-                    values[v + 3 + c] = m[c] * 1e-3;
-                }
-                v += 6;
-                for &(_, e, q) in &self.sensor_params[k] {
-                    values[v] = sensor_coefficient(e, q, rd.sensor, geometric) * 1e3;
-                    v += 1;
-                }
-            }
+            v += self.pose_values(x, &table, j, &mut values[v..]);
         }
         Ok(())
     }
@@ -375,31 +394,30 @@ pub fn identify_implicit(
     let mut x = vec![0.0; 6 * np + ng];
     let solver = cpm_lm::minimize_sparse(&mut problem, &mut x, &lm)?;
     // Reduced information of the globals: S = sum_j (G_j^T G_j - G_j^T L_j (L_j^T L_j)^-1 L_j^T G_j).
-    let pattern = problem.pattern();
-    let mut values = vec![0.0; pattern.len()];
-    problem
-        .jacobian_values(&x, &mut values)
-        .map_err(|e| CalibError::invalid("implicit Jacobian", e.to_string()))?;
-    let mut s = DMatrix::<f64>::zeros(ng, ng);
     let mut r = vec![0.0; rows];
     problem
         .residuals(&x, &mut r)
         .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
     let g0 = 6 * np;
-    let mut k = 0usize;
+    let table = model.table_with(&x[g0..])?;
+    let mut s = DMatrix::<f64>::zeros(ng, ng);
+    let mut pattern = Vec::new();
+    let mut values = Vec::new();
     for j in 0..np {
         let nr = 6 + problem.prepared.by_pose[j].len();
+        pattern.clear();
+        problem.pose_pattern(j, &mut pattern);
+        values.resize(pattern.len(), 0.0);
+        problem.pose_values(&x, &table, j, &mut values);
         let mut local = DMatrix::<f64>::zeros(nr, 6);
         let mut glob = DMatrix::<f64>::zeros(nr, ng);
-        while k < pattern.len() && pattern[k].0 < problem.row0[j] + nr {
-            let (row, col) = pattern[k];
+        for (&(row, col), &val) in pattern.iter().zip(&values) {
             let rr = row - problem.row0[j];
             if col < g0 {
-                local[(rr, col - 6 * j)] += values[k];
+                local[(rr, col - 6 * j)] += val;
             } else {
-                glob[(rr, col - g0)] += values[k];
+                glob[(rr, col - g0)] += val;
             }
-            k += 1;
         }
         let a = local.transpose() * &local;
         let b = local.transpose() * &glob;
