@@ -1,1 +1,688 @@
 //! Robot description files (TOML): joint table, sensors, home pose, clearance, load.
+//!
+//! A description is what a user writes to tell `cpm` about a robot: where the joints are
+//! (nominally), which length sensors exist, the home pose, how link readings map to lengths,
+//! and optionally the joint clearance, the load on the platform, calibration settings and a set
+//! of installation errors. `docs/robot-description.md` documents every key; the structs here
+//! mirror the file one to one and every table rejects unknown keys.
+//!
+//! Units follow the file convention of `cpm`: millimetres (`_mm`), micrometres for
+//! clearance and installation errors (`_um`), degrees for angles (`_deg`), kilograms, newtons.
+//! Orientation is `R = Rz(yaw) Ry(pitch) Rx(roll)` from `rpy_deg = [roll, pitch, yaw]`.
+//!
+//! Loading ([`RobotDescription::from_toml_str`], [`RobotDescription::load`]) parses and then
+//! checks the values; every failure is a [`GeometryError::Description`] whose message carries
+//! the line and column and names the key (`link[3].mm_per_unit: ...`; links, sensors and rows
+//! are numbered from 1 in messages, like the paper's links). Loading never panics.
+//!
+//! ```
+//! use cpm_geometry::description::RobotDescription;
+//! use cpm_geometry::JointTable;
+//! let text = RobotDescription::paper_cubic().to_toml_string().unwrap();
+//! let desc = RobotDescription::from_toml_str(&text, "<doc>").unwrap();
+//! assert_eq!(desc.joint_table().unwrap(), JointTable::paper_cubic());
+//!
+//! let err = RobotDescription::from_toml_str(&text.replace("[home]", "[home]\nz_mm = 1.0"), "x.toml")
+//!     .unwrap_err()
+//!     .to_string();
+//! assert!(err.contains("z_mm") && err.contains("line"));
+//! ```
+use std::collections::HashSet;
+use std::path::Path;
+
+use nalgebra::{Vector3, Vector6};
+use serde::{Deserialize, Serialize};
+
+use crate::{GeometryError, InstallationErrors, JointTable, Link, Pose, Sensor};
+
+/// Standard gravity, mm/s^2; the default gravity is `[0, 0, -STANDARD_GRAVITY_MM_S2]`.
+pub const STANDARD_GRAVITY_MM_S2: f64 = 9806.65;
+
+/// Minimum number of links of a description.
+pub const MIN_LINKS: usize = 6;
+
+/// A robot description: the contents of a robot TOML file.
+///
+/// The field names are the file's keys, except `links` (`[[link]]` tables) and `sensors`
+/// (`[[sensor]]` tables).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotDescription {
+    /// Free-form name of the robot. Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+    /// The home pose: start of forward kinematics.
+    pub home: HomeSpec,
+    /// The actuated links (`[[link]]`), six or more.
+    #[serde(rename = "link")]
+    pub links: Vec<LinkSpec>,
+    /// Length sensors (`[[sensor]]`), possibly none.
+    #[serde(rename = "sensor", default, skip_serializing_if = "Vec::is_empty")]
+    pub sensors: Vec<SensorSpec>,
+    /// Joint clearance (`[clearance]`). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<ClearanceSpec>,
+    /// Static load on the platform (`[load]`), which sets the clearance direction. Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub load: Option<LoadSpec>,
+    /// Calibration settings (`[calibration]`). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<CalibrationSpec>,
+    /// A set of installation errors, e.g. a calibration result or a simulation's truth
+    /// (`[installation_errors_um]`). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub installation_errors_um: Option<InstallationErrorsSpec>,
+}
+
+/// `[home]`: the home pose.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HomeSpec {
+    /// Platform origin in {B}, mm.
+    pub position_mm: [f64; 3],
+    /// Roll, pitch, yaw in degrees, `R = Rz(yaw) Ry(pitch) Rx(roll)`. Default zero.
+    #[serde(default)]
+    pub rpy_deg: [f64; 3],
+}
+
+impl HomeSpec {
+    /// The home pose.
+    pub fn pose(&self) -> Pose {
+        Pose::from_xyz_rpy_deg(self.position_mm, self.rpy_deg)
+    }
+}
+
+/// `[[link]]`: one actuated link and how its reading maps to a length.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkSpec {
+    /// Base joint centre in {B}, mm.
+    pub base_mm: [f64; 3],
+    /// Platform joint centre in {P}, mm.
+    pub platform_mm: [f64; 3],
+    /// Allowed length range `[min, max]`, mm. Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub length_limits_mm: Option<[f64; 2]>,
+    /// Length at a zero reading, mm. Default 0.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub length_at_zero_mm: f64,
+    /// Millimetres per reading unit. Default 1 (readings are lengths in mm).
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub mm_per_unit: f64,
+}
+
+impl LinkSpec {
+    /// A link with the default reading model (readings are lengths) and no limits.
+    pub fn new(base_mm: [f64; 3], platform_mm: [f64; 3]) -> Self {
+        Self {
+            base_mm,
+            platform_mm,
+            length_limits_mm: None,
+            length_at_zero_mm: 0.0,
+            mm_per_unit: 1.0,
+        }
+    }
+
+    /// Link length for a reading: `length_at_zero_mm + mm_per_unit * reading`, mm.
+    ///
+    /// ```
+    /// use cpm_geometry::description::LinkSpec;
+    /// let l = LinkSpec { length_at_zero_mm: 300.0, mm_per_unit: 0.001, ..LinkSpec::new([0.0; 3], [0.0; 3]) };
+    /// assert_eq!(l.length_mm(54_000.0), 354.0);
+    /// assert_eq!(l.reading(354.0), 54_000.0);
+    /// ```
+    pub fn length_mm(&self, reading: f64) -> f64 {
+        self.length_at_zero_mm + self.mm_per_unit * reading
+    }
+
+    /// The reading that corresponds to a link length (inverse of [`LinkSpec::length_mm`]).
+    pub fn reading(&self, length_mm: f64) -> f64 {
+        (length_mm - self.length_at_zero_mm) / self.mm_per_unit
+    }
+
+    /// The geometric part: a [`Link`] of a joint table.
+    pub fn to_link(&self) -> Link {
+        Link {
+            base_mm: Vector3::from(self.base_mm),
+            platform_mm: Vector3::from(self.platform_mm),
+            length_limits_mm: self.length_limits_mm.map(|[lo, hi]| (lo, hi)),
+        }
+    }
+
+    /// From a [`Link`], with the default reading model.
+    pub fn from_link(link: &Link) -> Self {
+        Self {
+            length_limits_mm: link.length_limits_mm.map(|(lo, hi)| [lo, hi]),
+            ..Self::new(link.base_mm.into(), link.platform_mm.into())
+        }
+    }
+}
+
+/// `[[sensor]]`: a length sensor between a base socket and a platform socket.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorSpec {
+    /// Name used in measurement files; unique.
+    pub name: String,
+    /// Base socket centre in {B}, mm.
+    pub base_mm: [f64; 3],
+    /// Platform socket centre in {P}, mm.
+    pub platform_mm: [f64; 3],
+}
+
+impl SensorSpec {
+    /// The [`Sensor`] of a joint table.
+    pub fn to_sensor(&self) -> Sensor {
+        Sensor::new(&self.name, self.base_mm, self.platform_mm)
+    }
+
+    /// From a [`Sensor`].
+    pub fn from_sensor(sensor: &Sensor) -> Self {
+        Self {
+            name: sensor.name.clone(),
+            base_mm: sensor.base_mm.into(),
+            platform_mm: sensor.platform_mm.into(),
+        }
+    }
+}
+
+/// `[clearance]`: radial clearance of the joints.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClearanceSpec {
+    /// Clearance radius of every joint, um.
+    pub radius_um: f64,
+    /// Width of the smooth sign rule for the clearance direction, N; 0 (the default) is the
+    /// paper's hard rule.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub smooth_force_n: f64,
+}
+
+/// `[load]`: masses and external wrench, for the statics that set the clearance direction.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSpec {
+    /// Platform mass, kg.
+    pub platform_mass_kg: f64,
+    /// Platform centre of mass in {P}, mm.
+    pub platform_com_mm: [f64; 3],
+    /// Payload mass, kg. Default 0.
+    #[serde(default)]
+    pub payload_mass_kg: f64,
+    /// Payload centre of mass in {P}, mm. Default origin.
+    #[serde(default)]
+    pub payload_com_mm: [f64; 3],
+    /// Gravity in {B}, mm/s^2. Default `[0, 0, -9806.65]`.
+    #[serde(default = "default_gravity")]
+    pub gravity_mm_s2: [f64; 3],
+    /// External force on the platform at its origin, {B}, N. Default zero.
+    #[serde(default)]
+    pub external_force_n: [f64; 3],
+    /// External moment on the platform about its origin, {B}, N mm. Default zero.
+    #[serde(default)]
+    pub external_moment_nmm: [f64; 3],
+}
+
+impl LoadSpec {
+    /// A platform of `mass_kg` with its centre of mass at `com_mm` in {P}, standard gravity
+    /// along -z of {B}, no payload, no external wrench.
+    pub fn platform(mass_kg: f64, com_mm: [f64; 3]) -> Self {
+        Self {
+            platform_mass_kg: mass_kg,
+            platform_com_mm: com_mm,
+            payload_mass_kg: 0.0,
+            payload_com_mm: [0.0; 3],
+            gravity_mm_s2: default_gravity(),
+            external_force_n: [0.0; 3],
+            external_moment_nmm: [0.0; 3],
+        }
+    }
+
+    /// Platform plus payload mass, kg.
+    pub fn total_mass_kg(&self) -> f64 {
+        self.platform_mass_kg + self.payload_mass_kg
+    }
+
+    /// The wrench applied to the platform at `pose`: `[force (N); moment about the platform
+    /// origin (N mm)]`, both in {B}. Weights (`m g`, with `g` in mm/s^2 so `1e-3 m g` is in
+    /// newtons) act at the centres of mass `R c`; the external wrench is added as given.
+    ///
+    /// ```
+    /// use cpm_geometry::{description::LoadSpec, Pose};
+    /// let load = LoadSpec::platform(20.0, [0.0, 0.0, -100.0]);
+    /// let w = load.wrench(&Pose::from_xyz_rpy(0.0, 0.0, 410.0, 0.0, 0.0, 0.0));
+    /// assert!((w[2] + 20.0 * 9.80665).abs() < 1e-12); // 196 N down
+    /// assert!(w.fixed_rows::<3>(3).norm() < 1e-12); // COM right below the origin: no moment
+    /// ```
+    pub fn wrench(&self, pose: &Pose) -> Vector6<f64> {
+        let g = Vector3::from(self.gravity_mm_s2) * 1e-3;
+        let weight_p = g * self.platform_mass_kg;
+        let weight_l = g * self.payload_mass_kg;
+        let cp = pose.rotation * Vector3::from(self.platform_com_mm);
+        let cl = pose.rotation * Vector3::from(self.payload_com_mm);
+        let f = weight_p + weight_l + Vector3::from(self.external_force_n);
+        let m = cp.cross(&weight_p) + cl.cross(&weight_l) + Vector3::from(self.external_moment_nmm);
+        Vector6::new(f.x, f.y, f.z, m.x, m.y, m.z)
+    }
+}
+
+/// `[calibration]`: settings for the calibration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CalibrationSpec {
+    /// Extra effects to identify besides the installation errors, e.g. `"link_offset"`,
+    /// `"link_scale"`; interpreted by the calibration crate. Default none.
+    #[serde(default)]
+    pub effects: Vec<String>,
+    /// Standard deviation of the sensor noise, um. Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_noise_um: Option<f64>,
+}
+
+/// `[installation_errors_um]`: joint displacements, um, one row `[dx, dy, dz]` per link.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InstallationErrorsSpec {
+    /// Base joint displacements in {B}, um, one per link.
+    pub base: Vec<[f64; 3]>,
+    /// Platform joint displacements in {P}, um, one per link.
+    pub platform: Vec<[f64; 3]>,
+}
+
+impl InstallationErrorsSpec {
+    /// As [`InstallationErrors`].
+    pub fn to_errors(&self) -> InstallationErrors {
+        InstallationErrors {
+            base_um: self.base.iter().map(|v| Vector3::from(*v)).collect(),
+            platform_um: self.platform.iter().map(|v| Vector3::from(*v)).collect(),
+        }
+    }
+
+    /// From [`InstallationErrors`].
+    pub fn from_errors(errors: &InstallationErrors) -> Self {
+        Self {
+            base: errors.base_um.iter().map(|v| (*v).into()).collect(),
+            platform: errors.platform_um.iter().map(|v| (*v).into()).collect(),
+        }
+    }
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn default_gravity() -> [f64; 3] {
+    [0.0, 0.0, -STANDARD_GRAVITY_MM_S2]
+}
+
+/// One step of a key path: a key or a 0-based array index.
+#[derive(Debug, Clone, Copy)]
+enum Seg {
+    Key(&'static str),
+    Index(usize),
+}
+
+/// A semantic problem: where (key path) and what.
+#[derive(Debug)]
+struct Problem {
+    path: Vec<Seg>,
+    message: String,
+}
+
+impl Problem {
+    fn new(path: &[Seg], message: impl Into<String>) -> Self {
+        Self {
+            path: path.to_vec(),
+            message: message.into(),
+        }
+    }
+
+    /// `link[3].mm_per_unit` (indices shown from 1).
+    fn path_string(&self) -> String {
+        let mut s = String::new();
+        for seg in &self.path {
+            match seg {
+                Seg::Key(k) => {
+                    if !s.is_empty() {
+                        s.push('.');
+                    }
+                    s.push_str(k);
+                }
+                Seg::Index(i) => s.push_str(&format!("[{}]", i + 1)),
+            }
+        }
+        s
+    }
+
+    /// The message, with the line and column of the key in `source` when it can be found.
+    fn render(&self, source: Option<&str>) -> String {
+        let mut out = format!("{}: {}", self.path_string(), self.message);
+        if let Some((line, col)) = source.and_then(|s| locate(s, &self.path)) {
+            out.push_str(&format!(" (line {line}, column {col})"));
+        }
+        out
+    }
+}
+
+/// Line and column (1-based) of the value at `path` in the TOML `source`, or of the deepest
+/// part of the path that exists there.
+fn locate(source: &str, path: &[Seg]) -> Option<(usize, usize)> {
+    use toml::de::{DeTable, DeValue};
+    let root = DeTable::parse(source).ok()?;
+    let mut span = root.span();
+    let root = DeValue::Table(root.into_inner());
+    let mut cur = &root;
+    for seg in path {
+        let next = match seg {
+            Seg::Key(k) => cur.get(*k),
+            Seg::Index(i) => cur.get(*i),
+        };
+        match next {
+            Some(v) => {
+                span = v.span();
+                cur = v.get_ref();
+            }
+            None => break,
+        }
+    }
+    let before = source.get(..span.start.min(source.len()))?;
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    Some((line, col))
+}
+
+fn finite3(v: &[f64; 3], path: &[Seg]) -> Result<(), Problem> {
+    match v.iter().position(|x| !x.is_finite()) {
+        None => Ok(()),
+        Some(k) => Err(Problem::new(
+            path,
+            format!(
+                "must be finite, but its {} component is {}",
+                ["x (1st)", "y (2nd)", "z (3rd)"][k],
+                v[k]
+            ),
+        )),
+    }
+}
+
+fn non_negative(v: f64, path: &[Seg]) -> Result<(), Problem> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(Problem::new(
+            path,
+            format!("must be finite and >= 0, got {v}"),
+        ))
+    }
+}
+
+fn desc_err(path: &str, message: String) -> GeometryError {
+    GeometryError::Description {
+        path: path.to_string(),
+        message,
+    }
+}
+
+impl RobotDescription {
+    /// Parses and checks a description. `path` names the source in error messages (use e.g.
+    /// `"<string>"` for text that is not a file).
+    ///
+    /// Errors ([`GeometryError::Description`]) for TOML syntax, unknown keys, missing keys and
+    /// wrong types carry toml's message (line, column, the key); semantic errors (non-finite
+    /// numbers, fewer than six links, duplicate sensor names, unordered limits, ...) name the
+    /// key path and its line and column.
+    pub fn from_toml_str(s: &str, path: &str) -> Result<Self, GeometryError> {
+        let desc: Self = toml::from_str(s).map_err(|e| desc_err(path, e.to_string()))?;
+        desc.check()
+            .map_err(|p| desc_err(path, p.render(Some(s))))?;
+        Ok(desc)
+    }
+
+    /// Reads, parses and checks a description file.
+    ///
+    /// ```
+    /// use cpm_geometry::{JointTable, RobotDescription};
+    /// // (Doctests run in the crate's folder.)
+    /// let d = RobotDescription::load("../../examples/hexapod_66.toml").unwrap();
+    /// assert_eq!(d.joint_table().unwrap(), JointTable::hexapod_66());
+    /// let e = RobotDescription::load("no/such/file.toml").unwrap_err();
+    /// assert!(e.to_string().starts_with("no/such/file.toml: cannot read the file"));
+    /// ```
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, GeometryError> {
+        let p = path.as_ref();
+        let name = p.display().to_string();
+        let text = std::fs::read_to_string(p)
+            .map_err(|e| desc_err(&name, format!("cannot read the file: {e}")))?;
+        Self::from_toml_str(&text, &name)
+    }
+
+    /// The description as TOML text (loads back to an equal description).
+    pub fn to_toml_string(&self) -> Result<String, GeometryError> {
+        toml::to_string(self).map_err(|e| desc_err(&self.label(), e.to_string()))
+    }
+
+    /// Writes the description as TOML to `path`.
+    pub fn save(&self, path: impl AsRef<Path>) -> Result<(), GeometryError> {
+        let p = path.as_ref();
+        let text = self.to_toml_string()?;
+        std::fs::write(p, text)
+            .map_err(|e| desc_err(&p.display().to_string(), format!("cannot write: {e}")))
+    }
+
+    /// Checks every value (see [`RobotDescription::from_toml_str`]).
+    pub fn validate(&self) -> Result<(), GeometryError> {
+        self.check()
+            .map_err(|p| desc_err(&self.label(), p.render(None)))
+    }
+
+    /// The joint table (links, sensors, home pose), after [`RobotDescription::validate`].
+    pub fn joint_table(&self) -> Result<JointTable, GeometryError> {
+        self.validate()?;
+        Ok(JointTable {
+            links: self.links.iter().map(LinkSpec::to_link).collect(),
+            sensors: self.sensors.iter().map(SensorSpec::to_sensor).collect(),
+            home: self.home.pose(),
+        })
+    }
+
+    /// The installation errors of `[installation_errors_um]`, if present (checked).
+    pub fn installation_errors(&self) -> Result<Option<InstallationErrors>, GeometryError> {
+        self.validate()?;
+        Ok(self
+            .installation_errors_um
+            .as_ref()
+            .map(InstallationErrorsSpec::to_errors))
+    }
+
+    /// Link lengths (mm) from link readings, one per link, through each link's
+    /// `length_at_zero_mm + mm_per_unit * reading`.
+    pub fn lengths_from_readings(&self, readings: &[f64]) -> Result<Vec<f64>, GeometryError> {
+        if readings.len() != self.links.len() {
+            return Err(GeometryError::LinkCountMismatch {
+                errors: readings.len(),
+                links: self.links.len(),
+            });
+        }
+        Ok(self
+            .links
+            .iter()
+            .zip(readings)
+            .map(|(l, r)| l.length_mm(*r))
+            .collect())
+    }
+
+    /// A description of a joint table: links (readings are lengths), sensors and home pose;
+    /// no name, clearance, load, calibration or installation errors.
+    pub fn from_joint_table(table: &JointTable) -> Self {
+        Self {
+            name: None,
+            home: HomeSpec {
+                position_mm: table.home.position_mm.into(),
+                // `+ 0.0` turns a -0.0 from atan2 into 0.0 for tidy files.
+                rpy_deg: table.home.rpy_deg().map(|a| a + 0.0),
+            },
+            links: table.links.iter().map(LinkSpec::from_link).collect(),
+            sensors: table.sensors.iter().map(SensorSpec::from_sensor).collect(),
+            clearance: None,
+            load: None,
+            calibration: None,
+            installation_errors_um: None,
+        }
+    }
+
+    /// The paper's cubic manipulator as in `examples/paper_cubic.toml`:
+    /// [`JointTable::paper_cubic`] plus a 10 um clearance (hard sign rule) and an assumed
+    /// load (platform 20 kg with its centre of mass at (0, 0, -100) mm in {P}; the paper
+    /// gives no mass).
+    pub fn paper_cubic() -> Self {
+        Self {
+            name: Some("paper cubic".into()),
+            clearance: Some(ClearanceSpec {
+                radius_um: 10.0,
+                smooth_force_n: 0.0,
+            }),
+            load: Some(LoadSpec::platform(20.0, [0.0, 0.0, -100.0])),
+            ..Self::from_joint_table(&JointTable::paper_cubic())
+        }
+    }
+
+    /// The general 6-6 Gough-Stewart platform of `examples/hexapod_66.toml`:
+    /// [`JointTable::hexapod_66`] plus a 10 um clearance and a 10 kg platform with its
+    /// centre of mass at (0, 0, -20) mm in {P}.
+    pub fn hexapod_66() -> Self {
+        Self {
+            name: Some("hexapod 6-6".into()),
+            clearance: Some(ClearanceSpec {
+                radius_um: 10.0,
+                smooth_force_n: 0.0,
+            }),
+            load: Some(LoadSpec::platform(10.0, [0.0, 0.0, -20.0])),
+            ..Self::from_joint_table(&JointTable::hexapod_66())
+        }
+    }
+
+    /// How error messages name a description that did not come from a file.
+    fn label(&self) -> String {
+        match &self.name {
+            Some(n) => format!("robot description `{n}`"),
+            None => "<robot description>".into(),
+        }
+    }
+
+    /// Semantic checks; the first problem found.
+    fn check(&self) -> Result<(), Problem> {
+        use Seg::{Index, Key};
+        finite3(&self.home.position_mm, &[Key("home"), Key("position_mm")])?;
+        finite3(&self.home.rpy_deg, &[Key("home"), Key("rpy_deg")])?;
+        let n = self.links.len();
+        if n < MIN_LINKS {
+            return Err(Problem::new(
+                &[Key("link")],
+                format!("need at least {MIN_LINKS} [[link]] tables, got {n}"),
+            ));
+        }
+        let home = self.home.pose();
+        for (i, l) in self.links.iter().enumerate() {
+            let at = |k: &'static str| [Key("link"), Index(i), Key(k)];
+            finite3(&l.base_mm, &at("base_mm"))?;
+            finite3(&l.platform_mm, &at("platform_mm"))?;
+            if let Some([lo, hi]) = l.length_limits_mm {
+                if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo < hi) {
+                    return Err(Problem::new(
+                        &at("length_limits_mm"),
+                        format!("need finite 0 < min < max, got [{lo}, {hi}]"),
+                    ));
+                }
+            }
+            if !l.length_at_zero_mm.is_finite() {
+                return Err(Problem::new(
+                    &at("length_at_zero_mm"),
+                    format!("must be finite, got {}", l.length_at_zero_mm),
+                ));
+            }
+            if !(l.mm_per_unit.is_finite() && l.mm_per_unit != 0.0) {
+                return Err(Problem::new(
+                    &at("mm_per_unit"),
+                    format!("must be finite and non-zero, got {}", l.mm_per_unit),
+                ));
+            }
+            let q = home.transform_point(&Vector3::from(l.platform_mm)) - Vector3::from(l.base_mm);
+            let has_length = q.norm() > 1e-9;
+            if !has_length {
+                return Err(Problem::new(
+                    &[Key("link"), Index(i)],
+                    "zero length at the home pose (its joints coincide)",
+                ));
+            }
+        }
+        let mut names = HashSet::new();
+        for (i, s) in self.sensors.iter().enumerate() {
+            let at = |k: &'static str| [Key("sensor"), Index(i), Key(k)];
+            if s.name.trim().is_empty() {
+                return Err(Problem::new(&at("name"), "must not be empty"));
+            }
+            if !names.insert(s.name.as_str()) {
+                return Err(Problem::new(
+                    &at("name"),
+                    format!("duplicate sensor name `{}`", s.name),
+                ));
+            }
+            finite3(&s.base_mm, &at("base_mm"))?;
+            finite3(&s.platform_mm, &at("platform_mm"))?;
+        }
+        if let Some(c) = &self.clearance {
+            non_negative(c.radius_um, &[Key("clearance"), Key("radius_um")])?;
+            non_negative(c.smooth_force_n, &[Key("clearance"), Key("smooth_force_n")])?;
+        }
+        if let Some(l) = &self.load {
+            let at = |k: &'static str| [Key("load"), Key(k)];
+            non_negative(l.platform_mass_kg, &at("platform_mass_kg"))?;
+            non_negative(l.payload_mass_kg, &at("payload_mass_kg"))?;
+            finite3(&l.platform_com_mm, &at("platform_com_mm"))?;
+            finite3(&l.payload_com_mm, &at("payload_com_mm"))?;
+            finite3(&l.gravity_mm_s2, &at("gravity_mm_s2"))?;
+            finite3(&l.external_force_n, &at("external_force_n"))?;
+            finite3(&l.external_moment_nmm, &at("external_moment_nmm"))?;
+        }
+        if let Some(c) = &self.calibration {
+            if let Some(v) = c.sensor_noise_um {
+                non_negative(v, &[Key("calibration"), Key("sensor_noise_um")])?;
+            }
+            let mut seen = HashSet::new();
+            for (i, e) in c.effects.iter().enumerate() {
+                let at = [Key("calibration"), Key("effects"), Index(i)];
+                if e.trim().is_empty() {
+                    return Err(Problem::new(&at, "must not be empty"));
+                }
+                if !seen.insert(e.as_str()) {
+                    return Err(Problem::new(&at, format!("duplicate effect `{e}`")));
+                }
+            }
+        }
+        if let Some(e) = &self.installation_errors_um {
+            for (key, rows) in [("base", &e.base), ("platform", &e.platform)] {
+                if rows.len() != n {
+                    return Err(Problem::new(
+                        &[Key("installation_errors_um"), Key(key)],
+                        format!(
+                            "has {} rows, need one [dx, dy, dz] per link ({n})",
+                            rows.len()
+                        ),
+                    ));
+                }
+                for (i, r) in rows.iter().enumerate() {
+                    finite3(r, &[Key("installation_errors_um"), Key(key), Index(i)])?;
+                }
+            }
+        }
+        Ok(())
+    }
+}

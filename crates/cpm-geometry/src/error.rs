@@ -31,7 +31,9 @@ pub enum GeometryError {
         why: String,
     },
     /// A rotation matrix was not orthonormal with determinant +1.
-    #[error("not a rotation matrix: orthonormality error {orthonormality_error:.3e}, det {det:.6}")]
+    #[error(
+        "not a rotation matrix: orthonormality error {orthonormality_error:.3e}, det {det:.6}"
+    )]
     NotARotation {
         /// max |R^T R - I|.
         orthonormality_error: f64,

@@ -116,6 +116,67 @@ impl JointTable {
         }
     }
 
+    /// A general 6-6 Gough-Stewart platform (not from the paper), the geometry of
+    /// `examples/hexapod_66.toml`.
+    ///
+    /// - Base joints on a radius-200 mm circle in the plane z = 0 of {B}, in pairs at +-15 deg
+    ///   around 0, 120 and 240 deg.
+    /// - Platform joints on a radius-120 mm circle in the plane z = 0 of {P}, in pairs at
+    ///   +-15 deg around 60, 180 and 300 deg.
+    /// - Link `i` joins base joint at angle `beta_i` = -15, 15, 105, 135, 225, 255 deg to the
+    ///   nearest platform joint of the neighbouring pair, at `pi_i` = -45, 45, 75, 165, 195,
+    ///   285 deg (the usual crossed-leg arrangement).
+    /// - Length limits 250..400 mm; home pose (0, 0, 300) mm, R = I, where every link is
+    ///   `sqrt(300^2 + d^2)` mm long with `d` the horizontal joint distance (about 320.7 mm).
+    /// - Coordinates are rounded to 1e-9 mm (so the file lists them exactly).
+    /// - Three length sensors `s1`, `s2`, `s3`: base sockets on a radius-400 mm circle at
+    ///   z = 100 mm at 20, 140, 260 deg, platform sockets on the platform rim (radius 120 mm,
+    ///   z = 0 in {P}) at 0, 120, 240 deg, so each gauge is inclined and has a tangential
+    ///   component (it sees the platform's yaw as well as its translation).
+    ///
+    /// ```
+    /// use cpm_geometry::JointTable;
+    /// let t = JointTable::hexapod_66();
+    /// assert_eq!(t.num_links(), 6);
+    /// assert_eq!(t.sensors.len(), 3);
+    /// assert!((t.links[0].base_mm.norm() - 200.0).abs() < 1e-8);
+    /// assert!((t.links[0].platform_mm.norm() - 120.0).abs() < 1e-8);
+    /// ```
+    pub fn hexapod_66() -> Self {
+        // Coordinates are rounded to 1e-9 mm so that the example file can list them exactly
+        // with nine decimals (the quotient is the double nearest to that decimal).
+        let r9 = |x: f64| (x * 1e9).round() / 1e9 + 0.0;
+        let on_circle = |radius: f64, deg: f64, z: f64| {
+            let (s, c) = deg.to_radians().sin_cos();
+            [r9(radius * c), r9(radius * s), z]
+        };
+        let base_deg = [-15.0, 15.0, 105.0, 135.0, 225.0, 255.0];
+        let platform_deg = [-45.0, 45.0, 75.0, 165.0, 195.0, 285.0];
+        let links = base_deg
+            .iter()
+            .zip(&platform_deg)
+            .map(|(b, p)| Link {
+                length_limits_mm: Some((250.0, 400.0)),
+                ..Link::new(on_circle(200.0, *b, 0.0), on_circle(120.0, *p, 0.0))
+            })
+            .collect();
+        let sensors = (0..3)
+            .map(|k| {
+                let a = 120.0 * k as f64;
+                Sensor::new(
+                    &format!("s{}", k + 1),
+                    on_circle(400.0, a + 20.0, 100.0),
+                    on_circle(120.0, a, 0.0),
+                )
+            })
+            .collect();
+        Self {
+            links,
+            sensors,
+            home: Pose::from_xyz_rpy(0.0, 0.0, 300.0, 0.0, 0.0, 0.0),
+        }
+    }
+
     /// Checks that every coordinate is finite and limits are ordered.
     pub fn validate(&self) -> Result<(), GeometryError> {
         let bad = |field: String, value: f64, why: &str| GeometryError::InvalidValue {

@@ -7,6 +7,10 @@
 //!   then about the fixed y axis by pitch, then about the fixed z axis by yaw (the paper's eq. 1
 //!   as its text describes it; see [`rotation`]).
 //!
+//! Robots are described in TOML files ([`description`], `docs/robot-description.md`);
+//! `examples/paper_cubic.toml` is the paper's cube, `examples/hexapod_66.toml` a general 6-6
+//! Gough-Stewart platform.
+//!
 //! ```
 //! use cpm_geometry::{JointTable, InstallationErrors, Pose};
 //! let nominal = JointTable::paper_cubic();
@@ -26,10 +30,11 @@ pub mod error;
 pub mod errors;
 pub mod joints;
 pub mod pose;
+pub mod rotation;
 #[cfg(feature = "proptest")]
 pub mod strategies;
-pub mod rotation;
 
+pub use description::RobotDescription;
 pub use error::GeometryError;
 pub use errors::{InstallationErrors, PlatformSign, Side};
 pub use joints::{JointTable, Link, Sensor};

@@ -109,10 +109,22 @@ impl Pose {
     }
 
     /// The twist `[dt; dw]` (base frame) that takes `self` to `other`: the inverse of
-    /// [`Pose::perturbed`].
+    /// [`Pose::perturbed`]. The rotation part is [`rotation::log`], accurate to rounding even
+    /// for tiny differences.
+    ///
+    /// ```
+    /// use cpm_geometry::Pose;
+    /// use nalgebra::Vector6;
+    /// let a = Pose::from_xyz_rpy(1.0, 2.0, 3.0, 0.1, 0.2, 0.3);
+    /// let twist = Vector6::new(1e-9, 0.0, 0.0, 1e-12, 0.0, -2e-12);
+    /// let d = a.difference(&a.perturbed(&twist));
+    /// // Tiny rotations come back to rounding (an acos-based angle would be off by ~1e-8 rad).
+    /// assert!((d.fixed_rows::<3>(3) - twist.fixed_rows::<3>(3)).norm() < 1e-15);
+    /// assert!((d.fixed_rows::<3>(0) - twist.fixed_rows::<3>(0)).norm() < 1e-15);
+    /// ```
     pub fn difference(&self, other: &Pose) -> Vector6<f64> {
         let dt = other.position_mm - self.position_mm;
-        let dw = (other.rotation * self.rotation.inverse()).scaled_axis();
+        let dw = rotation::log(&(other.rotation * self.rotation.inverse()));
         Vector6::new(dt.x, dt.y, dt.z, dw.x, dw.y, dw.z)
     }
 

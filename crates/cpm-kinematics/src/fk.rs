@@ -1,6 +1,6 @@
 //! Forward kinematics: link lengths to pose by Newton-Raphson with the analytic J1.
 use cpm_geometry::{JointTable, Pose};
-use nalgebra::{Matrix6, Vector3, Vector6};
+use nalgebra::{DMatrix, Matrix6, Vector3, Vector6};
 
 use crate::KinematicsError;
 
@@ -40,32 +40,87 @@ pub struct ForwardReport {
     pub residual_mm: f64,
 }
 
-/// 2-norm condition number of a 6x6 matrix.
+/// 2-norm condition number of a 6x6 matrix; infinite when it is singular or not finite.
+/// (Computed with the accurate [`crate::linalg::Svd`].)
 pub fn condition_number(m: &Matrix6<f64>) -> f64 {
-    let sv = m.singular_values();
-    let (mx, mn) = (sv.max(), sv.min());
-    if mn > 0.0 {
-        mx / mn
+    let d = DMatrix::from_column_slice(6, 6, m.as_slice());
+    crate::linalg::Svd::new(&d).map_or(f64::INFINITY, |s| s.condition_number())
+}
+
+/// A 6x6 matrix as rows, for the allocation-free solver.
+type Mat6 = [[f64; 6]; 6];
+
+/// Condition number of J1 from the assembled system: `jac` is J1 itself for six links and
+/// `J1^T J1` (whose condition number is the square) for more.
+fn j1_condition(jac: &Mat6, links: usize) -> f64 {
+    let c = condition_number(&Matrix6::from_fn(|i, j| jac[i][j]));
+    if links == 6 {
+        c
     } else {
-        f64::INFINITY
+        c.sqrt()
     }
 }
 
-/// Residual `l(x) - L` and J1 for six links (or the normal equations for more than six).
+/// Solves `a x = b` in place (`b` becomes `x`) by Gaussian elimination with partial pivoting.
+/// False when a pivot is zero or anything is not finite.
+///
+/// The row updates run over whole rows (a fixed trip count of six that the compiler
+/// vectorises); the entries left of the pivot column become garbage that is never read.
+fn solve6(a: &mut Mat6, b: &mut [f64; 6]) -> bool {
+    for k in 0..6 {
+        let mut p = k;
+        let mut best = a[k][k].abs();
+        for i in k + 1..6 {
+            let v = a[i][k].abs();
+            if v > best {
+                best = v;
+                p = i;
+            }
+        }
+        if !(best > 0.0 && best.is_finite()) {
+            return false;
+        }
+        a.swap(p, k);
+        b.swap(p, k);
+        let inv = 1.0 / a[k][k];
+        let pivot_row = a[k];
+        let bk = b[k];
+        for i in k + 1..6 {
+            let f = a[i][k] * inv;
+            let row = &mut a[i];
+            for j in 0..6 {
+                row[j] -= f * pivot_row[j];
+            }
+            b[i] -= f * bk;
+        }
+    }
+    for k in (0..6).rev() {
+        let mut s = b[k];
+        for j in k + 1..6 {
+            s -= a[k][j] * b[j];
+        }
+        b[k] = s / a[k][k];
+    }
+    b.iter().all(|v| v.is_finite())
+}
+
+/// Residual `l(x) - L` and J1 for six links (or the normal equations `J1^T J1`, `-J1^T r`
+/// for more than six) into `jac`, `rhs`. Returns the largest |residual|, NaN if any is NaN.
 fn residual_and_jacobian(
     table: &JointTable,
     pose: &Pose,
     lengths_mm: &[f64],
-    jac: &mut Matrix6<f64>,
-    rhs: &mut Vector6<f64>,
+    jac: &mut Mat6,
+    rhs: &mut [f64; 6],
 ) -> f64 {
     let r = pose.rotation.matrix();
     let square = table.num_links() == 6;
     if !square {
-        jac.fill(0.0);
-        rhs.fill(0.0);
+        *jac = [[0.0; 6]; 6];
+        *rhs = [0.0; 6];
     }
     let mut worst = 0.0f64;
+    let mut finite = true;
     for (i, (l, target)) in table.links.iter().zip(lengths_mm).enumerate() {
         let s: Vector3<f64> = r * l.platform_mm;
         let q = pose.position_mm + s - l.base_mm;
@@ -73,25 +128,40 @@ fn residual_and_jacobian(
         let z = q / n;
         let m = s.cross(&z);
         let res = n - target;
+        finite &= res.is_finite();
         worst = worst.max(res.abs());
-        let row = Vector6::new(z.x, z.y, z.z, m.x, m.y, m.z);
+        let row = [z.x, z.y, z.z, m.x, m.y, m.z];
         if square {
-            jac.set_row(i, &row.transpose());
+            jac[i] = row;
             rhs[i] = -res;
         } else {
-            *jac += row * row.transpose();
-            *rhs -= row * res;
+            for a in 0..6 {
+                for b in 0..6 {
+                    jac[a][b] += row[a] * row[b];
+                }
+                rhs[a] -= row[a] * res;
+            }
         }
     }
-    worst
+    if finite {
+        worst
+    } else {
+        f64::NAN
+    }
 }
 
 /// Forward kinematics: the pose at which the links have `lengths_mm`, by Newton-Raphson from
-/// `start`. Six or more links (more: Gauss-Newton on the least-squares closure).
+/// `start`. Six or more links (more: Gauss-Newton on the least-squares closure, converged
+/// when the residual is below the tolerance or the step moves no joint by more than it).
 ///
 /// Fails with [`KinematicsError::Singular`] when J1 is numerically singular at an iterate and
 /// [`KinematicsError::NonConvergence`] when the tolerance is not reached; both carry J1's
-/// condition number.
+/// condition number. Never panics.
+///
+/// Newton converges to the solution (assembly mode) whose basin holds `start`: a target
+/// that is separated from `start` by a singular configuration (det J1 changes sign on the
+/// way) may come out as another pose with the same link lengths. See
+/// [`crate::workspace::reachable_from_home`].
 pub fn forward(
     table: &JointTable,
     lengths_mm: &[f64],
@@ -112,10 +182,16 @@ pub fn forward(
             what: "link lengths or start pose".into(),
         });
     }
+    // Joint radius that turns a rotation step into a joint displacement (redundant case).
+    let radius_mm = table
+        .links
+        .iter()
+        .map(|l| l.platform_mm.norm())
+        .fold(1.0f64, f64::max);
     let mut pose = *start;
-    let mut jac = Matrix6::zeros();
-    let mut rhs = Vector6::zeros();
-    let mut worst = 0.0;
+    let mut jac: Mat6 = [[0.0; 6]; 6];
+    let mut rhs = [0.0; 6];
+    let mut worst = f64::NAN;
     for it in 0..=options.max_iterations {
         worst = residual_and_jacobian(table, &pose, lengths_mm, &mut jac, &mut rhs);
         if worst <= options.tolerance_mm {
@@ -130,16 +206,15 @@ pub fn forward(
         if it == options.max_iterations {
             break;
         }
-        let lu = jac.lu();
-        let step = match lu.solve(&rhs) {
-            Some(s) if s.iter().all(|v| v.is_finite()) => s,
-            _ => {
-                return Err(KinematicsError::Singular {
-                    iteration: it,
-                    condition: condition_number(&jac),
-                })
-            }
-        };
+        let mut lu = jac;
+        let mut step = rhs;
+        if !solve6(&mut lu, &mut step) {
+            return Err(KinematicsError::Singular {
+                iteration: it,
+                condition: j1_condition(&jac, n),
+            });
+        }
+        let step = Vector6::from(step);
         // Cheap singularity guard: a huge step from a small residual means J1 is near singular.
         let dt = Vector3::new(step[0], step[1], step[2]);
         let dw = Vector3::new(step[3], step[4], step[5]);
@@ -147,13 +222,9 @@ pub fn forward(
             .min(options.max_step_rad / dw.norm().max(1e-300))
             .min(1.0);
         if scale < 1.0 {
-            let c = condition_number(&jac);
-            let limit = if n == 6 {
-                options.max_condition
-            } else {
-                options.max_condition * options.max_condition
-            };
-            if c > limit {
+            let c = j1_condition(&jac, n);
+            let acceptable = c <= options.max_condition; // false for NaN
+            if !acceptable {
                 return Err(KinematicsError::Singular {
                     iteration: it,
                     condition: c,
@@ -161,11 +232,23 @@ pub fn forward(
             }
         }
         pose = pose.perturbed(&(step * scale));
+        if n > 6 && scale == 1.0 && dt.norm() + dw.norm() * radius_mm <= options.tolerance_mm {
+            // Least-squares closure of redundant links: stationary, the residual need not vanish.
+            let worst = residual_and_jacobian(table, &pose, lengths_mm, &mut jac, &mut rhs);
+            if worst.is_finite() {
+                return Ok((
+                    pose,
+                    ForwardReport {
+                        iterations: it + 1,
+                        residual_mm: worst,
+                    },
+                ));
+            }
+        }
     }
-    let _ = residual_and_jacobian(table, &pose, lengths_mm, &mut jac, &mut rhs);
     Err(KinematicsError::NonConvergence {
         iterations: options.max_iterations,
         residual_mm: worst,
-        condition: condition_number(&jac),
+        condition: j1_condition(&jac, n),
     })
 }

@@ -41,8 +41,19 @@ pub fn inverse_lengths(table: &JointTable, pose: &Pose) -> Vec<f64> {
     out
 }
 
-/// Link lengths (mm) at `pose` into `out` (no allocation). `out.len()` must equal the link count.
+/// Link lengths (mm) at `pose` into `out` (no allocation). `out.len()` must equal the link count
+/// (extra entries are left alone, missing ones skipped; debug builds assert it).
+///
+/// ```
+/// use cpm_geometry::JointTable;
+/// use cpm_kinematics::inverse_lengths_into;
+/// let t = JointTable::paper_cubic();
+/// let mut l = [0.0; 6];
+/// inverse_lengths_into(&t, &t.home, &mut l);
+/// assert_eq!(l[..5], [354.0; 5]);
+/// ```
 pub fn inverse_lengths_into(table: &JointTable, pose: &Pose, out: &mut [f64]) {
+    debug_assert_eq!(out.len(), table.num_links(), "one output per link");
     let r = pose.rotation.matrix();
     for (o, l) in out.iter_mut().zip(&table.links) {
         *o = (pose.position_mm + r * l.platform_mm - l.base_mm).norm();

@@ -2,9 +2,19 @@
 use cpm_geometry::{JointTable, Pose};
 use nalgebra::{DMatrix, DVector, Vector6};
 
+use crate::linalg::Svd;
 use crate::{inverse, KinematicsError};
 
 /// `J1` (N x 6): row i is `[z_i^T, (s_i x z_i)^T]`, so `dl = J1 [dt; dw]`.
+///
+/// ```
+/// use cpm_geometry::JointTable;
+/// use cpm_kinematics::j1;
+/// let t = JointTable::paper_cubic();
+/// let j = j1(&t, &t.home);
+/// // Link 1 is vertical at home: it only feels z and the tilts, s_1 x z = (-140, 140, 0).
+/// assert_eq!(j.row(0).iter().copied().collect::<Vec<_>>(), [0.0, 0.0, 1.0, -140.0, 140.0, 0.0]);
+/// ```
 pub fn j1(table: &JointTable, pose: &Pose) -> DMatrix<f64> {
     let links = inverse(table, pose);
     let mut j = DMatrix::zeros(links.len(), 6);
@@ -20,6 +30,16 @@ pub fn j1(table: &JointTable, pose: &Pose) -> DMatrix<f64> {
 
 /// `J2` (N x 6N): `dl_i = -z_i^T db_i + z_i^T R dp_i`, columns ordered link by link, base then
 /// platform, x y z (lengths in mm per mm of joint error).
+///
+/// ```
+/// use cpm_geometry::JointTable;
+/// use cpm_kinematics::j2;
+/// let t = JointTable::paper_cubic();
+/// let j = j2(&t, &t.home);
+/// assert_eq!(j.shape(), (6, 36));
+/// // Raising link 1's base joint shortens it; raising its platform joint lengthens it.
+/// assert_eq!((j[(0, 2)], j[(0, 5)]), (-1.0, 1.0));
+/// ```
 pub fn j2(table: &JointTable, pose: &Pose) -> DMatrix<f64> {
     let links = inverse(table, pose);
     let n = links.len();
@@ -40,6 +60,23 @@ pub fn j2(table: &JointTable, pose: &Pose) -> DMatrix<f64> {
 ///
 /// With the commanded lengths held (`dl = 0`) this is how far the platform ends up from the
 /// commanded pose because of the installation errors, to first order.
+///
+/// ```
+/// use cpm_geometry::{InstallationErrors, JointTable};
+/// use cpm_kinematics::first_order_pose_error;
+/// let t = JointTable::paper_cubic();
+/// // Every joint of link 1 raised by 10 um: with the lengths held, nothing moves...
+/// let mut e = vec![0.0; 36];
+/// e[2] = 0.01; // base dz, mm
+/// e[5] = 0.01; // platform dz, mm
+/// let dx = first_order_pose_error(&t, &t.home, &[0.0; 6], &e).unwrap();
+/// assert!(dx.norm() < 1e-15);
+/// // ...but the base joint alone lifts that corner of the platform by 10 um.
+/// e[5] = 0.0;
+/// let dx = first_order_pose_error(&t, &t.home, &[0.0; 6], &e).unwrap();
+/// assert!(dx[2] > 0.0 && dx.norm() > 1e-4);
+/// # let _ = InstallationErrors::zeros(6);
+/// ```
 pub fn first_order_pose_error(
     table: &JointTable,
     pose: &Pose,
@@ -57,20 +94,33 @@ pub fn first_order_pose_error(
             ),
         });
     }
-    let a = j1(table, pose);
-    let b = j2(table, pose);
-    let rhs = DVector::from_column_slice(dl_mm) - b * DVector::from_column_slice(de_mm);
-    let svd = a.svd(true, true);
-    let smax = svd.singular_values.max();
-    let smin = svd.singular_values.min();
-    if smin <= smax * 1e-12 {
-        return Err(KinematicsError::Singular {
-            iteration: 0,
-            condition: smax / smin,
+    if !pose.is_finite() || !dl_mm.iter().chain(de_mm).all(|v| v.is_finite()) {
+        return Err(KinematicsError::NonFinite {
+            what: "pose, length changes or joint errors".into(),
         });
     }
-    let x = svd
-        .solve(&rhs, 0.0)
-        .map_err(|e| KinematicsError::Dimension { what: e.into() })?;
+    let a = j1(table, pose);
+    if !a.iter().all(|v| v.is_finite()) {
+        return Err(KinematicsError::Singular {
+            iteration: 0,
+            condition: f64::INFINITY,
+        });
+    }
+    let b = j2(table, pose);
+    let rhs = DVector::from_column_slice(dl_mm) - b * DVector::from_column_slice(de_mm);
+    // One-sided Jacobi: nalgebra's SVD is not accurate enough here (see `linalg`).
+    let svd = Svd::new(&a).ok_or(KinematicsError::Singular {
+        iteration: 0,
+        condition: f64::INFINITY,
+    })?;
+    let condition = svd.condition_number();
+    let regular = condition < 1e12; // false for NaN
+    if !regular {
+        return Err(KinematicsError::Singular {
+            iteration: 0,
+            condition,
+        });
+    }
+    let x = svd.solve(&rhs, 0.0);
     Ok(Vector6::from_iterator(x.iter().copied()))
 }

@@ -17,16 +17,23 @@
 //! assert!(report.residual_mm < 1e-9);
 //! assert!((pose.position_mm - table.home.position_mm).norm() < 1e-9);
 //! ```
+//!
+//! Newton's forward kinematics finds the assembly mode whose basin holds its start; the
+//! [`workspace`] module tells whether a pose can be reached from home without crossing a
+//! singularity. [`linalg`] holds the accurate SVD used for condition numbers and eq. 12.
 #![warn(missing_docs)]
 
 pub mod error;
 pub mod fk;
 pub mod ik;
 pub mod jacobian;
+pub mod linalg;
 pub mod sensor;
+pub mod workspace;
 
 pub use error::KinematicsError;
 pub use fk::{forward, ForwardOptions, ForwardReport};
 pub use ik::{inverse, inverse_lengths, inverse_lengths_into, LinkState};
 pub use jacobian::{first_order_pose_error, j1, j2};
 pub use sensor::{sensor_length_mm, sensor_pose_gradient};
+pub use workspace::{reachable_from_home, Unreachable};
