@@ -370,16 +370,12 @@ pub fn analyze(
     } else {
         jacobian
     };
-    let svd = jm.clone().svd(false, true);
-    let mut order: Vec<usize> = (0..np).collect();
-    order.sort_by(|&a, &b| svd.singular_values[b].total_cmp(&svd.singular_values[a]));
-    let vt = svd.v_t.expect("v_t requested");
-    let mut v = DMatrix::zeros(np, np);
-    let mut sv = Vec::with_capacity(np);
-    for (c, &k) in order.iter().enumerate() {
-        sv.push(svd.singular_values[k]);
-        v.set_column(c, &vt.row(k).transpose());
-    }
+    // faer's SVD (nalgebra's bidiagonal SVD loses accuracy on some small matrices); the
+    // padded matrix is square, so V is complete.
+    let (sv, v) = match crate::linalg::thin_svd(jm) {
+        Some((sv, _, v)) => (sv, v),
+        None => (vec![0.0; np], DMatrix::identity(np, np)),
+    };
     let smax = sv.first().copied().unwrap_or(0.0);
     let threshold = options.rank_rtol * smax;
     let rank = sv.iter().filter(|&&s| s > threshold && s > 0.0).count();

@@ -33,6 +33,7 @@ pub mod error;
 pub mod identifiability;
 pub mod identify;
 pub mod implicit;
+pub mod linalg;
 pub mod model;
 pub mod paper;
 pub mod refine;

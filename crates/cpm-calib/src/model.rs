@@ -519,7 +519,8 @@ fn predict_exact(
         for &q in measurements {
             let pm = &campaign.pose_measurements[q];
             let o = m_readings + 6 * q;
-            let w = (tracker_rotation * pm.measured.rotation.inverse()).scaled_axis();
+            let w =
+                cpm_geometry::rotation::log(&(tracker_rotation * pm.measured.rotation.inverse()));
             for a in 0..3 {
                 y[o + a] = tracker_position[a];
                 y[o + 3 + a] = w[a] * 1e3;

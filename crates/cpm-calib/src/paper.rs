@@ -8,6 +8,11 @@ use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 
 use crate::campaign::{paper_circle, Plan};
+use crate::design::candidates::Workspace;
+use crate::design::{
+    Design, DesignOptions, MonteCarloOptions, MonteCarloReport, ObservabilityIndices,
+    SocketCandidates,
+};
 use crate::identifiability::{Identifiability, RankOptions};
 use crate::model::{predict, Prepared};
 use crate::{
@@ -165,12 +170,20 @@ pub struct PaperOptions {
     pub seed: u64,
     /// Noise, default the paper's uniform +-10 um.
     pub noise: Noise,
-    /// Poses of the designed campaign (16 sensors read at each). Default 125 (2000 readings).
-    pub designed_poses: usize,
-    /// Half range of the designed poses' positions about home, mm. Default 100.
+    /// The optimised design: reading budget (default 2000), sockets (default 4 base x 4
+    /// platform from [`SocketCandidates::paper_cubic`], hence 125 poses), criterion (default
+    /// A-optimal). Its `sigma_um` is replaced by the noise's.
+    pub design: DesignOptions,
+    /// Random candidate poses for the design (ballbar circles are added). Default 3000.
+    pub design_candidates: usize,
+    /// Half range of the candidate poses' positions about home, mm. Default 100.
     pub designed_range_mm: f64,
-    /// Half range of the designed poses' roll, pitch and yaw, deg. Default 25.
+    /// Half range of the candidate poses' roll, pitch and yaw, deg. Default 25 (with a tilt
+    /// limit of 30 deg and J1's condition number at most 3 times its value at home).
     pub designed_range_deg: f64,
+    /// Monte Carlo runs of the designed campaign (seeds `seed + 1000 ..`); 0 for none.
+    /// Default 100.
+    pub monte_carlo_runs: usize,
     /// Validation poses for the accuracy figures. Default 200.
     pub validation_poses: usize,
     /// Damping of the paper-design fit. Default: the paper's cubic-interpolation rule.
@@ -184,9 +197,11 @@ impl Default for PaperOptions {
             noise: Noise::Uniform {
                 half_width_um: 10.0,
             },
-            designed_poses: 125,
+            design: DesignOptions::default(),
+            design_candidates: 3000,
             designed_range_mm: 100.0,
             designed_range_deg: 25.0,
+            monte_carlo_runs: 100,
             validation_poses: 200,
             paper_damping: cpm_lm::Damping::CubicInterpolation,
         }
@@ -227,6 +242,13 @@ pub struct PaperReproduction {
     pub designed: CampaignOutcome,
     /// Identifiability of the designed plan at the nominal geometry (for the bounds).
     pub designed_identifiability: Identifiability,
+    /// The optimised design (sockets, poses, indices, gauge freedoms, how it was found).
+    pub design: Design,
+    /// Indices of the hand-made campaign of the same budget for comparison: the 16 socket
+    /// pairs of [`designed_sensors`] at 125 random poses (+-100 mm, +-25 deg).
+    pub handmade_indices: ObservabilityIndices,
+    /// Monte Carlo study of the designed campaign, when asked for.
+    pub monte_carlo: Option<MonteCarloReport>,
 }
 
 fn outcome(
@@ -322,20 +344,49 @@ pub fn reproduce(
     let d_plus: Vec<f64> = t3.iter().zip(&truth).map(|(a, b)| a - b).collect();
     let table3_visible_fraction = (vis(d_plus.clone()), vis(platform_negated(&d_plus)));
 
-    progress("designed campaign: 16 socket pairs, poses with orientation changes");
-    let mut dmodel = model.clone();
-    dmodel.nominal.sensors = designed_sensors();
-    let dplan = Plan {
-        poses: random_workspace_poses(
-            &dmodel.nominal,
-            options.designed_poses,
-            options.designed_range_mm,
-            options.designed_range_deg,
-            3.0,
-            options.seed + 1,
-        ),
-        sensors: (0..dmodel.nominal.sensors.len()).collect(),
+    progress("designed campaign: candidate poses in the workspace");
+    let workspace = Workspace::default();
+    let (candidates, _) = crate::design::candidates::default_candidates(
+        &model.nominal,
+        &workspace,
+        options.design_candidates,
+        options.designed_range_mm,
+        options.designed_range_deg,
+        options.seed + 1,
+    );
+    let design_options = DesignOptions {
+        sigma_um: sigma,
+        ..options.design
     };
+    let design = {
+        let cell = std::cell::RefCell::new(&mut progress);
+        crate::design::design(
+            &model,
+            &SocketCandidates::paper_cubic(),
+            &candidates,
+            &design_options,
+            &|stage: &str| (cell.borrow_mut())(stage),
+        )?
+    };
+    let handmade_indices = {
+        let mut hand = model.clone();
+        hand.nominal.sensors = designed_sensors();
+        let plan = Plan {
+            poses: random_workspace_poses(
+                &hand.nominal,
+                125,
+                options.designed_range_mm,
+                options.designed_range_deg,
+                3.0,
+                options.seed + 1,
+            ),
+            sensors: (0..hand.nominal.sensors.len()).collect(),
+        };
+        let j = crate::identification_jacobian(&hand, &plan.skeleton(), &vec![0.0; 36])?;
+        crate::design::observability_indices(&j, sigma)
+    };
+    let dmodel = design.model(&model);
+    let dplan = design.plan();
     let mut dident = IdentifyOptions {
         sigma_um: Some(sigma),
         ..IdentifyOptions::default()
@@ -343,6 +394,27 @@ pub fn reproduce(
     dident.lm.damping = cpm_lm::Damping::Nielsen;
     let designed_identifiability =
         crate::identifiability(&dmodel, &dplan.skeleton(), sigma, &RankOptions::default())?;
+    let monte_carlo = if options.monte_carlo_runs > 0 {
+        progress(&format!(
+            "designed campaign: Monte Carlo, {} simulated calibrations",
+            options.monte_carlo_runs
+        ));
+        Some(crate::design::monte_carlo(
+            &dmodel,
+            &truth,
+            &dplan,
+            &dident,
+            &MonteCarloOptions {
+                runs: options.monte_carlo_runs,
+                seed: options.seed + 1000,
+                noise: options.noise,
+            },
+            &|_, _| {},
+        )?)
+    } else {
+        None
+    };
+    progress("designed campaign: the calibration of this seed");
     let designed = outcome(&dmodel, dplan, &truth, &sim, &dident, &validation)?;
     Ok(PaperReproduction {
         options: *options,
@@ -353,5 +425,8 @@ pub fn reproduce(
         table3_visible_fraction,
         designed,
         designed_identifiability,
+        design,
+        handmade_indices,
+        monte_carlo,
     })
 }

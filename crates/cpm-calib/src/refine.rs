@@ -186,11 +186,12 @@ fn novelty(
     if norm == 0.0 {
         return Ok(0.0);
     }
-    let svd = old.svd(true, false);
-    let u = svd.u.expect("u requested");
-    let smax = svd.singular_values.max();
-    let keep: Vec<usize> = (0..svd.singular_values.len())
-        .filter(|&i| svd.singular_values[i] > rank_rtol * smax)
+    let Some((sv, u, _)) = crate::linalg::thin_svd(&old) else {
+        return Ok(0.0);
+    };
+    let smax = sv.first().copied().unwrap_or(0.0);
+    let keep: Vec<usize> = (0..sv.len())
+        .filter(|&i| sv[i] > rank_rtol * smax)
         .collect();
     let ur = u.select_columns(&keep);
     let outside = &new - &ur * (ur.transpose() * &new);

@@ -98,22 +98,25 @@ impl Workspace {
             return Err(Rejection::LengthLimit);
         }
         let lengths = inverse_lengths(table, pose);
-        let within = lengths
-            .iter()
-            .zip(&table.links)
-            .all(|(l, link)| match link.length_limits_mm {
-                Some((lo, hi)) => *l >= lo && *l <= hi,
-                None => l.is_finite(),
-            });
+        let within =
+            lengths
+                .iter()
+                .zip(&table.links)
+                .all(|(l, link)| match link.length_limits_mm {
+                    Some((lo, hi)) => *l >= lo && *l <= hi,
+                    None => l.is_finite(),
+                });
         if !within {
             return Err(Rejection::LengthLimit);
         }
-        // `!(a <= b)` so that NaN is rejected too.
-        if !(tilt_deg(&table.home, pose) <= self.max_tilt_deg) {
+        // Comparisons that are false for NaN, so that NaN is rejected too.
+        let level_enough = tilt_deg(&table.home, pose) <= self.max_tilt_deg;
+        if !level_enough {
             return Err(Rejection::Tilt);
         }
         let c0 = j1_condition(table, &table.home);
-        if !(j1_condition(table, pose) <= self.max_condition_ratio * c0) {
+        let conditioned = j1_condition(table, pose) <= self.max_condition_ratio * c0;
+        if !conditioned {
             return Err(Rejection::Condition);
         }
         match forward(table, &lengths, &table.home, &ForwardOptions::default()) {

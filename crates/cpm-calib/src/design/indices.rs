@@ -262,7 +262,10 @@ mod tests {
         assert_eq!(ix.rank, 1);
         assert!(ix.o2_condition.is_infinite());
         assert!(ix.crlb_rms_um.is_infinite());
-        assert_eq!(Criterion::DOptimal.value(&(j.transpose() * &j)), f64::NEG_INFINITY);
+        assert_eq!(
+            Criterion::DOptimal.value(&(j.transpose() * &j)),
+            f64::NEG_INFINITY
+        );
     }
 
     #[test]

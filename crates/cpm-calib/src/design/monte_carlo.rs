@@ -164,7 +164,10 @@ where
             RunErrors { seed, errors_um }
         })
         .collect();
-    (summarise(truth.len(), crlb_um, runs, first_seed, &results), results)
+    (
+        summarise(truth.len(), crlb_um, runs, first_seed, &results),
+        results,
+    )
 }
 
 /// Runs `estimator(seed)` for `runs` seeds from `first_seed` in parallel and compares its

@@ -16,9 +16,9 @@
 //! 1. **Greedy**: add the candidate with the largest gain until `n` are chosen. Gains only
 //!    fall as the set grows (exactly so for D, whose `log det` is submodular), so the search is
 //!    *lazy*: stale gains are upper bounds and only the front-runner is re-evaluated.
-//! 2. **Exchange** (Mitchell's DETMAX with excursions of one): add the best candidate, drop the
-//!    worst member; stop when the member dropped is the one just added, or the criterion no
-//!    longer improves.
+//! 2. **Exchange** (Mitchell's DETMAX): add the best candidate, drop the worst member, keep the
+//!    change when the criterion improves; when it does not, try longer excursions (add the 2,
+//!    3, ... best in turn, then drop as many) up to `max_excursion`; stop when none improves.
 //!
 //! ```
 //! use cpm_calib::design::select::{select_blocks, SelectOptions};
@@ -36,6 +36,7 @@
 use std::collections::BinaryHeap;
 
 use nalgebra::DMatrix;
+use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -49,8 +50,16 @@ pub struct SelectOptions {
     pub criterion: Criterion,
     /// Improve the greedy set by exchange. Default true.
     pub exchange: bool,
-    /// Most exchange rounds. Default 2000.
+    /// Most exchange rounds (excursions tried). Default 2000.
     pub max_exchanges: usize,
+    /// Longest excursion: when adding the best and dropping the worst candidate no longer
+    /// improves the criterion, DETMAX adds the 2, 3, ... best in turn and then drops as many,
+    /// up to this many. Default 3.
+    pub max_excursion: usize,
+    /// Extra random starts, each improved by exchange; the best set is kept. Default 0.
+    pub restarts: usize,
+    /// Seed of the random starts. Default 1.
+    pub seed: u64,
     /// Ridge added to the information matrix during the search, relative to the mean
     /// per-parameter information of one candidate. Default 1e-6.
     pub ridge: f64,
@@ -65,6 +74,9 @@ impl Default for SelectOptions {
             criterion: Criterion::AOptimal,
             exchange: true,
             max_exchanges: 2000,
+            max_excursion: 3,
+            restarts: 0,
+            seed: 1,
             ridge: 1e-6,
             tolerance: 1e-10,
         }
@@ -81,7 +93,7 @@ pub struct Selection {
     pub value: f64,
     /// Criterion value after the greedy phase (or of the start set).
     pub greedy_value: f64,
-    /// Exchanges made.
+    /// Excursions that improved the criterion.
     pub exchanges: usize,
     /// Candidate gain or loss evaluations.
     pub evaluations: usize,
@@ -188,6 +200,9 @@ impl State {
     }
 }
 
+/// Stale candidates re-evaluated together in the lazy greedy phase.
+const LAZY_BATCH: usize = 32;
+
 #[derive(PartialEq)]
 struct Entry(f64, usize);
 impl Eq for Entry {}
@@ -207,7 +222,8 @@ impl Ord for Entry {
 
 /// Chooses `n` of the candidate blocks (rows x parameters each, same parameters) to maximise
 /// the criterion of `prior + sum J_c^T J_c`. `start`, when given, replaces the greedy phase
-/// (it must hold `n` distinct indices). Each candidate is used at most once.
+/// (it must hold `n` distinct indices). Each candidate is used at most once. With
+/// `options.restarts`, random starts are exchanged too and the best set is kept.
 pub fn select_blocks(
     blocks: &[DMatrix<f64>],
     n: usize,
@@ -222,7 +238,11 @@ pub fn select_blocks(
     if let Some((i, b)) = blocks.iter().enumerate().find(|(_, b)| b.ncols() != np) {
         return Err(CalibError::invalid(
             "candidates",
-            format!("block {} has {} columns, the first has {np}", i + 1, b.ncols()),
+            format!(
+                "block {} has {} columns, the first has {np}",
+                i + 1,
+                b.ncols()
+            ),
         ));
     }
     if n == 0 || n > blocks.len() {
@@ -242,22 +262,15 @@ pub fn select_blocks(
     if !(options.ridge.is_finite() && options.ridge > 0.0) {
         return Err(CalibError::invalid("ridge", "must be finite and > 0"));
     }
-    let scale = blocks
-        .par_iter()
-        .map(|b| b.norm_squared())
-        .sum::<f64>()
-        / (blocks.len() * np) as f64;
+    // Sequential, so that the ridge (and hence every tie) does not depend on thread timing.
+    let scale = blocks.iter().map(|b| b.norm_squared()).sum::<f64>() / (blocks.len() * np) as f64;
     let eps = options.ridge * scale.max(f64::MIN_POSITIVE);
-    let mut m0 = prior.cloned().unwrap_or_else(|| DMatrix::zeros(np, np));
+    let mut base = prior.cloned().unwrap_or_else(|| DMatrix::zeros(np, np));
     for d in 0..np {
-        m0[(d, d)] += eps;
+        base[(d, d)] += eps;
     }
-    let base = m0.clone();
-    let mut state = State::new(options.criterion, m0)?;
-    let mut chosen = vec![false; blocks.len()];
     let mut evaluations = 0usize;
-
-    match start {
+    let first = match start {
         Some(s) => {
             if s.len() != n {
                 return Err(CalibError::invalid(
@@ -265,6 +278,7 @@ pub fn select_blocks(
                     format!("{} indices, expected {n}", s.len()),
                 ));
             }
+            let mut chosen = vec![false; blocks.len()];
             for &c in s {
                 if c >= blocks.len() || chosen[c] {
                     return Err(CalibError::invalid(
@@ -274,55 +288,140 @@ pub fn select_blocks(
                 }
                 chosen[c] = true;
             }
-            let mut m = base.clone();
-            for (c, _) in chosen.iter().enumerate().filter(|(_, k)| **k) {
-                m += blocks[c].transpose() * &blocks[c];
-            }
-            state = State::new(options.criterion, m)?;
+            chosen
         }
-        None => {
-            // Lazy greedy.
-            let gains: Vec<f64> = blocks.par_iter().map(|b| state.change(b, 1.0)).collect();
-            evaluations += gains.len();
-            let mut heap: BinaryHeap<Entry> =
-                gains.into_iter().enumerate().map(|(i, g)| Entry(g, i)).collect();
-            let mut picked = 0;
-            let mut stamp = vec![0usize; blocks.len()];
-            while picked < n {
-                let Some(Entry(_, c)) = heap.pop() else { break };
-                if stamp[c] == picked {
-                    chosen[c] = true;
-                    state.update(&blocks[c], 1.0)?;
-                    picked += 1;
-                } else {
-                    let g = state.change(&blocks[c], 1.0);
-                    evaluations += 1;
-                    stamp[c] = picked;
-                    heap.push(Entry(g, c));
-                }
-            }
+        None => greedy(blocks, n, &base, options.criterion, &mut evaluations)?,
+    };
+    let greedy_value = value_of(blocks, &first, prior, options.criterion);
+    let (mut best, mut exchanges) = exchange(blocks, n, &base, first, options, &mut evaluations)?;
+    let mut value = value_of(blocks, &best, prior, options.criterion);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
+    for _ in 0..options.restarts {
+        let mut idx: Vec<usize> = (0..blocks.len()).collect();
+        for i in 0..n {
+            let j = rng.random_range(i..idx.len());
+            idx.swap(i, j);
+        }
+        let mut chosen = vec![false; blocks.len()];
+        for &c in &idx[..n] {
+            chosen[c] = true;
+        }
+        let mut m = base.clone();
+        for &c in &idx[..n] {
+            m += blocks[c].transpose() * &blocks[c];
+        }
+        if m.clone().cholesky().is_none() {
+            continue;
+        }
+        let (set, ex) = exchange(blocks, n, &base, chosen, options, &mut evaluations)?;
+        let v = value_of(blocks, &set, prior, options.criterion);
+        if v > value {
+            best = set;
+            value = v;
+            exchanges = ex;
         }
     }
-    let greedy_value = value_of(blocks, &chosen, prior, options.criterion);
+    Ok(Selection {
+        chosen: (0..blocks.len()).filter(|i| best[*i]).collect(),
+        value,
+        greedy_value,
+        exchanges,
+        evaluations,
+    })
+}
 
+/// Lazy greedy addition of `n` candidates from nothing (information `base`).
+fn greedy(
+    blocks: &[DMatrix<f64>],
+    n: usize,
+    base: &DMatrix<f64>,
+    criterion: Criterion,
+    evaluations: &mut usize,
+) -> Result<Vec<bool>, CalibError> {
+    let mut state = State::new(criterion, base.clone())?;
+    let mut chosen = vec![false; blocks.len()];
+    let gains: Vec<f64> = blocks.par_iter().map(|b| state.change(b, 1.0)).collect();
+    *evaluations += gains.len();
+    let mut heap: BinaryHeap<Entry> = gains
+        .into_iter()
+        .enumerate()
+        .map(|(i, g)| Entry(g, i))
+        .collect();
+    let mut picked = 0;
+    let mut stamp = vec![0usize; blocks.len()];
+    while picked < n {
+        let Some(top) = heap.peek() else { break };
+        let c = top.1;
+        if stamp[c] == picked {
+            heap.pop();
+            chosen[c] = true;
+            state.update(&blocks[c], 1.0)?;
+            picked += 1;
+            continue;
+        }
+        // Re-evaluate the stale front-runners together (in parallel).
+        let mut stale = Vec::with_capacity(LAZY_BATCH);
+        while stale.len() < LAZY_BATCH {
+            match heap.peek() {
+                Some(e) if stamp[e.1] != picked => stale.push(heap.pop().map_or(0, |e| e.1)),
+                _ => break,
+            }
+        }
+        let fresh: Vec<Entry> = stale
+            .par_iter()
+            .map(|&c| Entry(state.change(&blocks[c], 1.0), c))
+            .collect();
+        *evaluations += fresh.len();
+        for e in fresh {
+            stamp[e.1] = picked;
+            heap.push(e);
+        }
+    }
+    Ok(chosen)
+}
+
+/// DETMAX exchange from the set `chosen` (see the module doc); returns the improved set and
+/// the number of improving excursions.
+fn exchange(
+    blocks: &[DMatrix<f64>],
+    n: usize,
+    base: &DMatrix<f64>,
+    mut chosen: Vec<bool>,
+    options: &SelectOptions,
+    evaluations: &mut usize,
+) -> Result<(Vec<bool>, usize), CalibError> {
     let mut exchanges = 0;
-    if options.exchange && n < blocks.len() {
-        let mut current = options.criterion.value(&state.m);
-        for _ in 0..options.max_exchanges {
-            // Best addition.
+    if !options.exchange || n >= blocks.len() {
+        return Ok((chosen, 0));
+    }
+    let mut m = base.clone();
+    for (c, _) in chosen.iter().enumerate().filter(|(_, k)| **k) {
+        m += blocks[c].transpose() * &blocks[c];
+    }
+    let mut state = State::new(options.criterion, m)?;
+    let mut current = options.criterion.value(&state.m);
+    let mut k = 1;
+    let mut rounds = 0;
+    while k <= options.max_excursion.min(blocks.len() - n) && rounds < options.max_exchanges {
+        rounds += 1;
+        let saved = (chosen.clone(), state.m.clone(), state.w.clone());
+        // Excursion: add the k best, one at a time, then drop the k worst.
+        for _ in 0..k {
             let best = blocks
                 .par_iter()
                 .enumerate()
                 .filter(|(i, _)| !chosen[*i])
                 .map(|(i, b)| Entry(state.change(b, 1.0), i))
                 .max();
-            evaluations += blocks.len() - n;
+            *evaluations += blocks.len() - n;
             let Some(Entry(_, add)) = best else { break };
             chosen[add] = true;
             state.update(&blocks[add], 1.0)?;
-            // Worst member (smallest loss).
+        }
+        let mut size = chosen.iter().filter(|c| **c).count();
+        while size > n {
             let members: Vec<usize> = (0..blocks.len()).filter(|i| chosen[*i]).collect();
-            evaluations += members.len();
+            *evaluations += members.len();
             let worst = members
                 .par_iter()
                 .map(|&i| Entry(-state.change(&blocks[i], -1.0), i))
@@ -330,28 +429,23 @@ pub fn select_blocks(
             let Some(Entry(_, drop)) = worst else { break };
             chosen[drop] = false;
             state.update(&blocks[drop], -1.0)?;
-            if drop == add {
-                break;
-            }
-            state.refresh()?;
-            let next = options.criterion.value(&state.m);
-            let improved = next - current > options.tolerance * current.abs().max(1e-300);
+            size -= 1;
+        }
+        state.refresh()?;
+        let next = options.criterion.value(&state.m);
+        if next - current > options.tolerance * current.abs().max(1e-300) {
             exchanges += 1;
             current = next;
-            if !improved {
-                break;
-            }
+            k = 1;
+        } else {
+            // No gain: undo, and try a longer excursion.
+            chosen = saved.0;
+            state.m = saved.1;
+            state.w = saved.2;
+            k += 1;
         }
     }
-    let idx: Vec<usize> = (0..blocks.len()).filter(|i| chosen[*i]).collect();
-    let value = value_of(blocks, &chosen, prior, options.criterion);
-    Ok(Selection {
-        chosen: idx,
-        value,
-        greedy_value,
-        exchanges,
-        evaluations,
-    })
+    Ok((chosen, exchanges))
 }
 
 fn value_of(
