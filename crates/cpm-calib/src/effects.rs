@@ -245,7 +245,11 @@ pub fn link_coefficient(
         Effect::LinkScale if k == link => 1e-6 * l,
         Effect::LinkNonlinearity if k / 2 == link => {
             let u = (l - ctx.home_mm[link]) / settings.nonlinearity_scale_mm;
-            1e-3 * if k % 2 == 0 { u * u } else { u * u * u }
+            1e-3 * if k.is_multiple_of(2) {
+                u * u
+            } else {
+                u * u * u
+            }
         }
         Effect::Clearance => {
             let t = ctx.forces_n[link];
@@ -262,7 +266,11 @@ pub fn link_coefficient(
         Effect::Compliance if k == link => 1e-3 * ctx.forces_n[link] / 1000.0,
         Effect::ScrewPeriodic if k / 2 == link => {
             let ph = std::f64::consts::TAU * l / settings.screw_lead_mm;
-            1e-3 * if k % 2 == 0 { ph.sin() } else { ph.cos() }
+            1e-3 * if k.is_multiple_of(2) {
+                ph.sin()
+            } else {
+                ph.cos()
+            }
         }
         _ => 0.0,
     }

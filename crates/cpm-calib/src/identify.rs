@@ -13,8 +13,9 @@ use crate::identifiability::{analyze, physical_patterns, Identifiability, RankOp
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, MeasurementModel};
 
-/// Options of [`identify`].
-#[derive(Debug, Clone)]
+/// Options of [`identify`]. The default: cpm-lm's defaults, default rank thresholds, noise
+/// estimated from the residual, start at the nominal geometry.
+#[derive(Debug, Clone, Default)]
 pub struct IdentifyOptions {
     /// Least-squares options (damping strategy etc.). Default: cpm-lm's defaults (Nielsen).
     pub lm: cpm_lm::Options,
@@ -24,17 +25,6 @@ pub struct IdentifyOptions {
     pub sigma_um: Option<f64>,
     /// Start values of the installation errors, um. Default zero (the nominal geometry).
     pub start_um: Option<Vec<f64>>,
-}
-
-impl Default for IdentifyOptions {
-    fn default() -> Self {
-        Self {
-            lm: cpm_lm::Options::default(),
-            rank: RankOptions::default(),
-            sigma_um: None,
-            start_um: None,
-        }
-    }
 }
 
 /// An identifiable combination `v^T e` of the installation errors and its estimate.

@@ -57,7 +57,8 @@ fn options() -> RefineOptions {
 
 #[test]
 fn refine_names_the_undeclared_effect_and_reaches_the_noise() {
-    let cases: [(Effect, fn(usize) -> f64); 5] = [
+    type Values = fn(usize) -> f64;
+    let cases: [(Effect, Values); 5] = [
         (Effect::LinkScale, |k| {
             [60.0, -40.0, 30.0, -50.0, 45.0, -35.0][k % 6]
         }),
