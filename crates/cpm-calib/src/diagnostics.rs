@@ -145,6 +145,27 @@ fn pearson(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
+/// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
+/// deviation) from the median.
+pub fn outliers(residuals_um: &[f64]) -> Vec<usize> {
+    let n = residuals_um.len();
+    if n == 0 {
+        return Vec::new();
+    }
+    let mut sorted = residuals_um.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[n / 2];
+    let mut dev: Vec<f64> = residuals_um.iter().map(|r| (r - median).abs()).collect();
+    dev.sort_by(f64::total_cmp);
+    let mad = dev[n / 2] * 1.4826;
+    residuals_um
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| mad > 0.0 && (**r - median).abs() > 5.0 * mad)
+        .map(|(k, _)| k)
+        .collect()
+}
+
 fn normal_two_sided(z: f64) -> f64 {
     let n = Normal::new(0.0, 1.0).expect("standard normal");
     2.0 * (1.0 - n.cdf(z.abs()))
@@ -208,16 +229,7 @@ pub fn diagnose(
     let ljung_box_p = ChiSquared::new(lags as f64)
         .map(|d| 1.0 - d.cdf(q))
         .unwrap_or(1.0);
-    // Outliers by the median absolute deviation.
-    let mut dev: Vec<f64> = residuals_um.iter().map(|r| (r - median).abs()).collect();
-    dev.sort_by(f64::total_cmp);
-    let mad = if n == 0 { 0.0 } else { dev[n / 2] * 1.4826 };
-    let outliers = residuals_um
-        .iter()
-        .enumerate()
-        .filter(|(_, r)| mad > 0.0 && (**r - median).abs() > 5.0 * mad)
-        .map(|(k, _)| k)
-        .collect();
+    let outliers = outliers(residuals_um);
     // Correlations.
     let mut correlations: Vec<Correlation> = regressors
         .iter()

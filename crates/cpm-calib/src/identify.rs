@@ -63,6 +63,9 @@ pub struct Calibration {
     pub sigma_estimated: bool,
     /// Residuals (predicted - measured) at the solution, um.
     pub residuals_um: Vec<f64>,
+    /// Observations whose residual is more than 5 robust standard deviations from the median
+    /// (flagged whatever the loss; a robust loss also limits their influence).
+    pub outliers: Vec<usize>,
     /// RMS residual at the start, um.
     pub initial_rms_um: f64,
     /// RMS residual at the solution, um.
@@ -288,6 +291,7 @@ pub fn identify(
         identifiability: ident,
         sigma_um,
         sigma_estimated,
+        outliers: crate::diagnostics::outliers(&residuals_um),
         initial_rms_um: rms(&r0),
         residual_rms_um: rms(&residuals_um),
         residuals_um,

@@ -240,3 +240,33 @@ fn bad_inputs_are_errors_not_panics() {
     let c = paper_plan(&model).skeleton();
     assert!(identify(&model, &c, &opts).is_err());
 }
+
+#[test]
+fn a_spike_is_flagged_and_a_robust_loss_contains_it() {
+    let model = designed_model();
+    let plan = designed_plan(&model, 30, 5);
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let sim = SimulationOptions {
+        noise: Noise::Gaussian { sigma_um: 2.0 },
+        repeats: 1,
+        seed: 3,
+    };
+    let mut data = simulate(&model, &truth, &plan, &sim).unwrap();
+    // A 5 mm spike in one reading (a ballbar that slipped).
+    data.readings[100].length_mm += 5.0;
+    let err = |cal: &Calibration| {
+        (0..36)
+            .map(|k| (cal.estimate_um[k].unwrap() - truth[k]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+            / 6.0
+    };
+    let plain = identify(&model, &data, &IdentifyOptions::default()).unwrap();
+    assert!(plain.outliers.contains(&100), "{:?}", plain.outliers);
+    let mut robust_opts = IdentifyOptions::default();
+    robust_opts.lm.loss = cpm_lm::Loss::Huber(10.0);
+    let robust = identify(&model, &data, &robust_opts).unwrap();
+    assert_eq!(robust.outliers, vec![100]);
+    assert!(err(&plain) > 20.0, "plain fit rms error {}", err(&plain));
+    assert!(err(&robust) < 2.0, "robust fit rms error {}", err(&robust));
+}

@@ -1,1 +1,286 @@
-fn main() {}
+//! Benchmarks of cpm-lm.
+//!
+//! * `nist/<dataset>`: one solve of a NIST StRD problem from its second start, cpm-lm
+//!   (default options, with and without the end-of-solve statistics) next to the
+//!   `levenberg-marquardt` crate (MINPACK port on nalgebra, default options, dynamic sizes).
+//! * `bundle/<solver>/<N>`: a bundle-shaped sparse problem, N blocks of 6 local parameters
+//!   sharing 40 global ones, 12 residuals per block, solved with the Schur complement and
+//!   with the sparse Cholesky solver.
+//!
+//! Inputs are built from fixed seeds. Run briefly with
+//! `cargo bench -p cpm-lm -- --warm-up-time 1 --measurement-time 2`.
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+
+#[path = "../tests/common/nist.rs"]
+mod nist;
+
+/// NIST problems: cpm-lm against the `levenberg-marquardt` crate.
+mod nist_vs_lm {
+    use super::*;
+    use cpm_lm::{minimize, Options};
+    use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+    use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+    use nist::{load, min_lre, NistProblem};
+
+    /// A NIST problem in the `levenberg-marquardt` crate's interface.
+    pub struct LmNist {
+        pub p: NistProblem,
+        pub x: DVector<f64>,
+    }
+
+    impl LeastSquaresProblem<f64, Dyn, Dyn> for LmNist {
+        type ResidualStorage = Owned<f64, Dyn>;
+        type JacobianStorage = Owned<f64, Dyn, Dyn>;
+        type ParameterStorage = Owned<f64, Dyn>;
+
+        fn set_params(&mut self, x: &DVector<f64>) {
+            self.x.copy_from(x);
+        }
+        fn params(&self) -> DVector<f64> {
+            self.x.clone()
+        }
+        fn residuals(&self) -> Option<DVector<f64>> {
+            let mut r = DVector::zeros(self.p.y.len());
+            self.p.residuals_into(self.x.as_slice(), r.as_mut_slice());
+            Some(r)
+        }
+        fn jacobian(&self) -> Option<DMatrix<f64>> {
+            let mut j = DMatrix::zeros(self.p.y.len(), self.p.n);
+            self.p
+                .jacobian_with(self.x.as_slice(), |i, k, v| j[(i, k)] = v);
+            Some(j)
+        }
+    }
+
+    pub const DATASETS: [&str; 6] = ["Misra1a", "Thurber", "MGH09", "Lanczos3", "Gauss1", "Rat43"];
+
+    pub fn bench(c: &mut Criterion) {
+        let no_stats = Options {
+            compute_statistics: false,
+            ..Options::default()
+        };
+        println!(
+            "{:<9} {:>26} {:>26}",
+            "dataset", "cpm-lm: evals / LRE", "levenberg-marquardt: evals / LRE"
+        );
+        for name in DATASETS {
+            let d = load(name);
+            let problem = NistProblem::new(&d);
+            // Accuracy and work of one solve of each, for the record.
+            let mut x = d.start2.clone();
+            let r = minimize(&mut problem.clone(), &mut x, &Options::default()).unwrap();
+            let ours = (
+                r.residual_evaluations,
+                r.jacobian_evaluations,
+                min_lre(&x, &d.certified),
+            );
+            let lm = LmNist {
+                p: problem.clone(),
+                x: DVector::from_vec(d.start2.clone()),
+            };
+            let (lm, rep) = LevenbergMarquardt::new().minimize(lm);
+            let theirs = (
+                rep.number_of_evaluations,
+                min_lre(lm.x.as_slice(), &d.certified),
+            );
+            println!(
+                "{name:<9} {:>12} / {:>4} / {:>5.2} {:>15} / {:>5.2}",
+                ours.0, ours.1, ours.2, theirs.0, theirs.1
+            );
+
+            let mut group = c.benchmark_group(format!("nist/{name}"));
+            group.bench_function("cpm-lm", |b| {
+                b.iter(|| {
+                    let mut p = problem.clone();
+                    let mut x = d.start2.clone();
+                    black_box(minimize(&mut p, &mut x, &Options::default()).unwrap());
+                    x
+                })
+            });
+            group.bench_function("cpm-lm (no statistics)", |b| {
+                b.iter(|| {
+                    let mut p = problem.clone();
+                    let mut x = d.start2.clone();
+                    black_box(minimize(&mut p, &mut x, &no_stats).unwrap());
+                    x
+                })
+            });
+            group.bench_function("levenberg-marquardt", |b| {
+                b.iter(|| {
+                    let lm = LmNist {
+                        p: problem.clone(),
+                        x: DVector::from_vec(d.start2.clone()),
+                    };
+                    let (lm, rep) = LevenbergMarquardt::new().minimize(lm);
+                    black_box(rep);
+                    lm.x
+                })
+            });
+            group.finish();
+        }
+    }
+}
+
+/// A bundle-shaped sparse problem solved with the Schur complement and sparse Cholesky.
+mod bundle {
+    use super::*;
+    use cpm_lm::{minimize_sparse, LinearSolver, ModelError, Options, Problem, SparseJacobian};
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    pub const LOCAL: usize = 6;
+    pub const GLOBAL: usize = 40;
+    pub const ROWS: usize = 12;
+
+    /// Block k, residual i: `a_ki . l_k + b_i . g + 0.2 sin(l_k[i % 6] + g[(7i + k) % 40]) - y_ki`.
+    pub struct Bundle {
+        pub blocks: usize,
+        a: Vec<f64>,
+        b: Vec<f64>,
+        y: Vec<f64>,
+        pub start: Vec<f64>,
+    }
+
+    impl Bundle {
+        /// Seeded random instance with `blocks` local blocks.
+        pub fn new(blocks: usize, seed: u64) -> Self {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let n = blocks * LOCAL + GLOBAL;
+            let a: Vec<f64> = (0..blocks * ROWS * LOCAL)
+                .map(|_| rng.random_range(-1.0..1.0))
+                .collect();
+            let b: Vec<f64> = (0..ROWS * GLOBAL)
+                .map(|_| rng.random_range(-0.3..0.3))
+                .collect();
+            let truth: Vec<f64> = (0..n).map(|_| rng.random_range(-1.0..1.0)).collect();
+            let mut p = Self {
+                blocks,
+                a,
+                b,
+                y: vec![0.0; blocks * ROWS],
+                start: Vec::new(),
+            };
+            let mut y = vec![0.0; blocks * ROWS];
+            p.eval(&truth, &mut y);
+            for v in &mut y {
+                *v += rng.random_range(-0.01..0.01);
+            }
+            p.y = y;
+            p.start = truth
+                .iter()
+                .map(|v| v + rng.random_range(-0.3..0.3))
+                .collect();
+            p
+        }
+
+        fn n(&self) -> usize {
+            self.blocks * LOCAL + GLOBAL
+        }
+
+        fn idx(&self, k: usize, i: usize) -> (usize, usize) {
+            (
+                k * LOCAL + i % LOCAL,
+                self.blocks * LOCAL + (7 * i + k) % GLOBAL,
+            )
+        }
+
+        fn eval(&self, x: &[f64], r: &mut [f64]) {
+            let g = &x[self.blocks * LOCAL..];
+            for k in 0..self.blocks {
+                let l = &x[k * LOCAL..(k + 1) * LOCAL];
+                for i in 0..ROWS {
+                    let row = k * ROWS + i;
+                    let a = &self.a[row * LOCAL..(row + 1) * LOCAL];
+                    let b = &self.b[i * GLOBAL..(i + 1) * GLOBAL];
+                    let lin: f64 = a.iter().zip(l).map(|(p, q)| p * q).sum::<f64>()
+                        + b.iter().zip(g).map(|(p, q)| p * q).sum::<f64>();
+                    let (p, q) = self.idx(k, i);
+                    r[row] = lin + 0.2 * (x[p] + x[q]).sin() - self.y[row];
+                }
+            }
+        }
+    }
+
+    impl Problem for Bundle {
+        fn num_params(&self) -> usize {
+            self.n()
+        }
+        fn num_residuals(&self) -> usize {
+            self.blocks * ROWS
+        }
+        fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+            self.eval(x, r);
+            Ok(())
+        }
+    }
+
+    impl SparseJacobian for Bundle {
+        fn pattern(&self) -> Vec<(usize, usize)> {
+            let mut p = Vec::with_capacity(self.blocks * ROWS * (LOCAL + GLOBAL));
+            for k in 0..self.blocks {
+                for i in 0..ROWS {
+                    let row = k * ROWS + i;
+                    p.extend((0..LOCAL).map(|a| (row, k * LOCAL + a)));
+                    p.extend((0..GLOBAL).map(|b| (row, self.blocks * LOCAL + b)));
+                }
+            }
+            p
+        }
+        fn jacobian_values(&mut self, x: &[f64], v: &mut [f64]) -> Result<(), ModelError> {
+            let w = LOCAL + GLOBAL;
+            for k in 0..self.blocks {
+                for i in 0..ROWS {
+                    let row = k * ROWS + i;
+                    let out = &mut v[row * w..(row + 1) * w];
+                    out[..LOCAL].copy_from_slice(&self.a[row * LOCAL..(row + 1) * LOCAL]);
+                    out[LOCAL..].copy_from_slice(&self.b[i * GLOBAL..(i + 1) * GLOBAL]);
+                    let (p, q) = self.idx(k, i);
+                    let c = 0.2 * (x[p] + x[q]).cos();
+                    out[p - k * LOCAL] += c;
+                    out[LOCAL + q - self.blocks * LOCAL] += c;
+                }
+            }
+            Ok(())
+        }
+    }
+
+    pub fn bench(c: &mut Criterion) {
+        let mut group = c.benchmark_group("bundle");
+        group.sample_size(10);
+        for blocks in [1000usize, 10_000] {
+            let mut problem = Bundle::new(blocks, 7);
+            let solvers = [
+                (
+                    "schur",
+                    LinearSolver::Schur {
+                        local_block_sizes: vec![LOCAL; blocks],
+                    },
+                ),
+                ("sparse-cholesky", LinearSolver::SparseCholesky),
+            ];
+            for (label, solver) in solvers {
+                let options = Options {
+                    linear_solver: solver,
+                    ..Options::default()
+                };
+                let mut x = problem.start.clone();
+                let r = minimize_sparse(&mut problem, &mut x, &options).unwrap();
+                println!("bundle {label} N={blocks}: {}", r.brief());
+                group.bench_function(format!("{label}/{blocks}"), |b| {
+                    b.iter(|| {
+                        let mut x = problem.start.clone();
+                        black_box(minimize_sparse(&mut problem, &mut x, &options).unwrap());
+                        x
+                    })
+                });
+            }
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, nist_vs_lm::bench, bundle::bench);
+criterion_main!(benches);

@@ -1,0 +1,356 @@
+//! Damping schedules: how the Levenberg-Marquardt parameter `mu` (or `lambda`) evolves.
+//!
+//! Every strategy solves `(J^T J + mu D^2) h = -J^T r` for the step `h` (with `D = I` under
+//! [`Scaling::Identity`](crate::Scaling::Identity)). They differ in how `mu` reacts to the
+//! gain ratio `rho = (actual reduction) / (reduction predicted by the linear model)`:
+//!
+//! * [`Damping::Nielsen`] (default; Nielsen 1999, Madsen-Nielsen-Tingleff 2004): on an
+//!   accepted step `mu <- mu * max(1/3, 1 - (2 rho - 1)^3)`, `nu <- 2`; on a rejected step
+//!   `mu <- mu * nu`, `nu <- 2 nu`. A step is accepted when `rho > 0`.
+//! * [`Damping::Marquardt`] (Marquardt 1963): `mu <- mu / 10` on acceptance,
+//!   `mu <- mu * 10` on rejection.
+//! * [`Damping::CubicInterpolation`]: the control of MATLAB's former `lsqnonlin`
+//!   Levenberg-Marquardt (about 2000-2004). The direction is `d = -(J^T J + lambda D^2)^-1
+//!   J^T f`, tried with a step length `alpha` (1 at first). `EstSum = ||J d + f||^2` is the
+//!   linear model's sum of squares at unit step. A step is accepted when it lowers the sum
+//!   of squares. After an accepted step of length `alpha`, the cubic through
+//!   `(0, SS_old, slope_old)` and `(alpha, SS_new, slope_new)` (slopes of the sum of squares
+//!   along `d`, the new one from the Jacobian at the new point) gives its minimiser and the
+//!   value there, `fbest` (if it exceeds `SS_new`, or there is no minimiser, `fbest =
+//!   0.9 SS_new`); then `lambda <- lambda / (1 + alpha)` if `EstSum > fbest`, else
+//!   `lambda <- lambda + (fbest - EstSum) / (alpha + eps)`, and `alpha <- 1`. A failed step
+//!   leaves `lambda` alone and shortens `alpha` by quadratic (first failure) or cubic
+//!   (later failures) interpolation of the sum of squares along `d`, safeguarded to
+//!   `[alpha/10, alpha/2]`, or `alpha / 8` when the interpolation is unusable. The original
+//!   damped with the identity; combine it with [`Scaling::Identity`](crate::Scaling::Identity)
+//!   to reproduce that, the default Marquardt scaling works as well.
+//!
+//! All strategies start from `mu_0 = tau * max_j (J^T J)_jj / D_j^2` (`tau =`
+//! [`Options::tau`](crate::Options::tau)).
+
+/// Damping schedule (see the [module documentation](self) for the update rules).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Damping {
+    /// Nielsen's smooth update driven by the gain ratio (default).
+    #[default]
+    Nielsen,
+    /// Marquardt's classic divide / multiply by 10.
+    Marquardt,
+    /// Cubic-interpolation control of MATLAB's former `lsqnonlin` LM (step length and
+    /// damping adapted from a cubic model of the sum of squares along the step).
+    CubicInterpolation,
+}
+
+impl Damping {
+    /// Short name for reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Damping::Nielsen => "Nielsen",
+            Damping::Marquardt => "Marquardt",
+            Damping::CubicInterpolation => "cubic interpolation",
+        }
+    }
+}
+
+/// What the line along the direction looked like at a trial (sum-of-squares units,
+/// i.e. `2 * cost`).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct LineInfo {
+    /// Sum of squares at the current point.
+    pub f0: f64,
+    /// Derivative of the sum of squares along the unit direction at the current point.
+    pub slope0: f64,
+    /// Step length used.
+    pub alpha: f64,
+    /// Sum of squares at the trial point.
+    pub f_trial: f64,
+    /// Linear model's sum of squares at unit step, `||J d + f||^2`.
+    pub est_sum: f64,
+}
+
+const MU_MIN: f64 = 1e-300;
+
+/// The evolving damping state of one solve.
+#[derive(Clone, Debug)]
+pub(crate) struct DampingState {
+    kind: Damping,
+    mu: f64,
+    nu: f64,
+    alpha: f64,
+    /// Previous failed trial along the current direction, `(alpha, f)`.
+    last_fail: Option<(f64, f64)>,
+    /// Accepted cubic step waiting for the slope at the new point.
+    pending: Option<LineInfo>,
+}
+
+impl DampingState {
+    pub(crate) fn new(kind: Damping, mu0: f64) -> Self {
+        Self {
+            kind,
+            mu: mu0.max(MU_MIN),
+            nu: 2.0,
+            alpha: 1.0,
+            last_fail: None,
+            pending: None,
+        }
+    }
+
+    /// Current damping parameter.
+    pub(crate) fn mu(&self) -> f64 {
+        self.mu
+    }
+
+    /// Step length to apply to the solved direction (1 except for the cubic control).
+    pub(crate) fn step_length(&self) -> f64 {
+        self.alpha
+    }
+
+    /// Whether a step with gain ratio `rho` and trial cost below the current one is accepted.
+    pub(crate) fn accepts(&self, rho: f64, decreased: bool) -> bool {
+        match self.kind {
+            Damping::CubicInterpolation => decreased,
+            _ => decreased && rho > 0.0,
+        }
+    }
+
+    /// Updates after an accepted step.
+    pub(crate) fn accepted(&mut self, rho: f64, line: LineInfo) {
+        match self.kind {
+            Damping::Nielsen => {
+                let t = 2.0 * rho - 1.0;
+                self.mu *= (1.0 / 3.0f64).max(1.0 - t * t * t);
+                self.nu = 2.0;
+            }
+            Damping::Marquardt => self.mu /= 10.0,
+            Damping::CubicInterpolation => {
+                self.pending = Some(line);
+                self.last_fail = None;
+                self.alpha = 1.0;
+            }
+        }
+        self.mu = self.mu.max(MU_MIN);
+    }
+
+    /// Whether the state waits for the slope at the new point ([`Self::new_slope`]).
+    pub(crate) fn needs_slope(&self) -> bool {
+        self.pending.is_some()
+    }
+
+    /// Completes the cubic update with the derivative of the sum of squares along the
+    /// accepted direction at the new point.
+    pub(crate) fn new_slope(&mut self, slope_new: f64) {
+        let Some(p) = self.pending.take() else {
+            return;
+        };
+        let a = p.alpha;
+        let f1 = p.f_trial;
+        let mut fbest = 0.9 * f1;
+        if let Some(t) = cubic_minimiser(p.f0, p.slope0, a, f1, slope_new) {
+            let v = cubic_value(p.f0, p.slope0, a, f1, slope_new, t);
+            if v.is_finite() && v <= f1 {
+                fbest = v;
+            }
+        }
+        if p.est_sum > fbest {
+            self.mu /= 1.0 + a;
+        } else {
+            self.mu += (fbest - p.est_sum) / (a + f64::EPSILON);
+        }
+        if !self.mu.is_finite() || self.mu <= 0.0 {
+            self.mu = MU_MIN;
+        }
+        self.mu = self.mu.max(MU_MIN);
+    }
+
+    /// Updates after a rejected step.
+    pub(crate) fn rejected(&mut self, line: LineInfo) {
+        match self.kind {
+            Damping::Nielsen => {
+                self.mu *= self.nu;
+                self.nu *= 2.0;
+            }
+            Damping::Marquardt => self.mu *= 10.0,
+            Damping::CubicInterpolation => {
+                let a = line.alpha;
+                let next = shorten(line.f0, line.slope0, a, line.f_trial, self.last_fail);
+                self.last_fail = Some((a, line.f_trial));
+                self.alpha = next;
+            }
+        }
+    }
+
+    /// Updates after the damped system could not be solved (not positive definite).
+    pub(crate) fn singular(&mut self) {
+        match self.kind {
+            Damping::Nielsen => {
+                self.mu *= self.nu;
+                self.nu *= 2.0;
+            }
+            Damping::Marquardt | Damping::CubicInterpolation => self.mu *= 10.0,
+        }
+        if self.mu == 0.0 {
+            self.mu = 1.0;
+        }
+    }
+}
+
+/// Positive minimiser of the cubic Hermite interpolant `p` with `p(0) = f0`, `p'(0) = s0`,
+/// `p(a) = f1`, `p'(a) = s1`, if any.
+fn cubic_minimiser(f0: f64, s0: f64, a: f64, f1: f64, s1: f64) -> Option<f64> {
+    let (c2, c3) = cubic_coefficients(f0, s0, a, f1, s1);
+    // p'(t) = s0 + 2 c2 t + 3 c3 t^2; the root with p'' > 0 written stably.
+    let disc = c2 * c2 - 3.0 * c3 * s0;
+    if disc.is_nan() || disc < 0.0 {
+        return None;
+    }
+    let den = c2 + disc.sqrt();
+    if den <= 0.0 {
+        return None;
+    }
+    let t = -s0 / den;
+    (t.is_finite() && t > 0.0).then_some(t)
+}
+
+fn cubic_coefficients(f0: f64, s0: f64, a: f64, f1: f64, s1: f64) -> (f64, f64) {
+    let big_a = f1 - f0 - s0 * a;
+    let big_b = s1 - s0;
+    let c3 = (big_b * a - 2.0 * big_a) / (a * a * a);
+    let c2 = (3.0 * big_a - big_b * a) / (a * a);
+    (c2, c3)
+}
+
+fn cubic_value(f0: f64, s0: f64, a: f64, f1: f64, s1: f64, t: f64) -> f64 {
+    let (c2, c3) = cubic_coefficients(f0, s0, a, f1, s1);
+    f0 + t * (s0 + t * (c2 + t * c3))
+}
+
+/// New step length after a failed trial at `a` (value `fa`), from `f(0) = f0`,
+/// `f'(0) = s0` and, when present, the previous failed trial `(a_prev, f_prev)`.
+fn shorten(f0: f64, s0: f64, a: f64, fa: f64, prev: Option<(f64, f64)>) -> f64 {
+    let fallback = a / 8.0;
+    if !(fa.is_finite() && s0 < 0.0) {
+        return fallback;
+    }
+    let candidate = match prev {
+        Some((ap, fp)) if fp.is_finite() && ap > a => {
+            // Cubic through f(0), f'(0), f(a), f(ap) (Nocedal & Wright, eq. 3.58).
+            let r1 = fa - f0 - s0 * a;
+            let r0 = fp - f0 - s0 * ap;
+            let den = a * a * ap * ap * (a - ap);
+            let ca = (ap * ap * r1 - a * a * r0) / den;
+            let cb = (-ap * ap * ap * r1 + a * a * a * r0) / den;
+            if ca.abs() < f64::MIN_POSITIVE {
+                -s0 / (2.0 * cb)
+            } else {
+                let disc = cb * cb - 3.0 * ca * s0;
+                if disc < 0.0 {
+                    f64::NAN
+                } else {
+                    (-cb + disc.sqrt()) / (3.0 * ca)
+                }
+            }
+        }
+        _ => -s0 * a * a / (2.0 * (fa - f0 - s0 * a)),
+    };
+    if candidate.is_finite() && candidate > 0.0 {
+        candidate.clamp(a / 10.0, a / 2.0)
+    } else {
+        fallback
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(rho_f: f64) -> LineInfo {
+        LineInfo {
+            f0: 1.0,
+            slope0: -1.0,
+            alpha: 1.0,
+            f_trial: rho_f,
+            est_sum: 0.5,
+        }
+    }
+
+    #[test]
+    fn nielsen_updates() {
+        let mut d = DampingState::new(Damping::Nielsen, 1.0);
+        d.accepted(1.0, line(0.5));
+        assert!((d.mu() - 1.0 / 3.0).abs() < 1e-15);
+        d.accepted(0.5, line(0.5));
+        assert!((d.mu() - 1.0 / 3.0).abs() < 1e-15); // 1 - 0^3 = 1
+        d.rejected(line(2.0));
+        assert!((d.mu() - 2.0 / 3.0).abs() < 1e-15);
+        d.rejected(line(2.0));
+        assert!((d.mu() - 8.0 / 3.0).abs() < 1e-15);
+        d.accepted(0.75, line(0.5));
+        // nu reset to 2, mu scaled by max(1/3, 1 - 0.125)
+        assert!((d.mu() - 8.0 / 3.0 * 0.875).abs() < 1e-14);
+        d.rejected(line(2.0));
+        assert!((d.mu() - 8.0 / 3.0 * 0.875 * 2.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn cubic_minimiser_of_a_quadratic() {
+        // f(t) = (t - 2)^2 + 1: f(0) = 5, f'(0) = -4, f(1) = 2, f'(1) = -2 -> t* = 2, f* = 1.
+        let t = cubic_minimiser(5.0, -4.0, 1.0, 2.0, -2.0).unwrap();
+        assert!((t - 2.0).abs() < 1e-12);
+        assert!((cubic_value(5.0, -4.0, 1.0, 2.0, -2.0, t) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn cubic_lambda_rule() {
+        let mut d = DampingState::new(Damping::CubicInterpolation, 1.0);
+        // Model too pessimistic (EstSum above the cubic's best) -> lambda / (1 + alpha).
+        d.accepted(
+            1.0,
+            LineInfo {
+                f0: 5.0,
+                slope0: -4.0,
+                alpha: 1.0,
+                f_trial: 2.0,
+                est_sum: 3.0,
+            },
+        );
+        assert!(d.needs_slope());
+        d.new_slope(-2.0);
+        assert!((d.mu() - 0.5).abs() < 1e-15);
+        // Model too optimistic -> lambda grows by (fbest - EstSum) / alpha.
+        d.accepted(
+            1.0,
+            LineInfo {
+                f0: 5.0,
+                slope0: -4.0,
+                alpha: 1.0,
+                f_trial: 2.0,
+                est_sum: 0.5,
+            },
+        );
+        d.new_slope(-2.0);
+        assert!((d.mu() - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn failed_cubic_step_shortens_alpha_only() {
+        let mut d = DampingState::new(Damping::CubicInterpolation, 1.0);
+        d.rejected(LineInfo {
+            f0: 1.0,
+            slope0: -1.0,
+            alpha: 1.0,
+            f_trial: 3.0,
+            est_sum: 0.0,
+        });
+        assert_eq!(d.mu(), 1.0);
+        // Quadratic: -s0 a^2 / (2 (fa - f0 - s0 a)) = 1 / 6, within [0.1, 0.5].
+        assert!((d.step_length() - 1.0 / 6.0).abs() < 1e-15);
+        d.rejected(LineInfo {
+            f0: 1.0,
+            slope0: -1.0,
+            alpha: 1.0 / 6.0,
+            f_trial: f64::NAN,
+            est_sum: 0.0,
+        });
+        assert!((d.step_length() - 1.0 / 48.0).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,237 @@
+//! Solver options: one flat struct with public fields, each default stated in its doc.
+
+use crate::damping::Damping;
+use crate::error::LmError;
+use crate::loss::Loss;
+use crate::solver::LinearSolver;
+
+/// How the damping term is scaled.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Scaling {
+    /// Marquardt scaling (default): the damping term is `mu * D^2` with
+    /// `D_j = max over iterations of ||J e_j||` (a running maximum of the column norms,
+    /// as in MINPACK; a column that has always been zero gets `D_j = 1`). The solver is
+    /// then invariant to rescaling of the parameters.
+    #[default]
+    Marquardt,
+    /// Identity damping: the damping term is `mu * I` (Levenberg's original form).
+    Identity,
+}
+
+/// Options of a solve. All fields are public; [`Options::default()`] gives the values
+/// stated in each field's documentation, and [`Options::validate`] explains what is wrong
+/// with a combination.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Options {
+    /// Damping schedule. Default: [`Damping::Nielsen`].
+    pub damping: Damping,
+    /// Scaling of the damping term. Default: [`Scaling::Marquardt`].
+    pub scaling: Scaling,
+    /// Linear solver for the damped normal equations. Default: [`LinearSolver::DenseQr`].
+    pub linear_solver: LinearSolver,
+    /// Robust loss applied to each residual. Default: [`Loss::Squared`] (plain least squares).
+    pub loss: Loss,
+    /// Stop when the predicted relative reduction of the cost in a step is at most `ftol`
+    /// and the actual relative reduction is too: at most `ftol` with a gain ratio of at most
+    /// 2 (MINPACK's test), at the rounding level of the cost (`8 eps sqrt(m)`), or not a
+    /// reduction at all (the step is below what the evaluation can resolve; damping more
+    /// would only shrink it further). Default: `1e-15`.
+    pub ftol: f64,
+    /// Stop when the scaled step is small relative to the scaled parameters:
+    /// `||D h|| <= xtol * (||D x|| + xtol)`. Default: `1e-15`.
+    pub xtol: f64,
+    /// Stop when the scaled gradient is small: `max_j |(J^T r)_j| / (||J e_j|| ||r||) <= gtol`
+    /// (the cosine of the angle between the residual and each Jacobian column, as in
+    /// MINPACK). Default: `1e-15`.
+    pub gtol: f64,
+    /// Maximum number of iterations; each trial step (accepted or rejected) is one
+    /// iteration. Default: `1000`.
+    pub max_iterations: usize,
+    /// Maximum number of residual evaluations, the initial one included. Default: `10_000`.
+    pub max_evaluations: usize,
+    /// Lower bounds on the parameters (length `num_params`; `f64::NEG_INFINITY` for none).
+    /// Steps are projected onto the box and parameters held at a bound by the gradient are
+    /// frozen for the step. Default: `None`.
+    pub lower: Option<Vec<f64>>,
+    /// Upper bounds on the parameters (length `num_params`; `f64::INFINITY` for none).
+    /// Default: `None`.
+    pub upper: Option<Vec<f64>>,
+    /// Initial damping relative to the largest diagonal entry of the (scaled) `J^T J`:
+    /// `mu_0 = tau * max_j (J^T J)_jj / D_j^2`. Default: `1e-3`.
+    pub tau: f64,
+    /// Absolute threshold on the singular values of `J` for the numerical rank used by the
+    /// statistics. Default: `None`, meaning `max(m, n) * f64::EPSILON * s_max`.
+    pub rank_tol: Option<f64>,
+    /// Compute [`Statistics`](crate::stats::Statistics) (rank, covariance, standard
+    /// deviations) at the solution. With a robust loss they use the reweighted Jacobian and
+    /// residuals the last step saw. Costs one extra Jacobian evaluation when the last
+    /// accepted step left the Jacobian stale. Default: `true`.
+    pub compute_statistics: bool,
+    /// Statistics use a dense SVD of the Jacobian and are skipped (left `None`) when the
+    /// problem has more parameters than this. Default: `1000`.
+    pub statistics_max_params: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            damping: Damping::default(),
+            scaling: Scaling::default(),
+            linear_solver: LinearSolver::default(),
+            loss: Loss::default(),
+            ftol: 1e-15,
+            xtol: 1e-15,
+            gtol: 1e-15,
+            max_iterations: 1000,
+            max_evaluations: 10_000,
+            lower: None,
+            upper: None,
+            tau: 1e-3,
+            rank_tol: None,
+            compute_statistics: true,
+            statistics_max_params: 1000,
+        }
+    }
+}
+
+fn check_tol(name: &str, v: f64) -> Result<(), LmError> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(LmError::InvalidOptions(format!(
+            "{name} must be finite and >= 0, got {v}"
+        )))
+    }
+}
+
+impl Options {
+    /// Checks the options on their own (independently of a problem): tolerances finite and
+    /// non-negative, limits at least 1, `tau > 0`, loss scale `> 0`, bounds not NaN and
+    /// `lower <= upper`, Schur block sizes non-zero. The error message says which option is
+    /// wrong and why.
+    pub fn validate(&self) -> Result<(), LmError> {
+        check_tol("ftol", self.ftol)?;
+        check_tol("xtol", self.xtol)?;
+        check_tol("gtol", self.gtol)?;
+        if self.max_iterations == 0 {
+            return Err(LmError::InvalidOptions(
+                "max_iterations must be >= 1, got 0".into(),
+            ));
+        }
+        if self.max_evaluations < 2 {
+            return Err(LmError::InvalidOptions(format!(
+                "max_evaluations must be >= 2 (the initial evaluation and one trial), got {}",
+                self.max_evaluations
+            )));
+        }
+        if !(self.tau.is_finite() && self.tau > 0.0) {
+            return Err(LmError::InvalidOptions(format!(
+                "tau (initial damping factor) must be finite and > 0, got {}",
+                self.tau
+            )));
+        }
+        if let Some(t) = self.rank_tol {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(LmError::InvalidOptions(format!(
+                    "rank_tol must be finite and >= 0 when set, got {t}"
+                )));
+            }
+        }
+        self.loss.validate()?;
+        self.linear_solver.validate()?;
+        if let Some(lo) = &self.lower {
+            if let Some(i) = lo.iter().position(|v| v.is_nan() || *v == f64::INFINITY) {
+                return Err(LmError::InvalidOptions(format!(
+                    "lower[{i}] = {} is not a usable lower bound (NaN or +inf)",
+                    lo[i]
+                )));
+            }
+        }
+        if let Some(up) = &self.upper {
+            if let Some(i) = up
+                .iter()
+                .position(|v| v.is_nan() || *v == f64::NEG_INFINITY)
+            {
+                return Err(LmError::InvalidOptions(format!(
+                    "upper[{i}] = {} is not a usable upper bound (NaN or -inf)",
+                    up[i]
+                )));
+            }
+        }
+        if let (Some(lo), Some(up)) = (&self.lower, &self.upper) {
+            if lo.len() != up.len() {
+                return Err(LmError::InvalidOptions(format!(
+                    "lower has {} entries but upper has {}",
+                    lo.len(),
+                    up.len()
+                )));
+            }
+            if let Some(i) = (0..lo.len()).find(|&i| lo[i] > up[i]) {
+                return Err(LmError::InvalidOptions(format!(
+                    "lower[{i}] = {} exceeds upper[{i}] = {}",
+                    lo[i], up[i]
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// [`validate`](Options::validate) plus the checks that need the problem size.
+    pub(crate) fn validate_for(&self, num_params: usize) -> Result<(), LmError> {
+        self.validate()?;
+        if let Some(lo) = &self.lower {
+            if lo.len() != num_params {
+                return Err(LmError::DimensionMismatch {
+                    what: "options.lower",
+                    expected: num_params,
+                    found: lo.len(),
+                });
+            }
+        }
+        if let Some(up) = &self.upper {
+            if up.len() != num_params {
+                return Err(LmError::DimensionMismatch {
+                    what: "options.upper",
+                    expected: num_params,
+                    found: up.len(),
+                });
+            }
+        }
+        if let LinearSolver::Schur { local_block_sizes } = &self.linear_solver {
+            let total: usize = local_block_sizes.iter().sum();
+            if total > num_params {
+                return Err(LmError::InvalidOptions(format!(
+                    "Schur local blocks cover {total} parameters but the problem has only {num_params}"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_is_valid() {
+        Options::default().validate().unwrap();
+    }
+
+    #[test]
+    fn messages_name_the_option() {
+        let o = Options {
+            ftol: -1.0,
+            ..Options::default()
+        };
+        let e = o.validate().unwrap_err().to_string();
+        assert!(e.contains("ftol") && e.contains("-1"), "{e}");
+        let o = Options {
+            lower: Some(vec![0.0, 2.0]),
+            upper: Some(vec![1.0, 1.0]),
+            ..Options::default()
+        };
+        let e = o.validate().unwrap_err().to_string();
+        assert!(e.contains("lower[1] = 2 exceeds upper[1] = 1"), "{e}");
+    }
+}

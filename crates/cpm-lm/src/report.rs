@@ -1,0 +1,228 @@
+//! What a solve returns: how it ended, the cost history, counts, timings and statistics.
+
+use std::fmt;
+use std::fmt::Write as _;
+use std::time::Duration;
+
+use crate::stats::Statistics;
+
+/// How a solve ended.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TerminationReason {
+    /// Actual and predicted relative cost reductions fell below `ftol`.
+    ConvergedFtol,
+    /// The scaled step fell below `xtol` relative to the scaled parameters.
+    ConvergedXtol,
+    /// The scaled gradient fell below `gtol`.
+    ConvergedGtol,
+    /// The residuals are zero: nothing is left to fit.
+    ZeroResidual,
+    /// `max_iterations` trial steps were taken.
+    MaxIterations,
+    /// `max_evaluations` residual evaluations were spent.
+    MaxEvaluations,
+    /// The residuals at the start, or a Jacobian, contained NaN or infinity.
+    NonFinite,
+    /// The damped linear system could not be solved even with very large damping.
+    SingularSystem,
+    /// The iteration callback asked to stop.
+    UserStop,
+}
+
+impl TerminationReason {
+    /// Whether the solve converged (one of the tolerance tests, or zero residual).
+    pub fn was_successful(&self) -> bool {
+        matches!(
+            self,
+            TerminationReason::ConvergedFtol
+                | TerminationReason::ConvergedXtol
+                | TerminationReason::ConvergedGtol
+                | TerminationReason::ZeroResidual
+        )
+    }
+}
+
+impl fmt::Display for TerminationReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            TerminationReason::ConvergedFtol => "converged (relative cost reduction below ftol)",
+            TerminationReason::ConvergedXtol => "converged (relative step below xtol)",
+            TerminationReason::ConvergedGtol => "converged (scaled gradient below gtol)",
+            TerminationReason::ZeroResidual => "converged (zero residual)",
+            TerminationReason::MaxIterations => "stopped: maximum number of iterations reached",
+            TerminationReason::MaxEvaluations => "stopped: maximum number of evaluations reached",
+            TerminationReason::NonFinite => "failed: non-finite residuals or Jacobian",
+            TerminationReason::SingularSystem => "failed: singular damped system",
+            TerminationReason::UserStop => "stopped by the iteration callback",
+        })
+    }
+}
+
+/// One trial step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IterationRecord {
+    /// 1-based iteration number (each trial step counts, accepted or not).
+    pub iteration: usize,
+    /// Cost `0.5 * sum rho(r_i^2)` after this iteration (the trial cost if accepted, the
+    /// previous cost otherwise).
+    pub cost: f64,
+    /// Cost at the trial point (may be infinite when the model returned non-finite values).
+    pub trial_cost: f64,
+    /// Damping parameter (`mu` or `lambda`) used for the step.
+    pub damping: f64,
+    /// Step length along the solved direction (1 except for the cubic-interpolation control).
+    pub step_length: f64,
+    /// Euclidean norm of the step actually taken (after projection onto the bounds).
+    pub step_norm: f64,
+    /// Gain ratio: actual over predicted cost reduction.
+    pub gain_ratio: f64,
+    /// Whether the step was accepted.
+    pub accepted: bool,
+    /// Infinity norm of the (projected) gradient `J^T r` at the point the step started from.
+    pub gradient_norm: f64,
+    /// Time since the start of the solve.
+    pub elapsed: Duration,
+}
+
+/// Where the time went.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timings {
+    /// In the user's residual function.
+    pub residuals: Duration,
+    /// In the user's Jacobian function (including scattering into the solver's storage).
+    pub jacobian: Duration,
+    /// Factorising and solving the damped systems.
+    pub linear_solver: Duration,
+    /// Computing the statistics at the end.
+    pub statistics: Duration,
+}
+
+/// The outcome of a solve.
+#[derive(Clone, Debug)]
+pub struct Report {
+    /// How the solve ended.
+    pub termination: TerminationReason,
+    /// Cost at the starting point (after projection onto the bounds).
+    pub initial_cost: f64,
+    /// Cost at the returned point.
+    pub final_cost: f64,
+    /// Every trial step, in order.
+    pub iterations: Vec<IterationRecord>,
+    /// Number of accepted steps.
+    pub accepted_steps: usize,
+    /// Number of rejected steps (including those whose linear system failed).
+    pub rejected_steps: usize,
+    /// Number of residual evaluations.
+    pub residual_evaluations: usize,
+    /// Number of Jacobian evaluations.
+    pub jacobian_evaluations: usize,
+    /// Wall-clock time of the whole solve.
+    pub elapsed: Duration,
+    /// Breakdown of the time.
+    pub timings: Timings,
+    /// Number of parameters.
+    pub num_params: usize,
+    /// Number of residuals.
+    pub num_residuals: usize,
+    /// Name of the damping strategy used.
+    pub damping: &'static str,
+    /// Name of the linear solver used.
+    pub linear_solver: &'static str,
+    /// Rank, covariance and standard deviations at the solution, when computed (see
+    /// [`Options::compute_statistics`](crate::Options::compute_statistics)).
+    pub statistics: Option<Statistics>,
+}
+
+impl Report {
+    /// Whether the solve converged (see [`TerminationReason::was_successful`]).
+    pub fn was_successful(&self) -> bool {
+        self.termination.was_successful()
+    }
+
+    /// Number of iterations (trial steps).
+    pub fn num_iterations(&self) -> usize {
+        self.iterations.len()
+    }
+
+    /// One-line summary.
+    pub fn brief(&self) -> String {
+        format!(
+            "{}: cost {:.6e} -> {:.6e} in {} iterations ({} accepted, {} rejected), \
+             {} residual / {} Jacobian evaluations, {:.3?}",
+            self.termination,
+            self.initial_cost,
+            self.final_cost,
+            self.iterations.len(),
+            self.accepted_steps,
+            self.rejected_steps,
+            self.residual_evaluations,
+            self.jacobian_evaluations,
+            self.elapsed
+        )
+    }
+
+    /// Multi-line summary: settings, an iteration table, counts, timings and statistics.
+    pub fn full(&self) -> String {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "Levenberg-Marquardt: {} parameters, {} residuals, {} damping, {} solver",
+            self.num_params, self.num_residuals, self.damping, self.linear_solver
+        );
+        let _ = writeln!(
+            s,
+            "{:>5} {:>14} {:>14} {:>10} {:>6} {:>10} {:>10} {:>10} {:>4}",
+            "iter", "cost", "trial cost", "damping", "alpha", "|step|", "gain", "|grad|", "acc"
+        );
+        for r in &self.iterations {
+            let _ = writeln!(
+                s,
+                "{:>5} {:>14.7e} {:>14.7e} {:>10.3e} {:>6.3} {:>10.3e} {:>10.3e} {:>10.3e} {:>4}",
+                r.iteration,
+                r.cost,
+                r.trial_cost,
+                r.damping,
+                r.step_length,
+                r.step_norm,
+                r.gain_ratio,
+                r.gradient_norm,
+                if r.accepted { "yes" } else { "no" }
+            );
+        }
+        let _ = writeln!(s, "termination: {}", self.termination);
+        let _ = writeln!(
+            s,
+            "cost: initial {:.10e}, final {:.10e}",
+            self.initial_cost, self.final_cost
+        );
+        let _ = writeln!(
+            s,
+            "steps: {} accepted, {} rejected; evaluations: {} residual, {} Jacobian",
+            self.accepted_steps,
+            self.rejected_steps,
+            self.residual_evaluations,
+            self.jacobian_evaluations
+        );
+        let t = &self.timings;
+        let _ = writeln!(
+            s,
+            "time: {:.3?} total ({:.3?} residuals, {:.3?} Jacobian, {:.3?} linear solver, {:.3?} statistics)",
+            self.elapsed, t.residuals, t.jacobian, t.linear_solver, t.statistics
+        );
+        if let Some(st) = &self.statistics {
+            let _ = write!(s, "{st}");
+        }
+        s
+    }
+}
+
+/// `{}` prints [`Report::brief`], `{:#}` prints [`Report::full`].
+impl fmt::Display for Report {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if f.alternate() {
+            f.write_str(&self.full())
+        } else {
+            f.write_str(&self.brief())
+        }
+    }
+}

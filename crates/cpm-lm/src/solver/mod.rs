@@ -1,0 +1,247 @@
+//! The Levenberg-Marquardt driver, its entry points and the linear solvers.
+//!
+//! [`minimize`] and [`minimize_sparse`] run a solve with [`Options`]; [`Solver`] does the
+//! same with an iteration callback that can stop the solve.
+
+use std::ops::ControlFlow;
+
+use crate::error::LmError;
+use crate::options::Options;
+use crate::problem::{DenseJacobian, SparseJacobian};
+use crate::report::{IterationRecord, Report};
+
+mod dense_cholesky;
+mod dense_qr;
+mod engine;
+pub(crate) mod jacobian;
+mod model;
+mod schur;
+mod small;
+mod sparse_cholesky;
+
+use jacobian::Jacobian;
+use model::{DenseModel, SparseModel};
+
+/// Linear solver for the damped normal equations `(J^T J + mu D^2) h = -J^T r`.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum LinearSolver {
+    /// Pivoted Householder QR of `J`, then Givens elimination of the damping rows per
+    /// damping value (MINPACK's approach). Accurate (never forms `J^T J`); default.
+    #[default]
+    DenseQr,
+    /// Dense Cholesky of `J^T J + mu D^2`. Faster for `m >> n`, squares the conditioning.
+    DenseCholesky,
+    /// Sparse Cholesky of `J^T J + mu D^2` (faer's supernodal/simplicial LLT with an AMD
+    /// ordering): the symbolic factorisation is done once, the numeric one per damping value.
+    SparseCholesky,
+    /// Schur complement for many small local blocks plus a few global parameters: the
+    /// local blocks are eliminated block by block, the reduced global system is solved
+    /// densely and the local steps are back-substituted. Each residual may depend on at most
+    /// one local block (and on any global parameters).
+    Schur {
+        /// Sizes of the local blocks: parameters `0..sizes[0]` form block 0, the next
+        /// `sizes[1]` block 1, and so on; parameters after `sum(sizes)` are global.
+        local_block_sizes: Vec<usize>,
+    },
+}
+
+impl LinearSolver {
+    /// Short name for reports.
+    pub fn name(&self) -> &'static str {
+        match self {
+            LinearSolver::DenseQr => "dense QR",
+            LinearSolver::DenseCholesky => "dense Cholesky",
+            LinearSolver::SparseCholesky => "sparse Cholesky",
+            LinearSolver::Schur { .. } => "Schur complement",
+        }
+    }
+
+    /// Whether the solver works on the sparse Jacobian structure.
+    pub fn is_sparse(&self) -> bool {
+        matches!(
+            self,
+            LinearSolver::SparseCholesky | LinearSolver::Schur { .. }
+        )
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), LmError> {
+        if let LinearSolver::Schur { local_block_sizes } = self {
+            if let Some(i) = local_block_sizes.iter().position(|&s| s == 0) {
+                return Err(LmError::InvalidOptions(format!(
+                    "Schur local_block_sizes[{i}] is 0; every local block needs at least one parameter"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A linear solver for the damped system, set up once per solve.
+pub(crate) trait LinearSystem {
+    /// Damping-independent work for a new Jacobian `jac` and (weighted) residual `r`.
+    fn prepare(&mut self, jac: &Jacobian, r: &[f64]) -> Result<(), String>;
+    /// Solves `(J^T J + mu D^2) h = -g` where `g = J^T r`, `D = diag(d)`. Returns `false`
+    /// when the system could not be solved (not numerically positive definite).
+    fn solve(&mut self, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool;
+}
+
+pub(crate) fn build_linear(
+    solver: &LinearSolver,
+    jac: &Jacobian,
+) -> Result<Box<dyn LinearSystem>, LmError> {
+    let (m, n) = match jac {
+        Jacobian::Dense(j) => (j.nrows(), j.ncols()),
+        Jacobian::Sparse(s) => (s.nrows, s.ncols),
+    };
+    Ok(match (solver, jac) {
+        (LinearSolver::DenseQr, _) => Box::new(dense_qr::DenseQr::new(m, n)),
+        (LinearSolver::DenseCholesky, _) => Box::new(dense_cholesky::DenseCholesky::new(n)),
+        (LinearSolver::SparseCholesky, Jacobian::Sparse(s)) => {
+            Box::new(sparse_cholesky::SparseCholesky::new(s)?)
+        }
+        (LinearSolver::Schur { local_block_sizes }, Jacobian::Sparse(s)) => {
+            Box::new(schur::Schur::new(s, local_block_sizes)?)
+        }
+        _ => {
+            return Err(LmError::Numerical(
+                "internal: Jacobian storage does not match the linear solver".into(),
+            ))
+        }
+    })
+}
+
+/// The callback type of [`Solver`]: sees every iteration, returns
+/// `ControlFlow::Break(())` to stop the solve (reported as
+/// [`TerminationReason::UserStop`](crate::TerminationReason::UserStop)).
+pub type IterationCallback<'a> = Box<dyn FnMut(&IterationRecord) -> ControlFlow<()> + 'a>;
+
+/// A solver holding options and an optional iteration callback.
+///
+/// ```
+/// use std::ops::ControlFlow;
+/// use cpm_lm::{DenseJacobian, ModelError, Options, Problem, Solver, TerminationReason};
+///
+/// struct Line;
+/// impl Problem for Line {
+///     fn num_params(&self) -> usize { 2 }
+///     fn num_residuals(&self) -> usize { 3 }
+///     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+///         for (i, ri) in r.iter_mut().enumerate() {
+///             let t = i as f64;
+///             *ri = x[0] + x[1] * t - (1.0 + 2.0 * t);
+///         }
+///         Ok(())
+///     }
+/// }
+/// impl DenseJacobian for Line {
+///     fn jacobian(&mut self, _x: &[f64], mut j: faer::MatMut<'_, f64>) -> Result<(), ModelError> {
+///         for i in 0..3 { j[(i, 0)] = 1.0; j[(i, 1)] = i as f64; }
+///         Ok(())
+///     }
+/// }
+///
+/// let mut seen = 0;
+/// let mut solver = Solver::new(Options::default()).with_callback(|_rec| {
+///     seen += 1;
+///     ControlFlow::Break(())
+/// });
+/// let mut x = [0.0, 0.0];
+/// let report = solver.minimize(&mut Line, &mut x).unwrap();
+/// assert_eq!(report.termination, TerminationReason::UserStop);
+/// drop(solver);
+/// assert_eq!(seen, 1);
+/// ```
+pub struct Solver<'a> {
+    options: Options,
+    callback: Option<IterationCallback<'a>>,
+}
+
+impl std::fmt::Debug for Solver<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Solver")
+            .field("options", &self.options)
+            .field("callback", &self.callback.as_ref().map(|_| "FnMut"))
+            .finish()
+    }
+}
+
+impl<'a> Solver<'a> {
+    /// A solver with these options and no callback.
+    pub fn new(options: Options) -> Self {
+        Self {
+            options,
+            callback: None,
+        }
+    }
+
+    /// Sets the iteration callback, called after every trial step.
+    pub fn with_callback(
+        mut self,
+        callback: impl FnMut(&IterationRecord) -> ControlFlow<()> + 'a,
+    ) -> Self {
+        self.callback = Some(Box::new(callback));
+        self
+    }
+
+    /// The options.
+    pub fn options(&self) -> &Options {
+        &self.options
+    }
+
+    /// The options, mutably.
+    pub fn options_mut(&mut self) -> &mut Options {
+        &mut self.options
+    }
+
+    /// Minimises a problem with a dense Jacobian; `x` is the start on input and the
+    /// solution on output. See [`minimize`].
+    pub fn minimize<P: DenseJacobian + ?Sized>(
+        &mut self,
+        problem: &mut P,
+        x: &mut [f64],
+    ) -> Result<Report, LmError> {
+        let mut model = DenseModel::new(problem);
+        let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
+        engine::run(&mut model, x, &self.options, cb)
+    }
+
+    /// Minimises a problem with a sparse Jacobian. See [`minimize_sparse`].
+    pub fn minimize_sparse<P: SparseJacobian + ?Sized>(
+        &mut self,
+        problem: &mut P,
+        x: &mut [f64],
+    ) -> Result<Report, LmError> {
+        let mut model = SparseModel::new(problem);
+        let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
+        engine::run(&mut model, x, &self.options, cb)
+    }
+}
+
+/// Minimises `0.5 * sum_i rho(r_i(x)^2)` for a problem with a dense Jacobian.
+///
+/// `x` holds the starting point on input and the best point found on output (projected
+/// onto the bounds, if any). Setup errors (invalid options, wrong sizes) are returned
+/// before any evaluation; a model error stops the solve and is returned as
+/// [`LmError::Model`]; otherwise the [`Report`] says how the solve ended. Any
+/// [`LinearSolver`] can be used (the sparse ones see a fully dense pattern).
+pub fn minimize<P: DenseJacobian + ?Sized>(
+    problem: &mut P,
+    x: &mut [f64],
+    options: &Options,
+) -> Result<Report, LmError> {
+    let mut model = DenseModel::new(problem);
+    engine::run(&mut model, x, options, None)
+}
+
+/// Minimises `0.5 * sum_i rho(r_i(x)^2)` for a problem with a sparse Jacobian.
+///
+/// Same contract as [`minimize`]. With [`LinearSolver::DenseQr`] or
+/// [`LinearSolver::DenseCholesky`] the Jacobian is scattered into a dense matrix.
+pub fn minimize_sparse<P: SparseJacobian + ?Sized>(
+    problem: &mut P,
+    x: &mut [f64],
+    options: &Options,
+) -> Result<Report, LmError> {
+    let mut model = SparseModel::new(problem);
+    engine::run(&mut model, x, options, None)
+}

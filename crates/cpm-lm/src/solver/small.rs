@@ -1,0 +1,75 @@
+//! Small dense kernels (column-major slices) for the per-block work of the Schur solver,
+//! where a call into a general library would cost more than the arithmetic.
+
+/// In-place Cholesky `A = L L^T` of the `k x k` column-major `a` (lower triangle read and
+/// overwritten with `L`). Returns `false` if `A` is not numerically positive definite.
+pub(crate) fn cholesky(a: &mut [f64], k: usize) -> bool {
+    for j in 0..k {
+        let mut s = a[j + j * k];
+        for p in 0..j {
+            s -= a[j + p * k] * a[j + p * k];
+        }
+        if !(s > 0.0 && s.is_finite()) {
+            return false;
+        }
+        let ljj = s.sqrt();
+        a[j + j * k] = ljj;
+        for i in j + 1..k {
+            let mut t = a[i + j * k];
+            for p in 0..j {
+                t -= a[i + p * k] * a[j + p * k];
+            }
+            a[i + j * k] = t / ljj;
+        }
+    }
+    true
+}
+
+/// Solves `L x = b` in place, `l` from [`cholesky`].
+pub(crate) fn forward_solve(l: &[f64], k: usize, b: &mut [f64]) {
+    for i in 0..k {
+        let mut t = b[i];
+        for p in 0..i {
+            t -= l[i + p * k] * b[p];
+        }
+        b[i] = t / l[i + i * k];
+    }
+}
+
+/// Solves `L^T x = b` in place, `l` from [`cholesky`].
+pub(crate) fn backward_solve(l: &[f64], k: usize, b: &mut [f64]) {
+    for i in (0..k).rev() {
+        let mut t = b[i];
+        for p in i + 1..k {
+            t -= l[p + i * k] * b[p];
+        }
+        b[i] = t / l[i + i * k];
+    }
+}
+
+/// Solves `L L^T x = b` in place, `l` from [`cholesky`].
+#[cfg(test)]
+pub(crate) fn cholesky_solve(l: &[f64], k: usize, b: &mut [f64]) {
+    forward_solve(l, k, b);
+    backward_solve(l, k, b);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solves_spd_system() {
+        let a = [4.0, 2.0, 0.4, 2.0, 5.0, 1.0, 0.4, 1.0, 3.0];
+        let mut l = a;
+        assert!(cholesky(&mut l, 3));
+        let mut b = [1.0, 2.0, 3.0];
+        cholesky_solve(&l, 3, &mut b);
+        for i in 0..3 {
+            let ax: f64 = (0..3).map(|j| a[i + 3 * j] * b[j]).sum();
+            assert!((ax - [1.0, 2.0, 3.0][i]).abs() < 1e-12);
+        }
+        let mut bad = [1.0, 2.0, 2.0, 1.0];
+        assert!(!cholesky(&mut bad, 2));
+    }
+}

@@ -1,0 +1,311 @@
+//! Statistics of a least-squares fit from its Jacobian: numerical rank, parameter
+//! covariance, standard deviations, correlations and identifiability.
+//!
+//! With the SVD `J = U S V^T` (singular values `s_1 >= s_2 >= ...`), the numerical rank is
+//! the number of singular values above `tol` (default `max(m, n) * eps * s_1`, the
+//! LAPACK/NumPy convention). Then
+//!
+//! * `(J^T J)^+ = sum_{k < rank} v_k v_k^T / s_k^2` (pseudo-inverse),
+//! * `sigma^2 = ||r||^2 / (m - rank) = 2 cost / (m - rank)` (undefined, NaN, when `m = rank`),
+//! * `covariance = sigma^2 (J^T J)^+`, `std_j = sqrt(covariance_jj)`,
+//!   `correlation_ij = covariance_ij / (std_i std_j)`.
+//!
+//! The numerical null space is spanned by the remaining right singular vectors. A
+//! parameter whose unit vector has a component of norm above
+//! [`IDENTIFIABILITY_THRESHOLD`] in it can be changed without changing the fit to first
+//! order: it is *unidentifiable*, and its standard deviation is `None` instead of the
+//! finite but meaningless number the pseudo-inverse would give.
+//!
+//! ```
+//! use cpm_lm::stats::Statistics;
+//! use faer::mat;
+//! // Columns 0 and 1 are equal: only their sum is identifiable; parameter 2 is fine.
+//! let j = mat![[1.0, 1.0, 0.0], [2.0, 2.0, 1.0], [3.0, 3.0, 0.0], [4.0, 4.0, 2.0]];
+//! let r = [0.1, -0.1, 0.05, 0.0];
+//! let st = Statistics::from_jacobian(j.as_ref(), &r, None);
+//! assert_eq!(st.rank, 2);
+//! assert!(st.is_rank_deficient());
+//! assert_eq!(st.std_dev[0], None);
+//! assert_eq!(st.std_dev[1], None);
+//! assert!(st.std_dev[2].is_some());
+//! ```
+
+use std::fmt;
+
+use faer::{Mat, MatRef};
+
+use crate::error::LmError;
+
+/// A parameter is unidentifiable when the norm of its unit vector's projection onto the
+/// numerical null space of `J` exceeds this value.
+pub const IDENTIFIABILITY_THRESHOLD: f64 = 1e-6;
+
+/// Statistics of a fit (see the [module documentation](self) for the formulas).
+#[derive(Clone, Debug)]
+pub struct Statistics {
+    /// Number of residuals `m`.
+    pub num_residuals: usize,
+    /// Number of parameters `n`.
+    pub num_params: usize,
+    /// Numerical rank of `J`.
+    pub rank: usize,
+    /// Threshold on the singular values used for the rank.
+    pub rank_tol: f64,
+    /// Singular values of `J`, descending (`min(m, n)` of them).
+    pub singular_values: Vec<f64>,
+    /// Degrees of freedom `m - rank`.
+    pub dof: usize,
+    /// `0.5 * ||r||^2`.
+    pub cost: f64,
+    /// Residual variance estimate `||r||^2 / (m - rank)`; NaN when `m == rank`.
+    pub sigma2: f64,
+    /// `(J^T J)^+`, the pseudo-inverse on the numerical range (`n x n`).
+    pub jtj_pinv: Mat<f64>,
+    /// `sigma2 * (J^T J)^+` (`n x n`).
+    pub covariance: Mat<f64>,
+    /// Standard deviation of each parameter; `None` when the parameter is unidentifiable
+    /// or `sigma2` is undefined.
+    pub std_dev: Vec<Option<f64>>,
+    /// Correlation matrix (`n x n`, unit diagonal for identifiable parameters); NaN where a
+    /// standard deviation is `None`.
+    pub correlation: Mat<f64>,
+    /// Orthonormal basis of the numerical null space of `J` (`n x (n - rank)`).
+    pub null_space: Mat<f64>,
+    /// Per parameter: whether it is identifiable (see [`IDENTIFIABILITY_THRESHOLD`]).
+    pub identifiable: Vec<bool>,
+}
+
+impl Statistics {
+    /// Statistics of the Jacobian `j` (`m x n`) with residuals `residuals` (length `m`).
+    ///
+    /// `rank_tol` is the absolute threshold on the singular values (default
+    /// `max(m, n) * f64::EPSILON * s_max`). Never panics: on a size mismatch, non-finite
+    /// input or an SVD failure it returns statistics of rank 0 in which every parameter is
+    /// unidentifiable (use [`Statistics::try_from_jacobian`] to get the error instead).
+    pub fn from_jacobian(j: MatRef<'_, f64>, residuals: &[f64], rank_tol: Option<f64>) -> Self {
+        Self::try_from_jacobian(j, residuals, rank_tol)
+            .unwrap_or_else(|_| Self::degenerate(j.nrows(), j.ncols(), residuals))
+    }
+
+    /// Like [`from_jacobian`](Self::from_jacobian) but reports bad input as an error.
+    pub fn try_from_jacobian(
+        j: MatRef<'_, f64>,
+        residuals: &[f64],
+        rank_tol: Option<f64>,
+    ) -> Result<Self, LmError> {
+        let (m, n) = (j.nrows(), j.ncols());
+        if residuals.len() != m {
+            return Err(LmError::DimensionMismatch {
+                what: "residuals",
+                expected: m,
+                found: residuals.len(),
+            });
+        }
+        if m == 0 || n == 0 {
+            return Err(LmError::EmptyProblem {
+                num_params: n,
+                num_residuals: m,
+            });
+        }
+        if let Some(t) = rank_tol {
+            if !(t.is_finite() && t >= 0.0) {
+                return Err(LmError::InvalidOptions(format!(
+                    "rank_tol must be finite and >= 0, got {t}"
+                )));
+            }
+        }
+        let finite = (0..n).all(|c| (0..m).all(|i| j[(i, c)].is_finite()))
+            && residuals.iter().all(|v| v.is_finite());
+        if !finite {
+            return Err(LmError::Numerical(
+                "statistics: the Jacobian or the residuals contain NaN or infinity".into(),
+            ));
+        }
+        // Right singular vectors: thin SVD when m >= n, full SVD otherwise (V is n x n).
+        let svd = if m >= n { j.thin_svd() } else { j.svd() };
+        let svd = svd.map_err(|e| LmError::Numerical(format!("statistics: SVD failed: {e:?}")))?;
+        let k = m.min(n);
+        let s_diag = svd.S().column_vector();
+        let singular_values: Vec<f64> = (0..k).map(|i| s_diag[i]).collect();
+        let v = svd.V();
+        let s_max = singular_values.first().copied().unwrap_or(0.0);
+        let tol = rank_tol.unwrap_or(m.max(n) as f64 * f64::EPSILON * s_max);
+        let rank = singular_values.iter().filter(|&&s| s > tol).count();
+
+        let ss: f64 = residuals.iter().map(|r| r * r).sum();
+        let dof = m - rank;
+        let sigma2 = if dof > 0 { ss / dof as f64 } else { f64::NAN };
+
+        let mut jtj_pinv = Mat::<f64>::zeros(n, n);
+        for kk in 0..rank {
+            let w = 1.0 / (singular_values[kk] * singular_values[kk]);
+            for c in 0..n {
+                let vc = v[(c, kk)] * w;
+                if vc == 0.0 {
+                    continue;
+                }
+                for r in 0..n {
+                    jtj_pinv[(r, c)] += v[(r, kk)] * vc;
+                }
+            }
+        }
+        let covariance = Mat::<f64>::from_fn(n, n, |r, c| sigma2 * jtj_pinv[(r, c)]);
+        let null_space = Mat::<f64>::from_fn(n, n - rank, |r, c| v[(r, rank + c)]);
+        let identifiable: Vec<bool> = (0..n)
+            .map(|p| {
+                let comp: f64 = (0..n - rank).map(|c| null_space[(p, c)].powi(2)).sum();
+                comp.sqrt() <= IDENTIFIABILITY_THRESHOLD
+            })
+            .collect();
+        let std_dev: Vec<Option<f64>> = (0..n)
+            .map(|p| {
+                let var = covariance[(p, p)];
+                (identifiable[p] && var.is_finite() && var >= 0.0).then(|| var.sqrt())
+            })
+            .collect();
+        let correlation = Mat::<f64>::from_fn(n, n, |r, c| match (std_dev[r], std_dev[c]) {
+            (Some(a), Some(b)) if a > 0.0 && b > 0.0 => {
+                if r == c {
+                    1.0
+                } else {
+                    covariance[(r, c)] / (a * b)
+                }
+            }
+            _ => f64::NAN,
+        });
+        Ok(Self {
+            num_residuals: m,
+            num_params: n,
+            rank,
+            rank_tol: tol,
+            singular_values,
+            dof,
+            cost: 0.5 * ss,
+            sigma2,
+            jtj_pinv,
+            covariance,
+            std_dev,
+            correlation,
+            null_space,
+            identifiable,
+        })
+    }
+
+    fn degenerate(m: usize, n: usize, residuals: &[f64]) -> Self {
+        let ss: f64 = residuals.iter().map(|r| r * r).sum();
+        Self {
+            num_residuals: m,
+            num_params: n,
+            rank: 0,
+            rank_tol: f64::NAN,
+            singular_values: Vec::new(),
+            dof: m,
+            cost: 0.5 * ss,
+            sigma2: f64::NAN,
+            jtj_pinv: Mat::from_fn(n, n, |_, _| f64::NAN),
+            covariance: Mat::from_fn(n, n, |_, _| f64::NAN),
+            std_dev: vec![None; n],
+            correlation: Mat::from_fn(n, n, |_, _| f64::NAN),
+            null_space: Mat::from_fn(n, n, |r, c| if r == c { 1.0 } else { 0.0 }),
+            identifiable: vec![false; n],
+        }
+    }
+
+    /// Whether `rank < num_params`.
+    pub fn is_rank_deficient(&self) -> bool {
+        self.rank < self.num_params
+    }
+
+    /// `s_max / s_min` over the singular values counted in the rank (infinite at rank 0).
+    pub fn condition_number(&self) -> f64 {
+        if self.rank == 0 {
+            f64::INFINITY
+        } else {
+            self.singular_values[0] / self.singular_values[self.rank - 1]
+        }
+    }
+
+    /// Residual standard deviation `sqrt(sigma2)`.
+    pub fn residual_std_dev(&self) -> f64 {
+        self.sigma2.sqrt()
+    }
+
+    /// Indices of the unidentifiable parameters.
+    pub fn unidentifiable(&self) -> Vec<usize> {
+        (0..self.num_params)
+            .filter(|&p| !self.identifiable[p])
+            .collect()
+    }
+}
+
+impl fmt::Display for Statistics {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "statistics: rank {} of {} (tol {:.3e}, condition {:.3e}), {} degrees of freedom, sigma^2 = {:.6e}",
+            self.rank,
+            self.num_params,
+            self.rank_tol,
+            self.condition_number(),
+            self.dof,
+            self.sigma2
+        )?;
+        if self.is_rank_deficient() {
+            writeln!(
+                f,
+                "rank deficient: unidentifiable parameters {:?}",
+                self.unidentifiable()
+            )?;
+        }
+        writeln!(f, "{:>6} {:>14}", "param", "std dev")?;
+        for (p, s) in self.std_dev.iter().enumerate() {
+            match s {
+                Some(s) => writeln!(f, "{p:>6} {s:>14.6e}")?,
+                None => writeln!(f, "{p:>6} {:>14}", "unidentified")?,
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn full_rank_covariance_matches_inverse() {
+        // J = diag(2, 4) stacked with a row: JtJ is easy to invert by hand.
+        let j = faer::mat![[2.0, 0.0], [0.0, 4.0], [0.0, 0.0]];
+        let r = [1.0, 1.0, 1.0];
+        let st = Statistics::from_jacobian(j.as_ref(), &r, None);
+        assert_eq!(st.rank, 2);
+        assert_eq!(st.dof, 1);
+        assert!((st.sigma2 - 3.0).abs() < 1e-14);
+        assert!((st.covariance[(0, 0)] - 3.0 / 4.0).abs() < 1e-14);
+        assert!((st.covariance[(1, 1)] - 3.0 / 16.0).abs() < 1e-14);
+        assert!((st.std_dev[0].unwrap() - (0.75f64).sqrt()).abs() < 1e-14);
+        assert_eq!(st.correlation[(0, 0)], 1.0);
+        assert!(st.correlation[(0, 1)].abs() < 1e-14);
+        assert_eq!(st.null_space.ncols(), 0);
+    }
+
+    #[test]
+    fn wide_jacobian_has_null_space() {
+        let j = faer::mat![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let st = Statistics::from_jacobian(j.as_ref(), &[0.0, 0.0], None);
+        assert_eq!(st.rank, 2);
+        assert_eq!(st.null_space.ncols(), 1);
+        assert_eq!(st.identifiable, vec![true, true, false]);
+        // dof = 0 -> sigma2 undefined -> no std at all.
+        assert!(st.sigma2.is_nan());
+        assert!(st.std_dev.iter().all(Option::is_none));
+    }
+
+    #[test]
+    fn bad_input_does_not_panic() {
+        let j = faer::mat![[f64::NAN, 1.0]];
+        let st = Statistics::from_jacobian(j.as_ref(), &[1.0], None);
+        assert_eq!(st.rank, 0);
+        assert!(Statistics::try_from_jacobian(j.as_ref(), &[1.0, 2.0], None).is_err());
+    }
+}
