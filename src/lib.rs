@@ -6,6 +6,8 @@ pub use cpm_geometry as geometry;
 pub use cpm_kinematics as kinematics;
 pub use cpm_lm as lm;
 
+pub mod cli;
+pub mod io;
 pub mod output;
 pub mod paper_report;
 pub mod plot;

@@ -5,7 +5,9 @@ use thiserror::Error;
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum ClearanceError {
     /// J1 is singular: the link forces are not determined by the load.
-    #[error("link forces undetermined: J1 is singular at this pose (condition number {condition:.3e})")]
+    #[error(
+        "link forces undetermined: J1 is singular at this pose (condition number {condition:.3e})"
+    )]
     Singular {
         /// Condition number of J1.
         condition: f64,

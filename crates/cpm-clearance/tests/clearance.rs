@@ -39,7 +39,9 @@ fn zero_clearance_gives_zero_correction() {
             rule,
         };
         for pose in poses() {
-            let dl = m.link_corrections_mm(&table, &pose, &Load::default()).unwrap();
+            let dl = m
+                .link_corrections_mm(&table, &pose, &Load::default())
+                .unwrap();
             assert!(dl.iter().all(|v| *v == 0.0));
         }
     }
@@ -89,7 +91,11 @@ fn invalid_radius_is_rejected() {
         rule: SignRule::Hard,
     };
     let e = m
-        .link_corrections_mm(&JointTable::paper_cubic(), &Pose::identity(), &Load::default())
+        .link_corrections_mm(
+            &JointTable::paper_cubic(),
+            &Pose::identity(),
+            &Load::default(),
+        )
         .unwrap_err();
     assert!(e.to_string().contains("radius_um"));
 }

@@ -10,9 +10,9 @@
 //!   (D-, A- or E-optimal), incremental (Woodbury) so thousands of candidates take seconds;
 //! - [`sockets`]: socket candidates, the socket pairs they make, and the gauge freedoms
 //!   (rotations about the sockets) a layout leaves;
-//! - [`monte_carlo`]: many simulated campaigns and calibrations; RMS error, bias and
+//! - [`monte_carlo`](mod@monte_carlo): many simulated campaigns and calibrations; RMS error, bias and
 //!   efficiency against the Cramér-Rao bound;
-//! - [`design`]: all of it together: sockets and poses jointly, for a reading budget, with the
+//! - [`design()`]: all of it together: sockets and poses jointly, for a reading budget, with the
 //!   files a user drives the machine with ([`Design::poses_csv`], [`Design::sockets_csv`],
 //!   [`Design::sensors_toml`]).
 //!

@@ -103,9 +103,22 @@ pub struct MonteCarloReport {
     pub max_error_um_worst: f64,
     /// Seeds used: `first_seed .. first_seed + runs`.
     pub first_seed: u64,
+    /// Per successful run, in seed order: (RMS error, largest |error|), um.
+    pub per_run_um: Vec<(f64, f64)>,
 }
 
 impl MonteCarloReport {
+    /// Fraction of the runs attempted whose RMS error is at most `rms_um` and whose largest
+    /// error is at most `max_um` (failed runs count as misses).
+    pub fn fraction_within(&self, rms_um: f64, max_um: f64) -> f64 {
+        let hits = self
+            .per_run_um
+            .iter()
+            .filter(|(r, m)| *r <= rms_um && *m <= max_um)
+            .count();
+        hits as f64 / self.runs.max(1) as f64
+    }
+
     /// One line: the headline figures.
     pub fn brief(&self) -> String {
         format!(
@@ -229,14 +242,16 @@ fn summarise(
         .iter()
         .map(|p| p.bias_um.abs())
         .fold(0.0, f64::max);
-    let per_run_rms: Vec<f64> = complete
+    let per_run_um: Vec<(f64, f64)> = complete
         .iter()
-        .map(|e| (e.iter().flatten().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt())
+        .map(|e| {
+            let rms = (e.iter().flatten().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt();
+            let max = e.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max);
+            (rms, max)
+        })
         .collect();
-    let mut per_run_max: Vec<f64> = complete
-        .iter()
-        .map(|e| e.iter().flatten().map(|x| x.abs()).fold(0.0, f64::max))
-        .collect();
+    let per_run_rms: Vec<f64> = per_run_um.iter().map(|p| p.0).collect();
+    let mut per_run_max: Vec<f64> = per_run_um.iter().map(|p| p.1).collect();
     per_run_max.sort_by(f64::total_cmp);
     let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
     let p95 = if per_run_max.is_empty() {
@@ -260,6 +275,7 @@ fn summarise(
         max_error_um_p95: p95,
         max_error_um_worst: per_run_max.last().copied().unwrap_or(f64::NAN),
         first_seed,
+        per_run_um,
     }
 }
 

@@ -1,0 +1,321 @@
+//! What the commands share: loading the robot and the data, choosing the effects, building a
+//! plan, the output directory, and locating solver failures in the input files.
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+use clap::Args;
+
+use super::{input_error, usage_error, Ctx};
+use crate::calib::{campaign::circle, CalibError, Effect, MeasurementModel, Plan};
+use crate::io::{self, merge, Merged, ReadOptions, Robot};
+
+/// The robot description argument.
+#[derive(Debug, Clone, Args)]
+pub struct RobotArg {
+    /// Robot description (TOML, docs/robot-description.md).
+    #[arg(long, value_name = "ROBOT.toml")]
+    pub robot: PathBuf,
+}
+
+/// Choice of the effects modelled beside the installation errors.
+#[derive(Debug, Clone, Args)]
+pub struct EffectsArg {
+    /// Effects to model beside the 36 installation errors, comma-separated (e.g.
+    /// link_offset,link_scale); overrides `[calibration] effects` of the robot description;
+    /// `none` for none.
+    #[arg(long, value_name = "LIST")]
+    pub effects: Option<String>,
+}
+
+impl EffectsArg {
+    /// The effects: the command line's, else the description's.
+    pub fn resolve(&self, robot: &Robot) -> anyhow::Result<Vec<Effect>> {
+        match self.effects.as_deref().map(str::trim) {
+            Some("none") | Some("") => Ok(Vec::new()),
+            Some(list) => {
+                io::parse_effects(list).map_err(|m| usage_error(format!("--effects: {m}")))
+            }
+            None => Ok(robot.declared_effects()?),
+        }
+    }
+}
+
+/// Where the poses of a plan come from.
+#[derive(Debug, Clone, Args)]
+pub struct PlanArgs {
+    /// Poses to visit: a CSV list of poses (x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg;
+    /// docs/formats.md).
+    #[arg(long, value_name = "POSES.csv")]
+    pub plan: Option<PathBuf>,
+    /// Poses on a circle about home in its xy plane at the home orientation (the paper's
+    /// design); see --radius-mm and --count.
+    #[arg(long)]
+    pub circle: bool,
+    /// N random poses about home, well conditioned and within the link limits; see
+    /// --range-mm, --range-deg and --seed.
+    #[arg(long, value_name = "N")]
+    pub random: Option<usize>,
+    /// Radius of --circle, mm.
+    #[arg(long, value_name = "MM", default_value_t = 100.0)]
+    pub radius_mm: f64,
+    /// Number of poses of --circle.
+    #[arg(long, value_name = "N", default_value_t = 36)]
+    pub count: usize,
+    /// Half range of the positions of --random about home, mm.
+    #[arg(long, value_name = "MM", default_value_t = 50.0)]
+    pub range_mm: f64,
+    /// Half range of roll, pitch and yaw of --random about home, degrees.
+    #[arg(long, value_name = "DEG", default_value_t = 10.0)]
+    pub range_deg: f64,
+    /// Sensors read at every pose, comma-separated names (default: every sensor of the robot).
+    #[arg(long, value_name = "NAMES", value_delimiter = ',')]
+    pub sensors: Vec<String>,
+    /// Random seed (for --random poses and simulated noise).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seed: u64,
+}
+
+impl PlanArgs {
+    /// True when a plan source is given.
+    pub fn given(&self) -> bool {
+        self.plan.is_some() || self.circle || self.random.is_some()
+    }
+}
+
+/// A plan with per-pose time and temperature (from a plan file).
+#[derive(Debug, Clone)]
+pub struct PlanSpec {
+    /// The plan.
+    pub plan: Plan,
+    /// Per pose: time (s) and temperature (deg C) when the plan file gives them.
+    pub conditions: Vec<(Option<f64>, Option<f64>)>,
+}
+
+impl PlanSpec {
+    /// The plan's campaign skeleton, with the plan file's times and temperatures.
+    pub fn skeleton(&self) -> crate::calib::Campaign {
+        let mut c = self.plan.skeleton();
+        for r in c.readings.iter_mut() {
+            let (t, temp) = self.conditions[r.pose];
+            r.time_s = t;
+            r.temperature_c = temp;
+        }
+        c
+    }
+}
+
+/// The sensors of `--sensors` (all when empty) as indices.
+pub fn sensor_indices(names: &[String], robot: &Robot) -> anyhow::Result<Vec<usize>> {
+    if robot.table.sensors.is_empty() {
+        return Err(input_error(format!(
+            "{}: the robot description has no [[sensor]]: nothing to read",
+            robot.file
+        )));
+    }
+    if names.is_empty() {
+        return Ok((0..robot.table.sensors.len()).collect());
+    }
+    names
+        .iter()
+        .map(|n| {
+            robot.table.sensor_index(n.trim()).ok_or_else(|| {
+                usage_error(format!(
+                    "--sensors: unknown sensor {:?} (the robot description has: {})",
+                    n.trim(),
+                    robot.sensor_names()
+                ))
+            })
+        })
+        .collect()
+}
+
+/// Builds the plan of `--plan`, `--circle` or `--random` (exactly one must be given).
+pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow::Result<PlanSpec> {
+    let given = [args.plan.is_some(), args.circle, args.random.is_some()]
+        .iter()
+        .filter(|g| **g)
+        .count();
+    if given != 1 {
+        return Err(usage_error(
+            "give the poses with exactly one of --plan FILE, --circle or --random N",
+        ));
+    }
+    let sensors = if need_sensors {
+        sensor_indices(&args.sensors, robot)?
+    } else {
+        Vec::new()
+    };
+    let table = &robot.table;
+    let ratio = ReadOptions::default().max_condition_ratio;
+    if let Some(path) = &args.plan {
+        let text = io::read_text(path)?;
+        let file = path.display().to_string();
+        let rows = io::read_pose_list(&text, &file)?;
+        for r in &rows {
+            io::campaign::check_reachable(table, &r.pose, ratio, &file, r.line, &r.label)?;
+        }
+        return Ok(PlanSpec {
+            conditions: rows.iter().map(|r| (r.time_s, r.temperature_c)).collect(),
+            plan: Plan {
+                poses: rows.iter().map(|r| r.pose).collect(),
+                sensors,
+            },
+        });
+    }
+    let poses = if args.circle {
+        if !(args.radius_mm.is_finite() && args.radius_mm >= 0.0) || args.count == 0 {
+            return Err(usage_error(
+                "--circle needs --radius-mm >= 0 and --count >= 1",
+            ));
+        }
+        let poses = circle(&table.home, args.radius_mm, args.count);
+        for (k, p) in poses.iter().enumerate() {
+            io::campaign::check_reachable(table, p, ratio, "--circle", k + 1, &(k + 1).to_string())
+                .map_err(|e| usage_error(format!("{}; try a smaller --radius-mm", e.message)))?;
+        }
+        poses
+    } else {
+        let n = args.random.unwrap_or(0);
+        if n == 0 || !(args.range_mm >= 0.0 && args.range_deg >= 0.0) {
+            return Err(usage_error(
+                "--random needs N >= 1 and non-negative --range-mm, --range-deg",
+            ));
+        }
+        let poses = crate::calib::paper::random_workspace_poses(
+            table,
+            n,
+            args.range_mm,
+            args.range_deg,
+            3.0,
+            args.seed,
+        );
+        if poses.len() < n {
+            return Err(usage_error(format!(
+                "--random: found only {} of {n} well-conditioned poses within the link limits; try a smaller --range-mm or --range-deg",
+                poses.len()
+            )));
+        }
+        poses
+    };
+    Ok(PlanSpec {
+        conditions: vec![(None, None); poses.len()],
+        plan: Plan { poses, sensors },
+    })
+}
+
+/// Loads the robot description.
+pub fn load_robot(path: &Path, ctx: &Ctx<'_>) -> anyhow::Result<Robot> {
+    let robot = Robot::load(path)?;
+    if robot.errors_applied {
+        ctx.note(format!(
+            "{} has [installation_errors_um]: its geometry is the joints plus those errors",
+            robot.file
+        ));
+    }
+    Ok(robot)
+}
+
+/// Checks that the robot has six links (what the identification handles).
+pub fn require_six_links(robot: &Robot) -> anyhow::Result<()> {
+    if robot.num_links() != 6 {
+        return Err(input_error(format!(
+            "{}: has {} links; calibration in cpm handles six-link machines",
+            robot.file,
+            robot.num_links()
+        )));
+    }
+    Ok(())
+}
+
+/// Reads and merges measurement files.
+pub fn load_data(
+    paths: &[PathBuf],
+    robot: &Robot,
+    options: &ReadOptions,
+) -> anyhow::Result<Merged> {
+    let mut files = Vec::with_capacity(paths.len());
+    for p in paths {
+        let text = io::read_text(p)?;
+        files.push(io::read_data(
+            &text,
+            &p.display().to_string(),
+            robot,
+            options,
+        )?);
+    }
+    Ok(merge(files, robot))
+}
+
+/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled.
+pub fn read_options(effects: &[Effect]) -> ReadOptions {
+    ReadOptions {
+        check_sensor_lengths: !effects.contains(&Effect::SensorOffset),
+        ..ReadOptions::default()
+    }
+}
+
+/// Turns a calibration error at a campaign pose into one that names the file and line.
+pub fn locate(err: CalibError, merged: &Merged) -> anyhow::Error {
+    let pose = match &err {
+        CalibError::Kinematics { pose, .. } | CalibError::Clearance { pose, .. } => Some(*pose),
+        _ => None,
+    };
+    match pose.and_then(|p| merged.pose_location(p)) {
+        Some(loc) => anyhow::Error::new(err).context(loc),
+        None => anyhow::Error::new(err),
+    }
+}
+
+/// The noise standard deviation for the fit: `--sigma-um`, else the description's.
+pub fn sigma(arg: Option<f64>, robot: &Robot) -> anyhow::Result<Option<f64>> {
+    match arg {
+        Some(s) if !(s.is_finite() && s > 0.0) => {
+            Err(usage_error(format!("--sigma-um must be > 0, got {s}")))
+        }
+        Some(s) => Ok(Some(s)),
+        None => Ok(robot.sensor_noise_um()),
+    }
+}
+
+/// Checks that the output directory can be used (not an existing file).
+pub fn check_out_dir(dir: &Path) -> anyhow::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(usage_error(format!(
+            "--out {}: exists and is not a directory",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Stages and commits, reporting what was written.
+pub fn commit(set: crate::output::OutputSet, what: &str) -> anyhow::Result<Vec<PathBuf>> {
+    set.commit().with_context(|| format!("writing {what}"))
+}
+
+/// Effect names, comma-separated (`none` when empty).
+pub fn effect_list(effects: &[Effect]) -> String {
+    if effects.is_empty() {
+        "none".into()
+    } else {
+        effects
+            .iter()
+            .map(|e| e.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// The model's parameter count in words.
+pub fn describe_model(model: &MeasurementModel) -> String {
+    format!(
+        "{} parameters ({} installation errors{})",
+        model.num_params(),
+        model.num_installation_params(),
+        if model.effects.is_empty() {
+            String::new()
+        } else {
+            format!(" + {}", effect_list(&model.effects))
+        }
+    )
+}

@@ -1,0 +1,296 @@
+//! `cpm design`: choose sensor sockets and poses for a calibration campaign (wraps
+//! `cpm_calib::design::design`), and write the poses, the sockets and a robot description with
+//! the chosen sensors.
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use serde_json::json;
+
+use super::common::{self, RobotArg};
+use super::{input_error, usage_error, Ctx, Outcome};
+use crate::calib::design::{
+    candidates, design, sockets::Socket, Criterion, DesignOptions, SelectOptions, SocketCandidates,
+};
+use crate::geometry::description::SensorSpec;
+use crate::io::{self, table::Table, InputError, Robot};
+use crate::output::OutputSet;
+
+/// Optimality criterion of the pose selection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CriterionArg {
+    /// A-optimal: smallest sum of Cramér-Rao variances (RMS bound).
+    A,
+    /// D-optimal: largest determinant of the information matrix.
+    D,
+    /// E-optimal: best worst direction (slow).
+    E,
+}
+
+/// Arguments of `cpm design`.
+#[derive(Debug, Clone, Args)]
+#[command(
+    after_help = "Examples:\n  cpm design --robot examples/hexapod_66.toml --base-sockets 3 --platform-sockets 3 --readings 360 --out design/\n  cpm design --robot robot.toml --sockets candidate_sockets.csv --readings 2000 --criterion d --out design/"
+)]
+pub struct DesignArgs {
+    /// The robot description.
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// Candidate socket places, CSV `name,side,x_mm,y_mm,z_mm` (side `base` in {B} or
+    /// `platform` in {P}); default: the sockets of the description's [[sensor]] tables.
+    #[arg(long, value_name = "SOCKETS.csv")]
+    pub sockets: Option<PathBuf>,
+    /// Reading budget (poses x socket pairs).
+    #[arg(long, value_name = "N", default_value_t = 2000)]
+    pub readings: usize,
+    /// Base sockets to use (each paired with every platform socket).
+    #[arg(long, value_name = "N", default_value_t = 3)]
+    pub base_sockets: usize,
+    /// Platform sockets to use.
+    #[arg(long, value_name = "N", default_value_t = 3)]
+    pub platform_sockets: usize,
+    /// Poses to drive (default: as many as the budget allows).
+    #[arg(long, value_name = "N")]
+    pub poses: Option<usize>,
+    /// Random candidate poses (plus circles) to choose from.
+    #[arg(long, value_name = "N", default_value_t = 1000)]
+    pub candidates: usize,
+    /// Half range of candidate positions about home, mm.
+    #[arg(long, value_name = "MM", default_value_t = 50.0)]
+    pub range_mm: f64,
+    /// Half range of candidate roll, pitch, yaw about home, degrees.
+    #[arg(long, value_name = "DEG", default_value_t = 10.0)]
+    pub range_deg: f64,
+    /// Selection criterion.
+    #[arg(long, value_enum, default_value_t = CriterionArg::A)]
+    pub criterion: CriterionArg,
+    /// Sensor noise for the reported bounds, um (default: the description's, else 1).
+    #[arg(long, value_name = "UM")]
+    pub sigma_um: Option<f64>,
+    /// Random seed of the candidates.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seed: u64,
+    /// Output directory: poses.csv, sockets.csv, robot.toml, design.json, report.md.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Reads candidate sockets: `name,side,x_mm,y_mm,z_mm`.
+pub fn read_sockets(text: &str, file: &str) -> Result<SocketCandidates, InputError> {
+    let t = Table::parse(text, file)?;
+    t.check_columns(&["name", "side", "x_mm", "y_mm", "z_mm"], &[], |_| false)?;
+    let mut c = SocketCandidates {
+        base: Vec::new(),
+        platform: Vec::new(),
+    };
+    for row in &t.rows {
+        let name = t.required_text(row, "name")?;
+        let p = [
+            t.number(row, "x_mm")?,
+            t.number(row, "y_mm")?,
+            t.number(row, "z_mm")?,
+        ];
+        match t.required_text(row, "side")? {
+            "base" => c.base.push(Socket::new(name, p)),
+            "platform" => c.platform.push(Socket::new(name, p)),
+            other => {
+                return Err(t.err(
+                    row,
+                    "side",
+                    format!("{other:?} is neither base nor platform"),
+                ))
+            }
+        }
+    }
+    Ok(c)
+}
+
+/// Candidate sockets from a description's sensors (distinct positions on each side).
+pub fn sockets_of(robot: &Robot) -> SocketCandidates {
+    let mut c = SocketCandidates {
+        base: Vec::new(),
+        platform: Vec::new(),
+    };
+    for s in &robot.table.sensors {
+        if !c
+            .base
+            .iter()
+            .any(|b| (b.position_mm - s.base_mm).norm() < 1e-9)
+        {
+            let name = format!("b{}", c.base.len() + 1);
+            c.base.push(Socket::new(&name, s.base_mm.into()));
+        }
+        if !c
+            .platform
+            .iter()
+            .any(|p| (p.position_mm - s.platform_mm).norm() < 1e-9)
+        {
+            let name = format!("p{}", c.platform.len() + 1);
+            c.platform.push(Socket::new(&name, s.platform_mm.into()));
+        }
+    }
+    c
+}
+
+/// Runs `cpm design`.
+pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    common::check_out_dir(&args.out)?;
+    ctx.stage("reading the robot description");
+    let robot = common::load_robot(&args.robot.robot, ctx)?;
+    common::require_six_links(&robot)?;
+    let sockets = match &args.sockets {
+        Some(p) => read_sockets(&io::read_text(p)?, &p.display().to_string())?,
+        None => sockets_of(&robot),
+    };
+    if sockets.base.len() < args.base_sockets || sockets.platform.len() < args.platform_sockets {
+        return Err(input_error(format!(
+            "{} base and {} platform socket places to choose from ({}), {} and {} asked for: give more places with --sockets FILE or ask for fewer",
+            sockets.base.len(),
+            sockets.platform.len(),
+            args.sockets
+                .as_ref()
+                .map_or_else(|| format!("the [[sensor]] tables of {}", robot.file), |p| p.display().to_string()),
+            args.base_sockets,
+            args.platform_sockets
+        )));
+    }
+    if args.candidates == 0 || !(args.range_mm > 0.0 && args.range_deg >= 0.0) {
+        return Err(usage_error(
+            "--candidates must be >= 1 and --range-mm > 0, --range-deg >= 0",
+        ));
+    }
+    let sigma = match args.sigma_um {
+        Some(s) => common::sigma(Some(s), &robot)?.unwrap_or(1.0),
+        None => robot.sensor_noise_um().unwrap_or(1.0),
+    };
+    let model = robot.model(&[]);
+    ctx.stage("candidate poses");
+    let (cands, rejected) = candidates::default_candidates(
+        &robot.table,
+        &candidates::Workspace::default(),
+        args.candidates,
+        args.range_mm,
+        args.range_deg,
+        args.seed,
+    );
+    if cands.is_empty() {
+        return Err(usage_error(format!(
+            "no admissible candidate pose ({} rejected): try a smaller --range-mm or --range-deg",
+            rejected.total()
+        )));
+    }
+    let options = DesignOptions {
+        max_readings: args.readings,
+        base_sockets: args.base_sockets,
+        platform_sockets: args.platform_sockets,
+        poses: args.poses,
+        select: SelectOptions {
+            criterion: match args.criterion {
+                CriterionArg::A => Criterion::AOptimal,
+                CriterionArg::D => Criterion::DOptimal,
+                CriterionArg::E => Criterion::EOptimal,
+            },
+            ..SelectOptions::default()
+        },
+        sigma_um: sigma,
+        ..DesignOptions::default()
+    };
+    let d = design(&model, &sockets, &cands, &options, &|s| {
+        ctx.stage(s.to_string())
+    })
+    .map_err(|e| match e {
+        crate::calib::CalibError::Invalid { .. } => usage_error(e.to_string()),
+        other => anyhow::Error::new(other),
+    })?;
+    ctx.stage("writing the design");
+    let mut desc = robot.description.clone();
+    desc.sensors = d.sensors.iter().map(SensorSpec::from_sensor).collect();
+    let robot_toml = format!(
+        "# {} with the sensors chosen by cpm design {}\n\n{}",
+        robot.file,
+        env!("CARGO_PKG_VERSION"),
+        desc.to_toml_string()?
+    );
+    let dir = &args.out;
+    let last_gauge = d.gauge.last();
+    let summary = json!({
+        "robot": robot.file,
+        "poses": d.poses.len(),
+        "sensors": d.sensors.iter().map(|s| s.name.clone()).collect::<Vec<_>>(),
+        "readings": d.num_readings(),
+        "candidates": d.candidates,
+        "criterion": format!("{:?}", d.criterion),
+        "rank": d.indices.rank,
+        "parameters": d.indices.num_params,
+        "sigma_um": d.indices.sigma_um,
+        "crlb_rms_um": d.indices.crlb_rms_um,
+        "crlb_max_um": d.indices.crlb_max_um,
+        "crlb_worst_direction_um": d.indices.crlb_worst_um,
+        "condition": d.indices.o2_condition,
+        "gauge_freedoms_left": last_gauge.map(|g| g.socket_freedoms()),
+        "sensor_lengths_mm": d.sensor_lengths_mm,
+        "log": d.log,
+    });
+    let mut set = OutputSet::new();
+    set.add(dir.join("poses.csv"), io::write_pose_list(&d.poses));
+    set.add(dir.join("sockets.csv"), d.sockets_csv());
+    set.add(dir.join("robot.toml"), robot_toml);
+    set.add(
+        dir.join("design.json"),
+        serde_json::to_string_pretty(&summary)?,
+    );
+    let mut r = String::from("# Calibration design\n\n");
+    r.push_str(&format!(
+        "- Robot: `{}`; {} poses x {} socket pairs = {} readings ({:?} criterion, {} admissible candidates).\n- Rank {} of {}; Cramér-Rao bounds for {} um of sensor noise: RMS {:.3} um, worst parameter {:.3} um, worst direction {:.3} um.\n",
+        robot.file, d.poses.len(), d.sensors.len(), d.num_readings(), d.criterion, d.candidates,
+        d.indices.rank, d.indices.num_params, d.indices.sigma_um, d.indices.crlb_rms_um, d.indices.crlb_max_um, d.indices.crlb_worst_um
+    ));
+    if let Some(g) = last_gauge {
+        r.push_str(&format!(
+            "- Gauge freedoms left by the socket layout: {}.\n",
+            g.socket_freedoms()
+        ));
+    }
+    r.push_str("\n## Sensors (gauge travel over the poses)\n\n| sensor | base socket (mm, {B}) | platform socket (mm, {P}) | length range (mm) |\n|---|---|---|---|\n");
+    for (s, (lo, hi)) in d.sensors.iter().zip(&d.sensor_lengths_mm) {
+        r.push_str(&format!(
+            "| {} | ({:.1}, {:.1}, {:.1}) | ({:.1}, {:.1}, {:.1}) | {lo:.1} .. {hi:.1} |\n",
+            s.name,
+            s.base_mm.x,
+            s.base_mm.y,
+            s.base_mm.z,
+            s.platform_mm.x,
+            s.platform_mm.y,
+            s.platform_mm.z
+        ));
+    }
+    r.push_str("\n## How it was chosen\n\n");
+    for l in &d.log {
+        r.push_str(&format!("- {l}\n"));
+    }
+    r.push_str("\n## Files\n\n- `poses.csv`: the poses to drive (`--plan` of `cpm simulate` / `cpm identifiability`).\n- `sockets.csv`: the chosen socket pairs.\n- `robot.toml`: the robot description with these sensors: measure with it, then `cpm calibrate --robot robot.toml`.\n");
+    set.add(dir.join("report.md"), r);
+    let written = common::commit(set, &dir.display().to_string())?;
+    ctx.finish();
+    if args.json {
+        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&summary)?)?;
+    } else {
+        writeln!(
+            ctx.out,
+            "{} poses x {} socket pairs = {} readings; rank {} of {}; Cramér-Rao RMS {:.3} um for {} um noise",
+            d.poses.len(),
+            d.sensors.len(),
+            d.num_readings(),
+            d.indices.rank,
+            d.indices.num_params,
+            d.indices.crlb_rms_um,
+            d.indices.sigma_um
+        )?;
+        for w in &written {
+            writeln!(ctx.out, "wrote {}", w.display())?;
+        }
+    }
+    Ok(Outcome::Done)
+}

@@ -1,0 +1,155 @@
+//! `cpm identifiability`: what a campaign (or a plan, before measuring) can identify.
+use std::path::PathBuf;
+
+use clap::Args;
+
+use super::common::{self, EffectsArg, PlanArgs, RobotArg};
+use super::{usage_error, Ctx, Outcome};
+use crate::calib::RankOptions;
+use crate::io::calibration::identifiability_json;
+
+/// Arguments of `cpm identifiability`.
+#[derive(Debug, Clone, Args)]
+#[command(
+    after_help = "Examples:\n  cpm identifiability --robot examples/paper_cubic.toml --circle\n  cpm identifiability --robot examples/hexapod_66.toml --random 40 --sensors s1,s2,s3 --json\n  cpm identifiability --robot examples/hexapod_66.toml --data data.csv --effects link_offset"
+)]
+pub struct IdentifiabilityArgs {
+    /// The robot description.
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// Measurement files (readings or tracker poses); repeatable. Or give a plan.
+    #[arg(long, value_name = "DATA.csv")]
+    pub data: Vec<PathBuf>,
+    /// The plan: where the poses come from.
+    #[command(flatten)]
+    pub plan: PlanArgs,
+    /// The effects modelled.
+    #[command(flatten)]
+    pub effects: EffectsArg,
+    /// Noise standard deviation for the Cramér-Rao bounds, um (default: the description's
+    /// [calibration] sensor_noise_um, else 1: bounds per um of noise).
+    #[arg(long, value_name = "UM")]
+    pub sigma_um: Option<f64>,
+    /// Relative rank threshold: singular values below RTOL x the largest count as zero.
+    #[arg(long, value_name = "RTOL", default_value_t = 1e-4)]
+    pub rank_rtol: f64,
+    /// Print JSON on stdout instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Runs `cpm identifiability`.
+pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    ctx.stage("reading the robot description");
+    let robot = common::load_robot(&args.robot.robot, ctx)?;
+    common::require_six_links(&robot)?;
+    let effects = args.effects.resolve(&robot)?;
+    let model = robot.model(&effects);
+    if !(args.rank_rtol > 0.0 && args.rank_rtol < 1.0) {
+        return Err(usage_error("--rank-rtol must be in (0, 1)"));
+    }
+    let (campaign, source) = match (args.data.is_empty(), args.plan.given()) {
+        (false, false) => {
+            if !args.plan.sensors.is_empty() {
+                return Err(usage_error("--sensors applies to a plan, not to --data"));
+            }
+            ctx.stage("reading the measurements");
+            let merged = common::load_data(&args.data, &robot, &common::read_options(&effects))?;
+            let names: Vec<String> = args.data.iter().map(|p| p.display().to_string()).collect();
+            (merged.campaign, names.join(", "))
+        }
+        (true, true) => {
+            ctx.stage("building the plan");
+            let spec = common::build_plan(&args.plan, &robot, true)?;
+            (spec.skeleton(), "plan".to_string())
+        }
+        (false, true) => {
+            return Err(usage_error(
+                "give either --data or a plan (--plan, --circle, --random), not both",
+            ))
+        }
+        (true, false) => return Err(usage_error(
+            "give the measurements (--data FILE) or a plan (--plan FILE, --circle or --random N)",
+        )),
+    };
+    let sigma = match args.sigma_um {
+        Some(s) => common::sigma(Some(s), &robot)?.unwrap_or(1.0),
+        None => robot.sensor_noise_um().unwrap_or(1.0),
+    };
+    ctx.stage(format!(
+        "analysing {} observations, {}",
+        campaign.len(),
+        common::describe_model(&model)
+    ));
+    let options = RankOptions {
+        rank_rtol: args.rank_rtol,
+        ..RankOptions::default()
+    };
+    let ident = crate::calib::identifiability(&model, &campaign, sigma, &options)?;
+    ctx.finish();
+    let names = model.parameter_names();
+    if args.json {
+        let mut v = identifiability_json(&ident, &names);
+        v["source"] = serde_json::json!(source);
+        v["simulated"] = serde_json::json!(campaign.simulated && !args.data.is_empty());
+        v["effects"] = serde_json::json!(effects.iter().map(|e| e.name()).collect::<Vec<_>>());
+        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
+        return Ok(Outcome::Done);
+    }
+    let o = &mut ctx.out;
+    writeln!(
+        o,
+        "Identifiability of {source} on {} ({})",
+        robot.file,
+        common::describe_model(&model)
+    )?;
+    if campaign.simulated && !args.data.is_empty() {
+        writeln!(o, "(the data are SIMULATED)")?;
+    }
+    write!(o, "{}", ident.summary())?;
+    writeln!(
+        o,
+        "Cramér-Rao bounds for sensor noise {sigma} um{}: RMS {}, worst {}",
+        if args.sigma_um.is_none() && robot.sensor_noise_um().is_none() {
+            " (none declared: bounds per um of noise)"
+        } else {
+            ""
+        },
+        fmt_opt(ident.crlb_rms_um()),
+        fmt_opt(ident.crlb_max_um())
+    )?;
+    writeln!(o, "\nsingular values:")?;
+    for (k, s) in ident.singular_values.iter().enumerate() {
+        writeln!(
+            o,
+            "  {:>3} {:.4e}{}",
+            k + 1,
+            s,
+            if k == ident.rank && ident.rank < ident.num_params {
+                "   <- below the rank threshold from here"
+            } else {
+                ""
+            }
+        )?;
+    }
+    writeln!(
+        o,
+        "\n{:<40} {:>10} {:>13} {:>14}",
+        "parameter", "determined", "null fraction", "CRLB std"
+    )?;
+    for (k, n) in names.iter().enumerate() {
+        writeln!(
+            o,
+            "{:<40} {:>10} {:>13.3e} {:>14}",
+            n,
+            if ident.determined[k] { "yes" } else { "no" },
+            ident.null_fraction[k],
+            ident.crlb_std_um[k].map_or("n.d.".to_string(), |s| format!("{s:.4}"))
+        )?;
+    }
+    Ok(Outcome::Done)
+}
+
+fn fmt_opt(v: Option<f64>) -> String {
+    v.map_or("n.d.".to_string(), |x| format!("{x:.3}"))
+}

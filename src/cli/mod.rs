@@ -1,0 +1,286 @@
+//! The `cpm` command line: argument parsing (clap), the commands, exit codes and messages.
+//!
+//! Each command lives in its own module; [`run`] parses the arguments, runs the command and
+//! turns the outcome into an exit code (`docs/cli.md`):
+//!
+//! | code | meaning |
+//! |---|---|
+//! | 0 | success |
+//! | 1 | the computation failed or reported trouble (e.g. the solver did not converge) |
+//! | 2 | usage error (unknown option, missing argument, conflicting options) |
+//! | 3 | bad input file (robot description or measurement file) |
+//! | 4 | I/O error (a file could not be read or written) |
+//!
+//! Errors go to stderr as `error: <file>:<line>: field <name>: <what>` where the problem is
+//! in a file. Outputs are staged in memory and written only after everything succeeded, so a
+//! failing command leaves no partial output.
+use std::ffi::OsString;
+use std::io::{IsTerminal, Write};
+use std::time::Duration;
+
+use clap::{Parser, Subcommand};
+
+pub mod calibrate;
+pub mod common;
+pub mod compensate;
+pub mod design;
+pub mod export;
+pub mod identifiability;
+pub mod plots;
+pub mod refine;
+pub mod simulate;
+
+/// Exit codes of `cpm`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExitKind {
+    /// 0: success.
+    Success = 0,
+    /// 1: the computation failed or reported trouble.
+    Trouble = 1,
+    /// 2: usage error.
+    Usage = 2,
+    /// 3: bad input file.
+    Input = 3,
+    /// 4: I/O error.
+    Io = 4,
+}
+
+/// An error with its exit code.
+#[derive(Debug, thiserror::Error)]
+#[error("{message}")]
+pub struct CliError {
+    /// Which exit code it gives.
+    pub kind: ExitKind,
+    /// What went wrong.
+    pub message: String,
+}
+
+/// A usage error (exit code 2).
+pub fn usage_error(message: impl Into<String>) -> anyhow::Error {
+    CliError {
+        kind: ExitKind::Usage,
+        message: message.into(),
+    }
+    .into()
+}
+
+/// A bad-input error without a file position (exit code 3).
+pub fn input_error(message: impl Into<String>) -> anyhow::Error {
+    CliError {
+        kind: ExitKind::Input,
+        message: message.into(),
+    }
+    .into()
+}
+
+/// A computation error (exit code 1).
+pub fn trouble(message: impl Into<String>) -> anyhow::Error {
+    CliError {
+        kind: ExitKind::Trouble,
+        message: message.into(),
+    }
+    .into()
+}
+
+/// The exit code an error gives: the first cause in its chain that says.
+pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
+    use crate::calib::CalibError;
+    use crate::io::{InputError, ReadError};
+    for cause in err.chain() {
+        if let Some(c) = cause.downcast_ref::<CliError>() {
+            return c.kind;
+        }
+        if cause.is::<InputError>() || cause.is::<crate::geometry::GeometryError>() {
+            return ExitKind::Input;
+        }
+        if let Some(r) = cause.downcast_ref::<ReadError>() {
+            return match r {
+                ReadError::Input(_) => ExitKind::Input,
+                ReadError::Io { .. } => ExitKind::Io,
+            };
+        }
+        if cause.is::<std::io::Error>() {
+            return ExitKind::Io;
+        }
+        if let Some(c) = cause.downcast_ref::<CalibError>() {
+            return match c {
+                CalibError::Invalid { .. } | CalibError::Geometry(_) => ExitKind::Input,
+                _ => ExitKind::Trouble,
+            };
+        }
+    }
+    ExitKind::Trouble
+}
+
+/// `cpm`: calibration of parallel manipulators.
+#[derive(Debug, Parser)]
+#[command(
+    name = "cpm",
+    version,
+    about = "Calibration of parallel manipulators (Gough-Stewart platforms): simulate, analyse, calibrate, compensate",
+    long_about = "Calibration of parallel manipulators (six-link Gough-Stewart platforms): finds the \
+3D installation errors of every base and platform joint, plus declared effects (link offsets, \
+scales, ...), from length-sensor readings or tracker pose measurements, and says which errors the \
+data determine and how precisely.\n\nUnits: mm and degrees in files, um for installation errors. \
+File formats: docs/formats.md. Exit codes: 0 ok, 1 computation trouble (e.g. no convergence), \
+2 usage error, 3 bad input file, 4 I/O error.",
+    arg_required_else_help = true,
+    after_help = "Examples:\n  cpm simulate --robot examples/hexapod_66.toml --random 40 --truth truth.toml --out data.csv\n  cpm identifiability --robot examples/hexapod_66.toml --data data.csv\n  cpm calibrate --robot examples/hexapod_66.toml --data data.csv --out cal/\n  cpm compensate --robot cal/calibrated.toml --poses targets.csv --out commands.csv\n  cpm export --format linuxcnc --robot cal/calibrated.toml\n  cpm design --robot examples/hexapod_66.toml --readings 360 --out design/"
+)]
+pub struct Cli {
+    /// No progress display and no notes on stderr (results and errors are still printed).
+    #[arg(long, short, global = true)]
+    pub quiet: bool,
+    /// The command.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The commands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Simulate a measurement campaign (marked simulated) from a robot, a plan and a truth.
+    Simulate(simulate::SimulateArgs),
+    /// What a campaign or plan can identify: rank, singular values, blind directions, bounds.
+    Identifiability(identifiability::IdentifiabilityArgs),
+    /// Fit installation errors and declared effects to measurements; write the results.
+    Calibrate(calibrate::CalibrateArgs),
+    /// Actuator commands for target poses from a calibrated robot description.
+    Compensate(compensate::CompensateArgs),
+    /// Export a (calibrated) robot's joints for a machine controller (LinuxCNC genhexkins).
+    Export(export::ExportArgs),
+    /// Calibrate, then add the effects the residual asks for, one at a time, with tests.
+    Refine(refine::RefineArgs),
+    /// Choose sensor sockets and poses for a campaign (experiment design).
+    Design(design::DesignArgs),
+}
+
+/// What a command gives back when it did not fail.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Outcome {
+    /// All well.
+    Done,
+    /// Finished and wrote its outputs, but reports trouble (exit code 1), e.g. no
+    /// convergence.
+    Trouble(String),
+}
+
+/// What a command needs besides its arguments: where results go, and the progress display.
+pub struct Ctx<'a> {
+    /// Standard output (results, `--json`).
+    pub out: &'a mut dyn Write,
+    /// `--quiet`.
+    pub quiet: bool,
+    progress: Option<indicatif::ProgressBar>,
+}
+
+impl<'a> Ctx<'a> {
+    /// A context writing results to `out`; progress is shown on stderr only when it is a
+    /// terminal and `quiet` is off.
+    pub fn new(out: &'a mut dyn Write, quiet: bool) -> Self {
+        let progress = (!quiet && std::io::stderr().is_terminal()).then(|| {
+            let bar = indicatif::ProgressBar::new_spinner();
+            if let Ok(style) =
+                indicatif::ProgressStyle::with_template("{spinner} [{elapsed_precise}] {msg}")
+            {
+                bar.set_style(style);
+            }
+            bar.enable_steady_tick(Duration::from_millis(120));
+            bar
+        });
+        Self {
+            out,
+            quiet,
+            progress,
+        }
+    }
+
+    /// Shows what is being done now.
+    pub fn stage(&self, message: impl Into<String>) {
+        if let Some(b) = &self.progress {
+            b.set_message(message.into());
+        }
+    }
+
+    /// A note on stderr (not with `--quiet`).
+    pub fn note(&self, message: impl AsRef<str>) {
+        if self.quiet {
+            return;
+        }
+        match &self.progress {
+            Some(b) => b.println(format!("note: {}", message.as_ref())),
+            None => eprintln!("note: {}", message.as_ref()),
+        }
+    }
+
+    /// Removes the progress display.
+    pub fn finish(&mut self) {
+        if let Some(b) = self.progress.take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+impl Drop for Ctx<'_> {
+    fn drop(&mut self) {
+        self.finish();
+    }
+}
+
+/// Runs a parsed command.
+pub fn execute(cli: &Cli, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    match &cli.command {
+        Command::Simulate(a) => simulate::run(a, ctx),
+        Command::Identifiability(a) => identifiability::run(a, ctx),
+        Command::Calibrate(a) => calibrate::run(a, ctx),
+        Command::Compensate(a) => compensate::run(a, ctx),
+        Command::Export(a) => export::run(a, ctx),
+        Command::Refine(a) => refine::run(a, ctx),
+        Command::Design(a) => design::run(a, ctx),
+    }
+}
+
+/// Parses `args` (the program name first), runs the command, prints errors to stderr and
+/// returns the exit code.
+pub fn run<I, T>(args: I) -> i32
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return e.exit_code();
+        }
+    };
+    let stdout = std::io::stdout();
+    let mut lock = stdout.lock();
+    let result = {
+        let mut ctx = Ctx::new(&mut lock, cli.quiet);
+        let r = execute(&cli, &mut ctx);
+        ctx.finish();
+        r
+    };
+    let _ = lock.flush();
+    match result {
+        Ok(Outcome::Done) => ExitKind::Success as i32,
+        Ok(Outcome::Trouble(msg)) => {
+            eprintln!("error: {msg}");
+            ExitKind::Trouble as i32
+        }
+        Err(e) if broken_pipe(&e) => ExitKind::Success as i32,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            exit_kind(&e) as i32
+        }
+    }
+}
+
+/// True when stdout was closed by its reader (`cpm ... | head`): not worth a message.
+fn broken_pipe(err: &anyhow::Error) -> bool {
+    err.chain().any(|c| {
+        c.downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}

@@ -1,0 +1,191 @@
+//! Figures of the calibration reports: residuals against pose and time, estimates with error
+//! bars (SVG, plotters).
+use plotters::prelude::*;
+
+use crate::calib::Campaign;
+use crate::plot::{scatter, PlotError};
+
+fn err(title: &str, e: impl std::fmt::Display) -> PlotError {
+    PlotError {
+        title: title.to_string(),
+        message: e.to_string(),
+    }
+}
+
+/// Residual series per sensor (and tracker) against `x(reading)`.
+fn residual_series(
+    campaign: &Campaign,
+    sensor_names: &[String],
+    residuals_um: &[f64],
+    x: impl Fn(usize) -> Option<f64>,
+    x_tracker: impl Fn(usize) -> Option<f64>,
+) -> Vec<(String, Vec<(f64, f64)>)> {
+    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for (k, r) in campaign.readings.iter().enumerate() {
+        let (Some(res), Some(xv)) = (residuals_um.get(k), x(k)) else {
+            continue;
+        };
+        let name = format!(
+            "sensor {}",
+            sensor_names.get(r.sensor).cloned().unwrap_or_default()
+        );
+        match series.iter_mut().find(|s| s.0 == name) {
+            Some(s) => s.1.push((xv, *res)),
+            None => series.push((name, vec![(xv, *res)])),
+        }
+    }
+    let m = campaign.readings.len();
+    if residuals_um.len() == m + 6 * campaign.pose_measurements.len()
+        && !campaign.pose_measurements.is_empty()
+    {
+        let mut pos = Vec::new();
+        for (q, _) in campaign.pose_measurements.iter().enumerate() {
+            let Some(xv) = x_tracker(q) else { continue };
+            for a in 0..3 {
+                pos.push((xv, residuals_um[m + 6 * q + a]));
+            }
+        }
+        series.push(("tracker position".to_string(), pos));
+    }
+    series
+}
+
+/// Residual against the pose number (from 1), one series per sensor.
+pub fn residuals_vs_pose(
+    title: &str,
+    campaign: &Campaign,
+    sensor_names: &[String],
+    residuals_um: &[f64],
+) -> Result<String, PlotError> {
+    let series = residual_series(
+        campaign,
+        sensor_names,
+        residuals_um,
+        |k| Some(campaign.readings[k].pose as f64 + 1.0),
+        |q| Some(campaign.pose_measurements[q].pose as f64 + 1.0),
+    );
+    scatter(title, "pose", "residual (um)", &series)
+}
+
+/// Residual against the logged time, when every reading has one.
+pub fn residuals_vs_time(
+    title: &str,
+    campaign: &Campaign,
+    sensor_names: &[String],
+    residuals_um: &[f64],
+) -> Option<Result<String, PlotError>> {
+    let all_timed = campaign.readings.iter().all(|r| r.time_s.is_some())
+        && campaign
+            .pose_measurements
+            .iter()
+            .all(|m| m.time_s.is_some())
+        && !campaign.is_empty();
+    if !all_timed {
+        return None;
+    }
+    let series = residual_series(
+        campaign,
+        sensor_names,
+        residuals_um,
+        |k| campaign.readings[k].time_s,
+        |q| campaign.pose_measurements[q].time_s,
+    );
+    Some(scatter(title, "time (s)", "residual (um)", &series))
+}
+
+/// Before/after residuals against the pose number (refinement).
+pub fn residuals_before_after(
+    title: &str,
+    campaign: &Campaign,
+    before_um: &[f64],
+    after_um: &[f64],
+) -> Result<String, PlotError> {
+    let at = |k: usize| -> f64 {
+        if k < campaign.readings.len() {
+            campaign.readings[k].pose as f64 + 1.0
+        } else {
+            let q = (k - campaign.readings.len()) / 6;
+            campaign
+                .pose_measurements
+                .get(q)
+                .map_or(f64::NAN, |m| m.pose as f64 + 1.0)
+        }
+    };
+    let pts =
+        |r: &[f64]| -> Vec<(f64, f64)> { r.iter().enumerate().map(|(k, v)| (at(k), *v)).collect() };
+    scatter(
+        title,
+        "pose",
+        "residual (um)",
+        &[
+            ("before".to_string(), pts(before_um)),
+            ("after".to_string(), pts(after_um)),
+        ],
+    )
+}
+
+/// Estimates with +-2 standard deviation error bars: one point per determined parameter
+/// (`labels[k]`, `value`, `std`), numbered along x.
+pub fn estimates(
+    title: &str,
+    y_label: &str,
+    points: &[(String, f64, f64)],
+) -> Result<String, PlotError> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1000, 500)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(title, e))?;
+        let (mut lo, mut hi) = (0.0f64, 0.0f64);
+        for (_, v, s) in points {
+            lo = lo.min(v - 2.0 * s);
+            hi = hi.max(v + 2.0 * s);
+        }
+        let pad = ((hi - lo).abs() * 0.1).max(1e-6);
+        let n = points.len().max(1);
+        let labels: Vec<String> = points.iter().map(|p| p.0.clone()).collect();
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0f64..(n as f64 + 1.0), (lo - pad)..(hi + pad))
+            .map_err(|e| err(title, e))?;
+        chart
+            .configure_mesh()
+            .x_desc("parameter (numbered as in report.md)")
+            .y_desc(y_label)
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 1.0 && (i as usize) <= labels.len() {
+                    format!("{}", i as usize)
+                } else {
+                    String::new()
+                }
+            })
+            .draw()
+            .map_err(|e| err(title, e))?;
+        let blue = RGBColor(31, 119, 180);
+        chart
+            .draw_series(points.iter().enumerate().map(|(i, (_, v, s))| {
+                let x = i as f64 + 1.0;
+                ErrorBar::new_vertical(x, v - 2.0 * s, *v, v + 2.0 * s, blue.filled(), 6)
+            }))
+            .map_err(|e| err(title, e))?
+            .label("estimate +- 2 std")
+            .legend(move |(x, y)| Circle::new((x + 5, y), 3, blue.filled()));
+        chart
+            .draw_series(LineSeries::new(
+                vec![(0.0, 0.0), (n as f64 + 1.0, 0.0)],
+                RGBColor(150, 150, 150).stroke_width(1),
+            ))
+            .map_err(|e| err(title, e))?;
+        chart
+            .configure_series_labels()
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.8))
+            .draw()
+            .map_err(|e| err(title, e))?;
+        root.present().map_err(|e| err(title, e))?;
+    }
+    Ok(svg)
+}

@@ -1,0 +1,270 @@
+//! `cpm refine`: calibrate, then add the effects that the residual asks for, one at a time,
+//! each with an F-test, its BIC change and cross-validation (cpm_calib::refine), and write
+//! `refine.json`, `report.md`, `calibration.json`, figures and `calibrated.toml`.
+use std::path::PathBuf;
+
+use clap::Args;
+use serde_json::{json, Value};
+
+use super::calibrate::{self, fit_report, provenance_lines, stage_calibrated, stage_figures};
+use super::common::{self, EffectsArg, RobotArg};
+use super::{plots, usage_error, Ctx, Outcome};
+use crate::calib::{refine, Effect, RefineOptions, Refinement};
+use crate::io::{self, parse_effects};
+use crate::output::OutputSet;
+
+/// Arguments of `cpm refine`.
+#[derive(Debug, Clone, Args)]
+#[command(
+    after_help = "Examples:\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --out refined/\n  cpm refine --robot robot.toml --data data.csv --candidates link_offset,link_scale,backlash --max-steps 2 --out refined/ --json"
+)]
+pub struct RefineArgs {
+    /// The robot description.
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// Measurement files (docs/formats.md); repeatable.
+    #[arg(long, value_name = "DATA.csv", required = true)]
+    pub data: Vec<PathBuf>,
+    /// The effects modelled.
+    #[command(flatten)]
+    pub effects: EffectsArg,
+    /// Candidate effects, comma-separated (default: the whole library).
+    #[arg(long, value_name = "LIST")]
+    pub candidates: Option<String>,
+    /// Most effects added.
+    #[arg(long, value_name = "N", default_value_t = 4)]
+    pub max_steps: usize,
+    /// Significance level of the F-test (before the Bonferroni correction).
+    #[arg(long, value_name = "P", default_value_t = 0.01)]
+    pub alpha: f64,
+    /// Folds of the cross-validation over poses.
+    #[arg(long, value_name = "K", default_value_t = 5)]
+    pub folds: usize,
+    /// Sensor noise standard deviation, um (default: the description's, else estimated).
+    #[arg(long, value_name = "UM")]
+    pub sigma_um: Option<f64>,
+    /// Output directory.
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Print a JSON summary (refine.json) on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn param_json(effect: Effect, params: &[(String, Option<f64>, Option<f64>)]) -> Value {
+    Value::Array(
+        params
+            .iter()
+            .enumerate()
+            .map(|(k, (n, v, s))| {
+                json!({
+                    "name": n,
+                    "value": v.filter(|x| x.is_finite()),
+                    "std": s.filter(|x| x.is_finite()),
+                    "unit": effect.param_unit(k),
+                })
+            })
+            .collect(),
+    )
+}
+
+/// The `refine.json` document.
+pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
+    let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
+    json!({
+        "cpm_version": env!("CARGO_PKG_VERSION"),
+        "simulated": simulated,
+        "initial": {
+            "rms_um": r.initial_diagnostics.rms_um,
+            "residual_white": r.initial_diagnostics.white,
+            "significant": r.initial_diagnostics.significant,
+        },
+        "steps": r.steps.iter().map(|s| json!({
+            "effect": s.effect.name(),
+            "p_value": finite(s.p_value),
+            "delta_bic": finite(s.delta_bic),
+            "rms_before_um": s.rms_before_um,
+            "rms_after_um": s.rms_after_um,
+            "cv_rms_before_um": s.cv_rms_before_um,
+            "cv_rms_after_um": s.cv_rms_after_um,
+            "parameters": param_json(s.effect, &s.parameters),
+            "candidates": s.candidates.iter().map(|c| json!({
+                "effect": c.effect.name(),
+                "novelty": c.novelty,
+                "p_value": c.p_value,
+                "delta_bic": c.delta_bic,
+                "rms_um": c.rms_um,
+            })).collect::<Vec<_>>(),
+        })).collect::<Vec<_>>(),
+        "final": {
+            "effects": r.model.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
+            "rms_um": r.calibration.residual_rms_um,
+            "cv_rms_um": r.final_cv_rms_um,
+            "residual_white": r.final_diagnostics.white,
+            "consistent_with_noise": r.final_diagnostics.consistent_with_noise,
+            "unexplained_structure": r.unexplained_structure,
+            "converged": r.calibration.solver.was_successful(),
+        },
+    })
+}
+
+/// Runs `cpm refine`.
+pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    common::check_out_dir(&args.out)?;
+    if !(args.alpha > 0.0 && args.alpha < 1.0) {
+        return Err(usage_error("--alpha must be in (0, 1)"));
+    }
+    if args.folds < 2 {
+        return Err(usage_error("--folds must be at least 2"));
+    }
+    let candidates = match &args.candidates {
+        Some(list) => parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
+        None => Effect::ALL.to_vec(),
+    };
+    let inputs = calibrate::load_inputs(
+        &args.robot.robot,
+        &args.data,
+        &args.effects,
+        args.sigma_um,
+        None,
+        None,
+        ctx,
+    )?;
+    let campaign = &inputs.merged.campaign;
+    ctx.stage(format!(
+        "refining: {} to {} observations, up to {} effects from {} candidates (each round fits every candidate)",
+        common::describe_model(&inputs.model),
+        campaign.len(),
+        args.max_steps,
+        candidates.len()
+    ));
+    let options = RefineOptions {
+        candidates,
+        alpha: args.alpha,
+        max_steps: args.max_steps,
+        folds: args.folds,
+        identify: inputs.identify.clone(),
+        ..RefineOptions::default()
+    };
+    let r =
+        refine(&inputs.model, campaign, &options).map_err(|e| common::locate(e, &inputs.merged))?;
+    ctx.stage("writing the results");
+    let dir = &args.out;
+    let cal = &r.calibration;
+    let mut set = OutputSet::new();
+    let doc = refine_json(&r, campaign.simulated);
+    set.add(dir.join("refine.json"), serde_json::to_string_pretty(&doc)?);
+    set.add(
+        dir.join("calibration.json"),
+        serde_json::to_string_pretty(&io::calibration_json(
+            &r.model,
+            campaign,
+            cal,
+            &inputs.provenance,
+        ))?,
+    );
+    let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;
+    set.add(
+        dir.join("residuals_before_after.svg"),
+        plots::residuals_before_after(
+            &format!(
+                "Residual before and after refinement{}",
+                if campaign.simulated {
+                    " (SIMULATED)"
+                } else {
+                    ""
+                }
+            ),
+            campaign,
+            &r.initial_residuals_um,
+            &cal.residuals_um,
+        )?,
+    );
+    figures.push("residuals_before_after.svg");
+    let notes = stage_calibrated(
+        &mut set,
+        dir,
+        &inputs,
+        &r.model,
+        cal,
+        false,
+        Some(&r.model.effects),
+        "Refined",
+    )?;
+    let mut s = String::from("# Refinement report\n\n");
+    if campaign.simulated {
+        s.push_str("**The measurements are SIMULATED.**\n\n");
+    }
+    for l in provenance_lines(&inputs.provenance, campaign.simulated, "Refined") {
+        s.push_str(&format!("{l}\n"));
+    }
+    s.push_str(&format!(
+        "\nStarting model: {}. Residual RMS {:.3} um, white: {}.\n\n## Steps\n\n",
+        common::describe_model(&inputs.model),
+        r.initial_diagnostics.rms_um,
+        r.initial_diagnostics.white
+    ));
+    if r.steps.is_empty() {
+        s.push_str("No effect was added: no candidate was significant (or the residual was already white and consistent with the noise).\n\n");
+    }
+    for (i, st) in r.steps.iter().enumerate() {
+        s.push_str(&format!(
+            "### {}. `{}`\n\n- F-test p-value {:.3e}, BIC change {:.2}\n- RMS {:.3} -> {:.3} um; cross-validated {:.3} -> {:.3} um\n\n| parameter | estimate | std |\n|---|---|---|\n",
+            i + 1, st.effect.name(), st.p_value, st.delta_bic, st.rms_before_um, st.rms_after_um, st.cv_rms_before_um, st.cv_rms_after_um
+        ));
+        for (n, v, sd) in &st.parameters {
+            s.push_str(&format!(
+                "| {n} | {} | {} |\n",
+                v.map_or("n.d.".into(), |x| format!("{x:.4}")),
+                sd.map_or("n.d.".into(), |x| format!("{x:.4}"))
+            ));
+        }
+        s.push('\n');
+    }
+    s.push_str(&format!(
+        "## Final\n\n- Effects: {}\n- RMS {:.3} um, cross-validated {:.3} um, residual white: {}\n- Unexplained structure: {}\n\n",
+        common::effect_list(&r.model.effects),
+        cal.residual_rms_um,
+        r.final_cv_rms_um,
+        r.final_diagnostics.white,
+        if r.unexplained_structure.is_empty() { "none".to_string() } else { r.unexplained_structure.join(", ") }
+    ));
+    fit_report(&mut s, &inputs.robot, &r.model, campaign, cal);
+    s.push_str(&format!(
+        "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models{}\n",
+        notes.undetermined.len(),
+        if notes.not_representable.is_empty() { String::new() } else { format!("; not representable in a description (see calibration.json): {}", notes.not_representable.len()) }
+    ));
+    for f in &figures {
+        s.push_str(&format!("- `{f}`\n"));
+    }
+    set.add(dir.join("report.md"), s);
+    let written = common::commit(set, &dir.display().to_string())?;
+    ctx.finish();
+    if args.json {
+        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&doc)?)?;
+    } else {
+        writeln!(
+            ctx.out,
+            "{}added {} effect(s): {}; RMS {:.3} -> {:.3} um, cross-validated {:.3} um; unexplained structure: {}",
+            if campaign.simulated { "SIMULATED data: " } else { "" },
+            r.steps.len(),
+            if r.steps.is_empty() { "none".to_string() } else { r.steps.iter().map(|s| s.effect.name()).collect::<Vec<_>>().join(", ") },
+            r.initial_diagnostics.rms_um,
+            cal.residual_rms_um,
+            r.final_cv_rms_um,
+            if r.unexplained_structure.is_empty() { "none".to_string() } else { r.unexplained_structure.join(", ") }
+        )?;
+        for w in &written {
+            writeln!(ctx.out, "wrote {}", w.display())?;
+        }
+    }
+    if cal.solver.was_successful() {
+        Ok(Outcome::Done)
+    } else {
+        Ok(Outcome::Trouble(format!(
+            "the final fit did not converge ({})",
+            cal.solver.termination
+        )))
+    }
+}

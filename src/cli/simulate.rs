@@ -1,0 +1,372 @@
+//! `cpm simulate`: a simulated measurement campaign (length-sensor readings or tracker pose
+//! measurements), marked simulated in the file.
+use std::path::PathBuf;
+
+use clap::{Args, ValueEnum};
+use rand::{Rng, SeedableRng};
+use serde_json::json;
+
+use super::common::{self, EffectsArg, PlanArgs, RobotArg};
+use super::{input_error, usage_error, Ctx, Outcome};
+use crate::calib::campaign::PoseMeasurement;
+use crate::calib::{simulate_campaign, Campaign, Effect, Noise, SimulationOptions};
+use crate::geometry::{InstallationErrors, Pose};
+use crate::io::{self, Robot};
+use crate::output::OutputSet;
+
+/// What the simulated campaign measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Measure {
+    /// Length-sensor readings (every plan sensor at every pose).
+    Lengths,
+    /// Tracker pose measurements with the commanded link readings.
+    Poses,
+}
+
+/// Arguments of `cpm simulate`.
+#[derive(Debug, Clone, Args)]
+#[command(
+    after_help = "Examples:\n  cpm simulate --robot examples/paper_cubic.toml --circle --paper-table2 --noise uniform:10 --out paper.csv\n  cpm simulate --robot examples/hexapod_66.toml --random 40 --truth truth.toml --effects link_offset --noise gaussian:2 --seed 7 --out data.csv\n  cpm simulate --robot examples/hexapod_66.toml --random 30 --truth truth.toml --measure poses --out tracker.csv"
+)]
+pub struct SimulateArgs {
+    /// The robot description.
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// The plan: where the poses come from.
+    #[command(flatten)]
+    pub plan: PlanArgs,
+    /// The true machine: a robot description whose geometry (joints plus
+    /// [installation_errors_um]) and link reading models (length_at_zero_mm, mm_per_unit)
+    /// differ from --robot's by the errors to simulate.
+    #[arg(long, value_name = "TRUTH.toml", conflicts_with = "paper_table2")]
+    pub truth: Option<PathBuf>,
+    /// The paper's Table 2 as the true installation errors (six links).
+    #[arg(long)]
+    pub paper_table2: bool,
+    /// True values of an effect, in its units, one per parameter (e.g.
+    /// sensor_offset=12 or link_offset=5,0,-3,0,0,2); repeatable. The effect is simulated.
+    #[arg(long, value_name = "EFFECT=V1,V2,..")]
+    pub truth_effect: Vec<String>,
+    /// The effects modelled.
+    #[command(flatten)]
+    pub effects: EffectsArg,
+    /// Noise: none, uniform:HALF_WIDTH_UM or gaussian:SIGMA_UM (default: gaussian with the
+    /// description's [calibration] sensor_noise_um, else none). For --measure poses it is the
+    /// noise of each position coordinate.
+    #[arg(long, value_name = "SPEC")]
+    pub noise: Option<String>,
+    /// Orientation noise of simulated tracker poses, urad (standard deviation per axis).
+    #[arg(long, value_name = "URAD", default_value_t = 0.0)]
+    pub orientation_noise_urad: f64,
+    /// What to measure.
+    #[arg(long, value_enum, default_value_t = Measure::Lengths)]
+    pub measure: Measure,
+    /// Output CSV file.
+    #[arg(long, value_name = "DATA.csv")]
+    pub out: PathBuf,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Parses a noise specification.
+pub fn parse_noise(spec: &str) -> Result<Noise, String> {
+    let spec = spec.trim();
+    if spec == "none" {
+        return Ok(Noise::None);
+    }
+    let (kind, value) = spec.split_once(':').ok_or_else(|| {
+        format!("{spec:?}: expected none, uniform:HALF_WIDTH_UM or gaussian:SIGMA_UM")
+    })?;
+    let v: f64 = value
+        .trim()
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v >= 0.0)
+        .ok_or_else(|| format!("{spec:?}: {value:?} is not a non-negative number of um"))?;
+    match kind.trim() {
+        "uniform" => Ok(Noise::Uniform { half_width_um: v }),
+        "gaussian" | "normal" => Ok(Noise::Gaussian { sigma_um: v }),
+        other => Err(format!(
+            "{spec:?}: unknown noise kind {other:?} (none, uniform, gaussian)"
+        )),
+    }
+}
+
+/// The noise in words, e.g. `gaussian 1 um`, `uniform +-10 um`.
+pub fn describe_noise(noise: &Noise) -> String {
+    match noise {
+        Noise::None => "none".into(),
+        Noise::Uniform { half_width_um } => format!("uniform +-{half_width_um} um"),
+        Noise::Gaussian { sigma_um } => format!("gaussian {sigma_um} um"),
+    }
+}
+
+fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
+    let (name, values) = s
+        .split_once('=')
+        .ok_or_else(|| format!("{s:?}: expected EFFECT=V1,V2,..."))?;
+    let effect = Effect::parse(name.trim())?;
+    let values = values
+        .split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("{s:?}: {v:?} is not a number"))
+        })
+        .collect::<Result<Vec<f64>, String>>()?;
+    Ok((effect, values))
+}
+
+fn draw(noise: &Noise, rng: &mut rand::rngs::StdRng) -> f64 {
+    match *noise {
+        Noise::None => 0.0,
+        Noise::Uniform { half_width_um } if half_width_um > 0.0 => {
+            rng.random_range(-half_width_um..=half_width_um)
+        }
+        Noise::Uniform { .. } => 0.0,
+        Noise::Gaussian { sigma_um } => gaussian(rng) * sigma_um,
+    }
+}
+
+fn gaussian(rng: &mut rand::rngs::StdRng) -> f64 {
+    // Box-Muller.
+    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
+    let u2: f64 = rng.random_range(0.0..1.0);
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// The truth: model effects and the full true parameter vector.
+struct Truth {
+    effects: Vec<Effect>,
+    params: Vec<f64>,
+    what: String,
+}
+
+fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::Result<Truth> {
+    let n = robot.num_links();
+    let mut effects = declared;
+    let mut installation = vec![0.0; 6 * n];
+    let mut values: Vec<(Effect, Vec<f64>)> = Vec::new();
+    let mut what = "zero installation errors (nominal machine)".to_string();
+    if args.paper_table2 {
+        if n != 6 {
+            return Err(usage_error(format!(
+                "--paper-table2 needs a six-link robot; {} has {n} links",
+                robot.file
+            )));
+        }
+        installation = InstallationErrors::paper_table2().to_vec_um();
+        what = "the paper's Table 2".into();
+    }
+    if let Some(path) = &args.truth {
+        let t = Robot::load(path)?;
+        let diff = io::robot::truth_from_description(robot, &t)
+            .map_err(|m| input_error(format!("{}: {m}", t.file)))?;
+        installation = diff.installation_um.clone();
+        if diff.has_link_terms() {
+            values.push((Effect::LinkOffset, diff.link_offset_um.clone()));
+            values.push((Effect::LinkScale, diff.link_scale_ppm.clone()));
+        }
+        what = format!("{} (its geometry and link reading models)", t.file);
+    }
+    for s in &args.truth_effect {
+        let (e, v) =
+            parse_truth_effect(s).map_err(|m| usage_error(format!("--truth-effect {m}")))?;
+        let need = e.num_params(n, robot.table.sensors.len());
+        if v.len() != need {
+            return Err(usage_error(format!(
+                "--truth-effect {s:?}: {} has {need} parameters here ({}), got {} values",
+                e.name(),
+                e.unit(),
+                v.len()
+            )));
+        }
+        values.retain(|(x, _)| *x != e);
+        values.push((e, v));
+    }
+    for (e, _) in &values {
+        if !effects.contains(e) {
+            effects.push(*e);
+        }
+    }
+    let model = robot.model(&effects);
+    let mut params = installation;
+    params.resize(model.num_params(), 0.0);
+    for b in model.blocks() {
+        if let Some(e) = b.effect {
+            if let Some((_, v)) = values.iter().find(|(x, _)| *x == e) {
+                params[b.offset..b.offset + b.len].copy_from_slice(v);
+            }
+        }
+    }
+    Ok(Truth {
+        effects,
+        params,
+        what,
+    })
+}
+
+/// Tracker pose measurements of `skeleton`'s poses on the true machine: the controller
+/// commands the nominal inverse kinematics; the machine's lengths are those plus the joint
+/// clearance shift and the link offsets and scales of the truth; the tracker sees the pose
+/// forward kinematics gives, plus noise.
+fn simulate_poses(
+    robot: &Robot,
+    truth: &Truth,
+    poses: &[Pose],
+    noise: &Noise,
+    orientation_urad: f64,
+    seed: u64,
+) -> anyhow::Result<Campaign> {
+    let model = robot.model(&truth.effects);
+    let n = robot.num_links();
+    for b in model.blocks() {
+        if let Some(e) = b.effect {
+            let nonzero = truth.params[b.offset..b.offset + b.len]
+                .iter()
+                .any(|v| *v != 0.0);
+            if nonzero && !matches!(e, Effect::LinkOffset | Effect::LinkScale) {
+                return Err(usage_error(format!(
+                    "--measure poses simulates installation errors, link_offset and link_scale; the truth has {} values",
+                    e.name()
+                )));
+            }
+        }
+    }
+    let block = |which: Effect| {
+        model
+            .blocks()
+            .into_iter()
+            .find(|b| b.effect == Some(which))
+            .map(|b| truth.params[b.offset..b.offset + b.len].to_vec())
+    };
+    let offset = block(Effect::LinkOffset).unwrap_or_else(|| vec![0.0; n]);
+    let scale = block(Effect::LinkScale).unwrap_or_else(|| vec![0.0; n]);
+    let true_table = model.table_with(&truth.params[..6 * n])?;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut c = Campaign {
+        simulated: true,
+        ..Campaign::default()
+    };
+    let mut commanded = Vec::new();
+    for (j, p) in poses.iter().enumerate() {
+        let cmd = cpm_kinematics::inverse_lengths(&robot.table, p);
+        let shift = model
+            .clearance
+            .link_corrections_mm(&robot.table, p, &model.load)
+            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
+        let eff: Vec<f64> = (0..n)
+            .map(|i| cmd[i] + shift[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
+            .collect();
+        let (reached, _) = cpm_kinematics::forward(&true_table, &eff, p, &model.fk)
+            .map_err(|source| crate::calib::CalibError::Kinematics { pose: j, source })?;
+        let mut twist = nalgebra::Vector6::zeros();
+        for a in 0..3 {
+            twist[a] = draw(noise, &mut rng) * 1e-3;
+            twist[3 + a] = gaussian(&mut rng) * orientation_urad * 1e-6;
+        }
+        let measured = reached.perturbed(&twist);
+        c.poses.push(measured);
+        c.pose_measurements.push(PoseMeasurement {
+            pose: j,
+            measured,
+            time_s: None,
+        });
+        commanded.push(cmd);
+    }
+    c.commanded_lengths_mm = Some(commanded);
+    Ok(c)
+}
+
+/// Runs `cpm simulate`.
+pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    ctx.stage("reading the robot description");
+    let robot = common::load_robot(&args.robot.robot, ctx)?;
+    let declared = args.effects.resolve(&robot)?;
+    let noise = match &args.noise {
+        Some(s) => parse_noise(s).map_err(|m| usage_error(format!("--noise {m}")))?,
+        None => match robot.sensor_noise_um() {
+            Some(s) => Noise::Gaussian { sigma_um: s },
+            None => Noise::None,
+        },
+    };
+    if !(args.orientation_noise_urad.is_finite() && args.orientation_noise_urad >= 0.0) {
+        return Err(usage_error("--orientation-noise-urad must be >= 0"));
+    }
+    let truth = truth(args, &robot, declared)?;
+    ctx.stage("building the plan");
+    let spec = common::build_plan(&args.plan, &robot, args.measure == Measure::Lengths)?;
+    ctx.stage(format!("simulating {} poses", spec.plan.poses.len()));
+    let note = format!(
+        "robot {}, truth {}, noise {}, seed {}",
+        robot.file,
+        truth.what,
+        describe_noise(&noise),
+        args.plan.seed
+    );
+    let (campaign, text) = match args.measure {
+        Measure::Lengths => {
+            let model = robot.model(&truth.effects);
+            let options = SimulationOptions {
+                noise,
+                repeats: 1,
+                seed: args.plan.seed,
+            };
+            let skeleton = spec.skeleton();
+            let c = simulate_campaign(&model, &truth.params, &skeleton, &options)?;
+            let text = io::write_readings(&c, &robot, &note);
+            (c, text)
+        }
+        Measure::Poses => {
+            let mut c = simulate_poses(
+                &robot,
+                &truth,
+                &spec.plan.poses,
+                &noise,
+                args.orientation_noise_urad,
+                args.plan.seed,
+            )?;
+            for (m, (t, _)) in c.pose_measurements.iter_mut().zip(&spec.conditions) {
+                m.time_s = *t;
+            }
+            let text = io::write_pose_measurements(&c, &robot, &note);
+            (c, text)
+        }
+    };
+    let mut set = OutputSet::new();
+    set.add(&args.out, text);
+    ctx.stage("writing");
+    common::commit(set, &args.out.display().to_string())?;
+    ctx.finish();
+    if args.json {
+        let v = json!({
+            "simulated": true,
+            "out": args.out.display().to_string(),
+            "measure": format!("{:?}", args.measure).to_lowercase(),
+            "poses": campaign.poses.len(),
+            "readings": campaign.readings.len(),
+            "pose_measurements": campaign.pose_measurements.len(),
+            "effects": truth.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
+            "truth": truth.what,
+            "noise": describe_noise(&noise),
+            "seed": args.plan.seed,
+        });
+        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
+    } else {
+        writeln!(
+            ctx.out,
+            "SIMULATED: {} readings and {} pose measurements at {} poses (truth: {}; noise {}; seed {}) -> {}",
+            campaign.readings.len(),
+            campaign.pose_measurements.len(),
+            campaign.poses.len(),
+            truth.what,
+            describe_noise(&noise),
+            args.plan.seed,
+            args.out.display()
+        )?;
+    }
+    Ok(Outcome::Done)
+}

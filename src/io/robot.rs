@@ -1,0 +1,467 @@
+//! Robot description files and the calibration model: loading a description into the geometry
+//! and [`MeasurementModel`] that the commands use, and writing a calibrated description.
+//!
+//! The geometry of a description is its joints plus its `[installation_errors_um]` when it
+//! has that table (a calibration result, for example). A calibrated description written by
+//! [`calibrated_description`] carries the calibrated joints in its `[[link]]` tables and no
+//! `[installation_errors_um]`, so that every reader of the file sees the calibrated machine.
+//! `link_offset` and `link_scale` are folded into each link's reading model exactly:
+//! with `L = length_at_zero_mm + mm_per_unit * u` the commanded length and the effective
+//! length `L (1 + 1e-6 s) + 1e-3 o`, the calibrated link has
+//! `length_at_zero_mm' = (1 + 1e-6 s) length_at_zero_mm + 1e-3 o` and
+//! `mm_per_unit' = (1 + 1e-6 s) mm_per_unit`.
+use std::path::Path;
+
+use cpm_calib::{Effect, MeasurementModel};
+use cpm_clearance::{ClearanceModel, Load, SignRule};
+use cpm_geometry::description::{CalibrationSpec, RobotDescription};
+use cpm_geometry::{InstallationErrors, JointTable};
+use nalgebra::Vector3;
+
+use super::{read_text, InputError, ReadError};
+
+/// A loaded robot description with its geometry.
+#[derive(Debug, Clone)]
+pub struct Robot {
+    /// The file it came from (for messages).
+    pub file: String,
+    /// The description as written.
+    pub description: RobotDescription,
+    /// The geometry: joints plus `[installation_errors_um]` when present; sensors; home.
+    pub table: JointTable,
+    /// True when `[installation_errors_um]` was applied to the joints.
+    pub errors_applied: bool,
+}
+
+impl Robot {
+    /// Reads and checks a description file.
+    pub fn load(path: &Path) -> Result<Robot, ReadError> {
+        let file = path.display().to_string();
+        let text = read_text(path)?;
+        Ok(Self::from_toml(&text, &file)?)
+    }
+
+    /// Parses and checks a description.
+    pub fn from_toml(text: &str, file: &str) -> Result<Robot, InputError> {
+        let description =
+            RobotDescription::from_toml_str(text, file).map_err(|e| describe(file, e))?;
+        Self::from_description(description, file)
+    }
+
+    /// A robot from a description already in memory.
+    pub fn from_description(
+        description: RobotDescription,
+        file: &str,
+    ) -> Result<Robot, InputError> {
+        let nominal = description.joint_table().map_err(|e| describe(file, e))?;
+        let errors = description
+            .installation_errors()
+            .map_err(|e| describe(file, e))?;
+        let errors_applied = errors.is_some();
+        let table = match errors {
+            Some(e) => e.apply(&nominal).map_err(|e| describe(file, e))?,
+            None => nominal,
+        };
+        Ok(Robot {
+            file: file.to_string(),
+            description,
+            table,
+            errors_applied,
+        })
+    }
+
+    /// Number of links.
+    pub fn num_links(&self) -> usize {
+        self.table.num_links()
+    }
+
+    /// Link length (mm) of link `i` for a reading.
+    pub fn length_mm(&self, link: usize, reading: f64) -> f64 {
+        self.description.links[link].length_mm(reading)
+    }
+
+    /// Reading of link `i` for a length (mm).
+    pub fn reading(&self, link: usize, length_mm: f64) -> f64 {
+        self.description.links[link].reading(length_mm)
+    }
+
+    /// True when every link's reading is its length in mm (the default reading model).
+    pub fn readings_are_lengths(&self) -> bool {
+        self.description
+            .links
+            .iter()
+            .all(|l| l.length_at_zero_mm == 0.0 && l.mm_per_unit == 1.0)
+    }
+
+    /// The effects declared in `[calibration] effects`.
+    pub fn declared_effects(&self) -> Result<Vec<Effect>, InputError> {
+        let names = self
+            .description
+            .calibration
+            .as_ref()
+            .map(|c| c.effects.clone())
+            .unwrap_or_default();
+        names
+            .iter()
+            .enumerate()
+            .map(|(k, n)| {
+                Effect::parse(n).map_err(|m| InputError {
+                    file: self.file.clone(),
+                    line: None,
+                    field: Some(format!("calibration.effects[{}]", k + 1)),
+                    message: m,
+                })
+            })
+            .collect()
+    }
+
+    /// `[calibration] sensor_noise_um` when declared and positive.
+    pub fn sensor_noise_um(&self) -> Option<f64> {
+        self.description
+            .calibration
+            .as_ref()
+            .and_then(|c| c.sensor_noise_um)
+            .filter(|s| *s > 0.0)
+    }
+
+    /// The joint clearance of the description; none without a `[clearance]` table.
+    pub fn clearance(&self) -> ClearanceModel {
+        match &self.description.clearance {
+            Some(c) => ClearanceModel {
+                radius_um: c.radius_um,
+                rule: if c.smooth_force_n > 0.0 {
+                    SignRule::Smooth {
+                        force_scale_n: c.smooth_force_n,
+                    }
+                } else {
+                    SignRule::Hard
+                },
+            },
+            None => ClearanceModel::none(),
+        }
+    }
+
+    /// The load of the description; `cpm`'s default load without a `[load]` table.
+    pub fn platform_load(&self) -> Load {
+        match &self.description.load {
+            Some(l) => Load {
+                platform_mass_kg: l.platform_mass_kg,
+                platform_com_mm: Vector3::from(l.platform_com_mm),
+                payload_mass_kg: l.payload_mass_kg,
+                payload_com_mm: Vector3::from(l.payload_com_mm),
+                gravity_mm_s2: Vector3::from(l.gravity_mm_s2),
+                external_force_n: Vector3::from(l.external_force_n),
+                external_moment_nmm: Vector3::from(l.external_moment_nmm),
+            },
+            None => Load::default(),
+        }
+    }
+
+    /// The measurement model: this geometry, clearance and load, and `effects`.
+    pub fn model(&self, effects: &[Effect]) -> MeasurementModel {
+        let mut m = MeasurementModel::new(self.table.clone());
+        m.clearance = self.clearance();
+        m.load = self.platform_load();
+        m.effects = effects.to_vec();
+        m
+    }
+
+    /// Nominal sensor names, for messages.
+    pub fn sensor_names(&self) -> String {
+        if self.table.sensors.is_empty() {
+            "none: the robot description has no [[sensor]]".to_string()
+        } else {
+            self.table
+                .sensors
+                .iter()
+                .map(|s| s.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        }
+    }
+}
+
+fn describe(file: &str, e: cpm_geometry::GeometryError) -> InputError {
+    match e {
+        cpm_geometry::GeometryError::Description { path, message } => {
+            locate_description_error(&path, &message)
+        }
+        other => InputError::file(file, other.to_string()),
+    }
+}
+
+/// Turns the description loader's messages into `file:line: field key: what`:
+/// `key: what (line L, column C)` for checks, `TOML parse error at line L, column C` followed
+/// by the source excerpt and the explanation for syntax and key errors.
+fn locate_description_error(path: &str, message: &str) -> InputError {
+    if let Some(rest) = message.strip_prefix("TOML parse error at line ") {
+        let line = rest
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .and_then(|n| n.parse::<usize>().ok());
+        let what = message
+            .lines()
+            .rev()
+            .find(|l| {
+                !l.trim().is_empty() && !l.trim_start().starts_with('|') && !l.contains(" | ")
+            })
+            .unwrap_or(message)
+            .trim()
+            .to_string();
+        if let Some(line) = line {
+            return InputError::line(path, line, what);
+        }
+    }
+    if let Some(open) = message.rfind(" (line ") {
+        let tail = &message[open + 7..];
+        let line = tail
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .and_then(|n| n.parse::<usize>().ok());
+        let body = &message[..open];
+        if let (Some(line), Some((key, what))) = (line, body.split_once(": ")) {
+            if !key.contains(' ') {
+                return InputError::field(path, line, key, what);
+            }
+        }
+    }
+    InputError::file(path, message)
+}
+
+/// Parses a comma-separated list of effect names.
+pub fn parse_effects(list: &str) -> Result<Vec<Effect>, String> {
+    let mut out: Vec<Effect> = Vec::new();
+    for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let e = Effect::parse(name)?;
+        if out.contains(&e) {
+            return Err(format!("effect `{name}` given twice"));
+        }
+        out.push(e);
+    }
+    Ok(out)
+}
+
+/// Values of one parameter vector, split: installation errors (um) and each effect's block.
+#[derive(Debug, Clone)]
+pub struct SplitParams {
+    /// Installation errors, um, `None` where not known.
+    pub installation_um: Vec<Option<f64>>,
+    /// Per effect of the model, its parameter values (`None` where not known).
+    pub effects: Vec<(Effect, Vec<Option<f64>>)>,
+}
+
+/// Splits a parameter vector of `model` into its blocks.
+pub fn split_params(model: &MeasurementModel, params: &[Option<f64>]) -> SplitParams {
+    let blocks = model.blocks();
+    let ni = model.num_installation_params();
+    SplitParams {
+        installation_um: params[..ni.min(params.len())].to_vec(),
+        effects: blocks
+            .iter()
+            .filter_map(|b| {
+                b.effect
+                    .map(|e| (e, params[b.offset..b.offset + b.len].to_vec()))
+            })
+            .collect(),
+    }
+}
+
+/// What [`calibrated_description`] could not put into the description.
+#[derive(Debug, Clone, Default)]
+pub struct CalibratedNotes {
+    /// Installation-error components left at nominal because the data do not determine them.
+    pub undetermined: Vec<String>,
+    /// Effect parameters with no place in a description (`name = value unit`).
+    pub not_representable: Vec<String>,
+    /// Effect parameters left out because the data do not determine them.
+    pub undetermined_effects: Vec<String>,
+}
+
+/// The calibrated description: `robot`'s description with the joints moved by the known
+/// installation errors in `params` (model order; `None` = not determined, left at nominal),
+/// `link_offset` / `link_scale` folded into the link reading models, `socket_error` moving
+/// the sensor sockets, and `[calibration] effects` set to `declare` when given.
+pub fn calibrated_description(
+    robot: &Robot,
+    model: &MeasurementModel,
+    params: &[Option<f64>],
+    declare: Option<&[Effect]>,
+) -> (RobotDescription, CalibratedNotes) {
+    let mut d = robot.description.clone();
+    let mut notes = CalibratedNotes::default();
+    let split = split_params(model, params);
+    let sensor_names: Vec<String> = robot.table.sensors.iter().map(|s| s.name.clone()).collect();
+    for (i, (spec, link)) in d.links.iter_mut().zip(&robot.table.links).enumerate() {
+        let mut base = link.base_mm;
+        let mut platform = link.platform_mm;
+        for a in 0..3 {
+            let kb = 6 * i + a;
+            let kp = 6 * i + 3 + a;
+            match split.installation_um.get(kb).copied().flatten() {
+                Some(v) => base[a] += v * 1e-3,
+                None => notes
+                    .undetermined
+                    .push(InstallationErrors::component_name(kb)),
+            }
+            match split.installation_um.get(kp).copied().flatten() {
+                Some(v) => platform[a] += v * 1e-3,
+                None => notes
+                    .undetermined
+                    .push(InstallationErrors::component_name(kp)),
+            }
+        }
+        spec.base_mm = base.into();
+        spec.platform_mm = platform.into();
+    }
+    d.installation_errors_um = None;
+    for (effect, values) in &split.effects {
+        for (k, v) in values.iter().enumerate() {
+            let name = format!(
+                "{} {} [{}]",
+                effect.name(),
+                effect.param_name(k, &sensor_names),
+                effect.param_unit(k)
+            );
+            let Some(v) = v else {
+                notes.undetermined_effects.push(name);
+                continue;
+            };
+            match effect {
+                Effect::LinkOffset | Effect::LinkScale => {}
+                Effect::SocketError => {
+                    let s = &mut d.sensors[k / 6];
+                    let side = if k % 6 < 3 {
+                        &mut s.base_mm
+                    } else {
+                        &mut s.platform_mm
+                    };
+                    side[k % 3] += v * 1e-3;
+                }
+                _ => notes.not_representable.push(format!("{name} = {v:.6}")),
+            }
+        }
+    }
+    // link_offset and link_scale: folded into the reading model (see the module doc).
+    let block = |which: Effect| {
+        split
+            .effects
+            .iter()
+            .find(|(e, _)| *e == which)
+            .map(|(_, v)| v.clone())
+    };
+    let (offset, scale) = (block(Effect::LinkOffset), block(Effect::LinkScale));
+    if offset.is_some() || scale.is_some() {
+        for (i, spec) in d.links.iter_mut().enumerate() {
+            let orig = &robot.description.links[i];
+            let s = scale.as_ref().and_then(|v| v[i]).unwrap_or(0.0);
+            let o = offset.as_ref().and_then(|v| v[i]).unwrap_or(0.0);
+            let f = 1.0 + s * 1e-6;
+            spec.length_at_zero_mm = orig.length_at_zero_mm * f + o * 1e-3;
+            spec.mm_per_unit = orig.mm_per_unit * f;
+        }
+    }
+    if let Some(effects) = declare {
+        let names: Vec<String> = effects.iter().map(|e| e.name().to_string()).collect();
+        match &mut d.calibration {
+            Some(c) => c.effects = names,
+            None if !names.is_empty() => {
+                d.calibration = Some(CalibrationSpec {
+                    effects: names,
+                    sensor_noise_um: None,
+                })
+            }
+            None => {}
+        }
+    }
+    (d, notes)
+}
+
+/// The calibrated description as TOML text, with a comment header that says where it came
+/// from and lists what the data did not determine.
+pub fn calibrated_toml(
+    d: &RobotDescription,
+    notes: &CalibratedNotes,
+    header: &[String],
+) -> Result<String, String> {
+    let body = d.to_toml_string().map_err(|e| e.to_string())?;
+    let mut s = String::new();
+    for h in header {
+        s.push_str(&format!("# {h}\n"));
+    }
+    s.push_str("# Joint coordinates are nominal + the installation errors the data determine.\n");
+    if !notes.undetermined.is_empty() {
+        s.push_str(&format!(
+            "# Not determined by the data, left at nominal ({}): {}\n",
+            notes.undetermined.len(),
+            notes.undetermined.join(", ")
+        ));
+    }
+    if !notes.undetermined_effects.is_empty() {
+        s.push_str(&format!(
+            "# Effect parameters not determined, left out: {}\n",
+            notes.undetermined_effects.join(", ")
+        ));
+    }
+    if !notes.not_representable.is_empty() {
+        s.push_str(&format!(
+            "# Effect values a description cannot hold (see calibration.json): {}\n",
+            notes.not_representable.join(", ")
+        ));
+    }
+    s.push('\n');
+    s.push_str(&body);
+    Ok(s)
+}
+
+/// The installation errors (um, model order) and link-effect values that turn `robot` into
+/// `truth`: the difference of the two geometries, and each link's reading model difference as
+/// `link_offset` (um) and `link_scale` (ppm).
+pub fn truth_from_description(robot: &Robot, truth: &Robot) -> Result<TruthDiff, String> {
+    if truth.num_links() != robot.num_links() {
+        return Err(format!(
+            "has {} links, the robot {}",
+            truth.num_links(),
+            robot.num_links()
+        ));
+    }
+    let mut errors = Vec::with_capacity(6 * robot.num_links());
+    for (a, b) in robot.table.links.iter().zip(&truth.table.links) {
+        let db = (b.base_mm - a.base_mm) * 1e3;
+        let dp = (b.platform_mm - a.platform_mm) * 1e3;
+        errors.extend(db.iter());
+        errors.extend(dp.iter());
+    }
+    let mut offset_um = Vec::new();
+    let mut scale_ppm = Vec::new();
+    for (a, b) in robot.description.links.iter().zip(&truth.description.links) {
+        let ratio = b.mm_per_unit / a.mm_per_unit;
+        scale_ppm.push((ratio - 1.0) * 1e6);
+        offset_um.push((b.length_at_zero_mm - ratio * a.length_at_zero_mm) * 1e3);
+    }
+    Ok(TruthDiff {
+        installation_um: errors,
+        link_offset_um: offset_um,
+        link_scale_ppm: scale_ppm,
+    })
+}
+
+/// The difference between a robot and a truth description.
+#[derive(Debug, Clone)]
+pub struct TruthDiff {
+    /// Installation errors, um (model order).
+    pub installation_um: Vec<f64>,
+    /// `link_offset` per link, um.
+    pub link_offset_um: Vec<f64>,
+    /// `link_scale` per link, ppm.
+    pub link_scale_ppm: Vec<f64>,
+}
+
+impl TruthDiff {
+    /// True when the link reading models differ (offset or scale non-zero).
+    pub fn has_link_terms(&self) -> bool {
+        self.link_offset_um
+            .iter()
+            .chain(&self.link_scale_ppm)
+            .any(|v| v.abs() > 1e-9)
+    }
+}

@@ -1,0 +1,656 @@
+//! End-to-end tests of the `cpm` binary on the shipped examples: simulate -> calibrate ->
+//! compensate, identifiability, refine, export, and what bad input and bad usage give.
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use cpm::geometry::{InstallationErrors, Pose, RobotDescription};
+use cpm::io::Robot;
+
+fn example(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("examples")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+/// A fresh scratch directory for one test.
+fn scratch(name: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("cli-{name}"));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn cpm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cpm"))
+        .args(args)
+        .output()
+        .expect("run cpm")
+}
+
+fn ok(args: &[&str]) -> String {
+    let o = cpm(args);
+    assert!(
+        o.status.success(),
+        "cpm {args:?} failed ({:?}):\n{}{}",
+        o.status.code(),
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8(o.stdout).unwrap()
+}
+
+fn p(path: &Path) -> String {
+    path.display().to_string()
+}
+
+/// The hexapod example with the paper's Table 2 as its installation errors: the true machine.
+fn write_truth(dir: &Path) -> PathBuf {
+    let mut d = RobotDescription::load(example("hexapod_66.toml")).unwrap();
+    d.installation_errors_um = Some(
+        cpm::geometry::description::InstallationErrorsSpec::from_errors(
+            &InstallationErrors::paper_table2(),
+        ),
+    );
+    let path = dir.join("truth.toml");
+    std::fs::write(&path, d.to_toml_string().unwrap()).unwrap();
+    path
+}
+
+/// RMS position error (um) reached on `truth` when commanding `readings` for `targets`.
+fn reached_error_um(
+    nominal: &Robot,
+    truth: &Robot,
+    targets: &[Pose],
+    readings: &[Vec<f64>],
+) -> f64 {
+    let clearance = nominal.clearance();
+    let load = nominal.platform_load();
+    let mut sq = 0.0;
+    for (t, u) in targets.iter().zip(readings) {
+        let shift = clearance
+            .link_corrections_mm(&nominal.table, t, &load)
+            .unwrap();
+        let lengths: Vec<f64> = (0..6)
+            .map(|i| truth.length_mm(i, u[i]) + shift[i])
+            .collect();
+        let (reached, _) = cpm::kinematics::forward(
+            &truth.table,
+            &lengths,
+            t,
+            &cpm::kinematics::ForwardOptions::default(),
+        )
+        .unwrap();
+        let d = t.difference(&reached);
+        sq += (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * 1e6;
+    }
+    (sq / targets.len() as f64).sqrt()
+}
+
+/// The reading_k columns of a commands file.
+fn read_commands(text: &str) -> Vec<Vec<f64>> {
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let cols: Vec<usize> = (1..=6)
+        .map(|k| {
+            header
+                .iter()
+                .position(|h| *h == format!("reading_{k}"))
+                .unwrap()
+        })
+        .collect();
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            cols.iter().map(|&c| f[c].parse().unwrap()).collect()
+        })
+        .collect()
+}
+
+#[test]
+fn simulate_calibrate_compensate_reduces_the_pose_error() {
+    let d = scratch("round-trip");
+    let robot_path = example("hexapod_66.toml");
+    let truth_path = write_truth(&d);
+    let data = d.join("data.csv");
+    let cal = d.join("cal");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot_path,
+        "--random",
+        "60",
+        "--truth",
+        &p(&truth_path),
+        "--noise",
+        "gaussian:0.2",
+        "--seed",
+        "5",
+        "--effects",
+        "none",
+        "--out",
+        &p(&data),
+    ]);
+    let text = std::fs::read_to_string(&data).unwrap();
+    assert!(text.starts_with("# simulated by cpm"));
+    let out = ok(&[
+        "calibrate",
+        "--robot",
+        &robot_path,
+        "--data",
+        &p(&data),
+        "--effects",
+        "none",
+        "--out",
+        &p(&cal),
+        "--json",
+    ]);
+    let summary: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(summary["simulated"], true);
+    assert_eq!(summary["rank"], 36);
+    for f in [
+        "calibration.json",
+        "report.md",
+        "calibrated.toml",
+        "residuals_pose.svg",
+        "estimates.svg",
+    ] {
+        assert!(cal.join(f).exists(), "{f} missing");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cal.join("calibration.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["simulated"], true);
+    assert_eq!(
+        json["installation_errors_um"]["base"]
+            .as_array()
+            .unwrap()
+            .len(),
+        6
+    );
+    assert_eq!(json["std_um"]["platform"][5].as_array().unwrap().len(), 3);
+    assert!(json["residual_rms_um"].as_f64().unwrap() < 0.5);
+    let report = std::fs::read_to_string(cal.join("report.md")).unwrap();
+    assert!(report.contains("SIMULATED"));
+
+    // Targets away from the calibration poses.
+    let nominal = Robot::load(Path::new(&robot_path)).unwrap();
+    let truth = Robot::load(&truth_path).unwrap();
+    let targets = cpm::calib::paper::random_workspace_poses(&nominal.table, 20, 40.0, 8.0, 3.0, 99);
+    let targets_path = d.join("targets.csv");
+    std::fs::write(&targets_path, cpm::io::write_pose_list(&targets)).unwrap();
+    let commands = d.join("commands.csv");
+    ok(&[
+        "compensate",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+        "--poses",
+        &p(&targets_path),
+        "--out",
+        &p(&commands),
+    ]);
+    let calibrated = read_commands(&std::fs::read_to_string(&commands).unwrap());
+    assert_eq!(calibrated.len(), 20);
+    // The nominal commands, through the same command for comparison.
+    let nominal_commands = d.join("nominal.csv");
+    ok(&[
+        "compensate",
+        "--robot",
+        &robot_path,
+        "--poses",
+        &p(&targets_path),
+        "--out",
+        &p(&nominal_commands),
+    ]);
+    let nominal_readings = read_commands(&std::fs::read_to_string(&nominal_commands).unwrap());
+    let before = reached_error_um(&nominal, &truth, &targets, &nominal_readings);
+    let after = reached_error_um(&nominal, &truth, &targets, &calibrated);
+    assert!(before > 30.0, "the truth should be visible: {before} um");
+    assert!(
+        after < 0.1 * before,
+        "nominal {before:.2} um, calibrated {after:.2} um"
+    );
+
+    // Export of the calibrated joints.
+    let hal = ok(&[
+        "export",
+        "--format",
+        "linuxcnc",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+    ]);
+    let setp: Vec<&str> = hal.lines().filter(|l| l.starts_with("setp ")).collect();
+    assert_eq!(setp.len(), 36);
+    assert!(setp[0].starts_with("setp genhexkins.base.0.x "));
+    assert!(setp[35].starts_with("setp genhexkins.platform.5.z "));
+    let cal_robot = Robot::load(&cal.join("calibrated.toml")).unwrap();
+    let x: f64 = setp[0].rsplit(' ').next().unwrap().parse().unwrap();
+    assert!((x - cal_robot.table.links[0].base_mm.x).abs() < 1e-6);
+}
+
+#[test]
+fn paper_design_reports_what_it_cannot_determine() {
+    let d = scratch("paper");
+    let robot = example("paper_cubic.toml");
+    let data = d.join("paper.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--circle",
+        "--paper-table2",
+        "--noise",
+        "uniform:10",
+        "--seed",
+        "2002",
+        "--effects",
+        "none",
+        "--out",
+        &p(&data),
+    ]);
+    let out = ok(&[
+        "identifiability",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "none",
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let rank = v["rank"].as_u64().unwrap();
+    assert!(rank < 36, "rank {rank}");
+    assert!(!v["blind_directions"].as_array().unwrap().is_empty());
+    assert_eq!(v["simulated"], true);
+    // The plan alone gives the same rank.
+    let out = ok(&[
+        "identifiability",
+        "--robot",
+        &robot,
+        "--circle",
+        "--effects",
+        "none",
+        "--json",
+    ]);
+    let w: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(w["rank"], v["rank"]);
+    let text = ok(&[
+        "identifiability",
+        "--robot",
+        &robot,
+        "--circle",
+        "--effects",
+        "none",
+    ]);
+    assert!(text.contains("blind directions") && text.contains("link 1 base dx"));
+
+    let cal = d.join("cal");
+    ok(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "none",
+        "--out",
+        &p(&cal),
+    ]);
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cal.join("calibration.json")).unwrap())
+            .unwrap();
+    assert!(json["installation_errors_um"]["base"][0][0].is_null());
+    assert!(json["std_um"]["base"][0][0].is_null());
+    assert!(!json["not_determined"].as_array().unwrap().is_empty());
+    let toml = std::fs::read_to_string(cal.join("calibrated.toml")).unwrap();
+    assert!(toml.contains("# Not determined by the data, left at nominal"));
+    assert!(toml.contains("SIMULATED"));
+    // Undetermined components stay at nominal.
+    let c = Robot::load(&cal.join("calibrated.toml")).unwrap();
+    let n = Robot::load(Path::new(&robot)).unwrap();
+    assert_eq!(c.table.links[0].base_mm.x, n.table.links[0].base_mm.x);
+}
+
+#[test]
+fn refine_finds_backlash() {
+    let d = scratch("refine");
+    let robot = example("hexapod_66.toml");
+    let truth = write_truth(&d);
+    let data = d.join("data.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "40",
+        "--truth",
+        &p(&truth),
+        "--truth-effect",
+        "backlash=20,-15,25,10,-20,15",
+        "--noise",
+        "gaussian:0.5",
+        "--seed",
+        "3",
+        "--out",
+        &p(&data),
+    ]);
+    let out_dir = d.join("refined");
+    let out = ok(&[
+        "refine",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "none",
+        "--candidates",
+        "sensor_offset,link_offset,backlash",
+        "--sigma-um",
+        "0.5",
+        "--out",
+        &p(&out_dir),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["steps"][0]["effect"], "backlash", "{v:#}");
+    let step = &v["steps"][0];
+    for k in [
+        "p_value",
+        "delta_bic",
+        "rms_before_um",
+        "rms_after_um",
+        "cv_rms_before_um",
+        "cv_rms_after_um",
+    ] {
+        assert!(step[k].is_number(), "{k}");
+    }
+    assert!(step["rms_after_um"].as_f64().unwrap() < step["rms_before_um"].as_f64().unwrap());
+    for k in [
+        "rms_um",
+        "cv_rms_um",
+        "residual_white",
+        "unexplained_structure",
+    ] {
+        assert!(!v["final"][k].is_null(), "{k}");
+    }
+    let value = step["parameters"][2]["value"].as_f64().unwrap();
+    assert!((value - 25.0).abs() < 2.0, "backlash of link 3: {value}");
+    for f in [
+        "refine.json",
+        "report.md",
+        "calibrated.toml",
+        "calibration.json",
+        "residuals_before_after.svg",
+    ] {
+        assert!(out_dir.join(f).exists(), "{f}");
+    }
+    let toml = std::fs::read_to_string(out_dir.join("calibrated.toml")).unwrap();
+    assert!(toml.contains("effects = [\"backlash\"]"), "{toml}");
+    assert!(toml.contains("Effect values a description cannot hold"));
+}
+
+#[test]
+fn design_writes_a_plan_that_identifies_everything() {
+    let d = scratch("design");
+    let robot = example("hexapod_66.toml");
+    let out = d.join("design");
+    let text = ok(&[
+        "design",
+        "--robot",
+        &robot,
+        "--readings",
+        "360",
+        "--candidates",
+        "150",
+        "--out",
+        &p(&out),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["rank"], 36);
+    assert_eq!(v["readings"], 360);
+    for f in [
+        "poses.csv",
+        "sockets.csv",
+        "robot.toml",
+        "design.json",
+        "report.md",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    let text = ok(&[
+        "identifiability",
+        "--robot",
+        &p(&out.join("robot.toml")),
+        "--plan",
+        &p(&out.join("poses.csv")),
+        "--json",
+    ]);
+    let w: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(w["rank"], 36);
+    assert_eq!(w["observations"], 360);
+    // Too few socket places in the description: a clear error, nothing written.
+    let o = cpm(&[
+        "design",
+        "--robot",
+        &example("paper_cubic.toml"),
+        "--out",
+        &p(&d.join("none")),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--sockets FILE"));
+    assert!(!d.join("none").exists());
+}
+
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn bad_files_give_exit_3_a_located_message_and_no_output() {
+    let d = scratch("bad");
+    let robot = example("paper_cubic.toml");
+    let out_dir = d.join("out");
+    std::fs::create_dir_all(&out_dir).unwrap();
+    std::fs::write(out_dir.join("keep.txt"), "x").unwrap();
+    let header = "pose,sensor,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,length_mm";
+    let row = "1,paper,0,0,410,0,0,0,309.9";
+    let cases = [
+        (
+            "missing.csv",
+            format!(
+                "pose,sensor,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n{}\n",
+                "1,paper,0,0,410,0,0,0"
+            ),
+            1,
+            "field length_mm: missing column",
+        ),
+        (
+            "nan.csv",
+            format!("{header}\n{row}\n2,paper,0,0,410,0,0,0,NaN\n"),
+            3,
+            "field length_mm: \"NaN\" is not a finite number",
+        ),
+        (
+            "sensor.csv",
+            format!("{header}\n1,ballbar,0,0,410,0,0,0,309.9\n"),
+            2,
+            "field sensor: unknown sensor \"ballbar\"",
+        ),
+        (
+            "unreachable.csv",
+            format!("{header}\n{row}\n2,paper,0,0,0.41,0,0,0,309.9\n"),
+            3,
+            "pose \"2\"",
+        ),
+        (
+            "metres.csv",
+            format!("{header}\n1,paper,0,0,410,0,0,0,0.3099\n"),
+            2,
+            "field length_mm: 0.3099 mm is far from the nominal length",
+        ),
+        (
+            "extra.csv",
+            format!("{header},operator\n{row},me\n"),
+            1,
+            "field operator: unknown column",
+        ),
+    ];
+    for (name, text, line, what) in cases {
+        let f = d.join(name);
+        std::fs::write(&f, text).unwrap();
+        let o = cpm(&[
+            "calibrate",
+            "--robot",
+            &robot,
+            "--data",
+            &p(&f),
+            "--out",
+            &p(&out_dir),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(3), "{name}: {err}");
+        let want = format!("error: {}:{line}: {what}", p(&f));
+        assert!(err.starts_with(&want), "\n got: {err}\nwant: {want}");
+        assert_eq!(
+            listing(&out_dir),
+            vec!["keep.txt".to_string()],
+            "{name} left output"
+        );
+    }
+    // A bad robot description.
+    let bad_robot = d.join("robot.toml");
+    std::fs::write(
+        &bad_robot,
+        std::fs::read_to_string(&robot)
+            .unwrap()
+            .replace("radius_um = 10.0", "radius_um = -1.0"),
+    )
+    .unwrap();
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &p(&bad_robot),
+        "--data",
+        &p(&d.join("nan.csv")),
+        "--out",
+        &p(&out_dir),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let located = err
+        .strip_prefix(&format!("error: {}:", p(&bad_robot)))
+        .and_then(|rest| rest.split_once(": field clearance.radius_um: must be finite and >= 0"))
+        .is_some_and(|(line, _)| line.parse::<usize>().is_ok());
+    assert!(located, "{err}");
+    // A missing file is an I/O error.
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&d.join("none.csv")),
+        "--out",
+        &p(&out_dir),
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(4),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    // Bad targets for compensate: nothing written.
+    let targets = d.join("targets.csv");
+    std::fs::write(
+        &targets,
+        "x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n0,0,410,0,0,0\n0,0,0.41,0,0,0\n",
+    )
+    .unwrap();
+    let o = cpm(&[
+        "compensate",
+        "--robot",
+        &robot,
+        "--poses",
+        &p(&targets),
+        "--out",
+        &p(&out_dir.join("c.csv")),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    assert!(String::from_utf8_lossy(&o.stderr)
+        .starts_with(&format!("error: {}:3: pose \"2\"", p(&targets))));
+    assert_eq!(listing(&out_dir), vec!["keep.txt".to_string()]);
+}
+
+#[test]
+fn usage_errors_exit_2_and_help_exits_0() {
+    let robot = example("hexapod_66.toml");
+    let d = scratch("usage");
+    let out = p(&d.join("x.csv"));
+    for args in [
+        vec!["simulate", "--robot", &robot, "--out", &out],
+        vec![
+            "simulate", "--robot", &robot, "--circle", "--random", "3", "--out", &out,
+        ],
+        vec![
+            "simulate",
+            "--robot",
+            &robot,
+            "--random",
+            "3",
+            "--effects",
+            "nosuch",
+            "--out",
+            &out,
+        ],
+        vec![
+            "simulate", "--robot", &robot, "--random", "3", "--noise", "pink:3", "--out", &out,
+        ],
+        vec![
+            "simulate",
+            "--robot",
+            &robot,
+            "--random",
+            "3",
+            "--sensors",
+            "s9",
+            "--out",
+            &out,
+        ],
+        vec!["calibrate", "--robot", &robot],
+        vec!["identifiability", "--robot", &robot],
+        vec!["export", "--format", "fanuc", "--robot", &robot],
+        vec!["frobnicate"],
+        vec![],
+    ] {
+        let o = cpm(&args);
+        assert_eq!(
+            o.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    }
+    assert!(!d.join("x.csv").exists());
+    for cmd in [
+        "simulate",
+        "identifiability",
+        "calibrate",
+        "compensate",
+        "export",
+        "refine",
+    ] {
+        let o = cpm(&[cmd, "--help"]);
+        assert_eq!(o.status.code(), Some(0));
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("Examples:"),
+            "{cmd}"
+        );
+    }
+}
