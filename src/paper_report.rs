@@ -219,7 +219,7 @@ pub fn report_md(r: &PaperReproduction) -> String {
     s.push_str("# Reproduction of Lim et al. (2002): installation error calibration of a cubic parallel manipulator\n\n");
     s.push_str("**All data in this report are simulated** (truth: the paper's Table 2; clearance 10 um per joint from the link force directions; sensor noise ");
     s.push_str(&format!(
-        "{:?}, seed {}). Produced by `cargo xtask reproduce-paper`.\n\n",
+        "{}, seed {}). Produced by `cargo xtask reproduce-paper`.\n\n",
         r.options.noise, r.options.seed
     ));
     s.push_str("## 1. The paper's design: one sensor, a circle at constant orientation\n\n");

@@ -26,6 +26,16 @@ pub enum Noise {
     },
 }
 
+impl std::fmt::Display for Noise {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Noise::None => write!(f, "none"),
+            Noise::Uniform { half_width_um } => write!(f, "uniform +-{half_width_um} um"),
+            Noise::Gaussian { sigma_um } => write!(f, "Gaussian, sigma {sigma_um} um"),
+        }
+    }
+}
+
 impl Noise {
     /// Standard deviation of one draw, um.
     pub fn sigma_um(&self) -> f64 {
