@@ -5,7 +5,7 @@ use std::time::Instant;
 
 fn usage() -> ExitCode {
     eprintln!(
-        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N]   run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--seed N]    implicit-loop calibration of a simulated N-pose campaign (16 socket pairs); one JSON line"
+        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N]   run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--seed N]    implicit-loop calibration of a simulated N-pose campaign (16 socket pairs); one JSON line\n  scale --sweep [--nested-max N]           10^3, 10^4, 10^5 poses side by side (nested too up to N, default 10^5)"
     );
     ExitCode::from(2)
 }
@@ -18,7 +18,45 @@ fn peak_rss_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+fn sweep(args: &[String]) -> ExitCode {
+    // Each size in its own process so that peak memory is per size.
+    let exe = match std::env::current_exe() {
+        Ok(e) => e,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let nested_max: usize = args
+        .windows(2)
+        .find(|w| w[0] == "--nested-max")
+        .and_then(|w| w[1].parse().ok())
+        .unwrap_or(100_000);
+    for n in [1_000usize, 10_000, 100_000] {
+        let mut cmd = std::process::Command::new(&exe);
+        cmd.args(["scale", "--poses", &n.to_string()]);
+        if n <= nested_max {
+            cmd.arg("--nested");
+        }
+        match cmd.status() {
+            Ok(s) if s.success() => {}
+            Ok(s) => {
+                eprintln!("error: scale --poses {n} exited with {s}");
+                return ExitCode::FAILURE;
+            }
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    }
+    ExitCode::SUCCESS
+}
+
 fn scale(args: &[String]) -> ExitCode {
+    if args.first().map(String::as_str) == Some("--sweep") {
+        return sweep(&args[1..]);
+    }
     use cpm::calib::implicit::{identify_implicit, ImplicitOptions};
     use cpm::calib::paper::{designed_sensors, random_workspace_poses};
     use cpm::calib::*;
