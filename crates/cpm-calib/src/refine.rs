@@ -35,7 +35,8 @@ pub struct RefineOptions {
     /// Folds of the cross-validation over poses. Default 5.
     pub folds: usize,
     /// Smallest fraction of a candidate's Jacobian outside the current model's column space for
-    /// it to be tried. Default 0.05.
+    /// it to be tried. Default 0.02 (link offsets are typically ~0.01 against installation
+    /// errors: a joint moved along its link is an offset but for the link's change of direction).
     pub min_novelty: f64,
     /// Identification options (declared noise in `sigma_um`).
     pub identify: IdentifyOptions,
@@ -48,7 +49,7 @@ impl Default for RefineOptions {
             alpha: 0.01,
             max_steps: 4,
             folds: 5,
-            min_novelty: 0.05,
+            min_novelty: 0.02,
             identify: IdentifyOptions::default(),
         }
     }
