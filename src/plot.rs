@@ -52,7 +52,7 @@ pub fn grouped_bars(
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(60)
-            .build_cartesian_2d(0f64..n as f64, 0f64..ymax)
+            .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), 0f64..ymax)
             .map_err(|e| err(title, e))?;
         let cats = categories.to_vec();
         chart
@@ -60,8 +60,8 @@ pub fn grouped_bars(
             .disable_x_mesh()
             .x_labels(n)
             .x_label_formatter(&|x| {
-                let i = (x - 0.5).round();
-                if (x - 0.5 - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < cats.len() {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < cats.len() {
                     cats[i as usize].clone()
                 } else {
                     String::new()
@@ -76,7 +76,7 @@ pub fn grouped_bars(
             chart
                 .draw_series(vals.iter().enumerate().filter(|(_, v)| v.is_finite()).map(
                     |(i, v)| {
-                        let x0 = i as f64 + 0.1 + w * si as f64;
+                        let x0 = i as f64 - 0.4 + w * si as f64;
                         Rectangle::new([(x0, 0.0), (x0 + w * 0.9, *v)], c.filled())
                     },
                 ))
@@ -129,6 +129,7 @@ pub fn spectrum(
             .configure_mesh()
             .x_desc("index")
             .y_desc("singular value")
+            .y_label_formatter(&|y| format!("{y:.0e}"))
             .draw()
             .map_err(|e| err(title, e))?;
         for (si, (name, vals)) in series.iter().enumerate() {
