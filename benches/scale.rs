@@ -1,0 +1,41 @@
+//! End-to-end benchmark of the two calibration formulations on simulated campaigns of the
+//! paper's cube with 16 socket pairs: nested (forward kinematics in every residual, dense QR)
+//! against implicit-loop (pose unknowns, Schur complement). `cargo xtask scale --sweep` runs
+//! the same comparison up to 10^5 poses with peak memory.
+use std::hint::black_box;
+
+use cpm::calib::implicit::{identify_implicit, ImplicitOptions};
+use cpm::calib::paper::{designed_sensors, random_workspace_poses};
+use cpm::calib::*;
+use cpm::geometry::{InstallationErrors, JointTable};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+
+fn campaign(poses: usize) -> (MeasurementModel, Campaign) {
+    let mut model = MeasurementModel::new(JointTable::paper_cubic());
+    model.nominal.sensors = designed_sensors();
+    let plan = Plan {
+        poses: random_workspace_poses(&model.nominal, poses, 100.0, 25.0, 3.0, 1),
+        sensors: (0..16).collect(),
+    };
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let data = simulate(&model, &truth, &plan, &SimulationOptions::default()).expect("simulate");
+    (model, data)
+}
+
+fn formulations(c: &mut Criterion) {
+    let mut group = c.benchmark_group("calibration");
+    group.sample_size(10);
+    for poses in [100usize, 1000] {
+        let (model, data) = campaign(poses);
+        group.bench_with_input(BenchmarkId::new("nested_dense", poses), &poses, |b, _| {
+            b.iter(|| identify(&model, black_box(&data), &IdentifyOptions::default()))
+        });
+        group.bench_with_input(BenchmarkId::new("implicit_schur", poses), &poses, |b, _| {
+            b.iter(|| identify_implicit(&model, black_box(&data), &ImplicitOptions::default()))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, formulations);
+criterion_main!(benches);
