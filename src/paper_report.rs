@@ -251,7 +251,15 @@ pub fn report_md(r: &PaperReproduction) -> String {
     );
     s.push_str("\n\n### Why the rank is so low (blind directions in physical terms)\n\n");
     s.push_str(&p.identifiability.summary().replace("\n  - ", "\n- "));
-    s.push_str("\nWith the orientation constant, a link's base and platform errors enter the link length only through `R dp_i - db_i`, so moving both joints of a link by the same vector changes nothing (3 dimensions per link, 18 in all). One length sensor cannot see the whole mechanism rotating about its base socket, nor the platform joint pattern rotating about its platform socket. What remains is probed by a single scalar per pose along a planar circle, which sees only a few smooth functions of the pose.\n\n");
+    let per_link: usize = p
+        .identifiability
+        .blind_directions
+        .iter()
+        .filter(|b| b.description.contains("moved together by the same vector"))
+        .map(|b| b.dimensions)
+        .sum();
+    s.push_str(&format!("\nWith the orientation constant, a link's base and platform errors enter the link length only through `R dp_i - db_i`, so moving both joints of a link by the same vector changes nothing ({per_link} blind dimensions found of this kind above)."));
+    s.push_str(" One length sensor cannot see the whole mechanism rotating about its base socket, nor the platform joint pattern rotating about its platform socket. What remains is probed by a single scalar per pose along a planar circle, which sees only a few smooth functions of the pose.\n\n");
     s.push_str("Identifiable combinations (estimate +- Cramér-Rao standard deviation):\n\n| # | singular value | estimate (um) | std (um) | largest loadings |\n|---|---|---|---|---|\n");
     for (i, c) in p.combinations.iter().enumerate() {
         s.push_str(&format!(
