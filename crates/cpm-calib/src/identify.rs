@@ -182,6 +182,29 @@ pub fn identifiability(
     ))
 }
 
+impl Calibration {
+    /// The parameters to compensate with: the start plus only those identifiable
+    /// combinations whose Cramér-Rao standard deviation is at most `max_std_um`.
+    ///
+    /// The minimum-norm solution also applies combinations the data barely see (a standard
+    /// deviation of a millimetre is common on weak designs); compensating with those makes the
+    /// machine worse, so a controller should take this truncated solution. Combinations left
+    /// out stay at the start value, like the blind directions.
+    pub fn compensation_um(&self, start_um: &[f64], max_std_um: f64) -> Vec<f64> {
+        let e = DVector::from_column_slice(&self.minimum_norm_um);
+        let s = DVector::from_column_slice(start_um);
+        let d = &e - &s;
+        let mut out = s;
+        for (c, std) in self.identifiability.combination_std_um.iter().enumerate() {
+            if *std <= max_std_um {
+                let v = self.identifiability.v.column(c);
+                out += v * v.dot(&d);
+            }
+        }
+        out.iter().copied().collect()
+    }
+}
+
 /// Identifies the installation errors from a campaign.
 pub fn identify(
     model: &MeasurementModel,

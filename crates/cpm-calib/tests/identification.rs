@@ -270,3 +270,28 @@ fn a_spike_is_flagged_and_a_robust_loss_contains_it() {
     assert!(err(&plain) > 20.0, "plain fit rms error {}", err(&plain));
     assert!(err(&robust) < 2.0, "robust fit rms error {}", err(&robust));
 }
+
+#[test]
+fn compensating_with_well_determined_combinations_helps_even_on_the_paper_design() {
+    let model = MeasurementModel::new(JointTable::paper_cubic());
+    let plan = paper_plan(&model);
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let data = simulate(&model, &truth, &plan, &SimulationOptions::default()).unwrap();
+    let cal = identify(&model, &data, &IdentifyOptions::default()).unwrap();
+    let targets = cpm_calib::paper::random_poses(&model.nominal.home, 50, 60.0, 8.0, 3);
+    let comp = cal.compensation_um(&[0.0; 36], 10.0);
+    // Only combinations with a small bound are applied: the result lies in their span.
+    let weak: Vec<usize> = (0..cal.identifiability.rank)
+        .filter(|&c| cal.identifiability.combination_std_um[c] > 10.0)
+        .collect();
+    assert!(!weak.is_empty());
+    for c in weak {
+        let v = cal.identifiability.v.column(c);
+        assert!(v.dot(&nalgebra::DVector::from_column_slice(&comp)).abs() < 1e-9);
+    }
+    let acc = accuracy(&model, &truth, &comp, &targets).unwrap();
+    assert!(
+        acc.calibrated.rms_position_um < 0.5 * acc.nominal.rms_position_um,
+        "{acc:?}"
+    );
+}
