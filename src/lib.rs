@@ -7,6 +7,7 @@ pub use cpm_kinematics as kinematics;
 pub use cpm_lm as lm;
 
 pub mod cli;
+pub mod fuzzing;
 pub mod io;
 pub mod output;
 pub mod paper_report;

@@ -40,6 +40,16 @@ pub struct CalibrateArgs {
     /// rather than only the components the data determine on their own.
     #[arg(long)]
     pub minimum_norm: bool,
+    /// Robust loss against outlier readings: huber:K, cauchy:K or tukey:K with K in um of
+    /// reading (where the loss departs from the square; e.g. 3 x the noise), or none (least
+    /// squares, the default). Readings more than 5 robust standard deviations off are
+    /// flagged in report.md and calibration.json either way.
+    #[arg(long, value_name = "LOSS:K")]
+    pub robust: Option<String>,
+    /// Most iterations of the least-squares solver (default 1000); a fit stopped by it has
+    /// not converged (exit code 1, the outputs say so).
+    #[arg(long, value_name = "N")]
+    pub max_iterations: Option<usize>,
     /// Output directory (created; existing files of the same names are replaced).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -78,8 +88,6 @@ pub fn load_inputs(
     let effects = effects.resolve(&robot)?;
     let model = robot.model(&effects);
     let sigma = common::sigma(sigma_um, &robot)?;
-    ctx.stage("reading the measurements");
-    let mut merged = common::load_data(data, &robot, &common::read_options(&effects))?;
     for (v, name) in [
         (pose_sigma_um, "--pose-sigma-um"),
         (orientation_sigma_urad, "--orientation-sigma-urad"),
@@ -90,6 +98,8 @@ pub fn load_inputs(
             }
         }
     }
+    ctx.stage("reading the measurements");
+    let mut merged = common::load_data(data, &robot, &common::read_options(&effects))?;
     if let Some(v) = pose_sigma_um {
         merged.campaign.pose_sigma_um = v;
     }
@@ -140,6 +150,7 @@ pub fn fit_report(
     model: &MeasurementModel,
     campaign: &Campaign,
     cal: &Calibration,
+    loss: &cpm_lm::Loss,
 ) {
     let names = model.parameter_names();
     s.push_str(&format!(
@@ -161,6 +172,7 @@ pub fn fit_report(
         }
     ));
     s.push_str(&format!("- Model: {}.\n", common::describe_model(model)));
+    s.push_str(&format!("- Loss: {}.\n", common::describe_loss(loss)));
     s.push_str(&format!(
         "- Residual RMS {:.3} um (at the start {:.3} um); noise {} {:.3} um.\n",
         cal.residual_rms_um,
@@ -284,6 +296,12 @@ pub fn stage_calibrated(
     };
     let (desc, notes) = io::calibrated_description(&inputs.robot, model, &params, declare);
     let mut header = provenance_lines(&inputs.provenance, cal.simulated, command);
+    if !cal.solver.was_successful() {
+        header.push(format!(
+            "WARNING: the solver did not converge ({}): these joints are where it stopped, not a calibration.",
+            cal.solver.termination
+        ));
+    }
     if minimum_norm {
         header.push("Minimum-norm solution: components the data do not determine on their own are set from the identifiable combinations, blind directions at nominal.".into());
     }
@@ -298,31 +316,220 @@ pub fn stage_calibrated(
     Ok(notes)
 }
 
-/// Runs `cpm calibrate`.
-pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
-    common::check_out_dir(&args.out)?;
-    let inputs = load_inputs(
-        &args.robot.robot,
-        &args.data,
-        &args.effects,
-        args.sigma_um,
-        args.pose_sigma_um,
-        args.orientation_sigma_urad,
-        ctx,
-    )?;
+/// Sets the solver options of `--robust` and `--max-iterations` (usage errors when bad).
+pub fn solver_options(
+    identify: &mut IdentifyOptions,
+    robust: Option<&str>,
+    max_iterations: Option<usize>,
+) -> anyhow::Result<()> {
+    if let Some(spec) = robust {
+        identify.lm.loss =
+            common::parse_loss(spec).map_err(|m| super::usage_error(format!("--robust {m}")))?;
+    }
+    if let Some(n) = max_iterations {
+        if n == 0 {
+            return Err(super::usage_error("--max-iterations must be >= 1"));
+        }
+        identify.lm.max_iterations = n;
+        identify.lm.max_evaluations = identify.lm.max_evaluations.max(n.saturating_add(1));
+    }
+    Ok(())
+}
+
+/// With a robust loss and the noise estimated from the residual, re-estimates the noise
+/// without the flagged outliers (which a robust fit does not follow, so their residuals would
+/// inflate it) and scales every standard deviation to it (they are proportional to the noise).
+/// Returns true when it did.
+pub fn robust_noise(cal: &mut Calibration, loss: &cpm_lm::Loss) -> bool {
+    if loss.is_squared() || !cal.sigma_estimated || cal.outliers.is_empty() {
+        return false;
+    }
+    let inliers: Vec<f64> = cal
+        .residuals_um
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !cal.outliers.contains(k))
+        .map(|(_, r)| *r)
+        .collect();
+    let dof = inliers
+        .len()
+        .saturating_sub(cal.identifiability.rank)
+        .max(1);
+    let sigma = (inliers.iter().map(|r| r * r).sum::<f64>() / dof as f64).sqrt();
+    if !(sigma.is_finite() && sigma > 0.0 && cal.sigma_um > 0.0) {
+        return false;
+    }
+    let f = sigma / cal.sigma_um;
+    let scale = |v: &mut Option<f64>| {
+        if let Some(x) = v {
+            *x *= f;
+        }
+    };
+    cal.std_um.iter_mut().for_each(scale);
+    cal.identifiability.crlb_std_um.iter_mut().for_each(scale);
+    cal.identifiability
+        .combination_std_um
+        .iter_mut()
+        .for_each(|x| *x *= f);
+    cal.combinations.iter_mut().for_each(|c| c.std_um *= f);
+    cal.identifiability.sigma_um = sigma;
+    cal.sigma_um = sigma;
+    true
+}
+
+/// What the data did not determine, and how the fit ended, in a few lines for the top of a
+/// report (empty when all is well).
+pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
+    let mut w = Vec::new();
+    if !cal.solver.was_successful() {
+        w.push(format!(
+            "**The solver did not converge** ({}): the estimates are where it stopped; treat them with suspicion.",
+            cal.solver.termination
+        ));
+    }
+    let id = &cal.identifiability;
+    if id.rank < id.num_params {
+        w.push(format!(
+            "**Rank-deficient fit**: the data determine {} of {} parameters on their own (rank {} of {}); the others have no estimate (`n.d.`, see \"What the data identify\").",
+            id.num_determined(),
+            model.num_params(),
+            id.rank,
+            id.num_params
+        ));
+    }
+    if cal.sigma_estimated && cal.residuals_um.len() <= id.rank {
+        w.push(format!(
+            "**The noise cannot be estimated**: {} observations for {} identifiable combinations leave no residual degrees of freedom; the standard deviations are meaningless. Give the noise with `--sigma-um`.",
+            cal.residuals_um.len(),
+            id.rank
+        ));
+    }
+    if !cal.outliers.is_empty() {
+        w.push(format!(
+            "**{} outlier observation{}** (more than 5 robust standard deviations off): listed under \"Outliers\".",
+            cal.outliers.len(),
+            if cal.outliers.len() == 1 { "" } else { "s" }
+        ));
+    }
+    w
+}
+
+/// Where observation `k` of a merged campaign came from and what it is.
+pub struct ObservationOrigin {
+    /// The file.
+    pub file: String,
+    /// Its line.
+    pub line: usize,
+    /// What was observed: `sensor s1 at pose "3"`, `tracker x of pose "7"`.
+    pub what: String,
+}
+
+/// The origin of observation `k` (readings first, then 6 per pose measurement).
+pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<ObservationOrigin> {
+    let c = &merged.campaign;
+    let m = c.readings.len();
+    if k < m {
+        let r = &c.readings[k];
+        let (file, line) = merged.reading_origin.get(k)?.clone();
+        let label = merged.pose_origin.get(r.pose).map_or("?", |o| o.2.as_str());
+        let sensor = robot
+            .table
+            .sensors
+            .get(r.sensor)
+            .map_or("?", |s| s.name.as_str());
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!("sensor {sensor} at pose {label:?}"),
+        })
+    } else {
+        let pm = c.pose_measurements.get((k - m) / 6)?;
+        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
+        let comp = ["x", "y", "z", "rotation x", "rotation y", "rotation z"][(k - m) % 6];
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!("tracker {comp} of pose {label:?}"),
+        })
+    }
+}
+
+/// The `outliers` array of `calibration.json`: per flagged observation its file, line, what
+/// it is and its residual.
+pub fn outliers_json(robot: &Robot, merged: &Merged, cal: &Calibration) -> serde_json::Value {
+    serde_json::Value::Array(
+        cal.outliers
+            .iter()
+            .map(|&k| {
+                let o = observation_origin(robot, merged, k);
+                json!({
+                    "observation": k + 1,
+                    "file": o.as_ref().map(|o| o.file.clone()),
+                    "line": o.as_ref().map(|o| o.line),
+                    "what": o.as_ref().map(|o| o.what.clone()),
+                    "residual_um": cal.residuals_um.get(k).copied().filter(|v| v.is_finite()),
+                })
+            })
+            .collect(),
+    )
+}
+
+/// The report's outlier section (nothing when none were flagged).
+pub fn outliers_report(s: &mut String, robot: &Robot, merged: &Merged, cal: &Calibration) {
+    if cal.outliers.is_empty() {
+        return;
+    }
+    s.push_str("## Outliers
+
+Observations whose residual is more than 5 robust standard deviations (1.4826 x MAD) from the median. With `--robust` their influence on the fit is limited; without it they pull on every estimate. Check the instrument log at these lines.
+
+| file:line | observation | residual (um) |
+|---|---|---|
+");
+    for &k in &cal.outliers {
+        let r = cal.residuals_um.get(k).copied().unwrap_or(f64::NAN);
+        match observation_origin(robot, merged, k) {
+            Some(o) => s.push_str(&format!(
+                "| {}:{} | {} | {r:.3} |
+",
+                o.file, o.line, o.what
+            )),
+            None => s.push_str(&format!(
+                "| ? | observation {} | {r:.3} |
+",
+                k + 1
+            )),
+        }
+    }
+    s.push('\n');
+}
+
+/// A fit and its staged outputs (not yet written).
+pub struct Fitted {
+    /// The calibration.
+    pub cal: Calibration,
+    /// `calibration.json`, `report.md`, the figures and `calibrated.toml`, staged in `dir`.
+    pub set: OutputSet,
+    /// The contents of `calibration.json`.
+    pub value: serde_json::Value,
+}
+
+/// Fits the inputs and stages every output of `cpm calibrate` in memory, for `dir`: nothing
+/// is written (commit the set). Errors name the file and line of the pose they are about.
+pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fitted> {
     let campaign = &inputs.merged.campaign;
     let model = &inputs.model;
-    ctx.stage(format!(
-        "fitting {} to {} observations",
-        common::describe_model(model),
-        campaign.len()
-    ));
-    let cal = identify(model, campaign, &inputs.identify)
+    let mut cal = identify(model, campaign, &inputs.identify)
         .map_err(|e| common::locate(e, &inputs.merged))?;
-    ctx.stage("writing the results");
-    let dir = &args.out;
+    let robust_sigma = robust_noise(&mut cal, &inputs.identify.lm.loss);
     let mut set = OutputSet::new();
-    let value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
+    let mut value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
+    value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
+    value["outliers"] = outliers_json(&inputs.robot, &inputs.merged, &cal);
+    value["warnings"] = json!(warnings(model, &cal)
+        .iter()
+        .map(|w| w.replace("**", ""))
+        .collect::<Vec<_>>());
     set.add(
         dir.join("calibration.json"),
         serde_json::to_string_pretty(&value)?,
@@ -331,10 +538,10 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let notes = stage_calibrated(
         &mut set,
         dir,
-        &inputs,
+        inputs,
         model,
         &cal,
-        args.minimum_norm,
+        minimum_norm,
         None,
         "Calibrated",
     )?;
@@ -347,19 +554,75 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         r.push_str(&format!("{l}\n"));
     }
     r.push('\n');
-    fit_report(&mut r, &inputs.robot, model, campaign, &cal);
+    for w in warnings(model, &cal) {
+        r.push_str(&format!("- {w}\n"));
+    }
+    if robust_sigma {
+        r.push_str("- The noise was estimated from the residuals without the flagged outliers (robust fit); the standard deviations use it.\n");
+    }
+    r.push('\n');
+    fit_report(
+        &mut r,
+        &inputs.robot,
+        model,
+        campaign,
+        &cal,
+        &inputs.identify.lm.loss,
+    );
+    outliers_report(&mut r, &inputs.robot, &inputs.merged, &cal);
     r.push_str("## Outputs\n\n- `calibration.json`: estimates, standard deviations, what is not determined, residual, solver report.\n");
     r.push_str(&format!(
         "- `calibrated.toml`: the robot description with the {} ({} installation-error components left at nominal); `link_offset`/`link_scale` folded into the link reading models.\n",
-        if args.minimum_norm { "minimum-norm solution" } else { "determined installation errors" },
+        if minimum_norm { "minimum-norm solution" } else { "determined installation errors" },
         notes.undetermined.len()
     ));
     for f in &figures {
         r.push_str(&format!("- `{f}`\n"));
     }
     set.add(dir.join("report.md"), r);
+    Ok(Fitted { cal, set, value })
+}
+
+/// Runs `cpm calibrate`.
+pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    common::check_out_dir(&args.out)?;
+    // Bad options are usage errors before any file is read.
+    solver_options(
+        &mut IdentifyOptions::default(),
+        args.robust.as_deref(),
+        args.max_iterations,
+    )?;
+    let mut inputs = load_inputs(
+        &args.robot.robot,
+        &args.data,
+        &args.effects,
+        args.sigma_um,
+        args.pose_sigma_um,
+        args.orientation_sigma_urad,
+        ctx,
+    )?;
+    solver_options(
+        &mut inputs.identify,
+        args.robust.as_deref(),
+        args.max_iterations,
+    )?;
+    let model = &inputs.model;
+    ctx.stage(format!(
+        "fitting {} to {} observations",
+        common::describe_model(model),
+        inputs.merged.campaign.len()
+    ));
+    let Fitted { cal, set, value } = fit(&inputs, &args.out, args.minimum_norm)?;
+    ctx.stage("writing the results");
+    let dir = &args.out;
     let written = common::commit(set, &dir.display().to_string())?;
     ctx.finish();
+    for w in warnings(model, &cal)
+        .iter()
+        .skip(usize::from(!cal.solver.was_successful()))
+    {
+        ctx.note(w.replace("**", ""));
+    }
     if args.json {
         let v = json!({
             "simulated": cal.simulated,
@@ -371,6 +634,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             "residual_rms_um": cal.residual_rms_um,
             "converged": cal.solver.was_successful(),
             "not_determined": value["not_determined"],
+            "outliers": value["outliers"],
         });
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else {

@@ -147,10 +147,19 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
     };
     let table = &robot.table;
     let ratio = ReadOptions::default().max_condition_ratio;
+    for (n, name) in [
+        (args.random.unwrap_or(0), "--random"),
+        (if args.circle { args.count } else { 0 }, "--count"),
+    ] {
+        if n > MAX_PLAN_POSES {
+            return Err(usage_error(format!(
+                "{name} {n}: at most {MAX_PLAN_POSES} poses"
+            )));
+        }
+    }
     if let Some(path) = &args.plan {
-        let text = io::read_text(path)?;
         let file = path.display().to_string();
-        let rows = io::read_pose_list(&text, &file)?;
+        let rows = io::read_pose_list_file(path)?;
         for r in &rows {
             io::campaign::check_reachable(table, &r.pose, ratio, &file, r.line, &r.label)?;
         }
@@ -176,9 +185,12 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
         poses
     } else {
         let n = args.random.unwrap_or(0);
-        if n == 0 || !(args.range_mm >= 0.0 && args.range_deg >= 0.0) {
+        if n == 0
+            || !(args.range_mm >= 0.0 && args.range_deg >= 0.0)
+            || !(args.range_mm.is_finite() && args.range_deg.is_finite())
+        {
             return Err(usage_error(
-                "--random needs N >= 1 and non-negative --range-mm, --range-deg",
+                "--random needs N >= 1 and finite, non-negative --range-mm, --range-deg",
             ));
         }
         let poses = crate::calib::paper::random_workspace_poses(
@@ -235,13 +247,7 @@ pub fn load_data(
 ) -> anyhow::Result<Merged> {
     let mut files = Vec::with_capacity(paths.len());
     for p in paths {
-        let text = io::read_text(p)?;
-        files.push(io::read_data(
-            &text,
-            &p.display().to_string(),
-            robot,
-            options,
-        )?);
+        files.push(io::read_data_file(p, robot, options)?);
     }
     Ok(merge(files, robot))
 }
@@ -254,15 +260,61 @@ pub fn read_options(effects: &[Effect]) -> ReadOptions {
     }
 }
 
+/// The campaign pose a calibration error is about, also when the least-squares solver
+/// stopped on it (the model's error inside [`cpm_lm::LmError::Model`]).
+pub fn error_pose(err: &CalibError) -> Option<usize> {
+    match err {
+        CalibError::Kinematics { pose, .. } | CalibError::Clearance { pose, .. } => Some(*pose),
+        CalibError::Solver(cpm_lm::LmError::Model { source, .. }) => {
+            source.downcast_ref::<CalibError>().and_then(error_pose)
+        }
+        _ => None,
+    }
+}
+
 /// Turns a calibration error at a campaign pose into one that names the file and line.
 pub fn locate(err: CalibError, merged: &Merged) -> anyhow::Error {
-    let pose = match &err {
-        CalibError::Kinematics { pose, .. } | CalibError::Clearance { pose, .. } => Some(*pose),
-        _ => None,
-    };
-    match pose.and_then(|p| merged.pose_location(p)) {
+    match error_pose(&err).and_then(|p| merged.pose_location(p)) {
         Some(loc) => anyhow::Error::new(err).context(loc),
         None => anyhow::Error::new(err),
+    }
+}
+
+/// The largest number of poses of `--circle --count` and `--random`.
+pub const MAX_PLAN_POSES: usize = 1_000_000;
+
+/// A robust loss from `huber:K`, `cauchy:K`, `tukey:K` (K in um of reading, > 0) or `none`.
+pub fn parse_loss(spec: &str) -> Result<cpm_lm::Loss, String> {
+    let spec = spec.trim();
+    if spec == "none" || spec == "squared" {
+        return Ok(cpm_lm::Loss::Squared);
+    }
+    let (kind, value) = spec.split_once(':').ok_or_else(|| {
+        format!("{spec:?}: expected huber:K, cauchy:K or tukey:K (K in um, > 0) or none")
+    })?;
+    let k: f64 = value
+        .trim()
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v > 0.0)
+        .ok_or_else(|| format!("{spec:?}: K = {value:?} must be a number of um > 0"))?;
+    match kind.trim() {
+        "huber" => Ok(cpm_lm::Loss::Huber(k)),
+        "cauchy" => Ok(cpm_lm::Loss::Cauchy(k)),
+        "tukey" => Ok(cpm_lm::Loss::Tukey(k)),
+        other => Err(format!(
+            "{spec:?}: unknown loss {other:?} (huber, cauchy, tukey, none)"
+        )),
+    }
+}
+
+/// The loss in words, e.g. `Huber, K = 3 um`.
+pub fn describe_loss(loss: &cpm_lm::Loss) -> String {
+    match loss {
+        cpm_lm::Loss::Squared => "least squares".into(),
+        cpm_lm::Loss::Huber(k) => format!("Huber, K = {k} um"),
+        cpm_lm::Loss::Cauchy(k) => format!("Cauchy, K = {k} um"),
+        cpm_lm::Loss::Tukey(k) => format!("Tukey, K = {k} um"),
     }
 }
 

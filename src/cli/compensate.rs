@@ -65,8 +65,7 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
     ctx.stage("reading the robot description");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     let file = args.poses.display().to_string();
-    let text = io::read_text(&args.poses)?;
-    let targets = io::read_pose_list(&text, &file)?;
+    let targets = io::read_pose_list_file(&args.poses)?;
     ctx.stage(format!("computing commands for {} targets", targets.len()));
     let ratio = ReadOptions::default().max_condition_ratio;
     let mut readings = Vec::with_capacity(targets.len());

@@ -77,32 +77,86 @@ pub struct DesignArgs {
     pub json: bool,
 }
 
+/// The most candidate sockets a `--sockets` file may list.
+pub const MAX_SOCKETS: usize = 10_000;
+
 /// Reads candidate sockets: `name,side,x_mm,y_mm,z_mm`.
 pub fn read_sockets(text: &str, file: &str) -> Result<SocketCandidates, InputError> {
-    let t = Table::parse(text, file)?;
+    read_sockets_from(text.as_bytes(), file).map_err(io::ReadError::into_input)
+}
+
+/// Reads candidate sockets from a reader, row by row.
+pub fn read_sockets_from<R: std::io::Read>(
+    source: R,
+    file: &str,
+) -> Result<SocketCandidates, io::ReadError> {
+    let mut t = Table::from_reader(source, file)?;
+    sockets_table(&mut t).map_err(|e| match t.take_io_error() {
+        Some(source) => io::ReadError::Io {
+            file: file.to_string(),
+            source,
+        },
+        None => e.into(),
+    })
+}
+
+fn sockets_table<R: std::io::Read>(t: &mut Table<R>) -> Result<SocketCandidates, InputError> {
     t.check_columns(&["name", "side", "x_mm", "y_mm", "z_mm"], &[], |_| false)?;
     let mut c = SocketCandidates {
         base: Vec::new(),
         platform: Vec::new(),
     };
-    for row in &t.rows {
-        let name = t.required_text(row, "name")?;
+    let mut seen: std::collections::HashMap<(String, bool), usize> = Default::default();
+    while let Some(row) = t.next_row()? {
+        let t: &io::table::Header = t;
+        if c.base.len() + c.platform.len() >= MAX_SOCKETS {
+            return Err(InputError::line(
+                &t.file,
+                row.line,
+                format!("more than {MAX_SOCKETS} candidate sockets"),
+            ));
+        }
+        let name = t.required_text(&row, "name")?;
         let p = [
-            t.number(row, "x_mm")?,
-            t.number(row, "y_mm")?,
-            t.number(row, "z_mm")?,
+            t.number(&row, "x_mm")?,
+            t.number(&row, "y_mm")?,
+            t.number(&row, "z_mm")?,
         ];
-        match t.required_text(row, "side")? {
-            "base" => c.base.push(Socket::new(name, p)),
-            "platform" => c.platform.push(Socket::new(name, p)),
+        let base = match t.required_text(&row, "side")? {
+            "base" => true,
+            "platform" => false,
             other => {
                 return Err(t.err(
-                    row,
+                    &row,
                     "side",
-                    format!("{other:?} is neither base nor platform"),
+                    format!(
+                        "{:?} is neither base nor platform",
+                        io::table::shorten(other)
+                    ),
                 ))
             }
+        };
+        if let Some(first) = seen.insert((name.to_string(), base), row.line) {
+            return Err(t.err(
+                &row,
+                "name",
+                format!(
+                    "socket {:?} is already on line {first} (names are unique on each side)",
+                    io::table::shorten(name)
+                ),
+            ));
         }
+        if base {
+            c.base.push(Socket::new(name, p));
+        } else {
+            c.platform.push(Socket::new(name, p));
+        }
+    }
+    if c.base.is_empty() && c.platform.is_empty() {
+        return Err(InputError::file(
+            &t.file,
+            "no sockets: the file has a header but no rows",
+        ));
     }
     Ok(c)
 }
@@ -141,7 +195,7 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     common::require_six_links(&robot)?;
     let sockets = match &args.sockets {
-        Some(p) => read_sockets(&io::read_text(p)?, &p.display().to_string())?,
+        Some(p) => read_sockets_from(io::campaign::open(p)?, &p.display().to_string())?,
         None => sockets_of(&robot),
     };
     if sockets.base.len() < args.base_sockets || sockets.platform.len() < args.platform_sockets {
@@ -156,10 +210,22 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             args.platform_sockets
         )));
     }
-    if args.candidates == 0 || !(args.range_mm > 0.0 && args.range_deg >= 0.0) {
+    if args.candidates == 0
+        || !(args.range_mm > 0.0 && args.range_deg >= 0.0)
+        || !(args.range_mm.is_finite() && args.range_deg.is_finite())
+    {
         return Err(usage_error(
-            "--candidates must be >= 1 and --range-mm > 0, --range-deg >= 0",
+            "--candidates must be >= 1 and --range-mm > 0, --range-deg >= 0 (finite)",
         ));
+    }
+    for (n, name, max) in [
+        (args.candidates, "--candidates", 100_000),
+        (args.readings, "--readings", 10_000_000),
+        (args.poses.unwrap_or(0), "--poses", 1_000_000),
+    ] {
+        if n > max {
+            return Err(usage_error(format!("{name} {n}: at most {max}")));
+        }
     }
     let sigma = match args.sigma_um {
         Some(s) => common::sigma(Some(s), &robot)?.unwrap_or(1.0),

@@ -271,10 +271,23 @@ where
         }
         Err(e) if broken_pipe(&e) => ExitKind::Success as i32,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", render_error(&e));
             exit_kind(&e) as i32
         }
     }
+}
+
+/// An error and its causes on one line, `outer: inner: ...`, leaving out a cause whose text
+/// the message before it already shows (many errors quote their source).
+pub fn render_error(err: &anyhow::Error) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    for cause in err.chain() {
+        let s = cause.to_string();
+        if !parts.iter().any(|p| p.contains(&s)) {
+            parts.push(s);
+        }
+    }
+    parts.join(": ")
 }
 
 /// True when stdout was closed by its reader (`cpm ... | head`): not worth a message.

@@ -43,6 +43,10 @@ pub struct RefineArgs {
     /// Sensor noise standard deviation, um (default: the description's, else estimated).
     #[arg(long, value_name = "UM")]
     pub sigma_um: Option<f64>,
+    /// Robust loss of every fit: huber:K, cauchy:K, tukey:K (K in um) or none (as for
+    /// `cpm calibrate --robust`).
+    #[arg(long, value_name = "LOSS:K")]
+    pub robust: Option<String>,
     /// Output directory.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -114,14 +118,19 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if !(args.alpha > 0.0 && args.alpha < 1.0) {
         return Err(usage_error("--alpha must be in (0, 1)"));
     }
-    if args.folds < 2 {
-        return Err(usage_error("--folds must be at least 2"));
+    if args.folds < 2 || args.folds > 1000 {
+        return Err(usage_error("--folds must be between 2 and 1000"));
     }
     let candidates = match &args.candidates {
         Some(list) => parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
         None => Effect::ALL.to_vec(),
     };
-    let inputs = calibrate::load_inputs(
+    calibrate::solver_options(
+        &mut crate::calib::IdentifyOptions::default(),
+        args.robust.as_deref(),
+        None,
+    )?;
+    let mut inputs = calibrate::load_inputs(
         &args.robot.robot,
         &args.data,
         &args.effects,
@@ -130,6 +139,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         None,
         ctx,
     )?;
+    calibrate::solver_options(&mut inputs.identify, args.robust.as_deref(), None)?;
     let campaign = &inputs.merged.campaign;
     ctx.stage(format!(
         "refining: {} to {} observations, up to {} effects from {} candidates (each round fits every candidate)",
@@ -146,22 +156,25 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         identify: inputs.identify.clone(),
         ..RefineOptions::default()
     };
-    let r =
+    let mut r =
         refine(&inputs.model, campaign, &options).map_err(|e| common::locate(e, &inputs.merged))?;
+    calibrate::robust_noise(&mut r.calibration, &inputs.identify.lm.loss);
     ctx.stage("writing the results");
     let dir = &args.out;
     let cal = &r.calibration;
     let mut set = OutputSet::new();
     let doc = refine_json(&r, campaign.simulated);
     set.add(dir.join("refine.json"), serde_json::to_string_pretty(&doc)?);
+    let mut value = io::calibration_json(&r.model, campaign, cal, &inputs.provenance);
+    value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
+    value["outliers"] = calibrate::outliers_json(&inputs.robot, &inputs.merged, cal);
+    value["warnings"] = json!(calibrate::warnings(&r.model, cal)
+        .iter()
+        .map(|w| w.replace("**", ""))
+        .collect::<Vec<_>>());
     set.add(
         dir.join("calibration.json"),
-        serde_json::to_string_pretty(&io::calibration_json(
-            &r.model,
-            campaign,
-            cal,
-            &inputs.provenance,
-        ))?,
+        serde_json::to_string_pretty(&value)?,
     );
     let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;
     set.add(
@@ -198,6 +211,10 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     for l in provenance_lines(&inputs.provenance, campaign.simulated, "Refined") {
         s.push_str(&format!("{l}\n"));
     }
+    s.push('\n');
+    for w in calibrate::warnings(&r.model, cal) {
+        s.push_str(&format!("- {w}\n"));
+    }
     s.push_str(&format!(
         "\nStarting model: {}. Residual RMS {:.3} um, white: {}.\n\n## Steps\n\n",
         common::describe_model(&inputs.model),
@@ -229,7 +246,15 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         r.final_diagnostics.white,
         if r.unexplained_structure.is_empty() { "none".to_string() } else { r.unexplained_structure.join(", ") }
     ));
-    fit_report(&mut s, &inputs.robot, &r.model, campaign, cal);
+    fit_report(
+        &mut s,
+        &inputs.robot,
+        &r.model,
+        campaign,
+        cal,
+        &inputs.identify.lm.loss,
+    );
+    calibrate::outliers_report(&mut s, &inputs.robot, &inputs.merged, cal);
     s.push_str(&format!(
         "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models{}\n",
         notes.undetermined.len(),

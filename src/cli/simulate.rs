@@ -69,6 +69,9 @@ pub struct SimulateArgs {
     pub json: bool,
 }
 
+/// The largest simulated noise, um.
+pub const MAX_NOISE_UM: f64 = 1000.0;
+
 /// Parses a noise specification.
 pub fn parse_noise(spec: &str) -> Result<Noise, String> {
     let spec = spec.trim();
@@ -84,6 +87,12 @@ pub fn parse_noise(spec: &str) -> Result<Noise, String> {
         .ok()
         .filter(|v: &f64| v.is_finite() && *v >= 0.0)
         .ok_or_else(|| format!("{spec:?}: {value:?} is not a non-negative number of um"))?;
+    if v > MAX_NOISE_UM {
+        return Err(format!(
+            "{spec:?}: {} um is implausibly large (over {MAX_NOISE_UM} um = 1 mm; the noise is in um)",
+            crate::io::table::show(v, None)
+        ));
+    }
     match kind.trim() {
         "uniform" => Ok(Noise::Uniform { half_width_um: v }),
         "gaussian" | "normal" => Ok(Noise::Gaussian { sigma_um: v }),
@@ -293,8 +302,12 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             None => Noise::None,
         },
     };
-    if !(args.orientation_noise_urad.is_finite() && args.orientation_noise_urad >= 0.0) {
-        return Err(usage_error("--orientation-noise-urad must be >= 0"));
+    if !(args.orientation_noise_urad.is_finite()
+        && (0.0..=1e5).contains(&args.orientation_noise_urad))
+    {
+        return Err(usage_error(
+            "--orientation-noise-urad must be between 0 and 100000 (0.1 rad)",
+        ));
     }
     let truth = truth(args, &robot, declared)?;
     ctx.stage("building the plan");

@@ -6,14 +6,16 @@
 //! without crossing a singularity, link readings and sensor lengths consistent with it, which
 //! catches a file in the wrong units); each failure names the file, the line and the field.
 use std::collections::HashMap;
+use std::io::Read;
+use std::path::Path;
 
 use cpm_calib::campaign::PoseMeasurement;
 use cpm_calib::{Campaign, Reading};
 use cpm_geometry::{JointTable, Pose, Vector3};
 use cpm_kinematics::workspace::{reachable_from_home, Unreachable};
 
-use super::table::{field, num, FileKind, Row, Table, SIMULATED_MARK};
-use super::{InputError, Robot};
+use super::table::{field, num, shorten, show, FileKind, Header, Row, Table, SIMULATED_MARK};
+use super::{InputError, ReadError, Robot};
 
 /// Columns of a length-sensor readings file that must be present.
 pub const READINGS_REQUIRED: [&str; 6] = ["pose", "sensor", "x_mm", "y_mm", "z_mm", "length_mm"];
@@ -29,6 +31,9 @@ pub const CONSISTENCY_MM: f64 = 5.0;
 /// Relative part of the consistency tolerance.
 pub const CONSISTENCY_REL: f64 = 0.05;
 
+/// The largest plausible position coordinate, mm (1 km).
+pub const MAX_POSITION_MM: f64 = 1e6;
+
 /// How strictly measurement files are checked.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReadOptions {
@@ -38,13 +43,20 @@ pub struct ReadOptions {
     /// A pose is refused when J1's condition number on the way from home exceeds this factor
     /// times its value at home. Default 1000.
     pub max_condition_ratio: f64,
+    /// The most data rows a file may have (the reading stops with an error at the next one).
+    /// Default [`MAX_ROWS`].
+    pub max_rows: usize,
 }
+
+/// The most data rows of a measurement file or pose list by default: ten million.
+pub const MAX_ROWS: usize = 10_000_000;
 
 impl Default for ReadOptions {
     fn default() -> Self {
         Self {
             check_sensor_lengths: true,
             max_condition_ratio: 1e3,
+            max_rows: MAX_ROWS,
         }
     }
 }
@@ -88,7 +100,7 @@ enum Orientation {
     Quaternion,
 }
 
-fn orientation(t: &Table) -> Result<Orientation, InputError> {
+fn orientation(t: &Header) -> Result<Orientation, InputError> {
     let rpy = RPY_COLUMNS.iter().any(|c| t.has(c));
     let quat = QUATERNION_COLUMNS.iter().any(|c| t.has(c));
     let need = |cols: &[&str]| -> Result<(), InputError> {
@@ -122,18 +134,32 @@ fn orientation_columns(o: Orientation) -> &'static [&'static str] {
     }
 }
 
+/// The numbers a pose was made of, by column (for agreement checks).
+type RawPose = Vec<(&'static str, f64)>;
+
 /// The pose of a row, and the raw numbers it was made of (for agreement checks).
-fn parse_pose(
-    t: &Table,
-    row: &Row,
-    o: Orientation,
-) -> Result<(Pose, Vec<(String, f64)>), InputError> {
+fn parse_pose(t: &Header, row: &Row, o: Orientation) -> Result<(Pose, RawPose), InputError> {
     let mut raw = Vec::with_capacity(7);
     for c in ["x_mm", "y_mm", "z_mm"]
         .iter()
         .chain(orientation_columns(o))
     {
-        raw.push((c.to_string(), t.number(row, c)?));
+        let v = t.number(row, c)?;
+        if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
+            return Err(t.err(
+                row,
+                c,
+                format!("{v:e} mm is implausibly far (over 1 km): positions are in mm"),
+            ));
+        }
+        if c.ends_with("_deg") && v.abs() > 360.0 {
+            return Err(t.err(
+                row,
+                c,
+                format!("{v} degrees: an angle is within [-360, 360] (angles are in degrees)"),
+            ));
+        }
+        raw.push((*c, v));
     }
     let p = [raw[0].1, raw[1].1, raw[2].1];
     let pose = match o {
@@ -197,10 +223,14 @@ pub fn check_reachable(
             "the way from home crosses a singularity ({:.0} % of the way): the pose belongs to another assembly mode",
             at * 100.0
         ),
-        Err(Unreachable::Invalid) => "the pose is not finite".to_string(),
+        Err(Unreachable::Invalid) => {
+            "its link lengths are not finite numbers (an implausible pose or robot)".to_string()
+        }
     };
-    let [x, y, z] = [pose.position_mm.x, pose.position_mm.y, pose.position_mm.z];
+    let [x, y, z] =
+        [pose.position_mm.x, pose.position_mm.y, pose.position_mm.z].map(|v| show(v, None));
     let [r, p, w] = pose.rpy_deg();
+    let label = shorten(label);
     Err(InputError::line(
         file,
         line,
@@ -210,27 +240,76 @@ pub fn check_reachable(
     ))
 }
 
-/// Reads a measurement file of either kind (told from the header).
+/// Opens a file for reading; failures are [`ReadError::Io`].
+pub fn open(path: &Path) -> Result<std::fs::File, ReadError> {
+    let file = path.display().to_string();
+    let f = std::fs::File::open(path).map_err(|source| ReadError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    match f.metadata() {
+        Ok(m) if m.is_dir() => Err(ReadError::Io {
+            file,
+            source: std::io::Error::other("is a directory, not a file"),
+        }),
+        _ => Ok(f),
+    }
+}
+
+/// The error of a reader: an I/O error when the table met one, else the input error.
+fn finish<R: Read>(t: &mut Table<R>, e: InputError) -> ReadError {
+    match t.take_io_error() {
+        Some(source) => ReadError::Io {
+            file: t.file.clone(),
+            source,
+        },
+        None => ReadError::Input(e),
+    }
+}
+
+/// Reads a measurement file of either kind (told from the header) from text.
 pub fn read_data(
     text: &str,
     file: &str,
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
-    let t = Table::parse(text, file)?;
-    match t.kind()? {
-        FileKind::Readings => read_readings_table(&t, robot, options),
-        FileKind::PoseMeasurements => read_pose_measurements_table(&t, robot, options),
-        FileKind::Poses => Err(InputError::line(
+    read_data_from(text.as_bytes(), file, robot, options).map_err(ReadError::into_input)
+}
+
+/// Reads a measurement file of either kind, streaming its rows from the file at `path`.
+pub fn read_data_file(
+    path: &Path,
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Result<DataFile, ReadError> {
+    read_data_from(open(path)?, &path.display().to_string(), robot, options)
+}
+
+/// Reads a measurement file of either kind (told from the header) from a reader, row by row:
+/// the first problem stops the reading there.
+pub fn read_data_from<R: Read>(
+    source: R,
+    file: &str,
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Result<DataFile, ReadError> {
+    let mut t = Table::from_reader(source, file)?;
+    let r = match t.kind() {
+        Ok(FileKind::Readings) => read_readings_table(&mut t, robot, options),
+        Ok(FileKind::PoseMeasurements) => read_pose_measurements_table(&mut t, robot, options),
+        Ok(FileKind::Poses) => Err(InputError::line(
             file,
             t.header_line,
             "this is a list of poses (no sensor readings and no link readings): measurements need `sensor` and `length_mm` columns, or `reading_1`.. columns with a measured pose",
         )),
-    }
+        Err(e) => Err(e),
+    };
+    r.map_err(|e| finish(&mut t, e))
 }
 
 /// Checks the `reading_k` columns: none, or exactly `reading_1..reading_n`.
-fn link_reading_columns(t: &Table, n: usize) -> Result<bool, InputError> {
+fn link_reading_columns(t: &Header, n: usize) -> Result<bool, InputError> {
     let ks = t.reading_columns()?;
     if ks.is_empty() {
         return Ok(false);
@@ -256,7 +335,7 @@ fn link_reading_columns(t: &Table, n: usize) -> Result<bool, InputError> {
     Ok(true)
 }
 
-fn link_readings(t: &Table, row: &Row, n: usize) -> Result<Vec<f64>, InputError> {
+fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>, InputError> {
     (1..=n)
         .map(|k| t.number(row, &format!("reading_{k}")))
         .collect()
@@ -264,7 +343,7 @@ fn link_readings(t: &Table, row: &Row, n: usize) -> Result<Vec<f64>, InputError>
 
 /// Checks logged link readings against the pose's inverse kinematics.
 fn check_link_readings(
-    t: &Table,
+    t: &Header,
     row: &Row,
     robot: &Robot,
     pose: &Pose,
@@ -275,18 +354,29 @@ fn check_link_readings(
     let mut lengths = Vec::with_capacity(readings.len());
     for (i, (u, l_ik)) in readings.iter().zip(&ik).enumerate() {
         let l = robot.length_mm(i, *u);
-        if (l - l_ik).abs() > tolerance_mm(*l_ik) {
+        if !l.is_finite() || !((l - l_ik).abs() <= tolerance_mm(*l_ik)) {
             return Err(t.err(
                 row,
                 &format!("reading_{}", i + 1),
                 format!(
-                    "{u} means a link length of {l:.3} mm (length_at_zero_mm + mm_per_unit * reading), but the {what} needs {l_ik:.3} mm: wrong units, a wrong link mapping in the robot description, or a wrong pose?"
+                    "{} means a link length of {} mm (length_at_zero_mm + mm_per_unit * reading), but the {what} needs {l_ik:.3} mm: wrong units, a wrong link mapping in the robot description, or a wrong pose?",
+                    show(*u, None),
+                    show(l, Some(3))
                 ),
             ));
         }
         lengths.push(l);
     }
     Ok(lengths)
+}
+
+/// The error of a file with more rows than allowed.
+fn too_many_rows(t: &Header, row: &Row, max: usize) -> InputError {
+    InputError::line(
+        &t.file,
+        row.line,
+        format!("more than {max} data rows: cpm reads at most {max} (average repeated readings, or split the campaign)"),
+    )
 }
 
 /// Reads length-sensor readings (see `docs/formats.md`).
@@ -296,12 +386,12 @@ pub fn read_readings(
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
-    let t = Table::parse(text, file)?;
-    read_readings_table(&t, robot, options)
+    let mut t = Table::parse(text, file)?;
+    read_readings_table(&mut t, robot, options)
 }
 
-fn read_readings_table(
-    t: &Table,
+fn read_readings_table<R: Read>(
+    t: &mut Table<R>,
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
@@ -317,14 +407,8 @@ fn read_readings_table(
         },
     )?;
     let logged = link_reading_columns(t, n)?;
-    if t.rows.is_empty() {
-        return Err(InputError::file(
-            &t.file,
-            "no readings: the file has a header but no rows",
-        ));
-    }
     struct PoseEntry {
-        raw: Vec<(String, f64)>,
+        raw: RawPose,
         readings: Option<Vec<f64>>,
         line: usize,
     }
@@ -337,28 +421,33 @@ fn read_readings_table(
     };
     let mut commanded = Vec::new();
     let mut reading_lines = Vec::new();
-    for row in &t.rows {
-        let label = t.required_text(row, "pose")?.to_string();
-        let sensor_name = t.required_text(row, "sensor")?;
+    while let Some(row) = t.next_row()? {
+        let t: &Header = t;
+        if reading_lines.len() >= options.max_rows {
+            return Err(too_many_rows(t, &row, options.max_rows));
+        }
+        let label = t.required_text(&row, "pose")?.to_string();
+        let sensor_name = t.required_text(&row, "sensor")?;
         let sensor = robot.table.sensor_index(sensor_name).ok_or_else(|| {
             t.err(
-                row,
+                &row,
                 "sensor",
                 format!(
-                    "unknown sensor {sensor_name:?} (the robot description has: {})",
+                    "unknown sensor {:?} (the robot description has: {})",
+                    shorten(sensor_name),
                     robot.sensor_names()
                 ),
             )
         })?;
-        let (pose, raw) = parse_pose(t, row, o)?;
-        let length_mm = t.number(row, "length_mm")?;
-        let time_s = t.optional_number(row, "time_s")?;
-        let temperature_c = t.optional_number(row, "temperature_c")?;
-        if t.optional_bool(row, "simulated")? == Some(true) {
+        let (pose, raw) = parse_pose(t, &row, o)?;
+        let length_mm = t.number(&row, "length_mm")?;
+        let time_s = t.optional_number(&row, "time_s")?;
+        let temperature_c = t.optional_number(&row, "temperature_c")?;
+        if t.optional_bool(&row, "simulated")? == Some(true) {
             campaign.simulated = true;
         }
         let link = if logged {
-            Some(link_readings(t, row, n)?)
+            Some(link_readings(t, &row, n)?)
         } else {
             None
         };
@@ -368,9 +457,9 @@ fn read_readings_table(
                 for ((name, a), (_, b)) in raw.iter().zip(&e.raw) {
                     if !close(*a, *b) {
                         return Err(t.err(
-                            row,
+                            &row,
                             name,
-                            format!("{a} differs from {b} given for pose {label:?} on line {}: rows of one pose share one commanded pose", e.line),
+                            format!("{} differs from {} given for pose {:?} on line {}: rows of one pose share one commanded pose (a repeated pose label?)", show(*a, None), show(*b, None), shorten(&label), e.line),
                         ));
                     }
                 }
@@ -378,9 +467,9 @@ fn read_readings_table(
                     for (k, (x, y)) in a.iter().zip(b).enumerate() {
                         if !close(*x, *y) {
                             return Err(t.err(
-                                row,
+                                &row,
                                 &format!("reading_{}", k + 1),
-                                format!("{x} differs from {y} given for pose {label:?} on line {}: rows of one pose share one command", e.line),
+                                format!("{x} differs from {y} given for pose {:?} on line {}: rows of one pose share one command", shorten(&label), e.line),
                             ));
                         }
                     }
@@ -402,7 +491,7 @@ fn read_readings_table(
                 if let Some(u) = &link {
                     commanded.push(check_link_readings(
                         t,
-                        row,
+                        &row,
                         robot,
                         &pose,
                         u,
@@ -423,12 +512,13 @@ fn read_readings_table(
         if options.check_sensor_lengths {
             let s = &robot.table.sensors[sensor];
             let nominal = s.length_mm(&campaign.poses[j]);
-            if (length_mm - nominal).abs() > tolerance_mm(nominal) {
+            if !((length_mm - nominal).abs() <= tolerance_mm(nominal)) {
                 return Err(t.err(
-                    row,
+                    &row,
                     "length_mm",
                     format!(
-                        "{length_mm} mm is far from the nominal length of sensor {sensor_name:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?"
+                        "{} mm is far from the nominal length of sensor {sensor_name:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?",
+                        show(length_mm, None)
                     ),
                 ));
             }
@@ -441,6 +531,12 @@ fn read_readings_table(
             temperature_c,
         });
         reading_lines.push(row.line);
+    }
+    if campaign.readings.is_empty() {
+        return Err(InputError::file(
+            &t.file,
+            "no readings: the file has a header but no rows",
+        ));
     }
     if logged {
         campaign.commanded_lengths_mm = Some(commanded);
@@ -462,12 +558,12 @@ pub fn read_pose_measurements(
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
-    let t = Table::parse(text, file)?;
-    read_pose_measurements_table(&t, robot, options)
+    let mut t = Table::parse(text, file)?;
+    read_pose_measurements_table(&mut t, robot, options)
 }
 
-fn read_pose_measurements_table(
-    t: &Table,
+fn read_pose_measurements_table<R: Read>(
+    t: &mut Table<R>,
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
@@ -490,12 +586,6 @@ fn read_pose_measurements_table(
             "missing column",
         ));
     }
-    if t.rows.is_empty() {
-        return Err(InputError::file(
-            &t.file,
-            "no pose measurements: the file has a header but no rows",
-        ));
-    }
     let mut campaign = Campaign {
         simulated: t.simulated_mark,
         ..Campaign::default()
@@ -504,20 +594,23 @@ fn read_pose_measurements_table(
     let mut labels = Vec::new();
     let mut lines = Vec::new();
     let mut commanded = Vec::new();
-    for row in &t.rows {
-        let label = t.required_text(row, "pose")?.to_string();
+    while let Some(row) = t.next_row()? {
+        let t: &Header = t;
+        if lines.len() >= options.max_rows {
+            return Err(too_many_rows(t, &row, options.max_rows));
+        }
+        let label = t.required_text(&row, "pose")?.to_string();
         if let Some(first) = seen.get(&label) {
             return Err(t.err(
-                row,
+                &row,
                 "pose",
-                format!("pose {label:?} appears again (first on line {first}): a tracker file has one row per pose"),
+                format!("pose {:?} appears again (first on line {first}): a tracker file has one row per pose", shorten(&label)),
             ));
         }
-        seen.insert(label.clone(), row.line);
-        let (measured, _) = parse_pose(t, row, o)?;
-        let u = link_readings(t, row, n)?;
-        let time_s = t.optional_number(row, "time_s")?;
-        if t.optional_bool(row, "simulated")? == Some(true) {
+        let (measured, _) = parse_pose(t, &row, o)?;
+        let u = link_readings(t, &row, n)?;
+        let time_s = t.optional_number(&row, "time_s")?;
+        if t.optional_bool(&row, "simulated")? == Some(true) {
             campaign.simulated = true;
         }
         if options.max_condition_ratio.is_finite() {
@@ -532,12 +625,13 @@ fn read_pose_measurements_table(
         }
         commanded.push(check_link_readings(
             t,
-            row,
+            &row,
             robot,
             &measured,
             &u,
             "measured pose",
         )?);
+        seen.insert(label.clone(), row.line);
         let j = campaign.poses.len();
         campaign.poses.push(measured);
         campaign.pose_measurements.push(PoseMeasurement {
@@ -547,6 +641,12 @@ fn read_pose_measurements_table(
         });
         labels.push(label);
         lines.push(row.line);
+    }
+    if campaign.pose_measurements.is_empty() {
+        return Err(InputError::file(
+            &t.file,
+            "no pose measurements: the file has a header but no rows",
+        ));
     }
     campaign.commanded_lengths_mm = Some(commanded);
     Ok(DataFile {
@@ -762,11 +862,25 @@ pub fn write_pose_measurements(campaign: &Campaign, robot: &Robot, note: &str) -
 /// `qw,qx,qy,qz`), optional `pose` label, `time_s`, `temperature_c`. Measurement files are
 /// refused (use them as `--data`).
 pub fn read_pose_list(text: &str, file: &str) -> Result<Vec<PoseRow>, InputError> {
-    let t = Table::parse(text, file)?;
+    read_pose_list_from(text.as_bytes(), file).map_err(ReadError::into_input)
+}
+
+/// Reads a list of poses from the file at `path`, streaming its rows.
+pub fn read_pose_list_file(path: &Path) -> Result<Vec<PoseRow>, ReadError> {
+    read_pose_list_from(open(path)?, &path.display().to_string())
+}
+
+/// Reads a list of poses from a reader (see [`read_pose_list`]).
+pub fn read_pose_list_from<R: Read>(source: R, file: &str) -> Result<Vec<PoseRow>, ReadError> {
+    let mut t = Table::from_reader(source, file)?;
+    pose_list_table(&mut t).map_err(|e| finish(&mut t, e))
+}
+
+fn pose_list_table<R: Read>(t: &mut Table<R>) -> Result<Vec<PoseRow>, InputError> {
     let kind = t.kind()?;
     if kind != FileKind::Poses {
         return Err(InputError::line(
-            file,
+            &t.file,
             t.header_line,
             format!(
                 "expected a list of poses (x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg), but the header says {}",
@@ -774,33 +888,37 @@ pub fn read_pose_list(text: &str, file: &str) -> Result<Vec<PoseRow>, InputError
             ),
         ));
     }
-    let o = orientation(&t)?;
+    let o = orientation(t)?;
     t.check_columns(
         &["x_mm", "y_mm", "z_mm"],
         &["pose", "time_s", "temperature_c"],
         |h| RPY_COLUMNS.contains(&h) || QUATERNION_COLUMNS.contains(&h),
     )?;
-    if t.rows.is_empty() {
-        return Err(InputError::file(
-            file,
-            "no poses: the file has a header but no rows",
-        ));
-    }
-    let mut out = Vec::with_capacity(t.rows.len());
-    for (k, row) in t.rows.iter().enumerate() {
-        let label = match t.text(row, "pose") {
+    let mut out = Vec::new();
+    while let Some(row) = t.next_row()? {
+        let t: &Header = t;
+        if out.len() >= MAX_ROWS {
+            return Err(too_many_rows(t, &row, MAX_ROWS));
+        }
+        let label = match t.text(&row, "pose") {
             Some(l) if !l.is_empty() => l.to_string(),
-            Some(_) => return Err(t.err(row, "pose", "missing value")),
-            None => (k + 1).to_string(),
+            Some(_) => return Err(t.err(&row, "pose", "missing value")),
+            None => (out.len() + 1).to_string(),
         };
-        let (pose, _) = parse_pose(&t, row, o)?;
+        let (pose, _) = parse_pose(t, &row, o)?;
         out.push(PoseRow {
             line: row.line,
             label,
             pose,
-            time_s: t.optional_number(row, "time_s")?,
-            temperature_c: t.optional_number(row, "temperature_c")?,
+            time_s: t.optional_number(&row, "time_s")?,
+            temperature_c: t.optional_number(&row, "temperature_c")?,
         });
+    }
+    if out.is_empty() {
+        return Err(InputError::file(
+            &t.file,
+            "no poses: the file has a header but no rows",
+        ));
     }
     Ok(out)
 }

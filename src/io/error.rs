@@ -84,15 +84,55 @@ pub enum ReadError {
     },
 }
 
-/// Reads a text file; failures are [`ReadError::Io`] (a file that is not UTF-8 text is bad
-/// input).
-pub fn read_text(path: &std::path::Path) -> Result<String, ReadError> {
-    let file = path.display().to_string();
-    std::fs::read_to_string(path).map_err(|source| {
-        if source.kind() == std::io::ErrorKind::InvalidData {
-            ReadError::Input(InputError::file(file, "not UTF-8 text"))
-        } else {
-            ReadError::Io { file, source }
+impl ReadError {
+    /// The error as an [`InputError`] (an I/O error becomes a whole-file one).
+    pub fn into_input(self) -> InputError {
+        match self {
+            ReadError::Input(e) => e,
+            ReadError::Io { file, source } => {
+                InputError::file(file, format!("cannot read: {source}"))
+            }
         }
+    }
+}
+
+/// The largest text file [`read_text`] reads (robot descriptions): 16 MiB.
+pub const MAX_TEXT_BYTES: u64 = 16 << 20;
+
+/// Reads a text file of at most [`MAX_TEXT_BYTES`]; failures are [`ReadError::Io`] (a file
+/// that is not UTF-8 text, or far too large, is bad input).
+pub fn read_text(path: &std::path::Path) -> Result<String, ReadError> {
+    use std::io::Read;
+    let file = path.display().to_string();
+    let io = |source| ReadError::Io {
+        file: file.clone(),
+        source,
+    };
+    let f = super::campaign::open(path)?;
+    let mut bytes = Vec::new();
+    f.take(MAX_TEXT_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
+    if bytes.len() as u64 > MAX_TEXT_BYTES {
+        return Err(ReadError::Input(InputError::file(
+            file,
+            format!(
+                "larger than {} MiB: not a robot description",
+                MAX_TEXT_BYTES >> 20
+            ),
+        )));
+    }
+    let bytes = match bytes.strip_prefix(b"\xEF\xBB\xBF") {
+        Some(rest) => rest.to_vec(),
+        None => bytes,
+    };
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = e.as_bytes()[..at].iter().filter(|b| **b == b'\n').count() + 1;
+        ReadError::Input(InputError::line(
+            file.clone(),
+            line,
+            "not UTF-8 text (save the file as UTF-8)",
+        ))
     })
 }

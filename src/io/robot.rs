@@ -43,9 +43,39 @@ impl Robot {
 
     /// Parses and checks a description.
     pub fn from_toml(text: &str, file: &str) -> Result<Robot, InputError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let description =
             RobotDescription::from_toml_str(text, file).map_err(|e| describe(file, e))?;
-        Self::from_description(description, file)
+        let robot = Self::from_description(description, file)?;
+        if let Err(mut e) = robot.declared_effects() {
+            // Name the line of the unknown effect: its quoted name after `[calibration]`.
+            let k = e
+                .field
+                .as_deref()
+                .and_then(|f| f.strip_prefix("calibration.effects["))
+                .and_then(|f| f.strip_suffix(']'))
+                .and_then(|k| k.parse::<usize>().ok());
+            let names = &robot
+                .description
+                .calibration
+                .as_ref()
+                .map(|c| c.effects.clone());
+            if let (Some(k), Some(names)) = (k, names) {
+                let quoted = format!("{:?}", names[k - 1]);
+                let start = text
+                    .lines()
+                    .position(|l| l.trim_start().starts_with("[calibration]"))
+                    .unwrap_or(0);
+                e.line = text
+                    .lines()
+                    .enumerate()
+                    .skip(start)
+                    .find(|(_, l)| l.contains(&quoted))
+                    .map(|(i, _)| i + 1);
+            }
+            return Err(e);
+        }
+        Ok(robot)
     }
 
     /// A robot from a description already in memory.
@@ -209,7 +239,28 @@ fn locate_description_error(path: &str, message: &str) -> InputError {
             .trim()
             .to_string();
         if let Some(line) = line {
-            return InputError::line(path, line, what);
+            // The key: named by the message, else the key of the excerpt's `key = value` line.
+            let named = ["missing field `", "unknown field `", "duplicate key `"]
+                .iter()
+                .find_map(|p| what.split_once(p))
+                .and_then(|(_, rest)| rest.split_once('`'))
+                .map(|(k, _)| k.to_string())
+                .filter(|k| !k.trim().is_empty());
+            let excerpt_key = message
+                .lines()
+                .find_map(|l| l.split_once(" | "))
+                .filter(|(n, _)| n.trim().parse::<usize>() == Ok(line))
+                .and_then(|(_, src)| src.split_once('='))
+                .map(|(k, _)| k.trim().to_string())
+                .filter(|k| {
+                    !k.is_empty()
+                        && k.chars()
+                            .all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c))
+                });
+            return match named.or(excerpt_key) {
+                Some(key) => InputError::field(path, line, key, what),
+                None => InputError::line(path, line, what),
+            };
         }
     }
     if let Some(open) = message.rfind(" (line ") {

@@ -1,11 +1,22 @@
-//! Reading CSV tables with a header row: column checks, typed fields, line numbers, and the
-//! `# simulated by cpm` comment line.
+//! Reading CSV tables with a header row, one row at a time: column checks, typed fields, line
+//! numbers, and the `# simulated by cpm` comment line.
+//!
+//! A [`Table`] streams its rows from any reader ([`Table::next_row`]): a file is never read
+//! into memory as a whole, and the first bad row stops the reading there. Lines starting with
+//! `#` are comments; blank lines (spaces only) are skipped; CRLF line endings and a UTF-8
+//! byte-order mark are accepted; a line longer than [`MAX_LINE_BYTES`] is refused (a file
+//! that is not CSV at all, without reading all of it). Line numbers in messages are the
+//! file's physical lines, as an editor shows them.
 use std::collections::HashMap;
+use std::io::{BufRead, BufReader, Read};
 
 use super::InputError;
 
 /// The first comment line of every file that `cpm` simulated.
 pub const SIMULATED_MARK: &str = "# simulated by cpm";
+
+/// The longest line a CSV file may have, bytes (1 MiB): longer means it is not a table.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
 
 /// What a file holds, told from its header row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -38,87 +49,267 @@ pub struct Row {
     pub fields: Vec<String>,
 }
 
-/// A CSV table read from text.
+/// The header of a table: file name, header line, column names; reads typed fields of rows.
 #[derive(Debug, Clone)]
-pub struct Table {
+pub struct Header {
     /// The file name used in messages.
     pub file: String,
     /// 1-based line of the header row.
     pub header_line: usize,
     /// Column names, trimmed.
     pub headers: Vec<String>,
-    /// Data rows.
-    pub rows: Vec<Row>,
     /// True when the first line is the `# simulated by cpm` mark.
     pub simulated_mark: bool,
     index: HashMap<String, usize>,
 }
 
-impl Table {
-    /// Parses CSV text with a header row. Lines starting with `#` are comments and blank lines
-    /// are skipped; every row must have as many fields as the header.
-    pub fn parse(text: &str, file: &str) -> Result<Table, InputError> {
-        let simulated_mark = text
-            .lines()
-            .next()
-            .is_some_and(|l| l.trim_start().starts_with(SIMULATED_MARK));
-        let header_line = text
-            .lines()
-            .position(|l| !l.trim().is_empty() && !l.starts_with('#'))
-            .map(|i| i + 1)
-            .ok_or_else(|| InputError::file(file, "no header row: the file is empty"))?;
-        let mut reader = csv::ReaderBuilder::new()
-            .comment(Some(b'#'))
-            .trim(csv::Trim::All)
-            .has_headers(true)
-            .flexible(false)
-            .from_reader(text.as_bytes());
-        let headers: Vec<String> = reader
-            .headers()
-            .map_err(|e| csv_error(file, header_line, e))?
-            .iter()
-            .map(|h| h.trim().to_string())
-            .collect();
-        let mut index = HashMap::new();
-        for (i, h) in headers.iter().enumerate() {
+/// A CSV table with a header row, read row by row from `R`.
+///
+/// The dialect: fields separated by commas and trimmed; a field may be quoted (`"a,b"`,
+/// `""` for a quote inside); one record per line (a quoted field cannot span lines).
+pub struct Table<R: Read> {
+    /// The header.
+    pub header: Header,
+    reader: BufReader<R>,
+    buf: Vec<u8>,
+    line: usize,
+    io_error: Option<std::io::Error>,
+}
+
+impl<R: Read> std::ops::Deref for Table<R> {
+    type Target = Header;
+    fn deref(&self) -> &Header {
+        &self.header
+    }
+}
+
+impl<'a> Table<&'a [u8]> {
+    /// A table over CSV text in memory.
+    pub fn parse(text: &'a str, file: &str) -> Result<Self, InputError> {
+        Table::from_reader(text.as_bytes(), file)
+    }
+}
+
+impl<R: Read> Table<R> {
+    /// Opens a table: skips a byte-order mark, notes the `# simulated by cpm` line, reads the
+    /// header row (the first line that is neither a comment nor blank) and checks its names.
+    pub fn from_reader(source: R, file: &str) -> Result<Self, InputError> {
+        let mut t = Table {
+            header: Header {
+                file: file.to_string(),
+                header_line: 0,
+                headers: Vec::new(),
+                simulated_mark: false,
+                index: HashMap::new(),
+            },
+            reader: BufReader::with_capacity(64 * 1024, source),
+            buf: Vec::new(),
+            line: 0,
+            io_error: None,
+        };
+        let Some(first) = t.next_record()? else {
+            return Err(InputError::file(
+                file,
+                "no header row: the file is empty (or has only comments)",
+            ));
+        };
+        t.header.header_line = first.line;
+        for (i, h) in first.fields.iter().enumerate() {
             if h.is_empty() {
                 return Err(InputError::line(
                     file,
-                    header_line,
+                    first.line,
                     format!("column {} of the header has no name", i + 1),
                 ));
             }
-            if index.insert(h.clone(), i).is_some() {
+            if t.header.index.insert(h.clone(), i).is_some() {
                 return Err(InputError::field(
                     file,
-                    header_line,
-                    h,
+                    first.line,
+                    shorten(h),
                     "the column appears twice in the header",
                 ));
             }
         }
-        let mut rows = Vec::new();
-        for rec in reader.records() {
-            let rec = rec.map_err(|e| csv_error(file, header_line, e))?;
-            let line = rec
-                .position()
-                .map(|p| p.line() as usize)
-                .unwrap_or(header_line);
-            rows.push(Row {
-                line,
-                fields: rec.iter().map(|f| f.trim().to_string()).collect(),
-            });
-        }
-        Ok(Table {
-            file: file.to_string(),
-            header_line,
-            headers,
-            rows,
-            simulated_mark,
-            index,
-        })
+        t.header.headers = first.fields;
+        Ok(t)
     }
 
+    /// The next data row, `None` at the end; every row has as many fields as the header.
+    pub fn next_row(&mut self) -> Result<Option<Row>, InputError> {
+        let Some(row) = self.next_record()? else {
+            return Ok(None);
+        };
+        let (len, expected) = (row.fields.len(), self.header.headers.len());
+        if len != expected {
+            return Err(InputError::line(
+                &self.header.file,
+                row.line,
+                format!(
+                    "{len} field{}, but the header has {expected}",
+                    if len == 1 { "" } else { "s" }
+                ),
+            ));
+        }
+        Ok(Some(row))
+    }
+
+    /// The I/O error that stopped the reading, if one did (the returned [`InputError`] then
+    /// only says that the file could not be read there).
+    pub fn take_io_error(&mut self) -> Option<std::io::Error> {
+        self.io_error.take()
+    }
+
+    /// Reads the next physical line into `buf` (without its line ending); false at the end.
+    fn read_line(&mut self) -> Result<bool, InputError> {
+        self.buf.clear();
+        loop {
+            let chunk = match self.reader.fill_buf() {
+                Ok(c) => c,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => {
+                    let err = InputError::line(
+                        &self.header.file,
+                        self.line + 1,
+                        format!("cannot read: {e}"),
+                    );
+                    self.io_error = Some(e);
+                    return Err(err);
+                }
+            };
+            if chunk.is_empty() {
+                if self.buf.is_empty() {
+                    return Ok(false);
+                }
+                break;
+            }
+            let (take, done) = match chunk.iter().position(|b| *b == b'\n') {
+                Some(i) => (i + 1, true),
+                None => (chunk.len(), false),
+            };
+            self.buf.extend_from_slice(&chunk[..take]);
+            self.reader.consume(take);
+            if self.buf.len() > MAX_LINE_BYTES {
+                return Err(InputError::line(
+                    &self.header.file,
+                    self.line + 1,
+                    format!(
+                        "the line is longer than {MAX_LINE_BYTES} bytes: this is not a CSV table of cpm"
+                    ),
+                ));
+            }
+            if done {
+                break;
+            }
+        }
+        self.line += 1;
+        while matches!(self.buf.last(), Some(b'\n' | b'\r')) {
+            self.buf.pop();
+        }
+        if self.line == 1 {
+            if self.buf.starts_with(b"\xEF\xBB\xBF") {
+                self.buf.drain(..3);
+            }
+            self.header.simulated_mark = self
+                .buf
+                .trim_ascii_start()
+                .starts_with(SIMULATED_MARK.as_bytes());
+        }
+        Ok(true)
+    }
+
+    /// The next line that is neither a comment nor blank, split into trimmed UTF-8 fields.
+    fn next_record(&mut self) -> Result<Option<Row>, InputError> {
+        loop {
+            if !self.read_line()? {
+                return Ok(None);
+            }
+            if self.buf.first() == Some(&b'#') || self.buf.trim_ascii().is_empty() {
+                continue;
+            }
+            let line = self.line;
+            let raw = split_fields(&self.buf).map_err(|(col, m)| {
+                match self.header.headers.get(col - 1) {
+                    Some(name) => InputError::field(&self.header.file, line, name, m),
+                    None => InputError::line(&self.header.file, line, format!("column {col}: {m}")),
+                }
+            })?;
+            let mut fields = Vec::with_capacity(raw.len());
+            for (k, f) in raw.into_iter().enumerate() {
+                match String::from_utf8(f) {
+                    Ok(s) => fields.push(s),
+                    Err(_) => {
+                        let what = "not UTF-8 text (save the file as UTF-8)";
+                        return Err(match self.header.headers.get(k) {
+                            Some(name) => InputError::field(&self.header.file, line, name, what),
+                            None => InputError::line(&self.header.file, line, what),
+                        });
+                    }
+                }
+            }
+            return Ok(Some(Row { line, fields }));
+        }
+    }
+}
+
+/// Splits one CSV line into trimmed fields: commas separate, a field that starts with `"`
+/// is quoted (`""` is a quote inside it).
+fn split_fields(line: &[u8]) -> Result<Vec<Vec<u8>>, (usize, &'static str)> {
+    let mut fields = Vec::new();
+    let mut i = 0;
+    loop {
+        while i < line.len() && matches!(line[i], b' ' | b'\t') {
+            i += 1;
+        }
+        let mut field = Vec::new();
+        if line.get(i) == Some(&b'"') {
+            let col = fields.len() + 1;
+            i += 1;
+            loop {
+                match line.get(i) {
+                    None => {
+                        return Err((
+                            col,
+                            "a quote is not closed on this line (a quoted field cannot span lines)",
+                        ))
+                    }
+                    Some(b'"') if line.get(i + 1) == Some(&b'"') => {
+                        field.push(b'"');
+                        i += 2;
+                    }
+                    Some(b'"') => {
+                        i += 1;
+                        break;
+                    }
+                    Some(b) => {
+                        field.push(*b);
+                        i += 1;
+                    }
+                }
+            }
+            while i < line.len() && matches!(line[i], b' ' | b'\t') {
+                i += 1;
+            }
+            if i < line.len() && line[i] != b',' {
+                return Err((col, "text after the closing quote (quote the whole field)"));
+            }
+            fields.push(field);
+        } else {
+            let start = i;
+            while i < line.len() && line[i] != b',' {
+                i += 1;
+            }
+            field.extend_from_slice(line[start..i].trim_ascii());
+            fields.push(field);
+        }
+        if i >= line.len() {
+            return Ok(fields);
+        }
+        i += 1; // the comma
+    }
+}
+
+impl Header {
     /// What the header says the file holds.
     pub fn kind(&self) -> Result<FileKind, InputError> {
         if self.has("sensor") || self.has("length_mm") {
@@ -133,7 +324,7 @@ impl Table {
                 self.header_line,
                 format!(
                     "cannot tell what this file holds from its header ({}): expected length-sensor readings (pose,sensor,x_mm,...,length_mm), tracker pose measurements (pose,reading_1..,x_mm,...) or a list of poses (x_mm,y_mm,z_mm,...)",
-                    self.headers.join(",")
+                    shorten(&self.headers.join(","))
                 ),
             ))
         }
@@ -165,7 +356,7 @@ impl Table {
                     *r,
                     format!(
                         "missing column (the header has: {})",
-                        self.headers.join(",")
+                        shorten(&self.headers.join(","))
                     ),
                 ));
             }
@@ -178,7 +369,7 @@ impl Table {
                 return Err(InputError::field(
                     &self.file,
                     self.header_line,
-                    h,
+                    shorten(h),
                     format!("unknown column (expected: {})", expected.join(", ")),
                 ));
             }
@@ -188,7 +379,8 @@ impl Table {
 
     /// The raw text of a field (`None` when the table has no such column).
     pub fn text<'a>(&self, row: &'a Row, name: &str) -> Option<&'a str> {
-        self.column(name).map(|i| row.fields[i].as_str())
+        self.column(name)
+            .and_then(|i| row.fields.get(i).map(String::as_str))
     }
 
     /// A required text field: present and non-empty.
@@ -231,7 +423,10 @@ impl Table {
                 _ => Err(self.err(
                     row,
                     name,
-                    format!("{t:?} is not a boolean (true/false, yes/no, 1/0)"),
+                    format!(
+                        "{:?} is not a boolean (true/false, yes/no, 1/0)",
+                        shorten(t)
+                    ),
                 )),
             },
         }
@@ -267,35 +462,39 @@ impl Table {
 /// `k` of a `reading_k` column name (k >= 1).
 pub fn reading_index(name: &str) -> Option<usize> {
     name.strip_prefix("reading_")
+        .filter(|k| k.bytes().all(|b| b.is_ascii_digit()))
         .and_then(|k| k.parse::<usize>().ok())
         .filter(|k| *k >= 1)
+}
+
+/// At most 60 characters of a text, for messages (a whole garbage line is no help).
+pub fn shorten(s: &str) -> String {
+    match s.char_indices().nth(60) {
+        Some((i, _)) => format!("{}...", &s[..i]),
+        None => s.to_string(),
+    }
 }
 
 /// Parses a finite number; the message says what is wrong.
 pub fn parse_number(t: &str) -> Result<f64, String> {
     match t.parse::<f64>() {
         Ok(v) if v.is_finite() => Ok(v),
-        Ok(_) => Err(format!("{t:?} is not a finite number")),
-        Err(_) => Err(format!("{t:?} is not a number")),
+        Ok(_) => Err(format!("{:?} is not a finite number", shorten(t))),
+        Err(_) => Err(format!("{:?} is not a number", shorten(t))),
     }
 }
 
-fn csv_error(file: &str, header_line: usize, e: csv::Error) -> InputError {
-    let line = e
-        .position()
-        .map(|p| p.line() as usize)
-        .unwrap_or(header_line);
-    let message = match e.kind() {
-        csv::ErrorKind::UnequalLengths {
-            expected_len, len, ..
-        } => format!(
-            "{len} field{}, but the header has {expected_len}",
-            if *len == 1 { "" } else { "s" }
-        ),
-        csv::ErrorKind::Utf8 { .. } => "not UTF-8 text".to_string(),
-        _ => e.to_string(),
-    };
-    InputError::line(file, line, message)
+/// A number for messages: as written for ordinary magnitudes, in exponent form for huge or
+/// tiny ones (a 300-digit number is no help), with at most `digits` decimals when given.
+pub fn show(v: f64, digits: Option<usize>) -> String {
+    if v != 0.0 && !(1e-6..1e12).contains(&v.abs()) {
+        format!("{v:e}")
+    } else {
+        match digits {
+            Some(d) => format!("{v:.d$}"),
+            None => format!("{v}"),
+        }
+    }
 }
 
 /// Formats a number so that it reads back exactly (shortest round-trip form).
@@ -309,5 +508,66 @@ pub fn field(s: &str) -> String {
         format!("\"{}\"", s.replace('"', "\"\""))
     } else {
         s.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rows(text: &[u8]) -> Result<(Header, Vec<Row>), InputError> {
+        let mut t = Table::from_reader(text, "t.csv")?;
+        let mut v = Vec::new();
+        while let Some(r) = t.next_row()? {
+            v.push(r);
+        }
+        Ok((t.header.clone(), v))
+    }
+
+    #[test]
+    fn bom_crlf_blank_lines_and_comments() {
+        let (h, r) =
+            rows(b"\xEF\xBB\xBF# simulated by cpm 0.1\r\na, b\r\n\r\n  \r\n1,2\r\n# c\r\n3,4\r\n")
+                .unwrap();
+        assert!(h.simulated_mark);
+        assert_eq!(h.headers, ["a", "b"]);
+        assert_eq!(h.header_line, 2);
+        assert_eq!(r.iter().map(|r| r.line).collect::<Vec<_>>(), [5, 7]);
+        assert_eq!(r[1].fields[1], "4");
+    }
+
+    #[test]
+    fn located_errors() {
+        let e = rows(b"").unwrap_err();
+        assert!(e.to_string().starts_with("t.csv: no header row"), "{e}");
+        let e = rows(b"# only\n\n").unwrap_err();
+        assert!(e.to_string().starts_with("t.csv: no header row"), "{e}");
+        let e = rows(b"a,b\n1,2\n1,2,3\n").unwrap_err();
+        assert_eq!(e.to_string(), "t.csv:3: 3 fields, but the header has 2");
+        let e = rows(b"a,b\n1,2\n1,\xff\n").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "t.csv:3: field b: not UTF-8 text (save the file as UTF-8)"
+        );
+        let (_, r) = rows(b"a, b\n\"x, \"\"y\"\"\" , 2\n").unwrap();
+        assert_eq!(r[0].fields, ["x, \"y\"", "2"]);
+        let e = rows(b"a,b\n\"x,2\n").unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("t.csv:2: field a: a quote is not closed"),
+            "{e}"
+        );
+        let e = rows(b"a,a\n").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "t.csv:1: field a: the column appears twice in the header"
+        );
+        let mut long = b"a,b\n1,2\n".to_vec();
+        long.extend(std::iter::repeat_n(b'7', MAX_LINE_BYTES + 10));
+        let e = rows(&long).unwrap_err();
+        assert!(
+            e.to_string().starts_with("t.csv:3: the line is longer"),
+            "{e}"
+        );
     }
 }

@@ -413,6 +413,32 @@ fn finite3(v: &[f64; 3], path: &[Seg]) -> Result<(), Problem> {
     }
 }
 
+/// The largest coordinate of a plausible description, mm (1 km).
+pub const MAX_COORDINATE_MM: f64 = 1e6;
+/// The shortest plausible link at the home pose, mm.
+pub const MIN_LINK_LENGTH_MM: f64 = 1.0;
+/// The largest plausible installation error, um (100 mm).
+pub const MAX_INSTALLATION_ERROR_UM: f64 = 1e5;
+/// The largest plausible joint clearance, um (10 mm).
+pub const MAX_CLEARANCE_UM: f64 = 1e4;
+
+/// A finite position within [`MAX_COORDINATE_MM`] of the origin.
+fn position3(v: &[f64; 3], path: &[Seg]) -> Result<(), Problem> {
+    finite3(v, path)?;
+    match v.iter().position(|x| x.abs() > MAX_COORDINATE_MM) {
+        None => Ok(()),
+        Some(k) => Err(Problem::new(
+            path,
+            format!(
+                "its {} component is {:e} mm: implausibly far (over {} km; positions are in mm)",
+                ["x (1st)", "y (2nd)", "z (3rd)"][k],
+                v[k],
+                MAX_COORDINATE_MM * 1e-6
+            ),
+        )),
+    }
+}
+
 fn non_negative(v: f64, path: &[Seg]) -> Result<(), Problem> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
@@ -580,7 +606,7 @@ impl RobotDescription {
     /// Semantic checks; the first problem found.
     fn check(&self) -> Result<(), Problem> {
         use Seg::{Index, Key};
-        finite3(&self.home.position_mm, &[Key("home"), Key("position_mm")])?;
+        position3(&self.home.position_mm, &[Key("home"), Key("position_mm")])?;
         finite3(&self.home.rpy_deg, &[Key("home"), Key("rpy_deg")])?;
         let n = self.links.len();
         if n < MIN_LINKS {
@@ -592,8 +618,8 @@ impl RobotDescription {
         let home = self.home.pose();
         for (i, l) in self.links.iter().enumerate() {
             let at = |k: &'static str| [Key("link"), Index(i), Key(k)];
-            finite3(&l.base_mm, &at("base_mm"))?;
-            finite3(&l.platform_mm, &at("platform_mm"))?;
+            position3(&l.base_mm, &at("base_mm"))?;
+            position3(&l.platform_mm, &at("platform_mm"))?;
             if let Some([lo, hi]) = l.length_limits_mm {
                 if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && lo < hi) {
                     return Err(Problem::new(
@@ -614,13 +640,40 @@ impl RobotDescription {
                     format!("must be finite and non-zero, got {}", l.mm_per_unit),
                 ));
             }
+            if l.mm_per_unit < 0.0 {
+                return Err(Problem::new(
+                    &at("mm_per_unit"),
+                    format!(
+                        "must be > 0 (millimetres per reading unit: the link lengthens as its reading grows), got {}",
+                        l.mm_per_unit
+                    ),
+                ));
+            }
             let q = home.transform_point(&Vector3::from(l.platform_mm)) - Vector3::from(l.base_mm);
-            let has_length = q.norm() > 1e-9;
-            if !has_length {
+            let length = q.norm();
+            if !(length > 1e-9) {
                 return Err(Problem::new(
                     &[Key("link"), Index(i)],
                     "zero length at the home pose (its joints coincide)",
                 ));
+            }
+            if length < MIN_LINK_LENGTH_MM {
+                return Err(Problem::new(
+                    &[Key("link"), Index(i)],
+                    format!(
+                        "only {length:.6} mm long at the home pose: implausibly short (positions are in mm: is the description in metres?)"
+                    ),
+                ));
+            }
+            if let Some([lo, hi]) = l.length_limits_mm {
+                if length < lo || length > hi {
+                    return Err(Problem::new(
+                        &at("length_limits_mm"),
+                        format!(
+                            "the link is {length:.3} mm long at the home pose, outside [{lo}, {hi}] mm: the home pose must be within the limits"
+                        ),
+                    ));
+                }
             }
         }
         let mut names = HashSet::new();
@@ -635,11 +688,21 @@ impl RobotDescription {
                     format!("duplicate sensor name `{}`", s.name),
                 ));
             }
-            finite3(&s.base_mm, &at("base_mm"))?;
-            finite3(&s.platform_mm, &at("platform_mm"))?;
+            position3(&s.base_mm, &at("base_mm"))?;
+            position3(&s.platform_mm, &at("platform_mm"))?;
         }
         if let Some(c) = &self.clearance {
             non_negative(c.radius_um, &[Key("clearance"), Key("radius_um")])?;
+            if c.radius_um > MAX_CLEARANCE_UM {
+                return Err(Problem::new(
+                    &[Key("clearance"), Key("radius_um")],
+                    format!(
+                        "{:e} um: implausibly large (over {} mm; the clearance is in um)",
+                        c.radius_um,
+                        MAX_CLEARANCE_UM * 1e-3
+                    ),
+                ));
+            }
             non_negative(c.smooth_force_n, &[Key("clearance"), Key("smooth_force_n")])?;
         }
         if let Some(l) = &self.load {
@@ -679,7 +742,19 @@ impl RobotDescription {
                     ));
                 }
                 for (i, r) in rows.iter().enumerate() {
-                    finite3(r, &[Key("installation_errors_um"), Key(key), Index(i)])?;
+                    let at = [Key("installation_errors_um"), Key(key), Index(i)];
+                    finite3(r, &at)?;
+                    if let Some(k) = r.iter().position(|v| v.abs() > MAX_INSTALLATION_ERROR_UM) {
+                        return Err(Problem::new(
+                            &at,
+                            format!(
+                                "its {} component is {:e} um: implausibly large (over {} mm; installation errors are in um)",
+                                ["x (1st)", "y (2nd)", "z (3rd)"][k],
+                                r[k],
+                                MAX_INSTALLATION_ERROR_UM * 1e-3
+                            ),
+                        ));
+                    }
                 }
             }
         }

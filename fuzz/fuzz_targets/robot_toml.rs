@@ -1,0 +1,4 @@
+//! cargo-fuzz target: `cpm::fuzzing::robot_toml` on arbitrary bytes (see fuzz/README.md).
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| cpm::fuzzing::robot_toml(data));
