@@ -1,11 +1,16 @@
 //! Benchmarks of cpm-lm.
 //!
 //! * `nist/<dataset>`: one solve of a NIST StRD problem from its second start, cpm-lm
-//!   (default options, with and without the end-of-solve statistics) next to the
-//!   `levenberg-marquardt` crate (MINPACK port on nalgebra, default options, dynamic sizes).
+//!   (default options, with and without the end-of-solve statistics, and with Nielsen's
+//!   damping) next to the `levenberg-marquardt` crate (MINPACK port on nalgebra, default
+//!   options, dynamic sizes).
 //! * `bundle/<solver>/<N>`: a bundle-shaped sparse problem, N blocks of 6 local parameters
 //!   sharing 40 global ones, 12 residuals per block, solved with the Schur complement and
 //!   with the sparse Cholesky solver.
+//! * `loops/<damping>/<N>`: the shape of an implicit-loop calibration (`tests/common/loops.rs`:
+//!   N poses of 6 local parameters, 36 globals, 22 residuals and 168 Jacobian entries per
+//!   pose) solved from zero with the Schur complement. `examples/schur_memory.rs` runs the
+//!   same problem at 10^5 poses and reports the peak memory.
 //!
 //! Inputs are built from fixed seeds. Run briefly with
 //! `cargo bench -p cpm-lm -- --warm-up-time 1 --measurement-time 2`.
@@ -17,10 +22,13 @@ use criterion::{criterion_group, criterion_main, Criterion};
 #[path = "../tests/common/nist.rs"]
 mod nist;
 
+#[path = "../tests/common/loops.rs"]
+mod loops;
+
 /// NIST problems: cpm-lm against the `levenberg-marquardt` crate.
 mod nist_vs_lm {
     use super::*;
-    use cpm_lm::{minimize, Options};
+    use cpm_lm::{minimize, Damping, Options};
     use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
     use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
     use nist::{load, min_lre, NistProblem};
@@ -60,6 +68,10 @@ mod nist_vs_lm {
     pub fn bench(c: &mut Criterion) {
         let no_stats = Options {
             compute_statistics: false,
+            ..Options::default()
+        };
+        let nielsen = Options {
+            damping: Damping::Nielsen,
             ..Options::default()
         };
         println!(
@@ -105,6 +117,14 @@ mod nist_vs_lm {
                     let mut p = problem.clone();
                     let mut x = d.start2.clone();
                     black_box(minimize(&mut p, &mut x, &no_stats).unwrap());
+                    x
+                })
+            });
+            group.bench_function("cpm-lm (Nielsen)", |b| {
+                b.iter(|| {
+                    let mut p = problem.clone();
+                    let mut x = d.start2.clone();
+                    black_box(minimize(&mut p, &mut x, &nielsen).unwrap());
                     x
                 })
             });
@@ -282,5 +302,52 @@ mod bundle {
     }
 }
 
-criterion_group!(benches, nist_vs_lm::bench, bundle::bench);
+/// The calibration-shaped problem (Schur complement), both damping strategies.
+mod calibration_shape {
+    use super::*;
+    use cpm_lm::{minimize_sparse, Damping, LinearSolver, Options};
+    use loops::{Loops, LOCAL};
+
+    pub fn bench(c: &mut Criterion) {
+        let mut group = c.benchmark_group("loops");
+        group.sample_size(10);
+        let blocks = 10_000;
+        let mut problem = Loops::new(blocks, 1);
+        problem.stream_pattern = true;
+        for (label, damping) in [
+            ("trust-region", Damping::TrustRegion),
+            ("nielsen", Damping::Nielsen),
+        ] {
+            let options = Options {
+                damping,
+                ftol: 1e-10,
+                xtol: 1e-10,
+                gtol: 1e-10,
+                compute_statistics: false,
+                linear_solver: LinearSolver::Schur {
+                    local_block_sizes: vec![LOCAL; blocks],
+                },
+                ..Options::default()
+            };
+            let mut x = vec![0.0; problem.truth.len()];
+            let r = minimize_sparse(&mut problem, &mut x, &options).unwrap();
+            println!("loops {label} N={blocks}: {}", r.brief());
+            group.bench_function(format!("{label}/{blocks}"), |b| {
+                b.iter(|| {
+                    let mut x = vec![0.0; problem.truth.len()];
+                    black_box(minimize_sparse(&mut problem, &mut x, &options).unwrap());
+                    x
+                })
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(
+    benches,
+    nist_vs_lm::bench,
+    bundle::bench,
+    calibration_shape::bench
+);
 criterion_main!(benches);

@@ -24,9 +24,10 @@
 //! Gauss-Newton step, large `mu` a short steepest-descent step. The linear model predicts
 //! the reduction `L(0) - L(h) = -g.h - 0.5 ||J h||^2`; the gain ratio
 //! `rho = (F(x) - F(x + h)) / (L(0) - L(h))` decides whether the step is accepted and how
-//! `mu` changes (see [`Damping`]). The solve stops on a small relative cost reduction
-//! (`ftol`), a small relative step (`xtol`), a small scaled gradient (`gtol`), a zero
-//! residual, or a limit.
+//! `mu` changes (see [`Damping`]; the default, [`Damping::TrustRegion`], chooses `mu` so
+//! that the scaled step fits a trust region, MINPACK's way). The solve stops on a small
+//! relative cost reduction (`ftol`), a small relative step (`xtol`), a small scaled
+//! gradient (`gtol`), a zero residual, or a limit.
 //!
 //! ## A curve fit
 //!
@@ -77,7 +78,8 @@
 //!
 //! [`Options`] is a flat struct with public fields; each default is in its documentation
 //! and [`Options::validate`] explains what is wrong with a combination. Choose the damping
-//! schedule ([`Damping::Nielsen`], [`Damping::Marquardt`], [`Damping::CubicInterpolation`]),
+//! schedule ([`Damping::TrustRegion`], [`Damping::Nielsen`], [`Damping::Marquardt`],
+//! [`Damping::CubicInterpolation`]),
 //! the scaling ([`Scaling`]) and the linear solver ([`LinearSolver`]):
 //!
 //! ```
@@ -174,10 +176,14 @@
 //! ## Sparse problems and the Schur complement
 //!
 //! Implement [`SparseJacobian`] (a fixed pattern declared once, values in that order) and
-//! call [`minimize_sparse`]. [`LinearSolver::SparseCholesky`] factors `J^T J + mu D^2` with
-//! faer's sparse Cholesky (symbolic analysis once); [`LinearSolver::Schur`] eliminates many
-//! small local blocks and solves the reduced system in the global parameters. The dense
-//! solvers also accept sparse problems.
+//! call [`minimize_sparse`]. The solver keeps the Jacobian in compressed-sparse-row form
+//! with `u32` column indices; a pattern listed row by row (rows ascending, columns
+//! ascending within a row) needs no copy and no map, and a large problem can stream it
+//! through [`SparseJacobian::visit_pattern`] instead of building the list.
+//! [`LinearSolver::SparseCholesky`] factors `J^T J + mu D^2` with faer's sparse Cholesky
+//! (symbolic analysis once); [`LinearSolver::Schur`] eliminates many small local blocks
+//! and solves the reduced system in the global parameters, holding only the small factor
+//! of each block besides the Jacobian. The dense solvers also accept sparse problems.
 //!
 //! ```
 //! use cpm_lm::{minimize_sparse, LinearSolver, ModelError, Options, Problem, SparseJacobian};

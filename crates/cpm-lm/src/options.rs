@@ -23,7 +23,8 @@ pub enum Scaling {
 /// with a combination.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Options {
-    /// Damping schedule. Default: [`Damping::Nielsen`].
+    /// Damping schedule. Default: [`Damping::TrustRegion`] (MINPACK's trust-region control;
+    /// [`Damping::Nielsen`] remains available).
     pub damping: Damping,
     /// Scaling of the damping term. Default: [`Scaling::Marquardt`].
     pub scaling: Scaling,
@@ -33,7 +34,7 @@ pub struct Options {
     pub loss: Loss,
     /// Stop when the predicted relative reduction of the cost in a step is at most `ftol`
     /// and the actual relative reduction is too: at most `ftol` with a gain ratio of at most
-    /// 2 (MINPACK's test), at the rounding level of the cost (`8 eps sqrt(m)`), or not a
+    /// 2 (MINPACK's test), at the rounding level of the cost (`32 eps sqrt(m)`), or not a
     /// reduction at all (the step is below what the evaluation can resolve; damping more
     /// would only shrink it further). Default: `1e-15`.
     pub ftol: f64,
@@ -57,7 +58,8 @@ pub struct Options {
     /// Default: `None`.
     pub upper: Option<Vec<f64>>,
     /// Initial damping relative to the largest diagonal entry of the (scaled) `J^T J`:
-    /// `mu_0 = tau * max_j (J^T J)_jj / D_j^2`. Default: `1e-3`.
+    /// `mu_0 = tau * max_j (J^T J)_jj / D_j^2`. The trust region uses it only when starting
+    /// from `x = 0` (initial radius `||D^-1 g|| / mu_0`). Default: `1e-3`.
     pub tau: f64,
     /// Absolute threshold on the singular values of `J` for the numerical rank used by the
     /// statistics. Default: `None`, meaning `max(m, n) * f64::EPSILON * s_max`.
@@ -65,7 +67,9 @@ pub struct Options {
     /// Compute [`Statistics`](crate::stats::Statistics) (rank, covariance, standard
     /// deviations) at the solution. With a robust loss they use the reweighted Jacobian and
     /// residuals the last step saw. Costs one extra Jacobian evaluation when the last
-    /// accepted step left the Jacobian stale. Default: `true`.
+    /// accepted step left the Jacobian stale (a step below `sqrt(eps)` of the scaled
+    /// parameters changes it only at the 1e-8 level and, with the plain loss, the Jacobian
+    /// before the step is used). Default: `true`.
     pub compute_statistics: bool,
     /// Statistics use a dense SVD of the Jacobian and are skipped (left `None`) when the
     /// problem has more parameters than this. Default: `1000`.

@@ -34,8 +34,24 @@ pub trait SparseJacobian: Problem {
     fn pattern(&self) -> Vec<(usize, usize)>;
 
     /// Writes the Jacobian values at `x` into `values`, in the order of
-    /// [`pattern()`](SparseJacobian::pattern) (length = number of pattern entries).
+    /// [`pattern()`](SparseJacobian::pattern) (length = number of pattern entries). Entries
+    /// not written count as zero.
     fn jacobian_values(&mut self, x: &[f64], values: &mut [f64]) -> Result<(), ModelError>;
+
+    /// Calls `visit(row, col)` for every structural non-zero, in the order of
+    /// [`pattern()`](SparseJacobian::pattern). The solvers call this once per solve instead
+    /// of `pattern()`; the default visits the entries of `pattern()`.
+    ///
+    /// Override it for a large problem to avoid building the list at all: a pattern visited
+    /// row by row in compressed-sparse-row order (rows ascending, columns strictly ascending
+    /// within a row) is stored as it arrives, and the values are then written straight into
+    /// the solver's storage, with no copy of the pattern and no map. Any other order works
+    /// as well, at the cost of a temporary list and a map.
+    fn visit_pattern(&self, visit: &mut dyn FnMut(usize, usize)) {
+        for (row, col) in self.pattern() {
+            visit(row, col);
+        }
+    }
 }
 
 impl<P: Problem + ?Sized> Problem for &mut P {
@@ -62,5 +78,8 @@ impl<P: SparseJacobian + ?Sized> SparseJacobian for &mut P {
     }
     fn jacobian_values(&mut self, x: &[f64], values: &mut [f64]) -> Result<(), ModelError> {
         (**self).jacobian_values(x, values)
+    }
+    fn visit_pattern(&self, visit: &mut dyn FnMut(usize, usize)) {
+        (**self).visit_pattern(visit)
     }
 }

@@ -35,6 +35,7 @@ use std::fmt;
 use faer::{Mat, MatRef};
 
 use crate::error::LmError;
+use crate::solver::small::{dot, norm2};
 
 /// A parameter is unidentifiable when the norm of its unit vector's projection onto the
 /// numerical null space of `J` exceeds this value.
@@ -121,13 +122,7 @@ impl Statistics {
                 "statistics: the Jacobian or the residuals contain NaN or infinity".into(),
             ));
         }
-        // Right singular vectors: thin SVD when m >= n, full SVD otherwise (V is n x n).
-        let svd = if m >= n { j.thin_svd() } else { j.svd() };
-        let svd = svd.map_err(|e| LmError::Numerical(format!("statistics: SVD failed: {e:?}")))?;
-        let k = m.min(n);
-        let s_diag = svd.S().column_vector();
-        let singular_values: Vec<f64> = (0..k).map(|i| s_diag[i]).collect();
-        let v = svd.V();
+        let (singular_values, v) = right_svd(j)?;
         let s_max = singular_values.first().copied().unwrap_or(0.0);
         let tol = rank_tol.unwrap_or(m.max(n) as f64 * f64::EPSILON * s_max);
         let rank = singular_values.iter().filter(|&&s| s > tol).count();
@@ -238,6 +233,125 @@ impl Statistics {
     }
 }
 
+/// Up to this many parameters the SVD is a one-sided Jacobi SVD of `R` (fast and accurate
+/// for small matrices); above, faer's SVD of `R`.
+const JACOBI_MAX: usize = 48;
+
+/// Singular values (descending, `min(m, n)` of them) and right singular vectors (`n x n`)
+/// of `j`. A tall `j` is first reduced to its `n x n` triangular factor `R` (Householder
+/// QR), which has the same singular values and right singular vectors; the left ones are
+/// never formed.
+fn right_svd(j: MatRef<'_, f64>) -> Result<(Vec<f64>, Mat<f64>), LmError> {
+    let (m, n) = (j.nrows(), j.ncols());
+    let k = m.min(n);
+    // Column-major copy of J, reduced in place to R when tall.
+    let mut a: Vec<f64> = Vec::with_capacity(m * n);
+    for c in 0..n {
+        a.extend(j.col(c).iter().copied());
+    }
+    let p = if m > n {
+        r_factor(&mut a, m, n);
+        n
+    } else {
+        m
+    };
+    if n <= JACOBI_MAX {
+        let (mut sv, v) = jacobi_svd(a, p, n);
+        sv.truncate(k);
+        return Ok((sv, v));
+    }
+    let svd = MatRef::from_column_major_slice(&a, p, n)
+        .svd()
+        .map_err(|e| LmError::Numerical(format!("statistics: SVD failed: {e:?}")))?;
+    let s_diag = svd.S().column_vector();
+    let sv = (0..k).map(|i| s_diag[i]).collect();
+    Ok((sv, svd.V().to_owned()))
+}
+
+/// Reduces the `m x n` column-major `a` (`m > n`) to the `n x n` upper-triangular `R` of
+/// `a = Q R` by Householder reflections, stored column-major in the first `n * n` entries
+/// (zeros below the diagonal); `a` is truncated to that.
+fn r_factor(a: &mut Vec<f64>, m: usize, n: usize) {
+    for c in 0..n {
+        let (left, right) = a.split_at_mut((c + 1) * m);
+        let x = &mut left[c * m + c..];
+        let norm = norm2(x).sqrt();
+        if norm == 0.0 {
+            continue;
+        }
+        // v = x - alpha e0 with alpha = -sign(x0) ||x||; (I - 2 v v^T / v^T v) x = alpha e0.
+        let alpha = if x[0] < 0.0 { norm } else { -norm };
+        x[0] -= alpha;
+        let vtv = norm2(x);
+        for y in right.chunks_exact_mut(m) {
+            let y = &mut y[c..];
+            let f = 2.0 * dot(x, y) / vtv;
+            for (q, p) in y.iter_mut().zip(x.iter()) {
+                *q -= f * p;
+            }
+        }
+        x[0] = alpha;
+    }
+    for c in 0..n {
+        for r in 0..n {
+            a[c * n + r] = if r <= c { a[c * m + r] } else { 0.0 };
+        }
+    }
+    a.truncate(n * n);
+}
+
+/// One-sided Jacobi SVD (Hestenes) of the `p x n` column-major `ac`: rotates pairs of
+/// columns until they are orthogonal to working precision. Returns the `n` column norms
+/// (the singular values, padded with zeros when `p < n`) in descending order and the
+/// matching right singular vectors.
+fn jacobi_svd(mut ac: Vec<f64>, p: usize, n: usize) -> (Vec<f64>, Mat<f64>) {
+    let mut vc = vec![0.0; n * n];
+    for c in 0..n {
+        vc[c * n + c] = 1.0;
+    }
+    fn rotate(buf: &mut [f64], len: usize, i: usize, k: usize, c: f64, s: f64) {
+        let (lo, hi) = buf.split_at_mut(k * len);
+        let x = &mut lo[i * len..(i + 1) * len];
+        let y = &mut hi[..len];
+        for (xa, ya) in x.iter_mut().zip(y.iter_mut()) {
+            let (u, w) = (*xa, *ya);
+            *xa = c * u - s * w;
+            *ya = s * u + c * w;
+        }
+    }
+    for _sweep in 0..80 {
+        let mut rotated = false;
+        for i in 0..n {
+            for k in i + 1..n {
+                let x = &ac[i * p..(i + 1) * p];
+                let y = &ac[k * p..(k + 1) * p];
+                let (alpha, beta, gamma) = (norm2(x), norm2(y), dot(x, y));
+                if gamma == 0.0 || gamma.abs() <= f64::EPSILON * (alpha * beta).sqrt() {
+                    continue;
+                }
+                rotated = true;
+                let zeta = (beta - alpha) / (2.0 * gamma);
+                let t = zeta.signum() / (zeta.abs() + (1.0 + zeta * zeta).sqrt());
+                let c = 1.0 / (1.0 + t * t).sqrt();
+                let s = c * t;
+                rotate(&mut ac, p, i, k, c, s);
+                rotate(&mut vc, n, i, k, c, s);
+            }
+        }
+        if !rotated {
+            break;
+        }
+    }
+    let norms: Vec<f64> = (0..n)
+        .map(|c| norm2(&ac[c * p..(c + 1) * p]).sqrt())
+        .collect();
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&x, &y| norms[y].total_cmp(&norms[x]));
+    let sv = order.iter().map(|&c| norms[c]).collect();
+    let vs = Mat::from_fn(n, n, |r, c| vc[order[c] * n + r]);
+    (sv, vs)
+}
+
 impl fmt::Display for Statistics {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(
@@ -299,6 +413,45 @@ mod tests {
         // dof = 0 -> sigma2 undefined -> no std at all.
         assert!(st.sigma2.is_nan());
         assert!(st.std_dev.iter().all(Option::is_none));
+    }
+
+    #[test]
+    fn jacobi_and_faer_svds_agree() {
+        // Tall, square and wide matrices, one of them rank deficient.
+        for (m, n) in [(9usize, 4usize), (5, 5), (3, 6), (70, 60)] {
+            let a = Mat::<f64>::from_fn(m, n, |i, k| {
+                let v = ((i * 7 + k * 13) % 11) as f64 - 5.0 + 0.1 * k as f64;
+                if k == 3 && n > 4 {
+                    ((i * 7) % 11) as f64 - 5.0 // column 3 = column 0 without the shift
+                } else {
+                    v
+                }
+            });
+            let (sv, v) = right_svd(a.as_ref()).unwrap();
+            let reference = a.svd().unwrap();
+            let s_ref = reference.S().column_vector();
+            assert_eq!(sv.len(), m.min(n));
+            for i in 0..sv.len() {
+                assert!(
+                    (sv[i] - s_ref[i]).abs() <= 1e-12 * s_ref[0],
+                    "{m}x{n}: {sv:?}"
+                );
+            }
+            // A V = U S: the columns of A V have norms equal to the singular values.
+            let av = &a * &v;
+            for c in 0..sv.len() {
+                let norm = av.col(c).norm_l2();
+                assert!((norm - sv[c]).abs() <= 1e-12 * s_ref[0]);
+            }
+            // V is orthogonal.
+            let vtv = v.transpose() * &v;
+            for r in 0..n {
+                for c in 0..n {
+                    let e = if r == c { 1.0 } else { 0.0 };
+                    assert!((vtv[(r, c)] - e).abs() < 1e-12);
+                }
+            }
+        }
     }
 
     #[test]

@@ -7,6 +7,7 @@
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Conj, Mat, Par};
 
 use crate::solver::jacobian::Jacobian;
@@ -19,6 +20,8 @@ pub(crate) struct DenseCholesky {
     a: Mat<f64>,
     rhs: Mat<f64>,
     mem: MemBuffer,
+    /// Whether `a` holds the factor of the last solve.
+    factored: bool,
 }
 
 impl DenseCholesky {
@@ -33,6 +36,7 @@ impl DenseCholesky {
             a: Mat::zeros(n, n),
             rhs: Mat::zeros(n, 1),
             mem: MemBuffer::new(req),
+            factored: false,
         }
     }
 }
@@ -42,6 +46,7 @@ impl LinearSystem for DenseCholesky {
         let Jacobian::Dense(j) = jac else {
             return Err("dense Cholesky needs a dense Jacobian".into());
         };
+        self.factored = false;
         matmul(
             self.jtj.as_mut(),
             Accum::Replace,
@@ -53,7 +58,8 @@ impl LinearSystem for DenseCholesky {
         Ok(())
     }
 
-    fn solve(&mut self, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+    fn solve(&mut self, _jac: &Jacobian, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+        self.factored = false;
         self.a.copy_from(&self.jtj);
         for k in 0..self.n {
             self.a[(k, k)] += mu * d[k] * d[k];
@@ -85,6 +91,20 @@ impl LinearSystem for DenseCholesky {
             h[k] = self.rhs[(k, 0)];
             ok &= h[k].is_finite();
         }
+        self.factored = ok;
         ok
+    }
+
+    fn inverse_quadratic(&mut self, _jac: &Jacobian, w: &[f64]) -> Option<f64> {
+        if !self.factored {
+            return None;
+        }
+        // ||L^-1 w||^2 with the factor of the last solve.
+        for k in 0..self.n {
+            self.rhs[(k, 0)] = w[k];
+        }
+        solve_lower_triangular_in_place(self.a.as_ref(), self.rhs.as_mut(), Par::Seq);
+        let q: f64 = (0..self.n).map(|k| self.rhs[(k, 0)].powi(2)).sum();
+        q.is_finite().then_some(q)
     }
 }

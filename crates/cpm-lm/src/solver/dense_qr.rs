@@ -9,6 +9,7 @@
 //! cheap. All storage is allocated once, when the solver is built.
 
 use crate::solver::jacobian::Jacobian;
+use crate::solver::small;
 use crate::solver::LinearSystem;
 
 /// Workspace of the dense QR solver.
@@ -20,18 +21,27 @@ pub(crate) struct DenseQr {
     /// `rows x n` column-major: Householder vectors, then `R` (upper triangle with
     /// diagonal); the strict lower triangle of the top `n x n` block is scratch for `qrsolv`.
     a: Vec<f64>,
-    rdiag: Vec<f64>,
-    acnorm: Vec<f64>,
-    wa: Vec<f64>,
     ipvt: Vec<usize>,
+    /// The vectors, in one allocation (see [`Vectors`]).
+    buf: Vec<f64>,
+    /// Whether the strict lower triangle and `sdiag` hold the factor `S` of the last solve
+    /// (`P^T (J^T J + mu D^2) P = S^T S`).
+    factored: bool,
+}
+
+/// The vectors of [`DenseQr`], borrowed from its buffer.
+struct Vectors<'a> {
+    rdiag: &'a mut [f64],
+    acnorm: &'a mut [f64],
+    wa: &'a mut [f64],
+    sdiag: &'a mut [f64],
+    xdiag: &'a mut [f64],
+    diag: &'a mut [f64],
+    z: &'a mut [f64],
     /// `Q^T r` (first `n` entries used).
-    qtf: Vec<f64>,
+    qtf: &'a mut [f64],
     /// Scratch of length `rows`.
-    wb: Vec<f64>,
-    sdiag: Vec<f64>,
-    xdiag: Vec<f64>,
-    diag: Vec<f64>,
-    z: Vec<f64>,
+    wb: &'a mut [f64],
 }
 
 impl DenseQr {
@@ -42,22 +52,37 @@ impl DenseQr {
             m,
             rows,
             a: vec![0.0; rows * n],
-            rdiag: vec![0.0; n],
-            acnorm: vec![0.0; n],
-            wa: vec![0.0; n],
             ipvt: vec![0; n],
-            qtf: vec![0.0; rows],
-            wb: vec![0.0; rows],
-            sdiag: vec![0.0; n],
-            xdiag: vec![0.0; n],
-            diag: vec![0.0; n],
-            z: vec![0.0; n],
+            buf: vec![0.0; 7 * n + 2 * rows],
+            factored: false,
+        }
+    }
+
+    fn split(buf: &mut [f64], n: usize) -> Vectors<'_> {
+        let (rdiag, rest) = buf.split_at_mut(n);
+        let (acnorm, rest) = rest.split_at_mut(n);
+        let (wa, rest) = rest.split_at_mut(n);
+        let (sdiag, rest) = rest.split_at_mut(n);
+        let (xdiag, rest) = rest.split_at_mut(n);
+        let (diag, rest) = rest.split_at_mut(n);
+        let (z, rest) = rest.split_at_mut(n);
+        let (qtf, wb) = rest.split_at_mut(rest.len() / 2);
+        Vectors {
+            rdiag,
+            acnorm,
+            wa,
+            sdiag,
+            xdiag,
+            diag,
+            z,
+            qtf,
+            wb,
         }
     }
 }
 
 fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+    small::norm2(v).sqrt()
 }
 
 /// Householder QR with column pivoting of the `rows x n` column-major `a` (MINPACK qrfac).
@@ -107,7 +132,7 @@ fn qrfac(
             let ajj = colj[0];
             for k in j + 1..n {
                 let colk = &mut right[(k - j - 1) * rows + j..(k - j) * rows];
-                let sum: f64 = colj.iter().zip(colk.iter()).map(|(p, q)| p * q).sum();
+                let sum = small::dot(colj, colk);
                 let temp = sum / ajj;
                 for (q, p) in colk.iter_mut().zip(colj.iter()) {
                     *q -= temp * p;
@@ -196,7 +221,7 @@ fn qrsolv(
     }
     for j in (0..nsing).rev() {
         let col = &r[j * ldr + j + 1..j * ldr + nsing];
-        let sum: f64 = col.iter().zip(&wa[j + 1..nsing]).map(|(a, b)| a * b).sum();
+        let sum = small::dot(col, &wa[j + 1..nsing]);
         wa[j] = (wa[j] - sum) / sdiag[j];
     }
     for j in 0..n {
@@ -210,66 +235,92 @@ impl LinearSystem for DenseQr {
             return Err("dense QR needs a dense Jacobian".into());
         };
         let (m, n, rows) = (self.m, self.n, self.rows);
+        self.factored = false;
         for c in 0..n {
             let dst = &mut self.a[c * rows..(c + 1) * rows];
             dst[..m].copy_from_slice(j.col_as_slice(c));
             dst[m..].fill(0.0);
         }
+        let v = Self::split(&mut self.buf, n);
         qrfac(
             rows,
             n,
             &mut self.a,
             &mut self.ipvt,
-            &mut self.rdiag,
-            &mut self.acnorm,
-            &mut self.wa,
+            v.rdiag,
+            v.acnorm,
+            v.wa,
         );
         // Q^T r, then store R's diagonal in place.
-        self.wb[..m].copy_from_slice(r);
-        self.wb[m..].fill(0.0);
+        v.wb[..m].copy_from_slice(r);
+        v.wb[m..].fill(0.0);
         for jj in 0..n {
             let col = &mut self.a[jj * rows..(jj + 1) * rows];
             let ajj = col[jj];
             if ajj != 0.0 {
-                let sum: f64 = col[jj..]
-                    .iter()
-                    .zip(&self.wb[jj..])
-                    .map(|(p, q)| p * q)
-                    .sum();
+                let sum = small::dot(&col[jj..], &v.wb[jj..]);
                 let temp = -sum / ajj;
-                for (w, p) in self.wb[jj..].iter_mut().zip(&col[jj..]) {
+                for (w, p) in v.wb[jj..].iter_mut().zip(&col[jj..]) {
                     *w += p * temp;
                 }
             }
-            col[jj] = self.rdiag[jj];
-            self.qtf[jj] = self.wb[jj];
+            col[jj] = v.rdiag[jj];
+            v.qtf[jj] = v.wb[jj];
         }
         Ok(())
     }
 
-    fn solve(&mut self, mu: f64, d: &[f64], _g: &[f64], h: &mut [f64]) -> bool {
+    fn solve(&mut self, _jac: &Jacobian, mu: f64, d: &[f64], _g: &[f64], h: &mut [f64]) -> bool {
+        let v = Self::split(&mut self.buf, self.n);
         let s = mu.sqrt();
-        for (dd, &v) in self.diag.iter_mut().zip(d) {
-            *dd = s * v;
+        for (dd, &dv) in v.diag.iter_mut().zip(d) {
+            *dd = s * dv;
         }
         qrsolv(
             self.n,
             &mut self.a,
             self.rows,
             &self.ipvt,
-            &self.diag,
-            &self.qtf,
-            &mut self.z,
-            &mut self.sdiag,
-            &mut self.wa,
-            &mut self.xdiag,
+            v.diag,
+            v.qtf,
+            v.z,
+            v.sdiag,
+            v.wa,
+            v.xdiag,
         );
         let mut ok = true;
-        for (hh, &z) in h.iter_mut().zip(&self.z) {
+        for (hh, &z) in h.iter_mut().zip(v.z.iter()) {
             *hh = -z;
             ok &= z.is_finite();
         }
+        self.factored = ok;
         ok
+    }
+
+    fn inverse_quadratic(&mut self, _jac: &Jacobian, w: &[f64]) -> Option<f64> {
+        if !self.factored {
+            return None;
+        }
+        // ||S^-T P^T w||^2 (MINPACK lmpar's Newton correction): S^T is the lower triangle
+        // left by qrsolv, with diagonal sdiag.
+        let (n, ldr) = (self.n, self.rows);
+        let v = Self::split(&mut self.buf, n);
+        for j in 0..n {
+            v.wa[j] = w[self.ipvt[j]];
+        }
+        for j in 0..n {
+            if v.sdiag[j] == 0.0 {
+                return None;
+            }
+            v.wa[j] /= v.sdiag[j];
+            let t = v.wa[j];
+            let col = &self.a[j * ldr + j + 1..j * ldr + n];
+            for (wi, &r) in v.wa[j + 1..n].iter_mut().zip(col) {
+                *wi -= r * t;
+            }
+        }
+        let q = small::norm2(&v.wa[..n]);
+        q.is_finite().then_some(q)
     }
 }
 
@@ -293,6 +344,18 @@ mod tests {
         (0..n).map(|k| x[(k, 0)]).collect()
     }
 
+    /// `w^T (J^T J + mu D^2)^-1 w` densely.
+    fn quad_reference(j: &Mat<f64>, mu: f64, d: &[f64], w: &[f64]) -> f64 {
+        let n = j.ncols();
+        let mut a = j.transpose() * j;
+        for k in 0..n {
+            a[(k, k)] += mu * d[k] * d[k];
+        }
+        let b = Mat::<f64>::from_fn(n, 1, |k, _| w[k]);
+        let x = a.partial_piv_lu().solve(&b);
+        (0..n).map(|k| w[k] * x[(k, 0)]).sum()
+    }
+
     #[test]
     fn damped_steps_match_normal_equations() {
         for (m, n) in [(7, 4), (4, 4), (2, 5), (30, 6)] {
@@ -302,10 +365,11 @@ mod tests {
             let r: Vec<f64> = (0..m).map(|i| (i as f64 * 0.7).sin()).collect();
             let d: Vec<f64> = (0..n).map(|k| 1.0 + k as f64).collect();
             let mut qr = DenseQr::new(m, n);
-            qr.prepare(&Jacobian::Dense(j.clone()), &r).unwrap();
+            let jac = Jacobian::Dense(j.clone());
+            qr.prepare(&jac, &r).unwrap();
             for mu in [1e-6, 1e-2, 1.0, 100.0] {
                 let mut h = vec![0.0; n];
-                assert!(qr.solve(mu, &d, &[], &mut h));
+                assert!(qr.solve(&jac, mu, &d, &[], &mut h));
                 let want = reference(&j, &r, mu, &d);
                 for k in 0..n {
                     assert!(
@@ -313,6 +377,13 @@ mod tests {
                         "{m}x{n} mu={mu}: {h:?} vs {want:?}"
                     );
                 }
+                let w: Vec<f64> = (0..n).map(|k| 0.5 + k as f64).collect();
+                let q = qr.inverse_quadratic(&jac, &w).unwrap();
+                let q_ref = quad_reference(&j, mu, &d, &w);
+                assert!(
+                    (q - q_ref).abs() < 1e-8 * q_ref,
+                    "{m}x{n} mu={mu}: {q} vs {q_ref}"
+                );
             }
         }
     }
@@ -323,9 +394,10 @@ mod tests {
         let j = Mat::<f64>::from_fn(5, 3, |i, k| if k == 2 { 0.0 } else { i as f64 + 1.0 });
         let r = [1.0, 0.0, -1.0, 2.0, 0.5];
         let mut qr = DenseQr::new(5, 3);
-        qr.prepare(&Jacobian::Dense(j.clone()), &r).unwrap();
+        let jac = Jacobian::Dense(j.clone());
+        qr.prepare(&jac, &r).unwrap();
         let mut h = vec![0.0; 3];
-        assert!(qr.solve(1e-3, &[1.0, 1.0, 1.0], &[], &mut h));
+        assert!(qr.solve(&jac, 1e-3, &[1.0, 1.0, 1.0], &[], &mut h));
         let want = reference(&j, &r, 1e-3, &[1.0, 1.0, 1.0]);
         for k in 0..3 {
             assert!((h[k] - want[k]).abs() < 1e-8);

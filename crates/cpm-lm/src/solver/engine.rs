@@ -16,18 +16,12 @@ use crate::report::{IterationRecord, Report, TerminationReason, Timings};
 use crate::solver::build_linear;
 use crate::solver::jacobian::Jacobian;
 use crate::solver::model::Model;
+use crate::solver::small::{dot, norm2};
+use crate::solver::trust_region::lmpar;
 use crate::stats::Statistics;
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(p, q)| p * q).sum()
-}
-
-fn norm2(a: &[f64]) -> f64 {
-    a.iter().map(|v| v * v).sum()
-}
-
-/// Robust reweighting of the residuals at the current point: fills `rw` and, for a
-/// non-square loss, scales the Jacobian rows.
+/// Robust reweighting of the residuals at the current point (non-square losses only):
+/// fills `rw` and scales the Jacobian rows.
 fn weigh(
     options: &Options,
     r: &[f64],
@@ -35,10 +29,6 @@ fn weigh(
     scale: &mut [f64],
     jac: Option<&mut Jacobian>,
 ) {
-    if options.loss.is_squared() {
-        rw.copy_from_slice(r);
-        return;
-    }
     for i in 0..r.len() {
         let (a, b) = options.loss.correction(r[i]);
         rw[i] = a * r[i];
@@ -90,25 +80,41 @@ pub(crate) fn run<M: Model>(
     let mut linear = build_linear(&options.linear_solver, &jac)?;
 
     let mut timings = Timings::default();
+    // Residual-sized buffers: the robust-loss ones only with a robust loss, the products
+    // with J only for a dense Jacobian or the cubic control (a sparse product is reduced
+    // row by row).
+    let robust = !options.loss.is_squared();
+    let cubic = options.damping == Damping::CubicInterpolation;
+    let dense_jac = matches!(jac, Jacobian::Dense(_));
+    let buffer = |needed: bool, v: f64| if needed { vec![v; m] } else { Vec::new() };
     let mut r = vec![0.0; m];
     let mut r_trial = vec![0.0; m];
-    let mut rw = vec![0.0; m];
-    let mut row_scale = vec![1.0; m];
-    let mut jstep = vec![0.0; m];
-    let mut jdir = vec![0.0; m];
-    let mut x_trial = vec![0.0; n];
-    let mut h = vec![0.0; n];
-    let mut step = vec![0.0; n];
-    let mut g = vec![0.0; n];
-    let mut norms2 = vec![0.0; n];
-    let mut d = vec![0.0; n];
-    let mut frozen = vec![false; n];
+    let mut rw = buffer(robust, 0.0);
+    let mut row_scale = buffer(robust, 1.0);
+    let mut jstep = buffer(dense_jac || cubic, 0.0);
+    let mut jdir = buffer(cubic, 0.0);
+    // The parameter-sized vectors share one allocation (small problems spend a fair part
+    // of their time in the allocator).
+    let mut nbuf = vec![0.0; 7 * n];
+    let (wa, rest) = nbuf.split_at_mut(n);
+    let (x_trial, rest) = rest.split_at_mut(n);
+    let (h, rest) = rest.split_at_mut(n);
+    let (step, rest) = rest.split_at_mut(n);
+    let (g, rest) = rest.split_at_mut(n);
+    let (norms2, d) = rest.split_at_mut(n);
+    let mut frozen = if bounds.is_some() {
+        vec![false; n]
+    } else {
+        Vec::new()
+    };
     let mut any_frozen = false;
-    let mut records: Vec<IterationRecord> = Vec::with_capacity(options.max_iterations.min(256));
+    let mut records: Vec<IterationRecord> = Vec::with_capacity(options.max_iterations.min(32));
     let (mut residual_evaluations, mut jacobian_evaluations) = (0usize, 0usize);
     let (mut accepted_steps, mut rejected_steps) = (0usize, 0usize);
 
-    let t = Instant::now();
+    // Timestamps are chained (one clock read per phase boundary): on small problems the
+    // clock costs as much as the arithmetic.
+    let mut clock = Instant::now();
     model
         .residuals(x, &mut r)
         .map_err(|source| LmError::Model {
@@ -116,7 +122,9 @@ pub(crate) fn run<M: Model>(
             stage: EvalStage::Residuals,
             source,
         })?;
-    timings.residuals += t.elapsed();
+    let now = Instant::now();
+    timings.residuals += now - clock;
+    clock = now;
     residual_evaluations += 1;
     let mut cost = options.loss.cost(&r);
     let initial_cost = cost;
@@ -133,12 +141,12 @@ pub(crate) fn run<M: Model>(
     let mut need_jac = true;
     let mut jac_current = false;
     let mut grad_inf = 0.0;
-    // Relative rounding level of a computed cost (sum of m squares).
-    let noise = 8.0 * f64::EPSILON * (m as f64).sqrt();
+    // Relative rounding level of a computed cost (sum of m squares, each residual usually a
+    // difference of larger numbers, hence the margin over eps).
+    let noise = 32.0 * f64::EPSILON * (m as f64).sqrt();
 
     while termination.is_none() {
         if need_jac {
-            let t = Instant::now();
             model
                 .jacobian(x, &mut jac)
                 .map_err(|source| LmError::Model {
@@ -146,16 +154,18 @@ pub(crate) fn run<M: Model>(
                     stage: EvalStage::Jacobian,
                     source,
                 })?;
-            timings.jacobian += t.elapsed();
             jacobian_evaluations += 1;
             if !jac.is_finite() {
                 termination = Some(TerminationReason::NonFinite);
                 break;
             }
-            weigh(options, &r, &mut rw, &mut row_scale, Some(&mut jac));
-            jac.gradient_and_norms(&rw, &mut g, &mut norms2);
+            if robust {
+                weigh(options, &r, &mut rw, &mut row_scale, Some(&mut jac));
+            }
+            let rw: &[f64] = if robust { &rw } else { &r };
+            jac.gradient_and_norms(rw, g, norms2);
             any_frozen = match &bounds {
-                Some(b) => b.freeze(x, &g, &mut frozen),
+                Some(b) => b.freeze(x, g, &mut frozen),
                 None => false,
             };
             if any_frozen {
@@ -179,9 +189,14 @@ pub(crate) fn run<M: Model>(
                 }
                 Scaling::Identity => d.fill(1.0),
             }
-            let t = Instant::now();
-            linear.prepare(&jac, &rw).map_err(LmError::Numerical)?;
-            timings.linear_solver += t.elapsed();
+            // The Jacobian's time includes the reweighting and the gradient.
+            let now = Instant::now();
+            timings.jacobian += now - clock;
+            clock = now;
+            linear.prepare(&jac, rw).map_err(LmError::Numerical)?;
+            let now = Instant::now();
+            timings.linear_solver += now - clock;
+            clock = now;
 
             if first {
                 let mut mu0 = 0.0f64;
@@ -193,12 +208,28 @@ pub(crate) fn run<M: Model>(
                     mu0 = options.tau;
                 }
                 damping = DampingState::new(options.damping, mu0);
+                if damping.is_trust_region() {
+                    let xn = x
+                        .iter()
+                        .zip(d.iter())
+                        .map(|(a, b)| (a * b) * (a * b))
+                        .sum::<f64>()
+                        .sqrt();
+                    // Bound on ||D h|| of the step damped with mu0: ||D^-1 g|| / mu0.
+                    let gn = g
+                        .iter()
+                        .zip(d.iter())
+                        .map(|(a, b)| (a / b) * (a / b))
+                        .sum::<f64>()
+                        .sqrt();
+                    damping.init_radius(xn, gn / mu0);
+                }
                 first = false;
             } else if damping.needs_slope() {
-                damping.new_slope(2.0 * dot(&g, &h));
+                damping.new_slope(2.0 * dot(g, h));
             }
             // Gradient test (cosine between the residual and each column).
-            let rnorm = norm2(&rw).sqrt();
+            let rnorm = norm2(rw).sqrt();
             let mut gnorm = 0.0f64;
             grad_inf = 0.0f64;
             for j in 0..n {
@@ -223,12 +254,32 @@ pub(crate) fn run<M: Model>(
             break;
         }
         let iteration = records.len() + 1;
-        let mu = damping.mu();
-        let t = Instant::now();
-        let solved = linear.solve(mu, &d, &g, &mut h);
-        timings.linear_solver += t.elapsed();
-
+        let (solved, mu) = if damping.is_trust_region() {
+            match lmpar(
+                linear.as_mut(),
+                &jac,
+                damping.radius(),
+                damping.gn_scale(),
+                damping.mu(),
+                d,
+                g,
+                h,
+                wa,
+            ) {
+                Some(mu) => {
+                    damping.set_mu(mu);
+                    (true, mu)
+                }
+                None => (false, damping.mu()),
+            }
+        } else {
+            let mu = damping.mu();
+            (linear.solve(&jac, mu, d, g, h), mu)
+        };
         if !solved {
+            let now = Instant::now();
+            timings.linear_solver += now - clock;
+            clock = now;
             rejected_steps += 1;
             damping.singular();
             let rec = IterationRecord {
@@ -241,10 +292,10 @@ pub(crate) fn run<M: Model>(
                 gain_ratio: f64::NAN,
                 accepted: false,
                 gradient_norm: grad_inf,
-                elapsed: start.elapsed(),
+                elapsed: clock - start,
             };
             records.push(rec);
-            if damping.mu().is_nan() || damping.mu() >= 1e300 {
+            if damping.exhausted() {
                 termination = Some(TerminationReason::SingularSystem);
             } else if let Some(cb) = callback.as_mut() {
                 if cb(&rec).is_break() {
@@ -259,7 +310,7 @@ pub(crate) fn run<M: Model>(
         }
         let mut clipped = false;
         if let Some(b) = &bounds {
-            b.project(&mut x_trial);
+            b.project(x_trial);
             clipped = (0..n).any(|j| x_trial[j] != x[j] + alpha * h[j]);
         }
         let (mut dx2, mut xn2, mut s2) = (0.0, 0.0, 0.0);
@@ -273,19 +324,22 @@ pub(crate) fn run<M: Model>(
             termination = Some(TerminationReason::ConvergedXtol);
             break;
         }
-        jac.mul(&step, &mut jstep);
-        let gs = dot(&g, &step);
-        let pred = -gs - 0.5 * norm2(&jstep);
+        let js2 = jac.product_norm2(step, &mut jstep);
+        let gs = dot(g, step);
+        let pred = -gs - 0.5 * js2;
 
-        let t = Instant::now();
+        // The linear solver's time includes forming the step and its predicted reduction.
+        let now = Instant::now();
+        timings.linear_solver += now - clock;
         model
-            .residuals(&x_trial, &mut r_trial)
+            .residuals(x_trial, &mut r_trial)
             .map_err(|source| LmError::Model {
                 iteration,
                 stage: EvalStage::Residuals,
                 source,
             })?;
-        timings.residuals += t.elapsed();
+        clock = Instant::now();
+        timings.residuals += clock - now;
         residual_evaluations += 1;
         let mut cost_trial = options.loss.cost(&r_trial);
         if !cost_trial.is_finite() {
@@ -299,20 +353,22 @@ pub(crate) fn run<M: Model>(
         } else {
             -1.0
         };
-        let line = if options.damping == Damping::CubicInterpolation {
+        let line = if cubic {
             let jh2 = if alpha == 1.0 && !clipped {
-                norm2(&jstep)
+                js2
             } else {
-                jac.mul(&h, &mut jdir);
+                jac.mul(h, &mut jdir);
                 norm2(&jdir)
             };
-            let gh = dot(&g, &h);
+            let gh = dot(g, h);
             LineInfo {
                 f0: 2.0 * cost,
                 slope0: 2.0 * gh,
                 alpha,
                 f_trial: 2.0 * cost_trial,
                 est_sum: 2.0 * cost + 2.0 * gh + jh2,
+                scaled_step: dx2.sqrt(),
+                gs,
             }
         } else {
             LineInfo {
@@ -321,21 +377,26 @@ pub(crate) fn run<M: Model>(
                 alpha,
                 f_trial: 2.0 * cost_trial,
                 est_sum: 0.0,
+                scaled_step: dx2.sqrt(),
+                gs,
             }
         };
         let cost_before = cost;
         let accept = damping.accepts(rho, cost_trial < cost);
         if accept {
-            x.copy_from_slice(&x_trial);
+            x.copy_from_slice(x_trial);
             std::mem::swap(&mut r, &mut r_trial);
             cost = cost_trial;
             need_jac = true;
-            jac_current = false;
+            // A step below sqrt(eps) of the scaled parameters leaves the Jacobian as it was
+            // to about 1e-8: good enough for the statistics (with the plain loss, whose
+            // Jacobian is not reweighted).
+            jac_current = !robust && dx2 <= f64::EPSILON * xn2;
             accepted_steps += 1;
             damping.accepted(rho, line);
         } else {
             rejected_steps += 1;
-            damping.rejected(line);
+            damping.rejected(rho, line);
         }
         let rec = IterationRecord {
             iteration,
@@ -347,7 +408,7 @@ pub(crate) fn run<M: Model>(
             gain_ratio: rho,
             accepted: accept,
             gradient_norm: grad_inf,
-            elapsed: start.elapsed(),
+            elapsed: clock - start,
         };
         records.push(rec);
         if cost == 0.0 {
@@ -380,13 +441,16 @@ pub(crate) fn run<M: Model>(
                     source,
                 })?;
             jacobian_evaluations += 1;
-            weigh(options, &r, &mut rw, &mut row_scale, Some(&mut jac));
+            if robust {
+                weigh(options, &r, &mut rw, &mut row_scale, Some(&mut jac));
+            }
         }
+        let rw: &[f64] = if robust { &rw } else { &r };
         let st = match &jac {
-            Jacobian::Dense(j) => Statistics::from_jacobian(j.as_ref(), &rw, options.rank_tol),
+            Jacobian::Dense(j) => Statistics::from_jacobian(j.as_ref(), rw, options.rank_tol),
             Jacobian::Sparse(_) => {
                 let dense = jac.to_dense();
-                Statistics::from_jacobian(dense.as_ref(), &rw, options.rank_tol)
+                Statistics::from_jacobian(dense.as_ref(), rw, options.rank_tol)
             }
         };
         timings.statistics = t.elapsed();

@@ -1,12 +1,20 @@
 //! Jacobian storage shared by the linear solvers: a dense column-major faer matrix, or a
-//! fixed compressed-sparse-column structure (with a row-wise index for row operations).
+//! fixed compressed-sparse-row structure.
+//!
+//! The sparse form is kept lean because it is what large problems hold for the whole solve:
+//! row pointers, `u32` column indices (sorted and unique within each row) and the values.
+//! When the user's pattern is already in that order (rows ascending, columns strictly
+//! ascending within a row, as a pattern built row by row usually is), the user writes the
+//! values straight into the storage and no map is kept; otherwise a map from pattern entries
+//! to storage positions (`u32` where it fits) and a buffer for the values in the user's order
+//! are kept. A column-wise index is only built by the solvers that need one.
 
 use faer::Mat;
 
 use crate::error::LmError;
+use crate::solver::small;
 
-/// A sparse Jacobian with a fixed structure: values in compressed-sparse-row (CSR) order,
-/// plus a column-wise (CSC) index into them.
+/// A sparse Jacobian with a fixed structure in compressed-sparse-row (CSR) order.
 #[derive(Clone, Debug)]
 pub(crate) struct SparseJac {
     pub nrows: usize,
@@ -14,128 +22,278 @@ pub(crate) struct SparseJac {
     /// CSR row pointers (`nrows + 1`).
     pub row_ptr: Vec<usize>,
     /// Column of each entry, sorted and unique within each row.
-    pub row_col: Vec<usize>,
+    pub row_col: Vec<u32>,
     /// Values, in CSR order.
     pub values: Vec<f64>,
-    /// CSC column pointers (`ncols + 1`) into `col_row` / `col_src`.
-    pub col_ptr: Vec<usize>,
-    /// Row of each CSC entry (sorted within a column).
-    pub col_row: Vec<usize>,
-    /// Position in `values` of each CSC entry.
-    pub col_src: Vec<usize>,
+}
+
+/// Where each entry of the user's pattern lives in [`SparseJac::values`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) enum ValueMap {
+    /// The pattern is in CSR order without duplicates: entry `k` is stored at `k`.
+    Identity,
+    /// Entry `k` is stored at `map[k]` (duplicates share a position and are summed).
+    Small(Vec<u32>),
+    /// As `Small`, for patterns with more than `u32::MAX` entries.
+    Large(Vec<usize>),
+}
+
+impl ValueMap {
+    /// `dst = 0`, then `dst[map[k]] += src[k]`. Not used for [`ValueMap::Identity`].
+    pub(crate) fn scatter(&self, src: &[f64], dst: &mut [f64]) {
+        match self {
+            ValueMap::Identity => dst.copy_from_slice(src),
+            ValueMap::Small(map) => {
+                dst.fill(0.0);
+                for (&p, &v) in map.iter().zip(src) {
+                    dst[p as usize] += v;
+                }
+            }
+            ValueMap::Large(map) => {
+                dst.fill(0.0);
+                for (&p, &v) in map.iter().zip(src) {
+                    dst[p] += v;
+                }
+            }
+        }
+    }
+}
+
+fn column_index(col: usize, ncols: usize) -> Result<u32, LmError> {
+    u32::try_from(col).map_err(|_| {
+        LmError::InvalidOptions(format!(
+            "sparse Jacobians support at most {} parameters, the problem has {ncols}",
+            u32::MAX
+        ))
+    })
 }
 
 impl SparseJac {
-    /// Builds the structure of a user pattern; also returns, for each pattern entry, its
-    /// position in `values` (duplicates share a position and are summed). Linear time;
-    /// a pattern listed row by row needs no sorting at all.
+    /// Builds the structure of a user pattern and the map from pattern entries to storage
+    /// positions. Linear time apart from sorting rows that are not already sorted; a
+    /// pattern in CSR order is copied once and needs no map.
+    #[cfg(test)]
     pub(crate) fn from_pattern(
         nrows: usize,
         ncols: usize,
         pattern: &[(usize, usize)],
-    ) -> Result<(Self, Vec<usize>), LmError> {
-        for (index, &(row, col)) in pattern.iter().enumerate() {
-            if row >= nrows || col >= ncols {
-                return Err(LmError::PatternOutOfBounds {
-                    index,
-                    row,
-                    col,
-                    nrows,
-                    ncols,
-                });
-            }
+    ) -> Result<(Self, ValueMap), LmError> {
+        let mut builder = PatternBuilder::new(nrows, ncols)?;
+        for &(r, c) in pattern {
+            builder.push(r, c);
         }
-        // Bucket the entries by row (sequential reads of the pattern), then sort each row
-        // by column if needed and merge duplicates.
-        let mut count = vec![0usize; nrows + 1];
+        builder.finish()
+    }
+
+    /// The general case of [`Self::from_pattern`]: rows in any order, columns in any order
+    /// and duplicates (all entries already checked to lie inside the matrix).
+    fn from_unordered(nrows: usize, ncols: usize, pattern: &[(usize, usize)]) -> (Self, ValueMap) {
+        let mut row_ptr = vec![0usize; nrows + 1];
         for &(r, _) in pattern {
-            count[r + 1] += 1;
+            row_ptr[r + 1] += 1;
         }
         for r in 0..nrows {
-            count[r + 1] += count[r];
+            row_ptr[r + 1] += row_ptr[r];
         }
-        let mut next = count.clone();
-        let mut bucket: Vec<(usize, usize)> = vec![(0, 0); pattern.len()];
-        for (k, &(r, c)) in pattern.iter().enumerate() {
-            bucket[next[r]] = (c, k);
+        // Bucket the pattern entries by row (stable), sort each row by column and merge
+        // duplicates; `order` holds pattern indices, later reused for the map.
+        let nnz_in = pattern.len();
+        let small = u32::try_from(nnz_in).is_ok();
+        let mut next = row_ptr.clone();
+        let mut order: Vec<usize> = vec![0; nnz_in];
+        for (k, &(r, _)) in pattern.iter().enumerate() {
+            order[next[r]] = k;
             next[r] += 1;
         }
         drop(next);
-        let mut row_ptr = vec![0usize; nrows + 1];
-        let mut row_col = Vec::with_capacity(pattern.len());
-        let mut user_to_csr = vec![0usize; pattern.len()];
+        let mut new_ptr = vec![0usize; nrows + 1];
+        let mut row_col: Vec<u32> = Vec::with_capacity(nnz_in);
+        let mut map_small: Vec<u32> = if small { vec![0; nnz_in] } else { Vec::new() };
+        let mut map_large: Vec<usize> = if small { Vec::new() } else { vec![0; nnz_in] };
         for r in 0..nrows {
-            let seg = &mut bucket[count[r]..count[r + 1]];
-            if !seg.windows(2).all(|w| w[0].0 < w[1].0) {
-                seg.sort_unstable();
+            let seg = &mut order[row_ptr[r]..row_ptr[r + 1]];
+            if !seg.windows(2).all(|w| pattern[w[0]].1 < pattern[w[1]].1) {
+                seg.sort_by_key(|&k| pattern[k].1);
             }
             let mut last = usize::MAX;
-            for &(c, k) in seg.iter() {
+            for &k in seg.iter() {
+                let c = pattern[k].1;
                 if c != last {
-                    row_col.push(c);
+                    row_col.push(c as u32);
                     last = c;
                 }
-                user_to_csr[k] = row_col.len() - 1;
+                let pos = row_col.len() - 1;
+                if small {
+                    map_small[k] = pos as u32;
+                } else {
+                    map_large[k] = pos;
+                }
             }
-            row_ptr[r + 1] = row_col.len();
+            new_ptr[r + 1] = row_col.len();
         }
+        drop(order);
+        row_col.shrink_to_fit();
         let nnz = row_col.len();
-        let mut jac = Self {
+        let jac = Self {
             nrows,
             ncols,
-            row_ptr,
+            row_ptr: new_ptr,
             row_col,
             values: vec![0.0; nnz],
-            col_ptr: Vec::new(),
-            col_row: Vec::new(),
-            col_src: Vec::new(),
         };
-        jac.build_cols();
-        Ok((jac, user_to_csr))
+        let map = if small {
+            ValueMap::Small(map_small)
+        } else {
+            ValueMap::Large(map_large)
+        };
+        (jac, map)
     }
 
     /// The fully dense structure (every entry present, row-major order).
-    pub(crate) fn full(nrows: usize, ncols: usize) -> Self {
+    pub(crate) fn full(nrows: usize, ncols: usize) -> Result<Self, LmError> {
+        if ncols > 0 {
+            column_index(ncols - 1, ncols)?;
+        }
         let row_ptr = (0..=nrows).map(|r| r * ncols).collect();
-        let row_col = (0..nrows).flat_map(|_| 0..ncols).collect();
-        let mut jac = Self {
+        let row_col = (0..nrows).flat_map(|_| 0..ncols as u32).collect();
+        Ok(Self {
             nrows,
             ncols,
             row_ptr,
             row_col,
             values: vec![0.0; nrows * ncols],
-            col_ptr: Vec::new(),
-            col_row: Vec::new(),
-            col_src: Vec::new(),
-        };
-        jac.build_cols();
-        jac
+        })
     }
 
-    fn build_cols(&mut self) {
-        let mut col_ptr = vec![0usize; self.ncols + 1];
-        for &c in &self.row_col {
-            col_ptr[c + 1] += 1;
-        }
-        for c in 0..self.ncols {
-            col_ptr[c + 1] += col_ptr[c];
-        }
-        let nnz = self.row_col.len();
-        let mut next = col_ptr.clone();
-        let mut col_row = vec![0usize; nnz];
-        let mut col_src = vec![0usize; nnz];
+    /// The entries of row `i`: columns and values.
+    #[inline]
+    pub(crate) fn row(&self, i: usize) -> (&[u32], &[f64]) {
+        let range = self.row_ptr[i]..self.row_ptr[i + 1];
+        (&self.row_col[range.clone()], &self.values[range])
+    }
+
+    /// Writes the values into the dense `m x n` matrix `dst` (zeroed first).
+    pub(crate) fn scatter_dense(&self, dst: &mut Mat<f64>) {
+        dst.fill(0.0);
         for r in 0..self.nrows {
-            for q in self.row_ptr[r]..self.row_ptr[r + 1] {
-                let c = self.row_col[q];
-                let p = next[c];
-                col_row[p] = r;
-                col_src[p] = q;
-                next[c] += 1;
+            let (cols, vals) = self.row(r);
+            for (&c, &v) in cols.iter().zip(vals) {
+                dst[(r, c as usize)] = v;
             }
         }
-        self.col_ptr = col_ptr;
-        self.col_row = col_row;
-        self.col_src = col_src;
+    }
+}
+
+/// Builds the CSR structure from pattern entries arriving one at a time, in one pass.
+///
+/// Entries in CSR order (rows ascending, columns strictly ascending within a row) go
+/// straight into the structure, so a problem that streams its pattern
+/// ([`SparseJacobian::visit_pattern`](crate::SparseJacobian::visit_pattern)) is never held
+/// as a list. At the first entry out of that order the entries so far are turned back into
+/// a list, the rest is appended, and the general construction (sorting, duplicates, a map)
+/// takes over at the end.
+pub(crate) struct PatternBuilder {
+    nrows: usize,
+    ncols: usize,
+    /// Entries seen.
+    count: usize,
+    row_ptr: Vec<usize>,
+    row_col: Vec<u32>,
+    /// Row of the last entry in order, and its column.
+    row: usize,
+    col: Option<usize>,
+    /// The entries as a list, once they came out of order.
+    list: Option<Vec<(usize, usize)>>,
+    error: Option<LmError>,
+}
+
+impl PatternBuilder {
+    pub(crate) fn new(nrows: usize, ncols: usize) -> Result<Self, LmError> {
+        if ncols > 0 {
+            column_index(ncols - 1, ncols)?;
+        }
+        Ok(Self {
+            nrows,
+            ncols,
+            count: 0,
+            row_ptr: vec![0; nrows + 1],
+            row_col: Vec::new(),
+            row: 0,
+            col: None,
+            list: None,
+            error: None,
+        })
+    }
+
+    /// Adds the next pattern entry.
+    pub(crate) fn push(&mut self, row: usize, col: usize) {
+        let index = self.count;
+        self.count += 1;
+        if self.error.is_some() {
+            return;
+        }
+        if row >= self.nrows || col >= self.ncols {
+            self.error = Some(LmError::PatternOutOfBounds {
+                index,
+                row,
+                col,
+                nrows: self.nrows,
+                ncols: self.ncols,
+            });
+            return;
+        }
+        if let Some(list) = &mut self.list {
+            list.push((row, col));
+            return;
+        }
+        if row > self.row {
+            let len = self.row_col.len();
+            self.row_ptr[self.row + 1..=row].fill(len);
+            self.row = row;
+        } else if row < self.row || self.col.is_some_and(|c| col <= c) {
+            self.spill_to_list();
+            if let Some(list) = &mut self.list {
+                list.push((row, col));
+            }
+            return;
+        }
+        self.row_col.push(col as u32);
+        self.col = Some(col);
+    }
+
+    /// Turns the entries so far (in CSR order) into a list.
+    fn spill_to_list(&mut self) {
+        let mut list = Vec::with_capacity(self.row_col.len() * 2);
+        let len = self.row_col.len();
+        self.row_ptr[self.row + 1] = len;
+        for r in 0..=self.row {
+            for q in self.row_ptr[r]..self.row_ptr[r + 1] {
+                list.push((r, self.row_col[q] as usize));
+            }
+        }
+        self.row_col = Vec::new();
+        self.list = Some(list);
+    }
+
+    /// The structure and the map from entries to storage positions.
+    pub(crate) fn finish(mut self) -> Result<(SparseJac, ValueMap), LmError> {
+        if let Some(e) = self.error {
+            return Err(e);
+        }
+        if let Some(list) = self.list.take() {
+            return Ok(SparseJac::from_unordered(self.nrows, self.ncols, &list));
+        }
+        let len = self.row_col.len();
+        self.row_ptr[self.row + 1..].fill(len);
+        self.row_col.shrink_to_fit();
+        let jac = SparseJac {
+            nrows: self.nrows,
+            ncols: self.ncols,
+            row_ptr: self.row_ptr,
+            row_col: self.row_col,
+            values: vec![0.0; len],
+        };
+        Ok((jac, ValueMap::Identity))
     }
 }
 
@@ -187,11 +345,9 @@ impl Jacobian {
                 }
             }
             Jacobian::Sparse(s) => {
-                for c in 0..s.ncols {
-                    if frozen[c] {
-                        for p in s.col_ptr[c]..s.col_ptr[c + 1] {
-                            s.values[s.col_src[p]] = 0.0;
-                        }
+                for (v, &c) in s.values.iter_mut().zip(&s.row_col) {
+                    if frozen[c as usize] {
+                        *v = 0.0;
                     }
                 }
             }
@@ -204,36 +360,50 @@ impl Jacobian {
             Jacobian::Dense(j) => {
                 for c in 0..j.ncols() {
                     let col = j.col_as_slice(c);
-                    let mut s = 0.0;
-                    let mut q = 0.0;
-                    for (a, b) in col.iter().zip(r) {
-                        s += a * b;
-                        q += a * a;
-                    }
-                    g[c] = s;
-                    norms2[c] = q;
+                    g[c] = small::dot(col, r);
+                    norms2[c] = small::norm2(col);
                 }
             }
             Jacobian::Sparse(sp) => {
                 g.fill(0.0);
                 norms2.fill(0.0);
-                for i in 0..sp.nrows {
-                    let ri = r[i];
-                    let range = sp.row_ptr[i]..sp.row_ptr[i + 1];
-                    for (&c, &v) in sp.row_col[range.clone()].iter().zip(&sp.values[range]) {
-                        g[c] += v * ri;
-                        norms2[c] += v * v;
+                for (i, &ri) in r.iter().enumerate().take(sp.nrows) {
+                    let (cols, vals) = sp.row(i);
+                    for (&c, &v) in cols.iter().zip(vals) {
+                        g[c as usize] += v * ri;
+                        norms2[c as usize] += v * v;
                     }
                 }
             }
         }
     }
 
+    /// `||J h||^2`; `scratch` (length `m`) is used by the dense form only.
+    pub(crate) fn product_norm2(&self, h: &[f64], scratch: &mut [f64]) -> f64 {
+        match self {
+            Jacobian::Dense(_) => {
+                self.mul(h, scratch);
+                small::norm2(scratch)
+            }
+            Jacobian::Sparse(s) => (0..s.nrows)
+                .map(|i| {
+                    let (cols, vals) = s.row(i);
+                    let v: f64 = cols
+                        .iter()
+                        .zip(vals)
+                        .map(|(&c, &v)| v * h[c as usize])
+                        .sum();
+                    v * v
+                })
+                .sum(),
+        }
+    }
+
     /// `out = J h`.
     pub(crate) fn mul(&self, h: &[f64], out: &mut [f64]) {
-        out.fill(0.0);
         match self {
             Jacobian::Dense(j) => {
+                out.fill(0.0);
                 for c in 0..j.ncols() {
                     let hc = h[c];
                     if hc == 0.0 {
@@ -246,11 +416,11 @@ impl Jacobian {
             }
             Jacobian::Sparse(s) => {
                 for (i, o) in out.iter_mut().enumerate() {
-                    let range = s.row_ptr[i]..s.row_ptr[i + 1];
-                    *o = s.row_col[range.clone()]
+                    let (cols, vals) = s.row(i);
+                    *o = cols
                         .iter()
-                        .zip(&s.values[range])
-                        .map(|(&c, &v)| v * h[c])
+                        .zip(vals)
+                        .map(|(&c, &v)| v * h[c as usize])
                         .sum();
                 }
             }
@@ -263,11 +433,7 @@ impl Jacobian {
             Jacobian::Dense(j) => j.clone(),
             Jacobian::Sparse(s) => {
                 let mut d = Mat::<f64>::zeros(s.nrows, s.ncols);
-                for r in 0..s.nrows {
-                    for q in s.row_ptr[r]..s.row_ptr[r + 1] {
-                        d[(r, s.row_col[q])] = s.values[q];
-                    }
-                }
+                s.scatter_dense(&mut d);
                 d
             }
         }
@@ -284,17 +450,35 @@ mod tests {
         let (s, map) = SparseJac::from_pattern(3, 3, &pat).unwrap();
         assert_eq!(s.row_ptr, vec![0, 2, 3, 4]);
         assert_eq!(s.row_col, vec![0, 2, 1, 1]);
-        assert_eq!(map, vec![3, 0, 2, 3, 1]);
-        assert_eq!(s.col_ptr, vec![0, 1, 3, 4]);
-        assert_eq!(s.col_row, vec![0, 1, 2, 0]);
-        assert_eq!(s.col_src, vec![0, 2, 3, 1]);
+        assert_eq!(map, ValueMap::Small(vec![3, 0, 2, 3, 1]));
+        let mut dst = vec![9.0; 4];
+        map.scatter(&[1.0, 2.0, 3.0, 4.0, 5.0], &mut dst);
+        assert_eq!(dst, vec![2.0, 5.0, 3.0, 5.0]);
         assert!(SparseJac::from_pattern(3, 3, &[(3, 0)]).is_err());
+    }
+
+    #[test]
+    fn pattern_in_csr_order_needs_no_map() {
+        let pat = [(0, 0), (0, 2), (2, 1), (2, 2)];
+        let (s, map) = SparseJac::from_pattern(3, 3, &pat).unwrap();
+        assert_eq!(map, ValueMap::Identity);
+        assert_eq!(s.row_ptr, vec![0, 2, 2, 4]);
+        assert_eq!(s.row_col, vec![0, 2, 1, 2]);
+        // A repeated column, a descending column or a descending row needs the map.
+        for pat in [
+            vec![(0, 0), (0, 0)],
+            vec![(0, 1), (0, 0)],
+            vec![(1, 0), (0, 0)],
+        ] {
+            let (_, map) = SparseJac::from_pattern(2, 2, &pat).unwrap();
+            assert_ne!(map, ValueMap::Identity, "{pat:?}");
+        }
     }
 
     #[test]
     fn dense_and_sparse_products_agree() {
         let d = Mat::<f64>::from_fn(4, 3, |i, j| (i * 3 + j) as f64 - 4.0);
-        let mut s = SparseJac::full(4, 3);
+        let mut s = SparseJac::full(4, 3).unwrap();
         for c in 0..3 {
             for i in 0..4 {
                 s.values[i * 3 + c] = d[(i, c)];
@@ -306,6 +490,10 @@ mod tests {
         jd.mul(&h, &mut a);
         js.mul(&h, &mut b);
         assert_eq!(a, b);
+        let mut scratch = [0.0; 4];
+        let n2: f64 = a.iter().map(|v| v * v).sum();
+        assert_eq!(jd.product_norm2(&h, &mut scratch), n2);
+        assert_eq!(js.product_norm2(&h, &mut []), n2);
         let r = [1.0, 2.0, 3.0, 4.0];
         let (mut g1, mut g2, mut n1, mut n2) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
         jd.gradient_and_norms(&r, &mut g1, &mut n1);

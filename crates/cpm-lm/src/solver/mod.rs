@@ -16,8 +16,9 @@ mod engine;
 pub(crate) mod jacobian;
 mod model;
 mod schur;
-mod small;
+pub(crate) mod small;
 mod sparse_cholesky;
+mod trust_region;
 
 use jacobian::Jacobian;
 use model::{DenseModel, SparseModel};
@@ -80,9 +81,15 @@ impl LinearSolver {
 pub(crate) trait LinearSystem {
     /// Damping-independent work for a new Jacobian `jac` and (weighted) residual `r`.
     fn prepare(&mut self, jac: &Jacobian, r: &[f64]) -> Result<(), String>;
-    /// Solves `(J^T J + mu D^2) h = -g` where `g = J^T r`, `D = diag(d)`. Returns `false`
+    /// Solves `(J^T J + mu D^2) h = -g` where `g = J^T r`, `D = diag(d)`, for the `jac` last
+    /// given to [`prepare`](Self::prepare). Returns `false`
     /// when the system could not be solved (not numerically positive definite).
-    fn solve(&mut self, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool;
+    fn solve(&mut self, jac: &Jacobian, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool;
+    /// `w^T (J^T J + mu D^2)^-1 w` for the `mu` and `D` of the last successful
+    /// [`solve`](Self::solve) since the last [`prepare`](Self::prepare); `None` when that
+    /// system is singular or there is none. Used by the trust-region damping for the
+    /// derivative of the step norm with respect to `mu`.
+    fn inverse_quadratic(&mut self, jac: &Jacobian, w: &[f64]) -> Option<f64>;
 }
 
 pub(crate) fn build_linear(
@@ -244,4 +251,100 @@ pub fn minimize_sparse<P: SparseJacobian + ?Sized>(
 ) -> Result<Report, LmError> {
     let mut model = SparseModel::new(problem);
     engine::run(&mut model, x, options, None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solver::jacobian::SparseJac;
+    use faer::prelude::*;
+    use faer::Mat;
+
+    /// A block-structured sparse Jacobian: `nb` local blocks of sizes 2 and 3 (4 rows each,
+    /// touching the block and some of the 3 globals), plus 2 rows on the globals only.
+    fn block_jacobian() -> (SparseJac, Vec<usize>) {
+        let sizes: Vec<usize> = (0..5).map(|k| 2 + k % 2).collect();
+        let nl: usize = sizes.iter().sum();
+        let ng = 3;
+        let mut pattern = Vec::new();
+        let (mut row, mut p0) = (0, 0);
+        for &s in &sizes {
+            for i in 0..4 {
+                for a in 0..s {
+                    pattern.push((row, p0 + a));
+                }
+                for b in 0..ng {
+                    if (i + b) % 3 != 0 {
+                        pattern.push((row, nl + b));
+                    }
+                }
+                row += 1;
+            }
+            p0 += s;
+        }
+        for b in 0..ng {
+            pattern.push((row + b % 2, nl + b));
+        }
+        let (mut jac, _) = SparseJac::from_pattern(row + 2, nl + ng, &pattern).unwrap();
+        for (q, v) in jac.values.iter_mut().enumerate() {
+            *v = ((q * 37 % 23) as f64 - 11.0) / 7.0 + if q % 5 == 0 { 1.5 } else { 0.0 };
+        }
+        (jac, sizes)
+    }
+
+    #[test]
+    fn every_solver_gives_the_damped_step_and_inverse_quadratic() {
+        let (sparse, sizes) = block_jacobian();
+        let (m, n) = (sparse.nrows, sparse.ncols);
+        let dense = Jacobian::Sparse(sparse.clone()).to_dense();
+        let r: Vec<f64> = (0..m).map(|i| (i as f64 * 0.37).sin()).collect();
+        let g: Vec<f64> = (0..n)
+            .map(|c| (0..m).map(|i| dense[(i, c)] * r[i]).sum())
+            .collect();
+        let d: Vec<f64> = (0..n).map(|c| 0.5 + 0.1 * c as f64).collect();
+        let w: Vec<f64> = (0..n).map(|c| 1.0 - 0.2 * c as f64).collect();
+        let jtj = dense.transpose() * &dense;
+        let solvers = [
+            LinearSolver::DenseQr,
+            LinearSolver::DenseCholesky,
+            LinearSolver::SparseCholesky,
+            LinearSolver::Schur {
+                local_block_sizes: sizes,
+            },
+        ];
+        for solver in solvers {
+            let jac = if solver.is_sparse() {
+                Jacobian::Sparse(sparse.clone())
+            } else {
+                Jacobian::Dense(dense.clone())
+            };
+            let mut sys = build_linear(&solver, &jac).unwrap();
+            sys.prepare(&jac, &r).unwrap();
+            assert!(sys.inverse_quadratic(&jac, &w).is_none(), "{solver:?}");
+            for mu in [0.0, 1e-3, 1.0, 50.0] {
+                let mut a = jtj.clone();
+                for k in 0..n {
+                    a[(k, k)] += mu * d[k] * d[k];
+                }
+                let lu = a.partial_piv_lu();
+                let want = lu.solve(Mat::from_fn(n, 1, |k, _| -g[k]));
+                let aw = lu.solve(Mat::from_fn(n, 1, |k, _| w[k]));
+                let q_ref: f64 = (0..n).map(|k| w[k] * aw[(k, 0)]).sum();
+                let mut h = vec![0.0; n];
+                assert!(sys.solve(&jac, mu, &d, &g, &mut h), "{solver:?} mu={mu}");
+                for k in 0..n {
+                    let e = (h[k] - want[(k, 0)]).abs();
+                    assert!(
+                        e < 1e-9 * (1.0 + want[(k, 0)].abs()),
+                        "{solver:?} mu={mu}: {h:?}"
+                    );
+                }
+                let q = sys.inverse_quadratic(&jac, &w).unwrap();
+                assert!(
+                    (q - q_ref).abs() < 1e-9 * q_ref,
+                    "{solver:?} mu={mu}: {q} vs {q_ref}"
+                );
+            }
+        }
+    }
 }

@@ -5,7 +5,7 @@ use faer::Mat;
 
 use crate::error::LmError;
 use crate::problem::{DenseJacobian, ModelError, SparseJacobian};
-use crate::solver::jacobian::{Jacobian, SparseJac};
+use crate::solver::jacobian::{Jacobian, PatternBuilder, SparseJac, ValueMap};
 
 /// What the iteration needs from a problem.
 pub(crate) trait Model {
@@ -63,7 +63,7 @@ impl<P: DenseJacobian + ?Sized> Model for DenseModel<'_, P> {
     fn new_jacobian(&mut self, sparse: bool) -> Result<Jacobian, LmError> {
         let (m, n) = (self.num_residuals(), self.num_params());
         Ok(if sparse {
-            Jacobian::Sparse(SparseJac::full(m, n))
+            Jacobian::Sparse(SparseJac::full(m, n)?)
         } else {
             Jacobian::Dense(Mat::zeros(m, n))
         })
@@ -71,24 +71,38 @@ impl<P: DenseJacobian + ?Sized> Model for DenseModel<'_, P> {
 }
 
 /// A [`SparseJacobian`] problem.
+///
+/// The pattern is visited once, when the storage is built: only the CSR structure (and, for
+/// a pattern not in CSR order, the map from pattern entries to storage positions) is kept.
 pub(crate) struct SparseModel<'a, P: ?Sized> {
     problem: &'a mut P,
-    pattern: Vec<(usize, usize)>,
-    /// Values in the user's pattern order.
+    map: ValueMap,
+    /// Values in the user's pattern order; empty when the user writes into the storage
+    /// directly ([`ValueMap::Identity`]).
     user_values: Vec<f64>,
-    /// For each pattern entry, its position in the sparse storage.
-    user_to_csr: Vec<usize>,
+    /// The sparse storage when the solver wants a dense Jacobian.
+    staging: Option<SparseJac>,
 }
 
 impl<'a, P: SparseJacobian + ?Sized> SparseModel<'a, P> {
     pub(crate) fn new(problem: &'a mut P) -> Self {
-        let pattern = problem.pattern();
-        let len = pattern.len();
         Self {
             problem,
-            pattern,
-            user_values: vec![0.0; len],
-            user_to_csr: Vec::new(),
+            map: ValueMap::Identity,
+            user_values: Vec::new(),
+            staging: None,
+        }
+    }
+
+    fn fill(&mut self, x: &[f64], s: &mut SparseJac) -> Result<(), ModelError> {
+        if self.map == ValueMap::Identity {
+            s.values.fill(0.0);
+            self.problem.jacobian_values(x, &mut s.values)
+        } else {
+            self.user_values.fill(0.0);
+            self.problem.jacobian_values(x, &mut self.user_values)?;
+            self.map.scatter(&self.user_values, &mut s.values);
+            Ok(())
         }
     }
 }
@@ -104,30 +118,39 @@ impl<P: SparseJacobian + ?Sized> Model for SparseModel<'_, P> {
         self.problem.residuals(x, r)
     }
     fn jacobian(&mut self, x: &[f64], jac: &mut Jacobian) -> Result<(), ModelError> {
-        self.problem.jacobian_values(x, &mut self.user_values)?;
         match jac {
             Jacobian::Dense(j) => {
-                j.fill(0.0);
-                for (&(r, c), &v) in self.pattern.iter().zip(&self.user_values) {
-                    j[(r, c)] += v;
-                }
+                let mut s = self
+                    .staging
+                    .take()
+                    .expect("staging storage of a dense solve");
+                let res = self.fill(x, &mut s);
+                s.scatter_dense(j);
+                self.staging = Some(s);
+                res
             }
-            Jacobian::Sparse(s) => {
-                s.values.fill(0.0);
-                for (&p, &v) in self.user_to_csr.iter().zip(&self.user_values) {
-                    s.values[p] += v;
-                }
-            }
+            Jacobian::Sparse(s) => self.fill(x, s),
         }
-        Ok(())
     }
     fn new_jacobian(&mut self, sparse: bool) -> Result<Jacobian, LmError> {
         let (m, n) = (self.num_residuals(), self.num_params());
-        let (s, map) = SparseJac::from_pattern(m, n, &self.pattern)?;
+        let mut builder = PatternBuilder::new(m, n)?;
+        let mut entries = 0usize;
+        self.problem.visit_pattern(&mut |r, c| {
+            builder.push(r, c);
+            entries += 1;
+        });
+        let (s, map) = builder.finish()?;
+        self.user_values = if map == ValueMap::Identity {
+            Vec::new()
+        } else {
+            vec![0.0; entries]
+        };
+        self.map = map;
         Ok(if sparse {
-            self.user_to_csr = map;
             Jacobian::Sparse(s)
         } else {
+            self.staging = Some(s);
             Jacobian::Dense(Mat::zeros(m, n))
         })
     }

@@ -4,34 +4,39 @@
 //!
 //! ```text
 //! [ U   W ]   U = blockdiag(U_k)   (U_k = J_k^T J_k + mu D_k^2, one per local block)
-//! [ W^T V ]   V = J_g^T J_g + mu D_g^2
+//! [ W^T V ]   V = J_g^T J_g + mu D_g^2,  W_k = J_k^T J_g
 //! ```
 //!
 //! Each `U_k = L_k L_k^T` is factored on its own (small dense Cholesky) and
 //! `Z_k = L_k^-1 W_k`, `z_k = L_k^-1 (-g_k)` are formed. The reduced system
-//! `(V - Z^T Z) dg = -g_g - Z^T z` (the Schur complement, `Z` stacking the `Z_k`) is
-//! assembled with one matrix product and solved densely (faer LLT); the local steps follow
-//! by back-substitution, `h_k = L_k^-T (z_k - Z_k dg)`. The cost is linear in the number
-//! of blocks.
+//! `(V - Z^T Z) dg = -g_g - Z^T z` (the Schur complement) is accumulated with one matrix
+//! product per chunk of blocks and solved densely (faer LLT); the local steps follow by
+//! back-substitution, `h_k = U_k^-1 (-g_k - J_k^T (J_g dg))`. The cost is linear in the
+//! number of blocks.
 //!
-//! Per Jacobian, `U_k` and `W_k` are accumulated row by row (each row touches at most one
-//! local block) and `V = J_g^T J_g` by matrix products over chunks of rows; per damping
-//! value only the block factorisations, the reduced system and the back-substitution run.
-//! All storage is allocated when the solver is built.
+//! Memory is kept to what the blocks need: per Jacobian only `J_g^T J_g` is formed (by
+//! matrix products over chunks of rows); per damping value each block's `U_k` and `W_k` are
+//! accumulated from its rows of the Jacobian into a small chunk buffer and turned into
+//! `Z_k` there, so neither `W` nor `Z` is ever stored whole. What persists is the factor
+//! `L_k` of every block (`sum s_k^2` values), the list of rows of each block (`u32`) and
+//! the `ng x ng` matrices.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt;
 use faer::linalg::matmul::matmul;
-use faer::{Accum, Conj, Mat, Par};
+use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::{Accum, Conj, Mat, MatRef, Par};
 
 use crate::error::LmError;
 use crate::solver::jacobian::{Jacobian, SparseJac};
 use crate::solver::small;
 use crate::solver::LinearSystem;
 
-const NO_BLOCK: usize = usize::MAX;
+const NO_BLOCK: u32 = u32::MAX;
 /// Rows gathered before each `V += C C^T` product.
 const CHUNK: usize = 128;
+/// Local parameters (rows of `Z`) gathered before each `S -= Z^T Z` product.
+const ZCHUNK: usize = 192;
 
 /// Workspace of the Schur solver.
 pub(crate) struct Schur {
@@ -41,31 +46,41 @@ pub(crate) struct Schur {
     ng: usize,
     /// First parameter of each block (plus one past the end).
     block_start: Vec<usize>,
-    /// Offset of each block's `U_k` (`s_k x s_k`, column-major) in `u` / `lf`.
-    u_off: Vec<usize>,
-    /// Block of each row (`NO_BLOCK` for rows with global parameters only).
-    row_block: Vec<usize>,
-    /// Per row, the first CSR entry on a global parameter.
-    row_split: Vec<usize>,
-    u: Vec<f64>,
+    /// Offset of each block's factor (`s_k x s_k`, column-major) in `lf`.
+    lf_off: Vec<usize>,
+    /// Cholesky factors of `U_k + mu D_k^2` from the last solve.
     lf: Vec<f64>,
-    /// `W` (`nl x ng`): block `k` in rows `block_start[k]..block_start[k + 1]`.
-    w: Mat<f64>,
-    /// `Z = blockdiag(L_k)^-1 W`.
-    z: Mat<f64>,
+    /// Rows of block `k`: `block_rows[block_row_ptr[k]..block_row_ptr[k + 1]]`.
+    block_row_ptr: Vec<usize>,
+    block_rows: Vec<u32>,
     /// `J_g^T J_g` (`ng x ng`).
     v: Mat<f64>,
     /// Reduced matrix, factored in place.
     s: Mat<f64>,
     /// Chunk of global rows (stored as columns, `ng x CHUNK`) for the products forming `V`.
     chunk: Mat<f64>,
-    /// Dense local part of one row.
+    /// Chunk of `Z` rows, transposed: `ng x zrows` column-major, one contiguous column of
+    /// length `ng` per local parameter; holds `W_k^T`, then `(L_k^-1 W_k)^T`, block after
+    /// block.
+    zt: Vec<f64>,
+    /// Capacity of the chunk in local parameters.
+    zrows: usize,
+    /// The matching chunk of `z` (`zrows x 1`).
+    zlc: Mat<f64>,
+    /// Dense local part of one row, and a local right-hand side.
     lrow: Vec<f64>,
-    /// `L^-1 (-g_l)`, then the back-substituted local step.
-    zl: Mat<f64>,
-    /// Reduced right-hand side, then the global step.
-    rhs: Mat<f64>,
+    tl: Vec<f64>,
+    /// Global right-hand side, then the global step.
+    tg: Mat<f64>,
     mem: MemBuffer,
+    /// Whether `lf` and `s` hold the factors of the last solve.
+    factored: bool,
+}
+
+/// Position of the first entry of a sorted row on a global parameter.
+#[inline]
+fn split(cols: &[u32], nl: usize) -> usize {
+    cols.partition_point(|&c| (c as usize) < nl)
 }
 
 impl Schur {
@@ -77,45 +92,69 @@ impl Schur {
                 "Schur local blocks cover {nl} parameters but the problem has only {n}"
             )));
         }
+        if u32::try_from(jac.nrows).is_err() {
+            return Err(LmError::InvalidOptions(format!(
+                "the Schur solver supports at most {} residuals, the problem has {}",
+                u32::MAX,
+                jac.nrows
+            )));
+        }
         let ng = n - nl;
-        let mut block_start = Vec::with_capacity(sizes.len() + 1);
-        let mut u_off = Vec::with_capacity(sizes.len() + 1);
+        let nb = sizes.len();
+        let mut block_start = Vec::with_capacity(nb + 1);
+        let mut lf_off = Vec::with_capacity(nb + 1);
         let mut col_block = vec![NO_BLOCK; nl];
         let (mut p, mut uo) = (0, 0);
         for (k, &s) in sizes.iter().enumerate() {
             block_start.push(p);
-            u_off.push(uo);
-            col_block[p..p + s].fill(k);
+            lf_off.push(uo);
+            col_block[p..p + s].fill(k as u32);
             p += s;
             uo += s * s;
         }
         block_start.push(p);
-        u_off.push(uo);
-        // Every row may touch at most one local block.
-        let mut row_block = vec![NO_BLOCK; jac.nrows];
-        let mut row_split = vec![0usize; jac.nrows];
-        for i in 0..jac.nrows {
-            let (b, e) = (jac.row_ptr[i], jac.row_ptr[i + 1]);
-            let mut split = e;
-            for q in b..e {
-                let c = jac.row_col[q];
-                if c >= nl {
-                    split = q;
-                    break;
-                }
-                let k = col_block[c];
-                if row_block[i] == NO_BLOCK {
-                    row_block[i] = k;
-                } else if row_block[i] != k {
-                    return Err(LmError::SchurStructure {
-                        row: i,
-                        first_block: row_block[i],
-                        second_block: k,
-                    });
-                }
+        lf_off.push(uo);
+        // Block of row i (every row may touch at most one local block).
+        let row_block = |i: usize| -> Result<u32, LmError> {
+            let (cols, _) = jac.row(i);
+            let locals = &cols[..split(cols, nl)];
+            let Some(&first) = locals.first() else {
+                return Ok(NO_BLOCK);
+            };
+            let k = col_block[first as usize];
+            let last = col_block[locals[locals.len() - 1] as usize];
+            if last != k {
+                return Err(LmError::SchurStructure {
+                    row: i,
+                    first_block: k as usize,
+                    second_block: last as usize,
+                });
             }
-            row_split[i] = split;
+            Ok(k)
+        };
+        let mut block_row_ptr = vec![0usize; nb + 1];
+        for i in 0..jac.nrows {
+            let k = row_block(i)?;
+            if k != NO_BLOCK {
+                block_row_ptr[k as usize + 1] += 1;
+            }
         }
+        for k in 0..nb {
+            block_row_ptr[k + 1] += block_row_ptr[k];
+        }
+        let mut next = block_row_ptr.clone();
+        let mut block_rows = vec![0u32; block_row_ptr[nb]];
+        for i in 0..jac.nrows {
+            let k = row_block(i)?;
+            if k != NO_BLOCK {
+                block_rows[next[k as usize]] = i as u32;
+                next[k as usize] += 1;
+            }
+        }
+        drop(next);
+        drop(col_block);
+        let smax = sizes.iter().copied().max().unwrap_or(0);
+        let zrows = ZCHUNK.max(smax);
         let req = StackReq::any_of(&[
             llt::factor::cholesky_in_place_scratch::<f64>(ng, Par::Seq, Default::default()),
             llt::solve::solve_in_place_scratch::<f64>(ng, 1, Par::Seq),
@@ -124,20 +163,21 @@ impl Schur {
             nl,
             ng,
             block_start,
-            u_off,
-            row_block,
-            row_split,
-            u: vec![0.0; uo],
+            lf_off,
             lf: vec![0.0; uo],
-            w: Mat::zeros(nl, ng),
-            z: Mat::zeros(nl, ng),
+            block_row_ptr,
+            block_rows,
             v: Mat::zeros(ng, ng),
             s: Mat::zeros(ng, ng),
             chunk: Mat::zeros(ng, CHUNK),
-            lrow: vec![0.0; sizes.iter().copied().max().unwrap_or(0)],
-            zl: Mat::zeros(nl, 1),
-            rhs: Mat::zeros(ng, 1),
+            zt: vec![0.0; zrows * ng],
+            zrows,
+            zlc: Mat::zeros(zrows, 1),
+            lrow: vec![0.0; smax],
+            tl: vec![0.0; smax],
+            tg: Mat::zeros(ng, 1),
             mem: MemBuffer::new(req),
+            factored: false,
         })
     }
 
@@ -148,6 +188,39 @@ impl Schur {
         let c = self.chunk.as_ref().subcols(0, rows);
         matmul(self.v.as_mut(), Accum::Add, c, c.transpose(), 1.0, Par::Seq);
     }
+
+    /// `S -= Z_c^T Z_c`, `tg -= Z_c^T z_c` over the first `rows` local parameters of the
+    /// chunk.
+    fn flush_z(&mut self, rows: usize) {
+        let ng = self.ng;
+        if rows == 0 || ng == 0 {
+            return;
+        }
+        let zt = MatRef::from_column_major_slice(&self.zt[..rows * ng], ng, rows);
+        matmul(
+            self.s.as_mut(),
+            Accum::Add,
+            zt,
+            zt.transpose(),
+            -1.0,
+            Par::Seq,
+        );
+        matmul(
+            self.tg.as_mut(),
+            Accum::Add,
+            zt,
+            self.zlc.as_ref().subrows(0, rows),
+            -1.0,
+            Par::Seq,
+        );
+    }
+
+    fn sparse(jac: &Jacobian) -> &SparseJac {
+        match jac {
+            Jacobian::Sparse(j) => j,
+            Jacobian::Dense(_) => unreachable!("the Schur solver is built for sparse Jacobians"),
+        }
+    }
 }
 
 impl LinearSystem for Schur {
@@ -155,49 +228,23 @@ impl LinearSystem for Schur {
         let Jacobian::Sparse(j) = jac else {
             return Err("Schur solver needs a sparse Jacobian".into());
         };
+        self.factored = false;
         let nl = self.nl;
-        self.u.fill(0.0);
-        self.w.fill(0.0);
         self.v.fill(0.0);
+        if self.ng == 0 {
+            return Ok(());
+        }
         let mut rows = 0;
         for i in 0..j.nrows {
-            let (b, split, e) = (j.row_ptr[i], self.row_split[i], j.row_ptr[i + 1]);
-            let blk = self.row_block[i];
-            if blk != NO_BLOCK {
-                let p0 = self.block_start[blk];
-                let s = self.block_start[blk + 1] - p0;
-                // Dense copy of the row's local part, then U += l l^T and W += l g^T.
-                let l = &mut self.lrow[..s];
-                l.fill(0.0);
-                for q in b..split {
-                    l[j.row_col[q] - p0] = j.values[q];
-                }
-                let u = &mut self.u[self.u_off[blk]..self.u_off[blk + 1]];
-                for (c, &lc) in l.iter().enumerate() {
-                    if lc != 0.0 {
-                        for (ua, &la) in u[c * s..(c + 1) * s].iter_mut().zip(l.iter()) {
-                            *ua += la * lc;
-                        }
-                    }
-                }
-                for qg in split..e {
-                    let vg = j.values[qg];
-                    if vg == 0.0 {
-                        continue;
-                    }
-                    let col = &mut self.w.col_as_slice_mut(j.row_col[qg] - nl)[p0..p0 + s];
-                    for (wa, &la) in col.iter_mut().zip(l.iter()) {
-                        *wa += la * vg;
-                    }
-                }
-            }
-            if split < e {
+            let (cols, vals) = j.row(i);
+            let sp = split(cols, nl);
+            if sp < cols.len() {
                 // Rows of the chunk are written transposed (one column per row) so that the
                 // writes are contiguous; V += C C^T below.
                 let col = self.chunk.col_as_slice_mut(rows);
                 col.fill(0.0);
-                for qg in split..e {
-                    col[j.row_col[qg] - nl] = j.values[qg];
+                for (&c, &v) in cols[sp..].iter().zip(&vals[sp..]) {
+                    col[c as usize - nl] = v;
                 }
                 rows += 1;
                 if rows == CHUNK {
@@ -210,58 +257,98 @@ impl LinearSystem for Schur {
         Ok(())
     }
 
-    fn solve(&mut self, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+    fn solve(&mut self, jac: &Jacobian, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+        self.factored = false;
+        let j = Self::sparse(jac);
         let (nl, ng) = (self.nl, self.ng);
         let nblocks = self.block_start.len() - 1;
-        // Per block: factor U_k + mu D_k^2, then Z_k = L_k^-1 W_k and z_k = L_k^-1 (-g_k).
-        for k in 0..nblocks {
-            let (p0, p1) = (self.block_start[k], self.block_start[k + 1]);
-            let s = p1 - p0;
-            let lf = &mut self.lf[self.u_off[k]..self.u_off[k + 1]];
-            lf.copy_from_slice(&self.u[self.u_off[k]..self.u_off[k + 1]]);
-            for a in 0..s {
-                lf[a + a * s] += mu * d[p0 + a] * d[p0 + a];
-            }
-            if !small::cholesky(lf, s) {
-                return false;
-            }
-            let zl = &mut self.zl.col_as_slice_mut(0)[p0..p1];
-            for a in 0..s {
-                zl[a] = -g[p0 + a];
-            }
-            small::forward_solve(lf, s, zl);
-            for b in 0..ng {
-                let src = &self.w.col_as_slice(b)[p0..p1];
-                let dst = &mut self.z.col_as_slice_mut(b)[p0..p1];
-                dst.copy_from_slice(src);
-                small::forward_solve(lf, s, dst);
-            }
-        }
         if ng > 0 {
-            // Reduced system (V + mu D_g^2 - Z^T Z) dg = -g_g - Z^T z.
+            // Reduced system (V + mu D_g^2 - Z^T Z) dg = -g_g - Z^T z, accumulated below.
             self.s.copy_from(&self.v);
             for b in 0..ng {
                 self.s[(b, b)] += mu * d[nl + b] * d[nl + b];
-                self.rhs[(b, 0)] = -g[nl + b];
+                self.tg[(b, 0)] = -g[nl + b];
             }
-            if nl > 0 {
-                matmul(
-                    self.s.as_mut(),
-                    Accum::Add,
-                    self.z.transpose(),
-                    self.z.as_ref(),
-                    -1.0,
-                    Par::Seq,
-                );
-                matmul(
-                    self.rhs.as_mut(),
-                    Accum::Add,
-                    self.z.transpose(),
-                    self.zl.as_ref(),
-                    -1.0,
-                    Par::Seq,
-                );
+        }
+        let zrows = self.zrows;
+        let mut zrow = 0;
+        for k in 0..nblocks {
+            let (p0, p1) = (self.block_start[k], self.block_start[k + 1]);
+            let sz = p1 - p0;
+            if zrow + sz > zrows {
+                self.flush_z(zrow);
+                zrow = 0;
             }
+            // U_k (lower triangle, in lf) and W_k^T (in the chunk) from the block's rows.
+            let lf = &mut self.lf[self.lf_off[k]..self.lf_off[k + 1]];
+            lf.fill(0.0);
+            let wt = &mut self.zt[zrow * ng..(zrow + sz) * ng];
+            wt.fill(0.0);
+            let l = &mut self.lrow[..sz];
+            for &i in &self.block_rows[self.block_row_ptr[k]..self.block_row_ptr[k + 1]] {
+                let (cols, vals) = j.row(i as usize);
+                let sp = split(cols, nl);
+                l.fill(0.0);
+                for (&c, &v) in cols[..sp].iter().zip(&vals[..sp]) {
+                    l[c as usize - p0] = v;
+                }
+                for c in 0..sz {
+                    let lc = l[c];
+                    if lc != 0.0 {
+                        for (ua, &la) in lf[c * sz + c..(c + 1) * sz].iter_mut().zip(&l[c..]) {
+                            *ua += la * lc;
+                        }
+                    }
+                }
+                if sp == cols.len() {
+                    continue;
+                }
+                let (gcols, gvals) = (&cols[sp..], &vals[sp..]);
+                for (a, &la) in l.iter().enumerate() {
+                    if la == 0.0 {
+                        continue;
+                    }
+                    let wrow = &mut wt[a * ng..(a + 1) * ng];
+                    for (&c, &vg) in gcols.iter().zip(gvals) {
+                        wrow[c as usize - nl] += la * vg;
+                    }
+                }
+            }
+            for a in 0..sz {
+                lf[a + a * sz] += mu * d[p0 + a] * d[p0 + a];
+            }
+            if !small::cholesky(lf, sz) {
+                return false;
+            }
+            if ng > 0 {
+                // Z_k = L_k^-1 W_k (row by row of Z_k, i.e. column by column of the chunk)
+                // and z_k = L_k^-1 (-g_k).
+                for a in 0..sz {
+                    let (done, rest) = wt.split_at_mut(a * ng);
+                    let ra = &mut rest[..ng];
+                    for p in 0..a {
+                        let lap = lf[a + p * sz];
+                        if lap != 0.0 {
+                            for (x, &y) in ra.iter_mut().zip(&done[p * ng..(p + 1) * ng]) {
+                                *x -= lap * y;
+                            }
+                        }
+                    }
+                    let inv = 1.0 / lf[a + a * sz];
+                    for x in ra.iter_mut() {
+                        *x *= inv;
+                    }
+                }
+                let zl = &mut self.zlc.col_as_slice_mut(0)[zrow..zrow + sz];
+                for a in 0..sz {
+                    zl[a] = -g[p0 + a];
+                }
+                small::forward_solve(lf, sz, zl);
+            }
+            zrow += sz;
+        }
+        self.flush_z(zrow);
+        if ng > 0 {
             let stack = MemStack::new(&mut self.mem);
             if llt::factor::cholesky_in_place(
                 self.s.as_mut(),
@@ -277,33 +364,93 @@ impl LinearSystem for Schur {
             llt::solve::solve_in_place_with_conj(
                 self.s.as_ref(),
                 Conj::No,
-                self.rhs.as_mut(),
+                self.tg.as_mut(),
                 Par::Seq,
                 stack,
             );
             for b in 0..ng {
-                h[nl + b] = self.rhs[(b, 0)];
-            }
-            if nl > 0 {
-                // z <- z - Z dg
-                matmul(
-                    self.zl.as_mut(),
-                    Accum::Add,
-                    self.z.as_ref(),
-                    self.rhs.as_ref(),
-                    -1.0,
-                    Par::Seq,
-                );
+                h[nl + b] = self.tg[(b, 0)];
             }
         }
-        // Back-substitution h_k = L_k^-T (z_k - Z_k dg).
+        // Back-substitution h_k = U_k^-1 (-g_k - J_k^T (J_g dg)).
+        let mut ok = h[nl..].iter().all(|v| v.is_finite());
+        let (hl, _) = h.split_at_mut(nl);
         for k in 0..nblocks {
             let (p0, p1) = (self.block_start[k], self.block_start[k + 1]);
-            let s = p1 - p0;
-            let zl = &mut self.zl.col_as_slice_mut(0)[p0..p1];
-            small::backward_solve(&self.lf[self.u_off[k]..self.u_off[k + 1]], s, zl);
-            h[p0..p1].copy_from_slice(zl);
+            let sz = p1 - p0;
+            let t = &mut self.tl[..sz];
+            for a in 0..sz {
+                t[a] = -g[p0 + a];
+            }
+            if ng > 0 {
+                for &i in &self.block_rows[self.block_row_ptr[k]..self.block_row_ptr[k + 1]] {
+                    let (cols, vals) = j.row(i as usize);
+                    let sp = split(cols, nl);
+                    let gd: f64 = cols[sp..]
+                        .iter()
+                        .zip(&vals[sp..])
+                        .map(|(&c, &v)| v * self.tg[(c as usize - nl, 0)])
+                        .sum();
+                    if gd != 0.0 {
+                        for (&c, &v) in cols[..sp].iter().zip(&vals[..sp]) {
+                            t[c as usize - p0] -= v * gd;
+                        }
+                    }
+                }
+            }
+            let lf = &self.lf[self.lf_off[k]..self.lf_off[k + 1]];
+            small::forward_solve(lf, sz, t);
+            small::backward_solve(lf, sz, t);
+            hl[p0..p1].copy_from_slice(t);
+            ok &= t.iter().all(|v| v.is_finite());
         }
-        h.iter().all(|v| v.is_finite())
+        self.factored = ok;
+        ok
+    }
+
+    fn inverse_quadratic(&mut self, jac: &Jacobian, w: &[f64]) -> Option<f64> {
+        if !self.factored {
+            return None;
+        }
+        // With A = L L^T, L = [L_U 0; Z^T L_S]: w^T A^-1 w = ||L_U^-1 w_l||^2 + ||y||^2,
+        // y = L_S^-1 (w_g - W^T U^-1 w_l), and W^T U^-1 w_l = J_g^T (J_l U^-1 w_l) row by row.
+        let j = Self::sparse(jac);
+        let (nl, ng) = (self.nl, self.ng);
+        for b in 0..ng {
+            self.tg[(b, 0)] = w[nl + b];
+        }
+        let mut quad = 0.0;
+        for k in 0..self.block_start.len() - 1 {
+            let (p0, p1) = (self.block_start[k], self.block_start[k + 1]);
+            let sz = p1 - p0;
+            let lf = &self.lf[self.lf_off[k]..self.lf_off[k + 1]];
+            let t = &mut self.tl[..sz];
+            t.copy_from_slice(&w[p0..p1]);
+            small::forward_solve(lf, sz, t);
+            quad += t.iter().map(|v| v * v).sum::<f64>();
+            if ng == 0 {
+                continue;
+            }
+            small::backward_solve(lf, sz, t);
+            for &i in &self.block_rows[self.block_row_ptr[k]..self.block_row_ptr[k + 1]] {
+                let (cols, vals) = j.row(i as usize);
+                let sp = split(cols, nl);
+                let sc: f64 = cols[..sp]
+                    .iter()
+                    .zip(&vals[..sp])
+                    .map(|(&c, &v)| v * t[c as usize - p0])
+                    .sum();
+                if sc != 0.0 {
+                    for (&c, &v) in cols[sp..].iter().zip(&vals[sp..]) {
+                        self.tg[(c as usize - nl, 0)] -= v * sc;
+                    }
+                }
+            }
+        }
+        if ng > 0 {
+            solve_lower_triangular_in_place(self.s.as_ref(), self.tg.as_mut(), Par::Seq);
+            quad += (0..ng).map(|b| self.tg[(b, 0)].powi(2)).sum::<f64>();
+        }
+        quad.is_finite().then_some(quad)
     }
 }

@@ -9,7 +9,8 @@
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky,
+    SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -40,16 +41,43 @@ pub(crate) struct SparseCholesky {
     /// Consecutive columns of `J` with identical row sets, assembled together:
     /// `(first column, one past the last)`.
     groups: Vec<(usize, usize)>,
+    /// Per group, `(row, CSR position)` of the entries of its first column:
+    /// `lead_src[lead_ptr[k]..lead_ptr[k + 1]]`.
+    lead_ptr: Vec<usize>,
+    lead_src: Vec<(usize, usize)>,
     /// Widest group.
     width: usize,
     /// Dense scratch `n x width` (row-major: entry `(a, t)` at `a * width + t`).
     work: Vec<f64>,
     rhs: Mat<f64>,
+    /// Whether `l_values` holds the factor of the last solve.
+    factored: bool,
 }
 
 impl SparseCholesky {
     pub(crate) fn new(jac: &SparseJac) -> Result<Self, LmError> {
         let n = jac.ncols;
+        // Column-wise index of J (transient): rows of each column and their CSR positions.
+        let mut jcol_ptr = vec![0usize; n + 1];
+        for &c in &jac.row_col {
+            jcol_ptr[c as usize + 1] += 1;
+        }
+        for c in 0..n {
+            jcol_ptr[c + 1] += jcol_ptr[c];
+        }
+        let nnz_j = jac.row_col.len();
+        let mut next = jcol_ptr.clone();
+        let mut jcol_row = vec![0u32; nnz_j];
+        let mut jcol_src = vec![0usize; nnz_j];
+        for r in 0..jac.nrows {
+            for q in jac.row_ptr[r]..jac.row_ptr[r + 1] {
+                let c = jac.row_col[q] as usize;
+                jcol_row[next[c]] = r as u32;
+                jcol_src[next[c]] = q;
+                next[c] += 1;
+            }
+        }
+        drop(next);
         // Structure of the upper triangle of J^T J.
         let mut marker = vec![usize::MAX; n];
         let mut col_ptr = Vec::with_capacity(n + 1);
@@ -60,10 +88,11 @@ impl SparseCholesky {
             let begin = row_idx.len();
             marker[b] = b;
             row_idx.push(b);
-            for p in jac.col_ptr[b]..jac.col_ptr[b + 1] {
-                let i = jac.col_row[p];
+            for p in jcol_ptr[b]..jcol_ptr[b + 1] {
+                let i = jcol_row[p] as usize;
                 // Entries a <= b of row i: the row prefix up to (i, b) itself.
-                for &a in &jac.row_col[jac.row_ptr[i]..jac.col_src[p]] {
+                for &a in &jac.row_col[jac.row_ptr[i]..jcol_src[p]] {
+                    let a = a as usize;
                     if marker[a] != b {
                         marker[a] = b;
                         row_idx.push(a);
@@ -101,19 +130,23 @@ impl SparseCholesky {
         // the global parameters): their J^T J columns are assembled in one pass over the rows.
         let max_width = (WORK_BUDGET / n.max(1)).clamp(1, 64);
         let mut groups = Vec::new();
+        let mut lead_ptr = vec![0usize];
+        let mut lead_src = Vec::new();
         let mut c = 0;
         while c < n {
-            let rows = &jac.col_row[jac.col_ptr[c]..jac.col_ptr[c + 1]];
+            let rows = &jcol_row[jcol_ptr[c]..jcol_ptr[c + 1]];
             let mut e = c + 1;
-            while e < n
-                && e - c < max_width
-                && &jac.col_row[jac.col_ptr[e]..jac.col_ptr[e + 1]] == rows
-            {
+            while e < n && e - c < max_width && &jcol_row[jcol_ptr[e]..jcol_ptr[e + 1]] == rows {
                 e += 1;
             }
             groups.push((c, e));
+            lead_src.extend(
+                (jcol_ptr[c]..jcol_ptr[c + 1]).map(|p| (jcol_row[p] as usize, jcol_src[p])),
+            );
+            lead_ptr.push(lead_src.len());
             c = e;
         }
+        drop((jcol_ptr, jcol_row, jcol_src));
         let width = groups.iter().map(|(a, b)| b - a).max().unwrap_or(1);
         let req = StackReq::any_of(&[
             symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
@@ -132,9 +165,12 @@ impl SparseCholesky {
             l_values,
             mem: MemBuffer::new(req),
             groups,
+            lead_ptr,
+            lead_src,
             width,
             work: vec![0.0; n * width],
             rhs: Mat::zeros(n, 1),
+            factored: false,
         })
     }
 }
@@ -144,22 +180,22 @@ impl LinearSystem for SparseCholesky {
         let Jacobian::Sparse(j) = jac else {
             return Err("sparse Cholesky needs a sparse Jacobian".into());
         };
+        self.factored = false;
         // Columns c0..c1 of a group share their rows. For a row i, the entries (i, c0..c1)
         // are consecutive in CSR order; column b = c0 + t of the upper triangle receives
         // J[i, b] * J[i, a] for the entries a <= b of row i (a prefix of the sorted row).
         let w = self.width;
-        for &(c0, c1) in &self.groups {
+        for (k, &(c0, c1)) in self.groups.iter().enumerate() {
             let gw = c1 - c0;
-            for p in j.col_ptr[c0]..j.col_ptr[c0 + 1] {
-                let q0 = j.col_src[p];
+            for &(row, q0) in &self.lead_src[self.lead_ptr[k]..self.lead_ptr[k + 1]] {
                 let vals = &j.values[q0..q0 + gw];
-                let begin = j.row_ptr[j.col_row[p]];
+                let begin = j.row_ptr[row];
                 for q in begin..q0 + gw {
                     let va = j.values[q];
                     if va == 0.0 {
                         continue;
                     }
-                    let a = j.row_col[q];
+                    let a = j.row_col[q] as usize;
                     let t0 = q.saturating_sub(q0);
                     let dst = &mut self.work[a * w + t0..a * w + gw];
                     for (d, &vb) in dst.iter_mut().zip(&vals[t0..]) {
@@ -179,7 +215,8 @@ impl LinearSystem for SparseCholesky {
         Ok(())
     }
 
-    fn solve(&mut self, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+    fn solve(&mut self, _jac: &Jacobian, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+        self.factored = false;
         self.a.copy_from_slice(&self.jtj);
         for k in 0..self.n {
             self.a[self.diag_pos[k]] += mu * d[k] * d[k];
@@ -214,6 +251,25 @@ impl LinearSystem for SparseCholesky {
             h[k] = self.rhs[(k, 0)];
             ok &= h[k].is_finite();
         }
+        self.factored = ok;
         ok
+    }
+
+    fn inverse_quadratic(&mut self, _jac: &Jacobian, w: &[f64]) -> Option<f64> {
+        if !self.factored {
+            return None;
+        }
+        for k in 0..self.n {
+            self.rhs[(k, 0)] = w[k];
+        }
+        let stack = MemStack::new(&mut self.mem);
+        LltRef::new(&self.symbolic, &self.l_values).solve_in_place_with_conj(
+            Conj::No,
+            self.rhs.as_mut(),
+            Par::Seq,
+            stack,
+        );
+        let q: f64 = (0..self.n).map(|k| w[k] * self.rhs[(k, 0)]).sum();
+        q.is_finite().then_some(q)
     }
 }
