@@ -58,36 +58,6 @@ fn write_truth(dir: &Path) -> PathBuf {
     path
 }
 
-/// RMS position error (um) reached on `truth` when commanding `readings` for `targets`.
-fn reached_error_um(
-    nominal: &Robot,
-    truth: &Robot,
-    targets: &[Pose],
-    readings: &[Vec<f64>],
-) -> f64 {
-    let clearance = nominal.clearance();
-    let load = nominal.platform_load();
-    let mut sq = 0.0;
-    for (t, u) in targets.iter().zip(readings) {
-        let shift = clearance
-            .link_corrections_mm(&nominal.table, t, &load)
-            .unwrap();
-        let lengths: Vec<f64> = (0..6)
-            .map(|i| truth.length_mm(i, u[i]) + shift[i])
-            .collect();
-        let (reached, _) = cpm::kinematics::forward(
-            &truth.table,
-            &lengths,
-            t,
-            &cpm::kinematics::ForwardOptions::default(),
-        )
-        .unwrap();
-        let d = t.difference(&reached);
-        sq += (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * 1e6;
-    }
-    (sq / targets.len() as f64).sqrt()
-}
-
 /// The reading_k columns of a commands file.
 fn read_commands(text: &str) -> Vec<Vec<f64>> {
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
@@ -204,8 +174,8 @@ fn simulate_calibrate_compensate_reduces_the_pose_error() {
         &p(&nominal_commands),
     ]);
     let nominal_readings = read_commands(&std::fs::read_to_string(&nominal_commands).unwrap());
-    let before = reached_error_um(&nominal, &truth, &targets, &nominal_readings);
-    let after = reached_error_um(&nominal, &truth, &targets, &calibrated);
+    let before = reached_error_um(&truth, &[0.0; 6], &targets, &nominal_readings);
+    let after = reached_error_um(&truth, &[0.0; 6], &targets, &calibrated);
     assert!(before > 30.0, "the truth should be visible: {before} um");
     assert!(
         after < 0.1 * before,
@@ -388,7 +358,158 @@ fn refine_finds_backlash() {
     }
     let toml = std::fs::read_to_string(out_dir.join("calibrated.toml")).unwrap();
     assert!(toml.contains("effects = [\"backlash\"]"), "{toml}");
-    assert!(toml.contains("Effect values a description cannot hold"));
+    assert!(toml.contains("[calibration.known_effects]"), "{toml}");
+    // The calibrated description carries the backlash it found, and reading it back gives it.
+    let cal = Robot::load(&out_dir.join("calibrated.toml")).unwrap();
+    let known = cal.model(&[]).known_effects;
+    assert_eq!(known.len(), 1);
+    assert_eq!(known[0].effect, cpm::calib::Effect::Backlash);
+    for (got, want) in known[0]
+        .values
+        .iter()
+        .zip([20.0, -15.0, 25.0, 10.0, -20.0, 15.0])
+    {
+        assert!((got - want).abs() < 2.0, "{:?}", known[0].values);
+    }
+}
+
+/// RMS position error (um) reached on the true machine of `truth_robot` plus a per-link
+/// backlash `backlash_um` when commanding `readings` for `targets` in order, starting at home.
+fn reached_error_um(
+    truth_robot: &Robot,
+    backlash_um: &[f64],
+    targets: &[Pose],
+    readings: &[Vec<f64>],
+) -> f64 {
+    let clearance = truth_robot.clearance();
+    let load = truth_robot.platform_load();
+    let mut previous =
+        cpm::kinematics::inverse_lengths(&truth_robot.table, &truth_robot.table.home);
+    let mut sign = [0.0; 6];
+    let mut sq = 0.0;
+    for (t, u) in targets.iter().zip(readings) {
+        let commanded: Vec<f64> = (0..6).map(|i| truth_robot.length_mm(i, u[i])).collect();
+        let shift = clearance
+            .link_corrections_mm(&truth_robot.table, t, &load)
+            .unwrap();
+        for i in 0..6 {
+            let d: f64 = commanded[i] - previous[i];
+            if d.abs() > 1e-9 {
+                sign[i] = d.signum();
+            }
+        }
+        let lengths: Vec<f64> = (0..6)
+            .map(|i| commanded[i] + shift[i] + backlash_um[i] * 1e-3 * sign[i])
+            .collect();
+        previous = commanded;
+        let (reached, _) = cpm::kinematics::forward(
+            &truth_robot.table,
+            &lengths,
+            t,
+            &cpm::kinematics::ForwardOptions::default(),
+        )
+        .unwrap();
+        let d = t.difference(&reached);
+        sq += (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * 1e6;
+    }
+    (sq / targets.len() as f64).sqrt()
+}
+
+#[test]
+fn calibrated_backlash_is_compensated() {
+    // Truth: Table 2 installation errors and a backlash declared in the truth description's
+    // [calibration.known_effects] (simulated). refine finds the backlash, calibrated.toml
+    // carries it, and compensate applies it: the pose error with it is far below the error
+    // of the same calibration without the backlash values.
+    let d = scratch("backlash-loop");
+    let robot = example("hexapod_66.toml");
+    let backlash = [18.0, -12.0, 22.0, 9.0, -16.0, 14.0];
+    let mut t = RobotDescription::load(write_truth(&d)).unwrap();
+    t.calibration
+        .get_or_insert_with(Default::default)
+        .known_effects = [("backlash".to_string(), backlash.to_vec())]
+        .into_iter()
+        .collect();
+    let truth_path = d.join("truth_backlash.toml");
+    std::fs::write(&truth_path, t.to_toml_string().unwrap()).unwrap();
+    let data = d.join("data.csv");
+    let sim = ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "40",
+        "--truth",
+        &p(&truth_path),
+        "--noise",
+        "gaussian:0.3",
+        "--seed",
+        "8",
+        "--out",
+        &p(&data),
+        "--json",
+    ]);
+    assert!(sim.contains("known backlash"), "{sim}");
+    let out_dir = d.join("refined");
+    ok(&[
+        "refine",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "none",
+        "--candidates",
+        "sensor_offset,link_offset,backlash",
+        "--sigma-um",
+        "0.3",
+        "--out",
+        &p(&out_dir),
+    ]);
+    let calibrated = out_dir.join("calibrated.toml");
+    let text = std::fs::read_to_string(&calibrated).unwrap();
+    assert!(text.contains("backlash = ["), "{text}");
+    // The same calibration without its backlash values.
+    let without = d.join("without_backlash.toml");
+    let mut w = RobotDescription::load(&calibrated).unwrap();
+    w.calibration.as_mut().unwrap().known_effects.clear();
+    std::fs::write(&without, w.to_toml_string().unwrap()).unwrap();
+
+    let truth = Robot::load(&write_truth(&d)).unwrap();
+    let targets = cpm::calib::paper::random_workspace_poses(&truth.table, 20, 40.0, 8.0, 3.0, 77);
+    let targets_path = d.join("targets.csv");
+    std::fs::write(&targets_path, cpm::io::write_pose_list(&targets)).unwrap();
+    let (mut reached, mut baseline) = (Vec::new(), Vec::new());
+    for desc in [&calibrated, &without] {
+        let out = d.join("commands.csv");
+        ok(&[
+            "compensate",
+            "--robot",
+            &p(desc),
+            "--poses",
+            &p(&targets_path),
+            "--from-home",
+            "--out",
+            &p(&out),
+        ]);
+        let u = read_commands(&std::fs::read_to_string(&out).unwrap());
+        reached.push(reached_error_um(&truth, &backlash, &targets, &u));
+        // What the calibration reaches on a machine without backlash (its own accuracy).
+        baseline.push(reached_error_um(&truth, &[0.0; 6], &targets, &u));
+    }
+    let (with, without) = (reached[0], reached[1]);
+    let own = baseline[1];
+    eprintln!("backlash loop: RMS position error {with:.3} um with the calibrated backlash, {without:.3} um without; {own:.3} um on the machine without backlash");
+    assert!(without > 8.0, "the backlash should show: {without:.2} um");
+    assert!(
+        with < 0.2 * without,
+        "with the calibrated backlash {with:.2} um, without {without:.2} um"
+    );
+    // Compensated backlash leaves the calibration's own accuracy.
+    assert!(
+        with < own + 1.0,
+        "with {with:.2} um, own accuracy {own:.2} um"
+    );
 }
 
 #[test]

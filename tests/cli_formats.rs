@@ -371,6 +371,69 @@ fn calibrated_description_folds_link_offset_and_scale_exactly() {
 }
 
 #[test]
+fn calibrated_description_adds_effect_values_to_the_known_ones() {
+    // A robot that already knows a backlash and a sensor offset, recalibrated with backlash and
+    // compliance: the new description knows the sums, keeps an undetermined parameter at its
+    // old value, and loads back into a model that predicts what the calibrated one did.
+    let mut d = hexapod().description.clone();
+    d.calibration = Some(cpm::geometry::description::CalibrationSpec {
+        known_effects: [
+            ("backlash".to_string(), vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]),
+            ("sensor_offset".to_string(), vec![7.5, -2.0, 0.5]),
+        ]
+        .into_iter()
+        .collect(),
+        ..Default::default()
+    });
+    let robot = Robot::from_description(d, "known.toml").unwrap();
+    let model = robot.model(&[Effect::Backlash, Effect::Compliance]);
+    let mut params: Vec<Option<f64>> = vec![Some(0.0); model.num_params()];
+    let fit = [0.5, -1.0, 0.25, 0.0, 2.0, -3.0];
+    for i in 0..6 {
+        params[36 + i] = Some(fit[i]);
+        params[42 + i] = Some(10.0 * (i as f64 + 1.0));
+    }
+    params[37] = None;
+    let (desc, notes) = calibrated_description(&robot, &model, &params, Some(&[Effect::Backlash]));
+    assert_eq!(notes.known_effects, vec!["backlash", "compliance"]);
+    assert_eq!(notes.undetermined_effects.len(), 1);
+    let known = &desc.calibration.as_ref().unwrap().known_effects;
+    assert_eq!(known["backlash"], vec![1.5, 2.0, 3.25, 4.0, 7.0, 3.0]);
+    assert_eq!(
+        known["compliance"],
+        vec![10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
+    );
+    assert_eq!(known["sensor_offset"], vec![7.5, -2.0, 0.5]);
+
+    let text = desc.to_toml_string().unwrap();
+    let back = Robot::from_toml(&text, "calibrated.toml").unwrap();
+    let plan = Plan {
+        poses: cpm::calib::paper::random_workspace_poses(&robot.table, 12, 40.0, 8.0, 3.0, 4),
+        sensors: (0..robot.table.sensors.len()).collect(),
+    };
+    let c = plan.skeleton();
+    let full: Vec<f64> = params.iter().map(|v| v.unwrap_or(0.0)).collect();
+    let prepared = cpm::calib::model::Prepared::new(&model, &c).unwrap();
+    let y_fit = cpm::calib::model::predict(&model, &prepared, &c, &full, None).unwrap();
+    let loaded = back.model(&[]);
+    let prepared = cpm::calib::model::Prepared::new(&loaded, &c).unwrap();
+    let y_back = cpm::calib::model::predict(&loaded, &prepared, &c, &[0.0; 36], None).unwrap();
+    let unfit = {
+        let mut m = model.clone();
+        m.known_effects.clear();
+        let prepared = cpm::calib::model::Prepared::new(&m, &c).unwrap();
+        cpm::calib::model::predict(&m, &prepared, &c, &full, None).unwrap()
+    };
+    let differs = y_fit.iter().zip(&unfit).any(|(a, b)| (a - b).abs() > 1e-4);
+    assert!(differs, "the known values should matter");
+    for (a, b) in y_fit.iter().zip(&y_back) {
+        // Link 2's backlash was not determined: the fit used 0 on top of the known 2.0, the
+        // description keeps 2.0; everything else is the same machine.
+        assert!((a - b).abs() < 1e-9, "fit {a} vs loaded back {b}");
+    }
+}
+
+#[test]
 fn robot_description_errors_are_located() {
     let text = std::fs::read_to_string(example("paper_cubic.toml")).unwrap();
     let e = Robot::from_toml(
@@ -395,14 +458,51 @@ fn robot_description_errors_are_located() {
     d.calibration = Some(cpm::geometry::description::CalibrationSpec {
         effects: vec!["link_offset".into(), "wobble".into()],
         sensor_noise_um: Some(2.0),
+        ..Default::default()
     });
-    let robot = Robot::from_description(d, "r.toml").unwrap();
-    let err = robot.declared_effects().unwrap_err().to_string();
+    let err = Robot::from_description(d.clone(), "r.toml")
+        .unwrap_err()
+        .to_string();
     assert!(
         err.starts_with("r.toml: field calibration.effects[2]: unknown effect `wobble`"),
         "{err}"
     );
+    d.calibration.as_mut().unwrap().effects.pop();
+    let robot = Robot::from_description(d.clone(), "r.toml").unwrap();
     assert_eq!(robot.sensor_noise_um(), Some(2.0));
+
+    // Known effect values: the name must be an effect, the count must fit the machine, and
+    // the message names the line of the entry.
+    let mut text = d.to_toml_string().unwrap();
+    text.push_str("\n[calibration.known_effects]\nsensor_offset = [1.5]\nbacklash = [1.0, 2.0]\n");
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("backlash"))
+        .unwrap()
+        + 1;
+    let e = Robot::from_toml(&text, "r.toml").unwrap_err();
+    assert_eq!(e.line, Some(line), "{e}");
+    assert_eq!(
+        e.field.as_deref(),
+        Some("calibration.known_effects.backlash")
+    );
+    assert!(
+        e.message
+            .contains("2 values, but backlash has 6 parameters"),
+        "{e}"
+    );
+    let text = text.replace("backlash = [1.0, 2.0]", "wobble = [1.0]");
+    let e = Robot::from_toml(&text, "r.toml").unwrap_err();
+    assert_eq!(e.line, Some(line), "{e}");
+    assert!(e.message.contains("unknown effect `wobble`"), "{e}");
+    let text = text.replace("wobble = [1.0]\n", "");
+    let robot = Robot::from_toml(&text, "r.toml").unwrap();
+    let model = robot.model(&[]);
+    assert_eq!(model.known_effects.len(), 1);
+    assert_eq!(
+        model.known(cpm::calib::Effect::SensorOffset),
+        Some(&[1.5][..])
+    );
 }
 
 #[test]

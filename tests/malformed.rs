@@ -563,6 +563,20 @@ const CASES: &[Case] = &[
         Some("calibration.effects[2]"),
         "unknown effect `wobble`",
     ),
+    case(
+        "robot_known_effect_count.toml",
+        Toml,
+        Some(79),
+        Some("calibration.known_effects.backlash"),
+        "3 values, but backlash has 6 parameters here",
+    ),
+    case(
+        "robot_known_effect_nan.toml",
+        Toml,
+        Some(77),
+        Some("calibration.known_effects.thermal_drift[3]"),
+        "must be finite, got NaN",
+    ),
     case("robot_not_utf8.toml", Toml, Some(6), None, "not UTF-8 text"),
     // A sensor of the data that the robot does not have.
     case(

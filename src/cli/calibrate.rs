@@ -572,9 +572,10 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
     outliers_report(&mut r, &inputs.robot, &inputs.merged, &cal);
     r.push_str("## Outputs\n\n- `calibration.json`: estimates, standard deviations, what is not determined, residual, solver report.\n");
     r.push_str(&format!(
-        "- `calibrated.toml`: the robot description with the {} ({} installation-error components left at nominal); `link_offset`/`link_scale` folded into the link reading models.\n",
+        "- `calibrated.toml`: the robot description with the {} ({} installation-error components left at nominal); `link_offset`/`link_scale` folded into the link reading models, `socket_error` into the sensor sockets{}.\n",
         if minimum_norm { "minimum-norm solution" } else { "determined installation errors" },
-        notes.undetermined.len()
+        notes.undetermined.len(),
+        if notes.known_effects.is_empty() { String::new() } else { format!(", the values of {} in `[calibration.known_effects]`", notes.known_effects.join(", ")) }
     ));
     for f in &figures {
         r.push_str(&format!("- `{f}`\n"));

@@ -1,9 +1,16 @@
 //! `cpm compensate`: the actuator commands that bring a calibrated machine to target poses.
 //!
 //! For each target the link lengths are the inverse kinematics with the calibrated joints,
-//! minus the joint clearance shift the description's `[clearance]` and `[load]` predict (the
-//! machine adds it back), turned into readings with each link's reading model (where a
+//! minus the joint clearance shift the description's `[clearance]` and `[load]` predict and
+//! minus the length changes of the link effects in `[calibration.known_effects]` (the
+//! machine adds both back), turned into readings with each link's reading model (where a
 //! calibrated description carries `link_offset` and `link_scale`).
+//!
+//! The known link effects depend on the commanded lengths (scale-like terms, screw error),
+//! so the commands are found by a fixed-point iteration. Backlash depends on the direction
+//! each link last moved: the targets are visited in file order, and the first target gets no
+//! backlash correction (its approach is unknown) unless `--from-home` says the machine starts
+//! at home. `thermal_drift` needs `--temperature-c`; without it no drift is corrected.
 use std::path::PathBuf;
 
 use clap::Args;
@@ -11,6 +18,8 @@ use serde_json::json;
 
 use super::common::{self, RobotArg};
 use super::{usage_error, Ctx, Outcome};
+use crate::calib::effects::{is_link_effect, PoseContext};
+use crate::calib::MeasurementModel;
 use crate::io::{self, campaign::check_reachable, ReadOptions};
 use crate::output::OutputSet;
 
@@ -32,19 +41,67 @@ pub struct CompensateArgs {
     /// Print a JSON summary on stdout (needs --out).
     #[arg(long)]
     pub json: bool,
+    /// Temperature of the machine, deg C, for a known `thermal_drift`.
+    #[arg(long, value_name = "DEG_C")]
+    pub temperature_c: Option<f64>,
+    /// The machine comes to the first target from its home pose (sets the first target's
+    /// direction of motion for a known `backlash`).
+    #[arg(long)]
+    pub from_home: bool,
 }
 
-/// Link lengths (mm) and readings that a machine described by `robot` needs to reach `pose`.
+/// Fixed-point iterations of the commanded lengths against the known link effects.
+const COMMAND_ITERATIONS: usize = 8;
+
+/// What the commands of one target came out as.
+#[derive(Debug, Clone)]
+pub struct Commands {
+    /// Commanded link lengths, mm.
+    pub lengths_mm: Vec<f64>,
+    /// Readings to command, in each link's reading units.
+    pub readings: Vec<f64>,
+    /// The pose context of this target (the next target's `previous`).
+    pub context: PoseContext,
+    /// The largest change of a commanded length in the last fixed-point iteration, mm.
+    pub last_change_mm: f64,
+}
+
+/// Link lengths (mm) and readings that a machine described by `robot` (its measurement model
+/// `model`, with the known effect values) needs to reach `pose`, coming from the target whose
+/// context is `previous`.
 pub fn commands_for(
     robot: &io::Robot,
+    model: &MeasurementModel,
     pose: &crate::geometry::Pose,
-) -> Result<(Vec<f64>, Vec<f64>), cpm_clearance::ClearanceError> {
-    let mut lengths = cpm_kinematics::inverse_lengths(&robot.table, pose);
-    let clearance = robot.clearance();
-    if clearance.radius_um > 0.0 {
-        let shift = clearance.link_corrections_mm(&robot.table, pose, &robot.platform_load())?;
-        for (l, s) in lengths.iter_mut().zip(shift) {
+    previous: Option<&PoseContext>,
+    temperature_c: Option<f64>,
+) -> Result<Commands, cpm_clearance::ClearanceError> {
+    let mut target = cpm_kinematics::inverse_lengths(&robot.table, pose);
+    if model.clearance.radius_um > 0.0 {
+        let shift = model
+            .clearance
+            .link_corrections_mm(&robot.table, pose, &model.load)?;
+        for (l, s) in target.iter_mut().zip(shift) {
             *l -= s;
+        }
+    }
+    let mut lengths = target.clone();
+    let mut context = model.pose_context(pose, lengths.clone(), previous, temperature_c, None)?;
+    let mut last_change_mm = 0.0;
+    if model.known_effects.iter().any(|k| is_link_effect(k.effect)) {
+        for _ in 0..COMMAND_ITERATIONS {
+            let shift = model.known_link_shift_mm(&context, 0.0);
+            let next: Vec<f64> = target.iter().zip(&shift).map(|(t, s)| t - s).collect();
+            last_change_mm = next
+                .iter()
+                .zip(&lengths)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            lengths = next;
+            context = model.pose_context(pose, lengths.clone(), previous, temperature_c, None)?;
+            if last_change_mm < 1e-9 {
+                break;
+            }
         }
     }
     let readings = lengths
@@ -52,7 +109,12 @@ pub fn commands_for(
         .enumerate()
         .map(|(i, l)| robot.reading(i, *l))
         .collect();
-    Ok((lengths, readings))
+    Ok(Commands {
+        lengths_mm: lengths,
+        readings,
+        context,
+        last_change_mm,
+    })
 }
 
 /// Runs `cpm compensate`.
@@ -68,12 +130,45 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
     let targets = io::read_pose_list_file(&args.poses)?;
     ctx.stage(format!("computing commands for {} targets", targets.len()));
     let ratio = ReadOptions::default().max_condition_ratio;
+    if let Some(t) = args.temperature_c {
+        if !(t.is_finite() && (-273.15..=1000.0).contains(&t)) {
+            return Err(usage_error(format!(
+                "--temperature-c {t}: not a temperature between -273.15 and 1000 deg C"
+            )));
+        }
+    }
+    let model = robot.model(&[]);
+    let mut previous = if args.from_home {
+        let home = robot.table.home;
+        let l = cpm_kinematics::inverse_lengths(&robot.table, &home);
+        Some(
+            model
+                .pose_context(&home, l, None, args.temperature_c, None)
+                .map_err(|e| io::InputError::file(&robot.file, format!("home pose: {e}")))?,
+        )
+    } else {
+        None
+    };
     let mut readings = Vec::with_capacity(targets.len());
     let mut lengths = Vec::with_capacity(targets.len());
     for t in &targets {
         check_reachable(&robot.table, &t.pose, ratio, &file, t.line, &t.label)?;
-        let (l, u) = commands_for(&robot, &t.pose)
-            .map_err(|e| io::InputError::line(&file, t.line, format!("pose {:?}: {e}", t.label)))?;
+        let c = commands_for(
+            &robot,
+            &model,
+            &t.pose,
+            previous.as_ref(),
+            args.temperature_c,
+        )
+        .map_err(|e| io::InputError::line(&file, t.line, format!("pose {:?}: {e}", t.label)))?;
+        if c.last_change_mm > 1e-6 {
+            return Err(super::trouble(format!(
+                "pose {:?} (line {}): the commands did not settle against the known link effects (last change {:.2e} mm after {COMMAND_ITERATIONS} iterations)",
+                t.label, t.line, c.last_change_mm
+            )));
+        }
+        let (l, u) = (c.lengths_mm, c.readings);
+        previous = Some(c.context);
         for (i, li) in l.iter().enumerate() {
             if let Some((lo, hi)) = robot.table.links[i].length_limits_mm {
                 if *li < lo || *li > hi {
@@ -110,6 +205,7 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
                     "targets": targets.len(),
                     "robot": robot.file,
                     "clearance_um": robot.clearance().radius_um,
+                    "known_effects": model.known_effects.iter().map(|k| k.effect.name()).collect::<Vec<_>>(),
                 });
                 writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
             } else {

@@ -64,6 +64,19 @@ pub fn linuxcnc(robot: &Robot) -> String {
             ));
         }
     }
+    // Checked when the description was loaded.
+    let known: Vec<String> = robot
+        .known_effects()
+        .unwrap_or_default()
+        .iter()
+        .map(|k| k.effect.name().to_string())
+        .collect();
+    if !known.is_empty() {
+        s.push_str(&format!(
+            "# Not in genhexkins: the known effects {} of [calibration.known_effects]; `cpm compensate` applies them to target poses.\n",
+            known.join(", ")
+        ));
+    }
     for (side, name) in [(0, "base"), (1, "platform")] {
         for (i, l) in robot.table.links.iter().enumerate() {
             let p = if side == 0 { l.base_mm } else { l.platform_mm };

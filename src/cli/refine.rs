@@ -256,9 +256,9 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     );
     calibrate::outliers_report(&mut s, &inputs.robot, &inputs.merged, cal);
     s.push_str(&format!(
-        "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models{}\n",
+        "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models, socket_error into the sensor sockets{}\n",
         notes.undetermined.len(),
-        if notes.not_representable.is_empty() { String::new() } else { format!("; not representable in a description (see calibration.json): {}", notes.not_representable.len()) }
+        if notes.known_effects.is_empty() { String::new() } else { format!("; values of {} in `[calibration.known_effects]`", notes.known_effects.join(", ")) }
     ));
     for f in &figures {
         s.push_str(&format!("- `{f}`\n"));

@@ -179,7 +179,45 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
             values.push((Effect::LinkOffset, diff.link_offset_um.clone()));
             values.push((Effect::LinkScale, diff.link_scale_ppm.clone()));
         }
-        what = format!("{} (its geometry and link reading models)", t.file);
+        // Known effect values of the truth beyond those of the robot are simulated too.
+        let (robot_model, truth_model) = (robot.model(&[]), t.model(&[]));
+        let mut known = Vec::new();
+        for e in Effect::ALL {
+            let (a, b) = (truth_model.known(e), robot_model.known(e));
+            if a.is_none() && b.is_none() {
+                continue;
+            }
+            let need = e.num_params(n, robot.table.sensors.len());
+            if a.is_some_and(|a| a.len() != need) {
+                return Err(input_error(format!(
+                    "{}: [calibration.known_effects] {e} has {} values, the robot {need} parameters (sensors differ?)",
+                    t.file,
+                    a.map_or(0, |a| a.len())
+                )));
+            }
+            let v: Vec<f64> = (0..need)
+                .map(|k| a.map_or(0.0, |a| a[k]) - b.map_or(0.0, |b| b[k]))
+                .collect();
+            if v.iter().any(|x| *x != 0.0) {
+                if values.iter().any(|(x, _)| *x == e) {
+                    return Err(input_error(format!(
+                        "{}: [calibration.known_effects] {e} adds to the link reading models' difference; give one or the other",
+                        t.file
+                    )));
+                }
+                known.push(e.name());
+                values.push((e, v));
+            }
+        }
+        what = if known.is_empty() {
+            format!("{} (its geometry and link reading models)", t.file)
+        } else {
+            format!(
+                "{} (its geometry, link reading models and known {})",
+                t.file,
+                known.join(", ")
+            )
+        };
     }
     for s in &args.truth_effect {
         let (e, v) =

@@ -12,7 +12,7 @@
 //! `mm_per_unit' = (1 + 1e-6 s) mm_per_unit`.
 use std::path::Path;
 
-use cpm_calib::{Effect, MeasurementModel};
+use cpm_calib::{Effect, EffectSettings, KnownEffect, MeasurementModel};
 use cpm_clearance::{ClearanceModel, Load, SignRule};
 use cpm_geometry::description::{CalibrationSpec, RobotDescription};
 use cpm_geometry::{InstallationErrors, JointTable};
@@ -46,36 +46,12 @@ impl Robot {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let description =
             RobotDescription::from_toml_str(text, file).map_err(|e| describe(file, e))?;
-        let robot = Self::from_description(description, file)?;
-        if let Err(mut e) = robot.declared_effects() {
-            // Name the line of the unknown effect: its quoted name after `[calibration]`.
-            let k = e
-                .field
-                .as_deref()
-                .and_then(|f| f.strip_prefix("calibration.effects["))
-                .and_then(|f| f.strip_suffix(']'))
-                .and_then(|k| k.parse::<usize>().ok());
-            let names = &robot
-                .description
-                .calibration
-                .as_ref()
-                .map(|c| c.effects.clone());
-            if let (Some(k), Some(names)) = (k, names) {
-                let quoted = format!("{:?}", names[k - 1]);
-                let start = text
-                    .lines()
-                    .position(|l| l.trim_start().starts_with("[calibration]"))
-                    .unwrap_or(0);
-                e.line = text
-                    .lines()
-                    .enumerate()
-                    .skip(start)
-                    .find(|(_, l)| l.contains(&quoted))
-                    .map(|(i, _)| i + 1);
-            }
-            return Err(e);
-        }
-        Ok(robot)
+        let names = description
+            .calibration
+            .as_ref()
+            .map(|c| c.effects.clone())
+            .unwrap_or_default();
+        Self::from_description(description, file).map_err(|e| locate_effect_error(text, &names, e))
     }
 
     /// A robot from a description already in memory.
@@ -92,12 +68,15 @@ impl Robot {
             Some(e) => e.apply(&nominal).map_err(|e| describe(file, e))?,
             None => nominal,
         };
-        Ok(Robot {
+        let robot = Robot {
             file: file.to_string(),
             description,
             table,
             errors_applied,
-        })
+        };
+        robot.known_effects()?;
+        robot.declared_effects()?;
+        Ok(robot)
     }
 
     /// Number of links.
@@ -145,6 +124,56 @@ impl Robot {
             .collect()
     }
 
+    /// The known effect values of `[calibration.known_effects]`, checked against the
+    /// effect library and this machine's numbers of links and sensors.
+    pub fn known_effects(&self) -> Result<Vec<KnownEffect>, InputError> {
+        let Some(c) = &self.description.calibration else {
+            return Ok(Vec::new());
+        };
+        let (n, s) = (self.num_links(), self.table.sensors.len());
+        let mut out = Vec::with_capacity(c.known_effects.len());
+        for (name, values) in &c.known_effects {
+            let err = |message: String| InputError {
+                file: self.file.clone(),
+                line: None,
+                field: Some(format!("calibration.known_effects.{name}")),
+                message,
+            };
+            let effect = Effect::parse(name).map_err(err)?;
+            let need = effect.num_params(n, s);
+            if values.len() != need {
+                return Err(err(format!(
+                    "{} values, but {name} has {need} parameters here ({n} links, {s} sensors; {})",
+                    values.len(),
+                    effect.unit()
+                )));
+            }
+            out.push(KnownEffect {
+                effect,
+                values: values.clone(),
+            });
+        }
+        Ok(out)
+    }
+
+    /// The effect settings of `[calibration]` (screw lead, reference temperature,
+    /// non-linearity scale), defaults where not given.
+    pub fn effect_settings(&self) -> EffectSettings {
+        let mut s = EffectSettings::default();
+        if let Some(c) = &self.description.calibration {
+            if let Some(v) = c.screw_lead_mm {
+                s.screw_lead_mm = v;
+            }
+            if let Some(v) = c.reference_temperature_c {
+                s.reference_temperature_c = v;
+            }
+            if let Some(v) = c.nonlinearity_scale_mm {
+                s.nonlinearity_scale_mm = v;
+            }
+        }
+        s
+    }
+
     /// `[calibration] sensor_noise_um` when declared and positive.
     pub fn sensor_noise_um(&self) -> Option<f64> {
         self.description
@@ -187,12 +216,16 @@ impl Robot {
         }
     }
 
-    /// The measurement model: this geometry, clearance and load, and `effects`.
+    /// The measurement model: this geometry, clearance and load, the known effect values
+    /// and settings of `[calibration]`, and `effects` to estimate.
     pub fn model(&self, effects: &[Effect]) -> MeasurementModel {
         let mut m = MeasurementModel::new(self.table.clone());
         m.clearance = self.clearance();
         m.load = self.platform_load();
         m.effects = effects.to_vec();
+        m.effect_settings = self.effect_settings();
+        // Checked when the robot was made (from_description).
+        m.known_effects = self.known_effects().unwrap_or_default();
         m
     }
 
@@ -209,6 +242,38 @@ impl Robot {
                 .join(", ")
         }
     }
+}
+
+/// Adds the line to an error about `[calibration]`'s effects: the quoted name in `effects`
+/// (`names`, as declared) or the `name = [...]` entry of `[calibration.known_effects]`.
+fn locate_effect_error(text: &str, names: &[String], mut e: InputError) -> InputError {
+    let field = e.field.clone().unwrap_or_default();
+    let line_after = |header: &str, hit: &dyn Fn(&str) -> bool| {
+        let start = text
+            .lines()
+            .position(|l| l.trim_start().starts_with(header))?;
+        text.lines()
+            .enumerate()
+            .skip(start)
+            .find(|(_, l)| hit(l))
+            .map(|(i, _)| i + 1)
+    };
+    if let Some(name) = field.strip_prefix("calibration.known_effects.") {
+        e.line = line_after("[calibration.known_effects]", &|l: &str| {
+            l.trim_start()
+                .strip_prefix(name)
+                .is_some_and(|r| r.trim_start().starts_with('='))
+        });
+    } else if let Some(k) = field
+        .strip_prefix("calibration.effects[")
+        .and_then(|f| f.strip_suffix(']'))
+        .and_then(|k| k.parse::<usize>().ok())
+        .filter(|k| (1..=names.len()).contains(k))
+    {
+        let quoted = format!("{:?}", names[k - 1]);
+        e.line = line_after("[calibration]", &|l: &str| l.contains(&quoted));
+    }
+    e
 }
 
 fn describe(file: &str, e: cpm_geometry::GeometryError) -> InputError {
@@ -317,21 +382,25 @@ pub fn split_params(model: &MeasurementModel, params: &[Option<f64>]) -> SplitPa
     }
 }
 
-/// What [`calibrated_description`] could not put into the description.
+/// What [`calibrated_description`] did with the parameters.
 #[derive(Debug, Clone, Default)]
 pub struct CalibratedNotes {
     /// Installation-error components left at nominal because the data do not determine them.
     pub undetermined: Vec<String>,
-    /// Effect parameters with no place in a description (`name = value unit`).
-    pub not_representable: Vec<String>,
-    /// Effect parameters left out because the data do not determine them.
+    /// Effect parameters left out (at their previous value) because the data do not
+    /// determine them.
     pub undetermined_effects: Vec<String>,
+    /// Effects written to `[calibration.known_effects]`.
+    pub known_effects: Vec<String>,
 }
 
 /// The calibrated description: `robot`'s description with the joints moved by the known
 /// installation errors in `params` (model order; `None` = not determined, left at nominal),
 /// `link_offset` / `link_scale` folded into the link reading models, `socket_error` moving
-/// the sensor sockets, and `[calibration] effects` set to `declare` when given.
+/// the sensor sockets, every other effect's values added to `[calibration.known_effects]`
+/// (on top of the values the description already knew; an undetermined parameter keeps its
+/// previous value), and `[calibration] effects` set to `declare` when given. Reading the
+/// result back gives a model that predicts what the calibrated `model` predicts.
 pub fn calibrated_description(
     robot: &Robot,
     model: &MeasurementModel,
@@ -388,8 +457,23 @@ pub fn calibrated_description(
                     };
                     side[k % 3] += v * 1e-3;
                 }
-                _ => notes.not_representable.push(format!("{name} = {v:.6}")),
+                _ => {}
             }
+        }
+        if !matches!(
+            effect,
+            Effect::LinkOffset | Effect::LinkScale | Effect::SocketError
+        ) {
+            let known = d
+                .calibration
+                .get_or_insert_with(CalibrationSpec::default)
+                .known_effects
+                .entry(effect.name().to_string())
+                .or_insert_with(|| vec![0.0; values.len()]);
+            for (kv, v) in known.iter_mut().zip(values) {
+                *kv += v.unwrap_or(0.0);
+            }
+            notes.known_effects.push(effect.name().to_string());
         }
     }
     // link_offset and link_scale: folded into the reading model (see the module doc).
@@ -418,7 +502,7 @@ pub fn calibrated_description(
             None if !names.is_empty() => {
                 d.calibration = Some(CalibrationSpec {
                     effects: names,
-                    sensor_noise_um: None,
+                    ..Default::default()
                 })
             }
             None => {}
@@ -453,10 +537,10 @@ pub fn calibrated_toml(
             notes.undetermined_effects.join(", ")
         ));
     }
-    if !notes.not_representable.is_empty() {
+    if !notes.known_effects.is_empty() {
         s.push_str(&format!(
-            "# Effect values a description cannot hold (see calibration.json): {}\n",
-            notes.not_representable.join(", ")
+            "# Calibrated effect values in [calibration.known_effects] (applied by every cpm command that reads this file): {}\n",
+            notes.known_effects.join(", ")
         ));
     }
     s.push('\n');

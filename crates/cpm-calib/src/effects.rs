@@ -179,6 +179,17 @@ impl std::fmt::Display for Effect {
     }
 }
 
+/// Known values of an effect (a previous calibration's result): applied in every
+/// prediction of a [`MeasurementModel`](crate::MeasurementModel), not estimated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct KnownEffect {
+    /// The effect.
+    pub effect: Effect,
+    /// One value per parameter, in the effect's units ([`Effect::param_unit`]) and
+    /// parameter order ([`Effect::param_name`]).
+    pub values: Vec<f64>,
+}
+
 /// Settings the effects need.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct EffectSettings {

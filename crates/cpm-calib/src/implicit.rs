@@ -297,6 +297,15 @@ fn build<'a>(
             format!("`{e}` is not supported by the implicit formulation"),
         ));
     }
+    if let Some(k) = model.known_effects.first() {
+        return Err(CalibError::invalid(
+            "known_effects",
+            format!(
+                "the implicit formulation does not apply known effect values (`{}` is known); use identify()",
+                k.effect
+            ),
+        ));
+    }
     let prepared = Prepared::new(model, campaign)?;
     let np = campaign.poses.len();
     let ng = model.num_params();

@@ -41,7 +41,7 @@ pub mod simulate;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
 pub use campaign::{Campaign, Plan, Reading};
-pub use effects::{Effect, EffectSettings};
+pub use effects::{Effect, EffectSettings, KnownEffect};
 pub use error::CalibError;
 pub use identifiability::{analyze, Identifiability, RankOptions};
 pub use identify::{

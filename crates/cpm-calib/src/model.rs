@@ -12,7 +12,8 @@ use cpm_kinematics::{forward, ForwardOptions};
 use nalgebra::{DMatrix, Matrix6, Vector6};
 
 use crate::effects::{
-    is_link_effect, link_coefficient, sensor_coefficient, Effect, EffectSettings, PoseContext,
+    is_link_effect, link_coefficient, sensor_coefficient, Effect, EffectSettings, KnownEffect,
+    PoseContext,
 };
 use crate::{CalibError, Campaign};
 
@@ -46,6 +47,10 @@ pub struct MeasurementModel {
     pub effects: Vec<Effect>,
     /// Settings of the effects.
     pub effect_settings: EffectSettings,
+    /// Known effect values (a previous calibration): applied in every prediction and never
+    /// estimated. An effect may be known and in [`effects`](Self::effects) at once; its
+    /// parameters are then corrections on top of the known values. Default none.
+    pub known_effects: Vec<KnownEffect>,
 }
 
 /// Where a block of parameters sits in the parameter vector.
@@ -71,7 +76,113 @@ impl MeasurementModel {
             fk: ForwardOptions::default(),
             effects: Vec::new(),
             effect_settings: EffectSettings::default(),
+            known_effects: Vec::new(),
         }
+    }
+
+    /// Checks [`known_effects`](Self::known_effects): one entry per effect, each with as many
+    /// finite values as the effect has parameters on this machine.
+    pub fn check_known_effects(&self) -> Result<(), CalibError> {
+        let (n, s) = (self.nominal.num_links(), self.nominal.sensors.len());
+        for (i, k) in self.known_effects.iter().enumerate() {
+            let field = format!("known_effects.{}", k.effect.name());
+            if self.known_effects[..i].iter().any(|o| o.effect == k.effect) {
+                return Err(CalibError::invalid(field, "given twice"));
+            }
+            let need = k.effect.num_params(n, s);
+            if k.values.len() != need {
+                return Err(CalibError::invalid(
+                    field,
+                    format!(
+                        "{} values, but {} has {need} parameters on this machine ({} links, {} sensors)",
+                        k.values.len(),
+                        k.effect.name(),
+                        n,
+                        s
+                    ),
+                ));
+            }
+            if let Some(v) = k.values.iter().find(|v| !v.is_finite()) {
+                return Err(CalibError::invalid(field, format!("{v} is not finite")));
+            }
+        }
+        Ok(())
+    }
+
+    /// The known values of `effect`, if any.
+    pub fn known(&self, effect: Effect) -> Option<&[f64]> {
+        self.known_effects
+            .iter()
+            .find(|k| k.effect == effect)
+            .map(|k| k.values.as_slice())
+    }
+
+    /// The change of each link's effective length (mm) the known link-channel effects make
+    /// at a pose with context `ctx` (`t0_s`: start of the campaign's clock).
+    pub fn known_link_shift_mm(&self, ctx: &PoseContext, t0_s: f64) -> Vec<f64> {
+        let n = self.nominal.num_links();
+        let mut out = vec![0.0; n];
+        for k in self
+            .known_effects
+            .iter()
+            .filter(|k| is_link_effect(k.effect))
+        {
+            for (i, o) in out.iter_mut().enumerate() {
+                for (q, v) in k.values.iter().enumerate() {
+                    *o += link_coefficient(k.effect, q, i, ctx, &self.effect_settings, t0_s) * v;
+                }
+            }
+        }
+        out
+    }
+
+    /// True when an effect of the model (estimated or known) needs the link forces.
+    fn needs_forces(&self) -> bool {
+        self.effects
+            .iter()
+            .chain(self.known_effects.iter().map(|k| &k.effect))
+            .any(|e| matches!(e, Effect::Clearance | Effect::Compliance))
+    }
+
+    /// What the effects need to know about a pose: `commanded_mm` the commanded link lengths,
+    /// `previous` the context of the pose visited before (for the motion direction; `None`
+    /// for the first pose), and the logged temperature and time.
+    pub fn pose_context(
+        &self,
+        pose: &Pose,
+        commanded_mm: Vec<f64>,
+        previous: Option<&PoseContext>,
+        temperature_c: Option<f64>,
+        time_s: Option<f64>,
+    ) -> Result<PoseContext, cpm_clearance::ClearanceError> {
+        let n = self.nominal.num_links();
+        let forces_n = if self.needs_forces() {
+            cpm_clearance::link_forces_n(&self.nominal, pose, &self.load)?
+        } else {
+            vec![0.0; n]
+        };
+        // A link that did not move keeps the direction of its last motion.
+        let motion_sign = match previous {
+            Some(prev) => (0..n)
+                .map(|i| {
+                    let d = commanded_mm[i] - prev.commanded_mm[i];
+                    if d.abs() < 1e-9 {
+                        prev.motion_sign[i]
+                    } else {
+                        d.signum()
+                    }
+                })
+                .collect(),
+            None => vec![0.0; n],
+        };
+        Ok(PoseContext {
+            commanded_mm,
+            home_mm: cpm_kinematics::inverse_lengths(&self.nominal, &self.nominal.home),
+            forces_n,
+            motion_sign,
+            temperature_c,
+            time_s,
+        })
     }
 
     /// Number of installation-error parameters (6 per link).
@@ -146,6 +257,13 @@ impl MeasurementModel {
             ));
         }
         let mut table = InstallationErrors::try_from_vec_um(&params[..ni])?.apply(&self.nominal)?;
+        if let Some(q) = self.known(Effect::SocketError) {
+            for (si, s) in table.sensors.iter_mut().enumerate() {
+                let q = &q[6 * si..6 * si + 6];
+                s.base_mm += nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3;
+                s.platform_mm += nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-3;
+            }
+        }
         if params.len() > ni {
             for b in self.blocks() {
                 if b.effect == Some(Effect::SocketError) {
@@ -205,6 +323,7 @@ impl MeasurementModel {
 
     /// Checks the campaign against the model: sensor indices, pose indices, finite values.
     pub fn check_campaign(&self, campaign: &Campaign) -> Result<(), CalibError> {
+        self.check_known_effects()?;
         if campaign.is_empty() {
             return Err(CalibError::NoInformation(
                 "the campaign has no readings and no pose measurements".into(),
@@ -338,60 +457,32 @@ fn contexts(
     effective_mm: &[Vec<f64>],
     by_pose: &[Vec<usize>],
 ) -> Result<Vec<PoseContext>, CalibError> {
-    let n = model.nominal.num_links();
-    let home_mm = cpm_kinematics::inverse_lengths(&model.nominal, &model.nominal.home);
     let mut out: Vec<PoseContext> = Vec::with_capacity(campaign.poses.len());
     for (j, pose) in campaign.poses.iter().enumerate() {
         let commanded_mm = match &campaign.commanded_lengths_mm {
             Some(c) => c[j].clone(),
             None => effective_mm[j].clone(),
         };
-        let forces_n = if model
-            .effects
-            .iter()
-            .any(|e| matches!(e, Effect::Clearance | Effect::Compliance))
-        {
-            cpm_clearance::link_forces_n(&model.nominal, pose, &model.load)
-                .map_err(|source| CalibError::Clearance { pose: j, source })?
-        } else {
-            vec![0.0; n]
-        };
-        // A link that did not move keeps the direction of its last motion.
-        let motion_sign = match out.last() {
-            Some(prev) => (0..n)
-                .map(|i| {
-                    let d = commanded_mm[i] - prev.commanded_mm[i];
-                    if d.abs() < 1e-9 {
-                        prev.motion_sign[i]
-                    } else {
-                        d.signum()
-                    }
-                })
-                .collect(),
-            None => vec![0.0; n],
-        };
         let rs = &by_pose[j];
-        out.push(PoseContext {
-            commanded_mm,
-            home_mm: home_mm.clone(),
-            forces_n,
-            motion_sign,
-            temperature_c: mean(
-                rs.iter()
-                    .filter_map(|&k| campaign.readings[k].temperature_c),
-            ),
-            time_s: mean(
-                rs.iter()
-                    .filter_map(|&k| campaign.readings[k].time_s)
-                    .chain(
-                        campaign
-                            .pose_measurements
-                            .iter()
-                            .filter(|p| p.pose == j)
-                            .filter_map(|p| p.time_s),
-                    ),
-            ),
-        });
+        let temperature_c = mean(
+            rs.iter()
+                .filter_map(|&k| campaign.readings[k].temperature_c),
+        );
+        let time_s = mean(
+            rs.iter()
+                .filter_map(|&k| campaign.readings[k].time_s)
+                .chain(
+                    campaign
+                        .pose_measurements
+                        .iter()
+                        .filter(|p| p.pose == j)
+                        .filter_map(|p| p.time_s),
+                ),
+        );
+        let ctx = model
+            .pose_context(pose, commanded_mm, out.last(), temperature_c, time_s)
+            .map_err(|source| CalibError::Clearance { pose: j, source })?;
+        out.push(ctx);
     }
     Ok(out)
 }
@@ -455,19 +546,41 @@ fn predict_exact(
     let tracker_block = blocks
         .iter()
         .find(|b| b.effect == Some(Effect::TrackerFrame));
+    let registration = |q: &[f64]| {
+        (
+            nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3,
+            nalgebra::Rotation3::new(nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-6),
+        )
+    };
+    // The estimated registration (reg) composed with the known one (known): a point p of the
+    // base frame is at reg_r (known_r p + known_t) + reg_t in the tracker frame.
     let (reg_t, reg_r) = match tracker_block {
-        Some(b) => (
-            nalgebra::Vector3::new(params[b.offset], params[b.offset + 1], params[b.offset + 2])
-                * 1e-3,
-            nalgebra::Rotation3::new(
-                nalgebra::Vector3::new(
-                    params[b.offset + 3],
-                    params[b.offset + 4],
-                    params[b.offset + 5],
-                ) * 1e-6,
-            ),
-        ),
+        Some(b) => registration(&params[b.offset..b.offset + 6]),
         None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
+    };
+    let (known_t, known_r) = match model.known(Effect::TrackerFrame) {
+        Some(q) => registration(q),
+        None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
+    };
+    // Known sensor offsets (mm) and scale factors per sensor; the estimated ones add on top.
+    let mut sensor_offset_mm = vec![0.0; table.sensors.len()];
+    let mut sensor_gain = vec![1.0; table.sensors.len()];
+    if let Some(v) = model.known(Effect::SensorOffset) {
+        for (o, v) in sensor_offset_mm.iter_mut().zip(v) {
+            *o += v * 1e-3;
+        }
+    }
+    if let Some(v) = model.known(Effect::SensorScale) {
+        for (g, v) in sensor_gain.iter_mut().zip(v) {
+            *g += v * 1e-6;
+        }
+    }
+    let estimated_gain = |si: usize| {
+        sensor_blocks
+            .iter()
+            .filter(|b| b.effect == Some(Effect::SensorScale))
+            .map(|b| params[b.offset + si] * 1e-6)
+            .sum::<f64>()
     };
     let m_readings = campaign.readings.len();
     let settings = &model.effect_settings;
@@ -483,6 +596,14 @@ fn predict_exact(
         }
         let ctx = &prepared.contexts[j];
         lengths.copy_from_slice(&prepared.lengths_mm[j]);
+        if !model.known_effects.is_empty() {
+            for (l, d) in lengths
+                .iter_mut()
+                .zip(model.known_link_shift_mm(ctx, prepared.t0_s))
+            {
+                *l += d;
+            }
+        }
         for (i, c) in coeff.iter_mut().enumerate() {
             c.clear();
             for b in &link_blocks {
@@ -502,7 +623,7 @@ fn predict_exact(
         for &k in readings {
             let si = campaign.readings[k].sensor;
             let geometric = table.sensors[si].length_mm(&pose);
-            let mut yk = geometric + sensor_corr;
+            let mut yk = geometric * sensor_gain[si] + sensor_offset_mm[si] + sensor_corr;
             for b in &sensor_blocks {
                 let e = b.effect.expect("effect");
                 for q in 0..b.len {
@@ -513,8 +634,8 @@ fn predict_exact(
         }
         // Tracker observations: position in the tracker frame (mm) and the rotation from the
         // measured to the predicted orientation (mrad).
-        let tracker_position = reg_r * pose.position_mm + reg_t;
-        let tracker_rotation = reg_r * pose.rotation;
+        let tracker_position = reg_r * (known_r * pose.position_mm + known_t) + reg_t;
+        let tracker_rotation = reg_r * known_r * pose.rotation;
         let mut omegas = Vec::with_capacity(measurements.len());
         for &q in measurements {
             let pm = &campaign.pose_measurements[q];
@@ -563,13 +684,6 @@ fn predict_exact(
                         row[p] += v[i] * a;
                     }
                 }
-                let geometric = s.length_mm(&pose);
-                for b in &sensor_blocks {
-                    let e = b.effect.expect("effect");
-                    for q in 0..b.len {
-                        row[b.offset + q] += sensor_coefficient(e, q, si, geometric);
-                    }
-                }
                 if let Some(b) = socket_block {
                     // Direct socket terms plus nothing through the pose (sockets do not
                     // change the closure).
@@ -579,6 +693,19 @@ fn predict_exact(
                     for a in 0..3 {
                         row[b.offset + 6 * si + a] = -u[a] * 1e-3;
                         row[b.offset + 6 * si + 3 + a] = up[a] * 1e-3;
+                    }
+                }
+                // Everything so far moves the geometric length, which the sensor's scale
+                // (known and estimated) multiplies.
+                let gain = sensor_gain[si] + estimated_gain(si);
+                if gain != 1.0 {
+                    row.iter_mut().for_each(|v| *v *= gain);
+                }
+                let geometric = s.length_mm(&pose);
+                for b in &sensor_blocks {
+                    let e = b.effect.expect("effect");
+                    for q in 0..b.len {
+                        row[b.offset + q] += sensor_coefficient(e, q, si, geometric);
                     }
                 }
             }
@@ -617,7 +744,7 @@ fn predict_exact(
                         dx.set_column(p, &sol);
                     }
                 }
-                let rr = reg_r.matrix();
+                let rr = (reg_r * known_r).into_inner();
                 for (&q, w) in measurements.iter().zip(&omegas) {
                     let o = m_readings + 6 * q;
                     let jl_inv = left_jacobian_inverse(w);

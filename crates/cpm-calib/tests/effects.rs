@@ -41,28 +41,25 @@ fn params_for(model: &MeasurementModel) -> Vec<f64> {
     p
 }
 
-#[test]
-fn every_effect_column_matches_central_differences() {
-    let model = model_with(&Effect::ALL);
-    let c = timed_campaign(&model, 8, 21);
-    let prepared = Prepared::new(&model, &c).unwrap();
-    let p = params_for(&model);
+/// Every column of `model`'s analytic Jacobian at `p` against central differences.
+fn check_columns(model: &MeasurementModel, c: &Campaign, p: &[f64]) {
+    let prepared = Prepared::new(model, c).unwrap();
     let np = model.num_params();
     assert_eq!(model.parameter_names().len(), np);
     let mut j = nalgebra::DMatrix::zeros(c.len(), np);
-    predict(&model, &prepared, &c, &p, Some(&mut j)).unwrap();
+    predict(model, &prepared, c, p, Some(&mut j)).unwrap();
     let names = model.parameter_names();
     for k in 0..np {
         // 0.5 um: forward kinematics is solved to 1e-11 mm, so tracker orientation rows carry
         // ~1e-13 rad of noise; a larger step keeps that far below the tolerance, and the
         // model's curvature over 1 um is ~1e-9 of a column.
         let h = 0.5;
-        let mut a = p.clone();
-        let mut b = p.clone();
+        let mut a = p.to_vec();
+        let mut b = p.to_vec();
         a[k] += h;
         b[k] -= h;
-        let ya = predict(&model, &prepared, &c, &a, None).unwrap();
-        let yb = predict(&model, &prepared, &c, &b, None).unwrap();
+        let ya = predict(model, &prepared, c, &a, None).unwrap();
+        let yb = predict(model, &prepared, c, &b, None).unwrap();
         let mut worst: f64 = 0.0;
         let mut scale: f64 = 0.0;
         for r in 0..c.len() {
@@ -76,6 +73,98 @@ fn every_effect_column_matches_central_differences() {
             names[k]
         );
     }
+}
+
+#[test]
+fn every_effect_column_matches_central_differences() {
+    let model = model_with(&Effect::ALL);
+    let c = timed_campaign(&model, 8, 21);
+    check_columns(&model, &c, &params_for(&model));
+}
+
+/// Sizeable known values for every effect (tens of um, hundreds of ppm / urad).
+fn known_values(model: &MeasurementModel) -> Vec<KnownEffect> {
+    let (n, s) = (model.nominal.num_links(), model.nominal.sensors.len());
+    Effect::ALL
+        .iter()
+        .map(|&effect| KnownEffect {
+            effect,
+            values: (0..effect.num_params(n, s))
+                .map(|k| 20.0 * ((k as f64 + 1.0) * 0.9 + effect as usize as f64).cos())
+                .collect(),
+        })
+        .collect()
+}
+
+#[test]
+fn known_effect_values_act_like_estimated_ones() {
+    // A known value must predict what the same value estimated predicts, for every effect:
+    // the calibrated description carries known values, and reading it back must give the
+    // calibrated machine.
+    let base = model_with(&[]);
+    let c = timed_campaign(&base, 8, 23);
+    let installation = InstallationErrors::paper_table2().to_vec_um();
+    for known in known_values(&base) {
+        let estimated = model_with(&[known.effect]);
+        let mut p = installation.clone();
+        p.extend(&known.values);
+        let prepared = Prepared::new(&estimated, &c).unwrap();
+        let y_estimated = predict(&estimated, &prepared, &c, &p, None).unwrap();
+
+        let mut fixed = model_with(&[]);
+        fixed.known_effects = vec![known.clone()];
+        let prepared = Prepared::new(&fixed, &c).unwrap();
+        let y_known = predict(&fixed, &prepared, &c, &installation, None).unwrap();
+
+        let nominal = predict(
+            &base,
+            &Prepared::new(&base, &c).unwrap(),
+            &c,
+            &installation,
+            None,
+        )
+        .unwrap();
+        let moved = y_known
+            .iter()
+            .zip(&nominal)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            moved > 1e-4,
+            "{}: known values change nothing",
+            known.effect
+        );
+        for (r, (a, b)) in y_known.iter().zip(&y_estimated).enumerate() {
+            assert!(
+                (a - b).abs() < 1e-9,
+                "{} row {r}: known {a} vs estimated {b}",
+                known.effect
+            );
+        }
+    }
+}
+
+#[test]
+fn columns_match_central_differences_on_top_of_known_values() {
+    let mut model = model_with(&Effect::ALL);
+    model.known_effects = known_values(&model);
+    let c = timed_campaign(&model, 6, 29);
+    check_columns(&model, &c, &params_for(&model));
+}
+
+#[test]
+fn known_values_of_the_wrong_length_are_refused() {
+    let mut model = model_with(&[]);
+    model.known_effects = vec![KnownEffect {
+        effect: Effect::Backlash,
+        values: vec![1.0; 5],
+    }];
+    let c = timed_campaign(&model, 4, 1);
+    let e = Prepared::new(&model, &c).unwrap_err().to_string();
+    assert!(
+        e.contains("known_effects.backlash") && e.contains("6 parameters"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -27,7 +27,7 @@
 //!     .to_string();
 //! assert!(err.contains("z_mm") && err.contains("line"));
 //! ```
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 use std::path::Path;
 
 use nalgebra::{Vector3, Vector6};
@@ -267,7 +267,7 @@ impl LoadSpec {
 }
 
 /// `[calibration]`: settings for the calibration.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CalibrationSpec {
     /// Extra effects to identify besides the installation errors, e.g. `"link_offset"`,
@@ -277,6 +277,22 @@ pub struct CalibrationSpec {
     /// Standard deviation of the sensor noise, um. Optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor_noise_um: Option<f64>,
+    /// Screw lead of the actuators, mm (the period of `screw_periodic`). Default 5.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub screw_lead_mm: Option<f64>,
+    /// Reference temperature of `thermal_drift`, deg C. Default 20.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_temperature_c: Option<f64>,
+    /// Length scale of `link_nonlinearity`'s polynomial variable, mm. Default 100.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nonlinearity_scale_mm: Option<f64>,
+    /// `[calibration.known_effects]`: known values of effects (a calibration result), keyed
+    /// by effect name, one value per parameter in the effect's units and parameter order
+    /// (e.g. `backlash = [2.1, -0.4, ...]` um, one per link). Every prediction applies them;
+    /// an effect also listed in `effects` is estimated as a correction on top. Interpreted
+    /// by the calibration crate. Default none.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub known_effects: BTreeMap<String, Vec<f64>>,
 }
 
 /// `[installation_errors_um]`: joint displacements, um, one row `[dx, dy, dz]` per link.
@@ -323,10 +339,12 @@ fn default_gravity() -> [f64; 3] {
     [0.0, 0.0, -STANDARD_GRAVITY_MM_S2]
 }
 
-/// One step of a key path: a key or a 0-based array index.
-#[derive(Debug, Clone, Copy)]
+/// One step of a key path: a key, a key named by the file (a map entry) or a 0-based
+/// array index.
+#[derive(Debug, Clone)]
 enum Seg {
     Key(&'static str),
+    Name(String),
     Index(usize),
 }
 
@@ -351,6 +369,12 @@ impl Problem {
         for seg in &self.path {
             match seg {
                 Seg::Key(k) => {
+                    if !s.is_empty() {
+                        s.push('.');
+                    }
+                    s.push_str(k);
+                }
+                Seg::Name(k) => {
                     if !s.is_empty() {
                         s.push('.');
                     }
@@ -383,6 +407,7 @@ fn locate(source: &str, path: &[Seg]) -> Option<(usize, usize)> {
     for seg in path {
         let next = match seg {
             Seg::Key(k) => cur.get(*k),
+            Seg::Name(k) => cur.get(k.as_str()),
             Seg::Index(i) => cur.get(*i),
         };
         match next {
@@ -605,7 +630,7 @@ impl RobotDescription {
 
     /// Semantic checks; the first problem found.
     fn check(&self) -> Result<(), Problem> {
-        use Seg::{Index, Key};
+        use Seg::{Index, Key, Name};
         position3(&self.home.position_mm, &[Key("home"), Key("position_mm")])?;
         finite3(&self.home.rpy_deg, &[Key("home"), Key("rpy_deg")])?;
         let n = self.links.len();
@@ -727,6 +752,46 @@ impl RobotDescription {
                 }
                 if !seen.insert(e.as_str()) {
                     return Err(Problem::new(&at, format!("duplicate effect `{e}`")));
+                }
+            }
+            for (key, v) in [
+                ("screw_lead_mm", c.screw_lead_mm),
+                ("nonlinearity_scale_mm", c.nonlinearity_scale_mm),
+            ] {
+                if let Some(v) = v {
+                    if !(v.is_finite() && v > 0.0) {
+                        return Err(Problem::new(
+                            &[Key("calibration"), Key(key)],
+                            format!("must be finite and > 0, got {v}"),
+                        ));
+                    }
+                }
+            }
+            if let Some(t) = c.reference_temperature_c {
+                if !(t.is_finite() && (-273.15..=1000.0).contains(&t)) {
+                    return Err(Problem::new(
+                        &[Key("calibration"), Key("reference_temperature_c")],
+                        format!("must be a temperature between -273.15 and 1000 deg C, got {t}"),
+                    ));
+                }
+            }
+            for (name, values) in &c.known_effects {
+                let at = |i: usize| {
+                    [
+                        Key("calibration"),
+                        Key("known_effects"),
+                        Name(name.clone()),
+                        Index(i),
+                    ]
+                };
+                if values.is_empty() {
+                    return Err(Problem::new(&at(0)[..3], "has no values"));
+                }
+                if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+                    return Err(Problem::new(
+                        &at(i),
+                        format!("must be finite, got {}", values[i]),
+                    ));
                 }
             }
         }

@@ -95,6 +95,18 @@ fn round_trip_with_every_section() {
     d.calibration = Some(CalibrationSpec {
         effects: vec!["link_offset".into(), "link_scale".into()],
         sensor_noise_um: Some(5.0),
+        screw_lead_mm: Some(4.0),
+        reference_temperature_c: Some(21.5),
+        nonlinearity_scale_mm: None,
+        known_effects: [
+            (
+                "backlash".to_string(),
+                vec![1.5, -2.0, 0.0, 0.25, 3.0, -1.0],
+            ),
+            ("sensor_offset".to_string(), vec![12.0]),
+        ]
+        .into_iter()
+        .collect(),
     });
     d.installation_errors_um = Some(InstallationErrorsSpec::from_errors(
         &InstallationErrors::paper_table2(),
@@ -110,6 +122,7 @@ fn round_trip_with_every_section() {
     let text = d.to_toml_string().unwrap();
     let back = RobotDescription::from_toml_str(&text, "<round trip>").unwrap();
     assert_eq!(back, d);
+    assert!(text.contains("[calibration.known_effects]"), "{text}");
     assert_eq!(
         back.installation_errors().unwrap().unwrap(),
         InstallationErrors::paper_table2()
@@ -374,6 +387,21 @@ fn semantic_errors_name_the_key_path() {
             "calibration.sensor_noise_um",
         ),
         (
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "[calibration]\nscrew_lead_mm = 0.0",
+            "calibration.screw_lead_mm: must be finite and > 0",
+        ),
+        (
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "[calibration]\neffects = []\n\n[calibration.known_effects]\nbacklash = [1.0, nan, 0.0, 0.0, 0.0, 0.0]",
+            "calibration.known_effects.backlash[2]: must be finite, got NaN",
+        ),
+        (
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "[calibration]\n\n[calibration.known_effects]\nclearance = []",
+            "calibration.known_effects.clearance: has no values",
+        ),
+        (
             "# [calibration]",
             "[installation_errors_um]\nbase = [[1.0, 2.0, 3.0]]\nplatform = []\n# [calibration]",
             "installation_errors_um.base: has 1 rows",
@@ -512,7 +540,10 @@ fn documentation_examples_load() {
         .skip(1)
         .map(|b| b.split("```").next().unwrap())
         .collect();
-    assert_eq!(blocks.len(), 2);
+    assert_eq!(blocks.len(), 3);
+    // In the order of the document: [calibration.known_effects], the paper, the encoder link.
+    let known_block = blocks[0];
+    let blocks = &blocks[1..];
 
     // The abridged paper example, with links 2 to 5 filled in.
     let middle: String = JointTable::paper_cubic().links[1..5]
@@ -552,6 +583,16 @@ fn documentation_examples_load() {
     expected.links[2].length_limits_mm = Some((300.0, 420.0));
     assert_eq!(d.joint_table().unwrap(), expected);
     assert_eq!(d.links[2].length_mm(208_000.0), 354.0);
+
+    // The [calibration.known_effects] example, in place of the paper's commented table.
+    let from = "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0";
+    assert!(paper_text().contains(from));
+    let text = paper_text().replacen(from, known_block, 1);
+    let d = RobotDescription::from_toml_str(&text, "doc").unwrap();
+    let c = d.calibration.unwrap();
+    assert_eq!(c.effects, ["backlash"]);
+    assert_eq!(c.known_effects["backlash"].len(), 6);
+    assert_eq!(c.known_effects["sensor_offset"], [12.5]);
 }
 
 /// The messages quoted in `docs/robot-description.md` are the real ones.
