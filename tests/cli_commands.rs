@@ -283,6 +283,27 @@ fn paper_design_reports_what_it_cannot_determine() {
     assert_eq!(c.table.links[0].base_mm.x, n.table.links[0].base_mm.x);
 }
 
+/// `cpm refine` from no effects with candidates sensor_offset, link_offset and backlash; its
+/// JSON summary.
+fn refine_no_effects(robot: &str, data: &Path, sigma_um: &str, out_dir: &Path) -> String {
+    ok(&[
+        "refine",
+        "--robot",
+        robot,
+        "--data",
+        &p(data),
+        "--effects",
+        "none",
+        "--candidates",
+        "sensor_offset,link_offset,backlash",
+        "--sigma-um",
+        sigma_um,
+        "--out",
+        &p(out_dir),
+        "--json",
+    ])
+}
+
 #[test]
 fn refine_finds_backlash() {
     let d = scratch("refine");
@@ -307,22 +328,7 @@ fn refine_finds_backlash() {
         &p(&data),
     ]);
     let out_dir = d.join("refined");
-    let out = ok(&[
-        "refine",
-        "--robot",
-        &robot,
-        "--data",
-        &p(&data),
-        "--effects",
-        "none",
-        "--candidates",
-        "sensor_offset,link_offset,backlash",
-        "--sigma-um",
-        "0.5",
-        "--out",
-        &p(&out_dir),
-        "--json",
-    ]);
+    let out = refine_no_effects(&robot, &data, "0.5", &out_dir);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["steps"][0]["effect"], "backlash", "{v:#}");
     let step = &v["steps"][0];
@@ -451,21 +457,7 @@ fn calibrated_backlash_is_compensated() {
     ]);
     assert!(sim.contains("known backlash"), "{sim}");
     let out_dir = d.join("refined");
-    ok(&[
-        "refine",
-        "--robot",
-        &robot,
-        "--data",
-        &p(&data),
-        "--effects",
-        "none",
-        "--candidates",
-        "sensor_offset,link_offset,backlash",
-        "--sigma-um",
-        "0.3",
-        "--out",
-        &p(&out_dir),
-    ]);
+    refine_no_effects(&robot, &data, "0.3", &out_dir);
     let calibrated = out_dir.join("calibrated.toml");
     let text = std::fs::read_to_string(&calibrated).unwrap();
     assert!(text.contains("backlash = ["), "{text}");

@@ -17,6 +17,18 @@ use crate::output::OutputSet;
     after_help = "Examples:\n  cpm calibrate --robot examples/hexapod_66.toml --data data.csv --out cal/\n  cpm calibrate --robot robot.toml --data lengths.csv --data tracker.csv --effects link_offset,link_scale,tracker_frame --out cal/ --json"
 )]
 pub struct CalibrateArgs {
+    /// Robot, data, effects, noise, solver and output: as for `cpm refine`.
+    #[command(flatten)]
+    pub fit: FitArgs,
+    /// Write the minimum-norm solution into calibrated.toml (blind directions at nominal)
+    /// rather than only the components the data determine on their own.
+    #[arg(long)]
+    pub minimum_norm: bool,
+}
+
+/// The arguments every fit (`cpm calibrate`, `cpm refine`) takes.
+#[derive(Debug, Clone, Args)]
+pub struct FitArgs {
     /// The robot description.
     #[command(flatten)]
     pub robot: RobotArg,
@@ -36,18 +48,14 @@ pub struct CalibrateArgs {
     /// Tracker orientation noise, urad (default cpm-calib's).
     #[arg(long, value_name = "URAD")]
     pub orientation_sigma_urad: Option<f64>,
-    /// Write the minimum-norm solution into calibrated.toml (blind directions at nominal)
-    /// rather than only the components the data determine on their own.
-    #[arg(long)]
-    pub minimum_norm: bool,
     /// Robust loss against outlier readings: huber:K, cauchy:K or tukey:K with K in um of
     /// reading (where the loss departs from the square; e.g. 3 x the noise), or none (least
     /// squares, the default). Readings more than 5 robust standard deviations off are
     /// flagged in report.md and calibration.json either way.
     #[arg(long, value_name = "LOSS:K")]
     pub robust: Option<String>,
-    /// Most iterations of the least-squares solver (default 1000); a fit stopped by it has
-    /// not converged (exit code 1, the outputs say so).
+    /// Most iterations of the least-squares solver per fit (default 1000); a fit stopped by
+    /// it has not converged (exit code 1, the outputs say so).
     #[arg(long, value_name = "N")]
     pub max_iterations: Option<usize>,
     /// Output directory (created; existing files of the same names are replaced).
@@ -56,6 +64,26 @@ pub struct CalibrateArgs {
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
+}
+
+impl FitArgs {
+    /// Checks the options (usage errors before any file is read), then loads and checks the
+    /// robot, the effects and the data.
+    pub fn load(&self, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
+        common::check_out_dir(&self.out)?;
+        solver_options(
+            &mut IdentifyOptions::default(),
+            self.robust.as_deref(),
+            self.max_iterations,
+        )?;
+        let mut inputs = load_inputs(self, ctx)?;
+        solver_options(
+            &mut inputs.identify,
+            self.robust.as_deref(),
+            self.max_iterations,
+        )?;
+        Ok(inputs)
+    }
 }
 
 /// The inputs of a fit, loaded and checked.
@@ -73,21 +101,15 @@ pub struct Inputs {
 }
 
 /// Loads robot, effects and data for `calibrate` and `refine`.
-pub fn load_inputs(
-    robot_path: &Path,
-    data: &[PathBuf],
-    effects: &EffectsArg,
-    sigma_um: Option<f64>,
-    pose_sigma_um: Option<f64>,
-    orientation_sigma_urad: Option<f64>,
-    ctx: &Ctx<'_>,
-) -> anyhow::Result<Inputs> {
+fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
+    let (data, effects) = (&args.data, &args.effects);
+    let (pose_sigma_um, orientation_sigma_urad) = (args.pose_sigma_um, args.orientation_sigma_urad);
     ctx.stage("reading the robot description");
-    let robot = common::load_robot(robot_path, ctx)?;
+    let robot = common::load_robot(&args.robot.robot, ctx)?;
     common::require_six_links(&robot)?;
     let effects = effects.resolve(&robot)?;
     let model = robot.model(&effects);
-    let sigma = common::sigma(sigma_um, &robot)?;
+    let sigma = common::sigma(args.sigma_um, &robot)?;
     for (v, name) in [
         (pose_sigma_um, "--pose-sigma-um"),
         (orientation_sigma_urad, "--orientation-sigma-urad"),
@@ -586,36 +608,16 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
 
 /// Runs `cpm calibrate`.
 pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
-    common::check_out_dir(&args.out)?;
-    // Bad options are usage errors before any file is read.
-    solver_options(
-        &mut IdentifyOptions::default(),
-        args.robust.as_deref(),
-        args.max_iterations,
-    )?;
-    let mut inputs = load_inputs(
-        &args.robot.robot,
-        &args.data,
-        &args.effects,
-        args.sigma_um,
-        args.pose_sigma_um,
-        args.orientation_sigma_urad,
-        ctx,
-    )?;
-    solver_options(
-        &mut inputs.identify,
-        args.robust.as_deref(),
-        args.max_iterations,
-    )?;
+    let inputs = args.fit.load(ctx)?;
     let model = &inputs.model;
     ctx.stage(format!(
         "fitting {} to {} observations",
         common::describe_model(model),
         inputs.merged.campaign.len()
     ));
-    let Fitted { cal, set, value } = fit(&inputs, &args.out, args.minimum_norm)?;
+    let Fitted { cal, set, value } = fit(&inputs, &args.fit.out, args.minimum_norm)?;
     ctx.stage("writing the results");
-    let dir = &args.out;
+    let dir = &args.fit.out;
     let written = common::commit(set, &dir.display().to_string())?;
     ctx.finish();
     for w in warnings(model, &cal)
@@ -624,7 +626,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     {
         ctx.note(w.replace("**", ""));
     }
-    if args.json {
+    if args.fit.json {
         let v = json!({
             "simulated": cal.simulated,
             "out": dir.display().to_string(),

@@ -1,13 +1,13 @@
 //! `cpm refine`: calibrate, then add the effects that the residual asks for, one at a time,
 //! each with an F-test, its BIC change and cross-validation (cpm_calib::refine), and write
 //! `refine.json`, `report.md`, `calibration.json`, figures and `calibrated.toml`.
-use std::path::PathBuf;
-
 use clap::Args;
 use serde_json::{json, Value};
 
-use super::calibrate::{self, fit_report, provenance_lines, stage_calibrated, stage_figures};
-use super::common::{self, EffectsArg, RobotArg};
+use super::calibrate::{
+    self, fit_report, provenance_lines, stage_calibrated, stage_figures, FitArgs,
+};
+use super::common;
 use super::{plots, usage_error, Ctx, Outcome};
 use crate::calib::{refine, Effect, RefineOptions, Refinement};
 use crate::io::{self, parse_effects};
@@ -19,15 +19,9 @@ use crate::output::OutputSet;
     after_help = "Examples:\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --out refined/\n  cpm refine --robot robot.toml --data data.csv --candidates link_offset,link_scale,backlash --max-steps 2 --out refined/ --json"
 )]
 pub struct RefineArgs {
-    /// The robot description.
+    /// Robot, data, effects, noise, solver and output: as for `cpm calibrate`.
     #[command(flatten)]
-    pub robot: RobotArg,
-    /// Measurement files (docs/formats.md); repeatable.
-    #[arg(long, value_name = "DATA.csv", required = true)]
-    pub data: Vec<PathBuf>,
-    /// The effects modelled.
-    #[command(flatten)]
-    pub effects: EffectsArg,
+    pub fit: FitArgs,
     /// Candidate effects, comma-separated (default: the whole library).
     #[arg(long, value_name = "LIST")]
     pub candidates: Option<String>,
@@ -40,19 +34,6 @@ pub struct RefineArgs {
     /// Folds of the cross-validation over poses.
     #[arg(long, value_name = "K", default_value_t = 5)]
     pub folds: usize,
-    /// Sensor noise standard deviation, um (default: the description's, else estimated).
-    #[arg(long, value_name = "UM")]
-    pub sigma_um: Option<f64>,
-    /// Robust loss of every fit: huber:K, cauchy:K, tukey:K (K in um) or none (as for
-    /// `cpm calibrate --robust`).
-    #[arg(long, value_name = "LOSS:K")]
-    pub robust: Option<String>,
-    /// Output directory.
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
-    /// Print a JSON summary (refine.json) on stdout.
-    #[arg(long)]
-    pub json: bool,
 }
 
 fn param_json(effect: Effect, params: &[(String, Option<f64>, Option<f64>)]) -> Value {
@@ -114,7 +95,7 @@ pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
 
 /// Runs `cpm refine`.
 pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
-    common::check_out_dir(&args.out)?;
+    common::check_out_dir(&args.fit.out)?;
     if !(args.alpha > 0.0 && args.alpha < 1.0) {
         return Err(usage_error("--alpha must be in (0, 1)"));
     }
@@ -125,21 +106,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         Some(list) => parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
         None => Effect::ALL.to_vec(),
     };
-    calibrate::solver_options(
-        &mut crate::calib::IdentifyOptions::default(),
-        args.robust.as_deref(),
-        None,
-    )?;
-    let mut inputs = calibrate::load_inputs(
-        &args.robot.robot,
-        &args.data,
-        &args.effects,
-        args.sigma_um,
-        None,
-        None,
-        ctx,
-    )?;
-    calibrate::solver_options(&mut inputs.identify, args.robust.as_deref(), None)?;
+    let inputs = args.fit.load(ctx)?;
     let campaign = &inputs.merged.campaign;
     ctx.stage(format!(
         "refining: {} to {} observations, up to {} effects from {} candidates (each round fits every candidate)",
@@ -160,7 +127,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         refine(&inputs.model, campaign, &options).map_err(|e| common::locate(e, &inputs.merged))?;
     calibrate::robust_noise(&mut r.calibration, &inputs.identify.lm.loss);
     ctx.stage("writing the results");
-    let dir = &args.out;
+    let dir = &args.fit.out;
     let cal = &r.calibration;
     let mut set = OutputSet::new();
     let doc = refine_json(&r, campaign.simulated);
@@ -266,7 +233,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     set.add(dir.join("report.md"), s);
     let written = common::commit(set, &dir.display().to_string())?;
     ctx.finish();
-    if args.json {
+    if args.fit.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&doc)?)?;
     } else {
         writeln!(
