@@ -767,3 +767,77 @@ fn usage_errors_exit_2_and_help_exits_0() {
         );
     }
 }
+
+#[test]
+fn refine_names_undeclared_effects_simulated_by_the_cli() {
+    // `cpm simulate` puts an effect the description does not declare into the truth, a few
+    // times the noise; `cpm refine` with the whole library as candidates must name it first
+    // and bring the cross-validated RMS to the noise.
+    let d = scratch("refine-library");
+    let robot = example("hexapod_66.toml");
+    let truth = write_truth(&d);
+    let noise_um = 0.5;
+    for (k, effect) in [
+        "link_scale=300,-250,200,-300,250,-200",
+        "link_nonlinearity=4,-2,-3,2,5,-1,-4,2,3,-2,-5,1",
+        "backlash=3,-2.5,3,2,-3,2.5",
+        // The example's link forces are tens of newtons: 0.3-0.4 um/N gives a few um.
+        "compliance=400,-300,350,-400,300,-350",
+        "screw_periodic=3,-2,2.5,1.5,-2,2,3,-1.5,2,2.5,-3,1.5",
+    ]
+    .iter()
+    .enumerate()
+    {
+        let name = effect.split('=').next().unwrap();
+        let data = d.join(format!("{name}.csv"));
+        ok(&[
+            "simulate",
+            "--robot",
+            &robot,
+            "--random",
+            "100",
+            "--range-mm",
+            "60",
+            "--range-deg",
+            "8",
+            "--truth",
+            &p(&truth),
+            "--truth-effect",
+            effect,
+            "--noise",
+            &format!("gaussian:{noise_um}"),
+            "--seed",
+            &format!("{}", 11 + k),
+            "--out",
+            &p(&data),
+        ]);
+        let out = ok(&[
+            "refine",
+            "--robot",
+            &robot,
+            "--data",
+            &p(&data),
+            "--effects",
+            "none",
+            "--sigma-um",
+            &format!("{noise_um}"),
+            "--out",
+            &p(&d.join(name)),
+            "--json",
+        ]);
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let steps: Vec<&str> = v["steps"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|s| s["effect"].as_str().unwrap())
+            .collect();
+        let cv = v["final"]["cv_rms_um"].as_f64().unwrap();
+        let before = v["steps"][0]["cv_rms_before_um"]
+            .as_f64()
+            .unwrap_or(f64::NAN);
+        eprintln!("{name}: steps {steps:?}, cv RMS {before:.3} -> {cv:.3} um");
+        assert_eq!(steps.first(), Some(&name), "{name}: {steps:?}");
+        assert!(cv < 1.2 * noise_um, "{name}: cv RMS {cv} um");
+    }
+}
