@@ -1,4 +1,5 @@
 //! cpm: calibration of parallel manipulators. Facade over the workspace crates.
+#![forbid(unsafe_code)]
 
 pub use cpm_calib as calib;
 pub use cpm_clearance as clearance;

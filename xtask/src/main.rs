@@ -1,4 +1,5 @@
 //! Project chores: `cargo xtask reproduce-paper` (the paper's example end to end).
+#![forbid(unsafe_code)]
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;

@@ -23,6 +23,7 @@
 //! assert!(cal.estimate_um.iter().all(|e| e.is_none()));
 //! ```
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod accuracy;
 pub mod campaign;

@@ -17,6 +17,7 @@
 //! assert!((dl[0] + 0.020).abs() < 1e-12);
 //! ```
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod clearance;
 pub mod error;

@@ -24,6 +24,7 @@
 //! # let _ = Pose::identity();
 //! ```
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod description;
 pub mod error;

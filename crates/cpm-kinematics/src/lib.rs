@@ -22,6 +22,7 @@
 //! [`workspace`] module tells whether a pose can be reached from home without crossing a
 //! singularity. [`linalg`] holds the accurate SVD used for condition numbers and eq. 12.
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod error;
 pub mod fk;
