@@ -258,8 +258,9 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
 
 /// Tracker pose measurements of `skeleton`'s poses on the true machine: the controller
 /// commands the nominal inverse kinematics; the machine's lengths are those plus the joint
-/// clearance shift and the link offsets and scales of the truth; the tracker sees the pose
-/// forward kinematics gives, plus noise.
+/// clearance shift, the robot's known link effects and the link offsets and scales of the
+/// truth; the tracker sees the pose forward kinematics gives, plus noise, in its frame (a
+/// known `tracker_frame` registration).
 fn simulate_poses(
     robot: &Robot,
     truth: &Truth,
@@ -299,14 +300,21 @@ fn simulate_poses(
         ..Campaign::default()
     };
     let mut commanded = Vec::new();
+    let mut previous: Option<crate::calib::effects::PoseContext> = None;
     for (j, p) in poses.iter().enumerate() {
         let cmd = cpm_kinematics::inverse_lengths(&robot.table, p);
         let shift = model
             .clearance
             .link_corrections_mm(&robot.table, p, &model.load)
             .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
+        // The robot's known link effects (a calibrated description's) act on the machine too.
+        let ctx = model
+            .pose_context(p, cmd.clone(), previous.as_ref(), None, None)
+            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
+        let known = model.known_link_shift_mm(&ctx, 0.0);
+        previous = Some(ctx);
         let eff: Vec<f64> = (0..n)
-            .map(|i| cmd[i] + shift[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
+            .map(|i| cmd[i] + shift[i] + known[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
             .collect();
         let (reached, _) = cpm_kinematics::forward(&true_table, &eff, p, &model.fk)
             .map_err(|source| crate::calib::CalibError::Kinematics { pose: j, source })?;
@@ -315,7 +323,14 @@ fn simulate_poses(
             twist[a] = draw(noise, &mut rng) * 1e-3;
             twist[3 + a] = gaussian(&mut rng) * orientation_urad * 1e-6;
         }
-        let measured = reached.perturbed(&twist);
+        let mut measured = reached.perturbed(&twist);
+        // A known tracker registration: the tracker reports in its own frame.
+        if let Some(q) = model.known(Effect::TrackerFrame) {
+            let r = nalgebra::Rotation3::new(nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-6);
+            let t = nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3;
+            measured.position_mm = r * measured.position_mm + t;
+            measured.rotation = r * measured.rotation;
+        }
         c.poses.push(measured);
         c.pose_measurements.push(PoseMeasurement {
             pose: j,
