@@ -63,6 +63,30 @@ fn simulate_tracker(dir: &Path) -> PathBuf {
     data
 }
 
+/// `cpm calibrate` with link_offset and link_scale unknowns, noise 1 um (readings and tracker
+/// positions) and 2 urad; its calibration.json.
+fn calibrate_offsets_and_scales(robot: &Path, data: &[&Path], out: &Path) -> serde_json::Value {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_cpm"));
+    c.args(["calibrate", "--robot"]).arg(robot);
+    for f in data {
+        c.arg("--data").arg(f);
+    }
+    let o = c
+        .args(["--effects", "link_offset,link_scale", "--sigma-um", "1"])
+        .args([
+            "--pose-sigma-um",
+            "1",
+            "--orientation-sigma-urad",
+            "2",
+            "--out",
+        ])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap()
+}
+
 #[test]
 fn simulated_tracker_file_reads_back() {
     let d = scratch("tracker-read");
@@ -199,30 +223,7 @@ fn length_readings_and_tracker_poses_calibrate_together() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let out = d.join("cal");
-    let o = Command::new(env!("CARGO_BIN_EXE_cpm"))
-        .args(["calibrate", "--robot"])
-        .arg(example())
-        .arg("--data")
-        .arg(&lengths)
-        .arg("--data")
-        .arg(&tracker)
-        .args([
-            "--effects",
-            "link_offset,link_scale",
-            "--sigma-um",
-            "1",
-            "--pose-sigma-um",
-            "1",
-        ])
-        .args(["--orientation-sigma-urad", "2", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap())
-            .unwrap();
+    let json = calibrate_offsets_and_scales(&example(), &[&lengths, &tracker], &d.join("cal"));
     assert_eq!(json["readings"], 60);
     assert_eq!(json["pose_measurements"], 40);
     assert_eq!(json["poses"], 60);
@@ -269,27 +270,9 @@ fn known_tracker_registration_and_link_effects_are_applied_on_both_sides() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rms = |robot: &Path, name: &str| {
-        let out = d.join(name);
-        let o = Command::new(env!("CARGO_BIN_EXE_cpm"))
-            .args(["calibrate", "--robot"])
-            .arg(robot)
-            .arg("--data")
-            .arg(&data)
-            .args([
-                "--effects",
-                "link_offset,link_scale",
-                "--pose-sigma-um",
-                "1",
-            ])
-            .args(["--orientation-sigma-urad", "2", "--out"])
-            .arg(&out)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap())
-                .unwrap();
-        json["residual_rms_um"].as_f64().unwrap()
+        calibrate_offsets_and_scales(robot, &[&data], &d.join(name))["residual_rms_um"]
+            .as_f64()
+            .unwrap()
     };
     let with = rms(&known, "with");
     let without = rms(&example(), "without");
