@@ -319,13 +319,19 @@ fn jacobi_svd(mut ac: Vec<f64>, p: usize, n: usize) -> (Vec<f64>, Mat<f64>) {
             *ya = s * u + c * w;
         }
     }
+    // Squared column norms, recomputed at the start of each sweep and updated exactly by
+    // each rotation in between (||x'||^2 = alpha - t gamma, ||y'||^2 = beta + t gamma), so a
+    // pair costs one dot product instead of three.
+    let mut sq = vec![0.0; n];
     for _sweep in 0..80 {
         let mut rotated = false;
+        for (c, v) in sq.iter_mut().enumerate() {
+            *v = norm2(&ac[c * p..(c + 1) * p]);
+        }
         for i in 0..n {
             for k in i + 1..n {
-                let x = &ac[i * p..(i + 1) * p];
-                let y = &ac[k * p..(k + 1) * p];
-                let (alpha, beta, gamma) = (norm2(x), norm2(y), dot(x, y));
+                let gamma = dot(&ac[i * p..(i + 1) * p], &ac[k * p..(k + 1) * p]);
+                let (alpha, beta) = (sq[i], sq[k]);
                 if gamma == 0.0 || gamma.abs() <= f64::EPSILON * (alpha * beta).sqrt() {
                     continue;
                 }
@@ -336,6 +342,8 @@ fn jacobi_svd(mut ac: Vec<f64>, p: usize, n: usize) -> (Vec<f64>, Mat<f64>) {
                 let s = c * t;
                 rotate(&mut ac, p, i, k, c, s);
                 rotate(&mut vc, n, i, k, c, s);
+                sq[i] = (alpha - t * gamma).max(0.0);
+                sq[k] = beta + t * gamma;
             }
         }
         if !rotated {
