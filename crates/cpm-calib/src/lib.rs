@@ -51,3 +51,8 @@ pub use identify::{
 pub use model::{MeasurementModel, ModelKind};
 pub use refine::{refine, RefineOptions, Refinement};
 pub use simulate::{simulate, simulate_campaign, Noise, SimulationOptions};
+
+/// The examples of the crate's README.md, run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -360,3 +360,8 @@ pub use problem::{DenseJacobian, ModelError, Problem, SparseJacobian};
 pub use report::{IterationRecord, Report, TerminationReason, Timings};
 pub use solver::{minimize, minimize_sparse, IterationCallback, LinearSolver, Solver};
 pub use stats::Statistics;
+
+/// The examples of the crate's README.md, run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
