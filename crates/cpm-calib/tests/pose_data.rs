@@ -126,6 +126,11 @@ fn refine_finds_an_undeclared_actuator_nonlinearity_on_a_hexapod() {
     };
     let r = refine(&declared, &data, &opts).unwrap();
     let names: Vec<Effect> = r.steps.iter().map(|s| s.effect).collect();
+    eprintln!(
+        "hexapod, tracker: steps {names:?}, cv RMS {:.3} -> {:.3} um (noise {POS_SIGMA} um)",
+        r.steps.first().map_or(f64::NAN, |s| s.cv_rms_before_um),
+        r.final_cv_rms_um
+    );
     assert_eq!(names.first(), Some(&Effect::LinkNonlinearity), "{names:?}");
     assert!(r.steps[0].cv_rms_after_um < r.steps[0].cv_rms_before_um);
     assert!(

@@ -87,6 +87,10 @@ fn refine_names_the_undeclared_effect_and_reaches_the_noise() {
             "{effect}: cv {}",
             r.final_cv_rms_um
         );
+        eprintln!(
+            "{effect}: steps {names:?}, cv RMS {:.3} -> {:.3} um (noise {SIGMA} um)",
+            first.cv_rms_before_um, r.final_cv_rms_um
+        );
         assert!(
             r.unexplained_structure.is_empty(),
             "{effect}: {:?}",
@@ -105,6 +109,10 @@ fn refine_adds_nothing_when_there_is_nothing() {
             added.push((seed, s.effect));
         }
     }
+    eprintln!(
+        "clean campaigns: refine added an effect in {} of 100 seeds {added:?}",
+        added.len()
+    );
     assert!(
         added.len() <= 5,
         "added an effect in {} of 100 clean campaigns: {added:?}",
@@ -123,6 +131,11 @@ fn structure_outside_the_library_is_reported_with_its_regressor() {
         r.length_mm += 25e-3 * dz * dz;
     }
     let r = refine(&base_model(), &data, &options()).unwrap();
+    eprintln!(
+        "outside the library: steps {:?}, unexplained structure {:?}",
+        r.steps.iter().map(|s| s.effect).collect::<Vec<_>>(),
+        r.unexplained_structure
+    );
     assert!(
         r.unexplained_structure
             .iter()
