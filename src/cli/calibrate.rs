@@ -358,47 +358,6 @@ pub fn solver_options(
     Ok(())
 }
 
-/// With a robust loss and the noise estimated from the residual, re-estimates the noise
-/// without the flagged outliers (which a robust fit does not follow, so their residuals would
-/// inflate it) and scales every standard deviation to it (they are proportional to the noise).
-/// Returns true when it did.
-pub fn robust_noise(cal: &mut Calibration, loss: &cpm_lm::Loss) -> bool {
-    if loss.is_squared() || !cal.sigma_estimated || cal.outliers.is_empty() {
-        return false;
-    }
-    let inliers: Vec<f64> = cal
-        .residuals_um
-        .iter()
-        .enumerate()
-        .filter(|(k, _)| !cal.outliers.contains(k))
-        .map(|(_, r)| *r)
-        .collect();
-    let dof = inliers
-        .len()
-        .saturating_sub(cal.identifiability.rank)
-        .max(1);
-    let sigma = (inliers.iter().map(|r| r * r).sum::<f64>() / dof as f64).sqrt();
-    if !(sigma.is_finite() && sigma > 0.0 && cal.sigma_um > 0.0) {
-        return false;
-    }
-    let f = sigma / cal.sigma_um;
-    let scale = |v: &mut Option<f64>| {
-        if let Some(x) = v {
-            *x *= f;
-        }
-    };
-    cal.std_um.iter_mut().for_each(scale);
-    cal.identifiability.crlb_std_um.iter_mut().for_each(scale);
-    cal.identifiability
-        .combination_std_um
-        .iter_mut()
-        .for_each(|x| *x *= f);
-    cal.combinations.iter_mut().for_each(|c| c.std_um *= f);
-    cal.identifiability.sigma_um = sigma;
-    cal.sigma_um = sigma;
-    true
-}
-
 /// What the data did not determine, and how the fit ended, in a few lines for the top of a
 /// report (empty when all is well).
 pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
@@ -541,9 +500,8 @@ pub struct Fitted {
 pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fitted> {
     let campaign = &inputs.merged.campaign;
     let model = &inputs.model;
-    let mut cal = identify(model, campaign, &inputs.identify)
+    let cal = identify(model, campaign, &inputs.identify)
         .map_err(|e| common::locate(e, &inputs.merged))?;
-    let robust_sigma = robust_noise(&mut cal, &inputs.identify.lm.loss);
     let mut set = OutputSet::new();
     let mut value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
@@ -579,7 +537,7 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
     for w in warnings(model, &cal) {
         r.push_str(&format!("- {w}\n"));
     }
-    if robust_sigma {
+    if cal.sigma_excludes_outliers {
         r.push_str("- The noise was estimated from the residuals without the flagged outliers (robust fit); the standard deviations use it.\n");
     }
     r.push('\n');

@@ -123,9 +123,8 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         identify: inputs.identify.clone(),
         ..RefineOptions::default()
     };
-    let mut r =
+    let r =
         refine(&inputs.model, campaign, &options).map_err(|e| common::locate(e, &inputs.merged))?;
-    calibrate::robust_noise(&mut r.calibration, &inputs.identify.lm.loss);
     ctx.stage("writing the results");
     let dir = &args.fit.out;
     let cal = &r.calibration;

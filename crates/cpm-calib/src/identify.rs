@@ -61,6 +61,10 @@ pub struct Calibration {
     pub sigma_um: f64,
     /// True when `sigma_um` was estimated from the residual (not declared).
     pub sigma_estimated: bool,
+    /// True when the estimate left the flagged outliers out: with a robust loss the fit does
+    /// not follow them, so their residuals would inflate the noise and every standard
+    /// deviation.
+    pub sigma_excludes_outliers: bool,
     /// Residuals (predicted - measured) at the solution, um.
     pub residuals_um: Vec<f64>,
     /// Observations whose residual is more than 5 robust standard deviations from the median
@@ -274,11 +278,19 @@ pub fn identify(
         .map(|((a, b), w)| (a - b) * 1e3 * w)
         .collect();
     let jf = weigh(jf);
-    let ssr: f64 = residuals_um.iter().map(|r| r * r).sum();
+    let outliers = crate::diagnostics::outliers(&residuals_um);
+    let robust = !options.lm.loss.is_squared();
+    let sigma_excludes_outliers = options.sigma_um.is_none() && robust && !outliers.is_empty();
+    // Residuals the noise estimate uses: all, or without the outliers of a robust fit.
+    let (ssr, count) = residuals_um
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !sigma_excludes_outliers || outliers.binary_search(k).is_err())
+        .fold((0.0, 0usize), |(s, n), (_, r)| (s + r * r, n + 1));
     let (sigma_um, sigma_estimated) = match options.sigma_um {
         Some(s) => (s, false),
         None => {
-            let dof = m.saturating_sub(first.rank).max(1);
+            let dof = count.saturating_sub(first.rank).max(1);
             ((ssr / dof as f64).sqrt(), true)
         }
     };
@@ -314,7 +326,8 @@ pub fn identify(
         identifiability: ident,
         sigma_um,
         sigma_estimated,
-        outliers: crate::diagnostics::outliers(&residuals_um),
+        sigma_excludes_outliers,
+        outliers,
         initial_rms_um: rms(&r0),
         residual_rms_um: rms(&residuals_um),
         residuals_um,

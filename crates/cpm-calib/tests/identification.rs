@@ -269,6 +269,15 @@ fn a_spike_is_flagged_and_a_robust_loss_contains_it() {
     assert_eq!(robust.outliers, vec![100]);
     assert!(err(&plain) > 20.0, "plain fit rms error {}", err(&plain));
     assert!(err(&robust) < 2.0, "robust fit rms error {}", err(&robust));
+    // The noise estimate of the robust fit leaves the spike out (the fit does not follow
+    // it): close to the simulated 2 um, where the spike alone would make it ~30 um.
+    assert!(robust.sigma_excludes_outliers && !plain.sigma_excludes_outliers);
+    assert!(
+        (robust.sigma_um - 2.0).abs() < 0.3,
+        "robust sigma {} um",
+        robust.sigma_um
+    );
+    assert!(plain.sigma_um > 10.0, "plain sigma {} um", plain.sigma_um);
 }
 
 #[test]
