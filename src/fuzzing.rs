@@ -79,7 +79,11 @@ pub fn robot_toml(data: &[u8]) {
                 .unwrap_or_else(|e| panic!("a loaded description does not load back: {e}"));
             assert_eq!(back.description, robot.description, "round trip");
             if let Ok(effects) = robot.declared_effects() {
-                let _ = robot.model(&effects);
+                let model = robot.model(&effects);
+                // What the loader accepted, the calibration crate accepts too.
+                model
+                    .check_known_effects()
+                    .unwrap_or_else(|e| panic!("loaded known effects refused by the model: {e}"));
             }
         }
     }

@@ -173,6 +173,7 @@ fn mutated_robot_descriptions_give_located_errors() {
     let seeds = vec![
         read("examples/paper_cubic.toml"),
         read("examples/hexapod_66.toml"),
+        read("fuzz/corpus/robot_toml/seed-known-effects.toml"),
     ];
     fuzz(&seeds, cpm::fuzzing::robot_toml, "robot_toml", 3000, 1);
 }
