@@ -507,7 +507,18 @@ fn calibrated_backlash_is_compensated() {
 #[test]
 fn design_writes_a_plan_that_identifies_everything() {
     let d = scratch("design");
-    let robot = example("hexapod_66.toml");
+    // A calibrated description: known backlash and sensor offsets of its three sensors.
+    let mut r = RobotDescription::load(example("hexapod_66.toml")).unwrap();
+    r.calibration
+        .get_or_insert_with(Default::default)
+        .known_effects = [
+        ("backlash".to_string(), vec![2.0; 6]),
+        ("sensor_offset".to_string(), vec![5.0, -3.0, 1.0]),
+    ]
+    .into_iter()
+    .collect();
+    let robot = p(&d.join("known.toml"));
+    std::fs::write(&robot, r.to_toml_string().unwrap()).unwrap();
     let out = d.join("design");
     let text = ok(&[
         "design",
@@ -544,6 +555,16 @@ fn design_writes_a_plan_that_identifies_everything() {
     let w: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(w["rank"], 36);
     assert_eq!(w["observations"], 360);
+    // The designed description keeps the machine's backlash; the old sensors' offsets do
+    // not carry over to the new sensors.
+    let designed = Robot::load(&out.join("robot.toml")).unwrap();
+    let known: Vec<_> = designed
+        .model(&[])
+        .known_effects
+        .iter()
+        .map(|k| k.effect)
+        .collect();
+    assert_eq!(known, vec![cpm::calib::Effect::Backlash]);
     // Too few socket places in the description: a clear error, nothing written.
     let o = cpm(&[
         "design",

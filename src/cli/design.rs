@@ -11,6 +11,7 @@ use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::design::{
     candidates, design, sockets::Socket, Criterion, DesignOptions, SelectOptions, SocketCandidates,
 };
+use crate::calib::Effect;
 use crate::geometry::description::SensorSpec;
 use crate::io::{self, table::Table, InputError, Robot};
 use crate::output::OutputSet;
@@ -273,6 +274,16 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     ctx.stage("writing the design");
     let mut desc = robot.description.clone();
     desc.sensors = d.sensors.iter().map(SensorSpec::from_sensor).collect();
+    // Known values of the old sensors' effects do not carry over to the new sensors.
+    if let Some(c) = desc.calibration.as_mut() {
+        for e in [
+            Effect::SensorOffset,
+            Effect::SensorScale,
+            Effect::SocketError,
+        ] {
+            c.known_effects.remove(e.name());
+        }
+    }
     let robot_toml = format!(
         "# {} with the sensors chosen by cpm design {}\n\n{}",
         robot.file,

@@ -109,6 +109,21 @@ impl MeasurementModel {
         Ok(())
     }
 
+    /// This model read through other sensors. The known values of the old sensors' effects
+    /// (`sensor_offset`, `sensor_scale`, `socket_error`) belong to those sensors and are
+    /// dropped; every other known value is kept.
+    pub fn with_sensors(&self, sensors: Vec<cpm_geometry::Sensor>) -> MeasurementModel {
+        let mut m = self.clone();
+        m.nominal.sensors = sensors;
+        m.known_effects.retain(|k| {
+            !matches!(
+                k.effect,
+                Effect::SensorOffset | Effect::SensorScale | Effect::SocketError
+            )
+        });
+        m
+    }
+
     /// The known values of `effect`, if any.
     pub fn known(&self, effect: Effect) -> Option<&[f64]> {
         self.known_effects

@@ -130,9 +130,7 @@ impl Design {
 
     /// `model` with the design's sensors (the model the plan is read through).
     pub fn model(&self, model: &MeasurementModel) -> MeasurementModel {
-        let mut m = model.clone();
-        m.nominal.sensors = self.sensors.clone();
-        m
+        model.with_sensors(self.sensors.clone())
     }
 
     /// Readings the plan takes.
@@ -509,8 +507,7 @@ pub fn design(
     let sensors = sockets::pair_sensors(&base_sockets, &platform_sockets);
     let design_poses: Vec<Pose> = chosen.iter().map(|&c| poses[c]).collect();
     progress("design: indices and gauge freedoms of the chosen layout");
-    let mut dm = model.clone();
-    dm.nominal.sensors = sensors.clone();
+    let mut dm = model.with_sensors(sensors.clone());
     dm.effects.clear();
     let plan = Plan {
         poses: design_poses.clone(),

@@ -127,8 +127,7 @@ pub fn pose_blocks(
     poses: &[Pose],
     sensors: &[Sensor],
 ) -> Vec<Option<DMatrix<f64>>> {
-    let mut m = model.clone();
-    m.nominal.sensors = sensors.to_vec();
+    let mut m = model.with_sensors(sensors.to_vec());
     m.effects.clear();
     let zeros = vec![0.0; m.num_params()];
     let all: Vec<usize> = (0..sensors.len()).collect();
