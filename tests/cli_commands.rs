@@ -362,6 +362,10 @@ fn refine_finds_backlash() {
     ] {
         assert!(out_dir.join(f).exists(), "{f}");
     }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("calibration.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["known_effects"], serde_json::json!([]));
     let toml = std::fs::read_to_string(out_dir.join("calibrated.toml")).unwrap();
     assert!(toml.contains("effects = [\"backlash\"]"), "{toml}");
     assert!(toml.contains("[calibration.known_effects]"), "{toml}");

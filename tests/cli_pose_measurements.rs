@@ -274,7 +274,16 @@ fn known_tracker_registration_and_link_effects_are_applied_on_both_sides() {
             .as_f64()
             .unwrap()
     };
-    let with = rms(&known, "with");
+    let with_json = calibrate_offsets_and_scales(&known, &[&data], &d.join("with"));
+    // calibration.json says which known values the fit applied.
+    let applied: Vec<&str> = with_json["known_effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|k| k["effect"].as_str().unwrap())
+        .collect();
+    assert_eq!(applied, ["backlash", "tracker_frame"]);
+    let with = with_json["residual_rms_um"].as_f64().unwrap();
     let without = rms(&example(), "without");
     eprintln!("tracker data, residual RMS: {with:.3} um with the known registration and backlash, {without:.3} um without");
     assert!(with < 1.3, "with the known values: {with} um");

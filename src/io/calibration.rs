@@ -131,10 +131,17 @@ pub fn calibration_json(
         "minimum_norm_um": per_joint(&minimum_norm[..ni]),
         "not_determined": not_determined,
         "effects": effects_json(model, &cal.estimate_um, &cal.std_um),
+        // Known values applied in every prediction (the estimates above are on top of them).
+        "known_effects": model
+            .known_effects
+            .iter()
+            .map(|k| json!({"effect": k.effect.name(), "unit": k.effect.unit(), "values": k.values}))
+            .collect::<Vec<_>>(),
         "residual_rms_um": cal.residual_rms_um,
         "initial_rms_um": cal.initial_rms_um,
         "sigma_um": cal.sigma_um,
         "sigma_estimated": cal.sigma_estimated,
+        "sigma_excludes_outliers": cal.sigma_excludes_outliers,
         "identifiability": identifiability_json(&cal.identifiability, &names),
         "solver": solver_json(&cal.solver),
     })
