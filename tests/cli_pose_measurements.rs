@@ -283,6 +283,8 @@ fn known_tracker_registration_and_link_effects_are_applied_on_both_sides() {
         .map(|k| k["effect"].as_str().unwrap())
         .collect();
     assert_eq!(applied, ["backlash", "tracker_frame"]);
+    let report = std::fs::read_to_string(d.join("with").join("report.md")).unwrap();
+    assert!(report.contains("known backlash, tracker_frame"), "{report}");
     let with = with_json["residual_rms_um"].as_f64().unwrap();
     let without = rms(&example(), "without");
     eprintln!("tracker data, residual RMS: {with:.3} um with the known registration and backlash, {without:.3} um without");

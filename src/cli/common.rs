@@ -360,14 +360,20 @@ pub fn effect_list(effects: &[Effect]) -> String {
 
 /// The model's parameter count in words.
 pub fn describe_model(model: &MeasurementModel) -> String {
+    let known: Vec<Effect> = model.known_effects.iter().map(|k| k.effect).collect();
     format!(
-        "{} parameters ({} installation errors{})",
+        "{} parameters ({} installation errors{}){}",
         model.num_params(),
         model.num_installation_params(),
         if model.effects.is_empty() {
             String::new()
         } else {
             format!(" + {}", effect_list(&model.effects))
+        },
+        if known.is_empty() {
+            String::new()
+        } else {
+            format!(", known {}", effect_list(&known))
         }
     )
 }
