@@ -38,7 +38,7 @@ pub struct FitArgs {
     /// The effects modelled.
     #[command(flatten)]
     pub effects: EffectsArg,
-    /// Sensor noise standard deviation, um (default: [calibration] sensor_noise_um of the
+    /// Sensor noise standard deviation, um (default: `[calibration] sensor_noise_um` of the
     /// description, else estimated from the residual).
     #[arg(long, value_name = "UM")]
     pub sigma_um: Option<f64>,

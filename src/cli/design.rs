@@ -37,7 +37,7 @@ pub struct DesignArgs {
     #[command(flatten)]
     pub robot: RobotArg,
     /// Candidate socket places, CSV `name,side,x_mm,y_mm,z_mm` (side `base` in {B} or
-    /// `platform` in {P}); default: the sockets of the description's [[sensor]] tables.
+    /// `platform` in {P}); default: the sockets of the description's `[[sensor]]` tables.
     #[arg(long, value_name = "SOCKETS.csv")]
     pub sockets: Option<PathBuf>,
     /// Reading budget (poses x socket pairs).

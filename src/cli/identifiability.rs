@@ -27,7 +27,7 @@ pub struct IdentifiabilityArgs {
     #[command(flatten)]
     pub effects: EffectsArg,
     /// Noise standard deviation for the Cramér-Rao bounds, um (default: the description's
-    /// [calibration] sensor_noise_um, else 1: bounds per um of noise).
+    /// `[calibration] sensor_noise_um`, else 1: bounds per um of noise).
     #[arg(long, value_name = "UM")]
     pub sigma_um: Option<f64>,
     /// Relative rank threshold: singular values below RTOL x the largest count as zero.

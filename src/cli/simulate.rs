@@ -36,7 +36,7 @@ pub struct SimulateArgs {
     #[command(flatten)]
     pub plan: PlanArgs,
     /// The true machine: a robot description whose geometry (joints plus
-    /// [installation_errors_um]) and link reading models (length_at_zero_mm, mm_per_unit)
+    /// `[installation_errors_um]`) and link reading models (length_at_zero_mm, mm_per_unit)
     /// differ from --robot's by the errors to simulate.
     #[arg(long, value_name = "TRUTH.toml", conflicts_with = "paper_table2")]
     pub truth: Option<PathBuf>,
@@ -51,7 +51,7 @@ pub struct SimulateArgs {
     #[command(flatten)]
     pub effects: EffectsArg,
     /// Noise: none, uniform:HALF_WIDTH_UM or gaussian:SIGMA_UM (default: gaussian with the
-    /// description's [calibration] sensor_noise_um, else none). For --measure poses it is the
+    /// description's `[calibration] sensor_noise_um`, else none). For --measure poses it is the
     /// noise of each position coordinate.
     #[arg(long, value_name = "SPEC")]
     pub noise: Option<String>,

@@ -11,7 +11,7 @@
 //! cost and memory grow linearly with the number of configurations.
 //!
 //! As the encoder noise goes to zero the closures become hard constraints and the estimate
-//! approaches the nested (forward kinematics in the loop) formulation of [`crate::identify`].
+//! approaches the nested (forward kinematics in the loop) formulation of [`crate::identify()`].
 use cpm_geometry::Pose;
 use cpm_lm::{LinearSolver, ModelError, Problem, SparseJacobian};
 use nalgebra::{DMatrix, Matrix3, Vector3};

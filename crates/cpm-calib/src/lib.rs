@@ -3,11 +3,11 @@
 //! The pipeline of Lim et al. (2002), made honest about what the data can identify:
 //! 1. a [`MeasurementModel`]: commanded pose -> nominal-IK link lengths -> clearance-corrected
 //!    effective lengths -> forward kinematics with the candidate joints -> sensor length;
-//! 2. a [`Campaign`] of readings, measured or [`simulate`]d (marked simulated);
-//! 3. [`identify`]: the eq. 16 cost minimised with `cpm-lm` in the identifiable subspace, with
+//! 2. a [`Campaign`] of readings, measured or [`simulate()`]d (marked simulated);
+//! 3. [`identify()`]: the eq. 16 cost minimised with `cpm-lm` in the identifiable subspace, with
 //!    an analytic Jacobian by implicit differentiation of forward kinematics;
-//! 4. [`identifiability`]: rank, singular values, blind directions in words, Cramér-Rao bounds;
-//! 5. [`accuracy`]: platform pose error over validation poses, nominal against calibrated.
+//! 4. [`identifiability()`]: rank, singular values, blind directions in words, Cramér-Rao bounds;
+//! 5. [`accuracy()`]: platform pose error over validation poses, nominal against calibrated.
 //!
 //! ```
 //! use cpm_calib::{campaign::paper_circle, identify, simulate, IdentifyOptions, MeasurementModel,
