@@ -58,17 +58,22 @@ fn write_truth(dir: &Path) -> PathBuf {
     path
 }
 
-/// The reading_k columns of a commands file.
+/// The `reading_k` columns of a commands file.
 fn read_commands(text: &str) -> Vec<Vec<f64>> {
+    command_columns(text, |k| format!("reading_{k}"))
+}
+
+/// The `length_k_mm` columns of a commands file.
+fn read_command_lengths(text: &str) -> Vec<Vec<f64>> {
+    command_columns(text, |k| format!("length_{k}_mm"))
+}
+
+/// The six columns `name(1)..name(6)` of a commands file, row by row.
+fn command_columns(text: &str, name: impl Fn(usize) -> String) -> Vec<Vec<f64>> {
     let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let cols: Vec<usize> = (1..=6)
-        .map(|k| {
-            header
-                .iter()
-                .position(|h| *h == format!("reading_{k}"))
-                .unwrap()
-        })
+        .map(|k| header.iter().position(|h| *h == name(k)).unwrap())
         .collect();
     lines
         .map(|l| {
@@ -865,4 +870,61 @@ fn refine_names_undeclared_effects_simulated_by_the_cli() {
         assert_eq!(steps.first(), Some(&name), "{name}: {steps:?}");
         assert!(cv < 1.2 * noise_um, "{name}: cv RMS {cv} um");
     }
+}
+
+#[test]
+fn compensate_corrects_a_known_thermal_drift_at_the_given_temperature() {
+    // A known drift of 12 ppm/K on every link (reference 20 deg C): at 30 deg C the links are
+    // 120 ppm longer, so the commanded lengths L satisfy L (1 + 120e-6) = the IK length.
+    let d = scratch("thermal");
+    let mut r = RobotDescription::load(example("hexapod_66.toml")).unwrap();
+    r.clearance = None;
+    let c = r.calibration.get_or_insert_with(Default::default);
+    c.reference_temperature_c = Some(20.0);
+    c.known_effects = [("thermal_drift".to_string(), vec![12.0; 6])]
+        .into_iter()
+        .collect();
+    let robot = d.join("thermal.toml");
+    std::fs::write(&robot, r.to_toml_string().unwrap()).unwrap();
+    let loaded = Robot::load(&robot).unwrap();
+    let targets = cpm::calib::paper::random_workspace_poses(&loaded.table, 5, 30.0, 5.0, 3.0, 21);
+    let targets_path = d.join("targets.csv");
+    std::fs::write(&targets_path, cpm::io::write_pose_list(&targets)).unwrap();
+    let out = d.join("commands.csv");
+    let base = [
+        "compensate",
+        "--robot",
+        robot.to_str().unwrap(),
+        "--poses",
+        targets_path.to_str().unwrap(),
+    ];
+    let lengths = |temperature: Option<&str>| {
+        let mut args = base.to_vec();
+        args.extend(["--out", out.to_str().unwrap()]);
+        if let Some(t) = temperature {
+            args.extend(["--temperature-c", t]);
+        }
+        ok(&args);
+        read_command_lengths(&std::fs::read_to_string(&out).unwrap())
+    };
+    let warm = lengths(Some("30"));
+    let reference = lengths(Some("20"));
+    let unknown = lengths(None);
+    for (k, t) in targets.iter().enumerate() {
+        let ik = cpm::kinematics::inverse_lengths(&loaded.table, t);
+        for i in 0..6 {
+            assert!((reference[k][i] - ik[i]).abs() < 1e-9);
+            assert!((unknown[k][i] - ik[i]).abs() < 1e-9);
+            let want = ik[i] / (1.0 + 120e-6);
+            assert!(
+                (warm[k][i] - want).abs() < 1e-6,
+                "target {k} link {i}: {} vs {want}",
+                warm[k][i]
+            );
+        }
+    }
+    // A temperature that is not one is a usage error.
+    let mut args = base.to_vec();
+    args.extend(["--temperature-c", "-500"]);
+    assert_eq!(cpm(&args).status.code(), Some(2));
 }
