@@ -58,6 +58,11 @@ fn write_truth(dir: &Path) -> PathBuf {
     path
 }
 
+/// A JSON file written by `cpm`.
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
 /// The `reading_k` columns of a commands file.
 fn read_commands(text: &str) -> Vec<Vec<f64>> {
     command_columns(text, |k| format!("reading_{k}"))
@@ -133,9 +138,7 @@ fn simulate_calibrate_compensate_reduces_the_pose_error() {
     ] {
         assert!(cal.join(f).exists(), "{f} missing");
     }
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(cal.join("calibration.json")).unwrap())
-            .unwrap();
+    let json = read_json(&cal.join("calibration.json"));
     assert_eq!(json["simulated"], true);
     assert_eq!(
         json["installation_errors_um"]["base"]
@@ -273,9 +276,7 @@ fn paper_design_reports_what_it_cannot_determine() {
         "--out",
         &p(&cal),
     ]);
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(cal.join("calibration.json")).unwrap())
-            .unwrap();
+    let json = read_json(&cal.join("calibration.json"));
     assert!(json["installation_errors_um"]["base"][0][0].is_null());
     assert!(json["std_um"]["base"][0][0].is_null());
     assert!(!json["not_determined"].as_array().unwrap().is_empty());
@@ -367,9 +368,7 @@ fn refine_finds_backlash() {
     ] {
         assert!(out_dir.join(f).exists(), "{f}");
     }
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out_dir.join("calibration.json")).unwrap())
-            .unwrap();
+    let json = read_json(&out_dir.join("calibration.json"));
     assert_eq!(json["known_effects"], serde_json::json!([]));
     let toml = std::fs::read_to_string(out_dir.join("calibrated.toml")).unwrap();
     assert!(toml.contains("effects = [\"backlash\"]"), "{toml}");

@@ -326,8 +326,7 @@ fn simulate_poses(
         let mut measured = reached.perturbed(&twist);
         // A known tracker registration: the tracker reports in its own frame.
         if let Some(q) = model.known(Effect::TrackerFrame) {
-            let r = nalgebra::Rotation3::new(nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-6);
-            let t = nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3;
+            let (t, r) = crate::calib::effects::tracker_registration(q);
             measured.position_mm = r * measured.position_mm + t;
             measured.rotation = r * measured.rotation;
         }

@@ -287,6 +287,16 @@ pub fn link_coefficient(
     }
 }
 
+/// The `tracker_frame` registration of parameters `q` (tx, ty, tz um; rx, ry, rz urad): the
+/// translation (mm) and rotation that take a point of the base frame into the tracker frame,
+/// `p_tracker = R p + t`.
+pub fn tracker_registration(q: &[f64]) -> (nalgebra::Vector3<f64>, nalgebra::Rotation3<f64>) {
+    (
+        nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3,
+        nalgebra::Rotation3::new(nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-6),
+    )
+}
+
 /// True when the effect acts through the link channel.
 pub fn is_link_effect(effect: Effect) -> bool {
     !matches!(

@@ -12,8 +12,8 @@ use cpm_kinematics::{forward, ForwardOptions};
 use nalgebra::{DMatrix, Matrix6, Vector6};
 
 use crate::effects::{
-    is_link_effect, link_coefficient, sensor_coefficient, Effect, EffectSettings, KnownEffect,
-    PoseContext,
+    is_link_effect, link_coefficient, sensor_coefficient, tracker_registration, Effect,
+    EffectSettings, KnownEffect, PoseContext,
 };
 use crate::{CalibError, Campaign};
 
@@ -190,9 +190,14 @@ impl MeasurementModel {
                 .collect(),
             None => vec![0.0; n],
         };
+        // The home lengths are the same for every pose: carried over, computed once.
+        let home_mm = match previous {
+            Some(prev) => prev.home_mm.clone(),
+            None => cpm_kinematics::inverse_lengths(&self.nominal, &self.nominal.home),
+        };
         Ok(PoseContext {
             commanded_mm,
-            home_mm: cpm_kinematics::inverse_lengths(&self.nominal, &self.nominal.home),
+            home_mm,
             forces_n,
             motion_sign,
             temperature_c,
@@ -272,21 +277,20 @@ impl MeasurementModel {
             ));
         }
         let mut table = InstallationErrors::try_from_vec_um(&params[..ni])?.apply(&self.nominal)?;
-        if let Some(q) = self.known(Effect::SocketError) {
-            for (si, s) in table.sensors.iter_mut().enumerate() {
-                let q = &q[6 * si..6 * si + 6];
+        // Socket errors, um, 6 per sensor (base xyz, platform xyz): known, then estimated.
+        let mut move_sockets = |q: &[f64]| {
+            for (s, q) in table.sensors.iter_mut().zip(q.chunks_exact(6)) {
                 s.base_mm += nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3;
                 s.platform_mm += nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-3;
             }
+        };
+        if let Some(q) = self.known(Effect::SocketError) {
+            move_sockets(q);
         }
         if params.len() > ni {
             for b in self.blocks() {
                 if b.effect == Some(Effect::SocketError) {
-                    for (si, s) in table.sensors.iter_mut().enumerate() {
-                        let q = &params[b.offset + 6 * si..b.offset + 6 * si + 6];
-                        s.base_mm += nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3;
-                        s.platform_mm += nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-3;
-                    }
+                    move_sockets(&params[b.offset..b.offset + b.len]);
                 }
             }
         }
@@ -402,7 +406,8 @@ impl MeasurementModel {
 /// Per-pose data that does not depend on the parameters, computed once per campaign.
 #[derive(Debug, Clone)]
 pub struct Prepared {
-    /// Effective link lengths per pose (commanded plus clearance), mm.
+    /// Effective link lengths per pose (commanded plus clearance plus the known link
+    /// effects), mm.
     pub lengths_mm: Vec<Vec<f64>>,
     /// What the effects need to know about each pose.
     pub contexts: Vec<PoseContext>,
@@ -430,15 +435,20 @@ impl Prepared {
             measurements_by_pose[pm.pose].push(q);
         }
         let contexts = contexts(model, campaign, &lengths_mm, &by_pose)?;
-        let t0_s = campaign
-            .readings
-            .iter()
-            .filter_map(|r| r.time_s)
-            .fold(f64::INFINITY, f64::min);
+        // The known link effects depend on the pose context only: applied here, once.
+        let mut lengths_mm = lengths_mm;
+        if !model.known_effects.is_empty() {
+            let t0 = campaign_t0_s(campaign);
+            for (l, ctx) in lengths_mm.iter_mut().zip(&contexts) {
+                for (a, d) in l.iter_mut().zip(model.known_link_shift_mm(ctx, t0)) {
+                    *a += d;
+                }
+            }
+        }
         let mut prepared = Prepared {
             lengths_mm,
             contexts,
-            t0_s: if t0_s.is_finite() { t0_s } else { 0.0 },
+            t0_s: campaign_t0_s(campaign),
             by_pose,
             measurements_by_pose,
             first_order: None,
@@ -454,6 +464,20 @@ impl Prepared {
             prepared.first_order = Some((y0, jac));
         }
         Ok(prepared)
+    }
+}
+
+/// Start of the campaign's clock, s: the earliest logged reading time, else 0.
+fn campaign_t0_s(campaign: &Campaign) -> f64 {
+    let t0 = campaign
+        .readings
+        .iter()
+        .filter_map(|r| r.time_s)
+        .fold(f64::INFINITY, f64::min);
+    if t0.is_finite() {
+        t0
+    } else {
+        0.0
     }
 }
 
@@ -561,20 +585,14 @@ fn predict_exact(
     let tracker_block = blocks
         .iter()
         .find(|b| b.effect == Some(Effect::TrackerFrame));
-    let registration = |q: &[f64]| {
-        (
-            nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3,
-            nalgebra::Rotation3::new(nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-6),
-        )
-    };
     // The estimated registration (reg) composed with the known one (known): a point p of the
     // base frame is at reg_r (known_r p + known_t) + reg_t in the tracker frame.
     let (reg_t, reg_r) = match tracker_block {
-        Some(b) => registration(&params[b.offset..b.offset + 6]),
+        Some(b) => tracker_registration(&params[b.offset..b.offset + 6]),
         None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
     };
     let (known_t, known_r) = match model.known(Effect::TrackerFrame) {
-        Some(q) => registration(q),
+        Some(q) => tracker_registration(q),
         None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
     };
     // Known sensor offsets (mm) and scale factors per sensor; the estimated ones add on top.
@@ -611,14 +629,6 @@ fn predict_exact(
         }
         let ctx = &prepared.contexts[j];
         lengths.copy_from_slice(&prepared.lengths_mm[j]);
-        if !model.known_effects.is_empty() {
-            for (l, d) in lengths
-                .iter_mut()
-                .zip(model.known_link_shift_mm(ctx, prepared.t0_s))
-            {
-                *l += d;
-            }
-        }
         for (i, c) in coeff.iter_mut().enumerate() {
             c.clear();
             for b in &link_blocks {

@@ -305,8 +305,8 @@ mod bundle {
 /// The calibration-shaped problem (Schur complement), both damping strategies.
 mod calibration_shape {
     use super::*;
-    use cpm_lm::{minimize_sparse, Damping, LinearSolver, Options};
-    use loops::{Loops, LOCAL};
+    use cpm_lm::{minimize_sparse, Damping, Options};
+    use loops::{schur_options, Loops};
 
     pub fn bench(c: &mut Criterion) {
         let mut group = c.benchmark_group("loops");
@@ -319,15 +319,10 @@ mod calibration_shape {
             ("nielsen", Damping::Nielsen),
         ] {
             let options = Options {
-                damping,
                 ftol: 1e-10,
                 xtol: 1e-10,
                 gtol: 1e-10,
-                compute_statistics: false,
-                linear_solver: LinearSolver::Schur {
-                    local_block_sizes: vec![LOCAL; blocks],
-                },
-                ..Options::default()
+                ..schur_options(blocks, damping)
             };
             let mut x = vec![0.0; problem.truth.len()];
             let r = minimize_sparse(&mut problem, &mut x, &options).unwrap();

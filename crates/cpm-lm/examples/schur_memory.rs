@@ -11,8 +11,8 @@
 #[path = "../tests/common/loops.rs"]
 mod loops;
 
-use cpm_lm::{minimize_sparse, Damping, LinearSolver, Options};
-use loops::{Loops, LOCAL};
+use cpm_lm::{minimize_sparse, Damping, Options};
+use loops::{schur_options, Loops, LOCAL};
 
 fn vm_hwm_mb() -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
@@ -34,15 +34,10 @@ fn main() {
     problem.stream_pattern = args.get(3).is_some_and(|s| s == "stream");
     let setup_mb = vm_hwm_mb();
     let options = Options {
-        damping,
         ftol: 1e-10,
         xtol: 1e-10,
         gtol: 1e-10,
-        compute_statistics: false,
-        linear_solver: LinearSolver::Schur {
-            local_block_sizes: vec![LOCAL; blocks],
-        },
-        ..Options::default()
+        ..schur_options(blocks, damping)
     };
     let mut x = vec![0.0; problem.truth.len()];
     let t = std::time::Instant::now();

@@ -10,18 +10,7 @@ use cpm_lm::{
     check_sparse_jacobian, minimize_sparse, Damping, LinearSolver, ModelError, Options, Problem,
     SparseJacobian,
 };
-use loops::{Loops, LOCAL};
-
-fn options(blocks: usize, damping: Damping) -> Options {
-    Options {
-        damping,
-        linear_solver: LinearSolver::Schur {
-            local_block_sizes: vec![LOCAL; blocks],
-        },
-        compute_statistics: false,
-        ..Options::default()
-    }
-}
+use loops::{schur_options as options, Loops, LOCAL};
 
 fn solve<P: SparseJacobian>(p: &mut P, o: &Options) -> (Vec<f64>, f64) {
     let mut x = vec![0.0; p.num_params()];

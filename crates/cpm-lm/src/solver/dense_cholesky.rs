@@ -11,6 +11,7 @@ use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
 use faer::{Accum, Conj, Mat, Par};
 
 use crate::solver::jacobian::Jacobian;
+use crate::solver::small::{load_negated, store_finite};
 use crate::solver::LinearSystem;
 
 /// Workspace of the dense Cholesky solver.
@@ -76,9 +77,7 @@ impl LinearSystem for DenseCholesky {
         {
             return false;
         }
-        for k in 0..self.n {
-            self.rhs[(k, 0)] = -g[k];
-        }
+        load_negated(&mut self.rhs, &g[..self.n]);
         llt::solve::solve_in_place_with_conj(
             self.a.as_ref(),
             Conj::No,
@@ -86,11 +85,7 @@ impl LinearSystem for DenseCholesky {
             Par::Seq,
             stack,
         );
-        let mut ok = true;
-        for k in 0..self.n {
-            h[k] = self.rhs[(k, 0)];
-            ok &= h[k].is_finite();
-        }
+        let ok = store_finite(&self.rhs, &mut h[..self.n]);
         self.factored = ok;
         ok
     }

@@ -76,6 +76,26 @@ pub(crate) fn backward_solve(l: &[f64], k: usize, b: &mut [f64]) {
 }
 
 /// Solves `L L^T x = b` in place, `l` from [`cholesky`].
+/// Writes `-g` into the single column `rhs` (the right-hand side of the damped normal
+/// equations).
+#[inline]
+pub(crate) fn load_negated(rhs: &mut faer::Mat<f64>, g: &[f64]) {
+    for (k, v) in g.iter().enumerate() {
+        rhs[(k, 0)] = -v;
+    }
+}
+
+/// Copies the single column `rhs` into `h`; true when every entry is finite.
+#[inline]
+pub(crate) fn store_finite(rhs: &faer::Mat<f64>, h: &mut [f64]) -> bool {
+    let mut ok = true;
+    for (k, v) in h.iter_mut().enumerate() {
+        *v = rhs[(k, 0)];
+        ok &= v.is_finite();
+    }
+    ok
+}
+
 #[cfg(test)]
 pub(crate) fn cholesky_solve(l: &[f64], k: usize, b: &mut [f64]) {
     forward_solve(l, k, b);

@@ -18,6 +18,7 @@ use faer::{Conj, Mat, Par, Side};
 
 use crate::error::LmError;
 use crate::solver::jacobian::{Jacobian, SparseJac};
+use crate::solver::small::{load_negated, store_finite};
 use crate::solver::LinearSystem;
 
 /// From this many parameters on, the supernodal factorisation is always used.
@@ -242,15 +243,9 @@ impl LinearSystem for SparseCholesky {
             Ok(l) => l,
             Err(_) => return false,
         };
-        for k in 0..self.n {
-            self.rhs[(k, 0)] = -g[k];
-        }
+        load_negated(&mut self.rhs, &g[..self.n]);
         llt.solve_in_place_with_conj(Conj::No, self.rhs.as_mut(), Par::Seq, stack);
-        let mut ok = true;
-        for k in 0..self.n {
-            h[k] = self.rhs[(k, 0)];
-            ok &= h[k].is_finite();
-        }
+        let ok = store_finite(&self.rhs, &mut h[..self.n]);
         self.factored = ok;
         ok
     }

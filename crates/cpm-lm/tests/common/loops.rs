@@ -7,9 +7,22 @@
 //! (`#[path]`-included).
 #![allow(dead_code)]
 
-use cpm_lm::{ModelError, Problem, SparseJacobian};
+use cpm_lm::{Damping, LinearSolver, ModelError, Options, Problem, SparseJacobian};
 
 pub const LOCAL: usize = 6;
+
+/// Options for `blocks` poses: the Schur solver over the pose blocks, `damping`, default
+/// tolerances, no statistics.
+pub fn schur_options(blocks: usize, damping: Damping) -> Options {
+    Options {
+        damping,
+        linear_solver: LinearSolver::Schur {
+            local_block_sizes: vec![LOCAL; blocks],
+        },
+        compute_statistics: false,
+        ..Options::default()
+    }
+}
 pub const GLOBAL: usize = 36;
 pub const LEGS: usize = 6;
 pub const SENSORS: usize = 16;
