@@ -1,5 +1,8 @@
 //! Errors of the kinematics crate.
+use nalgebra::Matrix6;
 use thiserror::Error;
+
+use crate::linalg::SvdError;
 
 /// What can go wrong in kinematics.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -28,10 +31,57 @@ pub enum KinematicsError {
         /// Description.
         what: String,
     },
+    /// The SVD behind a condition number or a solve could not be computed (a named
+    /// failure, never reported as an infinite condition number).
+    #[error(transparent)]
+    Svd(#[from] SvdError),
     /// A non-finite input.
     #[error("non-finite input: {what}")]
     NonFinite {
         /// Which input.
         what: String,
     },
+}
+
+impl KinematicsError {
+    /// [`KinematicsError::Singular`] at `iteration` with the condition number of the 6x6
+    /// `j1` (infinite when `j1` has a non-finite entry: a link of zero length), or
+    /// [`KinematicsError::Svd`] when the SVD fails on a finite `j1`.
+    pub fn singular(iteration: usize, j1: &Matrix6<f64>) -> Self {
+        match crate::fk::condition_number(j1) {
+            Ok(condition) => Self::Singular {
+                iteration,
+                condition,
+            },
+            Err(SvdError::NonFinite { .. }) => Self::Singular {
+                iteration,
+                condition: f64::INFINITY,
+            },
+            Err(e) => Self::Svd(e),
+        }
+    }
+
+    /// Applies `f` to the condition number a [`Singular`](Self::Singular) or
+    /// [`NonConvergence`](Self::NonConvergence) carries.
+    pub(crate) fn map_condition(self, f: impl Fn(f64) -> f64) -> Self {
+        match self {
+            Self::Singular {
+                iteration,
+                condition,
+            } => Self::Singular {
+                iteration,
+                condition: f(condition),
+            },
+            Self::NonConvergence {
+                iterations,
+                residual_mm,
+                condition,
+            } => Self::NonConvergence {
+                iterations,
+                residual_mm,
+                condition: f(condition),
+            },
+            other => other,
+        }
+    }
 }

@@ -2,6 +2,7 @@
 use cpm_geometry::{JointTable, Pose};
 use nalgebra::{DMatrix, Matrix6, Vector3, Vector6};
 
+use crate::linalg::SvdError;
 use crate::KinematicsError;
 
 /// Options of the forward kinematics solver.
@@ -40,11 +41,11 @@ pub struct ForwardReport {
     pub residual_mm: f64,
 }
 
-/// 2-norm condition number of a 6x6 matrix; infinite when it is singular or not finite.
-/// (Computed with the accurate [`crate::linalg::Svd`].)
-pub fn condition_number(m: &Matrix6<f64>) -> f64 {
+/// 2-norm condition number of a 6x6 matrix (infinite when it is exactly singular); an
+/// error when an entry is not finite or the SVD fails (see [`crate::linalg`]).
+pub fn condition_number(m: &Matrix6<f64>) -> Result<f64, SvdError> {
     let d = DMatrix::from_column_slice(6, 6, m.as_slice());
-    crate::linalg::Svd::new(&d).map_or(f64::INFINITY, |s| s.condition_number())
+    crate::linalg::condition_number(&d)
 }
 
 /// A 6x6 matrix as rows, for the allocation-free solver.
@@ -52,13 +53,26 @@ type Mat6 = [[f64; 6]; 6];
 
 /// Condition number of J1 from the assembled system: `jac` is J1 itself for six links and
 /// `J1^T J1` (whose condition number is the square) for more.
-fn j1_condition(jac: &Mat6, links: usize) -> f64 {
-    let c = condition_number(&Matrix6::from_fn(|i, j| jac[i][j]));
-    if links == 6 {
-        c
-    } else {
-        c.sqrt()
+fn j1_condition(jac: &Mat6, links: usize) -> Result<f64, SvdError> {
+    let c = condition_number(&Matrix6::from_fn(|i, j| jac[i][j]))?;
+    Ok(if links == 6 { c } else { c.sqrt() })
+}
+
+/// J1's condition number for an error report: infinite when J1 is not finite (a link of
+/// zero length), the SVD's own error when it fails on a finite J1.
+fn reported_condition(jac: &Mat6, links: usize) -> Result<f64, KinematicsError> {
+    match j1_condition(jac, links) {
+        Ok(c) => Ok(c),
+        Err(SvdError::NonFinite { .. }) => Ok(f64::INFINITY),
+        Err(e) => Err(e.into()),
     }
+}
+
+/// [`KinematicsError::Singular`] with J1's condition number (infinite when J1 is not
+/// finite: a link of zero length), or the SVD's own error when it fails on a finite J1.
+fn singular(iteration: usize, jac: &Mat6, links: usize) -> KinematicsError {
+    KinematicsError::singular(iteration, &Matrix6::from_fn(|i, j| jac[i][j]))
+        .map_condition(|c| if links == 6 { c } else { c.sqrt() })
 }
 
 /// Solves `a x = b` in place (`b` becomes `x`) by Gaussian elimination with partial pivoting.
@@ -209,10 +223,7 @@ pub fn forward(
         let mut lu = jac;
         let mut step = rhs;
         if !solve6(&mut lu, &mut step) {
-            return Err(KinematicsError::Singular {
-                iteration: it,
-                condition: j1_condition(&jac, n),
-            });
+            return Err(singular(it, &jac, n));
         }
         let step = Vector6::from(step);
         // Cheap singularity guard: a huge step from a small residual means J1 is near singular.
@@ -222,7 +233,7 @@ pub fn forward(
             .min(options.max_step_rad / dw.norm().max(1e-300))
             .min(1.0);
         if scale < 1.0 {
-            let c = j1_condition(&jac, n);
+            let c = reported_condition(&jac, n)?;
             let acceptable = c <= options.max_condition; // false for NaN
             if !acceptable {
                 return Err(KinematicsError::Singular {
@@ -249,6 +260,6 @@ pub fn forward(
     Err(KinematicsError::NonConvergence {
         iterations: options.max_iterations,
         residual_mm: worst,
-        condition: j1_condition(&jac, n),
+        condition: reported_condition(&jac, n)?,
     })
 }

@@ -108,11 +108,8 @@ pub fn first_order_pose_error(
     }
     let b = j2(table, pose);
     let rhs = DVector::from_column_slice(dl_mm) - b * DVector::from_column_slice(de_mm);
-    // One-sided Jacobi: nalgebra's SVD is not accurate enough here (see `linalg`).
-    let svd = Svd::new(&a).ok_or(KinematicsError::Singular {
-        iteration: 0,
-        condition: f64::INFINITY,
-    })?;
+    // faer's SVD after exact scaling: nalgebra's is not accurate enough here (see `linalg`).
+    let svd = Svd::new(&a)?;
     let condition = svd.condition_number();
     let regular = condition < 1e12; // false for NaN
     if !regular {

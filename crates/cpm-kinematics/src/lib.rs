@@ -19,8 +19,9 @@
 //! ```
 //!
 //! Newton's forward kinematics finds the assembly mode whose basin holds its start; the
-//! [`workspace`] module tells whether a pose can be reached from home without crossing a
-//! singularity. [`linalg`] holds the accurate SVD used for condition numbers and eq. 12.
+//! [`workspace`] module judges a pose where the machine is (length limits, J1's condition,
+//! forward kinematics returning it) or along a path from home. [`linalg`] holds the SVD
+//! (faer, exactly scaled) used for condition numbers and eq. 12.
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -37,4 +38,4 @@ pub use fk::{forward, ForwardOptions, ForwardReport};
 pub use ik::{inverse, inverse_lengths, inverse_lengths_into, LinkState};
 pub use jacobian::{first_order_pose_error, j1, j2};
 pub use sensor::{sensor_length_mm, sensor_pose_gradient};
-pub use workspace::{reachable_from_home, Unreachable};
+pub use workspace::{reachable_at, reachable_from_home, Unreachable};

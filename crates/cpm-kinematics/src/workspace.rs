@@ -1,29 +1,35 @@
-//! Reachability: link length limits, J1's condition number and singularity-free paths.
+//! Reachability: link length limits, J1's condition number and the assembly mode.
 //!
-//! Newton's forward kinematics finds the solution in whose basin its start lies. A pose is
-//! *reachable from home* here when the straight twist path from the home pose to it stays
-//! within every link's length limits, keeps J1's condition number below a bound and keeps the
-//! sign of det J1 (for six links): the robot can move there without crossing a singular
-//! configuration, so the pose is in home's assembly mode and forward kinematics started at
-//! home returns it.
+//! A pose is judged where the machine is ([`reachable_at`]): it is refused only for what is
+//! wrong at it: a link length outside its limits there, J1's condition number there beyond a
+//! bound, or forward kinematics from the pose's own link lengths not returning it (started
+//! from home, and again from a start near the pose). That is the rule the readers of `cpm`
+//! apply to commanded and measured poses: the machine does not drive a straight line from
+//! home to each pose, so what lies on that line says nothing about the pose.
+//!
+//! [`reachable_between`] and [`reachable_from_home`] check a straight twist path instead
+//! (length limits, condition number and the sign of det J1 along it): a pose that passes
+//! is in home's assembly mode and can be driven to from home without crossing a singular
+//! configuration. Use them to plan motions, not to judge data.
 //!
 //! ```
 //! use cpm_geometry::{JointTable, Pose};
-//! use cpm_kinematics::workspace::{reachable_from_home, Unreachable};
+//! use cpm_kinematics::workspace::{reachable_at, Unreachable};
 //! let t = JointTable::paper_cubic();
 //! let near = Pose::from_xyz_rpy(10.0, -20.0, 430.0, 0.1, 0.0, -0.1);
-//! assert!(reachable_from_home(&t, &near, 1e4).is_ok());
+//! assert!(reachable_at(&t, &near, 1e4).is_ok());
 //! // Dropping the platform onto the base plane folds the z links flat: singular.
 //! let flat = Pose::from_xyz_rpy(0.0, 0.0, 56.0, 0.0, 0.0, 0.0);
 //! assert!(matches!(
-//!     reachable_from_home(&t, &flat, 1e4),
-//!     Err(Unreachable::NearSingular { .. } | Unreachable::AssemblyModeChange { .. })
+//!     reachable_at(&t, &flat, 1e4),
+//!     Err(Unreachable::NearSingular { .. })
 //! ));
 //! ```
 use cpm_geometry::{JointTable, Pose};
-use nalgebra::Matrix6;
+use nalgebra::{Matrix6, Vector6};
 
-use crate::{inverse_lengths, j1};
+use crate::linalg::SvdError;
+use crate::{forward, inverse_lengths, j1, ForwardOptions};
 
 /// Why a pose is not reachable (see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -47,6 +53,18 @@ pub enum Unreachable {
         /// Fraction of the path (0..1] where the sign change was seen.
         at: f64,
     },
+    /// Forward kinematics from the pose's own link lengths, started from home and from near
+    /// the pose, does not return the pose.
+    ForwardMismatch {
+        /// Distance between the pose and what forward kinematics from home returned, mm
+        /// (infinite when it did not converge).
+        from_home_mm: f64,
+        /// The same from a start near the pose, mm (infinite when it did not converge).
+        from_near_mm: f64,
+    },
+    /// The SVD behind J1's condition number failed (a named failure, never read as an
+    /// infinite condition number).
+    Svd(SvdError),
     /// A pose or length is not finite, or the table has fewer than six links.
     Invalid,
 }
@@ -54,13 +72,14 @@ pub enum Unreachable {
 /// Samples checked along a path.
 const PATH_SAMPLES: usize = 32;
 
-/// Condition number (2-norm) of J1 at `pose`; infinite when singular or not finite.
-pub fn j1_condition(table: &JointTable, pose: &Pose) -> f64 {
-    let j = j1(table, pose);
-    if j.nrows() < 6 {
-        return f64::INFINITY;
+/// Condition number (2-norm) of J1 at `pose`; infinite when J1 is exactly singular or not
+/// finite (a link of zero length at a finite pose); an error when J1 has fewer than six
+/// rows or the SVD fails on it.
+pub fn j1_condition(table: &JointTable, pose: &Pose) -> Result<f64, SvdError> {
+    match crate::linalg::condition_number(&j1(table, pose)) {
+        Err(SvdError::NonFinite { .. }) if pose.is_finite() => Ok(f64::INFINITY),
+        other => other,
     }
-    crate::linalg::Svd::new(&j).map_or(f64::INFINITY, |s| s.condition_number())
 }
 
 /// Checks every link's length limits at `pose` (links without limits always pass).
@@ -117,7 +136,7 @@ pub fn reachable_between(
         if square && k > 0 && !same_sign {
             return Err(Unreachable::AssemblyModeChange { at: s });
         }
-        let c = j1_condition(table, &pose);
+        let c = j1_condition(table, &pose).map_err(Unreachable::Svd)?;
         let acceptable = c <= max_condition; // false for NaN
         if !acceptable {
             return Err(Unreachable::NearSingular { condition: c });
@@ -133,4 +152,61 @@ pub fn reachable_from_home(
     max_condition: f64,
 ) -> Result<(), Unreachable> {
     reachable_between(table, &table.home, target, max_condition)
+}
+
+/// A start near the pose for the second forward kinematics check: 0.3 mm and 2 mrad away,
+/// far more than installation errors move a pose, far less than separates assembly modes.
+const NEAR_START: [f64; 6] = [0.3, -0.2, 0.25, 2e-3, -1.5e-3, 1e-3];
+
+/// How close forward kinematics must come back to the pose: mm, and rad times the
+/// platform's joint radius.
+const RETURN_TOLERANCE_MM: f64 = 1e-3;
+
+/// Judges `pose` where the machine is (see the module doc): every link length within its
+/// limits there, J1's condition number there at most `max_condition`, and forward
+/// kinematics from the pose's link lengths returning the pose, started from home or (if
+/// that lands elsewhere) from a start near the pose.
+pub fn reachable_at(
+    table: &JointTable,
+    pose: &Pose,
+    max_condition: f64,
+) -> Result<(), Unreachable> {
+    if table.num_links() < 6 || !pose.is_finite() {
+        return Err(Unreachable::Invalid);
+    }
+    within_length_limits(table, pose)?;
+    let c = j1_condition(table, pose).map_err(Unreachable::Svd)?;
+    let acceptable = c <= max_condition; // false for NaN
+    if !acceptable {
+        return Err(Unreachable::NearSingular { condition: c });
+    }
+    let lengths = inverse_lengths(table, pose);
+    let radius_mm = table
+        .links
+        .iter()
+        .map(|l| l.platform_mm.norm())
+        .fold(1.0f64, f64::max);
+    let distance = |start: &Pose| -> f64 {
+        match forward(table, &lengths, start, &ForwardOptions::default()) {
+            Ok((p, _)) => {
+                let d = pose.difference(&p);
+                let dt = Vector6::new(d[0], d[1], d[2], 0.0, 0.0, 0.0).norm();
+                let dw = Vector6::new(d[3], d[4], d[5], 0.0, 0.0, 0.0).norm();
+                dt + dw * radius_mm
+            }
+            Err(_) => f64::INFINITY,
+        }
+    };
+    let from_home_mm = distance(&table.home);
+    if from_home_mm <= RETURN_TOLERANCE_MM {
+        return Ok(());
+    }
+    let from_near_mm = distance(&pose.perturbed(&Vector6::from(NEAR_START)));
+    if from_near_mm <= RETURN_TOLERANCE_MM {
+        return Ok(());
+    }
+    Err(Unreachable::ForwardMismatch {
+        from_home_mm,
+        from_near_mm,
+    })
 }
