@@ -2,8 +2,8 @@
 //! [`Campaign`] and written back; lists of poses (plans, compensation targets).
 //!
 //! The formats are documented in `docs/formats.md`. Reading checks every field (numbers
-//! finite, sensor names known, rows of one pose agreeing) and every pose (reachable from home
-//! without crossing a singularity, link readings and sensor lengths consistent with it, which
+//! finite, sensor names known, rows of one pose agreeing) and every pose (reachable where it
+//! is: length limits, J1's condition, forward kinematics returning it; link readings and sensor lengths consistent with it, which
 //! catches a file in the wrong units); each failure names the file, the line and the field.
 use std::collections::HashMap;
 use std::io::Read;
@@ -12,7 +12,7 @@ use std::path::Path;
 use cpm_calib::campaign::PoseMeasurement;
 use cpm_calib::{Campaign, Reading};
 use cpm_geometry::{JointTable, Pose, Vector3};
-use cpm_kinematics::workspace::{reachable_from_home, Unreachable};
+use cpm_kinematics::workspace::{reachable_at, Unreachable};
 
 use super::table::{field, num, shorten, show, FileKind, Header, Row, Table, SIMULATED_MARK};
 use super::{InputError, ReadError, Robot};
@@ -40,8 +40,8 @@ pub struct ReadOptions {
     /// Check each length reading against the nominal sensor length at its pose. Turn off for
     /// sensors whose zero is unknown (`sensor_offset` modelled). Default true.
     pub check_sensor_lengths: bool,
-    /// A pose is refused when J1's condition number on the way from home exceeds this factor
-    /// times its value at home. Default 1000.
+    /// A pose is refused when J1's condition number at it exceeds this factor times its
+    /// value at home (and at least 10). Default 1000.
     pub max_condition_ratio: f64,
     /// The most data rows a file may have (the reading stops with an error at the next one).
     /// Default [`MAX_ROWS`].
@@ -189,7 +189,10 @@ fn tolerance_mm(length_mm: f64) -> f64 {
     CONSISTENCY_MM + CONSISTENCY_REL * length_mm.abs()
 }
 
-/// Checks that a pose can be reached from home; the error names the pose's first line.
+/// Checks a pose where the machine is (see [`reachable_at`]): link lengths within their
+/// limits there, J1's condition number there at most `max_condition_ratio` times its home
+/// value (at least 10), forward kinematics from the pose's link lengths returning it. The
+/// error names the pose's first line.
 pub fn check_reachable(
     table: &JointTable,
     pose: &Pose,
@@ -198,31 +201,43 @@ pub fn check_reachable(
     line: usize,
     label: &str,
 ) -> Result<(), InputError> {
-    let c0 = cpm_kinematics::workspace::j1_condition(table, &table.home);
-    let bound = if c0.is_finite() {
-        (max_condition_ratio * c0).max(10.0)
-    } else {
-        f64::INFINITY
+    let home_condition = cpm_kinematics::workspace::j1_condition(table, &table.home);
+    let (bound, c0) = match home_condition {
+        Ok(c0) if c0.is_finite() => ((max_condition_ratio * c0).max(10.0), c0),
+        Ok(c0) => (f64::INFINITY, c0),
+        Err(e) => {
+            return Err(InputError::line(
+                file,
+                line,
+                format!("J1's condition number at the robot's home pose: {e}"),
+            ))
+        }
     };
-    let why = match reachable_from_home(table, pose, bound) {
+    let why = match reachable_at(table, pose, bound) {
         Ok(()) => return Ok(()),
         Err(Unreachable::LengthLimit {
             link,
             length_mm,
             limits_mm,
         }) => format!(
-            "link {} would be {length_mm:.3} mm long, outside its limits [{}, {}] mm",
+            "link {} would be {length_mm:.3} mm long there, outside its limits [{}, {}] mm",
             link + 1,
             limits_mm.0,
             limits_mm.1
         ),
         Err(Unreachable::NearSingular { condition }) => format!(
-            "the machine is (near) singular there or on the way from home (J1 condition number {condition:.3e}, {c0:.3e} at home)"
+            "the machine is (near) singular there (J1 condition number {condition:.3e}, {c0:.3e} at home, at most {bound:.3e} accepted)"
         ),
-        Err(Unreachable::AssemblyModeChange { at }) => format!(
-            "the way from home crosses a singularity ({:.0} % of the way): the pose belongs to another assembly mode",
-            at * 100.0
+        Err(Unreachable::AssemblyModeChange { .. }) => "det J1 there has the opposite sign to home's and forward kinematics from home does not return it: the pose belongs to another assembly mode (or is in other units)".to_string(),
+        Err(Unreachable::ForwardMismatch {
+            from_home_mm,
+            from_near_mm,
+        }) => format!(
+            "forward kinematics from its own link lengths does not return it (lands {from_home_mm:.3e} mm away started from home, {from_near_mm:.3e} mm started near the pose): another assembly mode or a degenerate configuration"
         ),
+        Err(Unreachable::Svd(e)) => {
+            format!("J1's condition number there could not be computed: {e}")
+        }
         Err(Unreachable::Invalid) => {
             "its link lengths are not finite numbers (an implausible pose or robot)".to_string()
         }
@@ -235,7 +250,7 @@ pub fn check_reachable(
         file,
         line,
         format!(
-            "pose {label:?} (x {x} mm, y {y} mm, z {z} mm, roll {r:.4} deg, pitch {p:.4} deg, yaw {w:.4} deg) is not reachable from home: {why} (positions are in mm, angles in degrees)"
+            "pose {label:?} (x {x} mm, y {y} mm, z {z} mm, roll {r:.4} deg, pitch {p:.4} deg, yaw {w:.4} deg) is not reachable: {why} (positions are in mm, angles in degrees)"
         ),
     ))
 }

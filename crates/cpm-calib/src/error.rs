@@ -22,6 +22,9 @@ pub enum CalibError {
         #[source]
         source: cpm_clearance::ClearanceError,
     },
+    /// An SVD could not be computed (non-finite entries, or faer did not converge).
+    #[error(transparent)]
+    Svd(#[from] cpm_kinematics::linalg::SvdError),
     /// Geometry error (bad table, unknown sensor, wrong error count).
     #[error(transparent)]
     Geometry(#[from] cpm_geometry::GeometryError),

@@ -17,7 +17,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::{Campaign, MeasurementModel};
+use crate::{Campaign, CalibError, MeasurementModel};
 use cpm_geometry::InstallationErrors;
 
 /// Thresholds of the identifiability analysis.
@@ -351,12 +351,37 @@ fn orthonormalise(vectors: &[DVector<f64>], against: Option<&DMatrix<f64>>) -> V
 }
 
 /// Identifiability of the parameters from a Jacobian (readings x parameters, um per um).
+///
+/// A Jacobian whose SVD cannot be computed (a non-finite entry) is reported as rank 0, every
+/// parameter undetermined; [`try_analyze`] returns that failure as an error instead.
 pub fn analyze(
     jacobian: &DMatrix<f64>,
     sigma_um: f64,
     options: &RankOptions,
     patterns: &[Pattern],
 ) -> Identifiability {
+    analyze_with(jacobian, sigma_um, options, patterns, false)
+        .expect("analyze_with(strict = false) does not fail")
+}
+
+/// Like [`analyze`], with an SVD failure (a non-finite entry in the Jacobian, faer not
+/// converging) reported as [`CalibError::Svd`].
+pub fn try_analyze(
+    jacobian: &DMatrix<f64>,
+    sigma_um: f64,
+    options: &RankOptions,
+    patterns: &[Pattern],
+) -> Result<Identifiability, CalibError> {
+    analyze_with(jacobian, sigma_um, options, patterns, true)
+}
+
+fn analyze_with(
+    jacobian: &DMatrix<f64>,
+    sigma_um: f64,
+    options: &RankOptions,
+    patterns: &[Pattern],
+    strict: bool,
+) -> Result<Identifiability, CalibError> {
     let (m, np) = jacobian.shape();
     // SVD of J (thin). For m < np pad with zero rows so that V is square.
     let padded;
@@ -373,8 +398,9 @@ pub fn analyze(
     // faer's SVD (nalgebra's bidiagonal SVD loses accuracy on some small matrices); the
     // padded matrix is square, so V is complete.
     let (sv, v) = match crate::linalg::thin_svd(jm) {
-        Some((sv, _, v)) => (sv, v),
-        None => (vec![0.0; np], DMatrix::identity(np, np)),
+        Ok((sv, _, v)) => (sv, v),
+        Err(e) if strict => return Err(e.into()),
+        Err(_) => (vec![0.0; np], DMatrix::identity(np, np)),
     };
     let smax = sv.first().copied().unwrap_or(0.0);
     let threshold = options.rank_rtol * smax;
@@ -428,7 +454,7 @@ pub fn analyze(
             explained.extend(new);
         }
     }
-    Identifiability {
+    Ok(Identifiability {
         num_params: np,
         num_readings: m,
         rank,
@@ -443,7 +469,7 @@ pub fn analyze(
         sigma_um,
         crlb_std_um: crlb,
         combination_std_um,
-    }
+    })
 }
 
 /// Names of the installation-error parameters, e.g. `link 2 platform dy`.

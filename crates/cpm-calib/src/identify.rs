@@ -9,7 +9,7 @@ use cpm_lm::{DenseJacobian, ModelError, Problem};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::identifiability::{analyze, physical_patterns, Identifiability, RankOptions};
+use crate::identifiability::{physical_patterns, try_analyze, Identifiability, RankOptions};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, MeasurementModel};
 
@@ -178,12 +178,12 @@ pub fn identifiability(
     options: &RankOptions,
 ) -> Result<Identifiability, CalibError> {
     let j = identification_jacobian(model, campaign, &vec![0.0; model.num_params()])?;
-    Ok(analyze(
+    try_analyze(
         &j,
         sigma_um,
         options,
         &physical_patterns(model, campaign),
-    ))
+    )
 }
 
 impl Calibration {
@@ -246,7 +246,7 @@ pub fn identify(
     let mut j0 = DMatrix::zeros(m, np);
     predict(model, &prepared, campaign, &start, Some(&mut j0))?;
     let patterns = physical_patterns(model, campaign);
-    let first = analyze(&weigh(j0), 1.0, &options.rank, &patterns);
+    let first = try_analyze(&weigh(j0), 1.0, &options.rank, &patterns)?;
     if first.rank == 0 {
         return Err(CalibError::NoInformation(
             "the identification Jacobian is zero: the readings do not depend on any installation error".into(),
@@ -294,7 +294,7 @@ pub fn identify(
             ((ssr / dof as f64).sqrt(), true)
         }
     };
-    let mut ident = analyze(&jf, sigma_um, &options.rank, &[]);
+    let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
     // Blind directions are named at the start (the nominal geometry, where the physical
     // patterns are exact); at the solution the errors tilt them by a few microradians.
     ident.blind_directions = first.blind_directions.clone();

@@ -44,7 +44,7 @@ pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
 pub use campaign::{Campaign, Plan, Reading};
 pub use effects::{Effect, EffectSettings, KnownEffect};
 pub use error::CalibError;
-pub use identifiability::{analyze, Identifiability, RankOptions};
+pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
 pub use identify::{
     identifiability, identification_jacobian, identify, Calibration, IdentifyOptions,
 };

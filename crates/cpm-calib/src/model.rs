@@ -691,10 +691,7 @@ fn predict_exact(
                 let g = cpm_kinematics::sensor_pose_gradient(s, &pose);
                 let v = lu_t.solve(&g).ok_or_else(|| CalibError::Kinematics {
                     pose: j,
-                    source: cpm_kinematics::KinematicsError::Singular {
-                        iteration: 0,
-                        condition: cpm_kinematics::fk::condition_number(&j1),
-                    },
+                    source: cpm_kinematics::KinematicsError::singular(0, &j1),
                 })?;
                 let mut row = jac.row_mut(k);
                 row.fill(0.0);
@@ -761,10 +758,7 @@ fn predict_exact(
                     if any {
                         let sol = lu.solve(&rhs).ok_or_else(|| CalibError::Kinematics {
                             pose: j,
-                            source: cpm_kinematics::KinematicsError::Singular {
-                                iteration: 0,
-                                condition: cpm_kinematics::fk::condition_number(&j1),
-                            },
+                            source: cpm_kinematics::KinematicsError::singular(0, &j1),
                         })?;
                         dx.set_column(p, &sol);
                     }

@@ -187,9 +187,7 @@ fn novelty(
     if norm == 0.0 {
         return Ok(0.0);
     }
-    let Some((sv, u, _)) = crate::linalg::thin_svd(&old) else {
-        return Ok(0.0);
-    };
+    let (sv, u, _) = crate::linalg::thin_svd(&old)?;
     let smax = sv.first().copied().unwrap_or(0.0);
     let keep: Vec<usize> = (0..sv.len())
         .filter(|&i| sv[i] > rank_rtol * smax)

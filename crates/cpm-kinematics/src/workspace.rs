@@ -2,8 +2,9 @@
 //!
 //! A pose is judged where the machine is ([`reachable_at`]): it is refused only for what is
 //! wrong at it: a link length outside its limits there, J1's condition number there beyond a
-//! bound, or forward kinematics from the pose's own link lengths not returning it (started
-//! from home, and again from a start near the pose). That is the rule the readers of `cpm`
+//! bound, or the pose in another assembly mode than home: forward kinematics from the pose's
+//! own link lengths started at home does not return it and det J1 there has the other sign
+//! (or a start near the pose does not return it either). That is the rule the readers of `cpm`
 //! apply to commanded and measured poses: the machine does not drive a straight line from
 //! home to each pose, so what lies on that line says nothing about the pose.
 //!
@@ -48,9 +49,11 @@ pub enum Unreachable {
         /// The condition number found.
         condition: f64,
     },
-    /// det J1 changes sign on the way: the target is in another assembly mode.
+    /// det J1 changes sign on the way (or has, at the pose, the opposite sign to home's):
+    /// the target is in another assembly mode.
     AssemblyModeChange {
-        /// Fraction of the path (0..1] where the sign change was seen.
+        /// Fraction of the path (0..1] where the sign change was seen; 1 for
+        /// [`reachable_at`].
         at: f64,
     },
     /// Forward kinematics from the pose's own link lengths, started from home and from near
@@ -163,14 +166,12 @@ const NEAR_START: [f64; 6] = [0.3, -0.2, 0.25, 2e-3, -1.5e-3, 1e-3];
 const RETURN_TOLERANCE_MM: f64 = 1e-3;
 
 /// Judges `pose` where the machine is (see the module doc): every link length within its
-/// limits there, J1's condition number there at most `max_condition`, and forward
-/// kinematics from the pose's link lengths returning the pose, started from home or (if
-/// that lands elsewhere) from a start near the pose.
-pub fn reachable_at(
-    table: &JointTable,
-    pose: &Pose,
-    max_condition: f64,
-) -> Result<(), Unreachable> {
+/// limits there, J1's condition number there at most `max_condition`, and the pose in the
+/// assembly mode of home: forward kinematics from the pose's link lengths, started from home,
+/// returns it; or (when that lands in another solution, as Newton's basins are not the
+/// modes) det J1 at the pose has home's sign (six links) and forward kinematics started near
+/// the pose returns it.
+pub fn reachable_at(table: &JointTable, pose: &Pose, max_condition: f64) -> Result<(), Unreachable> {
     if table.num_links() < 6 || !pose.is_finite() {
         return Err(Unreachable::Invalid);
     }
@@ -200,6 +201,12 @@ pub fn reachable_at(
     let from_home_mm = distance(&table.home);
     if from_home_mm <= RETURN_TOLERANCE_MM {
         return Ok(());
+    }
+    if table.num_links() == 6 {
+        let same_sign = det6(table, pose) * det6(table, &table.home) > 0.0; // false for NaN
+        if !same_sign {
+            return Err(Unreachable::AssemblyModeChange { at: 1.0 });
+        }
     }
     let from_near_mm = distance(&pose.perturbed(&Vector6::from(NEAR_START)));
     if from_near_mm <= RETURN_TOLERANCE_MM {
