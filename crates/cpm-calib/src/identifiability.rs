@@ -17,7 +17,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::{Campaign, CalibError, MeasurementModel};
+use crate::{CalibError, Campaign, MeasurementModel};
 use cpm_geometry::InstallationErrors;
 
 /// Thresholds of the identifiability analysis.

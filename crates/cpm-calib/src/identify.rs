@@ -178,12 +178,7 @@ pub fn identifiability(
     options: &RankOptions,
 ) -> Result<Identifiability, CalibError> {
     let j = identification_jacobian(model, campaign, &vec![0.0; model.num_params()])?;
-    try_analyze(
-        &j,
-        sigma_um,
-        options,
-        &physical_patterns(model, campaign),
-    )
+    try_analyze(&j, sigma_um, options, &physical_patterns(model, campaign))
 }
 
 impl Calibration {

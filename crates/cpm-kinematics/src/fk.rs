@@ -71,8 +71,13 @@ fn reported_condition(jac: &Mat6, links: usize) -> Result<f64, KinematicsError> 
 /// [`KinematicsError::Singular`] with J1's condition number (infinite when J1 is not
 /// finite: a link of zero length), or the SVD's own error when it fails on a finite J1.
 fn singular(iteration: usize, jac: &Mat6, links: usize) -> KinematicsError {
-    KinematicsError::singular(iteration, &Matrix6::from_fn(|i, j| jac[i][j]))
-        .map_condition(|c| if links == 6 { c } else { c.sqrt() })
+    KinematicsError::singular(iteration, &Matrix6::from_fn(|i, j| jac[i][j])).map_condition(|c| {
+        if links == 6 {
+            c
+        } else {
+            c.sqrt()
+        }
+    })
 }
 
 /// Solves `a x = b` in place (`b` becomes `x`) by Gaussian elimination with partial pivoting.

@@ -171,7 +171,11 @@ const RETURN_TOLERANCE_MM: f64 = 1e-3;
 /// returns it; or (when that lands in another solution, as Newton's basins are not the
 /// modes) det J1 at the pose has home's sign (six links) and forward kinematics started near
 /// the pose returns it.
-pub fn reachable_at(table: &JointTable, pose: &Pose, max_condition: f64) -> Result<(), Unreachable> {
+pub fn reachable_at(
+    table: &JointTable,
+    pose: &Pose,
+    max_condition: f64,
+) -> Result<(), Unreachable> {
     if table.num_links() < 6 || !pose.is_finite() {
         return Err(Unreachable::Invalid);
     }
