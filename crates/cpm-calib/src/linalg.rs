@@ -55,12 +55,14 @@ mod tests {
 
     #[test]
     fn extreme_scales_and_bad_input() {
-        let a = DMatrix::from_fn(9, 5, |i, j| ((i * 7 + j * 3) as f64).cos());
+        let a = DMatrix::from_fn(9, 5, |i, j| {
+            ((i * 37 + j * 101) % 17) as f64 / 17.0 + (i == j) as u8 as f64
+        });
         let (s0, _, _) = thin_svd(&a).unwrap();
         for c in [1e150, 1e-200] {
             let (s, u, v) = thin_svd(&(&a * c)).unwrap();
             for (x, y) in s.iter().zip(&s0) {
-                assert!((x / (c * y) - 1.0).abs() < 1e-12);
+                assert!((x / c - y).abs() < 1e-13 * s0[0]);
             }
             let back = &u * DMatrix::from_diagonal(&nalgebra::DVector::from_vec(s)) * v.transpose();
             assert!((back - &a * c).amax() < 1e-13 * c);
