@@ -3,12 +3,15 @@
 use cpm_kinematics::linalg::{scaling_exponent, times_pow2, SvdError};
 use nalgebra::DMatrix;
 
+/// Singular values (largest first), `U` and `V` of a thin SVD.
+pub type ThinSvd = (Vec<f64>, DMatrix<f64>, DMatrix<f64>);
+
 /// Thin SVD `A = U diag(s) V^T` of an `m x n` matrix (`k = min(m, n)` singular values, largest
 /// first, `U` is `m x k`, `V` is `n x k`). The matrix is first scaled by the power of two that
 /// brings its largest entry into `[1, 2)` (exact), so no unit makes it overflow or underflow.
 /// Errors: a non-finite entry ([`SvdError::NonFinite`]), an empty matrix
 /// ([`SvdError::Shape`]), faer not converging ([`SvdError::NoConvergence`]).
-pub fn thin_svd(a: &DMatrix<f64>) -> Result<(Vec<f64>, DMatrix<f64>, DMatrix<f64>), SvdError> {
+pub fn thin_svd(a: &DMatrix<f64>) -> Result<ThinSvd, SvdError> {
     let (m, n) = a.shape();
     if m == 0 || n == 0 {
         return Err(SvdError::Shape { rows: m, cols: n });

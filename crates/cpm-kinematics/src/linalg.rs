@@ -132,13 +132,16 @@ fn check(a: &DMatrix<f64>) -> Result<(), SvdError> {
     Ok(())
 }
 
+/// Thin `U` and `V` as faer matrices.
+type Factors = (Mat<f64>, Mat<f64>);
+
 /// faer's SVD of the scaled `a` (`rows >= cols`): singular values (scaled) and, when asked,
 /// thin `U` and `V`.
 fn faer_svd(
     a: &DMatrix<f64>,
     e: i32,
     vectors: bool,
-) -> Result<(Vec<f64>, Option<(Mat<f64>, Mat<f64>)>), SvdError> {
+) -> Result<(Vec<f64>, Option<Factors>), SvdError> {
     let (m, n) = a.shape();
     let (f1, f2) = pow2_pair(-e);
     let scaled = Mat::<f64>::from_fn(m, n, |i, j| a[(i, j)] * f1 * f2);
