@@ -188,3 +188,80 @@ proptest! {
         round_trip(robot, 40, range_mm.round(), range_deg.round(), seed);
     }
 }
+
+/// The paper cube with 16 length gauges instead of the paper's one (base sockets on a
+/// 520 mm circle at two heights, platform sockets on a 150 mm circle).
+fn cube_with_16_gauges(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(example("paper_cubic.toml")).unwrap();
+    let (head, rest) = text.split_at(text.find("[[sensor]]").unwrap());
+    let tail = &rest[rest.find("# Joint clearance").unwrap()..];
+    let mut out = head.to_string();
+    for k in 0..16 {
+        let t = std::f64::consts::TAU * k as f64 / 16.0;
+        let ph = std::f64::consts::TAU * ((k * 5) % 16) as f64 / 16.0;
+        out += &format!(
+            "[[sensor]]\nname = \"s{}\"\nbase_mm = [{:.3}, {:.3}, {}]\nplatform_mm = [{:.3}, {:.3}, {}]\n\n",
+            k + 1,
+            520.0 * t.cos(),
+            520.0 * t.sin(),
+            300.0 + 120.0 * (k % 2) as f64,
+            150.0 * ph.cos(),
+            150.0 * ph.sin(),
+            if k % 3 == 0 { 0.0 } else { -60.0 },
+        );
+    }
+    out += tail;
+    let path = dir.join("cube16.toml");
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// 10^6 readings (62,500 poses x 16 gauges on the paper cube, Table 2 errors, 0.5 um
+/// noise): simulate then calibrate, nothing refused. About 25 s in release; run with
+/// `cargo test --release -p cpm --test cli_reachability -- --ignored`.
+#[test]
+#[ignore]
+fn a_million_readings_round_trip() {
+    let d = scratch("million");
+    let robot = p(&cube_with_16_gauges(&d));
+    let data = d.join("data.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "62500",
+        "--range-mm",
+        "50",
+        "--range-deg",
+        "20",
+        "--seed",
+        "13",
+        "--paper-table2",
+        "--effects",
+        "none",
+        "--noise",
+        "gaussian:0.5",
+        "--out",
+        &p(&data),
+    ]);
+    let out = ok(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "none",
+        "--out",
+        &p(&d.join("cal")),
+        "--json",
+    ]);
+    let summary: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(summary["rank"], 36);
+    let rms = summary["residual_rms_um"].as_f64().unwrap();
+    assert!(
+        (0.45..0.55).contains(&rms),
+        "residual {rms} um for 0.5 um noise"
+    );
+}

@@ -128,9 +128,10 @@ pub fn j1_condition(table: &JointTable, pose: &Pose) -> f64 {
     cpm_kinematics::workspace::j1_condition(table, pose).unwrap_or(f64::NAN)
 }
 
-/// Like [`random_poses`], keeping only poses where the machine is well conditioned: J1's
-/// condition number at most `max_condition_ratio` times its value at home, and link lengths
-/// within their limits where the table has any. Draws until `n` are found (at most 100 n
+/// Like [`random_poses`], keeping only poses where the machine is well conditioned and that
+/// [`cpm_kinematics::reachable_at`] accepts: J1's condition number at most
+/// `max_condition_ratio` times its value at home, link lengths within their limits where the
+/// table has any, and the pose in home's assembly mode. Draws until `n` are found (at most 100 n
 /// draws).
 pub fn random_workspace_poses(
     table: &JointTable,
@@ -148,14 +149,9 @@ pub fn random_workspace_poses(
             if out.len() == n {
                 break;
             }
-            let within = cpm_kinematics::inverse_lengths(table, &p)
-                .iter()
-                .zip(&table.links)
-                .all(|(l, link)| match link.length_limits_mm {
-                    Some((lo, hi)) => *l >= lo && *l <= hi,
-                    None => true,
-                });
-            if within && j1_condition(table, &p) <= max_condition_ratio * c0 {
+            // Length limits and J1's condition at the pose, and home's assembly mode: the
+            // rule by which the readers judge a pose (`cpm_kinematics::reachable_at`).
+            if cpm_kinematics::reachable_at(table, &p, max_condition_ratio * c0).is_ok() {
                 out.push(p);
             }
         }
