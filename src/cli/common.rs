@@ -245,17 +245,18 @@ pub fn load_data(
     robot: &Robot,
     options: &ReadOptions,
 ) -> anyhow::Result<Merged> {
-    let mut files = Vec::with_capacity(paths.len());
-    for p in paths {
-        files.push(io::read_data_file(p, robot, options)?);
-    }
+    let files = io::read_data_files(paths, robot, options)?;
     Ok(merge(files, robot))
 }
 
-/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled.
-pub fn read_options(effects: &[Effect]) -> ReadOptions {
+/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;
+/// tracker files are registered with the model's known `tracker_frame` taken out.
+pub fn read_options(model: &MeasurementModel) -> ReadOptions {
     ReadOptions {
-        check_sensor_lengths: !effects.contains(&Effect::SensorOffset),
+        check_sensor_lengths: !model.effects.contains(&Effect::SensorOffset),
+        known_tracker_frame: model
+            .known(Effect::TrackerFrame)
+            .and_then(|q| <[f64; 6]>::try_from(q).ok()),
         ..ReadOptions::default()
     }
 }

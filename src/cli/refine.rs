@@ -134,6 +134,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let mut value = io::calibration_json(&r.model, campaign, cal, &inputs.provenance);
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
     value["outliers"] = calibrate::outliers_json(&inputs.robot, &inputs.merged, cal);
+    value["registration"] = calibrate::registration_json(&inputs.merged, &r.model, cal);
     value["warnings"] = json!(calibrate::warnings(&r.model, cal)
         .iter()
         .map(|w| w.replace("**", ""))
@@ -221,6 +222,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         &inputs.identify.lm.loss,
     );
     calibrate::outliers_report(&mut s, &inputs.robot, &inputs.merged, cal);
+    calibrate::registration_report(&mut s, &inputs.merged, &r.model, cal);
     s.push_str(&format!(
         "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models, socket_error into the sensor sockets{}\n",
         notes.undetermined.len(),

@@ -38,6 +38,7 @@ pub mod linalg;
 pub mod model;
 pub mod paper;
 pub mod refine;
+pub mod registration;
 pub mod simulate;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
