@@ -374,8 +374,62 @@ pub fn solver_options(
     Ok(())
 }
 
-/// What the data did not determine, and how the fit ended, in a few lines for the top of a
-/// report (empty when all is well).
+/// The chi-square test of the fit against the declared noise (`None` when the noise was
+/// estimated from the residual, or no degree of freedom is left).
+pub fn misfit(cal: &Calibration) -> Option<crate::calib::misfit::Misfit> {
+    if cal.sigma_estimated {
+        return None;
+    }
+    crate::calib::misfit::chi_square(
+        &cal.residuals_um,
+        cal.sigma_um,
+        cal.identifiability.rank,
+        &cal.outliers,
+    )
+}
+
+/// What a misfit says, in words.
+pub fn misfit_message(m: &crate::calib::misfit::Misfit) -> String {
+    format!(
+        "**The model does not fit the data to the declared noise**: chi2/dof = {:.2} on {} degrees of freedom (p {}), residual RMS {:.3} um against the declared {} um{}. The standard deviations assume the declared noise and are too small. An effect the model lacks (backlash, link offsets or scales, thermal drift, ...) or a noise larger than declared: `cpm refine` tests the effect library on these data.",
+        m.chi2_per_dof,
+        m.dof,
+        if m.p_value < 1e-300 {
+            "< 1e-300".to_string()
+        } else {
+            format!("= {:.1e}", m.p_value)
+        },
+        m.residual_rms_um,
+        m.sigma_um,
+        if m.outliers_left_out > 0 {
+            format!(", {} flagged outliers left out", m.outliers_left_out)
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// `calibration.json`'s `misfit` object (null when the noise was estimated).
+pub fn misfit_json(cal: &Calibration) -> serde_json::Value {
+    match misfit(cal) {
+        Some(m) => json!({
+            "chi2": m.chi2,
+            "dof": m.dof,
+            "chi2_per_dof": m.chi2_per_dof,
+            "p_value": m.p_value,
+            "residual_rms_um": m.residual_rms_um,
+            "sigma_um": m.sigma_um,
+            "outliers_left_out": m.outliers_left_out,
+            "inconsistent": m.inconsistent(),
+            "rule": format!("inconsistent when p < {} and chi2/dof > {}", crate::calib::misfit::MISFIT_P, crate::calib::misfit::MISFIT_CHI2_PER_DOF),
+            "message": if m.inconsistent() { Some(misfit_message(&m).replace("**", "")) } else { None },
+        }),
+        None => serde_json::Value::Null,
+    }
+}
+
+/// What the data did not determine, how the fit ended, and whether the model fits the
+/// declared noise, in a few lines for the top of a report (empty when all is well).
 pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     let mut w = Vec::new();
     if !cal.solver.was_successful() {
@@ -407,6 +461,9 @@ pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
             cal.outliers.len(),
             if cal.outliers.len() == 1 { "" } else { "s" }
         ));
+    }
+    if let Some(m) = misfit(cal).filter(|m| m.inconsistent()) {
+        w.push(misfit_message(&m));
     }
     w
 }
@@ -663,6 +720,7 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
     value["outliers"] = outliers_json(&inputs.robot, &inputs.merged, &cal);
     value["registration"] = registration_json(&inputs.merged, model, &cal);
+    value["misfit"] = misfit_json(&cal);
     value["warnings"] = json!(warnings(model, &cal)
         .iter()
         .map(|w| w.replace("**", ""))

@@ -35,6 +35,7 @@ pub mod identifiability;
 pub mod identify;
 pub mod implicit;
 pub mod linalg;
+pub mod misfit;
 pub mod model;
 pub mod paper;
 pub mod refine;

@@ -112,6 +112,10 @@ pub struct Refinement {
     pub unexplained_structure: Vec<String>,
     /// Residuals of the first fit, um (for plots).
     pub initial_residuals_um: Vec<f64>,
+    /// The candidates of the last round when it added nothing (empty when the rounds ended
+    /// otherwise): which were skipped as confounded with the model (novelty below
+    /// [`RefineOptions::min_novelty`]) and which were not significant.
+    pub last_round: Vec<CandidateScore>,
 }
 
 fn rss(r: &[f64]) -> f64 {
@@ -238,6 +242,7 @@ pub fn refine(
         &cal.minimum_norm_um,
     )?;
     let mut steps = Vec::new();
+    let mut last_round = Vec::new();
     for _ in 0..options.max_steps {
         if diag.white && diag.consistent_with_noise == Some(true) && diag.significant.is_empty() {
             break;
@@ -309,6 +314,7 @@ pub fn refine(
             scores.push(score);
         }
         let Some((i, aug, c1)) = best else {
+            last_round = scores;
             break;
         };
         let cv1 = cross_validated_rms(
@@ -357,5 +363,6 @@ pub fn refine(
         final_cv_rms_um: cv,
         unexplained_structure,
         initial_residuals_um,
+        last_round,
     })
 }
