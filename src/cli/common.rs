@@ -160,6 +160,7 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
     if let Some(path) = &args.plan {
         let file = path.display().to_string();
         let rows = io::read_pose_list_file(path)?;
+        io::campaign::check_pose_list_units(&rows, &file, robot)?;
         for r in &rows {
             io::campaign::check_reachable(table, &r.pose, ratio, &file, r.line, &r.label)?;
         }

@@ -260,6 +260,89 @@ fn tolerance_mm(length_mm: f64) -> f64 {
     CONSISTENCY_MM + CONSISTENCY_REL * length_mm.abs()
 }
 
+/// Angles all within this (in the file's unit, degrees expected) while some is at least
+/// [`RADIANS_MIN`]: the file is taken for radians (see [`check_angle_units`]).
+pub const RADIANS_MAX: f64 = 0.2;
+/// The largest angle of a file must reach this for [`RADIANS_MAX`] to apply (0.02 rad is
+/// 1.1 deg; a campaign in degrees that never tilts more than 0.2 deg is implausible for
+/// calibration, and a file of constant orientation is left alone).
+pub const RADIANS_MIN: f64 = 0.02;
+
+/// Angle values of a file: (line, column, value) for every `_deg` column of every row.
+type AngleCells = Vec<(usize, &'static str, f64)>;
+
+/// Refuses a file whose `roll_deg`, `pitch_deg`, `yaw_deg` values all lie within
+/// +-[`RADIANS_MAX`] while the largest reaches [`RADIANS_MIN`]: angles in radians, most
+/// likely. The error names the first row with such an angle, and says how to keep truly tiny
+/// angles (a quaternion).
+fn check_angle_units(file: &str, cells: &AngleCells) -> Result<(), InputError> {
+    let largest = cells.iter().fold(0.0_f64, |a, c| a.max(c.2.abs()));
+    if cells.is_empty() || largest > RADIANS_MAX || largest < RADIANS_MIN {
+        return Ok(());
+    }
+    let (line, col, v) = cells
+        .iter()
+        .find(|c| c.2.abs() >= RADIANS_MIN)
+        .copied()
+        .expect("the largest angle");
+    Err(InputError::field(
+        file,
+        line,
+        col,
+        format!(
+            "{} degrees, and every angle of the file is within +-{RADIANS_MAX} degrees (largest {largest}): radians? Angles are in degrees ({v} rad would be {:.3} deg). If the campaign really tilts less than {RADIANS_MAX} deg, give the orientation as a quaternion (qw,qx,qy,qz)",
+            show(v, None),
+            v.to_degrees()
+        ),
+    ))
+}
+
+/// The distance of the robot's home from the base origin, mm, when it is large enough
+/// (10 mm) for positions a hundred times smaller to be implausible.
+fn home_distance_mm(robot: &Robot) -> Option<f64> {
+    let h = robot.table.home.position_mm.norm();
+    (h >= 10.0).then_some(h)
+}
+
+/// Refuses a base-frame position a hundred times closer to the base origin than the robot's
+/// home: metres, most likely. `row` names the line.
+fn check_position_units(
+    file: &str,
+    line: usize,
+    p: &Vector3<f64>,
+    robot: &Robot,
+) -> Result<(), InputError> {
+    let Some(h) = home_distance_mm(robot) else {
+        return Ok(());
+    };
+    if p.norm() > h / 100.0 {
+        return Ok(());
+    }
+    let col = ["x_mm", "y_mm", "z_mm"][p.iamax()];
+    Err(InputError::field(
+        file,
+        line,
+        col,
+        format!(
+            "the position ({}, {}, {}) is {:.4} mm from the base origin while the robot's home is {h:.1} mm away: metres? Positions are in mm",
+            show(p.x, None),
+            show(p.y, None),
+            show(p.z, None),
+            p.norm()
+        ),
+    ))
+}
+
+/// Checks a pose list's positions against the robot (see [`read_pose_list`]): a position a
+/// hundred times closer to the base origin than the robot's home is refused as metres, at the
+/// first such row.
+pub fn check_pose_list_units(rows: &[PoseRow], file: &str, robot: &Robot) -> Result<(), InputError> {
+    for r in rows {
+        check_position_units(file, r.line, &r.pose.position_mm, robot)?;
+    }
+    Ok(())
+}
+
 /// Checks that a pose can be reached from home; the error names the pose's first line.
 pub fn check_reachable(
     table: &JointTable,
@@ -530,6 +613,7 @@ fn read_readings_table<R: Read>(
     };
     let mut commanded = Vec::new();
     let mut reading_lines = Vec::new();
+    let mut angles: AngleCells = Vec::new();
     while let Some(row) = t.next_row()? {
         let t: &Header = t;
         if reading_lines.len() >= options.max_rows {
@@ -587,6 +671,12 @@ fn read_readings_table<R: Read>(
             }
             None => {
                 let j = entries.len();
+                check_position_units(&t.file, row.line, &pose.position_mm, robot)?;
+                if o == Orientation::Rpy {
+                    for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+                        angles.push((row.line, *name, *v));
+                    }
+                }
                 if options.max_condition_ratio.is_finite() {
                     check_reachable(
                         &robot.table,
@@ -649,6 +739,7 @@ fn read_readings_table<R: Read>(
             "no readings: the file has a header but no rows",
         ));
     }
+    check_angle_units(&t.file, &angles)?;
     if logged {
         campaign.commanded_lengths_mm = Some(commanded);
     }
@@ -711,6 +802,7 @@ fn read_pose_measurements_table<R: Read>(
     let mut lines = Vec::new();
     let mut commanded = Vec::new();
     let mut rows = Vec::new();
+    let mut angles: AngleCells = Vec::new();
     while let Some(row) = t.next_row()? {
         let t: &Header = t;
         if lines.len() >= options.max_rows {
@@ -724,7 +816,10 @@ fn read_pose_measurements_table<R: Read>(
                 format!("pose {:?} appears again (first on line {first}): a tracker file has one row per pose", shorten(&label)),
             ));
         }
-        let (measured, _) = parse_pose(t, &row, o)?;
+        let (measured, raw) = parse_pose(t, &row, o)?;
+        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+            angles.push((row.line, *name, *v));
+        }
         let u = link_readings(t, &row, n)?;
         let time_s = t.optional_number(&row, "time_s")?;
         if t.optional_bool(&row, "simulated")? == Some(true) {
@@ -759,6 +854,8 @@ fn read_pose_measurements_table<R: Read>(
             "no pose measurements: the file has a header but no rows",
         ));
     }
+    check_angle_units(&t.file, &angles)?;
+    check_tracker_position_units(&t.file, &rows, &commanded)?;
     campaign.commanded_lengths_mm = Some(commanded);
     Ok(DataFile {
         file: t.file.clone(),
@@ -771,6 +868,51 @@ fn read_pose_measurements_table<R: Read>(
         tracker_rows: rows,
         checked: false,
     })
+}
+
+/// Refuses a tracker file whose measured positions spread a hundred times less than the
+/// commanded link lengths (over more than 1 mm of link travel): metres, most likely. The
+/// tracker frame may be anywhere, so only spreads are compared. The error names the row of
+/// the largest position move from the first row.
+fn check_tracker_position_units(
+    file: &str,
+    rows: &[TrackerRow],
+    lengths_mm: &[Vec<f64>],
+) -> Result<(), InputError> {
+    let spread = |vals: &mut dyn Iterator<Item = f64>| {
+        let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+        hi - lo
+    };
+    let n = lengths_mm.first().map_or(0, Vec::len);
+    let travel = (0..n)
+        .map(|i| spread(&mut lengths_mm.iter().map(|l| l[i])))
+        .fold(0.0_f64, f64::max);
+    let moved = (0..3)
+        .map(|a| spread(&mut rows.iter().map(|r| r.measured.position_mm[a])))
+        .fold(0.0_f64, f64::max);
+    if !(travel > 1.0 && moved * 100.0 < travel) {
+        return Ok(());
+    }
+    let first = rows[0].measured.position_mm;
+    let row = rows
+        .iter()
+        .max_by(|a, b| {
+            (a.measured.position_mm - first)
+                .norm()
+                .total_cmp(&(b.measured.position_mm - first).norm())
+        })
+        .expect("rows");
+    let k = (row.measured.position_mm - first).iamax();
+    Err(InputError::field(
+        file,
+        row.line,
+        ["x_mm", "y_mm", "z_mm"][k],
+        format!(
+            "the measured positions move by {moved:.4} mm over the file while the links travel {travel:.3} mm: metres? Positions are in mm"
+        ),
+    ))
 }
 
 /// Registers the tracker files among `files` together (a frame per file, reading offsets per
@@ -1243,6 +1385,7 @@ fn pose_list_table<R: Read>(t: &mut Table<R>) -> Result<Vec<PoseRow>, InputError
         |h| RPY_COLUMNS.contains(&h) || QUATERNION_COLUMNS.contains(&h),
     )?;
     let mut out = Vec::new();
+    let mut angles: AngleCells = Vec::new();
     while let Some(row) = t.next_row()? {
         let t: &Header = t;
         if out.len() >= MAX_ROWS {
@@ -1253,7 +1396,10 @@ fn pose_list_table<R: Read>(t: &mut Table<R>) -> Result<Vec<PoseRow>, InputError
             Some(_) => return Err(t.err(&row, "pose", "missing value")),
             None => (out.len() + 1).to_string(),
         };
-        let (pose, _) = parse_pose(t, &row, o)?;
+        let (pose, raw) = parse_pose(t, &row, o)?;
+        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+            angles.push((row.line, *name, *v));
+        }
         out.push(PoseRow {
             line: row.line,
             label,
@@ -1268,6 +1414,7 @@ fn pose_list_table<R: Read>(t: &mut Table<R>) -> Result<Vec<PoseRow>, InputError
             "no poses: the file has a header but no rows",
         ));
     }
+    check_angle_units(&t.file, &angles)?;
     Ok(out)
 }
 
