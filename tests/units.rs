@@ -31,7 +31,10 @@ fn cpm(dir: &Path, args: &[&str]) -> Output {
 }
 
 fn simulate(dir: &Path, out: &str, extra: &[&str]) -> String {
-    let mut a = vec!["simulate", "--random", "12", "--range-deg", "8", "--seed", "2"];
+    let mut a = vec!["simulate", "--random", "12", "--seed", "2"];
+    if !extra.contains(&"--range-deg") {
+        a.extend(["--range-deg", "8"]);
+    }
     a.extend(extra);
     a.extend(["--out", out]);
     let o = cpm(dir, &a);
