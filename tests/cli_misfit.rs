@@ -29,7 +29,14 @@ fn cpm(args: &[&str], dir: &Path) -> Output {
 }
 
 fn simulate(dir: &Path, out: &str, extra: &[&str]) {
-    let mut a = vec!["simulate", "--random", "40", "--paper-table2", "--seed", "4"];
+    let mut a = vec![
+        "simulate",
+        "--random",
+        "40",
+        "--paper-table2",
+        "--seed",
+        "4",
+    ];
     a.extend(extra);
     a.extend(["--out", out]);
     cpm(&a, dir);
@@ -53,14 +60,25 @@ fn backlash_in_the_data_with_a_declared_noise_is_called_a_misfit() {
         ],
     );
     let o = cpm(
-        &["calibrate", "--data", "bl.csv", "--sigma-um", "1", "--out", "cal"],
+        &[
+            "calibrate",
+            "--data",
+            "bl.csv",
+            "--sigma-um",
+            "1",
+            "--out",
+            "cal",
+        ],
         &d,
     );
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(stderr.contains("does not fit"), "{stderr}");
     assert!(stderr.contains("cpm refine"), "{stderr}");
     let report = std::fs::read_to_string(d.join("cal/report.md")).unwrap();
-    assert!(report.contains("does not fit") && report.contains("cpm refine"), "{report}");
+    assert!(
+        report.contains("does not fit") && report.contains("cpm refine"),
+        "{report}"
+    );
     let v = json(&d.join("cal/calibration.json"));
     let m = &v["misfit"];
     assert_eq!(m["inconsistent"], true);
@@ -82,7 +100,15 @@ fn a_clean_campaign_does_not_warn() {
     let d = scratch("clean");
     simulate(&d, "clean.csv", &["--noise", "gaussian:1"]);
     let o = cpm(
-        &["calibrate", "--data", "clean.csv", "--sigma-um", "1", "--out", "cal"],
+        &[
+            "calibrate",
+            "--data",
+            "clean.csv",
+            "--sigma-um",
+            "1",
+            "--out",
+            "cal",
+        ],
         &d,
     );
     let stderr = String::from_utf8_lossy(&o.stderr);

@@ -142,7 +142,7 @@ fn check_session(
         rpy[1].to_radians(),
         rpy[2].to_radians(),
     );
-    let dw = (r * truth.rotation.inverse()).scaled_axis();
+    let dw = cpm::geometry::rotation::log(&(r * truth.rotation.inverse()));
     let mut worst: f64 = 0.0;
     for a in 0..3 {
         let e = t[a] - truth.position_mm[a];
@@ -150,11 +150,19 @@ fn check_session(
             "  translation {a}: truth {:.4} mm, recovered {:.4} +- {:.4} mm",
             truth.position_mm[a], t[a], tsd[a]
         );
-        assert!(e.abs() <= k * tsd[a] + slack_mm, "translation {a}: {e} mm, sd {}", tsd[a]);
+        assert!(
+            e.abs() <= k * tsd[a] + slack_mm,
+            "translation {a}: {e} mm, sd {}",
+            tsd[a]
+        );
         worst = worst.max(e.abs() / tsd[a]);
         let e = dw[a].to_degrees();
         eprintln!("  rotation error {a}: {e:.6} deg, sd {:.6} deg", rsd[a]);
-        assert!(e.abs() <= k * rsd[a] + slack_deg, "rotation {a}: {e} deg, sd {}", rsd[a]);
+        assert!(
+            e.abs() <= k * rsd[a] + slack_deg,
+            "rotation {a}: {e} deg, sd {}",
+            rsd[a]
+        );
         worst = worst.max(e.abs() / rsd[a]);
     }
     worst
@@ -305,7 +313,10 @@ fn two_sessions_get_their_own_frames() {
     let sessions = v["registration"]["sessions"].as_array().unwrap();
     assert_eq!(sessions.len(), 2);
     for (k, (s, f)) in sessions.iter().zip(&frames).enumerate() {
-        assert!(s["file"].as_str().unwrap().ends_with(&format!("session{k}.csv")));
+        assert!(s["file"]
+            .as_str()
+            .unwrap()
+            .ends_with(&format!("session{k}.csv")));
         eprintln!("session {k} (SIMULATED):");
         check_session(s, f, 3.0, 0.0, 0.0);
     }

@@ -82,7 +82,9 @@ fn refused(dir: &Path, args: &[&str], file: &str, line: usize, fields: &[&str], 
     let start = format!("error: {file}:{line}: field ");
     assert!(stderr.starts_with(&start), "{stderr}");
     assert!(
-        fields.iter().any(|f| stderr.starts_with(&format!("{start}{f}:"))),
+        fields
+            .iter()
+            .any(|f| stderr.starts_with(&format!("{start}{f}:"))),
         "{stderr}"
     );
     assert!(stderr.contains(what), "{stderr}");
@@ -100,8 +102,16 @@ fn typed(e: ReadError) -> cpm::io::InputError {
 fn readings_in_radians_or_metres_are_refused_at_the_first_row() {
     let d = scratch("readings");
     let text = simulate(&d, "deg.csv", &[]);
-    std::fs::write(d.join("rad.csv"), map_columns(&text, &ANGLES, f64::to_radians)).unwrap();
-    std::fs::write(d.join("m.csv"), map_columns(&text, &POSITIONS, |v| v / 1000.0)).unwrap();
+    std::fs::write(
+        d.join("rad.csv"),
+        map_columns(&text, &ANGLES, f64::to_radians),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("m.csv"),
+        map_columns(&text, &POSITIONS, |v| v / 1000.0),
+    )
+    .unwrap();
     let args = |f: &'static str| ["calibrate", "--data", f, "--out", "out"];
     refused(&d, &args("rad.csv"), "rad.csv", 3, &ANGLES, "radians?");
     refused(&d, &args("m.csv"), "m.csv", 3, &POSITIONS, "metres?");
@@ -117,8 +127,16 @@ fn readings_in_radians_or_metres_are_refused_at_the_first_row() {
 fn tracker_poses_in_radians_or_metres_are_refused() {
     let d = scratch("tracker");
     let text = simulate(&d, "deg.csv", &["--measure", "poses"]);
-    std::fs::write(d.join("rad.csv"), map_columns(&text, &ANGLES, f64::to_radians)).unwrap();
-    std::fs::write(d.join("m.csv"), map_columns(&text, &POSITIONS, |v| v / 1000.0)).unwrap();
+    std::fs::write(
+        d.join("rad.csv"),
+        map_columns(&text, &ANGLES, f64::to_radians),
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("m.csv"),
+        map_columns(&text, &POSITIONS, |v| v / 1000.0),
+    )
+    .unwrap();
     let args = |f: &'static str| ["calibrate", "--data", f, "--out", "out"];
     refused(&d, &args("rad.csv"), "rad.csv", 3, &ANGLES, "radians?");
     // Tracker positions may be anywhere (the tracker's frame): their spread against the

@@ -575,7 +575,10 @@ fn block_values(
     effect: crate::calib::Effect,
 ) -> Option<Vec<(String, Option<f64>, Option<f64>)>> {
     let names = model.parameter_names();
-    let b = model.blocks().into_iter().find(|b| b.effect == Some(effect))?;
+    let b = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(effect))?;
     Some(
         (b.offset..b.offset + b.len)
             .map(|k| {
@@ -652,7 +655,12 @@ pub fn registration_json(
 }
 
 /// The registration section of report.md (nothing without tracker files).
-pub fn registration_report(s: &mut String, merged: &Merged, model: &MeasurementModel, cal: &Calibration) {
+pub fn registration_report(
+    s: &mut String,
+    merged: &Merged,
+    model: &MeasurementModel,
+    cal: &Calibration,
+) {
     let Some(r) = &merged.registration else {
         return;
     };
@@ -680,29 +688,47 @@ pub fn registration_report(s: &mut String, merged: &Merged, model: &MeasurementM
     if r.offsets_estimated {
         s.push_str(&format!(
             "Link reading offsets (true length = logged length + offset), mm: {}; {}.\n\n",
-            r.link_offset_mm.iter().zip(&r.link_offset_sd_mm).enumerate()
+            r.link_offset_mm
+                .iter()
+                .zip(&r.link_offset_sd_mm)
+                .enumerate()
                 .map(|(i, (o, sd))| format!("link {} {o:.3} +- {sd:.3}", i + 1))
-                .collect::<Vec<_>>().join(", "),
-            if r.offsets_applied { "applied to the commanded lengths before the fit and folded into `calibrated.toml`" } else { "not applied (small: left to `link_offset`)" }
+                .collect::<Vec<_>>()
+                .join(", "),
+            if r.offsets_applied {
+                "applied to the commanded lengths before the fit and folded into `calibrated.toml`"
+            } else {
+                "not applied (small: left to `link_offset`)"
+            }
         ));
     } else {
         s.push_str("Link reading offsets were not estimated (the poses cannot tell them from the frames).\n\n");
     }
-    for e in [crate::calib::Effect::TrackerFrame, crate::calib::Effect::LinkOffset] {
+    for e in [
+        crate::calib::Effect::TrackerFrame,
+        crate::calib::Effect::LinkOffset,
+    ] {
         if let Some(v) = block_values(model, cal, e) {
             s.push_str(&format!(
                 "Refined by the fit, `{}` (on top of the registration): {}.\n\n",
                 e.name(),
-                v.iter().map(|(n, v, sd)| match (v, sd) {
-                    (Some(v), Some(sd)) => format!("{n} {v:.2} +- {sd:.2}"),
-                    _ => format!("{n} not determined"),
-                }).collect::<Vec<_>>().join(", ")
+                v.iter()
+                    .map(|(n, v, sd)| match (v, sd) {
+                        (Some(v), Some(sd)) => format!("{n} {v:.2} +- {sd:.2}"),
+                        _ => format!("{n} not determined"),
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ));
         }
     }
-    let gauge: Vec<&str> = cal.identifiability.blind_directions.iter()
+    let gauge: Vec<&str> = cal
+        .identifiability
+        .blind_directions
+        .iter()
         .filter(|b| b.description.contains("tracker"))
-        .map(|b| b.description.as_str()).collect();
+        .map(|b| b.description.as_str())
+        .collect();
     if !gauge.is_empty() {
         s.push_str(&format!("Gauge freedoms of the refinement: {} (the fit determines the tracker frame only together with the installation errors; these directions are not determined).\n\n", gauge.join("; ")));
     }

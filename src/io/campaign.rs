@@ -336,7 +336,11 @@ fn check_position_units(
 /// Checks a pose list's positions against the robot (see [`read_pose_list`]): a position a
 /// hundred times closer to the base origin than the robot's home is refused as metres, at the
 /// first such row.
-pub fn check_pose_list_units(rows: &[PoseRow], file: &str, robot: &Robot) -> Result<(), InputError> {
+pub fn check_pose_list_units(
+    rows: &[PoseRow],
+    file: &str,
+    robot: &Robot,
+) -> Result<(), InputError> {
     for r in rows {
         check_position_units(file, r.line, &r.pose.position_mm, robot)?;
     }
@@ -961,7 +965,11 @@ pub fn register_tracker_files(
             .iter()
             .map(|&k| cpm_calib::registration::Session {
                 lengths_mm: raw_lengths(&files[k]),
-                measured: files[k].tracker_rows.iter().map(|r| unknown(&r.measured)).collect(),
+                measured: files[k]
+                    .tracker_rows
+                    .iter()
+                    .map(|r| unknown(&r.measured))
+                    .collect(),
             })
             .collect();
         let finite = sessions

@@ -148,12 +148,14 @@ impl Frame {
 
     /// Rotation angle, deg.
     pub fn rotation_angle_deg(&self) -> f64 {
-        self.rotation.angle().to_degrees()
+        cpm_geometry::rotation::log(&self.rotation)
+            .norm()
+            .to_degrees()
     }
 
     /// Rotation vector (axis times angle), deg.
     pub fn rotation_vector_deg(&self) -> [f64; 3] {
-        let w = self.rotation.scaled_axis();
+        let w = cpm_geometry::rotation::log(&self.rotation);
         [w.x.to_degrees(), w.y.to_degrees(), w.z.to_degrees()]
     }
 }
@@ -186,7 +188,9 @@ pub fn register(
     sessions: &[Session],
     options: &RegistrationOptions,
 ) -> Result<Registration, CalibError> {
-    register_with_corrections(table, sessions, options, &|_: &Pose| vec![0.0; table.num_links()])
+    register_with_corrections(table, sessions, options, &|_: &Pose| {
+        vec![0.0; table.num_links()]
+    })
 }
 
 /// [`register`] with a correction of the link lengths (mm) that depends on the pose (base
@@ -221,7 +225,11 @@ pub fn register_with_corrections(
         .map(|s| {
             s.lengths_mm
                 .iter()
-                .map(|l| forward(table, l, &table.home, &options.fk).ok().map(|r| r.0))
+                .map(|l| {
+                    forward(table, l, &table.home, &options.fk)
+                        .ok()
+                        .map(|r| r.0)
+                })
                 .collect()
         })
         .collect();
@@ -261,11 +269,19 @@ pub fn register_with_corrections(
     }
     let mut iterations = 0;
     loop {
-        let lin = linearise(table, sessions, &frames, &offsets, &mut fk, options, correction_mm)?;
+        let lin = linearise(
+            table,
+            sessions,
+            &frames,
+            &offsets,
+            &mut fk,
+            options,
+            correction_mm,
+        )?;
         let c = lin.residual.norm_squared();
         let np = 6 * sessions.len() + if estimate_offsets { n } else { 0 };
         let (js, scale) = scaled_columns(&lin.jacobian, np);
-        let svd = js.svd(true, true);
+        let svd = checked_svd(js, true)?;
         let smax = svd.singular_values.max();
         let smin = svd.singular_values.min();
         if estimate_offsets && !(smin > 1e-5 * smax) {
@@ -313,7 +329,15 @@ pub fn register_with_corrections(
             break;
         }
     }
-    let lin = linearise(table, sessions, &frames, &offsets, &mut fk, options, correction_mm)?;
+    let lin = linearise(
+        table,
+        sessions,
+        &frames,
+        &offsets,
+        &mut fk,
+        options,
+        correction_mm,
+    )?;
     let cost = lin.residual.norm_squared();
     let np = 6 * sessions.len() + if estimate_offsets { n } else { 0 };
     let (js, scale) = scaled_columns(&lin.jacobian, np);
@@ -325,7 +349,7 @@ pub fn register_with_corrections(
         f64::NAN
     };
     // Covariance of the scaled parameters: (Js^T Js)^-1 by the SVD.
-    let svd = js.svd(false, true);
+    let svd = checked_svd(js, false)?;
     let vt = svd.v_t.expect("v_t");
     let sd = |k: usize| -> f64 {
         let mut v = 0.0;
@@ -384,7 +408,9 @@ fn rms(pairs: &[(Pose, Pose)]) -> (f64, f64) {
         .sum::<f64>();
     let o = pairs
         .iter()
-        .map(|(a, b)| (a.rotation * b.rotation.inverse()).angle().powi(2))
+        .map(|(a, b)| {
+            cpm_geometry::rotation::log(&(a.rotation * b.rotation.inverse())).norm_squared()
+        })
         .sum::<f64>();
     ((p / k).sqrt(), (o / k).sqrt().to_degrees())
 }
@@ -393,8 +419,16 @@ fn rms(pairs: &[(Pose, Pose)]) -> (f64, f64) {
 /// R_q|_F^2` over pairs `(p, q)` (weighted Procrustes / Umeyama, by an SVD).
 fn procrustes(pairs: &[(Pose, Pose)], w_rot: f64) -> (Rotation3<f64>, Vector3<f64>) {
     let k = pairs.len() as f64;
-    let pbar = pairs.iter().map(|(p, _)| p.position_mm).sum::<Vector3<f64>>() / k;
-    let qbar = pairs.iter().map(|(_, q)| q.position_mm).sum::<Vector3<f64>>() / k;
+    let pbar = pairs
+        .iter()
+        .map(|(p, _)| p.position_mm)
+        .sum::<Vector3<f64>>()
+        / k;
+    let qbar = pairs
+        .iter()
+        .map(|(_, q)| q.position_mm)
+        .sum::<Vector3<f64>>()
+        / k;
     let mut m = Matrix3::zeros();
     for (p, q) in pairs {
         m += (q.position_mm - qbar) * (p.position_mm - pbar).transpose();
@@ -406,6 +440,24 @@ fn procrustes(pairs: &[(Pose, Pose)], w_rot: f64) -> (Rotation3<f64>, Vector3<f6
     let r = u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * vt;
     let r = Rotation3::from_matrix_unchecked(r);
     (r, qbar - r * pbar)
+}
+
+/// The SVD of a finite matrix (nalgebra's, with a bounded number of sweeps): an error, never
+/// a hang, for a non-finite matrix or no convergence.
+fn checked_svd(
+    m: DMatrix<f64>,
+    with_u: bool,
+) -> Result<nalgebra::SVD<f64, nalgebra::Dyn, nalgebra::Dyn>, CalibError> {
+    if m.iter().any(|v| !v.is_finite()) {
+        return Err(CalibError::invalid(
+            "registration",
+            "the Jacobian has non-finite entries (an implausible pose or robot)",
+        ));
+    }
+    m.try_svd(with_u, true, f64::EPSILON, 10_000)
+        .ok_or_else(|| {
+            CalibError::invalid("registration", "the SVD of the Jacobian did not converge")
+        })
 }
 
 /// The first `np` columns of `jac` scaled to unit norm, and the scale factors.
@@ -496,15 +548,16 @@ fn linearise(
                 .zip(corr.iter().chain(std::iter::repeat(&0.0)))
                 .map(|((l, o), c)| l + o + c)
                 .collect();
-            let (x, _) = forward(table, &lengths, &start, &options.fk)
-                .map_err(|source| CalibError::Kinematics {
+            let (x, _) = forward(table, &lengths, &start, &options.fk).map_err(|source| {
+                CalibError::Kinematics {
                     pose: global,
                     source,
-                })?;
+                }
+            })?;
             fk[si][j] = Some(x);
             let pred = r * x.position_mm + t;
             let rp = pred - q.position_mm;
-            let w = (r * x.rotation * q.rotation.inverse()).scaled_axis();
+            let w = cpm_geometry::rotation::log(&(r * x.rotation * q.rotation.inverse()));
             let jl = left_jacobian_inverse(&w);
             for a in 0..3 {
                 residual[row + a] = rp[a] * wp;
@@ -596,13 +649,7 @@ mod tests {
 
     /// A noisy measurement of `p` in the frame `frame`: position noise `sp` mm, orientation
     /// noise `so` rad (independent of the code under test: composed with nalgebra directly).
-    fn measure(
-        frame: &Pose,
-        p: &Pose,
-        sp: f64,
-        so: f64,
-        rng: &mut rand::rngs::StdRng,
-    ) -> Pose {
+    fn measure(frame: &Pose, p: &Pose, sp: f64, so: f64, rng: &mut rand::rngs::StdRng) -> Pose {
         let g = Normal::new(0.0, 1.0).unwrap();
         let mut pos = frame.rotation * p.position_mm + frame.position_mm;
         for a in 0..3 {
@@ -648,12 +695,20 @@ mod tests {
         let f = &r.frames[0];
         assert!(f.rms_before_mm > 50.0, "{}", f.rms_before_mm);
         assert!(f.rms_after_mm < 0.05, "{}", f.rms_after_mm);
-        assert!((r.variance_factor - 1.0).abs() < 0.3, "{}", r.variance_factor);
+        assert!(
+            (r.variance_factor - 1.0).abs() < 0.3,
+            "{}",
+            r.variance_factor
+        );
         for a in 0..3 {
             let e = f.translation_mm[a] - frame.position_mm[a];
-            assert!(e.abs() < 3.0 * f.translation_sd_mm[a], "t{a}: {e} vs {:?}", f.translation_sd_mm);
+            assert!(
+                e.abs() < 3.0 * f.translation_sd_mm[a],
+                "t{a}: {e} vs {:?}",
+                f.translation_sd_mm
+            );
         }
-        let dw = (f.rotation * frame.rotation.inverse()).scaled_axis();
+        let dw = cpm_geometry::rotation::log(&(f.rotation * frame.rotation.inverse()));
         for a in 0..3 {
             assert!(
                 dw[a].to_degrees().abs() < 3.0 * f.rotation_sd_deg[a],
@@ -664,7 +719,11 @@ mod tests {
         }
         for i in 0..6 {
             let e = r.link_offset_mm[i] - truth_offsets[i];
-            assert!(e.abs() < 3.0 * r.link_offset_sd_mm[i], "offset {i}: {e} vs {}", r.link_offset_sd_mm[i]);
+            assert!(
+                e.abs() < 3.0 * r.link_offset_sd_mm[i],
+                "offset {i}: {e} vs {}",
+                r.link_offset_sd_mm[i]
+            );
         }
     }
 
@@ -696,10 +755,17 @@ mod tests {
         for (f, truth) in r.frames.iter().zip(&frames) {
             for a in 0..3 {
                 let e = f.translation_mm[a] - truth.position_mm[a];
-                assert!(e.abs() < 3.0 * f.translation_sd_mm[a], "{e} {:?}", f.translation_sd_mm);
+                assert!(
+                    e.abs() < 3.0 * f.translation_sd_mm[a],
+                    "{e} {:?}",
+                    f.translation_sd_mm
+                );
             }
-            let dw = (f.rotation * truth.rotation.inverse()).scaled_axis();
-            assert!(dw.norm().to_degrees() < 3.0 * f.rotation_sd_deg.iter().fold(0.0, |a: f64, b| a.max(*b)) * 1.8);
+            let dw = cpm_geometry::rotation::log(&(f.rotation * truth.rotation.inverse()));
+            assert!(
+                dw.norm().to_degrees()
+                    < 3.0 * f.rotation_sd_deg.iter().fold(0.0, |a: f64, b| a.max(*b)) * 1.8
+            );
             // The base-frame view of a measured pose is near the nominal one.
             let back = f.to_base(&sessions[0].measured[0]);
             assert!(back.is_finite());
