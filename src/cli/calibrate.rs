@@ -568,12 +568,15 @@ pub struct Fitted {
     pub value: serde_json::Value,
 }
 
+/// A parameter's name, estimate and standard deviation (`None` when not determined).
+type NamedValue = (String, Option<f64>, Option<f64>);
+
 /// The fitted values of one effect block: (name, estimate, standard deviation).
 fn block_values(
     model: &MeasurementModel,
     cal: &Calibration,
     effect: crate::calib::Effect,
-) -> Option<Vec<(String, Option<f64>, Option<f64>)>> {
+) -> Option<Vec<NamedValue>> {
     let names = model.parameter_names();
     let b = model
         .blocks()

@@ -277,7 +277,7 @@ type AngleCells = Vec<(usize, &'static str, f64)>;
 /// angles (a quaternion).
 fn check_angle_units(file: &str, cells: &AngleCells) -> Result<(), InputError> {
     let largest = cells.iter().fold(0.0_f64, |a, c| a.max(c.2.abs()));
-    if cells.is_empty() || largest > RADIANS_MAX || largest < RADIANS_MIN {
+    if cells.is_empty() || !(RADIANS_MIN..=RADIANS_MAX).contains(&largest) {
         return Ok(());
     }
     let (line, col, v) = cells

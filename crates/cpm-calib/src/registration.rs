@@ -235,7 +235,7 @@ pub fn register_with_corrections(
         .collect();
     // 2. Closed-form frames.
     let w_rot = options.position_sigma_mm.powi(2) / (2.0 * options.orientation_sigma_rad.powi(2));
-    let mut frames: Vec<(Rotation3<f64>, Vector3<f64>)> = Vec::with_capacity(sessions.len());
+    let mut frames: Vec<RigidFrame> = Vec::with_capacity(sessions.len());
     let mut before = Vec::with_capacity(sessions.len());
     for (si, s) in sessions.iter().enumerate() {
         let pairs: Vec<(Pose, Pose)> = fk[si]
@@ -479,6 +479,9 @@ fn scaled_columns(jac: &DMatrix<f64>, np: usize) -> (DMatrix<f64>, Vec<f64>) {
     (js, scale)
 }
 
+/// A session frame in the making: rotation and translation (mm).
+type RigidFrame = (Rotation3<f64>, Vector3<f64>);
+
 struct Linearised {
     residual: DVector<f64>,
     /// Columns: per session (translation mm, rotation rad), then the link offsets, mm.
@@ -486,13 +489,13 @@ struct Linearised {
 }
 
 fn apply_step(
-    frames: &[(Rotation3<f64>, Vector3<f64>)],
+    frames: &[RigidFrame],
     offsets: &[f64],
     step: &[f64],
     lambda: f64,
     with_offsets: bool,
     n: usize,
-) -> (Vec<(Rotation3<f64>, Vector3<f64>)>, Vec<f64>) {
+) -> (Vec<RigidFrame>, Vec<f64>) {
     let f = frames
         .iter()
         .enumerate()
@@ -520,7 +523,7 @@ fn apply_step(
 fn linearise(
     table: &JointTable,
     sessions: &[Session],
-    frames: &[(Rotation3<f64>, Vector3<f64>)],
+    frames: &[RigidFrame],
     offsets: &[f64],
     fk: &mut [Vec<Option<Pose>>],
     options: &RegistrationOptions,
