@@ -261,7 +261,7 @@ fn tolerance_mm(length_mm: f64) -> f64 {
 }
 
 /// Angles all within this (in the file's unit, degrees expected) while some is at least
-/// [`RADIANS_MIN`]: the file is taken for radians (see [`check_angle_units`]).
+/// [`RADIANS_MIN`]: the file is taken for radians (docs/formats.md, "Checks beyond the syntax").
 pub const RADIANS_MAX: f64 = 0.2;
 /// The largest angle of a file must reach this for [`RADIANS_MAX`] to apply (0.02 rad is
 /// 1.1 deg; a campaign in degrees that never tilts more than 0.2 deg is implausible for
