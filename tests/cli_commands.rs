@@ -628,7 +628,7 @@ fn bad_files_give_exit_3_a_located_message_and_no_output() {
         ),
         (
             "unreachable.csv",
-            format!("{header}\n{row}\n2,paper,0,0,0.41,0,0,0,309.9\n"),
+            format!("{header}\n{row}\n2,paper,0,0,41,0,0,0,309.9\n"),
             3,
             "pose \"2\"",
         ),
@@ -712,7 +712,7 @@ fn bad_files_give_exit_3_a_located_message_and_no_output() {
     let targets = d.join("targets.csv");
     std::fs::write(
         &targets,
-        "x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n0,0,410,0,0,0\n0,0,0.41,0,0,0\n",
+        "x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n0,0,410,0,0,0\n0,0,41,0,0,0\n",
     )
     .unwrap();
     let o = cpm(&[

@@ -276,8 +276,10 @@ fn bad_readings_files_name_file_line_and_field() {
         (format!("{HEADER}\n1,paper,0,0,,0,0,0,309.9\n"), "data.csv:2: field z_mm: missing value"),
         // Unknown sensor.
         (format!("{HEADER}\n1,gauge,0,0,410,0,0,0,309.9\n"), "data.csv:2: field sensor: unknown sensor \"gauge\" (the robot description has: paper)"),
-        // Unreachable pose: the platform in metres.
-        (format!("{HEADER}\n1,paper,0,0,0.41,0,0,0,309.9\n"), "data.csv:2: pose \"1\" (x 0 mm, y 0 mm, z 0.41 mm"),
+        // The platform in metres: a hundred times closer to the base than home.
+        (format!("{HEADER}\n1,paper,0,0,0.41,0,0,0,309.9\n"), "data.csv:2: field z_mm: the position (0, 0, 0.41) is 0.4100 mm from the base origin while the robot's home is 410.0 mm away: metres?"),
+        // Angles in radians.
+        (format!("{HEADER}\n{ROW}\n2,paper,0,0,410,0.05,0,0,309.9\n"), "data.csv:3: field roll_deg: 0.05 degrees, and every angle of the file is within +-0.2 degrees (largest 0.05): radians?"),
         // A length in metres.
         (format!("{HEADER}\n1,paper,0,0,410,0,0,0,0.3099\n"), "data.csv:2: field length_mm: 0.3099 mm is far from the nominal length"),
         // Extra column.

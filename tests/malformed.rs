@@ -327,7 +327,7 @@ const CASES: &[Case] = &[
         Data,
         Some(3),
         None,
-        "pose \"2\" (x 0 mm, y 0 mm, z 0.41 mm",
+        "pose \"2\" (x 0 mm, y 0 mm, z 41 mm",
     ),
     case(
         "singular_pose.csv",
@@ -340,8 +340,8 @@ const CASES: &[Case] = &[
         "pose_in_metres.csv",
         Data,
         Some(2),
-        None,
-        "pose \"1\" (x 0 mm, y 0 mm, z 0.41 mm",
+        Some("z_mm"),
+        "the position (0, 0, 0.41) is 0.4100 mm from the base origin while the robot's home is 410.0 mm away: metres?",
     ),
     case(
         "length_in_metres.csv",
@@ -405,8 +405,8 @@ const CASES: &[Case] = &[
         "pose_in_metres_targets.csv",
         Poses,
         Some(3),
-        None,
-        "pose \"2\" (x 0 mm, y 0 mm, z 0.41 mm",
+        Some("z_mm"),
+        "the position (0, 0, 0.41) is 0.4100 mm from the base origin while the robot's home is 410.0 mm away: metres?",
     ),
     case(
         "nan_targets.csv",
@@ -657,6 +657,7 @@ fn typed(c: &Case) -> cpm::io::InputError {
         .map(|_| ()),
         Poses => cpm::io::read_pose_list_file(&p).and_then(|rows| {
             let robot = cube();
+            cpm::io::campaign::check_pose_list_units(&rows, &p.display().to_string(), &robot)?;
             for r in &rows {
                 cpm::io::campaign::check_reachable(
                     &robot.table,

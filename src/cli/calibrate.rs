@@ -121,7 +121,7 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         }
     }
     ctx.stage("reading the measurements");
-    let mut merged = common::load_data(data, &robot, &common::read_options(&effects))?;
+    let mut merged = common::load_data(data, &robot, &common::read_options(&model))?;
     if let Some(v) = pose_sigma_um {
         merged.campaign.pose_sigma_um = v;
     }
@@ -316,7 +316,23 @@ pub fn stage_calibrated(
     } else {
         cal.estimate_um.clone()
     };
-    let (desc, notes) = io::calibrated_description(&inputs.robot, model, &params, declare);
+    let (mut desc, notes) = io::calibrated_description(&inputs.robot, model, &params, declare);
+    // Reading offsets the registration applied to the data belong to the link reading models.
+    if let Some(r) = inputs
+        .merged
+        .registration
+        .as_ref()
+        .filter(|r| r.offsets_applied)
+    {
+        for ((spec, orig), o) in desc
+            .links
+            .iter_mut()
+            .zip(&inputs.robot.description.links)
+            .zip(&r.link_offset_mm)
+        {
+            spec.length_at_zero_mm += o * spec.mm_per_unit / orig.mm_per_unit;
+        }
+    }
     let mut header = provenance_lines(&inputs.provenance, cal.simulated, command);
     if !cal.solver.was_successful() {
         header.push(format!(
@@ -358,8 +374,62 @@ pub fn solver_options(
     Ok(())
 }
 
-/// What the data did not determine, and how the fit ended, in a few lines for the top of a
-/// report (empty when all is well).
+/// The chi-square test of the fit against the declared noise (`None` when the noise was
+/// estimated from the residual, or no degree of freedom is left).
+pub fn misfit(cal: &Calibration) -> Option<crate::calib::misfit::Misfit> {
+    if cal.sigma_estimated {
+        return None;
+    }
+    crate::calib::misfit::chi_square(
+        &cal.residuals_um,
+        cal.sigma_um,
+        cal.identifiability.rank,
+        &cal.outliers,
+    )
+}
+
+/// What a misfit says, in words.
+pub fn misfit_message(m: &crate::calib::misfit::Misfit) -> String {
+    format!(
+        "**The model does not fit the data to the declared noise**: chi2/dof = {:.2} on {} degrees of freedom (p {}), residual RMS {:.3} um against the declared {} um{}. The standard deviations assume the declared noise and are too small. An effect the model lacks (backlash, link offsets or scales, thermal drift, ...) or a noise larger than declared: `cpm refine` tests the effect library on these data.",
+        m.chi2_per_dof,
+        m.dof,
+        if m.p_value < 1e-300 {
+            "< 1e-300".to_string()
+        } else {
+            format!("= {:.1e}", m.p_value)
+        },
+        m.residual_rms_um,
+        m.sigma_um,
+        if m.outliers_left_out > 0 {
+            format!(", {} flagged outliers left out", m.outliers_left_out)
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// `calibration.json`'s `misfit` object (null when the noise was estimated).
+pub fn misfit_json(cal: &Calibration) -> serde_json::Value {
+    match misfit(cal) {
+        Some(m) => json!({
+            "chi2": m.chi2,
+            "dof": m.dof,
+            "chi2_per_dof": m.chi2_per_dof,
+            "p_value": m.p_value,
+            "residual_rms_um": m.residual_rms_um,
+            "sigma_um": m.sigma_um,
+            "outliers_left_out": m.outliers_left_out,
+            "inconsistent": m.inconsistent(),
+            "rule": format!("inconsistent when p < {} and chi2/dof > {}", crate::calib::misfit::MISFIT_P, crate::calib::misfit::MISFIT_CHI2_PER_DOF),
+            "message": if m.inconsistent() { Some(misfit_message(&m).replace("**", "")) } else { None },
+        }),
+        None => serde_json::Value::Null,
+    }
+}
+
+/// What the data did not determine, how the fit ended, and whether the model fits the
+/// declared noise, in a few lines for the top of a report (empty when all is well).
 pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     let mut w = Vec::new();
     if !cal.solver.was_successful() {
@@ -391,6 +461,9 @@ pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
             cal.outliers.len(),
             if cal.outliers.len() == 1 { "" } else { "s" }
         ));
+    }
+    if let Some(m) = misfit(cal).filter(|m| m.inconsistent()) {
+        w.push(misfit_message(&m));
     }
     w
 }
@@ -495,6 +568,175 @@ pub struct Fitted {
     pub value: serde_json::Value,
 }
 
+/// A parameter's name, estimate and standard deviation (`None` when not determined).
+type NamedValue = (String, Option<f64>, Option<f64>);
+
+/// The fitted values of one effect block: (name, estimate, standard deviation).
+fn block_values(
+    model: &MeasurementModel,
+    cal: &Calibration,
+    effect: crate::calib::Effect,
+) -> Option<Vec<NamedValue>> {
+    let names = model.parameter_names();
+    let b = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(effect))?;
+    Some(
+        (b.offset..b.offset + b.len)
+            .map(|k| {
+                (
+                    names[k].clone(),
+                    cal.estimate_um.get(k).copied().flatten(),
+                    cal.std_um.get(k).copied().flatten(),
+                )
+            })
+            .collect(),
+    )
+}
+
+/// `calibration.json`'s `registration` object: the automatic registration of the tracker
+/// files (per file: translation mm, rotation deg, RMS before and after; reading offsets mm per
+/// link), the fit's refinements of it (`tracker_frame`, `link_offset`) and their gauge
+/// freedoms; null without tracker files.
+pub fn registration_json(
+    merged: &Merged,
+    model: &MeasurementModel,
+    cal: &Calibration,
+) -> serde_json::Value {
+    let Some(r) = &merged.registration else {
+        return serde_json::Value::Null;
+    };
+    let vals = |e| {
+        block_values(model, cal, e).map(|v| {
+            v.into_iter()
+                .map(|(n, v, s)| json!({"name": n, "value": v, "std": s}))
+                .collect::<Vec<_>>()
+        })
+    };
+    let gauge: Vec<String> = cal
+        .identifiability
+        .blind_directions
+        .iter()
+        .filter(|b| b.description.contains("tracker"))
+        .map(|b| b.description.clone())
+        .collect();
+    json!({
+        "apply_threshold_mm": io::REGISTRATION_APPLY_MM,
+        "failure": r.failure,
+        "sessions": r.sessions.iter().map(|s| {
+            let f = &s.frame;
+            let [ro, pi, ya] = f.as_pose().rpy_deg();
+            json!({
+                "file": s.file,
+                "poses": f.poses,
+                "applied": s.applied,
+                "largest_move_mm": s.largest_move_mm,
+                "translation_mm": [f.translation_mm.x, f.translation_mm.y, f.translation_mm.z],
+                "translation_sd_mm": f.translation_sd_mm,
+                "rotation_vector_deg": f.rotation_vector_deg(),
+                "rotation_sd_deg": f.rotation_sd_deg,
+                "rotation_angle_deg": f.rotation_angle_deg(),
+                "roll_pitch_yaw_deg": [ro, pi, ya],
+                "rms_before_mm": f.rms_before_mm,
+                "rms_after_mm": f.rms_after_mm,
+                "orientation_rms_before_deg": f.orientation_rms_before_deg,
+                "orientation_rms_after_deg": f.orientation_rms_after_deg,
+            })
+        }).collect::<Vec<_>>(),
+        "link_reading_offset_mm": r.link_offset_mm,
+        "link_reading_offset_sd_mm": r.link_offset_sd_mm,
+        "offsets_estimated": r.offsets_estimated,
+        "offsets_applied": r.offsets_applied,
+        "variance_factor": r.variance_factor,
+        "refined_by_fit": {
+            "tracker_frame": vals(crate::calib::Effect::TrackerFrame),
+            "link_offset": vals(crate::calib::Effect::LinkOffset),
+            "gauge_freedoms": gauge,
+        },
+    })
+}
+
+/// The registration section of report.md (nothing without tracker files).
+pub fn registration_report(
+    s: &mut String,
+    merged: &Merged,
+    model: &MeasurementModel,
+    cal: &Calibration,
+) {
+    let Some(r) = &merged.registration else {
+        return;
+    };
+    s.push_str("## Tracker registration\n\n");
+    if let Some(why) = &r.failure {
+        s.push_str(&format!("The automatic registration of the tracker frames failed ({why}); the measured poses were used as logged.\n\n"));
+        return;
+    }
+    s.push_str(&format!("Each tracker file (session) gets its own frame, found from the data against the nominal forward kinematics of its readings (closed form, then Gauss-Newton with one reading offset per link shared by the files); a frame that moves a measured position by more than {} mm, or offsets larger than that, are applied to the data before the fit, smaller ones are left to the fit. Standard deviations are scaled by the registration's variance factor ({:.3}).\n\n", io::REGISTRATION_APPLY_MM, r.variance_factor));
+    s.push_str("| file | poses | translation, mm (sd) | rotation vector, deg (sd) | angle, deg | RMS before, mm | RMS after, mm | applied |\n|---|---|---|---|---|---|---|---|\n");
+    for x in &r.sessions {
+        let f = &x.frame;
+        let t = f.translation_mm;
+        let w = f.rotation_vector_deg();
+        s.push_str(&format!(
+            "| {} | {} | {:.3} ({:.3}), {:.3} ({:.3}), {:.3} ({:.3}) | {:.4} ({:.4}), {:.4} ({:.4}), {:.4} ({:.4}) | {:.4} | {:.3} | {:.4} | {} |\n",
+            x.file, f.poses,
+            t.x, f.translation_sd_mm[0], t.y, f.translation_sd_mm[1], t.z, f.translation_sd_mm[2],
+            w[0], f.rotation_sd_deg[0], w[1], f.rotation_sd_deg[1], w[2], f.rotation_sd_deg[2],
+            f.rotation_angle_deg(), f.rms_before_mm, f.rms_after_mm,
+            if x.applied { "yes" } else { "no (small)" }
+        ));
+    }
+    s.push('\n');
+    if r.offsets_estimated {
+        s.push_str(&format!(
+            "Link reading offsets (true length = logged length + offset), mm: {}; {}.\n\n",
+            r.link_offset_mm
+                .iter()
+                .zip(&r.link_offset_sd_mm)
+                .enumerate()
+                .map(|(i, (o, sd))| format!("link {} {o:.3} +- {sd:.3}", i + 1))
+                .collect::<Vec<_>>()
+                .join(", "),
+            if r.offsets_applied {
+                "applied to the commanded lengths before the fit and folded into `calibrated.toml`"
+            } else {
+                "not applied (small: left to `link_offset`)"
+            }
+        ));
+    } else {
+        s.push_str("Link reading offsets were not estimated (the poses cannot tell them from the frames).\n\n");
+    }
+    for e in [
+        crate::calib::Effect::TrackerFrame,
+        crate::calib::Effect::LinkOffset,
+    ] {
+        if let Some(v) = block_values(model, cal, e) {
+            s.push_str(&format!(
+                "Refined by the fit, `{}` (on top of the registration): {}.\n\n",
+                e.name(),
+                v.iter()
+                    .map(|(n, v, sd)| match (v, sd) {
+                        (Some(v), Some(sd)) => format!("{n} {v:.2} +- {sd:.2}"),
+                        _ => format!("{n} not determined"),
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+    }
+    let gauge: Vec<&str> = cal
+        .identifiability
+        .blind_directions
+        .iter()
+        .filter(|b| b.description.contains("tracker"))
+        .map(|b| b.description.as_str())
+        .collect();
+    if !gauge.is_empty() {
+        s.push_str(&format!("Gauge freedoms of the refinement: {} (the fit determines the tracker frame only together with the installation errors; these directions are not determined).\n\n", gauge.join("; ")));
+    }
+}
+
 /// Fits the inputs and stages every output of `cpm calibrate` in memory, for `dir`: nothing
 /// is written (commit the set). Errors name the file and line of the pose they are about.
 pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fitted> {
@@ -506,6 +748,8 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
     let mut value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
     value["outliers"] = outliers_json(&inputs.robot, &inputs.merged, &cal);
+    value["registration"] = registration_json(&inputs.merged, model, &cal);
+    value["misfit"] = misfit_json(&cal);
     value["warnings"] = json!(warnings(model, &cal)
         .iter()
         .map(|w| w.replace("**", ""))
@@ -550,6 +794,7 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
         &inputs.identify.lm.loss,
     );
     outliers_report(&mut r, &inputs.robot, &inputs.merged, &cal);
+    registration_report(&mut r, &inputs.merged, model, &cal);
     r.push_str("## Outputs\n\n- `calibration.json`: estimates, standard deviations, what is not determined, residual, solver report.\n");
     r.push_str(&format!(
         "- `calibrated.toml`: the robot description with the {} ({} installation-error components left at nominal); `link_offset`/`link_scale` folded into the link reading models, `socket_error` into the sensor sockets{}.\n",

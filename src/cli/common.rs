@@ -160,6 +160,7 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
     if let Some(path) = &args.plan {
         let file = path.display().to_string();
         let rows = io::read_pose_list_file(path)?;
+        io::campaign::check_pose_list_units(&rows, &file, robot)?;
         for r in &rows {
             io::campaign::check_reachable(table, &r.pose, ratio, &file, r.line, &r.label)?;
         }
@@ -245,17 +246,18 @@ pub fn load_data(
     robot: &Robot,
     options: &ReadOptions,
 ) -> anyhow::Result<Merged> {
-    let mut files = Vec::with_capacity(paths.len());
-    for p in paths {
-        files.push(io::read_data_file(p, robot, options)?);
-    }
+    let files = io::read_data_files(paths, robot, options)?;
     Ok(merge(files, robot))
 }
 
-/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled.
-pub fn read_options(effects: &[Effect]) -> ReadOptions {
+/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;
+/// tracker files are registered with the model's known `tracker_frame` taken out.
+pub fn read_options(model: &MeasurementModel) -> ReadOptions {
     ReadOptions {
-        check_sensor_lengths: !effects.contains(&Effect::SensorOffset),
+        check_sensor_lengths: !model.effects.contains(&Effect::SensorOffset),
+        known_tracker_frame: model
+            .known(Effect::TrackerFrame)
+            .and_then(|q| <[f64; 6]>::try_from(q).ok()),
         ..ReadOptions::default()
     }
 }

@@ -128,6 +128,7 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     let file = args.poses.display().to_string();
     let targets = io::read_pose_list_file(&args.poses)?;
+    io::campaign::check_pose_list_units(&targets, &file, &robot)?;
     ctx.stage(format!("computing commands for {} targets", targets.len()));
     let ratio = ReadOptions::default().max_condition_ratio;
     if let Some(t) = args.temperature_c {

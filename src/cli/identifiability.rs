@@ -54,7 +54,7 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
                 return Err(usage_error("--sensors applies to a plan, not to --data"));
             }
             ctx.stage("reading the measurements");
-            let merged = common::load_data(&args.data, &robot, &common::read_options(&effects))?;
+            let merged = common::load_data(&args.data, &robot, &common::read_options(&model))?;
             let names: Vec<String> = args.data.iter().map(|p| p.display().to_string()).collect();
             (merged.campaign, names.join(", "))
         }

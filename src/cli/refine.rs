@@ -53,6 +53,44 @@ fn param_json(effect: Effect, params: &[(String, Option<f64>, Option<f64>)]) -> 
     )
 }
 
+/// The sentence about the candidates of a last round that added nothing: those left out as
+/// confounded with the model (novelty below `min_novelty`), with their novelty, and those
+/// not significant. `None` when the rounds ended otherwise.
+pub fn last_round_message(r: &Refinement, min_novelty: f64) -> Option<String> {
+    if r.last_round.is_empty() {
+        return None;
+    }
+    let confounded: Vec<String> = r
+        .last_round
+        .iter()
+        .filter(|c| c.novelty < min_novelty)
+        .map(|c| format!("`{}` (novelty {:.4})", c.effect.name(), c.novelty))
+        .collect();
+    let weak: Vec<String> = r
+        .last_round
+        .iter()
+        .filter(|c| c.novelty >= min_novelty)
+        .map(|c| match c.p_value {
+            Some(p) => format!("`{}` (p {p:.2e})", c.effect.name()),
+            None => format!("`{}` (no fit)", c.effect.name()),
+        })
+        .collect();
+    let mut s = String::new();
+    if !confounded.is_empty() {
+        s.push_str(&format!(
+            "Left out as barely separable from the installation errors and effects already in the model on this design (novelty, the fraction of the effect's signature the model cannot already explain, below {min_novelty}): {}; the data cannot tell such an effect apart, so the residual says nothing about it: a design with more varied poses (`cpm design`) can. ",
+            confounded.join(", ")
+        ));
+    }
+    if !weak.is_empty() {
+        s.push_str(&format!(
+            "Not significant (after the Bonferroni correction, or no BIC gain): {}.",
+            weak.join(", ")
+        ));
+    }
+    Some(s.trim_end().to_string())
+}
+
 /// The `refine.json` document.
 pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
     let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
@@ -81,6 +119,15 @@ pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
                 "rms_um": c.rms_um,
             })).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
+        "last_round": r.last_round.iter().map(|c| json!({
+            "effect": c.effect.name(),
+            "novelty": c.novelty,
+            "confounded": c.novelty < RefineOptions::default().min_novelty,
+            "p_value": c.p_value,
+            "delta_bic": c.delta_bic,
+            "rms_um": c.rms_um,
+        })).collect::<Vec<_>>(),
+        "min_novelty": RefineOptions::default().min_novelty,
         "final": {
             "effects": r.model.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
             "rms_um": r.calibration.residual_rms_um,
@@ -134,6 +181,8 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let mut value = io::calibration_json(&r.model, campaign, cal, &inputs.provenance);
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
     value["outliers"] = calibrate::outliers_json(&inputs.robot, &inputs.merged, cal);
+    value["registration"] = calibrate::registration_json(&inputs.merged, &r.model, cal);
+    value["misfit"] = calibrate::misfit_json(cal);
     value["warnings"] = json!(calibrate::warnings(&r.model, cal)
         .iter()
         .map(|w| w.replace("**", ""))
@@ -187,8 +236,12 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         r.initial_diagnostics.rms_um,
         r.initial_diagnostics.white
     ));
+    let last = last_round_message(&r, options.min_novelty);
     if r.steps.is_empty() {
-        s.push_str("No effect was added: no candidate was significant (or the residual was already white and consistent with the noise).\n\n");
+        match &last {
+            Some(m) => s.push_str(&format!("No effect was added. {m}\n\n")),
+            None => s.push_str("No effect was added: the residual was already white and consistent with the noise (or no candidate was left).\n\n"),
+        }
     }
     for (i, st) in r.steps.iter().enumerate() {
         s.push_str(&format!(
@@ -203,6 +256,9 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             ));
         }
         s.push('\n');
+    }
+    if let (false, Some(m)) = (r.steps.is_empty(), &last) {
+        s.push_str(&format!("The last round added nothing. {m}\n\n"));
     }
     s.push_str(&format!(
         "## Final\n\n- Effects: {}\n- RMS {:.3} um, cross-validated {:.3} um, residual white: {}\n- Unexplained structure: {}\n\n",
@@ -221,6 +277,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         &inputs.identify.lm.loss,
     );
     calibrate::outliers_report(&mut s, &inputs.robot, &inputs.merged, cal);
+    calibrate::registration_report(&mut s, &inputs.merged, &r.model, cal);
     s.push_str(&format!(
         "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models, socket_error into the sensor sockets{}\n",
         notes.undetermined.len(),
@@ -232,6 +289,15 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     set.add(dir.join("report.md"), s);
     let written = common::commit(set, &dir.display().to_string())?;
     ctx.finish();
+    for w in calibrate::warnings(&r.model, cal)
+        .iter()
+        .skip(usize::from(!cal.solver.was_successful()))
+    {
+        ctx.note(w.replace("**", ""));
+    }
+    if let Some(m) = &last {
+        ctx.note(m.replace('`', ""));
+    }
     if args.fit.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&doc)?)?;
     } else {

@@ -46,6 +46,13 @@ pub struct ReadOptions {
     /// The most data rows a file may have (the reading stops with an error at the next one).
     /// Default [`MAX_ROWS`].
     pub max_rows: usize,
+    /// Register tracker files automatically before their consistency checks (see
+    /// [`register_tracker_files`]). Default true.
+    pub register_tracker: bool,
+    /// The known `tracker_frame` of the description (tx, ty, tz um; rx, ry, rz urad), which
+    /// the model applies to its predictions: registration works on the measured poses with
+    /// it taken out. Default none.
+    pub known_tracker_frame: Option<[f64; 6]>,
 }
 
 /// The most data rows of a measurement file or pose list by default: ten million.
@@ -57,6 +64,8 @@ impl Default for ReadOptions {
             check_sensor_lengths: true,
             max_condition_ratio: 1e3,
             max_rows: MAX_ROWS,
+            register_tracker: true,
+            known_tracker_frame: None,
         }
     }
 }
@@ -76,6 +85,68 @@ pub struct DataFile {
     pub pose_lines: Vec<usize>,
     /// The line of each reading.
     pub reading_lines: Vec<usize>,
+    /// Tracker files: the automatic registration of this file's frame (and the reading
+    /// offsets shared by all tracker files read together), when it was attempted.
+    pub registration: Option<RegistrationReport>,
+    /// Tracker files: each row as logged (before registration), for the checks that follow it.
+    pub tracker_rows: Vec<TrackerRow>,
+    /// Tracker files: whether the rows passed the consistency checks (they are checked after
+    /// registration, which may involve several files).
+    pub checked: bool,
+}
+
+/// One row of a tracker file as logged.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerRow {
+    /// 1-based line.
+    pub line: usize,
+    /// The `pose` label.
+    pub label: String,
+    /// The measured pose, tracker frame.
+    pub measured: Pose,
+    /// The link readings (`reading_k`), in the link's units.
+    pub readings: Vec<f64>,
+}
+
+/// A measured position is moved by more than this (mm) by a session's registration, or a
+/// link reading offset is larger than this: the registration (or the offsets) is applied to
+/// the data before the fit. Smaller ones are left to the fit (`tracker_frame`, `link_offset`).
+pub const REGISTRATION_APPLY_MM: f64 = 1.0;
+
+/// The registration of one tracker file (session).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SessionRegistration {
+    /// The file.
+    pub file: String,
+    /// The frame: base coordinates to tracker coordinates (with any known `tracker_frame`
+    /// taken out first).
+    pub frame: cpm_calib::registration::Frame,
+    /// Whether the frame was applied to the measured poses (it moves some measured position
+    /// by more than [`REGISTRATION_APPLY_MM`]).
+    pub applied: bool,
+    /// The largest move of a measured position by the registration, mm.
+    pub largest_move_mm: f64,
+}
+
+/// The automatic registration of tracker files: a frame per file and reading offsets per
+/// link shared by them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegistrationReport {
+    /// One per tracker file.
+    pub sessions: Vec<SessionRegistration>,
+    /// Link reading offset per link, mm (true length = reading's length + offset).
+    pub link_offset_mm: Vec<f64>,
+    /// Their standard deviations, mm.
+    pub link_offset_sd_mm: Vec<f64>,
+    /// Whether the offsets were estimated.
+    pub offsets_estimated: bool,
+    /// Whether they were applied to the commanded lengths (the largest is over
+    /// [`REGISTRATION_APPLY_MM`]).
+    pub offsets_applied: bool,
+    /// A-posteriori variance factor of the registration.
+    pub variance_factor: f64,
+    /// Why the registration failed, when it did (the data are then checked as logged).
+    pub failure: Option<String>,
 }
 
 /// One pose of a pose list.
@@ -187,6 +258,93 @@ fn close(a: f64, b: f64) -> bool {
 
 fn tolerance_mm(length_mm: f64) -> f64 {
     CONSISTENCY_MM + CONSISTENCY_REL * length_mm.abs()
+}
+
+/// Angles all within this (in the file's unit, degrees expected) while some is at least
+/// [`RADIANS_MIN`]: the file is taken for radians (docs/formats.md, "Checks beyond the syntax").
+pub const RADIANS_MAX: f64 = 0.2;
+/// The largest angle of a file must reach this for [`RADIANS_MAX`] to apply (0.02 rad is
+/// 1.1 deg; a campaign in degrees that never tilts more than 0.2 deg is implausible for
+/// calibration, and a file of constant orientation is left alone).
+pub const RADIANS_MIN: f64 = 0.02;
+
+/// Angle values of a file: (line, column, value) for every `_deg` column of every row.
+type AngleCells = Vec<(usize, &'static str, f64)>;
+
+/// Refuses a file whose `roll_deg`, `pitch_deg`, `yaw_deg` values all lie within
+/// +-[`RADIANS_MAX`] while the largest reaches [`RADIANS_MIN`]: angles in radians, most
+/// likely. The error names the first row with such an angle, and says how to keep truly tiny
+/// angles (a quaternion).
+fn check_angle_units(file: &str, cells: &AngleCells) -> Result<(), InputError> {
+    let largest = cells.iter().fold(0.0_f64, |a, c| a.max(c.2.abs()));
+    if cells.is_empty() || !(RADIANS_MIN..=RADIANS_MAX).contains(&largest) {
+        return Ok(());
+    }
+    let (line, col, v) = cells
+        .iter()
+        .find(|c| c.2.abs() >= RADIANS_MIN)
+        .copied()
+        .expect("the largest angle");
+    Err(InputError::field(
+        file,
+        line,
+        col,
+        format!(
+            "{} degrees, and every angle of the file is within +-{RADIANS_MAX} degrees (largest {largest}): radians? Angles are in degrees ({v} rad would be {:.3} deg). If the campaign really tilts less than {RADIANS_MAX} deg, give the orientation as a quaternion (qw,qx,qy,qz)",
+            show(v, None),
+            v.to_degrees()
+        ),
+    ))
+}
+
+/// The distance of the robot's home from the base origin, mm, when it is large enough
+/// (10 mm) for positions a hundred times smaller to be implausible.
+fn home_distance_mm(robot: &Robot) -> Option<f64> {
+    let h = robot.table.home.position_mm.norm();
+    (h >= 10.0).then_some(h)
+}
+
+/// Refuses a base-frame position a hundred times closer to the base origin than the robot's
+/// home: metres, most likely. `row` names the line.
+fn check_position_units(
+    file: &str,
+    line: usize,
+    p: &Vector3<f64>,
+    robot: &Robot,
+) -> Result<(), InputError> {
+    let Some(h) = home_distance_mm(robot) else {
+        return Ok(());
+    };
+    if p.norm() > h / 100.0 {
+        return Ok(());
+    }
+    let col = ["x_mm", "y_mm", "z_mm"][p.iamax()];
+    Err(InputError::field(
+        file,
+        line,
+        col,
+        format!(
+            "the position ({}, {}, {}) is {:.4} mm from the base origin while the robot's home is {h:.1} mm away: metres? Positions are in mm",
+            show(p.x, None),
+            show(p.y, None),
+            show(p.z, None),
+            p.norm()
+        ),
+    ))
+}
+
+/// Checks a pose list's positions against the robot (see [`read_pose_list`]): a position a
+/// hundred times closer to the base origin than the robot's home is refused as metres, at the
+/// first such row.
+pub fn check_pose_list_units(
+    rows: &[PoseRow],
+    file: &str,
+    robot: &Robot,
+) -> Result<(), InputError> {
+    for r in rows {
+        check_position_units(file, r.line, &r.pose.position_mm, robot)?;
+    }
+    Ok(())
 }
 
 /// Checks a pose where the machine is (see [`reachable_at`]): link lengths within their
@@ -320,7 +478,35 @@ pub fn read_data_from<R: Read>(
         )),
         Err(e) => Err(e),
     };
-    r.map_err(|e| finish(&mut t, e))
+    let mut f = r.map_err(|e| finish(&mut t, e))?;
+    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
+    Ok(f)
+}
+
+/// Reads several measurement files (see [`read_data_file`]); the tracker files among them are
+/// registered together ([`register_tracker_files`]: a frame per file, reading offsets shared)
+/// before their consistency checks.
+pub fn read_data_files(
+    paths: &[std::path::PathBuf],
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Result<Vec<DataFile>, ReadError> {
+    let mut files = Vec::with_capacity(paths.len());
+    for path in paths {
+        let file = path.display().to_string();
+        let mut t = Table::from_reader(open(path)?, &file)?;
+        let r = match t.kind() {
+            Ok(FileKind::PoseMeasurements) => read_pose_measurements_table(&mut t, robot, options),
+            _ => {
+                drop(t);
+                files.push(read_data_file(path, robot, options)?);
+                continue;
+            }
+        };
+        files.push(r.map_err(|e| finish(&mut t, e))?);
+    }
+    register_tracker_files(&mut files, robot, options)?;
+    Ok(files)
 }
 
 /// Checks the `reading_k` columns: none, or exactly `reading_1..reading_n`.
@@ -356,25 +542,35 @@ fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>, InputError
         .collect()
 }
 
-/// Checks logged link readings against the pose's inverse kinematics.
+/// Checks link lengths (from the logged readings `readings`, plus `offset_mm` per link when the
+/// registration found reading offsets) against the pose's inverse kinematics; errors name
+/// `file`, `line` and the `reading_k` field, with `note` appended.
+#[allow(clippy::too_many_arguments)]
 fn check_link_readings(
-    t: &Header,
-    row: &Row,
+    file: &str,
+    line: usize,
     robot: &Robot,
     pose: &Pose,
     readings: &[f64],
+    offset_mm: Option<&[f64]>,
     what: &str,
+    note: &str,
 ) -> Result<Vec<f64>, InputError> {
     let ik = cpm_kinematics::inverse_lengths(&robot.table, pose);
     let mut lengths = Vec::with_capacity(readings.len());
     for (i, (u, l_ik)) in readings.iter().zip(&ik).enumerate() {
-        let l = robot.length_mm(i, *u);
+        let l = robot.length_mm(i, *u) + offset_mm.map_or(0.0, |o| o[i]);
         if !l.is_finite() || !((l - l_ik).abs() <= tolerance_mm(*l_ik)) {
-            return Err(t.err(
-                row,
-                &format!("reading_{}", i + 1),
+            let offset = match offset_mm {
+                Some(o) => format!(" + the registration's reading offset {:.3} mm", o[i]),
+                None => String::new(),
+            };
+            return Err(InputError::field(
+                file,
+                line,
+                format!("reading_{}", i + 1),
                 format!(
-                    "{} means a link length of {} mm (length_at_zero_mm + mm_per_unit * reading), but the {what} needs {l_ik:.3} mm: wrong units, a wrong link mapping in the robot description, or a wrong pose?",
+                    "{} means a link length of {} mm (length_at_zero_mm + mm_per_unit * reading{offset}), but the {what} needs {l_ik:.3} mm: wrong units, a wrong link mapping in the robot description, or a wrong pose?{note}",
                     show(*u, None),
                     show(l, Some(3))
                 ),
@@ -436,6 +632,7 @@ fn read_readings_table<R: Read>(
     };
     let mut commanded = Vec::new();
     let mut reading_lines = Vec::new();
+    let mut angles: AngleCells = Vec::new();
     while let Some(row) = t.next_row()? {
         let t: &Header = t;
         if reading_lines.len() >= options.max_rows {
@@ -493,6 +690,12 @@ fn read_readings_table<R: Read>(
             }
             None => {
                 let j = entries.len();
+                check_position_units(&t.file, row.line, &pose.position_mm, robot)?;
+                if o == Orientation::Rpy {
+                    for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+                        angles.push((row.line, *name, *v));
+                    }
+                }
                 if options.max_condition_ratio.is_finite() {
                     check_reachable(
                         &robot.table,
@@ -505,12 +708,14 @@ fn read_readings_table<R: Read>(
                 }
                 if let Some(u) = &link {
                     commanded.push(check_link_readings(
-                        t,
-                        &row,
+                        &t.file,
+                        row.line,
                         robot,
                         &pose,
                         u,
+                        None,
                         "commanded pose",
+                        "",
                     )?);
                 }
                 by_label.insert(label.clone(), j);
@@ -553,6 +758,7 @@ fn read_readings_table<R: Read>(
             "no readings: the file has a header but no rows",
         ));
     }
+    check_angle_units(&t.file, &angles)?;
     if logged {
         campaign.commanded_lengths_mm = Some(commanded);
     }
@@ -563,6 +769,9 @@ fn read_readings_table<R: Read>(
         campaign,
         pose_labels: labels,
         reading_lines,
+        registration: None,
+        tracker_rows: Vec::new(),
+        checked: true,
     })
 }
 
@@ -574,7 +783,9 @@ pub fn read_pose_measurements(
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
     let mut t = Table::parse(text, file)?;
-    read_pose_measurements_table(&mut t, robot, options)
+    let mut f = read_pose_measurements_table(&mut t, robot, options)?;
+    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
+    Ok(f)
 }
 
 fn read_pose_measurements_table<R: Read>(
@@ -609,6 +820,8 @@ fn read_pose_measurements_table<R: Read>(
     let mut labels = Vec::new();
     let mut lines = Vec::new();
     let mut commanded = Vec::new();
+    let mut rows = Vec::new();
+    let mut angles: AngleCells = Vec::new();
     while let Some(row) = t.next_row()? {
         let t: &Header = t;
         if lines.len() >= options.max_rows {
@@ -622,30 +835,21 @@ fn read_pose_measurements_table<R: Read>(
                 format!("pose {:?} appears again (first on line {first}): a tracker file has one row per pose", shorten(&label)),
             ));
         }
-        let (measured, _) = parse_pose(t, &row, o)?;
+        let (measured, raw) = parse_pose(t, &row, o)?;
+        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+            angles.push((row.line, *name, *v));
+        }
         let u = link_readings(t, &row, n)?;
         let time_s = t.optional_number(&row, "time_s")?;
         if t.optional_bool(&row, "simulated")? == Some(true) {
             campaign.simulated = true;
         }
-        if options.max_condition_ratio.is_finite() {
-            check_reachable(
-                &robot.table,
-                &measured,
-                options.max_condition_ratio,
-                &t.file,
-                row.line,
-                &label,
-            )?;
-        }
-        commanded.push(check_link_readings(
-            t,
-            &row,
-            robot,
-            &measured,
-            &u,
-            "measured pose",
-        )?);
+        commanded.push(
+            u.iter()
+                .enumerate()
+                .map(|(i, v)| robot.length_mm(i, *v))
+                .collect::<Vec<f64>>(),
+        );
         seen.insert(label.clone(), row.line);
         let j = campaign.poses.len();
         campaign.poses.push(measured);
@@ -653,6 +857,12 @@ fn read_pose_measurements_table<R: Read>(
             pose: j,
             measured,
             time_s,
+        });
+        rows.push(TrackerRow {
+            line: row.line,
+            label: label.clone(),
+            measured,
+            readings: u,
         });
         labels.push(label);
         lines.push(row.line);
@@ -663,6 +873,8 @@ fn read_pose_measurements_table<R: Read>(
             "no pose measurements: the file has a header but no rows",
         ));
     }
+    check_angle_units(&t.file, &angles)?;
+    check_tracker_position_units(&t.file, &rows, &commanded)?;
     campaign.commanded_lengths_mm = Some(commanded);
     Ok(DataFile {
         file: t.file.clone(),
@@ -671,7 +883,277 @@ fn read_pose_measurements_table<R: Read>(
         pose_labels: labels,
         pose_lines: lines,
         reading_lines: Vec::new(),
+        registration: None,
+        tracker_rows: rows,
+        checked: false,
     })
+}
+
+/// Refuses a tracker file whose measured positions spread a hundred times less than the
+/// commanded link lengths (over more than 1 mm of link travel): metres, most likely. The
+/// tracker frame may be anywhere, so only spreads are compared. The error names the row of
+/// the largest position move from the first row.
+fn check_tracker_position_units(
+    file: &str,
+    rows: &[TrackerRow],
+    lengths_mm: &[Vec<f64>],
+) -> Result<(), InputError> {
+    let spread = |vals: &mut dyn Iterator<Item = f64>| {
+        let (lo, hi) = vals.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+        hi - lo
+    };
+    let n = lengths_mm.first().map_or(0, Vec::len);
+    let travel = (0..n)
+        .map(|i| spread(&mut lengths_mm.iter().map(|l| l[i])))
+        .fold(0.0_f64, f64::max);
+    let moved = (0..3)
+        .map(|a| spread(&mut rows.iter().map(|r| r.measured.position_mm[a])))
+        .fold(0.0_f64, f64::max);
+    if !(travel > 1.0 && moved * 100.0 < travel) {
+        return Ok(());
+    }
+    let first = rows[0].measured.position_mm;
+    let row = rows
+        .iter()
+        .max_by(|a, b| {
+            (a.measured.position_mm - first)
+                .norm()
+                .total_cmp(&(b.measured.position_mm - first).norm())
+        })
+        .expect("rows");
+    let k = (row.measured.position_mm - first).iamax();
+    Err(InputError::field(
+        file,
+        row.line,
+        ["x_mm", "y_mm", "z_mm"][k],
+        format!(
+            "the measured positions move by {moved:.4} mm over the file while the links travel {travel:.3} mm: metres? Positions are in mm"
+        ),
+    ))
+}
+
+/// Registers the tracker files among `files` together (a frame per file, reading offsets per
+/// link shared by them; see [`cpm_calib::registration`]), applies what is large (over
+/// [`REGISTRATION_APPLY_MM`]) to their measured poses and commanded lengths, then checks every
+/// tracker row: the pose reachable, the link readings consistent with it. Files already
+/// checked are left alone. Errors name the file, line and field, and the registration when it
+/// is the likely cause.
+pub fn register_tracker_files(
+    files: &mut [DataFile],
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Result<(), InputError> {
+    let idx: Vec<usize> = (0..files.len())
+        .filter(|&k| files[k].kind == FileKind::PoseMeasurements && !files[k].checked)
+        .collect();
+    if idx.is_empty() {
+        return Ok(());
+    }
+    let known = options
+        .known_tracker_frame
+        .map(|q| cpm_calib::effects::tracker_registration(&q));
+    // The measured pose with the known registration taken out, and put back.
+    let unknown = |p: &Pose| match &known {
+        Some((t, r)) => Pose::new(r.inverse() * (p.position_mm - t), r.inverse() * p.rotation),
+        None => *p,
+    };
+    let known_applied = |p: &Pose| match &known {
+        Some((t, r)) => Pose::new(r * p.position_mm + t, r * p.rotation),
+        None => *p,
+    };
+    let raw_lengths = |f: &DataFile| -> Vec<Vec<f64>> {
+        f.tracker_rows
+            .iter()
+            .map(|r| {
+                r.readings
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| robot.length_mm(i, *v))
+                    .collect()
+            })
+            .collect()
+    };
+    if options.register_tracker {
+        let sessions: Vec<cpm_calib::registration::Session> = idx
+            .iter()
+            .map(|&k| cpm_calib::registration::Session {
+                lengths_mm: raw_lengths(&files[k]),
+                measured: files[k]
+                    .tracker_rows
+                    .iter()
+                    .map(|r| unknown(&r.measured))
+                    .collect(),
+            })
+            .collect();
+        let finite = sessions
+            .iter()
+            .all(|s| s.lengths_mm.iter().flatten().all(|v| v.is_finite()));
+        // The model's joint clearance shifts the effective link lengths with the link forces:
+        // the registration uses it too.
+        let model = robot.model(&[]);
+        let n = robot.num_links();
+        let clearance = |p: &Pose| {
+            model
+                .clearance
+                .link_corrections_mm(&model.nominal, p, &model.load)
+                .unwrap_or_else(|_| vec![0.0; n])
+        };
+        let result = if finite {
+            cpm_calib::registration::register_with_corrections(
+                &robot.table,
+                &sessions,
+                &cpm_calib::registration::RegistrationOptions::default(),
+                &clearance,
+            )
+            .map_err(|e| e.to_string())
+        } else {
+            Err("a link reading gives a length that is not a finite number".to_string())
+        };
+        match result {
+            Ok(reg) => {
+                let largest_offset = reg
+                    .link_offset_mm
+                    .iter()
+                    .fold(0.0_f64, |a, o| a.max(o.abs()));
+                let offsets_applied =
+                    reg.offsets_estimated && largest_offset > REGISTRATION_APPLY_MM;
+                let mut report = RegistrationReport {
+                    sessions: Vec::new(),
+                    link_offset_mm: reg.link_offset_mm.clone(),
+                    link_offset_sd_mm: reg.link_offset_sd_mm.clone(),
+                    offsets_estimated: reg.offsets_estimated,
+                    offsets_applied,
+                    variance_factor: reg.variance_factor,
+                    failure: None,
+                };
+                for (s, (&k, frame)) in sessions.iter().zip(idx.iter().zip(&reg.frames)) {
+                    let largest_move_mm = s
+                        .measured
+                        .iter()
+                        .map(|q| (frame.to_base(q).position_mm - q.position_mm).norm())
+                        .fold(0.0_f64, f64::max);
+                    let applied = largest_move_mm > REGISTRATION_APPLY_MM;
+                    report.sessions.push(SessionRegistration {
+                        file: files[k].file.clone(),
+                        frame: frame.clone(),
+                        applied,
+                        largest_move_mm,
+                    });
+                }
+                for (s, &k) in report.sessions.iter().zip(&idx) {
+                    let f = &mut files[k];
+                    if s.applied {
+                        for (q, row) in f.tracker_rows.iter().enumerate() {
+                            let base = s.frame.to_base(&unknown(&row.measured));
+                            f.campaign.pose_measurements[q].measured = known_applied(&base);
+                            f.campaign.poses[f.campaign.pose_measurements[q].pose] = base;
+                        }
+                    }
+                    if offsets_applied {
+                        if let Some(c) = &mut f.campaign.commanded_lengths_mm {
+                            for l in c.iter_mut() {
+                                for (a, o) in l.iter_mut().zip(&report.link_offset_mm) {
+                                    *a += o;
+                                }
+                            }
+                        }
+                    }
+                }
+                for &k in &idx {
+                    files[k].registration = Some(report.clone());
+                }
+            }
+            Err(why) => {
+                let report = RegistrationReport {
+                    sessions: Vec::new(),
+                    link_offset_mm: Vec::new(),
+                    link_offset_sd_mm: Vec::new(),
+                    offsets_estimated: false,
+                    offsets_applied: false,
+                    variance_factor: f64::NAN,
+                    failure: Some(why),
+                };
+                for &k in &idx {
+                    files[k].registration = Some(report.clone());
+                }
+            }
+        }
+    }
+    // The checks, after registration.
+    for &k in &idx {
+        let f = &mut files[k];
+        let note = registration_note(f);
+        let offsets = f
+            .registration
+            .as_ref()
+            .filter(|r| r.offsets_applied)
+            .map(|r| r.link_offset_mm.clone());
+        for (q, row) in f.tracker_rows.iter().enumerate() {
+            let pose = f.campaign.poses[f.campaign.pose_measurements[q].pose];
+            if options.max_condition_ratio.is_finite() {
+                check_reachable(
+                    &robot.table,
+                    &pose,
+                    options.max_condition_ratio,
+                    &f.file,
+                    row.line,
+                    &row.label,
+                )
+                .map_err(|mut e| {
+                    e.message.push_str(&note);
+                    e
+                })?;
+            }
+            check_link_readings(
+                &f.file,
+                row.line,
+                robot,
+                &pose,
+                &row.readings,
+                offsets.as_deref(),
+                "measured pose",
+                &note,
+            )?;
+        }
+        f.checked = true;
+    }
+    Ok(())
+}
+
+/// What a consistency error of a tracker file says about its registration.
+fn registration_note(f: &DataFile) -> String {
+    let Some(r) = &f.registration else {
+        return " (the tracker frame was not registered automatically: the measured poses must be in the base frame)".to_string();
+    };
+    if let Some(why) = &r.failure {
+        return format!(" (the automatic registration of the tracker frame failed: {why}; the measured poses were checked as logged)");
+    }
+    let Some(s) = r.sessions.iter().find(|s| s.file == f.file) else {
+        return String::new();
+    };
+    let t = s.frame.translation_mm;
+    format!(
+        " (the tracker frame of this file was registered automatically{}: {:.3} mm, {:.4} deg from the base frame, RMS {:.3} mm before and {:.3} mm after{}; a wrong registration, from too few poses, poses all alike or a wrong link mapping, is the likely cause)",
+        if s.applied { " and applied" } else { ", not applied (small)" },
+        t.norm(),
+        s.frame.rotation_angle_deg(),
+        s.frame.rms_before_mm,
+        s.frame.rms_after_mm,
+        if r.offsets_applied {
+            format!(
+                ", reading offsets {} mm applied",
+                r.link_offset_mm
+                    .iter()
+                    .map(|o| format!("{o:.3}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        } else {
+            String::new()
+        }
+    )
 }
 
 /// Several measurement files merged into one campaign, with where each pose came from.
@@ -683,6 +1165,8 @@ pub struct Merged {
     pub pose_origin: Vec<(String, usize, String)>,
     /// Per reading: (file, line).
     pub reading_origin: Vec<(String, usize)>,
+    /// The automatic registration of the tracker files, if any.
+    pub registration: Option<RegistrationReport>,
 }
 
 impl Merged {
@@ -705,7 +1189,20 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
     let mut commanded = Vec::new();
     let mut pose_origin = Vec::new();
     let mut reading_origin = Vec::new();
+    let mut registration: Option<RegistrationReport> = None;
     for f in files {
+        if let Some(r) = &f.registration {
+            match &mut registration {
+                Some(acc) => {
+                    for s in &r.sessions {
+                        if !acc.sessions.iter().any(|a| a.file == s.file) {
+                            acc.sessions.push(s.clone());
+                        }
+                    }
+                }
+                None => registration = Some(r.clone()),
+            }
+        }
         let c = f.campaign;
         let base = out.poses.len();
         out.simulated |= c.simulated;
@@ -741,6 +1238,7 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
         campaign: out,
         pose_origin,
         reading_origin,
+        registration,
     }
 }
 
@@ -910,6 +1408,7 @@ fn pose_list_table<R: Read>(t: &mut Table<R>) -> Result<Vec<PoseRow>, InputError
         |h| RPY_COLUMNS.contains(&h) || QUATERNION_COLUMNS.contains(&h),
     )?;
     let mut out = Vec::new();
+    let mut angles: AngleCells = Vec::new();
     while let Some(row) = t.next_row()? {
         let t: &Header = t;
         if out.len() >= MAX_ROWS {
@@ -920,7 +1419,10 @@ fn pose_list_table<R: Read>(t: &mut Table<R>) -> Result<Vec<PoseRow>, InputError
             Some(_) => return Err(t.err(&row, "pose", "missing value")),
             None => (out.len() + 1).to_string(),
         };
-        let (pose, _) = parse_pose(t, &row, o)?;
+        let (pose, raw) = parse_pose(t, &row, o)?;
+        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+            angles.push((row.line, *name, *v));
+        }
         out.push(PoseRow {
             line: row.line,
             label,
@@ -935,6 +1437,7 @@ fn pose_list_table<R: Read>(t: &mut Table<R>) -> Result<Vec<PoseRow>, InputError
             "no poses: the file has a header but no rows",
         ));
     }
+    check_angle_units(&t.file, &angles)?;
     Ok(out)
 }
 

@@ -35,9 +35,11 @@ pub mod identifiability;
 pub mod identify;
 pub mod implicit;
 pub mod linalg;
+pub mod misfit;
 pub mod model;
 pub mod paper;
 pub mod refine;
+pub mod registration;
 pub mod simulate;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};

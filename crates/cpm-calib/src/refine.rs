@@ -112,6 +112,10 @@ pub struct Refinement {
     pub unexplained_structure: Vec<String>,
     /// Residuals of the first fit, um (for plots).
     pub initial_residuals_um: Vec<f64>,
+    /// The candidates of the last round when it added nothing (empty when the rounds ended
+    /// otherwise): which were skipped as confounded with the model (novelty below
+    /// [`RefineOptions::min_novelty`]) and which were not significant.
+    pub last_round: Vec<CandidateScore>,
 }
 
 fn rss(r: &[f64]) -> f64 {
@@ -236,6 +240,7 @@ pub fn refine(
         &cal.minimum_norm_um,
     )?;
     let mut steps = Vec::new();
+    let mut last_round = Vec::new();
     for _ in 0..options.max_steps {
         if diag.white && diag.consistent_with_noise == Some(true) && diag.significant.is_empty() {
             break;
@@ -307,6 +312,7 @@ pub fn refine(
             scores.push(score);
         }
         let Some((i, aug, c1)) = best else {
+            last_round = scores;
             break;
         };
         let cv1 = cross_validated_rms(
@@ -355,5 +361,6 @@ pub fn refine(
         final_cv_rms_um: cv,
         unexplained_structure,
         initial_residuals_um,
+        last_round,
     })
 }
