@@ -576,7 +576,10 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let Fitted { cal, set, value } = fit(&inputs, &args.fit.out, args.minimum_norm)?;
     ctx.stage("writing the results");
     let dir = &args.fit.out;
-    let written = common::commit(set, &dir.display().to_string())?;
+    let inputs_paths: Vec<&Path> = std::iter::once(args.fit.robot.robot.as_path())
+        .chain(args.fit.data.iter().map(PathBuf::as_path))
+        .collect();
+    let written = common::commit_dir(set, dir, &inputs_paths, "calibrate", ctx)?;
     ctx.finish();
     for w in warnings(model, &cal)
         .iter()

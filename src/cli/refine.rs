@@ -230,7 +230,10 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         s.push_str(&format!("- `{f}`\n"));
     }
     set.add(dir.join("report.md"), s);
-    let written = common::commit(set, &dir.display().to_string())?;
+    let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.fit.robot.robot.as_path())
+        .chain(args.fit.data.iter().map(std::path::PathBuf::as_path))
+        .collect();
+    let written = common::commit_dir(set, dir, &inputs_paths, "refine", ctx)?;
     ctx.finish();
     if args.fit.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&doc)?)?;

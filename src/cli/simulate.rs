@@ -12,7 +12,7 @@ use crate::calib::campaign::PoseMeasurement;
 use crate::calib::{simulate_campaign, Campaign, Effect, Noise, SimulationOptions};
 use crate::geometry::{InstallationErrors, Pose};
 use crate::io::{self, Robot};
-use crate::output::OutputSet;
+use crate::output::Target;
 
 /// What the simulated campaign measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -61,7 +61,7 @@ pub struct SimulateArgs {
     /// What to measure.
     #[arg(long, value_enum, default_value_t = Measure::Lengths)]
     pub measure: Measure,
-    /// Output CSV file.
+    /// Output CSV file (`-`: stdout). Never a device, FIFO or an input file.
     #[arg(long, value_name = "DATA.csv")]
     pub out: PathBuf,
     /// Print a JSON summary on stdout.
@@ -344,6 +344,15 @@ fn simulate_poses(
 
 /// Runs `cpm simulate`.
 pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    let inputs: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
+        .chain(args.truth.as_deref())
+        .chain(args.plan.plan.as_deref())
+        .collect();
+    if common::out_target("--out", &args.out, &inputs)? == Target::Stdout && args.json {
+        return Err(usage_error(
+            "--json needs --out FILE (the data would share stdout)",
+        ));
+    }
     ctx.stage("reading the robot description");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     let declared = args.effects.resolve(&robot)?;
@@ -401,11 +410,17 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             (c, text)
         }
     };
-    let mut set = OutputSet::new();
-    set.add(&args.out, text);
     ctx.stage("writing");
-    common::commit(set, &args.out.display().to_string())?;
     ctx.finish();
+    if common::write_out("--out", &args.out, &inputs, &text, ctx)? == Target::Stdout {
+        ctx.note(format!(
+            "SIMULATED: {} readings and {} pose measurements at {} poses written to standard output",
+            campaign.readings.len(),
+            campaign.pose_measurements.len(),
+            campaign.poses.len()
+        ));
+        return Ok(Outcome::Done);
+    }
     if args.json {
         let v = json!({
             "simulated": true,
