@@ -542,3 +542,135 @@ fn concurrent_runs_on_one_directory_end_with_one_complete_result() {
     }
     println!("concurrent rounds ending with campaign 1 / campaign 2: {seen:?}");
 }
+
+// ---------------------------------------------------------------------------------------
+// Robust fits and refine.
+
+fn read_json(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}
+
+fn hexapod_campaign(d: &Path) -> PathBuf {
+    let data = d.join("data.csv");
+    let o = cpm(&[
+        "simulate",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--random",
+        "40",
+        "--noise",
+        "gaussian:0.5",
+        "--out",
+        p(&data),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    data
+}
+
+fn calibrate_robust(data: &Path, out: &Path, robust: Option<&str>) -> Output {
+    let mut args = vec![
+        "calibrate".to_string(),
+        "--robot".into(),
+        example("hexapod_66.toml"),
+        "--data".into(),
+        p(data).into(),
+        "--out".into(),
+        p(out).into(),
+    ];
+    if let Some(r) = robust {
+        args.extend(["--robust".to_string(), r.to_string()]);
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    cpm(&args)
+}
+
+#[test]
+fn a_robust_fit_on_clean_data_matches_least_squares_and_one_that_ignores_the_data_fails() {
+    let d = scratch("robust");
+    let data = hexapod_campaign(&d);
+    let o = calibrate_robust(&data, &d.join("ls"), None);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let ls = read_json(&d.join("ls/calibration.json"));
+    let ls_rms = ls["residual_rms_um"].as_f64().unwrap();
+    for loss in ["tukey:3", "cauchy:3", "huber:1.5", "tukey:1.5"] {
+        let out = d.join(loss.replace(':', "-"));
+        let o = calibrate_robust(&data, &out, Some(loss));
+        assert_eq!(o.status.code(), Some(0), "{loss}: {}", stderr(&o));
+        let v = read_json(&out.join("calibration.json"));
+        let rms = v["residual_rms_um"].as_f64().unwrap();
+        assert!(
+            rms < 1.2 * ls_rms,
+            "{loss}: residual {rms} um against {ls_rms} um for least squares"
+        );
+        let share = v["robust"]["downweighted_share"].as_f64().unwrap();
+        assert!(share < 0.3, "{loss}: {share}");
+        assert_eq!(v["robust"]["failed"], false);
+    }
+    // K far below the noise: most observations down-weighted: failed, exit 1, outputs say so.
+    let out = d.join("tiny");
+    let o = calibrate_robust(&data, &out, Some("tukey:0.01"));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("ignored most of the data"),
+        "{}",
+        stderr(&o)
+    );
+    let v = read_json(&out.join("calibration.json"));
+    assert_eq!(v["robust"]["failed"], true);
+    assert!(v["robust"]["downweighted_share"].as_f64().unwrap() > 0.5);
+    assert!(std::fs::read_to_string(out.join("report.md"))
+        .unwrap()
+        .contains("The fit failed"));
+}
+
+#[test]
+fn refine_adds_no_effect_for_a_spike_and_flags_it() {
+    let d = scratch("spike");
+    let data = hexapod_campaign(&d);
+    // One 5 mm spike on the 91st reading.
+    let text = std::fs::read_to_string(&data).unwrap();
+    let mut k = 0;
+    let mut spiked_line = 0;
+    let lines: Vec<String> = text
+        .lines()
+        .enumerate()
+        .map(|(n, l)| {
+            if l.starts_with('#') || l.starts_with("pose") {
+                return l.to_string();
+            }
+            k += 1;
+            if k != 91 {
+                return l.to_string();
+            }
+            spiked_line = n + 1;
+            let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+            f[8] = (f[8].parse::<f64>().unwrap() + 5.0).to_string();
+            f.join(",")
+        })
+        .collect();
+    let spiked = d.join("spiked.csv");
+    std::fs::write(&spiked, lines.join("\n") + "\n").unwrap();
+    let out = d.join("refined");
+    let o = cpm(&[
+        "refine",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--data",
+        p(&spiked),
+        "--out",
+        p(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let r = read_json(&out.join("refine.json"));
+    assert_eq!(r["steps"].as_array().unwrap().len(), 0, "{r:#}");
+    assert!(r["outliers_before"].as_u64().unwrap() >= 1);
+    for rej in r["rejected_by_cross_validation"].as_array().unwrap() {
+        assert!(rej["cv_rms_with_um"].as_f64() >= rej["cv_rms_before_um"].as_f64());
+    }
+    let cal = read_json(&out.join("calibration.json"));
+    let flagged = cal["outliers"].to_string();
+    assert!(
+        flagged.contains(&format!("\"line\":{spiked_line}")),
+        "line {spiked_line} not flagged: {flagged}"
+    );
+}

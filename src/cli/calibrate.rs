@@ -362,6 +362,9 @@ pub fn solver_options(
 /// report (empty when all is well).
 pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     let mut w = Vec::new();
+    if let Some(why) = cal.robust_failure() {
+        w.push(format!("**The fit failed**: {why}. Use a larger K (about 3 x the noise) or least squares."));
+    }
     if !cal.solver.was_successful() {
         w.push(format!(
             "**The solver did not converge** ({}): the estimates are where it stopped; treat them with suspicion.",
@@ -505,6 +508,12 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
     let mut set = OutputSet::new();
     let mut value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
+    value["robust"] = json!({
+        "downweighted_share": cal.downweighted_share,
+        "downweight_level": crate::calib::DOWNWEIGHT_LEVEL,
+        "max_downweighted_share": crate::calib::MAX_DOWNWEIGHTED_SHARE,
+        "failed": cal.robust_failed,
+    });
     value["outliers"] = outliers_json(&inputs.robot, &inputs.merged, &cal);
     value["warnings"] = json!(warnings(model, &cal)
         .iter()
@@ -583,7 +592,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     ctx.finish();
     for w in warnings(model, &cal)
         .iter()
-        .skip(usize::from(!cal.solver.was_successful()))
+        .skip(usize::from(!cal.succeeded()))
     {
         ctx.note(w.replace("**", ""));
     }
@@ -597,6 +606,8 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             "determined": cal.identifiability.num_determined(),
             "residual_rms_um": cal.residual_rms_um,
             "converged": cal.solver.was_successful(),
+            "downweighted_share": cal.downweighted_share,
+            "robust_failed": cal.robust_failed,
             "not_determined": value["not_determined"],
             "outliers": value["outliers"],
         });
@@ -620,7 +631,11 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             writeln!(ctx.out, "wrote {}", w.display())?;
         }
     }
-    if cal.solver.was_successful() {
+    if let Some(why) = cal.robust_failure() {
+        Ok(Outcome::Trouble(format!(
+            "the fit failed: {why}; the outputs were written and say so"
+        )))
+    } else if cal.solver.was_successful() {
         Ok(Outcome::Done)
     } else {
         Ok(Outcome::Trouble(format!(
