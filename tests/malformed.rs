@@ -456,7 +456,7 @@ const CASES: &[Case] = &[
         Toml,
         Some(38),
         Some("base_mm"),
-        "invalid length 2",
+        "expected 3 numbers, got 2",
     ),
     case(
         "robot_duplicate_key.toml",
