@@ -138,7 +138,9 @@ pub fn output_target(option: &str, path: &Path, inputs: &[&Path]) -> Result<Targ
     } else {
         path.to_path_buf()
     };
-    let ft = std::fs::metadata(&resolved).map_err(io_at(path))?.file_type();
+    let ft = std::fs::metadata(&resolved)
+        .map_err(io_at(path))?
+        .file_type();
     if ft.is_dir() {
         return Err(OutputError::Refused(format!(
             "{option} {}: is a directory, not a file",
@@ -462,8 +464,7 @@ pub fn commit_dir(
             "files": listed,
         });
         let text = serde_json::to_string_pretty(&manifest).unwrap_or_default();
-        write_synced(&stage.join(MANIFEST), text.as_bytes())
-            .map_err(io_at(&dir.join(MANIFEST)))?;
+        write_synced(&stage.join(MANIFEST), text.as_bytes()).map_err(io_at(&dir.join(MANIFEST)))?;
         fault_point("manifest-written");
         sync_dir(&stage);
         fault_point("staged");

@@ -198,10 +198,16 @@ fn an_output_that_is_an_input_is_refused() {
     assert_refused(&export_from(r, r), "export over its robot");
     let alias = d.join("alias.toml");
     std::os::unix::fs::symlink(&robot, &alias).unwrap();
-    assert_refused(&export_from(r, p(&alias)), "export over a link to its robot");
+    assert_refused(
+        &export_from(r, p(&alias)),
+        "export over a link to its robot",
+    );
     let hard = d.join("hard.toml");
     std::fs::hard_link(&robot, &hard).unwrap();
-    assert_refused(&export_from(r, p(&hard)), "export over a hard link to its robot");
+    assert_refused(
+        &export_from(r, p(&hard)),
+        "export over a hard link to its robot",
+    );
     // simulate --out robot.toml
     let o = cpm(&["simulate", "--robot", r, "--random", "5", "--out", r]);
     assert_refused(&o, "simulate over its robot");
@@ -269,13 +275,7 @@ fn an_output_that_is_an_input_is_refused() {
 
 fn export_from(robot: &str, out: &str) -> Output {
     cpm(&[
-        "export",
-        "--format",
-        "linuxcnc",
-        "--robot",
-        robot,
-        "--out",
-        out,
+        "export", "--format", "linuxcnc", "--robot", robot, "--out", out,
     ])
 }
 
@@ -290,7 +290,11 @@ fn a_closed_or_full_standard_output_is_an_io_error() {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
-    assert!(stderr(&o).contains("standard output is closed"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("standard output is closed"),
+        "{}",
+        stderr(&o)
+    );
     // ... > /dev/full
     let full = std::fs::OpenOptions::new()
         .write(true)
@@ -486,7 +490,11 @@ fn a_commit_killed_at_any_step_leaves_one_complete_result() {
                 let which = complete_result(&out, &refs)
                     .unwrap_or_else(|e| panic!("{step} (fallback {no_exchange}): {e}"));
                 if which == 0 {
-                    assert_eq!(snapshot(&out), before, "{step}: the previous result changed");
+                    assert_eq!(
+                        snapshot(&out),
+                        before,
+                        "{step}: the previous result changed"
+                    );
                 }
                 ["previous", "new"][which].to_string()
             };
@@ -505,7 +513,11 @@ fn a_commit_killed_at_any_step_leaves_one_complete_result() {
             assert_eq!(complete_result(&out, &refs), Ok(1), "{step}");
             outcomes.push(format!(
                 "{step}{}: {state}, {} leftover(s)",
-                if no_exchange == "1" { " (two renames)" } else { "" },
+                if no_exchange == "1" {
+                    " (two renames)"
+                } else {
+                    ""
+                },
                 left.len()
             ));
         }

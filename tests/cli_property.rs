@@ -97,7 +97,7 @@ fn simulate_and_calibrate(d: &Path, poses: usize, sigma_um: f64, seed: u64) -> (
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 5, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 8, ..ProptestConfig::default() })]
 
     #[test]
     fn valid_inputs_round_trip_through_every_command(
@@ -110,7 +110,21 @@ proptest! {
         ),
     ) {
         let d = scratch("valid");
-        let (_, cal) = simulate_and_calibrate(&d, poses, sigma_um, seed);
+        let (data, cal) = simulate_and_calibrate(&d, poses, sigma_um, seed);
+        // identifiability and refine read what simulate wrote.
+        let o = cpm(&["identifiability", "--robot", &example("hexapod_66.toml"), "--data", p(&data), "--json"]);
+        no_panic(&o, "identifiability");
+        prop_assert_eq!(o.status.code(), Some(0), "identifiability: {}", stderr(&o));
+        let ident: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        prop_assert!(ident.is_object());
+        let refined = d.join("refined");
+        let o = cpm(&[
+            "refine", "--robot", &example("hexapod_66.toml"), "--data", p(&data),
+            "--candidates", "link_offset", "--max-steps", "1", "--out", p(&refined),
+        ]);
+        no_panic(&o, "refine");
+        prop_assert_eq!(o.status.code(), Some(0), "refine: {}", stderr(&o));
+        prop_assert!(refined.join("refine.json").exists());
         let v: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(cal.join("calibration.json")).unwrap()).unwrap();
         let rms = v["residual_rms_um"].as_f64().unwrap();

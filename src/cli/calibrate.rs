@@ -363,7 +363,9 @@ pub fn solver_options(
 pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     let mut w = Vec::new();
     if let Some(why) = cal.robust_failure() {
-        w.push(format!("**The fit failed**: {why}. Use a larger K (about 3 x the noise) or least squares."));
+        w.push(format!(
+            "**The fit failed**: {why}. Use a larger K (about 3 x the noise) or least squares."
+        ));
     }
     if !cal.solver.was_successful() {
         w.push(format!(

@@ -116,7 +116,10 @@ fn a_robust_fit_follows_the_data_not_the_spikes() {
         assert!(tukey.outliers.contains(&k), "{k} not flagged");
     }
     let (e_ls, e_t) = (worst_error_um(&ls), worst_error_um(&tukey));
-    assert!(e_t < 5.0 && e_t < 0.2 * e_ls, "Tukey {e_t} um, LS {e_ls} um");
+    assert!(
+        e_t < 5.0 && e_t < 0.2 * e_ls,
+        "Tukey {e_t} um, LS {e_ls} um"
+    );
 }
 
 #[test]
@@ -132,7 +135,11 @@ fn refine_adds_nothing_for_a_spike_and_flags_it() {
         ..RefineOptions::default()
     };
     let r = refine(&model(), &c, &options).unwrap();
-    assert!(r.outliers_before.contains(&spike), "{:?}", r.outliers_before);
+    assert!(
+        r.outliers_before.contains(&spike),
+        "{:?}",
+        r.outliers_before
+    );
     println!("rejected by cross-validation: {:?}", r.rejected_by_cv);
     let added: Vec<Effect> = r.steps.iter().map(|s| s.effect).collect();
     assert!(added.is_empty(), "added {added:?}");

@@ -104,7 +104,11 @@ pub struct LinkSpec {
     #[serde(deserialize_with = "exact")]
     pub platform_mm: [f64; 3],
     /// Allowed length range `[min, max]`, mm. Optional.
-    #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "exact_opt")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "exact_opt"
+    )]
     pub length_limits_mm: Option<[f64; 2]>,
     /// Length at a zero reading, mm. Default 0.
     #[serde(default, skip_serializing_if = "is_zero")]
@@ -495,7 +499,8 @@ fn singular_at_home(d: &RobotDescription, home: &Pose) -> Result<(), Problem> {
         .collect();
     for (j, lj) in d.links.iter().enumerate() {
         for (i, li) in d.links.iter().enumerate().take(j) {
-            let same = |a: &[f64; 3], b: &[f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+            let same =
+                |a: &[f64; 3], b: &[f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
             if same(&li.base_mm, &lj.base_mm) && same(&li.platform_mm, &lj.platform_mm) {
                 return Err(Problem::new(
                     &[Key("link"), Index(j)],
@@ -801,7 +806,9 @@ impl RobotDescription {
             }
             if s.name.trim() != s.name
                 || s.name.starts_with('#')
-                || s.name.chars().any(|c| c.is_control() || c == ',' || c == '"')
+                || s.name
+                    .chars()
+                    .any(|c| c.is_control() || c == ',' || c == '"')
             {
                 return Err(Problem::new(
                     &at("name"),
