@@ -257,7 +257,17 @@ fn wrong_types_and_shapes() {
         (
             "base_mm = [-140.0, -140.0, 28.0]",
             "base_mm = [-140.0, -140.0]",
-            "length 2",
+            "expected 3 numbers, got 2",
+        ),
+        (
+            "position_mm = [0.0, 0.0, 410.0]",
+            "position_mm = [0, 0, 300, 999, 1e9]",
+            "expected 3 numbers, got 5",
+        ),
+        (
+            "base_mm = [-140.0, -140.0, 28.0]",
+            "base_mm = [-140.0, -140.0, 28.0, 1.0]",
+            "expected 3 numbers, got 4",
         ),
         (
             "platform_mass_kg = 20.0",
@@ -269,7 +279,8 @@ fn wrong_types_and_shapes() {
         let msg = err_message(RobotDescription::from_toml_str(&text, "robot.toml"));
         assert!(msg.contains("line"), "{msg}");
         assert!(
-            msg.contains(what) || msg.contains("invalid"),
+            msg.contains(what)
+                || (what == "radius_um" || what == "platform_mass_kg") && msg.contains("invalid"),
             "{what}: {msg}"
         );
     }
