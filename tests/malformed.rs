@@ -456,7 +456,7 @@ const CASES: &[Case] = &[
         Toml,
         Some(38),
         Some("base_mm"),
-        "invalid length 2",
+        "expected 3 numbers, got 2",
     ),
     case(
         "robot_duplicate_key.toml",
@@ -541,6 +541,50 @@ const CASES: &[Case] = &[
         Some(38),
         Some("link[6].base_mm"),
         "its z (3rd) component is 1e300 mm: implausibly far",
+    ),
+    // Issue 14: arrays longer than their fields, a load that overflows, a machine singular at
+    // home, a zero declared noise (like --sigma-um 0) and a sensor name that reads as a comment.
+    case(
+        "robot_array_too_long.toml",
+        Toml,
+        Some(12),
+        Some("position_mm"),
+        "expected 3 numbers, got 5",
+    ),
+    case(
+        "robot_base_four.toml",
+        Toml,
+        Some(22),
+        Some("base_mm"),
+        "expected 3 numbers, got 4",
+    ),
+    case(
+        "robot_heavy_load.toml",
+        Toml,
+        Some(55),
+        Some("load.platform_mass_kg"),
+        "the load's weight or wrench at home is not a finite number",
+    ),
+    case(
+        "robot_coincident_links.toml",
+        Toml,
+        Some(21),
+        Some("link[2]"),
+        "has the same joints as link 1 (it coincides with it): the machine is singular at its home pose",
+    ),
+    case(
+        "robot_zero_noise.toml",
+        Toml,
+        Some(66),
+        Some("calibration.sensor_noise_um"),
+        "must be > 0, got 0",
+    ),
+    case(
+        "robot_sensor_name_hash.toml",
+        Toml,
+        Some(43),
+        Some("sensor[1].name"),
+        "\"#paper\": a sensor name must not start with '#'",
     ),
     case(
         "robot_error_rows.toml",
@@ -1224,4 +1268,57 @@ fn a_solver_error_at_a_pose_names_its_line() {
         shown.contains("good.csv:3: pose \"1\": pose 0: forward kinematics did not converge"),
         "{shown}"
     );
+}
+
+/// Options that make no sense exit 2 naming the option (issue 14), and a declared noise of 0
+/// is refused like `--sigma-um 0`.
+#[test]
+fn options_that_make_no_sense_exit_2_naming_the_option() {
+    let out = scratch("options");
+    let sim = out.join("sim.csv");
+    for (value, says) in [
+        ("link_offset=1e300,0,0,0,0,0", "implausibly large"),
+        ("link_offset=9e4,0,0,0,0,0", "cannot be simulated"),
+    ] {
+        let o = cpm(&[
+            "simulate",
+            "--robot",
+            HEXAPOD,
+            "--random",
+            "5",
+            "--truth-effect",
+            value,
+            "--out",
+            sim.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{value}: {err}");
+        assert!(err.starts_with("error: --truth-effect"), "{value}: {err}");
+        assert!(err.contains(says), "{value}: {err}");
+        assert!(!sim.exists());
+    }
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        CUBE,
+        "--data",
+        GOOD,
+        "--sigma-um",
+        "0",
+        "--out",
+        out.join("cal").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &format!("{DIR}/robot_zero_noise.toml"),
+        "--data",
+        GOOD,
+        "--out",
+        out.join("cal").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(3));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("sensor_noise_um: must be > 0"));
+    assert!(!out.join("cal").exists());
 }

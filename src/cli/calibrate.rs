@@ -432,6 +432,11 @@ pub fn misfit_json(cal: &Calibration) -> serde_json::Value {
 /// declared noise, in a few lines for the top of a report (empty when all is well).
 pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     let mut w = Vec::new();
+    if let Some(why) = cal.robust_failure() {
+        w.push(format!(
+            "**The fit failed**: {why}. Use a larger K (about 3 x the noise) or least squares."
+        ));
+    }
     if !cal.solver.was_successful() {
         w.push(format!(
             "**The solver did not converge** ({}): the estimates are where it stopped; treat them with suspicion.",
@@ -747,6 +752,12 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
     let mut set = OutputSet::new();
     let mut value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
+    value["robust"] = json!({
+        "downweighted_share": cal.downweighted_share,
+        "downweight_level": crate::calib::DOWNWEIGHT_LEVEL,
+        "max_downweighted_share": crate::calib::MAX_DOWNWEIGHTED_SHARE,
+        "failed": cal.robust_failed,
+    });
     value["outliers"] = outliers_json(&inputs.robot, &inputs.merged, &cal);
     value["registration"] = registration_json(&inputs.merged, model, &cal);
     value["misfit"] = misfit_json(&cal);
@@ -821,11 +832,14 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let Fitted { cal, set, value } = fit(&inputs, &args.fit.out, args.minimum_norm)?;
     ctx.stage("writing the results");
     let dir = &args.fit.out;
-    let written = common::commit(set, &dir.display().to_string())?;
+    let inputs_paths: Vec<&Path> = std::iter::once(args.fit.robot.robot.as_path())
+        .chain(args.fit.data.iter().map(PathBuf::as_path))
+        .collect();
+    let written = common::commit_dir(set, dir, &inputs_paths, "calibrate", ctx)?;
     ctx.finish();
     for w in warnings(model, &cal)
         .iter()
-        .skip(usize::from(!cal.solver.was_successful()))
+        .skip(usize::from(!cal.succeeded()))
     {
         ctx.note(w.replace("**", ""));
     }
@@ -839,6 +853,8 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             "determined": cal.identifiability.num_determined(),
             "residual_rms_um": cal.residual_rms_um,
             "converged": cal.solver.was_successful(),
+            "downweighted_share": cal.downweighted_share,
+            "robust_failed": cal.robust_failed,
             "not_determined": value["not_determined"],
             "outliers": value["outliers"],
         });
@@ -862,7 +878,11 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             writeln!(ctx.out, "wrote {}", w.display())?;
         }
     }
-    if cal.solver.was_successful() {
+    if let Some(why) = cal.robust_failure() {
+        Ok(Outcome::Trouble(format!(
+            "the fit failed: {why}; the outputs were written and say so"
+        )))
+    } else if cal.solver.was_successful() {
         Ok(Outcome::Done)
     } else {
         Ok(Outcome::Trouble(format!(

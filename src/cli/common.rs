@@ -331,9 +331,9 @@ pub fn sigma(arg: Option<f64>, robot: &Robot) -> anyhow::Result<Option<f64>> {
     }
 }
 
-/// Checks that the output directory can be used (not an existing file).
+/// Checks that the output directory can be used (not an existing file, not a link to one).
 pub fn check_out_dir(dir: &Path) -> anyhow::Result<()> {
-    if dir.exists() && !dir.is_dir() {
+    if std::fs::symlink_metadata(dir).is_ok() && !dir.is_dir() {
         return Err(usage_error(format!(
             "--out {}: exists and is not a directory",
             dir.display()
@@ -342,9 +342,55 @@ pub fn check_out_dir(dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Stages and commits, reporting what was written.
-pub fn commit(set: crate::output::OutputSet, what: &str) -> anyhow::Result<Vec<PathBuf>> {
-    set.commit().with_context(|| format!("writing {what}"))
+/// Commits a result directory as one step (`crate::output::commit_dir`: staged, swapped in,
+/// under a lock), refusing output names that are `inputs`; notes a wait for another run and
+/// any leftovers of an interrupted run it cleaned up.
+pub fn commit_dir(
+    set: crate::output::OutputSet,
+    dir: &Path,
+    inputs: &[&Path],
+    command: &str,
+    ctx: &Ctx<'_>,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let done = crate::output::commit_dir(set, dir, inputs, command)
+        .with_context(|| format!("writing {}", dir.display()))?;
+    if done.waited {
+        ctx.note(format!(
+            "waited for another cpm run writing {} to finish; its result was replaced by this one",
+            dir.display()
+        ));
+    }
+    for r in &done.recovered {
+        ctx.note(r);
+    }
+    Ok(done.written)
+}
+
+/// Checks a single-file output (`-` for standard output) before any work: never a device,
+/// FIFO, socket or directory, never one of `inputs` (exit 2).
+pub fn out_target(
+    option: &str,
+    path: &Path,
+    inputs: &[&Path],
+) -> anyhow::Result<crate::output::Target> {
+    Ok(crate::output::output_target(option, path, inputs)?)
+}
+
+/// Writes a single-file output to its checked target (re-checked now), atomically.
+pub fn write_out(
+    option: &str,
+    path: &Path,
+    inputs: &[&Path],
+    contents: &str,
+    ctx: &mut Ctx<'_>,
+) -> anyhow::Result<crate::output::Target> {
+    let target = out_target(option, path, inputs)?;
+    match &target {
+        crate::output::Target::Stdout => ctx.out.write_all(contents.as_bytes())?,
+        crate::output::Target::File(p) => crate::output::write_file(p, contents.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?,
+    }
+    Ok(target)
 }
 
 /// Effect names, comma-separated (`none` when empty).

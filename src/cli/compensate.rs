@@ -21,7 +21,7 @@ use super::{usage_error, Ctx, Outcome};
 use crate::calib::effects::{is_link_effect, PoseContext};
 use crate::calib::MeasurementModel;
 use crate::io::{self, campaign::check_reachable, ReadOptions};
-use crate::output::OutputSet;
+use crate::output::Target;
 
 /// Arguments of `cpm compensate`.
 #[derive(Debug, Clone, Args)]
@@ -35,7 +35,7 @@ pub struct CompensateArgs {
     /// Target poses (a list of poses, docs/formats.md).
     #[arg(long, value_name = "TARGETS.csv")]
     pub poses: PathBuf,
-    /// Output CSV file (default: stdout).
+    /// Output CSV file (default, or `-`: stdout). Never a device, FIFO or an input file.
     #[arg(long, value_name = "COMMANDS.csv")]
     pub out: Option<PathBuf>,
     /// Print a JSON summary on stdout (needs --out).
@@ -119,10 +119,14 @@ pub fn commands_for(
 
 /// Runs `cpm compensate`.
 pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
-    if args.json && args.out.is_none() {
+    if args.json && args.out.as_deref().is_none_or(|o| o.as_os_str() == "-") {
         return Err(usage_error(
-            "--json needs --out (the commands would share stdout)",
+            "--json needs --out FILE (the commands would share stdout)",
         ));
+    }
+    let inputs: [&std::path::Path; 2] = [&args.robot.robot, &args.poses];
+    if let Some(out) = &args.out {
+        common::out_target("--out", out, &inputs)?;
     }
     ctx.stage("reading the robot description");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
@@ -197,9 +201,9 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
     ctx.finish();
     match &args.out {
         Some(out) => {
-            let mut set = OutputSet::new();
-            set.add(out, csv);
-            common::commit(set, &out.display().to_string())?;
+            if common::write_out("--out", out, &inputs, &csv, ctx)? == Target::Stdout {
+                return Ok(Outcome::Done);
+            }
             if args.json {
                 let v = json!({
                     "out": out.display().to_string(),

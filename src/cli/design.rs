@@ -349,7 +349,10 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     }
     r.push_str("\n## Files\n\n- `poses.csv`: the poses to drive (`--plan` of `cpm simulate` / `cpm identifiability`).\n- `sockets.csv`: the chosen socket pairs.\n- `robot.toml`: the robot description with these sensors: measure with it, then `cpm calibrate --robot robot.toml`.\n");
     set.add(dir.join("report.md"), r);
-    let written = common::commit(set, &dir.display().to_string())?;
+    let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
+        .chain(args.sockets.as_deref())
+        .collect();
+    let written = common::commit_dir(set, dir, &inputs_paths, "design", ctx)?;
     ctx.finish();
     if args.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&summary)?)?;

@@ -10,7 +10,7 @@ use clap::{Args, ValueEnum};
 use super::common::{self, RobotArg};
 use super::{input_error, Ctx, Outcome};
 use crate::io::Robot;
-use crate::output::OutputSet;
+use crate::output::Target;
 
 /// Export formats.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -31,7 +31,7 @@ pub struct ExportArgs {
     /// The robot description.
     #[command(flatten)]
     pub robot: RobotArg,
-    /// Output file (default: stdout).
+    /// Output file (default, or `-`: stdout). Never a device, FIFO or an input file.
     #[arg(long, value_name = "FILE")]
     pub out: Option<PathBuf>,
 }
@@ -93,6 +93,10 @@ pub fn linuxcnc(robot: &Robot) -> String {
 
 /// Runs `cpm export`.
 pub fn run(args: &ExportArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    let inputs: [&std::path::Path; 1] = [&args.robot.robot];
+    if let Some(out) = &args.out {
+        common::out_target("--out", out, &inputs)?;
+    }
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     let text = match args.format {
         Format::Linuxcnc => {
@@ -109,10 +113,9 @@ pub fn run(args: &ExportArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     ctx.finish();
     match &args.out {
         Some(out) => {
-            let mut set = OutputSet::new();
-            set.add(out, text);
-            common::commit(set, &out.display().to_string())?;
-            writeln!(ctx.out, "wrote {}", out.display())?;
+            if common::write_out("--out", out, &inputs, &text, ctx)? != Target::Stdout {
+                writeln!(ctx.out, "wrote {}", out.display())?;
+            }
         }
         None => write!(ctx.out, "{text}")?,
     }

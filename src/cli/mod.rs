@@ -90,6 +90,12 @@ pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
         if let Some(c) = cause.downcast_ref::<CliError>() {
             return c.kind;
         }
+        if let Some(o) = cause.downcast_ref::<crate::output::OutputError>() {
+            return match o {
+                crate::output::OutputError::Refused(_) => ExitKind::Usage,
+                crate::output::OutputError::Io { .. } => ExitKind::Io,
+            };
+        }
         if cause.is::<InputError>() || cause.is::<crate::geometry::GeometryError>() {
             return ExitKind::Input;
         }
@@ -255,6 +261,12 @@ where
         }
     };
     let stdout = std::io::stdout();
+    // A closed standard output would swallow the results silently (Rust ignores writes to a
+    // closed descriptor 1), and a file opened later could take its number: stop first.
+    if stdout_closed(&stdout) {
+        eprintln!("error: standard output is closed; the results would be lost");
+        return ExitKind::Io as i32;
+    }
     let mut lock = stdout.lock();
     let result = {
         let mut ctx = Ctx::new(&mut lock, cli.quiet);
@@ -262,7 +274,13 @@ where
         ctx.finish();
         r
     };
-    let _ = lock.flush();
+    let flushed = lock.flush();
+    let result = match (result, flushed) {
+        (Ok(_), Err(e)) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(anyhow::Error::new(e).context("writing to standard output"))
+        }
+        (r, _) => r,
+    };
     match result {
         Ok(Outcome::Done) => ExitKind::Success as i32,
         Ok(Outcome::Trouble(msg)) => {
@@ -288,6 +306,33 @@ pub fn render_error(err: &anyhow::Error) -> String {
         }
     }
     parts.join(": ")
+}
+
+/// True when descriptor 1 was closed when `cpm` started (`cpm ... >&-`).
+///
+/// The Rust runtime opens `/dev/null` read-write on a closed standard descriptor before
+/// `main`, so a closed stdout shows as `/dev/null` open for reading and writing (a shell's
+/// `>/dev/null` opens it write-only, which is fine).
+fn stdout_closed(stdout: &std::io::Stdout) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use rustix::fs::{fcntl_getfl, fstat, major, minor, FileType, OFlags};
+        use std::os::fd::AsFd as _;
+        let fd = stdout.as_fd();
+        let (Ok(flags), Ok(st)) = (fcntl_getfl(fd), fstat(fd)) else {
+            return true;
+        };
+        let read_write = (flags & OFlags::ACCMODE) == OFlags::RDWR;
+        let dev_null = FileType::from_raw_mode(st.st_mode) == FileType::CharacterDevice
+            && major(st.st_rdev) == 1
+            && minor(st.st_rdev) == 3;
+        read_write && dev_null
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = stdout;
+        false
+    }
 }
 
 /// True when stdout was closed by its reader (`cpm ... | head`): not worth a message.

@@ -117,6 +117,7 @@ pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
                 "p_value": c.p_value,
                 "delta_bic": c.delta_bic,
                 "rms_um": c.rms_um,
+                "cv_rms_um": c.cv_rms_um,
             })).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
         "last_round": r.last_round.iter().map(|c| json!({
@@ -136,7 +137,15 @@ pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
             "consistent_with_noise": r.final_diagnostics.consistent_with_noise,
             "unexplained_structure": r.unexplained_structure,
             "converged": r.calibration.solver.was_successful(),
+            "downweighted_share": r.calibration.downweighted_share,
+            "robust_failed": r.calibration.robust_failed,
         },
+        "outliers_before": r.outliers_before.len(),
+        "rejected_by_cross_validation": r.rejected_by_cv.iter().map(|(e, before, after)| json!({
+            "effect": e.name(),
+            "cv_rms_before_um": before,
+            "cv_rms_with_um": after,
+        })).collect::<Vec<_>>(),
     })
 }
 
@@ -236,6 +245,21 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         r.initial_diagnostics.rms_um,
         r.initial_diagnostics.white
     ));
+    if !r.outliers_before.is_empty() {
+        s.push_str(&format!(
+            "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations.\n\n",
+            r.outliers_before.len()
+        ));
+    }
+    for (e, before, after) in &r.rejected_by_cv {
+        s.push_str(&format!(
+            "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {before:.3} -> {after:.3} um (no better).\n",
+            e.name()
+        ));
+    }
+    if !r.rejected_by_cv.is_empty() {
+        s.push('\n');
+    }
     let last = last_round_message(&r, options.min_novelty);
     if r.steps.is_empty() {
         match &last {
@@ -287,7 +311,10 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         s.push_str(&format!("- `{f}`\n"));
     }
     set.add(dir.join("report.md"), s);
-    let written = common::commit(set, &dir.display().to_string())?;
+    let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.fit.robot.robot.as_path())
+        .chain(args.fit.data.iter().map(std::path::PathBuf::as_path))
+        .collect();
+    let written = common::commit_dir(set, dir, &inputs_paths, "refine", ctx)?;
     ctx.finish();
     for w in calibrate::warnings(&r.model, cal)
         .iter()
@@ -316,7 +343,11 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             writeln!(ctx.out, "wrote {}", w.display())?;
         }
     }
-    if cal.solver.was_successful() {
+    if let Some(why) = cal.robust_failure() {
+        Ok(Outcome::Trouble(format!(
+            "the final fit failed: {why}; the outputs were written and say so"
+        )))
+    } else if cal.solver.was_successful() {
         Ok(Outcome::Done)
     } else {
         Ok(Outcome::Trouble(format!(

@@ -12,7 +12,7 @@ use crate::calib::campaign::PoseMeasurement;
 use crate::calib::{simulate_campaign, Campaign, Effect, Noise, SimulationOptions};
 use crate::geometry::{InstallationErrors, Pose};
 use crate::io::{self, Robot};
-use crate::output::OutputSet;
+use crate::output::Target;
 
 /// What the simulated campaign measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -61,7 +61,7 @@ pub struct SimulateArgs {
     /// What to measure.
     #[arg(long, value_enum, default_value_t = Measure::Lengths)]
     pub measure: Measure,
-    /// Output CSV file.
+    /// Output CSV file (`-`: stdout). Never a device, FIFO or an input file.
     #[arg(long, value_name = "DATA.csv")]
     pub out: PathBuf,
     /// Print a JSON summary on stdout.
@@ -111,6 +111,25 @@ pub fn describe_noise(noise: &Noise) -> String {
     }
 }
 
+/// A simulation that fails with `--truth-effect` values given is a bad option value (exit 2,
+/// naming the option); otherwise the error as it is.
+fn blame_truth(args: &SimulateArgs, e: impl Into<anyhow::Error>) -> anyhow::Error {
+    let e = e.into();
+    if args.truth_effect.is_empty() {
+        e
+    } else {
+        usage_error(format!(
+            "--truth-effect {}: the machine with these values cannot be simulated: {}",
+            args.truth_effect.join(" --truth-effect "),
+            super::render_error(&e)
+        ))
+    }
+}
+
+/// The largest magnitude of a `--truth-effect` value (in the effect's unit: um, um/mm, ...),
+/// like the largest plausible installation error (100 mm in um).
+pub const MAX_TRUTH_EFFECT: f64 = 1e5;
+
 fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
     let (name, values) = s
         .split_once('=')
@@ -124,6 +143,15 @@ fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
                 .ok()
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| format!("{s:?}: {v:?} is not a number"))
+                .and_then(|x| {
+                    if x.abs() <= MAX_TRUTH_EFFECT {
+                        Ok(x)
+                    } else {
+                        Err(format!(
+                            "{s:?}: {x:e} is implausibly large (at most {MAX_TRUTH_EFFECT:e} in the effect's unit)"
+                        ))
+                    }
+                })
         })
         .collect::<Result<Vec<f64>, String>>()?;
     Ok((effect, values))
@@ -344,6 +372,15 @@ fn simulate_poses(
 
 /// Runs `cpm simulate`.
 pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    let inputs: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
+        .chain(args.truth.as_deref())
+        .chain(args.plan.plan.as_deref())
+        .collect();
+    if common::out_target("--out", &args.out, &inputs)? == Target::Stdout && args.json {
+        return Err(usage_error(
+            "--json needs --out FILE (the data would share stdout)",
+        ));
+    }
     ctx.stage("reading the robot description");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     let declared = args.effects.resolve(&robot)?;
@@ -381,7 +418,8 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 seed: args.plan.seed,
             };
             let skeleton = spec.skeleton();
-            let c = simulate_campaign(&model, &truth.params, &skeleton, &options)?;
+            let c = simulate_campaign(&model, &truth.params, &skeleton, &options)
+                .map_err(|e| blame_truth(args, e))?;
             let text = io::write_readings(&c, &robot, &note);
             (c, text)
         }
@@ -393,7 +431,8 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 &noise,
                 args.orientation_noise_urad,
                 args.plan.seed,
-            )?;
+            )
+            .map_err(|e| blame_truth(args, e))?;
             for (m, (t, _)) in c.pose_measurements.iter_mut().zip(&spec.conditions) {
                 m.time_s = *t;
             }
@@ -401,11 +440,17 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             (c, text)
         }
     };
-    let mut set = OutputSet::new();
-    set.add(&args.out, text);
     ctx.stage("writing");
-    common::commit(set, &args.out.display().to_string())?;
     ctx.finish();
+    if common::write_out("--out", &args.out, &inputs, &text, ctx)? == Target::Stdout {
+        ctx.note(format!(
+            "SIMULATED: {} readings and {} pose measurements at {} poses written to standard output",
+            campaign.readings.len(),
+            campaign.pose_measurements.len(),
+            campaign.poses.len()
+        ));
+        return Ok(Outcome::Done);
+    }
     if args.json {
         let v = json!({
             "simulated": true,

@@ -74,8 +74,42 @@ pub struct Calibration {
     pub initial_rms_um: f64,
     /// RMS residual at the solution, um.
     pub residual_rms_um: f64,
-    /// The solver's report.
+    /// The solver's report (of the last stage: the robust loss itself).
     pub solver: cpm_lm::Report,
+    /// Share of the observations a robust loss down-weighted below weight
+    /// [`DOWNWEIGHT_LEVEL`] at the solution (0 for least squares).
+    pub downweighted_share: f64,
+    /// True when a robust fit ignored most of the data (more than
+    /// [`MAX_DOWNWEIGHTED_SHARE`] of the observations down-weighted): the fit has failed
+    /// whatever the solver says; [`Calibration::robust_failure`] says why.
+    pub robust_failed: bool,
+}
+
+/// The weight `rho'(r^2)` below which a robust loss is said to down-weight an observation.
+pub const DOWNWEIGHT_LEVEL: f64 = 0.5;
+
+/// The largest share of down-weighted observations of a robust fit that is not failed: a fit
+/// that ignores more than half of its data describes the rest, not the machine.
+pub const MAX_DOWNWEIGHTED_SHARE: f64 = 0.5;
+
+impl Calibration {
+    /// Why the fit failed although the solver stopped normally (a robust loss ignoring most of
+    /// the data), or `None`.
+    pub fn robust_failure(&self) -> Option<String> {
+        self.robust_failed.then(|| {
+            format!(
+                "the robust fit ignored most of the data: {:.0} % of the observations were down-weighted below weight {DOWNWEIGHT_LEVEL} (at most {:.0} % allowed); the loss scale K is too small for these residuals (residual RMS {:.3} um)",
+                100.0 * self.downweighted_share,
+                100.0 * MAX_DOWNWEIGHTED_SHARE,
+                self.residual_rms_um
+            )
+        })
+    }
+
+    /// True when the solver stopped normally and a robust fit did not ignore most of the data.
+    pub fn succeeded(&self) -> bool {
+        self.solver.was_successful() && !self.robust_failed
+    }
 }
 
 struct Subspace<'a> {
@@ -262,7 +296,23 @@ pub fn identify(
     problem
         .residuals(&theta, &mut r0)
         .map_err(|e| CalibError::invalid("model at the start", e.to_string()))?;
-    let solver = cpm_lm::minimize(&mut problem, &mut theta, &options.lm)?;
+    // A robust (above all a redescending) loss started far from the solution sees every
+    // residual beyond its scale and down-weights everything: start it from least squares,
+    // and a redescending one from Huber's solution at the same scale.
+    let robust = !options.lm.loss.is_squared();
+    let solver = if robust {
+        let stage = |loss| cpm_lm::Options {
+            loss,
+            ..options.lm.clone()
+        };
+        cpm_lm::minimize(&mut problem, &mut theta, &stage(cpm_lm::Loss::Squared))?;
+        if let cpm_lm::Loss::Tukey(k) | cpm_lm::Loss::Cauchy(k) = options.lm.loss {
+            cpm_lm::minimize(&mut problem, &mut theta, &stage(cpm_lm::Loss::Huber(k)))?;
+        }
+        cpm_lm::minimize(&mut problem, &mut theta, &options.lm)?
+    } else {
+        cpm_lm::minimize(&mut problem, &mut theta, &options.lm)?
+    };
     let e_hat = problem.errors(&theta);
     let mut jf = DMatrix::zeros(m, np);
     let y = predict(model, &prepared, campaign, &e_hat, Some(&mut jf))?;
@@ -274,7 +324,15 @@ pub fn identify(
         .collect();
     let jf = weigh(jf);
     let outliers = crate::diagnostics::outliers(&residuals_um);
-    let robust = !options.lm.loss.is_squared();
+    let downweighted_share = if robust && !residuals_um.is_empty() {
+        residuals_um
+            .iter()
+            .filter(|r| options.lm.loss.evaluate(*r * *r)[1] < DOWNWEIGHT_LEVEL)
+            .count() as f64
+            / residuals_um.len() as f64
+    } else {
+        0.0
+    };
     let sigma_excludes_outliers = options.sigma_um.is_none() && robust && !outliers.is_empty();
     // Residuals the noise estimate uses: all, or without the outliers of a robust fit.
     let (ssr, count) = residuals_um
@@ -327,5 +385,7 @@ pub fn identify(
         residual_rms_um: rms(&residuals_um),
         residuals_um,
         solver,
+        downweighted_share,
+        robust_failed: downweighted_share > MAX_DOWNWEIGHTED_SHARE,
     })
 }

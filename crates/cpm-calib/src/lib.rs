@@ -49,6 +49,7 @@ pub use error::CalibError;
 pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
 pub use identify::{
     identifiability, identification_jacobian, identify, Calibration, IdentifyOptions,
+    DOWNWEIGHT_LEVEL, MAX_DOWNWEIGHTED_SHARE,
 };
 pub use model::{MeasurementModel, ModelKind};
 pub use refine::{refine, RefineOptions, Refinement};

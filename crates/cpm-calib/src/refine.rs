@@ -8,8 +8,15 @@
 //! 2. the augmented model is fitted, and scored by an F-test on the drop of the residual sum of
 //!    squares per added identifiable dimension, and by the change of BIC
 //!    (`m ln(RSS/m) + k ln m`);
-//! 3. the candidate with the lowest BIC among those significant at `alpha / candidates`
-//!    (Bonferroni) with negative delta BIC is added.
+//! 3. among those significant at `alpha / candidates` (Bonferroni) with negative delta BIC,
+//!    in order of BIC, the first whose cross-validated RMS is lower than the current model's
+//!    is added: an effect that fits the campaign better but predicts unseen poses worse (a
+//!    spike it bends to) is never added. A candidate whose robust fit failed is not added.
+//!
+//! The observations the first fit flags as outliers ([`Refinement::outliers_before`]) are set
+//! aside before any effect is chosen: the rounds (fits, tests, cross-validation) run on the
+//! campaign without them, so no effect is bent to a spike. The final model is then fitted to
+//! the whole campaign ([`Refinement::calibration`], which flags them again).
 //!
 //! Rounds stop when no candidate is significant, when the residual is white and consistent with
 //! the declared noise, or after `max_steps`. What remains correlated with a regressor is
@@ -68,6 +75,10 @@ pub struct CandidateScore {
     pub delta_bic: Option<f64>,
     /// RMS residual with the effect, um.
     pub rms_um: Option<f64>,
+    /// Cross-validated RMS with the effect, um (computed for the candidates that passed the
+    /// tests, in order of BIC, until one improved on the current model).
+    #[serde(default)]
+    pub cv_rms_um: Option<f64>,
 }
 
 /// One accepted refinement step.
@@ -116,6 +127,12 @@ pub struct Refinement {
     /// otherwise): which were skipped as confounded with the model (novelty below
     /// [`RefineOptions::min_novelty`]) and which were not significant.
     pub last_round: Vec<CandidateScore>,
+    /// Observations the first fit flagged as outliers (more than 5 robust standard deviations
+    /// off), before any effect was chosen; the rounds ran without them.
+    pub outliers_before: Vec<usize>,
+    /// Candidates that passed the F-test and BIC but were not added because the
+    /// cross-validated RMS did not improve: (effect, CV RMS before, with it), um.
+    pub rejected_by_cv: Vec<(Effect, f64, f64)>,
 }
 
 fn rss(r: &[f64]) -> f64 {
@@ -159,6 +176,28 @@ pub fn cross_validated_rms(
         }
     }
     Ok((sq / count.max(1) as f64).sqrt())
+}
+
+/// The campaign without the observations `drop` (indices of [`Campaign::observations`]): a
+/// reading is left out, a tracker pose measurement when any of its six observations is.
+fn without_observations(campaign: &Campaign, drop: &[usize]) -> Campaign {
+    if drop.is_empty() {
+        return campaign.clone();
+    }
+    let m = campaign.readings.len();
+    let mut c = campaign.clone();
+    let mut k = 0;
+    c.readings.retain(|_| {
+        k += 1;
+        drop.binary_search(&(k - 1)).is_err()
+    });
+    let mut j = 0;
+    c.pose_measurements.retain(|_| {
+        j += 1;
+        let first = m + 6 * (j - 1);
+        !(first..first + 6).any(|o| drop.binary_search(&o).is_ok())
+    });
+    c
 }
 
 fn with_effect(model: &MeasurementModel, e: Effect) -> MeasurementModel {
@@ -213,6 +252,11 @@ pub fn refine(
             format!("{} must be in (0, 1)", options.alpha),
         ));
     }
+    let first = identify(model, campaign, &options.identify)?;
+    let outliers_before = first.outliers.clone();
+    let full = campaign;
+    let reduced = without_observations(campaign, &outliers_before);
+    let campaign = &reduced;
     let m = campaign.len();
     let sigma = options.identify.sigma_um;
     let diag_of =
@@ -228,8 +272,12 @@ pub fn refine(
             ))
         };
     let mut current = model.clone();
-    let mut cal = identify(&current, campaign, &options.identify)?;
-    let initial_residuals_um = cal.residuals_um.clone();
+    let mut cal = if outliers_before.is_empty() {
+        first.clone()
+    } else {
+        identify(&current, campaign, &options.identify)?
+    };
+    let initial_residuals_um = first.residuals_um.clone();
     let initial_diagnostics = diag_of(&current, &cal)?;
     let mut diag = initial_diagnostics.clone();
     let mut cv = cross_validated_rms(
@@ -239,6 +287,7 @@ pub fn refine(
         options.folds,
         &cal.minimum_norm_um,
     )?;
+    let mut rejected_by_cv = Vec::new();
     let mut steps = Vec::new();
     let mut last_round = Vec::new();
     for _ in 0..options.max_steps {
@@ -259,7 +308,7 @@ pub fn refine(
         let k0 = cal.identifiability.rank;
         let bic0 = bic(rss0, m, k0);
         let mut scores = Vec::new();
-        let mut best: Option<(usize, MeasurementModel, Calibration)> = None;
+        let mut eligible: Vec<(usize, MeasurementModel, Calibration)> = Vec::new();
         for e in remaining {
             let aug = with_effect(&current, e);
             let start = extend_start(&cal.minimum_norm_um, &aug);
@@ -276,6 +325,7 @@ pub fn refine(
                 p_value: None,
                 delta_bic: None,
                 rms_um: None,
+                cv_rms_um: None,
             };
             if nov < options.min_novelty {
                 scores.push(score);
@@ -301,27 +351,36 @@ pub fn refine(
                 let db = bic(rss1, m, k1) - bic0;
                 score.p_value = Some(p);
                 score.delta_bic = Some(db);
-                let better = match &best {
-                    None => true,
-                    Some((i, _, _)) => db < scores[*i].delta_bic.unwrap_or(f64::INFINITY),
-                };
-                if p < level && db < 0.0 && better {
-                    best = Some((scores.len(), aug, c1));
+                if p < level && db < 0.0 && !c1.robust_failed {
+                    eligible.push((scores.len(), aug, c1));
                 }
             }
             scores.push(score);
         }
-        let Some((i, aug, c1)) = best else {
+        eligible.sort_by(|a, b| {
+            let key = |i: usize| scores[i].delta_bic.unwrap_or(f64::INFINITY);
+            key(a.0).total_cmp(&key(b.0))
+        });
+        let mut best = None;
+        for (i, aug, c1) in eligible {
+            let cv1 = cross_validated_rms(
+                &aug,
+                campaign,
+                &options.identify,
+                options.folds,
+                &c1.minimum_norm_um,
+            )?;
+            scores[i].cv_rms_um = Some(cv1);
+            if cv1 < cv {
+                best = Some((i, aug, c1, cv1));
+                break;
+            }
+            rejected_by_cv.push((scores[i].effect, cv, cv1));
+        }
+        let Some((i, aug, c1, cv1)) = best else {
             last_round = scores;
             break;
         };
-        let cv1 = cross_validated_rms(
-            &aug,
-            campaign,
-            &options.identify,
-            options.folds,
-            &c1.minimum_norm_um,
-        )?;
         let names = aug.parameter_names();
         let block = *aug.blocks().last().expect("augmented block");
         let parameters = (block.offset..block.offset + block.len)
@@ -352,6 +411,16 @@ pub fn refine(
         }
         u
     };
+    // The final model on the whole campaign (residuals and outliers for every observation).
+    let cal = if outliers_before.is_empty() {
+        cal
+    } else {
+        let opts = IdentifyOptions {
+            start_um: Some(cal.minimum_norm_um.clone()),
+            ..options.identify.clone()
+        };
+        identify(&current, full, &opts)?
+    };
     Ok(Refinement {
         steps,
         model: current,
@@ -362,5 +431,7 @@ pub fn refine(
         unexplained_structure,
         initial_residuals_um,
         last_round,
+        outliers_before,
+        rejected_by_cv,
     })
 }

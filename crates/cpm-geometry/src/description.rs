@@ -79,9 +79,10 @@ pub struct RobotDescription {
 #[serde(deny_unknown_fields)]
 pub struct HomeSpec {
     /// Platform origin in {B}, mm.
+    #[serde(deserialize_with = "exact")]
     pub position_mm: [f64; 3],
     /// Roll, pitch, yaw in degrees, `R = Rz(yaw) Ry(pitch) Rx(roll)`. Default zero.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact")]
     pub rpy_deg: [f64; 3],
 }
 
@@ -97,11 +98,17 @@ impl HomeSpec {
 #[serde(deny_unknown_fields)]
 pub struct LinkSpec {
     /// Base joint centre in {B}, mm.
+    #[serde(deserialize_with = "exact")]
     pub base_mm: [f64; 3],
     /// Platform joint centre in {P}, mm.
+    #[serde(deserialize_with = "exact")]
     pub platform_mm: [f64; 3],
     /// Allowed length range `[min, max]`, mm. Optional.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "exact_opt"
+    )]
     pub length_limits_mm: Option<[f64; 2]>,
     /// Length at a zero reading, mm. Default 0.
     #[serde(default, skip_serializing_if = "is_zero")]
@@ -165,8 +172,10 @@ pub struct SensorSpec {
     /// Name used in measurement files; unique.
     pub name: String,
     /// Base socket centre in {B}, mm.
+    #[serde(deserialize_with = "exact")]
     pub base_mm: [f64; 3],
     /// Platform socket centre in {P}, mm.
+    #[serde(deserialize_with = "exact")]
     pub platform_mm: [f64; 3],
 }
 
@@ -205,21 +214,22 @@ pub struct LoadSpec {
     /// Platform mass, kg.
     pub platform_mass_kg: f64,
     /// Platform centre of mass in {P}, mm.
+    #[serde(deserialize_with = "exact")]
     pub platform_com_mm: [f64; 3],
     /// Payload mass, kg. Default 0.
     #[serde(default)]
     pub payload_mass_kg: f64,
     /// Payload centre of mass in {P}, mm. Default origin.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact")]
     pub payload_com_mm: [f64; 3],
     /// Gravity in {B}, mm/s^2. Default `[0, 0, -9806.65]`.
-    #[serde(default = "default_gravity")]
+    #[serde(default = "default_gravity", deserialize_with = "exact")]
     pub gravity_mm_s2: [f64; 3],
     /// External force on the platform at its origin, {B}, N. Default zero.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact")]
     pub external_force_n: [f64; 3],
     /// External moment on the platform about its origin, {B}, N mm. Default zero.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact")]
     pub external_moment_nmm: [f64; 3],
 }
 
@@ -300,8 +310,10 @@ pub struct CalibrationSpec {
 #[serde(deny_unknown_fields)]
 pub struct InstallationErrorsSpec {
     /// Base joint displacements in {B}, um, one per link.
+    #[serde(deserialize_with = "exact_list")]
     pub base: Vec<[f64; 3]>,
     /// Platform joint displacements in {P}, um, one per link.
+    #[serde(deserialize_with = "exact_list")]
     pub platform: Vec<[f64; 3]>,
 }
 
@@ -333,6 +345,39 @@ fn is_one(v: &f64) -> bool {
 
 fn one() -> f64 {
     1.0
+}
+
+/// A fixed number of numbers: serde's own arrays would take the first `N` of a longer TOML
+/// list and ignore the rest (`position_mm = [0, 0, 300, 999]`).
+fn exact<'de, D: serde::Deserializer<'de>, const N: usize>(d: D) -> Result<[f64; N], D::Error> {
+    let v = Vec::<f64>::deserialize(d)?;
+    exact_of(&v)
+}
+
+fn exact_of<E: serde::de::Error, const N: usize>(v: &[f64]) -> Result<[f64; N], E> {
+    v.try_into().map_err(|_| {
+        E::custom(format!(
+            "expected {N} numbers, got {} (extra or missing values are not ignored)",
+            v.len()
+        ))
+    })
+}
+
+fn exact_opt<'de, D: serde::Deserializer<'de>, const N: usize>(
+    d: D,
+) -> Result<Option<[f64; N]>, D::Error> {
+    Option::<Vec<f64>>::deserialize(d)?
+        .map(|v| exact_of(&v))
+        .transpose()
+}
+
+fn exact_list<'de, D: serde::Deserializer<'de>, const N: usize>(
+    d: D,
+) -> Result<Vec<[f64; N]>, D::Error> {
+    Vec::<Vec<f64>>::deserialize(d)?
+        .iter()
+        .map(|v| exact_of(v))
+        .collect()
 }
 
 fn default_gravity() -> [f64; 3] {
@@ -436,6 +481,57 @@ fn finite3(v: &[f64; 3], path: &[Seg]) -> Result<(), Problem> {
             ),
         )),
     }
+}
+
+/// Refuses a machine whose links cannot hold the platform at home: two links on the same
+/// joints, or a link Jacobian of rank below 6 (six or more links).
+fn singular_at_home(d: &RobotDescription, home: &Pose) -> Result<(), Problem> {
+    use Seg::{Index, Key};
+    let rows: Vec<(Vector3<f64>, Vector3<f64>)> = d
+        .links
+        .iter()
+        .map(|l| {
+            let b = Vector3::from(l.base_mm);
+            let p = home.transform_point(&Vector3::from(l.platform_mm));
+            let u = (p - b).normalize();
+            (u, (p - home.transform_point(&Vector3::zeros())).cross(&u))
+        })
+        .collect();
+    for (j, lj) in d.links.iter().enumerate() {
+        for (i, li) in d.links.iter().enumerate().take(j) {
+            let same =
+                |a: &[f64; 3], b: &[f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+            if same(&li.base_mm, &lj.base_mm) && same(&li.platform_mm, &lj.platform_mm) {
+                return Err(Problem::new(
+                    &[Key("link"), Index(j)],
+                    format!(
+                        "has the same joints as link {} (it coincides with it): the machine is singular at its home pose",
+                        i + 1
+                    ),
+                ));
+            }
+        }
+    }
+    if rows.len() >= 6 {
+        let m = nalgebra::DMatrix::from_fn(rows.len(), 6, |r, c| {
+            if c < 3 {
+                rows[r].0[c]
+            } else {
+                rows[r].1[c - 3] * 1e-3 // per metre, to balance the columns
+            }
+        });
+        let sv = m.singular_values();
+        let (smax, smin) = (sv.max(), sv.min());
+        if !(smin > 1e-9 * smax.max(f64::MIN_POSITIVE)) {
+            return Err(Problem::new(
+                &[Key("link")],
+                format!(
+                    "the links do not hold the platform at its home pose: their Jacobian is singular (smallest singular value {smin:.3e} of {smax:.3e})"
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The largest coordinate of a plausible description, mm (1 km).
@@ -701,11 +797,26 @@ impl RobotDescription {
                 }
             }
         }
+        singular_at_home(self, &home)?;
         let mut names = HashSet::new();
         for (i, s) in self.sensors.iter().enumerate() {
             let at = |k: &'static str| [Key("sensor"), Index(i), Key(k)];
             if s.name.trim().is_empty() {
                 return Err(Problem::new(&at("name"), "must not be empty"));
+            }
+            if s.name.trim() != s.name
+                || s.name.starts_with('#')
+                || s.name
+                    .chars()
+                    .any(|c| c.is_control() || c == ',' || c == '"')
+            {
+                return Err(Problem::new(
+                    &at("name"),
+                    format!(
+                        "{:?}: a sensor name must not start with '#', have spaces at its ends or contain a comma, a quote or a control character (it is a column value of the measurement files)",
+                        s.name
+                    ),
+                ));
             }
             if !names.insert(s.name.as_str()) {
                 return Err(Problem::new(
@@ -739,10 +850,35 @@ impl RobotDescription {
             finite3(&l.gravity_mm_s2, &at("gravity_mm_s2"))?;
             finite3(&l.external_force_n, &at("external_force_n"))?;
             finite3(&l.external_moment_nmm, &at("external_moment_nmm"))?;
+            // Derived quantities: the weight and the wrench at home must be finite too.
+            let w = l.wrench(&home);
+            if !(l.total_mass_kg().is_finite() && w.iter().all(|x| x.is_finite())) {
+                let key = if l.payload_mass_kg > l.platform_mass_kg {
+                    "payload_mass_kg"
+                } else {
+                    "platform_mass_kg"
+                };
+                return Err(Problem::new(
+                    &at(key),
+                    format!(
+                        "the load's weight or wrench at home is not a finite number (masses {:e} + {:e} kg): implausible",
+                        l.platform_mass_kg, l.payload_mass_kg
+                    ),
+                ));
+            }
         }
         if let Some(c) = &self.calibration {
             if let Some(v) = c.sensor_noise_um {
-                non_negative(v, &[Key("calibration"), Key("sensor_noise_um")])?;
+                // Like `--sigma-um`: a declared noise must be > 0 (leave the key out to have
+                // the noise estimated from the residual).
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(Problem::new(
+                        &[Key("calibration"), Key("sensor_noise_um")],
+                        format!(
+                            "must be > 0, got {v} (leave it out to estimate the noise from the residual)"
+                        ),
+                    ));
+                }
             }
             let mut seen = HashSet::new();
             for (i, e) in c.effects.iter().enumerate() {

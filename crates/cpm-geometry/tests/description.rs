@@ -257,7 +257,17 @@ fn wrong_types_and_shapes() {
         (
             "base_mm = [-140.0, -140.0, 28.0]",
             "base_mm = [-140.0, -140.0]",
-            "length 2",
+            "expected 3 numbers, got 2",
+        ),
+        (
+            "position_mm = [0.0, 0.0, 410.0]",
+            "position_mm = [0, 0, 300, 999, 1e9]",
+            "expected 3 numbers, got 5",
+        ),
+        (
+            "base_mm = [-140.0, -140.0, 28.0]",
+            "base_mm = [-140.0, -140.0, 28.0, 1.0]",
+            "expected 3 numbers, got 4",
         ),
         (
             "platform_mass_kg = 20.0",
@@ -269,7 +279,8 @@ fn wrong_types_and_shapes() {
         let msg = err_message(RobotDescription::from_toml_str(&text, "robot.toml"));
         assert!(msg.contains("line"), "{msg}");
         assert!(
-            msg.contains(what) || msg.contains("invalid"),
+            msg.contains(what)
+                || (what == "radius_um" || what == "platform_mass_kg") && msg.contains("invalid"),
             "{what}: {msg}"
         );
     }
@@ -377,27 +388,27 @@ fn semantic_errors_name_the_key_path() {
         ),
         ("name = \"paper\"", "name = \"\"", "sensor[1].name: must not be empty"),
         (
-            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 2.0",
             "[calibration]\neffects = [\"link_offset\", \"link_offset\"]",
             "calibration.effects[2]: duplicate effect",
         ),
         (
-            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 2.0",
             "[calibration]\nsensor_noise_um = nan",
             "calibration.sensor_noise_um",
         ),
         (
-            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 2.0",
             "[calibration]\nscrew_lead_mm = 0.0",
             "calibration.screw_lead_mm: must be finite and > 0",
         ),
         (
-            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 2.0",
             "[calibration]\neffects = []\n\n[calibration.known_effects]\nbacklash = [1.0, nan, 0.0, 0.0, 0.0, 0.0]",
             "calibration.known_effects.backlash[2]: must be finite, got NaN",
         ),
         (
-            "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0",
+            "# [calibration]\n# effects = []\n# sensor_noise_um = 2.0",
             "[calibration]\n\n[calibration.known_effects]\nclearance = []",
             "calibration.known_effects.clearance: has no values",
         ),
@@ -585,7 +596,7 @@ fn documentation_examples_load() {
     assert_eq!(d.links[2].length_mm(208_000.0), 354.0);
 
     // The [calibration.known_effects] example, in place of the paper's commented table.
-    let from = "# [calibration]\n# effects = []\n# sensor_noise_um = 0.0";
+    let from = "# [calibration]\n# effects = []\n# sensor_noise_um = 2.0";
     assert!(paper_text().contains(from));
     let text = paper_text().replacen(from, known_block, 1);
     let d = RobotDescription::from_toml_str(&text, "doc").unwrap();
