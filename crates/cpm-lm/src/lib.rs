@@ -355,7 +355,7 @@ pub use check::{check_jacobian, check_sparse_jacobian, JacobianCheck};
 pub use damping::Damping;
 pub use error::{EvalStage, LmError};
 pub use loss::Loss;
-pub use options::{Options, Scaling};
+pub use options::{GeodesicAcceleration, Options, Scaling};
 pub use problem::{DenseJacobian, ModelError, Problem, SparseJacobian};
 pub use report::{IterationRecord, Report, TerminationReason, Timings};
 pub use solver::{minimize, minimize_sparse, IterationCallback, LinearSolver, Solver};
