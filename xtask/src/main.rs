@@ -111,6 +111,7 @@ fn scale(args: &[String]) -> ExitCode {
             / 36.0)
             .sqrt()
     };
+    let rss_before_mb = peak_rss_mb();
     let t0 = Instant::now();
     let implicit = identify_implicit(&model, &data, &ImplicitOptions::default());
     let seconds = t0.elapsed().as_secs_f64();
@@ -131,6 +132,14 @@ fn scale(args: &[String]) -> ExitCode {
         "seconds_per_iteration": seconds / r.solver.num_iterations().max(1) as f64,
         "termination": r.solver.termination.to_string(),
         "peak_rss_mb": peak_rss_mb(),
+        "peak_rss_mb_before_fit": rss_before_mb,
+        "solver_seconds": {
+            "total": r.solver.elapsed.as_secs_f64(),
+            "residuals": r.solver.timings.residuals.as_secs_f64(),
+            "jacobian": r.solver.timings.jacobian.as_secs_f64(),
+            "linear_solver": r.solver.timings.linear_solver.as_secs_f64(),
+        },
+        "residual_evaluations": r.solver.residual_evaluations,
         "rms_error_um": error_rms(&r.globals[..36]),
         "rank": r.identifiability.rank,
     });

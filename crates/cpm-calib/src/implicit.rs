@@ -91,9 +91,13 @@ struct Implicit<'a> {
     prepared: Prepared,
     /// First residual row of each configuration.
     row0: Vec<usize>,
-    /// Link-channel coefficients per configuration and link: (global index, mm per unit).
-    link_coeff: Vec<Vec<Vec<(usize, f64)>>>,
-    /// Sensor-channel globals per reading: (global index, effect, index within its block).
+    /// Link-channel coefficients (global index, mm per unit) of configuration `j`, link `i`:
+    /// `link_coeff[link_ptr[6 j + i]..link_ptr[6 j + i + 1]]` (one flat list: a campaign
+    /// of 10^5 configurations would otherwise hold 7 * 10^5 vectors, mostly empty).
+    link_coeff: Vec<(usize, f64)>,
+    link_ptr: Vec<usize>,
+    /// Sensor-channel globals per sensor (they depend on the sensor only): (global index,
+    /// effect, index within its block).
     sensor_params: Vec<Vec<(usize, Effect, usize)>>,
     num_poses: usize,
     num_globals: usize,
@@ -103,6 +107,10 @@ struct Implicit<'a> {
 }
 
 impl Implicit<'_> {
+    fn links(&self, j: usize, i: usize) -> &[(usize, f64)] {
+        &self.link_coeff[self.link_ptr[6 * j + i]..self.link_ptr[6 * j + i + 1]]
+    }
+
     fn pose(&self, x: &[f64], j: usize) -> (Pose, Vector3<f64>) {
         let c = &self.campaign.poses[j];
         let dt = Vector3::new(x[6 * j], x[6 * j + 1], x[6 * j + 2]) * 1e-3;
@@ -135,7 +143,7 @@ impl Problem for Implicit<'_> {
             for (i, l) in table.links.iter().enumerate() {
                 let q = pose.position_mm + rm * l.platform_mm - l.base_mm;
                 let mut target = self.prepared.lengths_mm[j][i];
-                for &(p, a) in &self.link_coeff[j][i] {
+                for &(p, a) in self.links(j, i) {
                     target += a * globals[p];
                 }
                 r[o + i] = (q.norm() - target) * 1e3 * self.w_enc;
@@ -145,7 +153,7 @@ impl Problem for Implicit<'_> {
                 let s = &table.sensors[rd.sensor];
                 let geometric = s.length_mm(&pose);
                 let mut y = geometric + self.sensor_corr;
-                for &(p, e, q) in &self.sensor_params[k] {
+                for &(p, e, q) in &self.sensor_params[rd.sensor] {
                     y += sensor_coefficient(e, q, rd.sensor, geometric) * globals[p];
                 }
                 r[o + 6 + t] = (y - rd.length_mm) * 1e3;
@@ -156,32 +164,33 @@ impl Problem for Implicit<'_> {
 }
 
 impl Implicit<'_> {
-    /// Structural non-zeros of configuration `j`'s rows, in value order.
-    fn pose_pattern(&self, j: usize, p: &mut Vec<(usize, usize)>) {
+    /// Visits the structural non-zeros of configuration `j`'s rows, in value order (row by
+    /// row, columns ascending: the pose block, then the globals in block order).
+    fn visit_pose_pattern(&self, j: usize, visit: &mut dyn FnMut(usize, usize)) {
         let g0 = 6 * self.num_poses;
         let o = self.row0[j];
         for i in 0..6 {
             for c in 0..6 {
-                p.push((o + i, 6 * j + c));
+                visit(o + i, 6 * j + c);
             }
             for c in 0..6 {
-                p.push((o + i, g0 + 6 * i + c));
+                visit(o + i, g0 + 6 * i + c);
             }
-            for &(q, _) in &self.link_coeff[j][i] {
-                p.push((o + i, g0 + q));
+            for &(q, _) in self.links(j, i) {
+                visit(o + i, g0 + q);
             }
         }
         for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
             for c in 0..6 {
-                p.push((o + 6 + t, 6 * j + c));
+                visit(o + 6 + t, 6 * j + c);
             }
-            for &(q, _, _) in &self.sensor_params[k] {
-                p.push((o + 6 + t, g0 + q));
+            for &(q, _, _) in &self.sensor_params[self.campaign.readings[k].sensor] {
+                visit(o + 6 + t, g0 + q);
             }
         }
     }
 
-    /// Jacobian values of configuration `j`'s rows (order of [`Self::pose_pattern`]);
+    /// Jacobian values of configuration `j`'s rows (order of [`Self::visit_pose_pattern`]);
     /// returns how many were written.
     fn pose_values(
         &self,
@@ -212,7 +221,7 @@ impl Implicit<'_> {
                 values[v + 3 + c] = zp[c] * w;
             }
             v += 6;
-            for &(_, a) in &self.link_coeff[j][i] {
+            for &(_, a) in self.links(j, i) {
                 values[v] = -a * 1e3 * w;
                 v += 1;
             }
@@ -230,7 +239,7 @@ impl Implicit<'_> {
                 values[v + 3 + c] = m[c] * 1e-3;
             }
             v += 6;
-            for &(_, e, q) in &self.sensor_params[k] {
+            for &(_, e, q) in &self.sensor_params[rd.sensor] {
                 values[v] = sensor_coefficient(e, q, rd.sensor, geometric) * 1e3;
                 v += 1;
             }
@@ -242,10 +251,16 @@ impl Implicit<'_> {
 impl SparseJacobian for Implicit<'_> {
     fn pattern(&self) -> Vec<(usize, usize)> {
         let mut p = Vec::new();
-        for j in 0..self.num_poses {
-            self.pose_pattern(j, &mut p);
-        }
+        self.visit_pattern(&mut |r, c| p.push((r, c)));
         p
+    }
+
+    /// Streams the pattern in compressed-sparse-row order: the solver stores it as it
+    /// arrives, with no list of the entries (at 10^6 readings the list alone was 270 MB).
+    fn visit_pattern(&self, visit: &mut dyn FnMut(usize, usize)) {
+        for j in 0..self.num_poses {
+            self.visit_pose_pattern(j, visit);
+        }
     }
 
     fn jacobian_values(&mut self, x: &[f64], values: &mut [f64]) -> Result<(), ModelError> {
@@ -316,43 +331,39 @@ fn build<'a>(
         row0.push(rows);
         rows += 6 + prepared.by_pose[j].len();
     }
-    let link_coeff: Vec<Vec<Vec<(usize, f64)>>> = (0..np)
-        .map(|j| {
-            (0..6)
-                .map(|i| {
-                    let mut c = Vec::new();
-                    for b in blocks
-                        .iter()
-                        .filter(|b| b.effect.is_some_and(is_link_effect))
-                    {
-                        for k in 0..b.len {
-                            let a = link_coefficient(
-                                b.effect.expect("effect"),
-                                k,
-                                i,
-                                &prepared.contexts[j],
-                                &model.effect_settings,
-                                prepared.t0_s,
-                            );
-                            if a != 0.0 {
-                                c.push((b.offset + k, a));
-                            }
-                        }
+    let mut link_coeff = Vec::new();
+    let mut link_ptr = Vec::with_capacity(6 * np + 1);
+    link_ptr.push(0);
+    for j in 0..np {
+        for i in 0..6 {
+            for b in blocks
+                .iter()
+                .filter(|b| b.effect.is_some_and(is_link_effect))
+            {
+                for k in 0..b.len {
+                    let a = link_coefficient(
+                        b.effect.expect("effect"),
+                        k,
+                        i,
+                        &prepared.contexts[j],
+                        &model.effect_settings,
+                        prepared.t0_s,
+                    );
+                    if a != 0.0 {
+                        link_coeff.push((b.offset + k, a));
                     }
-                    c
-                })
-                .collect()
-        })
-        .collect();
-    let sensor_params: Vec<Vec<(usize, Effect, usize)>> = campaign
-        .readings
-        .iter()
-        .map(|r| {
+                }
+            }
+            link_ptr.push(link_coeff.len());
+        }
+    }
+    let sensor_params: Vec<Vec<(usize, Effect, usize)>> = (0..model.nominal.sensors.len())
+        .map(|sensor| {
             blocks
                 .iter()
                 .filter_map(|b| match b.effect {
                     Some(e @ (Effect::SensorOffset | Effect::SensorScale)) => {
-                        Some((b.offset + r.sensor, e, r.sensor))
+                        Some((b.offset + sensor, e, sensor))
                     }
                     _ => None,
                 })
@@ -365,6 +376,7 @@ fn build<'a>(
         prepared,
         row0,
         link_coeff,
+        link_ptr,
         sensor_params,
         num_poses: np,
         num_globals: ng,
@@ -409,33 +421,50 @@ pub fn identify_implicit(
         .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
     let g0 = 6 * np;
     let table = model.table_with(&x[g0..])?;
+    // One configuration at a time, in fixed-size buffers; only the rows that touch globals
+    // (the closures, and readings with sensor-channel effects) enter G^T G and L^T G.
     let mut s = DMatrix::<f64>::zeros(ng, ng);
-    let mut pattern = Vec::new();
+    let mut entries: Vec<(usize, usize)> = Vec::new();
     let mut values = Vec::new();
+    let mut grow: Vec<(usize, f64)> = Vec::new();
+    let mut b = nalgebra::Matrix6xX::<f64>::zeros(ng);
+    let mut ainv_b = nalgebra::Matrix6xX::<f64>::zeros(ng);
     for j in 0..np {
-        let nr = 6 + problem.prepared.by_pose[j].len();
-        pattern.clear();
-        problem.pose_pattern(j, &mut pattern);
-        values.resize(pattern.len(), 0.0);
+        entries.clear();
+        problem.visit_pose_pattern(j, &mut |r, c| entries.push((r, c)));
+        values.resize(entries.len(), 0.0);
         problem.pose_values(&x, &table, j, &mut values);
-        let mut local = DMatrix::<f64>::zeros(nr, 6);
-        let mut glob = DMatrix::<f64>::zeros(nr, ng);
-        for (&(row, col), &val) in pattern.iter().zip(&values) {
-            let rr = row - problem.row0[j];
-            if col < g0 {
-                local[(rr, col - 6 * j)] += val;
-            } else {
-                glob[(rr, col - g0)] += val;
+        let mut a = nalgebra::Matrix6::<f64>::zeros();
+        b.fill(0.0);
+        let mut q = 0;
+        while q < entries.len() {
+            let row = entries[q].0;
+            let mut l = nalgebra::Vector6::<f64>::zeros();
+            grow.clear();
+            while q < entries.len() && entries[q].0 == row {
+                let (col, val) = (entries[q].1, values[q]);
+                if col < g0 {
+                    l[col - 6 * j] += val;
+                } else {
+                    grow.push((col - g0, val));
+                }
+                q += 1;
+            }
+            a += l * l.transpose();
+            for &(c, v) in &grow {
+                for k in 0..6 {
+                    b[(k, c)] += l[k] * v;
+                }
+                for &(c2, v2) in &grow {
+                    s[(c, c2)] += v * v2;
+                }
             }
         }
-        let a = local.transpose() * &local;
-        let b = local.transpose() * &glob;
-        let ainv_b = a
-            .clone()
-            .cholesky()
-            .map(|c| c.solve(&b))
-            .unwrap_or_else(|| DMatrix::zeros(6, ng));
-        s += glob.transpose() * &glob - b.transpose() * ainv_b;
+        if let Some(ch) = a.cholesky() {
+            ainv_b.copy_from(&b);
+            ch.solve_mut(&mut ainv_b);
+            s.gemm_tr(-1.0, &b, &ainv_b, 1.0);
+        }
     }
     let eig = nalgebra::SymmetricEigen::new(s);
     let mut pseudo = DMatrix::<f64>::zeros(ng, ng);
