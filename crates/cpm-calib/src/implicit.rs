@@ -422,13 +422,31 @@ pub fn identify_implicit(
     let g0 = 6 * np;
     let table = model.table_with(&x[g0..])?;
     // One configuration at a time, in fixed-size buffers; only the rows that touch globals
-    // (the closures, and readings with sensor-channel effects) enter G^T G and L^T G.
-    let mut s = DMatrix::<f64>::zeros(ng, ng);
+    // (the closures, and readings with sensor-channel effects) enter G^T G and L^T G. With
+    // A = L L^T, B^T A^-1 B = Z^T Z for Z = L^-1 B; the rows of Z are gathered (as columns)
+    // into a chunk and subtracted with one matrix product per chunk.
+    const ZCHUNK: usize = 32 * 6;
+    let mut gtg = vec![0.0; ng * ng];
+    let mut zt = faer::Mat::<f64>::zeros(ng, ZCHUNK);
+    let mut red = faer::Mat::<f64>::zeros(ng, ng);
+    let mut zcols = 0usize;
+    let flush = |red: &mut faer::Mat<f64>, zt: &faer::Mat<f64>, cols: usize| {
+        if cols > 0 {
+            let z = zt.as_ref().subcols(0, cols);
+            faer::linalg::matmul::matmul(
+                red.as_mut(),
+                faer::Accum::Add,
+                z,
+                z.transpose(),
+                -1.0,
+                faer::Par::Seq,
+            );
+        }
+    };
     let mut entries: Vec<(usize, usize)> = Vec::new();
     let mut values = Vec::new();
     let mut grow: Vec<(usize, f64)> = Vec::new();
-    let mut b = nalgebra::Matrix6xX::<f64>::zeros(ng);
-    let mut ainv_b = nalgebra::Matrix6xX::<f64>::zeros(ng);
+    let mut b = vec![0.0; 6 * ng];
     for j in 0..np {
         entries.clear();
         problem.visit_pose_pattern(j, &mut |r, c| entries.push((r, c)));
@@ -453,19 +471,36 @@ pub fn identify_implicit(
             a += l * l.transpose();
             for &(c, v) in &grow {
                 for k in 0..6 {
-                    b[(k, c)] += l[k] * v;
+                    b[k * ng + c] += l[k] * v;
                 }
+                let gc = &mut gtg[c * ng..(c + 1) * ng];
                 for &(c2, v2) in &grow {
-                    s[(c, c2)] += v * v2;
+                    gc[c2] += v * v2;
                 }
             }
         }
-        if let Some(ch) = a.cholesky() {
-            ainv_b.copy_from(&b);
-            ch.solve_mut(&mut ainv_b);
-            s.gemm_tr(-1.0, &b, &ainv_b, 1.0);
+        let Some(ch) = a.cholesky() else {
+            continue;
+        };
+        let lm = ch.l();
+        if zcols + 6 > ZCHUNK {
+            flush(&mut red, &zt, zcols);
+            zcols = 0;
         }
+        // Row k of Z: (b_k - sum_{p<k} L_kp z_p) / L_kk.
+        for k in 0..6 {
+            for c in 0..ng {
+                let mut v = b[k * ng + c];
+                for p in 0..k {
+                    v -= lm[(k, p)] * zt[(c, zcols + p)];
+                }
+                zt[(c, zcols + k)] = v / lm[(k, k)];
+            }
+        }
+        zcols += 6;
     }
+    flush(&mut red, &zt, zcols);
+    let s = DMatrix::<f64>::from_fn(ng, ng, |r, c| gtg[r * ng + c] + red[(r, c)]);
     let eig = nalgebra::SymmetricEigen::new(s);
     let mut pseudo = DMatrix::<f64>::zeros(ng, ng);
     for c in 0..ng {
