@@ -154,6 +154,7 @@ fn scale(args: &[String]) -> ExitCode {
             "linear_solver": r.solver.timings.linear_solver.as_secs_f64(),
         },
         "residual_evaluations": r.solver.residual_evaluations,
+        "damping_per_iteration": r.solver.iterations.iter().map(|i| i.damping).collect::<Vec<_>>(),
         "rms_error_um": error_rms(&r.globals[..36]),
         "rank": r.identifiability.rank,
     });
