@@ -69,6 +69,11 @@ pub struct ImplicitCalibration {
     pub reading_rms_um: f64,
     /// RMS of the closure residuals (unweighted), um.
     pub closure_rms_um: f64,
+    /// Residual (predicted - measured) of every reading at the solution, um, in the order of
+    /// the campaign's readings.
+    pub reading_residuals_um: Vec<f64>,
+    /// RMS of the reading residuals at the start (commanded poses, zero errors), um.
+    pub initial_reading_rms_um: f64,
     /// The solver's report.
     pub solver: cpm_lm::Report,
 }
@@ -273,23 +278,10 @@ impl SparseJacobian for Implicit<'_> {
     }
 }
 
-fn build<'a>(
-    model: &'a MeasurementModel,
-    campaign: &'a Campaign,
-    options: &ImplicitOptions,
-) -> Result<Implicit<'a>, CalibError> {
-    if !(options.encoder_sigma_um > 0.0 && options.encoder_sigma_um.is_finite()) {
-        return Err(CalibError::invalid(
-            "encoder_sigma_um",
-            "must be finite and > 0",
-        ));
-    }
-    if !(options.sensor_sigma_um > 0.0 && options.sensor_sigma_um.is_finite()) {
-        return Err(CalibError::invalid(
-            "sensor_sigma_um",
-            "must be finite and > 0",
-        ));
-    }
+/// Whether the implicit formulation can fit this model to this campaign: six links, length
+/// readings only (no tracker poses), no socket or tracker-frame effects and no known effect
+/// values. The error says what stands in the way.
+pub fn supported(model: &MeasurementModel, campaign: &Campaign) -> Result<(), CalibError> {
     if model.nominal.num_links() != 6 {
         return Err(CalibError::invalid(
             "links",
@@ -321,6 +313,27 @@ fn build<'a>(
             ),
         ));
     }
+    Ok(())
+}
+
+fn build<'a>(
+    model: &'a MeasurementModel,
+    campaign: &'a Campaign,
+    options: &ImplicitOptions,
+) -> Result<Implicit<'a>, CalibError> {
+    if !(options.encoder_sigma_um > 0.0 && options.encoder_sigma_um.is_finite()) {
+        return Err(CalibError::invalid(
+            "encoder_sigma_um",
+            "must be finite and > 0",
+        ));
+    }
+    if !(options.sensor_sigma_um > 0.0 && options.sensor_sigma_um.is_finite()) {
+        return Err(CalibError::invalid(
+            "sensor_sigma_um",
+            "must be finite and > 0",
+        ));
+    }
+    supported(model, campaign)?;
     let prepared = Prepared::new(model, campaign)?;
     let np = campaign.poses.len();
     let ng = model.num_params();
@@ -413,6 +426,24 @@ pub fn identify_implicit(
         local_block_sizes: vec![6; np],
     };
     let mut x = vec![0.0; 6 * np + ng];
+    let reading_rms = |problem: &Implicit<'_>, r: &[f64]| {
+        let mut s2 = 0.0;
+        for j in 0..np {
+            let o = problem.row0[j] + 6;
+            s2 += r[o..o + problem.prepared.by_pose[j].len()]
+                .iter()
+                .map(|v| v * v)
+                .sum::<f64>();
+        }
+        (s2 / campaign.readings.len().max(1) as f64).sqrt()
+    };
+    let initial_reading_rms_um = {
+        let mut r0 = vec![0.0; rows];
+        problem
+            .residuals(&x, &mut r0)
+            .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
+        reading_rms(&problem, &r0)
+    };
     let solver = cpm_lm::minimize_sparse(&mut problem, &mut x, &lm)?;
     // Reduced information of the globals: S = sum_j (G_j^T G_j - G_j^T L_j (L_j^T L_j)^-1 L_j^T G_j).
     let mut r = vec![0.0; rows];
@@ -509,7 +540,12 @@ pub fn identify_implicit(
             pseudo[(c, rr)] = l * eig.eigenvectors[(rr, c)];
         }
     }
-    let mut ident = analyze(&pseudo, options.sensor_sigma_um, &options.rank, &[]);
+    let mut ident = analyze(
+        &pseudo,
+        options.sensor_sigma_um,
+        &options.rank,
+        &crate::identifiability::physical_patterns(model, campaign),
+    );
     ident.num_readings = campaign.readings.len();
     let globals = x[g0..].to_vec();
     let estimate_um = (0..ng)
@@ -519,13 +555,15 @@ pub fn identify_implicit(
     let mut sc = 0.0;
     let mut sr = 0.0;
     let mut nr = 0usize;
+    let mut reading_residuals_um = vec![0.0; campaign.readings.len()];
     for j in 0..np {
         let o = problem.row0[j];
         for i in 0..6 {
             sc += (r[o + i] / problem.w_enc).powi(2);
         }
-        for t in 0..problem.prepared.by_pose[j].len() {
+        for (t, &k) in problem.prepared.by_pose[j].iter().enumerate() {
             sr += r[o + 6 + t].powi(2);
+            reading_residuals_um[k] = r[o + 6 + t];
             nr += 1;
         }
     }
@@ -537,6 +575,114 @@ pub fn identify_implicit(
         poses,
         reading_rms_um: (sr / nr.max(1) as f64).sqrt(),
         closure_rms_um: (sc / (6 * np).max(1) as f64).sqrt(),
+        reading_residuals_um,
+        initial_reading_rms_um,
         solver,
+    })
+}
+
+/// Identifies `model` from `campaign` with the implicit formulation and returns the result
+/// in the form of the nested formulation's [`identify()`](crate::identify()), so that either
+/// can feed the same reports.
+///
+/// The commanded lengths are treated as exact, as the nested formulation does (encoder
+/// standard deviation `1e-4` of the reading one), so both give the same estimates to a small
+/// fraction of a standard deviation. The noise is `options.sigma_um` when declared, otherwise
+/// estimated from the reading residuals (`m - rank` degrees of freedom); the standard
+/// deviations are the Cramér-Rao bounds of the reduced (Schur) information at that noise.
+/// `minimum_norm_um` is the estimate projected on the identified directions (the start is
+/// zero). Length readings only, plain least squares, no start (see [`supported`]).
+pub fn identify_implicit_calibration(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &crate::IdentifyOptions,
+) -> Result<crate::Calibration, CalibError> {
+    supported(model, campaign)?;
+    if !options.lm.loss.is_squared() {
+        return Err(CalibError::invalid(
+            "loss",
+            "the implicit formulation fits plain least squares; use identify() for a robust loss",
+        ));
+    }
+    if options.start_um.is_some() {
+        return Err(CalibError::invalid(
+            "start_um",
+            "the implicit formulation starts from zero errors; use identify() for a start",
+        ));
+    }
+    let reference = options.sigma_um.unwrap_or(1.0);
+    let mut lm = ImplicitOptions::default().lm;
+    lm.max_iterations = options.lm.max_iterations;
+    lm.max_evaluations = options.lm.max_evaluations;
+    let imp = identify_implicit(
+        model,
+        campaign,
+        &ImplicitOptions {
+            encoder_sigma_um: 1e-4 * reference,
+            sensor_sigma_um: reference,
+            lm,
+            rank: options.rank.clone(),
+        },
+    )?;
+    let m = imp.reading_residuals_um.len();
+    let rank = imp.identifiability.rank;
+    let (sigma_um, sigma_estimated) = match options.sigma_um {
+        Some(s) => (s, false),
+        None => {
+            let ssr: f64 = imp.reading_residuals_um.iter().map(|r| r * r).sum();
+            ((ssr / m.saturating_sub(rank).max(1) as f64).sqrt(), true)
+        }
+    };
+    // The reduced information depends on the ratio of the two noises only (fixed above), so
+    // the bounds at the estimated noise are those at the reference one rescaled.
+    let mut ident = imp.identifiability.clone();
+    let scale = sigma_um / reference;
+    for s in ident.crlb_std_um.iter_mut().flatten() {
+        *s *= scale;
+    }
+    for s in ident.combination_std_um.iter_mut() {
+        *s *= scale;
+    }
+    ident.sigma_um = sigma_um;
+    let e_hat = &imp.globals;
+    let np = e_hat.len();
+    let estimate_um = (0..np)
+        .map(|k| ident.determined[k].then_some(e_hat[k]))
+        .collect();
+    let mut minimum_norm_um = vec![0.0; np];
+    let combinations = (0..ident.rank)
+        .map(|c| {
+            let v = ident.v.column(c);
+            let proj: f64 = v.iter().zip(e_hat).map(|(a, b)| a * b).sum();
+            for (mn, a) in minimum_norm_um.iter_mut().zip(v.iter()) {
+                *mn += a * proj;
+            }
+            let mut load: Vec<(usize, f64)> = v.iter().copied().enumerate().collect();
+            load.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            load.truncate(4);
+            crate::identify::Combination {
+                singular_value: ident.singular_values[c],
+                estimate_um: proj,
+                std_um: ident.combination_std_um[c],
+                loadings: load,
+            }
+        })
+        .collect();
+    let outliers = crate::diagnostics::outliers(&imp.reading_residuals_um);
+    Ok(crate::Calibration {
+        simulated: campaign.simulated,
+        estimate_um,
+        std_um: ident.crlb_std_um.clone(),
+        minimum_norm_um,
+        combinations,
+        identifiability: ident,
+        sigma_um,
+        sigma_estimated,
+        sigma_excludes_outliers: false,
+        outliers,
+        initial_rms_um: imp.initial_reading_rms_um,
+        residual_rms_um: imp.reading_rms_um,
+        residuals_um: imp.reading_residuals_um,
+        solver: imp.solver,
     })
 }
