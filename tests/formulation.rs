@@ -23,17 +23,24 @@ fn nested_and_implicit_agree_to_a_tenth_of_a_standard_deviation() {
     let nested = identify_with(Formulation::Nested, &model, &data, &options).unwrap();
     let implicit = identify_with(Formulation::Implicit, &model, &data, &options).unwrap();
     assert!(implicit.solver.was_successful(), "{}", implicit.solver);
-    assert_eq!(
-        nested.identifiability.rank,
-        implicit.identifiability.rank
-    );
+    assert_eq!(nested.identifiability.rank, implicit.identifiability.rank);
     let mut compared = 0;
     for k in 0..model.num_params() {
-        match (nested.estimate_um[k], implicit.estimate_um[k], nested.std_um[k]) {
+        match (
+            nested.estimate_um[k],
+            implicit.estimate_um[k],
+            nested.std_um[k],
+        ) {
             (Some(a), Some(b), Some(s)) => {
-                assert!((a - b).abs() < 0.1 * s, "{k}: nested {a} implicit {b} (std {s})");
+                assert!(
+                    (a - b).abs() < 0.1 * s,
+                    "{k}: nested {a} implicit {b} (std {s})"
+                );
                 let si = implicit.std_um[k].unwrap();
-                assert!((si - s).abs() < 0.05 * s, "{k}: std nested {s} implicit {si}");
+                assert!(
+                    (si - s).abs() < 0.05 * s,
+                    "{k}: std nested {s} implicit {si}"
+                );
                 compared += 1;
             }
             (None, None, _) => {}
@@ -49,7 +56,9 @@ fn nested_and_implicit_agree_to_a_tenth_of_a_standard_deviation() {
         nested.sigma_um,
         implicit.sigma_um
     );
-    assert!((nested.residual_rms_um - implicit.residual_rms_um).abs() < 0.02 * nested.residual_rms_um);
+    assert!(
+        (nested.residual_rms_um - implicit.residual_rms_um).abs() < 0.02 * nested.residual_rms_um
+    );
 }
 
 fn example(name: &str) -> String {
@@ -114,16 +123,39 @@ fn calibrate_says_which_formulation_and_both_agree() {
     let data = d.join("data.csv");
     let (dp, tp) = (data.display().to_string(), truth_path.display().to_string());
     ok(&[
-        "simulate", "--robot", &robot, "--random", "60", "--truth", &tp, "--noise",
-        "gaussian:0.5", "--seed", "3", "--effects", "none", "--out", &dp,
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "60",
+        "--truth",
+        &tp,
+        "--noise",
+        "gaussian:0.5",
+        "--seed",
+        "3",
+        "--effects",
+        "none",
+        "--out",
+        &dp,
     ]);
     let mut results = Vec::new();
     for f in ["nested", "implicit", "auto"] {
         let out = d.join(f);
         let op = out.display().to_string();
         let summary = ok(&[
-            "calibrate", "--robot", &robot, "--data", &dp, "--effects", "none", "--out", &op,
-            "--formulation", f, "--json",
+            "calibrate",
+            "--robot",
+            &robot,
+            "--data",
+            &dp,
+            "--effects",
+            "none",
+            "--out",
+            &op,
+            "--formulation",
+            f,
+            "--json",
         ]);
         let summary: serde_json::Value = serde_json::from_str(&summary).unwrap();
         let expected = if f == "auto" { "nested" } else { f };
@@ -135,17 +167,26 @@ fn calibrate_says_which_formulation_and_both_agree() {
             report.contains(&format!("Formulation: {expected} (")),
             "{report}"
         );
-        results.push((per_joint(&cal["installation_errors_um"]), per_joint(&cal["std_um"])));
+        results.push((
+            per_joint(&cal["installation_errors_um"]),
+            per_joint(&cal["std_um"]),
+        ));
     }
     let (nested, nested_std) = &results[0];
     let (implicit, _) = &results[1];
     let mut compared = 0;
     for k in 0..36 {
         if let (Some(a), Some(b), Some(s)) = (nested[k], implicit[k], nested_std[k]) {
-            assert!((a - b).abs() < 0.1 * s, "{k}: nested {a} implicit {b} (std {s})");
+            assert!(
+                (a - b).abs() < 0.1 * s,
+                "{k}: nested {a} implicit {b} (std {s})"
+            );
             compared += 1;
         }
     }
     assert!(compared > 0);
-    assert_eq!(results[2].0, results[0].0, "auto picks nested for 360 readings");
+    assert_eq!(
+        results[2].0, results[0].0,
+        "auto picks nested for 360 readings"
+    );
 }

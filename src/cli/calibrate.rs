@@ -520,8 +520,7 @@ pub fn fit_with(
 ) -> anyhow::Result<Fitted> {
     let campaign = &inputs.merged.campaign;
     let model = &inputs.model;
-    let formulation =
-        super::formulation::resolve(formulation, model, campaign, &inputs.identify);
+    let formulation = super::formulation::resolve(formulation, model, campaign, &inputs.identify);
     let cal = super::formulation::identify_with(formulation, model, campaign, &inputs.identify)
         .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();

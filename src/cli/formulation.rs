@@ -7,7 +7,9 @@
 //! (to a small fraction of a standard deviation) on a campaign either can fit; the implicit
 //! one takes length readings only, plain least squares, and no effect with a known value.
 use crate::calib::implicit::{identify_implicit_calibration, supported};
-use crate::calib::{identify, CalibError, Calibration, Campaign, IdentifyOptions, MeasurementModel};
+use crate::calib::{
+    identify, CalibError, Calibration, Campaign, IdentifyOptions, MeasurementModel,
+};
 
 /// Campaigns with at least this many readings are fitted with the implicit formulation
 /// (when it supports them); smaller ones with the nested one.

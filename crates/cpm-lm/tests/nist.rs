@@ -106,7 +106,10 @@ fn boxbod_start_1_plateau_and_geodesic_acceleration() {
     let accel = minimize(&mut p, &mut x, &options).unwrap();
     let rss = lre(2.0 * accel.final_cost, d.certified_rss);
     let params = min_lre(&x, &d.certified);
-    assert!(rss >= 6.0 && params >= 6.0, "RSS LRE {rss:.2}, parameter LRE {params:.2}\n{accel:#}");
+    assert!(
+        rss >= 6.0 && params >= 6.0,
+        "RSS LRE {rss:.2}, parameter LRE {params:.2}\n{accel:#}"
+    );
 }
 
 #[test]
@@ -206,5 +209,8 @@ fn geodesic_acceleration_table() {
         .filter(|r| r.2 < 6.0 && !(r.0 == "MGH09" && r.1 == 1))
         .map(|r| format!("{} start {}: LRE {:.2} ({})", r.0, r.1, r.2, r.7))
         .collect();
-    assert!(failed.is_empty(), "accelerated runs below LRE 6: {failed:#?}");
+    assert!(
+        failed.is_empty(),
+        "accelerated runs below LRE 6: {failed:#?}"
+    );
 }

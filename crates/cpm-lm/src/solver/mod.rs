@@ -356,7 +356,10 @@ mod tests {
                 assert!(sys.resolve(&jac, mu, &d, &w, &mut hr), "{solver:?} mu={mu}");
                 for k in 0..n {
                     let e = (hr[k] + aw[(k, 0)]).abs();
-                    assert!(e < 1e-9 * (1.0 + aw[(k, 0)].abs()), "{solver:?} mu={mu}: {hr:?}");
+                    assert!(
+                        e < 1e-9 * (1.0 + aw[(k, 0)].abs()),
+                        "{solver:?} mu={mu}: {hr:?}"
+                    );
                 }
             }
         }
