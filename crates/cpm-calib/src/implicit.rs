@@ -621,7 +621,7 @@ pub fn identify_implicit_calibration(
             encoder_sigma_um: 1e-4 * reference,
             sensor_sigma_um: reference,
             lm,
-            rank: options.rank.clone(),
+            rank: options.rank,
         },
     )?;
     let m = imp.reading_residuals_um.len();

@@ -312,4 +312,39 @@ mod tests {
         let e = o.validate().unwrap_err().to_string();
         assert!(e.contains("lower[1] = 2 exceeds upper[1] = 1"), "{e}");
     }
+
+    #[test]
+    fn acceleration_is_checked() {
+        let with = |a: GeodesicAcceleration| Options {
+            acceleration: Some(a),
+            ..Options::default()
+        };
+        with(GeodesicAcceleration::default()).validate().unwrap();
+        let e = with(GeodesicAcceleration {
+            max_ratio: 0.0,
+            ..GeodesicAcceleration::default()
+        })
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("max_ratio"), "{e}");
+        let e = with(GeodesicAcceleration {
+            fd_step: f64::NAN,
+            ..GeodesicAcceleration::default()
+        })
+        .validate()
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("fd_step"), "{e}");
+        let robust = Options {
+            loss: Loss::Huber(1.0),
+            ..with(GeodesicAcceleration::default())
+        };
+        assert!(robust.validate().is_err());
+        let cubic = Options {
+            damping: Damping::CubicInterpolation,
+            ..with(GeodesicAcceleration::default())
+        };
+        assert!(cubic.validate().is_err());
+    }
 }
