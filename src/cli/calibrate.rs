@@ -7,7 +7,7 @@ use serde_json::json;
 
 use super::common::{self, EffectsArg, RobotArg};
 use super::{plots, Ctx, Outcome};
-use crate::calib::{identify, Calibration, Campaign, IdentifyOptions, MeasurementModel};
+use crate::calib::{Calibration, Campaign, IdentifyOptions, MeasurementModel};
 use crate::io::{self, Merged, Provenance, Robot};
 use crate::output::OutputSet;
 
@@ -24,6 +24,11 @@ pub struct CalibrateArgs {
     /// rather than only the components the data determine on their own.
     #[arg(long)]
     pub minimum_norm: bool,
+    /// Formulation of the fit: `auto` (nested below 100,000 readings, implicit from there
+    /// when the campaign has length readings only and the fit is plain least squares),
+    /// `nested` or `implicit`. The report and calibration.json say which was used.
+    #[arg(long, value_enum, default_value_t = super::formulation::FormulationArg::Auto)]
+    pub formulation: super::formulation::FormulationArg,
 }
 
 /// The arguments every fit (`cpm calibrate`, `cpm refine`) takes.
@@ -745,12 +750,29 @@ pub fn registration_report(
 /// Fits the inputs and stages every output of `cpm calibrate` in memory, for `dir`: nothing
 /// is written (commit the set). Errors name the file and line of the pose they are about.
 pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fitted> {
+    fit_with(
+        inputs,
+        dir,
+        minimum_norm,
+        super::formulation::FormulationArg::Auto,
+    )
+}
+
+/// [`fit`] with the formulation chosen by `formulation` (see [`super::formulation`]).
+pub fn fit_with(
+    inputs: &Inputs,
+    dir: &Path,
+    minimum_norm: bool,
+    formulation: super::formulation::FormulationArg,
+) -> anyhow::Result<Fitted> {
     let campaign = &inputs.merged.campaign;
     let model = &inputs.model;
-    let cal = identify(model, campaign, &inputs.identify)
+    let formulation = super::formulation::resolve(formulation, model, campaign, &inputs.identify);
+    let cal = super::formulation::identify_with(formulation, model, campaign, &inputs.identify)
         .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
     let mut value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
+    value["formulation"] = json!(formulation.key());
     value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
     value["robust"] = json!({
         "downweighted_share": cal.downweighted_share,
@@ -788,6 +810,7 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
     for l in provenance_lines(&inputs.provenance, cal.simulated, "Calibrated") {
         r.push_str(&format!("{l}\n"));
     }
+    r.push_str(&format!("Formulation: {}.\n", formulation.describe()));
     r.push('\n');
     for w in warnings(model, &cal) {
         r.push_str(&format!("- {w}\n"));
@@ -829,7 +852,8 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         common::describe_model(model),
         inputs.merged.campaign.len()
     ));
-    let Fitted { cal, set, value } = fit(&inputs, &args.fit.out, args.minimum_norm)?;
+    let Fitted { cal, set, value } =
+        fit_with(&inputs, &args.fit.out, args.minimum_norm, args.formulation)?;
     ctx.stage("writing the results");
     let dir = &args.fit.out;
     let inputs_paths: Vec<&Path> = std::iter::once(args.fit.robot.robot.as_path())
@@ -846,6 +870,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.fit.json {
         let v = json!({
             "simulated": cal.simulated,
+            "formulation": value["formulation"],
             "out": dir.display().to_string(),
             "files": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
             "rank": cal.identifiability.rank,

@@ -25,6 +25,7 @@ pub mod common;
 pub mod compensate;
 pub mod design;
 pub mod export;
+pub mod formulation;
 pub mod identifiability;
 pub mod plots;
 pub mod refine;

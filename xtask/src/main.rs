@@ -19,6 +19,17 @@ fn peak_rss_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// CPU time (user + system) of this process so far, s (Linux; `None` elsewhere). On a
+/// shared machine the wall clock also counts other processes' time.
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses): utime is the 12th, stime the 13th.
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks / 100.0)
+}
+
 fn sweep(args: &[String]) -> ExitCode {
     // Each size in its own process so that peak memory is per size.
     let exe = match std::env::current_exe() {
@@ -111,9 +122,12 @@ fn scale(args: &[String]) -> ExitCode {
             / 36.0)
             .sqrt()
     };
+    let rss_before_mb = peak_rss_mb();
+    let cpu0 = cpu_seconds();
     let t0 = Instant::now();
     let implicit = identify_implicit(&model, &data, &ImplicitOptions::default());
     let seconds = t0.elapsed().as_secs_f64();
+    let cpu = cpu_seconds().zip(cpu0).map(|(b, a)| b - a);
     let r = match implicit {
         Ok(r) => r,
         Err(e) => {
@@ -127,10 +141,20 @@ fn scale(args: &[String]) -> ExitCode {
         "poses": poses,
         "readings": data.readings.len(),
         "seconds": seconds,
+        "cpu_seconds": cpu,
         "iterations": r.solver.num_iterations(),
         "seconds_per_iteration": seconds / r.solver.num_iterations().max(1) as f64,
         "termination": r.solver.termination.to_string(),
         "peak_rss_mb": peak_rss_mb(),
+        "peak_rss_mb_before_fit": rss_before_mb,
+        "solver_seconds": {
+            "total": r.solver.elapsed.as_secs_f64(),
+            "residuals": r.solver.timings.residuals.as_secs_f64(),
+            "jacobian": r.solver.timings.jacobian.as_secs_f64(),
+            "linear_solver": r.solver.timings.linear_solver.as_secs_f64(),
+        },
+        "residual_evaluations": r.solver.residual_evaluations,
+        "damping_per_iteration": r.solver.iterations.iter().map(|i| i.damping).collect::<Vec<_>>(),
         "rms_error_um": error_rms(&r.globals[..36]),
         "rank": r.identifiability.rank,
     });

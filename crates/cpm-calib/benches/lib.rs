@@ -1,5 +1,6 @@
 //! Criterion benchmarks of cpm-calib: prediction with the analytic Jacobian, and whole
-//! identifications (the paper's design and a designed campaign).
+//! identifications (the paper's design and a designed campaign), and the nested and implicit
+//! formulations side by side.
 use std::hint::black_box;
 
 use cpm_calib::campaign::paper_circle;
@@ -55,5 +56,24 @@ fn identification(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, prediction, identification);
+/// The two formulations side by side on the same designed campaign (125 poses x 16 sensors):
+/// nested (forward kinematics in the loop, dense Jacobian) and implicit (poses as unknowns,
+/// Schur complement), both returning a `Calibration`.
+fn formulations(c: &mut Criterion) {
+    let (model, data) = designed(125);
+    let opts = IdentifyOptions::default();
+    let mut group = c.benchmark_group("formulation/designed_2000_readings");
+    group.sample_size(10);
+    group.bench_function("nested", |b| {
+        b.iter(|| identify(&model, black_box(&data), &opts))
+    });
+    group.bench_function("implicit", |b| {
+        b.iter(|| {
+            cpm_calib::implicit::identify_implicit_calibration(&model, black_box(&data), &opts)
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, prediction, identification, formulations);
 criterion_main!(benches);

@@ -69,6 +69,11 @@ pub struct ImplicitCalibration {
     pub reading_rms_um: f64,
     /// RMS of the closure residuals (unweighted), um.
     pub closure_rms_um: f64,
+    /// Residual (predicted - measured) of every reading at the solution, um, in the order of
+    /// the campaign's readings.
+    pub reading_residuals_um: Vec<f64>,
+    /// RMS of the reading residuals at the start (commanded poses, zero errors), um.
+    pub initial_reading_rms_um: f64,
     /// The solver's report.
     pub solver: cpm_lm::Report,
 }
@@ -91,9 +96,13 @@ struct Implicit<'a> {
     prepared: Prepared,
     /// First residual row of each configuration.
     row0: Vec<usize>,
-    /// Link-channel coefficients per configuration and link: (global index, mm per unit).
-    link_coeff: Vec<Vec<Vec<(usize, f64)>>>,
-    /// Sensor-channel globals per reading: (global index, effect, index within its block).
+    /// Link-channel coefficients (global index, mm per unit) of configuration `j`, link `i`:
+    /// `link_coeff[link_ptr[6 j + i]..link_ptr[6 j + i + 1]]` (one flat list: a campaign
+    /// of 10^5 configurations would otherwise hold 7 * 10^5 vectors, mostly empty).
+    link_coeff: Vec<(usize, f64)>,
+    link_ptr: Vec<usize>,
+    /// Sensor-channel globals per sensor (they depend on the sensor only): (global index,
+    /// effect, index within its block).
     sensor_params: Vec<Vec<(usize, Effect, usize)>>,
     num_poses: usize,
     num_globals: usize,
@@ -103,6 +112,10 @@ struct Implicit<'a> {
 }
 
 impl Implicit<'_> {
+    fn links(&self, j: usize, i: usize) -> &[(usize, f64)] {
+        &self.link_coeff[self.link_ptr[6 * j + i]..self.link_ptr[6 * j + i + 1]]
+    }
+
     fn pose(&self, x: &[f64], j: usize) -> (Pose, Vector3<f64>) {
         let c = &self.campaign.poses[j];
         let dt = Vector3::new(x[6 * j], x[6 * j + 1], x[6 * j + 2]) * 1e-3;
@@ -135,7 +148,7 @@ impl Problem for Implicit<'_> {
             for (i, l) in table.links.iter().enumerate() {
                 let q = pose.position_mm + rm * l.platform_mm - l.base_mm;
                 let mut target = self.prepared.lengths_mm[j][i];
-                for &(p, a) in &self.link_coeff[j][i] {
+                for &(p, a) in self.links(j, i) {
                     target += a * globals[p];
                 }
                 r[o + i] = (q.norm() - target) * 1e3 * self.w_enc;
@@ -145,7 +158,7 @@ impl Problem for Implicit<'_> {
                 let s = &table.sensors[rd.sensor];
                 let geometric = s.length_mm(&pose);
                 let mut y = geometric + self.sensor_corr;
-                for &(p, e, q) in &self.sensor_params[k] {
+                for &(p, e, q) in &self.sensor_params[rd.sensor] {
                     y += sensor_coefficient(e, q, rd.sensor, geometric) * globals[p];
                 }
                 r[o + 6 + t] = (y - rd.length_mm) * 1e3;
@@ -156,32 +169,33 @@ impl Problem for Implicit<'_> {
 }
 
 impl Implicit<'_> {
-    /// Structural non-zeros of configuration `j`'s rows, in value order.
-    fn pose_pattern(&self, j: usize, p: &mut Vec<(usize, usize)>) {
+    /// Visits the structural non-zeros of configuration `j`'s rows, in value order (row by
+    /// row, columns ascending: the pose block, then the globals in block order).
+    fn visit_pose_pattern(&self, j: usize, visit: &mut dyn FnMut(usize, usize)) {
         let g0 = 6 * self.num_poses;
         let o = self.row0[j];
         for i in 0..6 {
             for c in 0..6 {
-                p.push((o + i, 6 * j + c));
+                visit(o + i, 6 * j + c);
             }
             for c in 0..6 {
-                p.push((o + i, g0 + 6 * i + c));
+                visit(o + i, g0 + 6 * i + c);
             }
-            for &(q, _) in &self.link_coeff[j][i] {
-                p.push((o + i, g0 + q));
+            for &(q, _) in self.links(j, i) {
+                visit(o + i, g0 + q);
             }
         }
         for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
             for c in 0..6 {
-                p.push((o + 6 + t, 6 * j + c));
+                visit(o + 6 + t, 6 * j + c);
             }
-            for &(q, _, _) in &self.sensor_params[k] {
-                p.push((o + 6 + t, g0 + q));
+            for &(q, _, _) in &self.sensor_params[self.campaign.readings[k].sensor] {
+                visit(o + 6 + t, g0 + q);
             }
         }
     }
 
-    /// Jacobian values of configuration `j`'s rows (order of [`Self::pose_pattern`]);
+    /// Jacobian values of configuration `j`'s rows (order of [`Self::visit_pose_pattern`]);
     /// returns how many were written.
     fn pose_values(
         &self,
@@ -212,7 +226,7 @@ impl Implicit<'_> {
                 values[v + 3 + c] = zp[c] * w;
             }
             v += 6;
-            for &(_, a) in &self.link_coeff[j][i] {
+            for &(_, a) in self.links(j, i) {
                 values[v] = -a * 1e3 * w;
                 v += 1;
             }
@@ -230,7 +244,7 @@ impl Implicit<'_> {
                 values[v + 3 + c] = m[c] * 1e-3;
             }
             v += 6;
-            for &(_, e, q) in &self.sensor_params[k] {
+            for &(_, e, q) in &self.sensor_params[rd.sensor] {
                 values[v] = sensor_coefficient(e, q, rd.sensor, geometric) * 1e3;
                 v += 1;
             }
@@ -242,10 +256,16 @@ impl Implicit<'_> {
 impl SparseJacobian for Implicit<'_> {
     fn pattern(&self) -> Vec<(usize, usize)> {
         let mut p = Vec::new();
-        for j in 0..self.num_poses {
-            self.pose_pattern(j, &mut p);
-        }
+        self.visit_pattern(&mut |r, c| p.push((r, c)));
         p
+    }
+
+    /// Streams the pattern in compressed-sparse-row order: the solver stores it as it
+    /// arrives, with no list of the entries (at 10^6 readings the list alone was 270 MB).
+    fn visit_pattern(&self, visit: &mut dyn FnMut(usize, usize)) {
+        for j in 0..self.num_poses {
+            self.visit_pose_pattern(j, visit);
+        }
     }
 
     fn jacobian_values(&mut self, x: &[f64], values: &mut [f64]) -> Result<(), ModelError> {
@@ -258,23 +278,10 @@ impl SparseJacobian for Implicit<'_> {
     }
 }
 
-fn build<'a>(
-    model: &'a MeasurementModel,
-    campaign: &'a Campaign,
-    options: &ImplicitOptions,
-) -> Result<Implicit<'a>, CalibError> {
-    if !(options.encoder_sigma_um > 0.0 && options.encoder_sigma_um.is_finite()) {
-        return Err(CalibError::invalid(
-            "encoder_sigma_um",
-            "must be finite and > 0",
-        ));
-    }
-    if !(options.sensor_sigma_um > 0.0 && options.sensor_sigma_um.is_finite()) {
-        return Err(CalibError::invalid(
-            "sensor_sigma_um",
-            "must be finite and > 0",
-        ));
-    }
+/// Whether the implicit formulation can fit this model to this campaign: six links, length
+/// readings only (no tracker poses), no socket or tracker-frame effects and no known effect
+/// values. The error says what stands in the way.
+pub fn supported(model: &MeasurementModel, campaign: &Campaign) -> Result<(), CalibError> {
     if model.nominal.num_links() != 6 {
         return Err(CalibError::invalid(
             "links",
@@ -306,6 +313,27 @@ fn build<'a>(
             ),
         ));
     }
+    Ok(())
+}
+
+fn build<'a>(
+    model: &'a MeasurementModel,
+    campaign: &'a Campaign,
+    options: &ImplicitOptions,
+) -> Result<Implicit<'a>, CalibError> {
+    if !(options.encoder_sigma_um > 0.0 && options.encoder_sigma_um.is_finite()) {
+        return Err(CalibError::invalid(
+            "encoder_sigma_um",
+            "must be finite and > 0",
+        ));
+    }
+    if !(options.sensor_sigma_um > 0.0 && options.sensor_sigma_um.is_finite()) {
+        return Err(CalibError::invalid(
+            "sensor_sigma_um",
+            "must be finite and > 0",
+        ));
+    }
+    supported(model, campaign)?;
     let prepared = Prepared::new(model, campaign)?;
     let np = campaign.poses.len();
     let ng = model.num_params();
@@ -316,43 +344,39 @@ fn build<'a>(
         row0.push(rows);
         rows += 6 + prepared.by_pose[j].len();
     }
-    let link_coeff: Vec<Vec<Vec<(usize, f64)>>> = (0..np)
-        .map(|j| {
-            (0..6)
-                .map(|i| {
-                    let mut c = Vec::new();
-                    for b in blocks
-                        .iter()
-                        .filter(|b| b.effect.is_some_and(is_link_effect))
-                    {
-                        for k in 0..b.len {
-                            let a = link_coefficient(
-                                b.effect.expect("effect"),
-                                k,
-                                i,
-                                &prepared.contexts[j],
-                                &model.effect_settings,
-                                prepared.t0_s,
-                            );
-                            if a != 0.0 {
-                                c.push((b.offset + k, a));
-                            }
-                        }
+    let mut link_coeff = Vec::new();
+    let mut link_ptr = Vec::with_capacity(6 * np + 1);
+    link_ptr.push(0);
+    for j in 0..np {
+        for i in 0..6 {
+            for b in blocks
+                .iter()
+                .filter(|b| b.effect.is_some_and(is_link_effect))
+            {
+                for k in 0..b.len {
+                    let a = link_coefficient(
+                        b.effect.expect("effect"),
+                        k,
+                        i,
+                        &prepared.contexts[j],
+                        &model.effect_settings,
+                        prepared.t0_s,
+                    );
+                    if a != 0.0 {
+                        link_coeff.push((b.offset + k, a));
                     }
-                    c
-                })
-                .collect()
-        })
-        .collect();
-    let sensor_params: Vec<Vec<(usize, Effect, usize)>> = campaign
-        .readings
-        .iter()
-        .map(|r| {
+                }
+            }
+            link_ptr.push(link_coeff.len());
+        }
+    }
+    let sensor_params: Vec<Vec<(usize, Effect, usize)>> = (0..model.nominal.sensors.len())
+        .map(|sensor| {
             blocks
                 .iter()
                 .filter_map(|b| match b.effect {
                     Some(e @ (Effect::SensorOffset | Effect::SensorScale)) => {
-                        Some((b.offset + r.sensor, e, r.sensor))
+                        Some((b.offset + sensor, e, sensor))
                     }
                     _ => None,
                 })
@@ -365,6 +389,7 @@ fn build<'a>(
         prepared,
         row0,
         link_coeff,
+        link_ptr,
         sensor_params,
         num_poses: np,
         num_globals: ng,
@@ -401,6 +426,24 @@ pub fn identify_implicit(
         local_block_sizes: vec![6; np],
     };
     let mut x = vec![0.0; 6 * np + ng];
+    let reading_rms = |problem: &Implicit<'_>, r: &[f64]| {
+        let mut s2 = 0.0;
+        for j in 0..np {
+            let o = problem.row0[j] + 6;
+            s2 += r[o..o + problem.prepared.by_pose[j].len()]
+                .iter()
+                .map(|v| v * v)
+                .sum::<f64>();
+        }
+        (s2 / campaign.readings.len().max(1) as f64).sqrt()
+    };
+    let initial_reading_rms_um = {
+        let mut r0 = vec![0.0; rows];
+        problem
+            .residuals(&x, &mut r0)
+            .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
+        reading_rms(&problem, &r0)
+    };
     let solver = cpm_lm::minimize_sparse(&mut problem, &mut x, &lm)?;
     // Reduced information of the globals: S = sum_j (G_j^T G_j - G_j^T L_j (L_j^T L_j)^-1 L_j^T G_j).
     let mut r = vec![0.0; rows];
@@ -409,34 +452,86 @@ pub fn identify_implicit(
         .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
     let g0 = 6 * np;
     let table = model.table_with(&x[g0..])?;
-    let mut s = DMatrix::<f64>::zeros(ng, ng);
-    let mut pattern = Vec::new();
+    // One configuration at a time, in fixed-size buffers; only the rows that touch globals
+    // (the closures, and readings with sensor-channel effects) enter G^T G and L^T G. With
+    // A = L L^T, B^T A^-1 B = Z^T Z for Z = L^-1 B; the rows of Z are gathered (as columns)
+    // into a chunk and subtracted with one matrix product per chunk.
+    const ZCHUNK: usize = 32 * 6;
+    let mut gtg = vec![0.0; ng * ng];
+    let mut zt = faer::Mat::<f64>::zeros(ng, ZCHUNK);
+    let mut red = faer::Mat::<f64>::zeros(ng, ng);
+    let mut zcols = 0usize;
+    let flush = |red: &mut faer::Mat<f64>, zt: &faer::Mat<f64>, cols: usize| {
+        if cols > 0 {
+            let z = zt.as_ref().subcols(0, cols);
+            faer::linalg::matmul::matmul(
+                red.as_mut(),
+                faer::Accum::Add,
+                z,
+                z.transpose(),
+                -1.0,
+                faer::Par::Seq,
+            );
+        }
+    };
+    let mut entries: Vec<(usize, usize)> = Vec::new();
     let mut values = Vec::new();
+    let mut grow: Vec<(usize, f64)> = Vec::new();
+    let mut b = vec![0.0; 6 * ng];
     for j in 0..np {
-        let nr = 6 + problem.prepared.by_pose[j].len();
-        pattern.clear();
-        problem.pose_pattern(j, &mut pattern);
-        values.resize(pattern.len(), 0.0);
+        entries.clear();
+        problem.visit_pose_pattern(j, &mut |r, c| entries.push((r, c)));
+        values.resize(entries.len(), 0.0);
         problem.pose_values(&x, &table, j, &mut values);
-        let mut local = DMatrix::<f64>::zeros(nr, 6);
-        let mut glob = DMatrix::<f64>::zeros(nr, ng);
-        for (&(row, col), &val) in pattern.iter().zip(&values) {
-            let rr = row - problem.row0[j];
-            if col < g0 {
-                local[(rr, col - 6 * j)] += val;
-            } else {
-                glob[(rr, col - g0)] += val;
+        let mut a = nalgebra::Matrix6::<f64>::zeros();
+        b.fill(0.0);
+        let mut q = 0;
+        while q < entries.len() {
+            let row = entries[q].0;
+            let mut l = nalgebra::Vector6::<f64>::zeros();
+            grow.clear();
+            while q < entries.len() && entries[q].0 == row {
+                let (col, val) = (entries[q].1, values[q]);
+                if col < g0 {
+                    l[col - 6 * j] += val;
+                } else {
+                    grow.push((col - g0, val));
+                }
+                q += 1;
+            }
+            a += l * l.transpose();
+            for &(c, v) in &grow {
+                for k in 0..6 {
+                    b[k * ng + c] += l[k] * v;
+                }
+                let gc = &mut gtg[c * ng..(c + 1) * ng];
+                for &(c2, v2) in &grow {
+                    gc[c2] += v * v2;
+                }
             }
         }
-        let a = local.transpose() * &local;
-        let b = local.transpose() * &glob;
-        let ainv_b = a
-            .clone()
-            .cholesky()
-            .map(|c| c.solve(&b))
-            .unwrap_or_else(|| DMatrix::zeros(6, ng));
-        s += glob.transpose() * &glob - b.transpose() * ainv_b;
+        let Some(ch) = a.cholesky() else {
+            continue;
+        };
+        let lm = ch.l();
+        if zcols + 6 > ZCHUNK {
+            flush(&mut red, &zt, zcols);
+            zcols = 0;
+        }
+        // Row k of Z: (b_k - sum_{p<k} L_kp z_p) / L_kk.
+        for k in 0..6 {
+            for c in 0..ng {
+                let mut v = b[k * ng + c];
+                for p in 0..k {
+                    v -= lm[(k, p)] * zt[(c, zcols + p)];
+                }
+                zt[(c, zcols + k)] = v / lm[(k, k)];
+            }
+        }
+        zcols += 6;
     }
+    flush(&mut red, &zt, zcols);
+    let s = DMatrix::<f64>::from_fn(ng, ng, |r, c| gtg[r * ng + c] + red[(r, c)]);
     let eig = nalgebra::SymmetricEigen::new(s);
     let mut pseudo = DMatrix::<f64>::zeros(ng, ng);
     for c in 0..ng {
@@ -445,7 +540,12 @@ pub fn identify_implicit(
             pseudo[(c, rr)] = l * eig.eigenvectors[(rr, c)];
         }
     }
-    let mut ident = analyze(&pseudo, options.sensor_sigma_um, &options.rank, &[]);
+    let mut ident = analyze(
+        &pseudo,
+        options.sensor_sigma_um,
+        &options.rank,
+        &crate::identifiability::physical_patterns(model, campaign),
+    );
     ident.num_readings = campaign.readings.len();
     let globals = x[g0..].to_vec();
     let estimate_um = (0..ng)
@@ -455,13 +555,15 @@ pub fn identify_implicit(
     let mut sc = 0.0;
     let mut sr = 0.0;
     let mut nr = 0usize;
+    let mut reading_residuals_um = vec![0.0; campaign.readings.len()];
     for j in 0..np {
         let o = problem.row0[j];
         for i in 0..6 {
             sc += (r[o + i] / problem.w_enc).powi(2);
         }
-        for t in 0..problem.prepared.by_pose[j].len() {
+        for (t, &k) in problem.prepared.by_pose[j].iter().enumerate() {
             sr += r[o + 6 + t].powi(2);
+            reading_residuals_um[k] = r[o + 6 + t];
             nr += 1;
         }
     }
@@ -473,6 +575,114 @@ pub fn identify_implicit(
         poses,
         reading_rms_um: (sr / nr.max(1) as f64).sqrt(),
         closure_rms_um: (sc / (6 * np).max(1) as f64).sqrt(),
+        reading_residuals_um,
+        initial_reading_rms_um,
         solver,
+    })
+}
+
+/// Identifies `model` from `campaign` with the implicit formulation and returns the result
+/// in the form of the nested formulation's [`identify()`](crate::identify()), so that either
+/// can feed the same reports.
+///
+/// The commanded lengths are treated as exact, as the nested formulation does (encoder
+/// standard deviation `1e-4` of the reading one), so both give the same estimates to a small
+/// fraction of a standard deviation. The noise is `options.sigma_um` when declared, otherwise
+/// estimated from the reading residuals (`m - rank` degrees of freedom); the standard
+/// deviations are the Cramér-Rao bounds of the reduced (Schur) information at that noise.
+/// `minimum_norm_um` is the estimate projected on the identified directions (the start is
+/// zero). Length readings only, plain least squares, no start (see [`supported`]).
+pub fn identify_implicit_calibration(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &crate::IdentifyOptions,
+) -> Result<crate::Calibration, CalibError> {
+    supported(model, campaign)?;
+    if !options.lm.loss.is_squared() {
+        return Err(CalibError::invalid(
+            "loss",
+            "the implicit formulation fits plain least squares; use identify() for a robust loss",
+        ));
+    }
+    if options.start_um.is_some() {
+        return Err(CalibError::invalid(
+            "start_um",
+            "the implicit formulation starts from zero errors; use identify() for a start",
+        ));
+    }
+    let reference = options.sigma_um.unwrap_or(1.0);
+    let mut lm = ImplicitOptions::default().lm;
+    lm.max_iterations = options.lm.max_iterations;
+    lm.max_evaluations = options.lm.max_evaluations;
+    let imp = identify_implicit(
+        model,
+        campaign,
+        &ImplicitOptions {
+            encoder_sigma_um: 1e-4 * reference,
+            sensor_sigma_um: reference,
+            lm,
+            rank: options.rank,
+        },
+    )?;
+    let m = imp.reading_residuals_um.len();
+    let rank = imp.identifiability.rank;
+    let (sigma_um, sigma_estimated) = match options.sigma_um {
+        Some(s) => (s, false),
+        None => {
+            let ssr: f64 = imp.reading_residuals_um.iter().map(|r| r * r).sum();
+            ((ssr / m.saturating_sub(rank).max(1) as f64).sqrt(), true)
+        }
+    };
+    // The reduced information depends on the ratio of the two noises only (fixed above), so
+    // the bounds at the estimated noise are those at the reference one rescaled.
+    let mut ident = imp.identifiability.clone();
+    let scale = sigma_um / reference;
+    for s in ident.crlb_std_um.iter_mut().flatten() {
+        *s *= scale;
+    }
+    for s in ident.combination_std_um.iter_mut() {
+        *s *= scale;
+    }
+    ident.sigma_um = sigma_um;
+    let e_hat = &imp.globals;
+    let np = e_hat.len();
+    let estimate_um = (0..np)
+        .map(|k| ident.determined[k].then_some(e_hat[k]))
+        .collect();
+    let mut minimum_norm_um = vec![0.0; np];
+    let combinations = (0..ident.rank)
+        .map(|c| {
+            let v = ident.v.column(c);
+            let proj: f64 = v.iter().zip(e_hat).map(|(a, b)| a * b).sum();
+            for (mn, a) in minimum_norm_um.iter_mut().zip(v.iter()) {
+                *mn += a * proj;
+            }
+            let mut load: Vec<(usize, f64)> = v.iter().copied().enumerate().collect();
+            load.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            load.truncate(4);
+            crate::identify::Combination {
+                singular_value: ident.singular_values[c],
+                estimate_um: proj,
+                std_um: ident.combination_std_um[c],
+                loadings: load,
+            }
+        })
+        .collect();
+    let outliers = crate::diagnostics::outliers(&imp.reading_residuals_um);
+    Ok(crate::Calibration {
+        simulated: campaign.simulated,
+        estimate_um,
+        std_um: ident.crlb_std_um.clone(),
+        minimum_norm_um,
+        combinations,
+        identifiability: ident,
+        sigma_um,
+        sigma_estimated,
+        sigma_excludes_outliers: false,
+        outliers,
+        initial_rms_um: imp.initial_reading_rms_um,
+        residual_rms_um: imp.reading_rms_um,
+        residuals_um: imp.reading_residuals_um,
+        solver: imp.solver,
     })
 }

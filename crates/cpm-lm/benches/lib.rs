@@ -4,6 +4,9 @@
 //!   (default options, with and without the end-of-solve statistics, and with Nielsen's
 //!   damping) next to the `levenberg-marquardt` crate (MINPACK port on nalgebra, default
 //!   options, dynamic sizes).
+//! * `nist/BoxBOD-start1`: BoxBOD from its first start, cpm-lm plain (stops on the plateau)
+//!   and with geodesic acceleration (reaches the certified minimum), and the
+//!   levenberg-marquardt crate.
 //! * `bundle/<solver>/<N>`: a bundle-shaped sparse problem, N blocks of 6 local parameters
 //!   sharing 40 global ones, 12 residuals per block, solved with the Schur complement and
 //!   with the sparse Cholesky solver.
@@ -28,7 +31,7 @@ mod loops;
 /// NIST problems: cpm-lm against the `levenberg-marquardt` crate.
 mod nist_vs_lm {
     use super::*;
-    use cpm_lm::{minimize, Damping, Options};
+    use cpm_lm::{minimize, Damping, GeodesicAcceleration, Options};
     use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
     use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
     use nist::{load, min_lre, NistProblem};
@@ -141,6 +144,69 @@ mod nist_vs_lm {
             });
             group.finish();
         }
+    }
+
+    /// BoxBOD from NIST's first start: the plain solve stops on the plateau, the
+    /// geodesic-accelerated one reaches the certified minimum; the levenberg-marquardt crate
+    /// beside them. The residual sums of squares are printed.
+    pub fn boxbod(c: &mut Criterion) {
+        let d = load("BoxBOD");
+        let problem = NistProblem::new(&d);
+        let accel = Options {
+            acceleration: Some(GeodesicAcceleration::default()),
+            ..Options::default()
+        };
+        for (label, options) in [
+            ("plain", Options::default()),
+            ("accelerated", accel.clone()),
+        ] {
+            let mut x = d.start1.clone();
+            let r = minimize(&mut problem.clone(), &mut x, &options).unwrap();
+            println!(
+                "BoxBOD start 1, cpm-lm {label}: RSS {:.4} (certified {:.4}), {} evaluations",
+                2.0 * r.final_cost,
+                d.certified_rss,
+                r.residual_evaluations
+            );
+        }
+        let lm = LmNist {
+            p: problem.clone(),
+            x: DVector::from_vec(d.start1.clone()),
+        };
+        let (lm, rep) = LevenbergMarquardt::new().minimize(lm);
+        println!(
+            "BoxBOD start 1, levenberg-marquardt: RSS {:.4}, {} evaluations",
+            2.0 * rep.objective_function,
+            rep.number_of_evaluations
+        );
+        drop(lm);
+        let mut group = c.benchmark_group("nist/BoxBOD-start1");
+        group.bench_function("cpm-lm", |b| {
+            b.iter(|| {
+                let mut x = d.start1.clone();
+                black_box(minimize(&mut problem.clone(), &mut x, &Options::default()).unwrap());
+                x
+            })
+        });
+        group.bench_function("cpm-lm (geodesic acceleration)", |b| {
+            b.iter(|| {
+                let mut x = d.start1.clone();
+                black_box(minimize(&mut problem.clone(), &mut x, &accel).unwrap());
+                x
+            })
+        });
+        group.bench_function("levenberg-marquardt", |b| {
+            b.iter(|| {
+                let lm = LmNist {
+                    p: problem.clone(),
+                    x: DVector::from_vec(d.start1.clone()),
+                };
+                let (lm, rep) = LevenbergMarquardt::new().minimize(lm);
+                black_box(rep);
+                lm.x
+            })
+        });
+        group.finish();
     }
 }
 
@@ -342,6 +408,7 @@ mod calibration_shape {
 criterion_group!(
     benches,
     nist_vs_lm::bench,
+    nist_vs_lm::boxbod,
     bundle::bench,
     calibration_shape::bench
 );

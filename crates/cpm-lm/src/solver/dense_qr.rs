@@ -297,6 +297,40 @@ impl LinearSystem for DenseQr {
         ok
     }
 
+    fn resolve(&mut self, _jac: &Jacobian, _mu: f64, _d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+        if !self.factored {
+            return false;
+        }
+        // h = -P S^-1 S^-T P^T g with the factor S of the last solve.
+        let (n, ldr) = (self.n, self.rows);
+        let v = Self::split(&mut self.buf, n);
+        for j in 0..n {
+            v.wa[j] = g[self.ipvt[j]];
+        }
+        for j in 0..n {
+            if v.sdiag[j] == 0.0 {
+                return false;
+            }
+            v.wa[j] /= v.sdiag[j];
+            let t = v.wa[j];
+            let col = &self.a[j * ldr + j + 1..j * ldr + n];
+            for (wi, &r) in v.wa[j + 1..n].iter_mut().zip(col) {
+                *wi -= r * t;
+            }
+        }
+        for j in (0..n).rev() {
+            let col = &self.a[j * ldr + j + 1..j * ldr + n];
+            let sum = small::dot(col, &v.wa[j + 1..n]);
+            v.wa[j] = (v.wa[j] - sum) / v.sdiag[j];
+        }
+        let mut ok = true;
+        for j in 0..n {
+            h[self.ipvt[j]] = -v.wa[j];
+            ok &= v.wa[j].is_finite();
+        }
+        ok
+    }
+
     fn inverse_quadratic(&mut self, _jac: &Jacobian, w: &[f64]) -> Option<f64> {
         if !self.factored {
             return None;

@@ -91,8 +91,16 @@ pub(crate) fn run<M: Model>(
     let mut r_trial = vec![0.0; m];
     let mut rw = buffer(robust, 0.0);
     let mut row_scale = buffer(robust, 1.0);
+    let accel = options.acceleration;
     let mut jstep = buffer(dense_jac || cubic, 0.0);
-    let mut jdir = buffer(cubic, 0.0);
+    let mut jdir = buffer(cubic || accel.is_some(), 0.0);
+    // Geodesic acceleration: residuals at x + h v, the acceleration and its right-hand side.
+    let mut r_probe = buffer(accel.is_some(), 0.0);
+    let mut acc = if accel.is_some() {
+        vec![0.0; 2 * n]
+    } else {
+        Vec::new()
+    };
     // The parameter-sized vectors share one allocation (small problems spend a fair part
     // of their time in the allocator).
     let mut nbuf = vec![0.0; 7 * n];
@@ -305,6 +313,100 @@ pub(crate) fn run<M: Model>(
             continue;
         }
         let alpha = damping.step_length();
+        // Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
+        // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial.
+        let mut accel_ratio = None;
+        if let Some(ga) = accel {
+            let fd = ga.fd_step;
+            for j in 0..n {
+                x_trial[j] = x[j] + fd * h[j];
+            }
+            let now = Instant::now();
+            timings.linear_solver += now - clock;
+            model
+                .residuals(x_trial, &mut r_probe)
+                .map_err(|source| LmError::Model {
+                    iteration,
+                    stage: EvalStage::Residuals,
+                    source,
+                })?;
+            clock = Instant::now();
+            timings.residuals += clock - now;
+            residual_evaluations += 1;
+            jac.mul(h, &mut jdir);
+            for i in 0..m {
+                r_probe[i] = (2.0 / fd) * ((r_probe[i] - r[i]) / fd - jdir[i]);
+            }
+            let (a, rhs) = acc.split_at_mut(n);
+            jac.transpose_mul(&r_probe, rhs);
+            // An acceleration that cannot be solved for leaves the plain step (ratio 0).
+            let ratio = if linear.resolve(&jac, mu, d, rhs, a) {
+                let (mut da2, mut dv2) = (0.0, 0.0);
+                for j in 0..n {
+                    da2 += (d[j] * a[j]).powi(2);
+                    dv2 += (d[j] * h[j]).powi(2);
+                }
+                if dv2 > 0.0 {
+                    2.0 * (da2 / dv2).sqrt()
+                } else {
+                    0.0
+                }
+            } else {
+                a.fill(0.0);
+                0.0
+            };
+            accel_ratio = Some(ratio);
+            if !(ratio <= ga.max_ratio) {
+                // The velocity is not to be trusted this far: a rejected trial (the cost at
+                // the step is not evaluated; the damping grows as after a failed step).
+                let now = Instant::now();
+                timings.linear_solver += now - clock;
+                clock = now;
+                rejected_steps += 1;
+                let dv = d
+                    .iter()
+                    .zip(h.iter())
+                    .map(|(a, b)| (a * b) * (a * b))
+                    .sum::<f64>()
+                    .sqrt();
+                damping.rejected(
+                    -1.0,
+                    LineInfo {
+                        f0: 2.0 * cost,
+                        slope0: 0.0,
+                        alpha,
+                        f_trial: 2.0 * cost,
+                        est_sum: 0.0,
+                        scaled_step: dv,
+                        gs: dot(g, h),
+                    },
+                );
+                let rec = IterationRecord {
+                    iteration,
+                    cost,
+                    trial_cost: f64::NAN,
+                    damping: mu,
+                    step_length: alpha,
+                    step_norm: norm2(h).sqrt(),
+                    gain_ratio: f64::NAN,
+                    accepted: false,
+                    gradient_norm: grad_inf,
+                    elapsed: clock - start,
+                };
+                records.push(rec);
+                if damping.exhausted() {
+                    termination = Some(TerminationReason::SingularSystem);
+                } else if let Some(cb) = callback.as_mut() {
+                    if cb(&rec).is_break() {
+                        termination = Some(TerminationReason::UserStop);
+                    }
+                }
+                continue;
+            }
+            for j in 0..n {
+                h[j] += 0.5 * a[j];
+            }
+        }
         for j in 0..n {
             x_trial[j] = x[j] + alpha * h[j];
         }
@@ -324,8 +426,17 @@ pub(crate) fn run<M: Model>(
             termination = Some(TerminationReason::ConvergedXtol);
             break;
         }
-        let js2 = jac.product_norm2(step, &mut jstep);
-        let gs = dot(g, step);
+        // With acceleration the prediction is the linear model's for the velocity (GSL's
+        // convention): the acceleration is a correction the model does not see.
+        let (js2, gs) = if accel_ratio.is_some() {
+            let a = &acc[..n];
+            for j in 0..n {
+                wa[j] = step[j] - 0.5 * alpha * a[j];
+            }
+            (jac.product_norm2(wa, &mut jstep), dot(g, wa))
+        } else {
+            (jac.product_norm2(step, &mut jstep), dot(g, step))
+        };
         let pred = -gs - 0.5 * js2;
 
         // The linear solver's time includes forming the step and its predicted reduction.

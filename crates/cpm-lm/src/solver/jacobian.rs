@@ -399,6 +399,26 @@ impl Jacobian {
         }
     }
 
+    /// `out = J^T v`.
+    pub(crate) fn transpose_mul(&self, v: &[f64], out: &mut [f64]) {
+        match self {
+            Jacobian::Dense(j) => {
+                for (c, o) in out.iter_mut().enumerate().take(j.ncols()) {
+                    *o = small::dot(j.col_as_slice(c), v);
+                }
+            }
+            Jacobian::Sparse(sp) => {
+                out.fill(0.0);
+                for (i, &vi) in v.iter().enumerate().take(sp.nrows) {
+                    let (cols, vals) = sp.row(i);
+                    for (&c, &a) in cols.iter().zip(vals) {
+                        out[c as usize] += a * vi;
+                    }
+                }
+            }
+        }
+    }
+
     /// `out = J h`.
     pub(crate) fn mul(&self, h: &[f64], out: &mut [f64]) {
         match self {

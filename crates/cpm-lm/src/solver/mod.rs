@@ -85,6 +85,13 @@ pub(crate) trait LinearSystem {
     /// given to [`prepare`](Self::prepare). Returns `false`
     /// when the system could not be solved (not numerically positive definite).
     fn solve(&mut self, jac: &Jacobian, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool;
+    /// Solves `(J^T J + mu D^2) h = -g` for another `g` with the `mu` and `D` of the last
+    /// successful [`solve`](Self::solve) (the geodesic acceleration's second solve). The
+    /// default solves afresh; a solver whose `solve` reads its right-hand side from
+    /// [`prepare`](Self::prepare) reuses its factor instead.
+    fn resolve(&mut self, jac: &Jacobian, mu: f64, d: &[f64], g: &[f64], h: &mut [f64]) -> bool {
+        self.solve(jac, mu, d, g, h)
+    }
     /// `w^T (J^T J + mu D^2)^-1 w` for the `mu` and `D` of the last successful
     /// [`solve`](Self::solve) since the last [`prepare`](Self::prepare); `None` when that
     /// system is singular or there is none. Used by the trust-region damping for the
@@ -344,6 +351,16 @@ mod tests {
                     (q - q_ref).abs() < 1e-9 * q_ref,
                     "{solver:?} mu={mu}: {q} vs {q_ref}"
                 );
+                // Another right-hand side with the same damping: -(J^T J + mu D^2)^-1 w.
+                let mut hr = vec![0.0; n];
+                assert!(sys.resolve(&jac, mu, &d, &w, &mut hr), "{solver:?} mu={mu}");
+                for k in 0..n {
+                    let e = (hr[k] + aw[(k, 0)]).abs();
+                    assert!(
+                        e < 1e-9 * (1.0 + aw[(k, 0)].abs()),
+                        "{solver:?} mu={mu}: {hr:?}"
+                    );
+                }
             }
         }
     }
