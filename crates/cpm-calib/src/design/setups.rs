@@ -63,6 +63,11 @@ pub struct SetupOptions {
     pub workspace: Workspace,
     /// Seed of the projections. Default 1.
     pub seed: u64,
+    /// Rounds of minimax reweighting after the reading selection: the parameters are
+    /// weighted by their Cramér-Rao variance and the readings exchanged again on the
+    /// weighted criterion; a round is kept when it lowers the largest per-parameter bound.
+    /// Pulls the worst parameter towards the RMS. Default 2.
+    pub minimax_rounds: usize,
 }
 
 impl Default for SetupOptions {
@@ -79,6 +84,7 @@ impl Default for SetupOptions {
             },
             workspace: Workspace::default(),
             seed: 1,
+            minimax_rounds: 2,
         }
     }
 }
@@ -747,7 +753,7 @@ pub fn design_setups(
         .iter()
         .map(|(_, c)| DMatrix::from_row_slice(1, n, c.row.as_slice()))
         .collect();
-    let sel = select_blocks(&blocks, n_read, None, None, &options.select)?;
+    let mut sel = select_blocks(&blocks, n_read, None, None, &options.select)?;
     log.push(format!(
         "{} of {} candidate readings chosen ({}-criterion {:.4} after greedy, {:.4} after {} exchanges)",
         sel.chosen.len(),
@@ -757,6 +763,43 @@ pub fn design_setups(
         sel.value,
         sel.exchanges
     ));
+    // Minimax reweighting: weight each parameter by its variance, exchange again.
+    let variances = |chosen: &[usize]| -> Option<Vec<f64>> {
+        let m = super::select::information(&blocks, chosen);
+        let inv = m.cholesky()?.inverse();
+        Some((0..n).map(|k| inv[(k, k)]).collect())
+    };
+    for round in 0..options.minimax_rounds {
+        let Some(v) = variances(&sel.chosen) else { break };
+        let worst = v.iter().copied().fold(0.0, f64::max);
+        let mean = v.iter().sum::<f64>() / n as f64;
+        // Column k scaled by 1 / sqrt(w_k), w_k = v_k / mean: A-optimality of the scaled
+        // problem is sum_k v_k' / w_k.
+        let d: Vec<f64> = v.iter().map(|vk| (mean / vk.max(1e-300)).sqrt()).collect();
+        let scaled: Vec<DMatrix<f64>> = blocks
+            .iter()
+            .map(|b| DMatrix::from_fn(1, n, |_, c| b[(0, c)] * d[c]))
+            .collect();
+        let next = select_blocks(&scaled, n_read, None, Some(&sel.chosen), &options.select)?;
+        let Some(v2) = variances(&next.chosen) else { break };
+        let worst2 = v2.iter().copied().fold(0.0, f64::max);
+        let sigma = constraints.gauge.sigma_um;
+        log.push(format!(
+            "minimax round {}: {} exchanges on the variance-weighted criterion; worst parameter bound {:.3} -> {:.3} um, RMS {:.3} -> {:.3} um{}",
+            round + 1,
+            next.exchanges,
+            sigma * worst.sqrt(),
+            sigma * worst2.sqrt(),
+            sigma * mean.sqrt(),
+            sigma * (v2.iter().sum::<f64>() / n as f64).sqrt(),
+            if worst2 < worst { "" } else { " (not kept)" }
+        ));
+        if worst2 < worst {
+            sel = next;
+        } else {
+            break;
+        }
+    }
     // Assemble the setups.
     let mut groups: Vec<Vec<&Cand>> = vec![Vec::new(); chosen.len()];
     for &i in &sel.chosen {
