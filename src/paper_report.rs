@@ -581,9 +581,39 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
     s
 }
 
-/// Stages the campaign under limits as files under `dir/designed/`: `robot.toml` (the cube
-/// with one `[[sensor]]` per setup), `readings.csv` (its simulated readings, readings format,
-/// marked simulated), `setup_sheet.md` and `setup_sheet.csv`. Nothing when it was not run.
+/// The files of a campaign under limits on the paper's cube, as (name, contents):
+/// `robot.toml` (the cube with one `[[sensor]]` per setup of `design`), `readings.csv`
+/// (`data`, readings format; marked simulated when `data` is, `note` on that line),
+/// `setup_sheet.md` and `setup_sheet.csv`. `file` names the description in messages.
+pub fn designed_files(
+    design: &cpm_calib::design::SetupDesign,
+    data: &cpm_calib::Campaign,
+    note: &str,
+    file: &str,
+) -> Result<Vec<(&'static str, String)>, String> {
+    let mut desc = cpm_geometry::description::RobotDescription::paper_cubic();
+    desc.sensors = design
+        .sensors()
+        .iter()
+        .map(cpm_geometry::description::SensorSpec::from_sensor)
+        .collect();
+    let toml = desc.to_toml_string().map_err(|e| e.to_string())?;
+    let robot = crate::io::Robot::from_description(desc, file).map_err(|e| e.to_string())?;
+    Ok(vec![
+        (
+            "robot.toml",
+            format!(
+                "# The paper's cube with the sockets of a campaign under limits:\n# one [[sensor]] per setup (socket pair + bar), in mounting order; see setup_sheet.md.\n\n{toml}"
+            ),
+        ),
+        ("readings.csv", crate::io::write_readings(data, &robot, note)),
+        ("setup_sheet.md", design.setup_sheet_md(&robot.table)),
+        ("setup_sheet.csv", design.setup_sheet_csv()),
+    ])
+}
+
+/// Stages the campaign under limits as files under `dir/designed/` ([`designed_files`]).
+/// Nothing when it was not run.
 pub fn render_limited(
     r: &PaperReproduction,
     dir: &std::path::Path,
@@ -592,33 +622,18 @@ pub fn render_limited(
     let Some(l) = &r.limited else {
         return Ok(());
     };
-    let mut desc = cpm_geometry::description::RobotDescription::paper_cubic();
-    desc.sensors = l
-        .design
-        .sensors()
-        .iter()
-        .map(cpm_geometry::description::SensorSpec::from_sensor)
-        .collect();
-    let toml = desc.to_toml_string().map_err(|e| e.to_string())?;
-    let file = dir.join("designed").join("robot.toml");
-    let robot = crate::io::Robot::from_description(desc, &file.display().to_string())
-        .map_err(|e| e.to_string())?;
     let d = dir.join("designed");
-    out.add(
-        d.join("robot.toml"),
-        format!(
-            "# The paper's cube with the sockets of a campaign under limits (cargo xtask reproduce-paper):\n# one [[sensor]] per setup (socket pair + bar), in mounting order; see setup_sheet.md.\n\n{toml}"
-        ),
-    );
     let note = format!(
         "paper's cube, campaign under limits, truth the paper's Table 2, noise {}, seed {}",
         r.options.noise, r.options.seed
     );
-    out.add(
-        d.join("readings.csv"),
-        crate::io::write_readings(&l.data, &robot, &note),
-    );
-    out.add(d.join("setup_sheet.md"), l.design.setup_sheet_md(&robot.table));
-    out.add(d.join("setup_sheet.csv"), l.design.setup_sheet_csv());
+    for (name, text) in designed_files(
+        &l.design,
+        &l.data,
+        &note,
+        &d.join("robot.toml").display().to_string(),
+    )? {
+        out.add(d.join(name), text);
+    }
     Ok(())
 }

@@ -706,6 +706,69 @@ pub fn design_setups(
             break;
         }
     }
+    // Minimax at the setup level: weight the parameters by their variance under the chosen
+    // setups and choose again; keep when the largest variance falls.
+    let variances_of = |chosen: &[usize]| -> Option<Vec<f64>> {
+        let mut m = ridge.clone();
+        for &c in chosen {
+            m += &setups[c].info;
+        }
+        let inv = m.cholesky()?.inverse();
+        Some((0..n).map(|k| inv[(k, k)]).collect())
+    };
+    let weighted = |chosen: &[usize], w: &[f64]| -> f64 {
+        variances_of(chosen).map_or(f64::NEG_INFINITY, |v| {
+            -v.iter().zip(w).map(|(a, b)| a * b).sum::<f64>()
+        })
+    };
+    let mut setup_minimax = Vec::new();
+    for _ in 0..options.minimax_rounds {
+        let Some(v) = variances_of(&chosen) else { break };
+        let worst = v.iter().copied().fold(0.0, f64::max);
+        let mean = v.iter().sum::<f64>() / n as f64;
+        let w: Vec<f64> = v.iter().map(|x| x / mean).collect();
+        let mut trial = chosen.clone();
+        let mut cur = weighted(&trial, &w);
+        for _pass in 0..3 {
+            let mut improved = false;
+            for i in 0..trial.len() {
+                let best = (0..setups.len())
+                    .into_par_iter()
+                    .filter(|c| !trial.contains(c))
+                    .map(|c| {
+                        let mut t = trial.clone();
+                        t[i] = c;
+                        (weighted(&t, &w), c)
+                    })
+                    .reduce_with(|a, b| if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a });
+                if let Some((v, c)) = best {
+                    if v > cur + options.select.tolerance * cur.abs() {
+                        trial[i] = c;
+                        cur = v;
+                        improved = true;
+                    }
+                }
+            }
+            if !improved {
+                break;
+            }
+        }
+        let Some(v2) = variances_of(&trial) else { break };
+        let worst2 = v2.iter().copied().fold(0.0, f64::max);
+        setup_minimax.push(format!("{:.3} -> {:.3}", worst.sqrt(), worst2.sqrt()));
+        if worst2 < worst {
+            chosen = trial;
+            current = value(&chosen);
+        } else {
+            break;
+        }
+    }
+    if !setup_minimax.is_empty() {
+        log.push(format!(
+            "setup minimax rounds (worst parameter bound of the budget shares, per unit noise): {}",
+            setup_minimax.join(", ")
+        ));
+    }
     log.push(format!(
         "{} candidate setups (socket pair x {} mm window); {} chosen: {}-criterion of their budget shares {:.4} greedy, {:.4} after {} swaps",
         setups.len(),
@@ -780,7 +843,11 @@ pub fn design_setups(
             .iter()
             .map(|b| DMatrix::from_fn(1, n, |_, c| b[(0, c)] * d[c]))
             .collect();
-        let next = select_blocks(&scaled, n_read, None, Some(&sel.chosen), &options.select)?;
+        let quick = SelectOptions {
+            max_exchanges: options.select.max_exchanges.min(100),
+            ..options.select
+        };
+        let next = select_blocks(&scaled, n_read, None, Some(&sel.chosen), &quick)?;
         let Some(v2) = variances(&next.chosen) else { break };
         let worst2 = v2.iter().copied().fold(0.0, f64::max);
         let sigma = constraints.gauge.sigma_um;
