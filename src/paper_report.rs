@@ -556,8 +556,15 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
         let (lo, hi) = st.length_range_mm();
         s.push_str(&format!(
             "| {} | {} | {} | {:.1} | {:.1} .. {:.1} | {} | {lo:.1} .. {hi:.1} | {:.1} | {:.1} |\n",
-            st.name, st.base.name, st.platform.name, st.bar_mm, st.window_mm.0, st.window_mm.1,
-            st.poses.len(), st.travel_mm(), st.min_clearance_mm()
+            st.name,
+            st.base.name,
+            st.platform.name,
+            st.bar_mm,
+            st.window_mm.0,
+            st.window_mm.1,
+            st.poses.len(),
+            st.travel_mm(),
+            st.min_clearance_mm()
         ));
     }
     s.push_str("\nHow it was chosen:\n\n");
@@ -570,10 +577,23 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
             c.clearance.gauge_link_mm, c.joints.base_cone_deg, l.options.max_setups, max_readings
         ));
         for t in &l.tradeoff {
-            let f = |v: f64| if v.is_finite() { format!("{v:.2}") } else { "inf".into() };
+            let f = |v: f64| {
+                if v.is_finite() {
+                    format!("{v:.2}")
+                } else {
+                    "inf".into()
+                }
+            };
             s.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {:.1} | {:.1} |\n",
-                t.stroke_mm, t.setups, t.readings, t.rank, f(t.crlb_rms_um), f(t.crlb_max_um), t.max_travel_mm, t.min_clearance_mm
+                t.stroke_mm,
+                t.setups,
+                t.readings,
+                t.rank,
+                f(t.crlb_rms_um),
+                f(t.crlb_max_um),
+                t.max_travel_mm,
+                t.min_clearance_mm
             ));
         }
     }

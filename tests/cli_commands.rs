@@ -933,7 +933,9 @@ fn compensate_corrects_a_known_thermal_drift_at_the_given_temperature() {
 /// identifies all 36 errors.
 #[test]
 fn designed_files_under_limits_round_trip_through_calibrate() {
-    use cpm::calib::design::{candidates, design_setups, Constraints, SetupOptions, SocketCandidates};
+    use cpm::calib::design::{
+        candidates, design_setups, Constraints, SetupOptions, SocketCandidates,
+    };
     use cpm::calib::{simulate_campaign, MeasurementModel, Noise, SimulationOptions};
     let d = scratch("designed-limits");
     let model = MeasurementModel::new(cpm::geometry::JointTable::paper_cubic());
@@ -966,7 +968,9 @@ fn designed_files_under_limits_round_trip_through_calibrate() {
     let dmodel = design.model(&model);
     let truth = InstallationErrors::paper_table2().to_vec_um();
     let sim = SimulationOptions {
-        noise: Noise::Uniform { half_width_um: 10.0 },
+        noise: Noise::Uniform {
+            half_width_um: 10.0,
+        },
         repeats: 1,
         seed: 3,
     };
@@ -996,7 +1000,12 @@ fn designed_files_under_limits_round_trip_through_calibrate() {
     assert_eq!(cal["readings"], design.num_readings());
     // The file's sensors are the setups, in mounting order.
     let loaded = Robot::load(&robot).unwrap();
-    let names: Vec<String> = loaded.table.sensors.iter().map(|s| s.name.clone()).collect();
+    let names: Vec<String> = loaded
+        .table
+        .sensors
+        .iter()
+        .map(|s| s.name.clone())
+        .collect();
     let expected: Vec<String> = design.setups.iter().map(|s| s.name.clone()).collect();
     assert_eq!(names, expected);
 }
@@ -1073,7 +1082,10 @@ fn design_under_limits_writes_setup_plans_simulate_and_calibrate_read() {
         let col = header.iter().position(|h| *h == "length_mm").unwrap();
         for l in lines {
             let len: f64 = l.split(',').nth(col).unwrap().parse().unwrap();
-            assert!(len >= lo - 0.1 && len <= hi + 0.1, "{name}: {len} outside {lo}..{hi}");
+            assert!(
+                len >= lo - 0.1 && len <= hi + 0.1,
+                "{name}: {len} outside {lo}..{hi}"
+            );
         }
         data.push(p(&file));
     }

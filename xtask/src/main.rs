@@ -174,7 +174,10 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
                 }
                 let l = options.limited.get_or_insert_with(Default::default);
                 for kv in v.split(',') {
-                    let Some((k, n)) = kv.split_once('=').and_then(|(k, n)| Some((k, n.parse::<usize>().ok()?))) else {
+                    let Some((k, n)) = kv
+                        .split_once('=')
+                        .and_then(|(k, n)| Some((k, n.parse::<usize>().ok()?)))
+                    else {
                         eprintln!("error: --limited expects key=N pairs, got `{kv}`");
                         return ExitCode::from(2);
                     };

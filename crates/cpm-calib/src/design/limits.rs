@@ -107,7 +107,10 @@ impl Gauge {
     pub fn validate(&self) -> Result<(), CalibError> {
         let pos = |v: f64| v.is_finite() && v > 0.0;
         if !pos(self.stroke_mm) {
-            return Err(CalibError::invalid("gauge.stroke_mm", "must be finite and > 0"));
+            return Err(CalibError::invalid(
+                "gauge.stroke_mm",
+                "must be finite and > 0",
+            ));
         }
         if !(pos(self.shortest_mm) && self.longest_mm.is_finite()) {
             return Err(CalibError::invalid(
@@ -125,18 +128,17 @@ impl Gauge {
                 ),
             ));
         }
-        if let Some(b) = self
-            .bars_mm
-            .iter()
-            .find(|b| !(b.is_finite() && **b >= 0.0))
-        {
+        if let Some(b) = self.bars_mm.iter().find(|b| !(b.is_finite() && **b >= 0.0)) {
             return Err(CalibError::invalid(
                 "gauge.bars_mm",
                 format!("{b}: bars must be finite and >= 0 mm"),
             ));
         }
         if !pos(self.sigma_um) {
-            return Err(CalibError::invalid("gauge.sigma_um", "must be finite and > 0"));
+            return Err(CalibError::invalid(
+                "gauge.sigma_um",
+                "must be finite and > 0",
+            ));
         }
         Ok(())
     }
@@ -514,7 +516,10 @@ mod tests {
             },
             ..Constraints::default()
         };
-        assert!(tight.check_pose(&t, &pose).unwrap_err().contains("base joint cone"));
+        assert!(tight
+            .check_pose(&t, &pose)
+            .unwrap_err()
+            .contains("base joint cone"));
     }
 
     #[test]
@@ -527,7 +532,11 @@ mod tests {
         assert!(c.validate().unwrap_err().to_string().contains("longest_mm"));
         let mut c = Constraints::default();
         c.joints.platform_cone_deg = f64::NAN;
-        assert!(c.validate().unwrap_err().to_string().contains("platform_cone_deg"));
+        assert!(c
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("platform_cone_deg"));
         let mut c = Constraints::default();
         c.gauge.bars_mm = vec![-1.0];
         assert!(c.validate().unwrap_err().to_string().contains("bars_mm"));

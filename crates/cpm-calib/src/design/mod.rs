@@ -57,9 +57,9 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 pub use indices::{observability_indices, Criterion, ObservabilityIndices};
+pub use limits::{Clearance, Constraints, Gauge, GaugeKind, JointLimits};
 pub use monte_carlo::{monte_carlo, monte_carlo_campaign, MonteCarloOptions, MonteCarloReport};
 pub use select::{select_blocks, SelectOptions, Selection};
-pub use limits::{Clearance, Constraints, Gauge, GaugeKind, JointLimits};
 pub use setups::{design_setups, Setup, SetupDesign, SetupOptions};
 pub use sockets::{gauge_freedoms, GaugeReport, Socket, SocketCandidates};
 

@@ -41,7 +41,7 @@ use super::indices::{observability_indices, Criterion, ObservabilityIndices};
 use super::limits::{cone_angles_deg, gauge_clearance_mm, Constraints};
 use super::select::{select_blocks, SelectOptions};
 use super::sockets::{pose_blocks, Socket, SocketCandidates};
-use crate::{identification_jacobian, Campaign, CalibError, MeasurementModel, Reading};
+use crate::{identification_jacobian, CalibError, Campaign, MeasurementModel, Reading};
 
 /// Options of [`design_setups`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -436,7 +436,13 @@ struct Ctx<'a> {
 
 impl Ctx<'_> {
     /// Projected readings of `sensor` in `window` from the `poses` (checked; rows computed).
-    fn projected(&self, sensor: &Sensor, window: (f64, f64), poses: &[Pose], seed: u64) -> Vec<Cand> {
+    fn projected(
+        &self,
+        sensor: &Sensor,
+        window: (f64, f64),
+        poses: &[Pose],
+        seed: u64,
+    ) -> Vec<Cand> {
         let table = &self.model.nominal;
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         let (lo, hi) = window;
@@ -653,7 +659,8 @@ pub fn design_setups(
     }
     let criterion = options.select.criterion;
     let scale = setups.iter().map(|s| s.info.trace()).sum::<f64>() / (setups.len() * n) as f64;
-    let ridge = DMatrix::<f64>::identity(n, n) * (options.select.ridge * scale.max(f64::MIN_POSITIVE));
+    let ridge =
+        DMatrix::<f64>::identity(n, n) * (options.select.ridge * scale.max(f64::MIN_POSITIVE));
     let value = |chosen: &[usize]| {
         let mut m = ridge.clone();
         for &c in chosen {
@@ -672,7 +679,13 @@ pub fn design_setups(
                 t.push(c);
                 (value(&t), c)
             })
-            .reduce_with(|a, b| if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a });
+            .reduce_with(|a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            });
         match best {
             Some((_, c)) => chosen.push(c),
             None => break,
@@ -692,7 +705,13 @@ pub fn design_setups(
                     t[i] = c;
                     (value(&t), c)
                 })
-                .reduce_with(|a, b| if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a });
+                .reduce_with(|a, b| {
+                    if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                        b
+                    } else {
+                        a
+                    }
+                });
             if let Some((v, c)) = best {
                 if v > current + options.select.tolerance * current.abs() {
                     chosen[i] = c;
@@ -723,7 +742,9 @@ pub fn design_setups(
     };
     let mut setup_minimax = Vec::new();
     for _ in 0..options.minimax_rounds {
-        let Some(v) = variances_of(&chosen) else { break };
+        let Some(v) = variances_of(&chosen) else {
+            break;
+        };
         let worst = v.iter().copied().fold(0.0, f64::max);
         let mean = v.iter().sum::<f64>() / n as f64;
         let w: Vec<f64> = v.iter().map(|x| x / mean).collect();
@@ -740,7 +761,13 @@ pub fn design_setups(
                         t[i] = c;
                         (weighted(&t, &w), c)
                     })
-                    .reduce_with(|a, b| if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) { b } else { a });
+                    .reduce_with(|a, b| {
+                        if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                            b
+                        } else {
+                            a
+                        }
+                    });
                 if let Some((v, c)) = best {
                     if v > cur + options.select.tolerance * cur.abs() {
                         trial[i] = c;
@@ -753,7 +780,9 @@ pub fn design_setups(
                 break;
             }
         }
-        let Some(v2) = variances_of(&trial) else { break };
+        let Some(v2) = variances_of(&trial) else {
+            break;
+        };
         let worst2 = v2.iter().copied().fold(0.0, f64::max);
         setup_minimax.push(format!("{:.3} -> {:.3}", worst.sqrt(), worst2.sqrt()));
         if worst2 < worst {
@@ -802,7 +831,12 @@ pub fn design_setups(
             }
         }
         let extra = sample(&mut rng, options.projections);
-        for cand in ctx.projected(s, cs.window, &extra, options.seed.wrapping_mul(31) ^ (c as u64 + 7)) {
+        for cand in ctx.projected(
+            s,
+            cs.window,
+            &extra,
+            options.seed.wrapping_mul(31) ^ (c as u64 + 7),
+        ) {
             pool.push((k, cand));
         }
     }
@@ -833,7 +867,9 @@ pub fn design_setups(
         Some((0..n).map(|k| inv[(k, k)]).collect())
     };
     for round in 0..options.minimax_rounds {
-        let Some(v) = variances(&sel.chosen) else { break };
+        let Some(v) = variances(&sel.chosen) else {
+            break;
+        };
         let worst = v.iter().copied().fold(0.0, f64::max);
         let mean = v.iter().sum::<f64>() / n as f64;
         // Column k scaled by 1 / sqrt(w_k), w_k = v_k / mean: A-optimality of the scaled
@@ -844,11 +880,13 @@ pub fn design_setups(
             .map(|b| DMatrix::from_fn(1, n, |_, c| b[(0, c)] * d[c]))
             .collect();
         let quick = SelectOptions {
-            max_exchanges: options.select.max_exchanges.min(100),
+            max_exchanges: options.select.max_exchanges.min(40),
             ..options.select
         };
         let next = select_blocks(&scaled, n_read, None, Some(&sel.chosen), &quick)?;
-        let Some(v2) = variances(&next.chosen) else { break };
+        let Some(v2) = variances(&next.chosen) else {
+            break;
+        };
         let worst2 = v2.iter().copied().fold(0.0, f64::max);
         let sigma = constraints.gauge.sigma_um;
         log.push(format!(
@@ -1130,7 +1168,8 @@ mod tests {
     #[test]
     fn impossible_limits_are_an_error_not_a_design() {
         let model = MeasurementModel::new(JointTable::paper_cubic());
-        let (cands, _) = default_candidates(&model.nominal, &Workspace::default(), 50, 50.0, 10.0, 1);
+        let (cands, _) =
+            default_candidates(&model.nominal, &Workspace::default(), 50, 50.0, 10.0, 1);
         let c = Constraints {
             clearance: crate::design::limits::Clearance {
                 gauge_link_mm: 5000.0,
@@ -1144,7 +1183,14 @@ mod tests {
             projections: 4,
             ..SetupOptions::default()
         };
-        let e = design_setups(&model, &SocketCandidates::paper_cubic(), &cands, &c, &opts, &|_| {});
+        let e = design_setups(
+            &model,
+            &SocketCandidates::paper_cubic(),
+            &cands,
+            &c,
+            &opts,
+            &|_| {},
+        );
         assert!(e.is_err());
     }
 }
