@@ -1094,16 +1094,20 @@ mod tests {
         let pairs = sockets.all_pairs();
         let sens = pose_sensitivities(&model, &poses[..10]);
         let direct = pose_blocks(&model, &poses[..10], &pairs);
+        let mut worst = 0.0f64;
         for ((p, s), d) in poses.iter().zip(sens).zip(direct) {
             let (s, d) = (s.unwrap(), d.unwrap());
             for (r, pair) in pairs.iter().enumerate() {
                 let a = row(pair, p, &s);
                 let b = d.row(r);
-                let err = (&a - &b).norm();
-                // Equal to first order: the sensor socket clearance terms are left out.
-                assert!(err <= 2e-3 * b.norm().max(1.0), "pair {r}: {err}");
+                let rel = (&a - &b).norm() / b.norm();
+                worst = worst.max(rel);
+                // Equal to first order (terms of the model beyond the pose's sensitivity,
+                // e.g. the gauge's own socket clearance, are left out).
+                assert!(rel <= 1e-2, "pair {r}: relative difference {rel}");
             }
         }
+        eprintln!("largest relative difference of a row: {worst:.2e}");
     }
 
     #[test]
