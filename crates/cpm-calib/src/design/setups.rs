@@ -63,6 +63,10 @@ pub struct SetupOptions {
     pub workspace: Workspace,
     /// Seed of the projections. Default 1.
     pub seed: u64,
+    /// Readings are planned at least this far inside their setup's window, mm (capped at a
+    /// quarter of the stroke): the machine's unknown errors move the actual length by up to a
+    /// few tenths of a millimetre from the nominal one. Default 1.
+    pub edge_margin_mm: f64,
     /// Rounds of minimax reweighting after the reading selection: the parameters are
     /// weighted by their Cramér-Rao variance and the readings exchanged again on the
     /// weighted criterion; a round is kept when it lowers the largest per-parameter bound.
@@ -84,6 +88,7 @@ impl Default for SetupOptions {
             },
             workspace: Workspace::default(),
             seed: 1,
+            edge_margin_mm: 1.0,
             minimax_rounds: 2,
         }
     }
@@ -446,7 +451,7 @@ impl Ctx<'_> {
         let table = &self.model.nominal;
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         let (lo, hi) = window;
-        let margin = 0.02 * (hi - lo);
+        let margin = 0.01 * (hi - lo);
         let moved: Vec<Pose> = poses
             .iter()
             .map(|p| project(sensor, p, rng.random_range(lo + margin..=hi - margin)))
@@ -515,6 +520,17 @@ pub fn design_setups(
             "at least one base and one platform socket candidate are needed",
         ));
     }
+    if !(options.edge_margin_mm.is_finite() && options.edge_margin_mm >= 0.0) {
+        return Err(CalibError::invalid(
+            "edge_margin_mm",
+            "must be finite and >= 0",
+        ));
+    }
+    // Readings are admitted in the window shrunk by the edge margin.
+    let edge = options
+        .edge_margin_mm
+        .min(0.25 * constraints.gauge.stroke_mm);
+    let inner = |w: (f64, f64)| (w.0 + edge, w.1 - edge);
     let table = &model.nominal;
     let mut model = model.clone();
     model.effects.clear();
@@ -629,13 +645,14 @@ pub fn design_setups(
         .enumerate()
         .filter_map(|(k, &(r, bar, window))| {
             let s = &pairs[r];
+            let w = inner(window);
             let mut rows: Vec<RowDVector<f64>> = natural[r]
                 .iter()
-                .filter(|(_, l, _)| *l >= window.0 && *l <= window.1)
+                .filter(|(_, l, _)| *l >= w.0 && *l <= w.1)
                 .map(|(c, _, _)| row(s, &poses[*c], &sens[*c]))
                 .collect();
             rows.extend(
-                ctx.projected(s, window, &screen_poses, options.seed ^ (k as u64 + 1))
+                ctx.projected(s, w, &screen_poses, options.seed ^ (k as u64 + 1))
                     .into_iter()
                     .map(|c| c.row),
             );
@@ -817,8 +834,9 @@ pub fn design_setups(
     for (k, &c) in chosen.iter().enumerate() {
         let cs = &setups[c];
         let s = &pairs[cs.pair];
+        let w = inner(cs.window);
         for (pi, l, cl) in &natural[cs.pair] {
-            if *l >= cs.window.0 && *l <= cs.window.1 {
+            if *l >= w.0 && *l <= w.1 {
                 pool.push((
                     k,
                     Cand {
@@ -831,12 +849,7 @@ pub fn design_setups(
             }
         }
         let extra = sample(&mut rng, options.projections);
-        for cand in ctx.projected(
-            s,
-            cs.window,
-            &extra,
-            options.seed.wrapping_mul(31) ^ (c as u64 + 7),
-        ) {
+        for cand in ctx.projected(s, w, &extra, options.seed.wrapping_mul(31) ^ (c as u64 + 7)) {
             pool.push((k, cand));
         }
     }
@@ -1152,6 +1165,8 @@ mod tests {
                 lo = lo.min(l);
                 hi = hi.max(l);
                 min_clear = min_clear.min(c);
+                // Planned at least the edge margin (1 mm) inside the window.
+                assert!(l >= s.window_mm.0 + 1.0 - 1e-9 && l <= s.window_mm.1 - 1.0 + 1e-9);
                 // And the library's own check agrees.
                 check_reading(table, &constraints, &ws, &s.sensor(), s.window_mm, p).unwrap();
             }
