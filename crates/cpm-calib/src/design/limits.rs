@@ -449,7 +449,7 @@ mod tests {
     #[test]
     fn segment_distance_matches_brute_force_sampling() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(16);
-        let mut v = |rng: &mut rand::rngs::StdRng, s: f64| {
+        let v = |rng: &mut rand::rngs::StdRng, s: f64| {
             Vector3::new(
                 rng.random_range(-s..s),
                 rng.random_range(-s..s),

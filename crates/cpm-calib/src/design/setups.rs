@@ -1113,7 +1113,7 @@ mod tests {
             for (r, pair) in pairs.iter().enumerate() {
                 let a = row(pair, p, &s);
                 let b = d.row(r);
-                let rel = (&a - &b).norm() / b.norm();
+                let rel = (&a - b).norm() / b.norm();
                 worst = worst.max(rel);
                 // Equal to first order (terms of the model beyond the pose's sensitivity,
                 // e.g. the gauge's own socket clearance, are left out).
