@@ -107,7 +107,7 @@ pub struct DesignArgs {
     #[arg(long, value_name = "N", default_value_t = 16)]
     pub setups: usize,
     /// Output directory: poses.csv, sockets.csv, robot.toml, design.json, report.md (with
-    /// --stroke-mm: robot.toml, setup_sheet.md, setup_sheet.csv, plans/<setup>.csv,
+    /// --stroke-mm: robot.toml, setup_sheet.md, setup_sheet.csv, plans/SETUP.csv,
     /// design.json, report.md).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,

@@ -210,7 +210,7 @@ pub struct LimitedOptions {
     /// Cramér-Rao bounds. Default true.
     pub tradeoff: bool,
     /// The search (its reading budget and seed are replaced by the reproduction's).
-    /// Default [`SetupOptions::default`].
+    /// Default [`crate::design::SetupOptions::default`].
     pub search: crate::design::SetupOptions,
     /// Most exchanges of the trade-off's other strokes (lighter searches). Default 60.
     pub tradeoff_exchanges: usize,
