@@ -67,7 +67,8 @@ pub fn summary_json(r: &PaperReproduction) -> serde_json::Value {
             "accuracy": accuracy_json(&r.designed),
             "design": design_json(r),
             "monte_carlo": r.monte_carlo.as_ref().map(monte_carlo_json).unwrap_or(serde_json::Value::Null),
-        }
+        },
+        "limited": r.limited.as_ref().map(limited_json).unwrap_or(serde_json::Value::Null),
     })
 }
 
@@ -404,6 +405,9 @@ pub fn report_md(r: &PaperReproduction) -> String {
         ));
     }
     s.push('\n');
+    if let Some(l) = &r.limited {
+        s.push_str(&limited_md(l, r.options.design.max_readings));
+    }
     s.push_str("## 3. The tables side by side (um)\n\nn.d. = not determined by the data (no estimate exists).\n\n| component | Table 2 (true) | Table 3 (paper) | cpm, paper design | cpm, designed | std (designed) |\n|---|---|---|---|---|---|\n");
     for k in 0..36 {
         s.push_str(&format!(
@@ -459,4 +463,198 @@ pub fn report_md(r: &PaperReproduction) -> String {
     s.push_str("\n## Figures\n\n- `fig5_platform.svg`, `fig6_base.svg`: per-joint error norm, true (Table 2), paper (Table 3) and cpm's designed campaign (the paper design determines no joint, so it has no bars).\n- `singular_values.svg`: spectra of both designs with the rank threshold.\n\n");
     s.push_str("## Assumptions\n\n- Home pose (0, 0, 410) mm, R = I (the paper gives none; at this pose the z links are 354 mm long).\n- Platform mass 20 kg, centre of mass 100 mm below the platform origin (the paper gives no load); only the force directions matter.\n- Platform-side errors are applied as p + dp in cpm.\n- Length sensor kept in compression by its spring (its socket clearance is a constant -20 um, corrected as eq. 14).\n");
     s
+}
+
+// ---- The campaign under an instrument's limits (issue 16) ----------------------------------
+
+fn limited_json(l: &cpm_calib::paper::LimitedOutcome) -> serde_json::Value {
+    let d = &l.design;
+    let c = &d.constraints;
+    json!({
+        "constraints": {
+            "gauge": c.gauge.kind.name(),
+            "stroke_mm": c.gauge.stroke_mm,
+            "shortest_mm": c.gauge.shortest_mm,
+            "longest_mm": c.gauge.longest_mm,
+            "gauge_link_clearance_mm": c.clearance.gauge_link_mm,
+            "base_cone_deg": c.joints.base_cone_deg,
+            "platform_cone_deg": c.joints.platform_cone_deg,
+            "max_setups": l.options.max_setups,
+        },
+        "readings": d.num_readings(),
+        "setups": d.setups.len(),
+        "rank": d.indices.rank,
+        "crlb_rms_um": finite(d.indices.crlb_rms_um),
+        "crlb_max_um": finite(d.indices.crlb_max_um),
+        "max_travel_mm": d.max_travel_mm(),
+        "min_clearance_mm": finite(d.min_clearance_mm()),
+        "max_base_cone_deg": l.max_cone_deg.0,
+        "max_platform_cone_deg": l.max_cone_deg.1,
+        "remounts": { "socket_moves": d.remounts().0, "bar_changes": d.remounts().1 },
+        "per_setup": d.setups.iter().map(|s| json!({
+            "setup": s.name,
+            "base_socket": s.base.name,
+            "platform_socket": s.platform.name,
+            "bar_mm": s.bar_mm,
+            "window_mm": [s.window_mm.0, s.window_mm.1],
+            "readings": s.poses.len(),
+            "length_range_mm": [s.length_range_mm().0, s.length_range_mm().1],
+            "travel_mm": s.travel_mm(),
+            "min_clearance_mm": s.min_clearance_mm(),
+        })).collect::<Vec<_>>(),
+        "rms_error_um": opt(l.error_vs_truth_um.map(|x| x.0)),
+        "max_error_um": opt(l.error_vs_truth_um.map(|x| x.1)),
+        "monte_carlo": l.monte_carlo.as_ref().map(monte_carlo_json).unwrap_or(serde_json::Value::Null),
+        "tradeoff": l.tradeoff.iter().map(|t| json!({
+            "stroke_mm": t.stroke_mm,
+            "setups": t.setups,
+            "readings": t.readings,
+            "rank": t.rank,
+            "crlb_rms_um": finite(t.crlb_rms_um),
+            "crlb_max_um": finite(t.crlb_max_um),
+            "max_travel_mm": t.max_travel_mm,
+            "min_clearance_mm": finite(t.min_clearance_mm),
+        })).collect::<Vec<_>>(),
+        "log": d.log,
+        "files": ["designed/robot.toml", "designed/readings.csv", "designed/setup_sheet.md", "designed/setup_sheet.csv"],
+    })
+}
+
+fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> String {
+    let d = &l.design;
+    let c = &d.constraints;
+    let mut s = String::from("## 2b. A campaign a real instrument can run\n\n");
+    s.push_str(&format!(
+        "The campaign above assumes a gauge that travels several hundred mm and passes through the links. Under an instrument's limits (`cpm_calib::design::design_setups`): a {} gauge of **{} mm stroke per setup** (lengths {} to {} mm, any bar length), **at least {} mm between the gauge axis and every link axis**, **joint cone angles at most {} deg** at the base and {} deg at the platform joints, at most {} readings and {} setups (a setup = one socket pair with one bar; it is one `[[sensor]]` of the files). Candidate poses: those of the campaign above within the cone limits, plus poses moved along each gauge axis into its window.\n\n",
+        c.gauge.kind.name(), c.gauge.stroke_mm, c.gauge.shortest_mm, c.gauge.longest_mm, c.clearance.gauge_link_mm,
+        c.joints.base_cone_deg, c.joints.platform_cone_deg, max_readings, l.options.max_setups
+    ));
+    let (moves, bars) = d.remounts();
+    s.push_str(&format!(
+        "- **{} readings in {} setups; largest gauge travel in a setup {:.1} mm; smallest gauge-link clearance {:.1} mm; largest cone angle {:.1} deg (base joints), {:.1} deg (platform joints)**; {} socket moves and {} bar changes between consecutive setups.\n",
+        d.num_readings(), d.setups.len(), d.max_travel_mm(), d.min_clearance_mm(), l.max_cone_deg.0, l.max_cone_deg.1, moves, bars
+    ));
+    s.push_str(&format!(
+        "- Rank {} of 36; Cramér-Rao bound RMS {:.2} um, worst parameter {:.2} um.\n",
+        d.indices.rank, d.indices.crlb_rms_um, d.indices.crlb_max_um
+    ));
+    if let Some((rms, max)) = l.error_vs_truth_um {
+        s.push_str(&format!(
+            "- Estimates of this seed's readings against Table 2: RMS error {rms:.2} um, max {max:.2} um.\n"
+        ));
+    }
+    if let Some(m) = &l.monte_carlo {
+        s.push_str(&format!(
+            "- **Monte Carlo, {} simulated campaigns and calibrations (seeds {}..{}, {} failed): RMS error {:.2} um (Cramér-Rao {:.2} um, efficiency {:.3}); largest error per run: mean {:.2} um, 95th percentile {:.2} um, worst {:.2} um**; {:.0} % of the runs meet both RMS <= 2 um and max <= 6 um.\n",
+            m.runs, m.first_seed, m.first_seed + m.runs as u64 - 1, m.failed_runs, m.rms_error_um, m.crlb_rms_um, m.efficiency,
+            m.max_error_um_mean, m.max_error_um_p95, m.max_error_um_worst, 100.0 * m.fraction_within(2.0, 6.0)
+        ));
+    }
+    s.push_str("- Files: `designed/robot.toml` (the cube with one `[[sensor]]` per setup), `designed/readings.csv` (the simulated readings of this seed, readings format, marked simulated), `designed/setup_sheet.md` and `designed/setup_sheet.csv` (what to mount, then which poses to drive, in order). `cpm calibrate --robot designed/robot.toml --data designed/readings.csv --out cal/` fits them.\n\n");
+    s.push_str("| setup | base socket | platform socket | bar (mm) | window (mm) | readings | lengths used (mm) | travel (mm) | min clearance (mm) |\n|---|---|---|---|---|---|---|---|---|\n");
+    for st in &d.setups {
+        let (lo, hi) = st.length_range_mm();
+        s.push_str(&format!(
+            "| {} | {} | {} | {:.1} | {:.1} .. {:.1} | {} | {lo:.1} .. {hi:.1} | {:.1} | {:.1} |\n",
+            st.name,
+            st.base.name,
+            st.platform.name,
+            st.bar_mm,
+            st.window_mm.0,
+            st.window_mm.1,
+            st.poses.len(),
+            st.travel_mm(),
+            st.min_clearance_mm()
+        ));
+    }
+    s.push_str("\nHow it was chosen:\n\n");
+    for line in &d.log {
+        s.push_str(&format!("- {line}\n"));
+    }
+    if !l.tradeoff.is_empty() {
+        s.push_str(&format!(
+            "\n### Stroke against precision\n\nThe same limits (clearance {} mm, cones {} deg, at most {} setups) and budget ({} readings) for gauges of shorter stroke (2 mm: a ballbar); Cramér-Rao bounds at the nominal geometry for the paper's noise. The other strokes' searches use at most {} exchanges (the campaign above {}); a setup's readings keep an edge margin of up to a quarter of the stroke inside its window, so a 2 mm ballbar travels at most 1 mm.\n\n| stroke (mm) | setups | readings | rank | Cramér-Rao RMS (um) | worst parameter (um) | largest travel (mm) | smallest clearance (mm) |\n|---|---|---|---|---|---|---|---|\n",
+            c.clearance.gauge_link_mm, c.joints.base_cone_deg, l.options.max_setups, max_readings,
+            l.options.tradeoff_exchanges, l.options.search.select.max_exchanges
+        ));
+        for t in &l.tradeoff {
+            let f = |v: f64| {
+                if v.is_finite() {
+                    format!("{v:.2}")
+                } else {
+                    "inf".into()
+                }
+            };
+            s.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {:.1} | {:.1} |\n",
+                t.stroke_mm,
+                t.setups,
+                t.readings,
+                t.rank,
+                f(t.crlb_rms_um),
+                f(t.crlb_max_um),
+                t.max_travel_mm,
+                t.min_clearance_mm
+            ));
+        }
+    }
+    s.push('\n');
+    s
+}
+
+/// The files of a campaign under limits on the paper's cube, as (name, contents):
+/// `robot.toml` (the cube with one `[[sensor]]` per setup of `design`), `readings.csv`
+/// (`data`, readings format; marked simulated when `data` is, `note` on that line),
+/// `setup_sheet.md` and `setup_sheet.csv`. `file` names the description in messages.
+pub fn designed_files(
+    design: &cpm_calib::design::SetupDesign,
+    data: &cpm_calib::Campaign,
+    note: &str,
+    file: &str,
+) -> Result<Vec<(&'static str, String)>, String> {
+    let mut desc = cpm_geometry::description::RobotDescription::paper_cubic();
+    desc.sensors = design
+        .sensors()
+        .iter()
+        .map(cpm_geometry::description::SensorSpec::from_sensor)
+        .collect();
+    let toml = desc.to_toml_string().map_err(|e| e.to_string())?;
+    let robot = crate::io::Robot::from_description(desc, file).map_err(|e| e.to_string())?;
+    Ok(vec![
+        (
+            "robot.toml",
+            format!(
+                "# The paper's cube with the sockets of a campaign under limits:\n# one [[sensor]] per setup (socket pair + bar), in mounting order; see setup_sheet.md.\n\n{toml}"
+            ),
+        ),
+        ("readings.csv", crate::io::write_readings(data, &robot, note)),
+        ("setup_sheet.md", design.setup_sheet_md(&robot.table)),
+        ("setup_sheet.csv", design.setup_sheet_csv()),
+    ])
+}
+
+/// Stages the campaign under limits as files under `dir/designed/` ([`designed_files`]).
+/// Nothing when it was not run.
+pub fn render_limited(
+    r: &PaperReproduction,
+    dir: &std::path::Path,
+    out: &mut OutputSet,
+) -> Result<(), String> {
+    let Some(l) = &r.limited else {
+        return Ok(());
+    };
+    let d = dir.join("designed");
+    let note = format!(
+        "paper's cube, campaign under limits, truth the paper's Table 2, noise {}, seed {}",
+        r.options.noise, r.options.seed
+    );
+    for (name, text) in designed_files(
+        &l.design,
+        &l.data,
+        &note,
+        &d.join("robot.toml").display().to_string(),
+    )? {
+        out.add(d.join(name), text);
+    }
+    Ok(())
 }

@@ -927,3 +927,176 @@ fn compensate_corrects_a_known_thermal_drift_at_the_given_temperature() {
     args.extend(["--temperature-c", "-500"]);
     assert_eq!(cpm(&args).status.code(), Some(2));
 }
+
+/// A campaign under limits on the paper's cube (small), written with the files
+/// `cargo xtask reproduce-paper` writes to `designed/`: `cpm calibrate` reads them back and
+/// identifies all 36 errors.
+#[test]
+fn designed_files_under_limits_round_trip_through_calibrate() {
+    use cpm::calib::design::{
+        candidates, design_setups, Constraints, SetupOptions, SocketCandidates,
+    };
+    use cpm::calib::{simulate_campaign, MeasurementModel, Noise, SimulationOptions};
+    let d = scratch("designed-limits");
+    let model = MeasurementModel::new(cpm::geometry::JointTable::paper_cubic());
+    let (cands, _) = candidates::default_candidates(
+        &model.nominal,
+        &candidates::Workspace::default(),
+        300,
+        100.0,
+        25.0,
+        4,
+    );
+    let opts = SetupOptions {
+        max_readings: 300,
+        max_setups: 8,
+        windows_per_pair: 3,
+        screening_projections: 6,
+        projections: 40,
+        minimax_rounds: 1,
+        ..SetupOptions::default()
+    };
+    let design = design_setups(
+        &model,
+        &SocketCandidates::paper_cubic(),
+        &cands,
+        &Constraints::default(),
+        &opts,
+        &|_| {},
+    )
+    .unwrap();
+    let dmodel = design.model(&model);
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let sim = SimulationOptions {
+        noise: Noise::Uniform {
+            half_width_um: 10.0,
+        },
+        repeats: 1,
+        seed: 3,
+    };
+    let data = simulate_campaign(&dmodel, &truth, &design.campaign(), &sim).unwrap();
+    let robot = d.join("robot.toml");
+    for (name, text) in
+        cpm::paper_report::designed_files(&design, &data, "test", &p(&robot)).unwrap()
+    {
+        std::fs::write(d.join(name), text).unwrap();
+    }
+    let readings = std::fs::read_to_string(d.join("readings.csv")).unwrap();
+    assert!(readings.starts_with("# simulated by cpm"), "{readings:.80}");
+    let text = ok(&[
+        "calibrate",
+        "--robot",
+        &p(&robot),
+        "--data",
+        &p(&d.join("readings.csv")),
+        "--out",
+        &p(&d.join("cal")),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(v["simulated"], true);
+    assert_eq!(v["rank"], 36, "{text:.2000}");
+    let cal = read_json(&d.join("cal").join("calibration.json"));
+    assert_eq!(cal["readings"], design.num_readings());
+    // The file's sensors are the setups, in mounting order.
+    let loaded = Robot::load(&robot).unwrap();
+    let names: Vec<String> = loaded
+        .table
+        .sensors
+        .iter()
+        .map(|s| s.name.clone())
+        .collect();
+    let expected: Vec<String> = design.setups.iter().map(|s| s.name.clone()).collect();
+    assert_eq!(names, expected);
+}
+
+/// `cpm design --stroke-mm`: setup plans that `cpm simulate` and `cpm calibrate` read, every
+/// plan within the stroke.
+#[test]
+fn design_under_limits_writes_setup_plans_simulate_and_calibrate_read() {
+    let d = scratch("design-limits");
+    let sockets = d.join("sockets.csv");
+    let c = cpm::calib::design::SocketCandidates::paper_cubic();
+    let mut text = String::from("name,side,x_mm,y_mm,z_mm\n");
+    for (side, list) in [("base", &c.base), ("platform", &c.platform)] {
+        for s in list.iter() {
+            let v = s.position_mm;
+            text.push_str(&format!("{},{side},{},{},{}\n", s.name, v.x, v.y, v.z));
+        }
+    }
+    std::fs::write(&sockets, text).unwrap();
+    let out = d.join("design");
+    let text = ok(&[
+        "design",
+        "--robot",
+        &example("paper_cubic.toml"),
+        "--sockets",
+        &p(&sockets),
+        "--readings",
+        "240",
+        "--candidates",
+        "200",
+        "--range-mm",
+        "100",
+        "--range-deg",
+        "20",
+        "--stroke-mm",
+        "80",
+        "--setups",
+        "8",
+        "--out",
+        &p(&out),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(v["readings"].as_u64().unwrap() <= 240);
+    assert!(v["max_travel_mm"].as_f64().unwrap() <= 80.0 + 1e-9);
+    assert!(v["min_clearance_mm"].as_f64().unwrap() >= 30.0);
+    assert!(v["max_base_cone_deg"].as_f64().unwrap() <= 40.0 + 1e-9);
+    assert!(out.join("setup_sheet.md").exists() && out.join("setup_sheet.csv").exists());
+    let robot = p(&out.join("robot.toml"));
+    let mut data = Vec::new();
+    for s in v["setups"].as_array().unwrap() {
+        let name = s["sensor"].as_str().unwrap();
+        let file = d.join(format!("{name}.csv"));
+        ok(&[
+            "simulate",
+            "--robot",
+            &robot,
+            "--plan",
+            &p(&out.join(s["plan"].as_str().unwrap())),
+            "--sensors",
+            name,
+            "--paper-table2",
+            "--noise",
+            "uniform:10",
+            "--out",
+            &p(&file),
+        ]);
+        // Every simulated reading of the true machine lies in the setup's window (the design
+        // keeps an edge margin for the machine's errors).
+        let w = &s["window_mm"];
+        let (lo, hi) = (w[0].as_f64().unwrap(), w[1].as_f64().unwrap());
+        let csv = std::fs::read_to_string(&file).unwrap();
+        let mut lines = csv.lines().filter(|l| !l.starts_with('#'));
+        let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        let col = header.iter().position(|h| *h == "length_mm").unwrap();
+        for l in lines {
+            let len: f64 = l.split(',').nth(col).unwrap().parse().unwrap();
+            assert!(len >= lo && len <= hi, "{name}: {len} outside {lo}..{hi}");
+        }
+        data.push(p(&file));
+    }
+    let mut args = vec!["calibrate", "--robot", &robot];
+    for f in &data {
+        args.push("--data");
+        args.push(f);
+    }
+    let cal = p(&d.join("cal"));
+    args.extend(["--out", &cal, "--json"]);
+    let text = ok(&args);
+    let c: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(c["rank"], v["rank"]);
+    let cal = read_json(&d.join("cal").join("calibration.json"));
+    assert_eq!(cal["readings"], v["readings"]);
+}

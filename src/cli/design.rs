@@ -9,7 +9,8 @@ use serde_json::json;
 use super::common::{self, RobotArg};
 use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::design::{
-    candidates, design, sockets::Socket, Criterion, DesignOptions, SelectOptions, SocketCandidates,
+    candidates, design, design_setups, sockets::Socket, Clearance, Constraints, Criterion,
+    DesignOptions, Gauge, GaugeKind, JointLimits, SelectOptions, SetupOptions, SocketCandidates,
 };
 use crate::calib::Effect;
 use crate::geometry::description::SensorSpec;
@@ -25,6 +26,15 @@ pub enum CriterionArg {
     D,
     /// E-optimal: best worst direction (slow).
     E,
+}
+
+/// Kind of gauge of a design under limits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum GaugeArg {
+    /// Telescoping length gauge.
+    Telescoping,
+    /// Ballbar.
+    Ballbar,
 }
 
 /// Arguments of `cpm design`.
@@ -70,7 +80,35 @@ pub struct DesignArgs {
     /// Random seed of the candidates.
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub seed: u64,
-    /// Output directory: poses.csv, sockets.csv, robot.toml, design.json, report.md.
+    /// Design under an instrument's limits: the gauge's stroke per setup, mm. Turns the
+    /// setup design on (one socket pair with one bar per setup; readings only within the
+    /// stroke, the clearance and the joint cones); writes setup_sheet.md/.csv and plans/.
+    #[arg(long, value_name = "MM")]
+    pub stroke_mm: Option<f64>,
+    /// Kind of gauge (with --stroke-mm).
+    #[arg(long, value_enum, default_value_t = GaugeArg::Telescoping)]
+    pub gauge: GaugeArg,
+    /// Shortest socket-to-socket length the gauge reads, mm (with --stroke-mm).
+    #[arg(long, value_name = "MM", default_value_t = 150.0)]
+    pub shortest_mm: f64,
+    /// Longest socket-to-socket length the gauge reads with any bar, mm (with --stroke-mm).
+    #[arg(long, value_name = "MM", default_value_t = 1000.0)]
+    pub longest_mm: f64,
+    /// Extension bars available, mm, comma-separated (with --stroke-mm; default: any length).
+    #[arg(long, value_name = "MM,..", value_delimiter = ',')]
+    pub bars_mm: Vec<f64>,
+    /// Smallest distance between the gauge axis and any link axis, mm (with --stroke-mm).
+    #[arg(long, value_name = "MM", default_value_t = 30.0)]
+    pub clearance_mm: f64,
+    /// Largest cone angle of every base and platform joint from home, deg (with --stroke-mm).
+    #[arg(long, value_name = "DEG", default_value_t = 40.0)]
+    pub cone_deg: f64,
+    /// Most setups (gauge mounts) (with --stroke-mm).
+    #[arg(long, value_name = "N", default_value_t = 16)]
+    pub setups: usize,
+    /// Output directory: poses.csv, sockets.csv, robot.toml, design.json, report.md (with
+    /// --stroke-mm: robot.toml, setup_sheet.md, setup_sheet.csv, plans/SETUP.csv,
+    /// design.json, report.md).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
     /// Print a JSON summary on stdout.
@@ -248,6 +286,9 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             rejected.total()
         )));
     }
+    if let Some(stroke) = args.stroke_mm {
+        return run_limited(args, ctx, &robot, &model, &sockets, &cands, stroke, sigma);
+    }
     let options = DesignOptions {
         max_readings: args.readings,
         base_sockets: args.base_sockets,
@@ -367,6 +408,191 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             d.indices.num_params,
             d.indices.crlb_rms_um,
             d.indices.sigma_um
+        )?;
+        for w in &written {
+            writeln!(ctx.out, "wrote {}", w.display())?;
+        }
+    }
+    Ok(Outcome::Done)
+}
+
+// ---- Design under an instrument's limits (--stroke-mm) -------------------------------------
+
+fn criterion(arg: CriterionArg) -> Criterion {
+    match arg {
+        CriterionArg::A => Criterion::AOptimal,
+        CriterionArg::D => Criterion::DOptimal,
+        CriterionArg::E => Criterion::EOptimal,
+    }
+}
+
+/// The description `robot` with `sensors` instead of its own (known sensor effects dropped).
+fn with_sensors(robot: &Robot, sensors: &[crate::geometry::Sensor]) -> anyhow::Result<String> {
+    let mut desc = robot.description.clone();
+    desc.sensors = sensors.iter().map(SensorSpec::from_sensor).collect();
+    if let Some(c) = desc.calibration.as_mut() {
+        for e in [
+            Effect::SensorOffset,
+            Effect::SensorScale,
+            Effect::SocketError,
+        ] {
+            c.known_effects.remove(e.name());
+        }
+    }
+    Ok(desc.to_toml_string()?)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_limited(
+    args: &DesignArgs,
+    ctx: &mut Ctx<'_>,
+    robot: &Robot,
+    model: &crate::calib::MeasurementModel,
+    sockets: &SocketCandidates,
+    cands: &[crate::geometry::Pose],
+    stroke: f64,
+    sigma: f64,
+) -> anyhow::Result<Outcome> {
+    if args.setups == 0 || args.setups > 1000 {
+        return Err(usage_error("--setups must be between 1 and 1000"));
+    }
+    let constraints = Constraints {
+        gauge: Gauge {
+            kind: match args.gauge {
+                GaugeArg::Telescoping => GaugeKind::Telescoping,
+                GaugeArg::Ballbar => GaugeKind::Ballbar,
+            },
+            stroke_mm: stroke,
+            shortest_mm: args.shortest_mm,
+            longest_mm: args.longest_mm,
+            bars_mm: args.bars_mm.clone(),
+            sigma_um: sigma,
+        },
+        clearance: Clearance {
+            gauge_link_mm: args.clearance_mm,
+            link_link_mm: None,
+        },
+        joints: JointLimits {
+            base_cone_deg: args.cone_deg,
+            platform_cone_deg: args.cone_deg,
+        },
+    };
+    constraints
+        .validate()
+        .map_err(|e| usage_error(e.to_string()))?;
+    let options = SetupOptions {
+        max_readings: args.readings,
+        max_setups: args.setups,
+        select: SelectOptions {
+            criterion: criterion(args.criterion),
+            max_exchanges: 400,
+            ..SelectOptions::default()
+        },
+        seed: args.seed,
+        ..SetupOptions::default()
+    };
+    let d = design_setups(model, sockets, cands, &constraints, &options, &|s| {
+        ctx.stage(s.to_string())
+    })
+    .map_err(|e| match e {
+        crate::calib::CalibError::Invalid { .. } | crate::calib::CalibError::NoInformation(_) => {
+            usage_error(e.to_string())
+        }
+        other => anyhow::Error::new(other),
+    })?;
+    ctx.stage("writing the design");
+    let dir = &args.out;
+    let robot_toml = format!(
+        "# {} with one sensor per setup of cpm design {} (see setup_sheet.md)\n\n{}",
+        robot.file,
+        env!("CARGO_PKG_VERSION"),
+        with_sensors(robot, &d.sensors())?
+    );
+    let (max_base, max_platform) = d.max_cone_deg(&robot.table);
+    let (moves, bars) = d.remounts();
+    let summary = json!({
+        "robot": robot.file,
+        "limited": true,
+        "setups": d.setups.iter().map(|s| json!({
+            "sensor": s.name,
+            "base_socket": s.base.name,
+            "platform_socket": s.platform.name,
+            "bar_mm": s.bar_mm,
+            "window_mm": [s.window_mm.0, s.window_mm.1],
+            "poses": s.poses.len(),
+            "travel_mm": s.travel_mm(),
+            "min_clearance_mm": s.min_clearance_mm(),
+            "plan": format!("plans/{}.csv", s.name),
+        })).collect::<Vec<_>>(),
+        "readings": d.num_readings(),
+        "candidate_poses": d.candidate_poses,
+        "candidate_readings": d.candidate_readings,
+        "criterion": format!("{:?}", d.criterion),
+        "rank": d.indices.rank,
+        "parameters": d.indices.num_params,
+        "sigma_um": d.indices.sigma_um,
+        "crlb_rms_um": d.indices.crlb_rms_um,
+        "crlb_max_um": d.indices.crlb_max_um,
+        "max_travel_mm": d.max_travel_mm(),
+        "min_clearance_mm": d.min_clearance_mm(),
+        "max_base_cone_deg": max_base,
+        "max_platform_cone_deg": max_platform,
+        "socket_moves": moves,
+        "bar_changes": bars,
+        "constraints": {
+            "gauge": constraints.gauge.kind.name(),
+            "stroke_mm": stroke,
+            "shortest_mm": constraints.gauge.shortest_mm,
+            "longest_mm": constraints.gauge.longest_mm,
+            "bars_mm": constraints.gauge.bars_mm,
+            "clearance_mm": constraints.clearance.gauge_link_mm,
+            "cone_deg": args.cone_deg,
+        },
+        "log": d.log,
+    });
+    let mut set = OutputSet::new();
+    set.add(dir.join("robot.toml"), robot_toml);
+    set.add(dir.join("setup_sheet.md"), d.setup_sheet_md(&robot.table));
+    set.add(dir.join("setup_sheet.csv"), d.setup_sheet_csv());
+    for (k, s) in d.setups.iter().enumerate() {
+        set.add(
+            dir.join("plans").join(format!("{}.csv", s.name)),
+            d.setup_poses_csv(k),
+        );
+    }
+    set.add(
+        dir.join("design.json"),
+        serde_json::to_string_pretty(&summary)?,
+    );
+    let mut r = String::from("# Calibration design under an instrument's limits\n\n");
+    r.push_str(&format!(
+        "- Robot: `{}`; {} setups, {} readings ({:?} criterion; {} candidate poses within the joint limits, {} candidate readings).\n- Rank {} of {}; Cramér-Rao bounds for {} um of sensor noise: RMS {:.3} um, worst parameter {:.3} um.\n- Largest gauge travel in a setup {:.1} mm (stroke {} mm); smallest gauge-link clearance {:.1} mm (at least {} mm); largest cone angle {:.1} deg (base), {:.1} deg (platform), at most {} deg.\n\n",
+        robot.file, d.setups.len(), d.num_readings(), d.criterion, d.candidate_poses, d.candidate_readings,
+        d.indices.rank, d.indices.num_params, d.indices.sigma_um, d.indices.crlb_rms_um, d.indices.crlb_max_um,
+        d.max_travel_mm(), stroke, d.min_clearance_mm(), args.clearance_mm, max_base, max_platform, args.cone_deg
+    ));
+    r.push_str("## How it was chosen\n\n");
+    for l in &d.log {
+        r.push_str(&format!("- {l}\n"));
+    }
+    r.push_str("\n## Files\n\n- `setup_sheet.md`, `setup_sheet.csv`: what to mount, then which poses to drive, setup by setup.\n- `plans/<setup>.csv`: each setup's poses (`cpm simulate --plan plans/<setup>.csv --sensors <setup>`).\n- `robot.toml`: the robot description with one sensor per setup: measure each setup into its own readings file, then `cpm calibrate --robot robot.toml --data s01.csv --data s02.csv ...`.\n");
+    set.add(dir.join("report.md"), r);
+    let written = common::commit(set, &dir.display().to_string())?;
+    ctx.finish();
+    if args.json {
+        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&summary)?)?;
+    } else {
+        writeln!(
+            ctx.out,
+            "{} setups, {} readings; rank {} of {}; Cramér-Rao RMS {:.3} um for {} um noise; max travel {:.1} mm, min clearance {:.1} mm",
+            d.setups.len(),
+            d.num_readings(),
+            d.indices.rank,
+            d.indices.num_params,
+            d.indices.crlb_rms_um,
+            d.indices.sigma_um,
+            d.max_travel_mm(),
+            d.min_clearance_mm()
         )?;
         for w in &written {
             writeln!(ctx.out, "wrote {}", w.display())?;

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 fn usage() -> ExitCode {
     eprintln!(
-        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N]   run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--seed N]    implicit-loop calibration of a simulated N-pose campaign (16 socket pairs); one JSON line\n  scale --sweep [--nested-max N]           10^3, 10^4, 10^5 poses side by side (nested too up to N, default 10^5)"
+        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N] [--limited off|setups=N,minimax=N,mc=N,exchanges=N,projections=N,windows=N,tradeoff=0|1]\n                                           run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--seed N]    implicit-loop calibration of a simulated N-pose campaign (16 socket pairs); one JSON line\n  scale --sweep [--nested-max N]           10^3, 10^4, 10^5 poses side by side (nested too up to N, default 10^5)"
     );
     ExitCode::from(2)
 }
@@ -189,6 +189,37 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
     while let Some(a) = it.next() {
         match (a.as_str(), it.next()) {
             ("--out", Some(v)) => out = PathBuf::from(v),
+            ("--limited", Some(v)) => {
+                // Knobs of the campaign under limits: setups=N, minimax=N, mc=N, exchanges=N,
+                // projections=N, tradeoff=0|1 (comma-separated), or `off`.
+                if v == "off" {
+                    options.limited = None;
+                    continue;
+                }
+                let l = options.limited.get_or_insert_with(Default::default);
+                for kv in v.split(',') {
+                    let Some((k, n)) = kv
+                        .split_once('=')
+                        .and_then(|(k, n)| Some((k, n.parse::<usize>().ok()?)))
+                    else {
+                        eprintln!("error: --limited expects key=N pairs, got `{kv}`");
+                        return ExitCode::from(2);
+                    };
+                    match k {
+                        "setups" => l.max_setups = n,
+                        "minimax" => l.search.minimax_rounds = n,
+                        "mc" => l.monte_carlo_runs = n,
+                        "exchanges" => l.search.select.max_exchanges = n,
+                        "projections" => l.search.projections = n,
+                        "windows" => l.search.windows_per_pair = n,
+                        "tradeoff" => l.tradeoff = n != 0,
+                        _ => {
+                            eprintln!("error: --limited: unknown key `{k}`");
+                            return ExitCode::from(2);
+                        }
+                    }
+                }
+            }
             ("--seed", Some(v)) => match v.parse() {
                 Ok(s) => options.seed = s,
                 Err(_) => {
@@ -215,6 +246,10 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::FAILURE;
     }
+    if let Err(e) = cpm::paper_report::render_limited(&r, &out, &mut files) {
+        eprintln!("error: the campaign under limits: {e}");
+        return ExitCode::FAILURE;
+    }
     match files.commit() {
         Ok(written) => {
             let summary = cpm::paper_report::summary_json(&r);
@@ -232,6 +267,24 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
                 summary["designed"]["readings"], summary["designed"]["rank"],
                 summary["designed"]["rms_error_um"], summary["designed"]["max_error_um"], summary["designed"]["crlb_rms_um"]
             );
+            let l = &summary["limited"];
+            if !l.is_null() {
+                println!(
+                    "under limits: {} readings, {} setups, rank {} of 36, max travel {:.1} mm, min clearance {:.1} mm, max cone {:.1} / {:.1} deg; Monte Carlo RMS error {} um, worst {} um, Cramér-Rao RMS {} um",
+                    l["readings"], l["setups"], l["rank"],
+                    l["max_travel_mm"].as_f64().unwrap_or(f64::NAN),
+                    l["min_clearance_mm"].as_f64().unwrap_or(f64::NAN),
+                    l["max_base_cone_deg"].as_f64().unwrap_or(f64::NAN),
+                    l["max_platform_cone_deg"].as_f64().unwrap_or(f64::NAN),
+                    l["monte_carlo"]["rms_error_um"], l["monte_carlo"]["max_error_um_worst"], l["crlb_rms_um"]
+                );
+                for t in l["tradeoff"].as_array().into_iter().flatten() {
+                    println!(
+                        "  stroke {:>5} mm: Cramér-Rao RMS {} um (worst {} um), {} readings, {} setups",
+                        t["stroke_mm"], t["crlb_rms_um"], t["crlb_max_um"], t["readings"], t["setups"]
+                    );
+                }
+            }
             for w in written {
                 println!("wrote {}", w.display());
             }

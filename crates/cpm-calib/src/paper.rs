@@ -185,6 +185,224 @@ pub struct PaperOptions {
     pub validation_poses: usize,
     /// Damping of the paper-design fit. Default: the paper's cubic-interpolation rule.
     pub paper_damping: cpm_lm::Damping,
+    /// The campaign under an instrument's limits (and its stroke trade-off); `None` to skip.
+    /// Default [`LimitedOptions::default`].
+    pub limited: Option<LimitedOptions>,
+}
+
+/// Settings of the campaign under limits (issue: experiments a real instrument can run).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LimitedOptions {
+    /// Gauge stroke per setup, mm. Default 200.
+    pub stroke_mm: f64,
+    /// Smallest gauge-link clearance, mm. Default 30.
+    pub clearance_mm: f64,
+    /// Largest joint cone angle (base and platform), deg. Default 40.
+    pub cone_deg: f64,
+    /// Most setups. Default 16.
+    pub max_setups: usize,
+    /// Monte Carlo runs (seeds `seed + 3000 ..`). Default 100.
+    pub monte_carlo_runs: usize,
+    /// The stroke trade-off: designs for 2 (a ballbar), 20, 50, 100 and 200 mm and their
+    /// Cramér-Rao bounds. Default true.
+    pub tradeoff: bool,
+    /// The search (its reading budget and seed are replaced by the reproduction's).
+    /// Default [`crate::design::SetupOptions::default`].
+    pub search: crate::design::SetupOptions,
+    /// Most exchanges of the trade-off's other strokes (lighter searches). Default 60.
+    pub tradeoff_exchanges: usize,
+}
+
+impl Default for LimitedOptions {
+    fn default() -> Self {
+        Self {
+            stroke_mm: 200.0,
+            clearance_mm: 30.0,
+            cone_deg: 40.0,
+            max_setups: 16,
+            monte_carlo_runs: 100,
+            tradeoff: true,
+            search: crate::design::SetupOptions::default(),
+            tradeoff_exchanges: 60,
+        }
+    }
+}
+
+/// Strokes of the trade-off table, mm.
+pub const TRADEOFF_STROKES_MM: [f64; 5] = [2.0, 20.0, 50.0, 100.0, 200.0];
+
+/// One row of the stroke trade-off.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TradeoffRow {
+    /// Gauge stroke per setup, mm.
+    pub stroke_mm: f64,
+    /// Setups used.
+    pub setups: usize,
+    /// Readings used.
+    pub readings: usize,
+    /// Rank of the design (of 36).
+    pub rank: usize,
+    /// Cramér-Rao RMS over the 36 errors, um.
+    pub crlb_rms_um: f64,
+    /// Largest per-parameter Cramér-Rao standard deviation, um.
+    pub crlb_max_um: f64,
+    /// Largest gauge travel used in a setup, mm.
+    pub max_travel_mm: f64,
+    /// Smallest gauge-link clearance met, mm.
+    pub min_clearance_mm: f64,
+}
+
+/// The campaign under limits.
+#[derive(Debug, Clone)]
+pub struct LimitedOutcome {
+    /// Options used.
+    pub options: LimitedOptions,
+    /// The design (setups, their poses, figures).
+    pub design: crate::design::SetupDesign,
+    /// Largest base and platform joint cone angles over the readings, deg.
+    pub max_cone_deg: (f64, f64),
+    /// The simulated readings of this seed (setup after setup).
+    pub data: crate::Campaign,
+    /// Estimates of this seed against Table 2: (RMS, max), um.
+    pub error_vs_truth_um: Option<(f64, f64)>,
+    /// Monte Carlo study, when asked for.
+    pub monte_carlo: Option<MonteCarloReport>,
+    /// The stroke trade-off, when asked for.
+    pub tradeoff: Vec<TradeoffRow>,
+}
+
+fn limited_campaign(
+    model: &MeasurementModel,
+    candidates: &[Pose],
+    options: &PaperOptions,
+    limited: &LimitedOptions,
+    truth: &[f64],
+    ident: &IdentifyOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<LimitedOutcome, CalibError> {
+    use crate::design::limits::{Clearance, Constraints, Gauge, JointLimits};
+    use crate::design::{design_setups, SetupOptions};
+    let sigma = options.noise.sigma_um();
+    let constraints = |stroke: f64| Constraints {
+        gauge: Gauge {
+            stroke_mm: stroke,
+            sigma_um: sigma,
+            ..if stroke <= 2.0 {
+                Gauge::ballbar()
+            } else {
+                Gauge::default()
+            }
+        },
+        clearance: Clearance {
+            gauge_link_mm: limited.clearance_mm,
+            link_link_mm: None,
+        },
+        joints: JointLimits {
+            base_cone_deg: limited.cone_deg,
+            platform_cone_deg: limited.cone_deg,
+        },
+    };
+    let setup_options = SetupOptions {
+        max_readings: options.design.max_readings,
+        max_setups: limited.max_setups,
+        seed: options.seed + 2,
+        ..limited.search
+    };
+    let sockets = SocketCandidates::paper_cubic();
+    let run = |stroke: f64, opts: &SetupOptions, progress: &mut dyn FnMut(&str)| {
+        let cell = std::cell::RefCell::new(progress);
+        design_setups(
+            model,
+            &sockets,
+            candidates,
+            &constraints(stroke),
+            opts,
+            &|stage: &str| (cell.borrow_mut())(stage),
+        )
+    };
+    progress(&format!(
+        "campaign under limits: stroke {} mm, clearance {} mm, cones {} deg",
+        limited.stroke_mm, limited.clearance_mm, limited.cone_deg
+    ));
+    let design = run(limited.stroke_mm, &setup_options, progress)?;
+    let dmodel = design.model(model);
+    let skeleton = design.campaign();
+    let sim = SimulationOptions {
+        noise: options.noise,
+        repeats: 1,
+        seed: options.seed,
+    };
+    let data = crate::simulate_campaign(&dmodel, truth, &skeleton, &sim)?;
+    let cal = identify(&dmodel, &data, ident)?;
+    let det: Vec<(f64, f64)> = cal
+        .estimate_um
+        .iter()
+        .zip(truth)
+        .filter_map(|(e, t)| e.map(|e| (e, *t)))
+        .collect();
+    let error_vs_truth_um = (!det.is_empty()).then(|| {
+        let (a, b): (Vec<f64>, Vec<f64>) = det.into_iter().unzip();
+        rms_max_diff(&a, &b)
+    });
+    let monte_carlo = if limited.monte_carlo_runs > 0 {
+        progress(&format!(
+            "campaign under limits: Monte Carlo, {} simulated calibrations",
+            limited.monte_carlo_runs
+        ));
+        Some(crate::design::monte_carlo_campaign(
+            &dmodel,
+            truth,
+            &skeleton,
+            ident,
+            &MonteCarloOptions {
+                runs: limited.monte_carlo_runs,
+                seed: options.seed + 3000,
+                noise: options.noise,
+            },
+            &|_, _| {},
+        )?)
+    } else {
+        None
+    };
+    let mut tradeoff = Vec::new();
+    if limited.tradeoff {
+        // Lighter searches for the table: fewer exchanges.
+        let quick = SetupOptions {
+            select: crate::design::SelectOptions {
+                max_exchanges: limited.tradeoff_exchanges,
+                ..setup_options.select
+            },
+            ..setup_options
+        };
+        for stroke in TRADEOFF_STROKES_MM {
+            progress(&format!("stroke trade-off: {stroke} mm"));
+            let d = if stroke == limited.stroke_mm {
+                design.clone()
+            } else {
+                run(stroke, &quick, progress)?
+            };
+            tradeoff.push(TradeoffRow {
+                stroke_mm: stroke,
+                setups: d.setups.len(),
+                readings: d.num_readings(),
+                rank: d.indices.rank,
+                crlb_rms_um: d.indices.crlb_rms_um,
+                crlb_max_um: d.indices.crlb_max_um,
+                max_travel_mm: d.max_travel_mm(),
+                min_clearance_mm: d.min_clearance_mm(),
+            });
+        }
+    }
+    let max_cone_deg = design.max_cone_deg(&model.nominal);
+    Ok(LimitedOutcome {
+        options: *limited,
+        design,
+        max_cone_deg,
+        data,
+        error_vs_truth_um,
+        monte_carlo,
+        tradeoff,
+    })
 }
 
 impl Default for PaperOptions {
@@ -201,6 +419,7 @@ impl Default for PaperOptions {
             monte_carlo_runs: 100,
             validation_poses: 200,
             paper_damping: cpm_lm::Damping::CubicInterpolation,
+            limited: Some(LimitedOptions::default()),
         }
     }
 }
@@ -253,6 +472,8 @@ pub struct PaperReproduction {
     pub handmade_indices: ObservabilityIndices,
     /// Monte Carlo study of the designed campaign, when asked for.
     pub monte_carlo: Option<MonteCarloReport>,
+    /// The campaign under an instrument's limits, when asked for.
+    pub limited: Option<LimitedOutcome>,
 }
 
 fn outcome(
@@ -424,6 +645,18 @@ pub fn reproduce(
     };
     progress("designed campaign: the calibration of this seed");
     let designed = outcome(&dmodel, dplan, &truth, &sim, &dident, &validation)?;
+    let limited = match &options.limited {
+        Some(l) => Some(limited_campaign(
+            &model,
+            &candidates,
+            options,
+            l,
+            &truth,
+            &dident,
+            &mut progress,
+        )?),
+        None => None,
+    };
     Ok(PaperReproduction {
         options: *options,
         paper,
@@ -436,5 +669,6 @@ pub fn reproduce(
         design,
         handmade_indices,
         monte_carlo,
+        limited,
     })
 }

@@ -12,6 +12,10 @@
 //!   (rotations about the sockets) a layout leaves;
 //! - [`monte_carlo`](mod@monte_carlo): many simulated campaigns and calibrations; RMS error, bias and
 //!   efficiency against the Cramér-Rao bound;
+//! - [`limits`]: the instrument and the machine's limits (gauge stroke and bars, gauge-link
+//!   clearance, joint cone angles) and the exact distance between axes;
+//! - [`setups`]: design under those limits: setups (socket pair + bar), the poses each drives,
+//!   a setup sheet ([`design_setups`]);
 //! - [`design()`]: all of it together: sockets and poses jointly, for a reading budget, with the
 //!   files a user drives the machine with ([`Design::poses_csv`], [`Design::sockets_csv`],
 //!   [`Design::sensors_toml`]).
@@ -42,8 +46,10 @@
 //! ```
 pub mod candidates;
 pub mod indices;
+pub mod limits;
 pub mod monte_carlo;
 pub mod select;
+pub mod setups;
 pub mod sockets;
 
 use cpm_geometry::{Pose, Sensor};
@@ -51,8 +57,10 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 pub use indices::{observability_indices, Criterion, ObservabilityIndices};
-pub use monte_carlo::{monte_carlo, MonteCarloOptions, MonteCarloReport};
+pub use limits::{Clearance, Constraints, Gauge, GaugeKind, JointLimits};
+pub use monte_carlo::{monte_carlo, monte_carlo_campaign, MonteCarloOptions, MonteCarloReport};
 pub use select::{select_blocks, SelectOptions, Selection};
+pub use setups::{design_setups, Setup, SetupDesign, SetupOptions};
 pub use sockets::{gauge_freedoms, GaugeReport, Socket, SocketCandidates};
 
 use crate::{identification_jacobian, CalibError, MeasurementModel, Plan};

@@ -329,3 +329,54 @@ pub fn monte_carlo(
         progress,
     ))
 }
+
+/// [`monte_carlo`] for a campaign skeleton instead of a plan (readings need not be every
+/// sensor at every pose, e.g. a [`super::SetupDesign::campaign`]): `options.runs` campaigns
+/// simulated from `skeleton` on the machine with installation errors `truth_um`, each
+/// identified, against the Cramér-Rao bounds of the skeleton at the nominal geometry.
+pub fn monte_carlo_campaign(
+    model: &MeasurementModel,
+    truth_um: &[f64],
+    skeleton: &crate::Campaign,
+    identify_options: &IdentifyOptions,
+    options: &MonteCarloOptions,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<MonteCarloReport, CalibError> {
+    if options.runs == 0 {
+        return Err(CalibError::invalid("runs", "must be at least 1"));
+    }
+    let sigma = options.noise.sigma_um();
+    if !(sigma.is_finite() && sigma > 0.0) {
+        return Err(CalibError::invalid(
+            "noise",
+            "a Monte Carlo study needs noise with a positive standard deviation",
+        ));
+    }
+    let ident = crate::identifiability(model, skeleton, sigma, &RankOptions::default())?;
+    let crlb: Vec<f64> = ident
+        .crlb_std_um
+        .iter()
+        .map(|c| c.unwrap_or(f64::INFINITY))
+        .collect();
+    let opts = IdentifyOptions {
+        sigma_um: Some(sigma),
+        ..identify_options.clone()
+    };
+    Ok(monte_carlo_with(
+        truth_um,
+        &crlb,
+        options.runs,
+        options.seed,
+        |seed| {
+            let sim = SimulationOptions {
+                noise: options.noise,
+                repeats: 1,
+                seed,
+            };
+            let data = crate::simulate_campaign(model, truth_um, skeleton, &sim).ok()?;
+            let cal = identify(model, &data, &opts).ok()?;
+            Some(cal.estimate_um)
+        },
+        progress,
+    ))
+}
