@@ -110,7 +110,11 @@ fn readme_walk_through_runs_as_written() {
             .filter(|l| !l.starts_with('#') && !l.trim().is_empty())
             .count()
     };
-    assert_eq!(count(&commands), count(&targets), "one command row per target");
+    assert_eq!(
+        count(&commands),
+        count(&targets),
+        "one command row per target"
+    );
 }
 
 #[test]

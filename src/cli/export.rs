@@ -75,7 +75,10 @@ impl Units {
 /// Writes a number for a HAL or INI file: fixed decimals, never `-0`.
 fn num(v: f64, decimals: usize) -> String {
     let s = format!("{:.decimals$}", v + 0.0);
-    if s.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') {
+    if s.trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
         s.trim_start_matches('-').to_string()
     } else {
         s
@@ -138,7 +141,10 @@ pub fn linuxcnc_in(robot: &Robot, units: Units) -> String {
         for (i, l) in robot.table.links.iter().enumerate() {
             let p = if side == 0 { l.base_mm } else { l.platform_mm };
             for (a, axis) in ["x", "y", "z"].iter().enumerate() {
-                s.push_str(&format!("setp genhexkins.{name}.{i}.{axis} {}\n", num(p[a] / k, 6)));
+                s.push_str(&format!(
+                    "setp genhexkins.{name}.{i}.{axis} {}\n",
+                    num(p[a] / k, 6)
+                ));
             }
         }
     }
@@ -154,14 +160,24 @@ pub fn linuxcnc_in(robot: &Robot, units: Units) -> String {
              # The lines below assume each joint axis lies in its base / platform plane, tangent to the circle\n\
              # through the joint around the frame's z axis; check them against the machine, then uncomment.\n"
         ));
-        s.push_str(&format!("# setp genhexkins.screw-lead {}\n", num(lead / k, 6)));
+        s.push_str(&format!(
+            "# setp genhexkins.screw-lead {}\n",
+            num(lead / k, 6)
+        ));
         for (side, name) in [(0, "base-n"), (1, "platform-n")] {
             for (i, l) in robot.table.links.iter().enumerate() {
                 let p = if side == 0 { l.base_mm } else { l.platform_mm };
                 let r = (p[0] * p[0] + p[1] * p[1]).sqrt();
-                let t = if r > 0.0 { [-p[1] / r, p[0] / r, 0.0] } else { [1.0, 0.0, 0.0] };
+                let t = if r > 0.0 {
+                    [-p[1] / r, p[0] / r, 0.0]
+                } else {
+                    [1.0, 0.0, 0.0]
+                };
                 for (a, axis) in ["x", "y", "z"].iter().enumerate() {
-                    s.push_str(&format!("# setp genhexkins.{name}.{i}.{axis} {}\n", num(t[a], 6)));
+                    s.push_str(&format!(
+                        "# setp genhexkins.{name}.{i}.{axis} {}\n",
+                        num(t[a], 6)
+                    ));
                 }
             }
         }
@@ -193,7 +209,10 @@ pub fn linuxcnc_ini(robot: &Robot, units: Units) -> String {
     );
     for (i, l) in robot.description.links.iter().enumerate() {
         s.push_str(&format!("\n[JOINT_{i}]\n; cpm link {}\n", i + 1));
-        s.push_str(&format!("HOME_OFFSET = {}\n", num(l.length_at_zero_mm / k, 6)));
+        s.push_str(&format!(
+            "HOME_OFFSET = {}\n",
+            num(l.length_at_zero_mm / k, 6)
+        ));
         s.push_str(&format!("SCALE = {}\n", num(k / l.mm_per_unit, 9)));
         if let Some(b) = backlash.as_ref().and_then(|b| b.get(i)) {
             let lash_mm = -2.0 * b * 1e-3;
@@ -224,7 +243,10 @@ pub fn run(args: &ExportArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             linuxcnc_in(&robot, args.units)
         }
     };
-    let ini = args.ini.as_ref().map(|p| (p, linuxcnc_ini(&robot, args.units)));
+    let ini = args
+        .ini
+        .as_ref()
+        .map(|p| (p, linuxcnc_ini(&robot, args.units)));
     ctx.finish();
     let mut set = OutputSet::new();
     if let Some(out) = &args.out {

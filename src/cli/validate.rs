@@ -64,7 +64,10 @@ fn rms(v: &[f64]) -> f64 {
 }
 
 fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(f64::NAN, |m, x| if m.is_nan() { x.abs() } else { m.max(x.abs()) })
+    v.iter().fold(
+        f64::NAN,
+        |m, x| if m.is_nan() { x.abs() } else { m.max(x.abs()) },
+    )
 }
 
 /// The groups (sensor names, or `file (tracker)`) and their errors for one robot.
@@ -81,14 +84,15 @@ fn errors_of(
     let mut names: Vec<String> = Vec::new();
     let mut groups: Vec<Errors> = Vec::new();
     let mut simulated = false;
-    let group_of = |name: String, names: &mut Vec<String>, groups: &mut Vec<Errors>| {
-        match names.iter().position(|n| *n == name) {
-            Some(i) => i,
-            None => {
-                names.push(name);
-                groups.push(Errors::default());
-                names.len() - 1
-            }
+    let group_of = |name: String, names: &mut Vec<String>, groups: &mut Vec<Errors>| match names
+        .iter()
+        .position(|n| *n == name)
+    {
+        Some(i) => i,
+        None => {
+            names.push(name);
+            groups.push(Errors::default());
+            names.len() - 1
         }
     };
     for path in paths {
@@ -105,11 +109,17 @@ fn errors_of(
         let campaign: &Campaign = &file.campaign;
         simulated |= campaign.simulated;
         let prepared = Prepared::new(&model, campaign).map_err(|e| {
-            super::trouble(format!("{}: predicting with {}: {e}", file.file, robot.file))
+            super::trouble(format!(
+                "{}: predicting with {}: {e}",
+                file.file, robot.file
+            ))
         })?;
         let zeros = vec![0.0; model.num_params()];
         let predicted = predict(&model, &prepared, campaign, &zeros, None).map_err(|e| {
-            super::trouble(format!("{}: predicting with {}: {e}", file.file, robot.file))
+            super::trouble(format!(
+                "{}: predicting with {}: {e}",
+                file.file, robot.file
+            ))
         })?;
         let observed = campaign.observations();
         let nr = campaign.readings.len();
@@ -119,11 +129,7 @@ fn errors_of(
             groups[g].values_um.push((observed[k] - predicted[k]) * 1e3);
         }
         if !campaign.pose_measurements.is_empty() {
-            let g = group_of(
-                format!("{} (tracker)", file.file),
-                &mut names,
-                &mut groups,
-            );
+            let g = group_of(format!("{} (tracker)", file.file), &mut names, &mut groups);
             for q in 0..campaign.pose_measurements.len() {
                 for a in 0..3 {
                     let k = nr + 6 * q + a;
@@ -156,7 +162,13 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     ctx.stage("reading the robot descriptions");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     let reference = common::load_robot(&args.reference, ctx)?;
-    let sensors = |r: &Robot| r.table.sensors.iter().map(|s| s.name.clone()).collect::<Vec<_>>();
+    let sensors = |r: &Robot| {
+        r.table
+            .sensors
+            .iter()
+            .map(|s| s.name.clone())
+            .collect::<Vec<_>>()
+    };
     if robot.num_links() != reference.num_links() {
         return Err(super::input_error(format!(
             "{} has {} links, the reference {} has {}",
@@ -168,13 +180,14 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     }
     ctx.stage("predicting the held-out measurements");
     let (names, cal, simulated) = errors_of(&robot, &reference, &args.data)?;
-    let (ref_names, reference_errors, _) = errors_of(&reference, &reference, &args.data).map_err(|e| {
-        e.context(format!(
-            "reading the held-out data against the reference {} (its sensors: {})",
-            reference.file,
-            sensors(&reference).join(", ")
-        ))
-    })?;
+    let (ref_names, reference_errors, _) =
+        errors_of(&reference, &reference, &args.data).map_err(|e| {
+            e.context(format!(
+                "reading the held-out data against the reference {} (its sensors: {})",
+                reference.file,
+                sensors(&reference).join(", ")
+            ))
+        })?;
     if names != ref_names {
         return Err(super::input_error(format!(
             "the robot and the reference name different sensors ({} / {})",
@@ -279,7 +292,10 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         .map_err(|e| super::trouble(e.to_string()))?;
         md.push_str("\n![held-out RMS per group](validation.svg)\n");
         let mut set = OutputSet::new();
-        set.add(dir.join("validation.json"), serde_json::to_string_pretty(&value)?);
+        set.add(
+            dir.join("validation.json"),
+            serde_json::to_string_pretty(&value)?,
+        );
         set.add(dir.join("validation.md"), md.clone());
         set.add(dir.join("validation.svg"), svg);
         written = common::commit(set, &dir.display().to_string())?;

@@ -125,7 +125,9 @@ impl<P: Problem> DenseJacobian for NumericJacobian<P> {
         let (m, n) = (self.problem.num_residuals(), self.problem.num_params());
         let rel = self.step.unwrap_or(self.scheme.default_step());
         if !(rel.is_finite() && rel > 0.0) {
-            return Err(format!("finite differences: step must be finite and > 0, got {rel}").into());
+            return Err(
+                format!("finite differences: step must be finite and > 0, got {rel}").into(),
+            );
         }
         self.xs.clear();
         self.xs.extend_from_slice(x);
@@ -211,7 +213,11 @@ mod tests {
                     for c in 0..2 {
                         let scale = (0..t.len()).map(|i| e[(i, c)].abs()).fold(1e-300, f64::max);
                         let h = scheme.default_step() * x[c].abs().max(f64::MIN_POSITIVE);
-                        let h = if x[c] == 0.0 { scheme.default_step() } else { h };
+                        let h = if x[c] == 0.0 {
+                            scheme.default_step()
+                        } else {
+                            h
+                        };
                         let rounding = 4.0 * f64::EPSILON * r_max / h / scale;
                         for i in 0..t.len() {
                             let err = (j[(i, c)] - e[(i, c)]).abs() / scale;

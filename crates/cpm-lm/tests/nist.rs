@@ -142,7 +142,10 @@ fn nist_strd_with_finite_difference_jacobians() {
         let d = load(name);
         for start in [&d.start1, &d.start2] {
             runs += 1;
-            for (k, scheme) in [Difference::Forward, Difference::Central].into_iter().enumerate() {
+            for (k, scheme) in [Difference::Forward, Difference::Central]
+                .into_iter()
+                .enumerate()
+            {
                 let mut p = NumericJacobian::new(NistProblem::new(&d), scheme);
                 let mut x = start.clone();
                 let report = minimize(&mut p, &mut x, &Options::default()).unwrap();
@@ -160,6 +163,14 @@ fn nist_strd_with_finite_difference_jacobians() {
         worst[1],
         sum[1] / runs as f64
     );
-    assert!(worst[1] >= 6.0, "central differences: min LRE {:.2}", worst[1]);
-    assert!(worst[0] >= 4.5, "forward differences: min LRE {:.2}", worst[0]);
+    assert!(
+        worst[1] >= 6.0,
+        "central differences: min LRE {:.2}",
+        worst[1]
+    );
+    assert!(
+        worst[0] >= 4.5,
+        "forward differences: min LRE {:.2}",
+        worst[0]
+    );
 }
