@@ -90,6 +90,14 @@ fn readme_walk_through_runs_as_written() {
     ] {
         assert!(dir.join(f).is_file(), "{f} was not written");
     }
+    // Provenance: the simulated file names the effect it carries.
+    let data = std::fs::read_to_string(dir.join("data.csv")).unwrap();
+    let header = data.lines().next().unwrap();
+    assert!(
+        header.starts_with("# simulated by cpm")
+            && header.contains("--truth-effect backlash=-8,6,-10,5,-7,9"),
+        "{header}"
+    );
     // The refined calibration predicts the held-out campaign better than the nominal robot.
     let v = json(&dir.join("validation/validation.json"));
     let (c, r) = (
