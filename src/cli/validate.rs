@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use clap::Args;
 use serde_json::json;
 
-use super::common::{self, RobotArg};
+use super::common;
 use super::{Ctx, Outcome};
 use crate::calib::model::{predict, Prepared};
 use crate::calib::{Campaign, MeasurementModel};
@@ -28,16 +28,32 @@ use crate::output::OutputSet;
     after_help = "Examples:\n  cpm validate --robot cal/calibrated.toml --reference examples/hexapod_66.toml --data held_out.csv\n  cpm validate --robot cal/calibrated.toml --reference robot.toml --data a.csv --data b.csv --out validation/ --json"
 )]
 pub struct ValidateArgs {
-    /// The calibrated robot description (`calibrated.toml` of `cpm calibrate` or `cpm refine`).
-    #[command(flatten)]
-    pub robot: RobotArg,
+    /// The calibrated robot description (`calibrated.toml` of `cpm calibrate` or `cpm refine`);
+    /// not used with `--commands`.
+    #[arg(long, value_name = "ROBOT.toml", required_unless_present = "commands")]
+    pub robot: Option<PathBuf>,
     /// The reference robot the calibration is judged against, usually the nominal description
     /// the fit started from.
     #[arg(long, value_name = "REFERENCE.toml")]
     pub reference: PathBuf,
     /// Held-out measurement files (gauge readings or tracker poses); repeatable.
-    #[arg(long, value_name = "DATA.csv", required = true)]
+    #[arg(long, value_name = "DATA.csv", required_unless_present = "commands")]
     pub data: Vec<PathBuf>,
+    /// Check a compensation end to end in simulation instead: the machine `--truth` executes
+    /// these commands (`cpm compensate`'s output), and the pose it reaches is compared with
+    /// each target; the reference is the same machine commanded with the reference robot's
+    /// inverse kinematics (no compensation).
+    #[arg(
+        long,
+        value_name = "COMMANDS.csv",
+        requires = "truth",
+        conflicts_with = "data"
+    )]
+    pub commands: Option<PathBuf>,
+    /// The true machine for `--commands`: a robot description (geometry, link reading models
+    /// and `[calibration.known_effects]`), e.g. the `--truth` of `cpm simulate`.
+    #[arg(long, value_name = "TRUTH.toml", requires = "commands")]
+    pub truth: Option<PathBuf>,
     /// Also write validation.json, validation.md and validation.svg into this directory.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
@@ -154,13 +170,181 @@ fn errors_of(
     Ok((names, groups, simulated))
 }
 
+/// Pose errors (position um per target, orientation urad per target) the machine `truth`
+/// reaches when it executes link `readings` (its own reading models turn them into lengths,
+/// its known effects apply) aiming at `targets`.
+fn reached_errors(
+    truth: &Robot,
+    targets: &[crate::io::PoseRow],
+    readings: &[Vec<f64>],
+) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+    let links = &truth.description.links;
+    let campaign = Campaign {
+        poses: targets.iter().map(|t| t.pose).collect(),
+        commanded_lengths_mm: Some(
+            readings
+                .iter()
+                .map(|u| {
+                    u.iter()
+                        .zip(links)
+                        .map(|(u, l)| l.length_at_zero_mm + l.mm_per_unit * u)
+                        .collect()
+                })
+                .collect(),
+        ),
+        pose_measurements: targets
+            .iter()
+            .enumerate()
+            .map(|(j, t)| crate::calib::campaign::PoseMeasurement {
+                pose: j,
+                measured: t.pose,
+                time_s: t.time_s,
+            })
+            .collect(),
+        simulated: true,
+        ..Campaign::default()
+    };
+    let model = truth.model(&[]);
+    let prepared = Prepared::new(&model, &campaign).map_err(|e| {
+        super::trouble(format!(
+            "the machine {} executing the commands: {e}",
+            truth.file
+        ))
+    })?;
+    let predicted = predict(
+        &model,
+        &prepared,
+        &campaign,
+        &vec![0.0; model.num_params()],
+        None,
+    )
+    .map_err(|e| {
+        super::trouble(format!(
+            "the machine {} executing the commands: {e}",
+            truth.file
+        ))
+    })?;
+    let observed = campaign.observations();
+    let (mut position_um, mut orientation_urad) = (Vec::new(), Vec::new());
+    for q in 0..targets.len() {
+        let d = |a: usize| (predicted[6 * q + a] - observed[6 * q + a]) * 1e3;
+        position_um.push((d(0).powi(2) + d(1).powi(2) + d(2).powi(2)).sqrt());
+        orientation_urad.push((d(3).powi(2) + d(4).powi(2) + d(5).powi(2)).sqrt());
+    }
+    Ok((position_um, orientation_urad))
+}
+
+/// `cpm validate --commands`: a compensation checked end to end on a simulated machine.
+fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    let (Some(commands), Some(truth)) = (&args.commands, &args.truth) else {
+        return Err(super::usage_error("--commands needs --truth"));
+    };
+    let reference = common::load_robot(&args.reference, ctx)?;
+    let truth = common::load_robot(truth, ctx)?;
+    if truth.num_links() != reference.num_links() {
+        return Err(super::input_error(format!(
+            "{} has {} links, the reference {} has {}",
+            truth.file,
+            truth.num_links(),
+            reference.file,
+            reference.num_links()
+        )));
+    }
+    let rows = crate::io::read_commands_file(commands, truth.num_links())?;
+    let targets: Vec<crate::io::PoseRow> = rows.iter().map(|r| r.0.clone()).collect();
+    let compensated: Vec<Vec<f64>> = rows.iter().map(|r| r.1.clone()).collect();
+    // The same targets commanded with the reference robot's inverse kinematics.
+    let nominal: Vec<Vec<f64>> = targets
+        .iter()
+        .map(|t| {
+            crate::kinematics::ik::inverse_lengths(&reference.table, &t.pose)
+                .iter()
+                .zip(&reference.description.links)
+                .map(|(l, m)| (l - m.length_at_zero_mm) / m.mm_per_unit)
+                .collect()
+        })
+        .collect();
+    let (pos, rot) = reached_errors(&truth, &targets, &compensated)?;
+    let (pos_ref, rot_ref) = reached_errors(&truth, &targets, &nominal)?;
+    let summary = |p: &[f64], r: &[f64]| {
+        json!({
+            "position_rms_um": rms(p),
+            "position_max_um": max_abs(p),
+            "orientation_rms_urad": rms(r),
+            "orientation_max_urad": max_abs(r),
+        })
+    };
+    let value = json!({
+        "simulated": true,
+        "truth": truth.file,
+        "reference_robot": reference.file,
+        "commands": commands.display().to_string(),
+        "targets": targets.len(),
+        "compensated": summary(&pos, &rot),
+        "reference": summary(&pos_ref, &rot_ref),
+        "per_target": targets.iter().enumerate().map(|(j, t)| json!({
+            "pose": t.label,
+            "position_um": pos[j],
+            "orientation_urad": rot[j],
+            "reference_position_um": pos_ref[j],
+        })).collect::<Vec<_>>(),
+    });
+    let mut md = String::from("# Compensation checked on a simulated machine\n\n**SIMULATED: the machine is the description ");
+    md.push_str(&format!(
+        "`{}`, not a measurement.**\n\nIt executes `{}` (compensated) and, for reference, the inverse kinematics of `{}` (uncompensated), aiming at the same {} targets.\n\n| commands | position RMS (um) | position max (um) | orientation RMS (urad) | orientation max (urad) |\n|---|---|---|---|---|\n| compensated | {:.3} | {:.3} | {:.2} | {:.2} |\n| uncompensated | {:.3} | {:.3} | {:.2} | {:.2} |\n",
+        truth.file,
+        commands.display(),
+        reference.file,
+        targets.len(),
+        rms(&pos), max_abs(&pos), rms(&rot), max_abs(&rot),
+        rms(&pos_ref), max_abs(&pos_ref), rms(&rot_ref), max_abs(&rot_ref),
+    ));
+    ctx.finish();
+    let mut written = Vec::new();
+    if let Some(dir) = &args.out {
+        let mut set = OutputSet::new();
+        set.add(
+            dir.join("compensation.json"),
+            serde_json::to_string_pretty(&value)?,
+        );
+        set.add(dir.join("compensation.md"), md);
+        written = common::commit(set, &dir.display().to_string())?;
+    }
+    if args.json {
+        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&value)?)?;
+    } else {
+        writeln!(
+            ctx.out,
+            "SIMULATED machine {}: compensated position error RMS {:.3} um (max {:.3}), uncompensated {:.3} um (max {:.3}) over {} targets",
+            truth.file,
+            rms(&pos),
+            max_abs(&pos),
+            rms(&pos_ref),
+            max_abs(&pos_ref),
+            targets.len()
+        )?;
+        for w in &written {
+            writeln!(ctx.out, "wrote {}", w.display())?;
+        }
+    }
+    Ok(Outcome::Done)
+}
+
 /// Runs `cpm validate`.
 pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if let Some(out) = &args.out {
         common::check_out_dir(out)?;
     }
+    if args.commands.is_some() {
+        return run_commands(args, ctx);
+    }
     ctx.stage("reading the robot descriptions");
-    let robot = common::load_robot(&args.robot.robot, ctx)?;
+    let Some(robot) = &args.robot else {
+        return Err(super::usage_error(
+            "--robot is required (unless --commands is given)",
+        ));
+    };
+    let robot = common::load_robot(robot, ctx)?;
     let reference = common::load_robot(&args.reference, ctx)?;
     let sensors = |r: &Robot| {
         r.table

@@ -28,9 +28,10 @@ pub mod table;
 
 pub use calibration::{calibration_json, Provenance};
 pub use campaign::{
-    merge, read_data, read_data_file, read_data_from, read_pose_list, read_pose_list_file,
-    read_pose_list_from, read_pose_measurements, read_readings, write_commands, write_pose_list,
-    write_pose_measurements, write_readings, DataFile, Merged, PoseRow, ReadOptions, MAX_ROWS,
+    merge, read_commands_file, read_data, read_data_file, read_data_from, read_pose_list,
+    read_pose_list_file, read_pose_list_from, read_pose_measurements, read_readings,
+    write_commands, write_pose_list, write_pose_measurements, write_readings, DataFile, Merged,
+    PoseRow, ReadOptions, MAX_ROWS,
 };
 pub use error::{read_text, InputError, ReadError};
 pub use robot::{calibrated_description, calibrated_toml, parse_effects, Robot};
