@@ -96,8 +96,8 @@ pub fn linuxcnc(robot: &Robot) -> String {
 /// `BACKLASH`, all in `units`.
 ///
 /// cpm's link `N` (1-based, the order of `[[link]]`) is genhexkins' joint / strut `N - 1`.
-/// The INI values assume the joint's feedback is the link's reading (`length = length_at_zero_mm
-/// + mm_per_unit * reading`) with the home switch at reading 0: `SCALE = 1 / mm_per_unit`
+/// The INI values assume the joint's feedback is the link's reading
+/// (`length = length_at_zero_mm + mm_per_unit * reading`) with the home switch at reading 0: `SCALE = 1 / mm_per_unit`
 /// feedback units per machine unit and `HOME_OFFSET = length_at_zero_mm` (the strut length at
 /// home). cpm's `backlash` is half the lost motion, signed as a change of the effective length
 /// after extending; LinuxCNC's `BACKLASH` is the whole lost motion, added in the direction of
