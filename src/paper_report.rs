@@ -244,6 +244,7 @@ pub fn render(
         serde_json::to_string_pretty(&summary_json(r)).unwrap_or_default(),
     );
     out.add(dir.join("report.md"), report_md(r));
+    crate::html::stage_report_html(out, dir, "cpm: the paper reproduced (simulated)");
     Ok(())
 }
 

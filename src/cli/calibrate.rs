@@ -561,6 +561,7 @@ pub fn fit(inputs: &Inputs, dir: &Path, minimum_norm: bool) -> anyhow::Result<Fi
         r.push_str(&format!("- `{f}`\n"));
     }
     set.add(dir.join("report.md"), r);
+    crate::html::stage_report_html(&mut set, dir, "cpm calibration report");
     Ok(Fitted { cal, set, value })
 }
 

@@ -349,6 +349,7 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     }
     r.push_str("\n## Files\n\n- `poses.csv`: the poses to drive (`--plan` of `cpm simulate` / `cpm identifiability`).\n- `sockets.csv`: the chosen socket pairs.\n- `robot.toml`: the robot description with these sensors: measure with it, then `cpm calibrate --robot robot.toml`.\n");
     set.add(dir.join("report.md"), r);
+    crate::html::stage_report_html(&mut set, dir, "cpm experiment design");
     let written = common::commit(set, &dir.display().to_string())?;
     ctx.finish();
     if args.json {

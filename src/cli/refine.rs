@@ -230,6 +230,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         s.push_str(&format!("- `{f}`\n"));
     }
     set.add(dir.join("report.md"), s);
+    crate::html::stage_report_html(&mut set, dir, "cpm refinement report");
     let written = common::commit(set, &dir.display().to_string())?;
     ctx.finish();
     if args.fit.json {
