@@ -9,6 +9,7 @@ pub use cpm_lm as lm;
 
 pub mod cli;
 pub mod fuzzing;
+pub mod html;
 pub mod io;
 pub mod output;
 pub mod paper_report;

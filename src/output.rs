@@ -519,6 +519,14 @@ impl OutputSet {
         self.files.push((path.into(), contents.into()));
     }
 
+    /// The staged contents of `path`, if it is staged.
+    pub fn contents(&self, path: &Path) -> Option<&[u8]> {
+        self.files
+            .iter()
+            .find(|(p, _)| p == path)
+            .map(|(_, c)| c.as_slice())
+    }
+
     /// The staged paths.
     pub fn paths(&self) -> impl Iterator<Item = &Path> {
         self.files.iter().map(|(p, _)| p.as_path())

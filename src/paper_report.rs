@@ -163,27 +163,61 @@ pub fn render(
     let t3 = InstallationErrors::paper_table3().to_vec_um();
     let p = &r.paper.calibration;
     let d = &r.designed.calibration;
-    let dest: Vec<f64> = d
-        .estimate_um
-        .iter()
-        .map(|e| e.unwrap_or(f64::NAN))
-        .collect();
+    // Per-joint error norms with their standard deviation (first order, components taken
+    // as independent: sd(|e|) = sqrt(sum (e_a / |e|)^2 sd_a^2)); a joint with a component
+    // the data do not determine has no norm (NaN: drawn "n.i.", not identifiable).
+    let joint_norms = |c: &cpm_calib::Calibration, side: usize| -> (Vec<f64>, Vec<f64>) {
+        (0..6)
+            .map(|i| {
+                let o = 6 * i + 3 * side;
+                let e: Option<Vec<(f64, f64)>> = (o..o + 3)
+                    .map(|k| Some((c.estimate_um[k]?, c.std_um[k]?)))
+                    .collect();
+                match e {
+                    Some(e) => {
+                        let n = e.iter().map(|(v, _)| v * v).sum::<f64>().sqrt();
+                        let sd = if n > 0.0 {
+                            e.iter()
+                                .map(|(v, s)| (v / n * s).powi(2))
+                                .sum::<f64>()
+                                .sqrt()
+                        } else {
+                            e.iter().map(|(_, s)| s * s).sum::<f64>().sqrt()
+                        };
+                        (n, sd)
+                    }
+                    None => (f64::NAN, f64::NAN),
+                }
+            })
+            .unzip()
+    };
     let links: Vec<String> = (1..=6).map(|i| format!("link {i}")).collect();
     for (side, name, file) in [
         (1, "platform", "fig5_platform.svg"),
         (0, "base", "fig6_base.svg"),
     ] {
-        let svg = plot::grouped_bars(
+        let (pn, ps) = joint_norms(p, side);
+        let (dn, ds) = joint_norms(d, side);
+        let svg = plot::grouped_bars_with_errors(
             &format!(
                 "Per-joint error norm, {name} side (simulated; cf. paper Fig. {})",
                 if side == 1 { 5 } else { 6 }
             ),
-            "|error| (um)",
+            "|installation error| (um)",
             &links,
             &[
-                ("Table 2 (true)".to_string(), norms(&t2, side)),
-                ("Table 3 (paper)".to_string(), norms(&t3, side)),
-                ("cpm, designed campaign".to_string(), norms(&dest, side)),
+                ("Table 2 (true)".to_string(), norms(&t2, side)).into(),
+                ("Table 3 (paper's estimate)".to_string(), norms(&t3, side)).into(),
+                plot::BarSeries {
+                    name: "cpm, paper design".into(),
+                    values: pn,
+                    std: Some(ps),
+                },
+                plot::BarSeries {
+                    name: "cpm, designed campaign".into(),
+                    values: dn,
+                    std: Some(ds),
+                },
             ],
         )?;
         out.add(dir.join(file), svg);
@@ -211,6 +245,7 @@ pub fn render(
         serde_json::to_string_pretty(&summary_json(r)).unwrap_or_default(),
     );
     out.add(dir.join("report.md"), report_md(r));
+    crate::html::stage_report_html(out, dir, "cpm: the paper reproduced (simulated)");
     Ok(())
 }
 

@@ -18,13 +18,171 @@ fn err(title: &str, e: impl std::fmt::Display) -> PlotError {
     }
 }
 
-const COLORS: [RGBColor; 5] = [
+/// Twenty distinguishable colours (Tableau 10 and its light companions, reordered so that
+/// neighbours differ); with [`MARKERS`] a series' style repeats only after 60 series.
+pub const PALETTE: [RGBColor; 20] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
     RGBColor(214, 39, 40),
     RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+    RGBColor(0, 65, 120),
+    RGBColor(170, 80, 0),
+    RGBColor(20, 100, 20),
+    RGBColor(140, 20, 20),
+    RGBColor(90, 50, 140),
+    RGBColor(196, 156, 148),
+    RGBColor(247, 182, 210),
+    RGBColor(60, 60, 60),
+    RGBColor(120, 120, 10),
+    RGBColor(10, 120, 130),
 ];
+
+/// Marker shapes, cycled apart from the colours.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Marker {
+    /// Filled circle.
+    Circle,
+    /// Filled triangle (point up).
+    Triangle,
+    /// Filled square.
+    Square,
+    /// Cross (x).
+    Cross,
+    /// Hollow circle.
+    Ring,
+    /// Filled diamond.
+    Diamond,
+}
+
+/// The marker cycle.
+pub const MARKERS: [Marker; 6] = [
+    Marker::Circle,
+    Marker::Triangle,
+    Marker::Square,
+    Marker::Cross,
+    Marker::Ring,
+    Marker::Diamond,
+];
+
+/// The colour and marker of series `i`: distinct for the first 60 series.
+pub fn style(i: usize) -> (RGBColor, Marker) {
+    (PALETTE[i % PALETTE.len()], MARKERS[i % MARKERS.len()])
+}
+
+/// The element drawing `marker` of size `r` at `at` (backend coordinates).
+fn marker_element<DB: DrawingBackend>(
+    marker: Marker,
+    at: (i32, i32),
+    r: i32,
+    c: RGBColor,
+) -> DynElement<'static, DB, (i32, i32)> {
+    let (x, y) = at;
+    match marker {
+        Marker::Circle => Circle::new(at, r, c.filled()).into_dyn(),
+        Marker::Ring => Circle::new(at, r, c.stroke_width(2)).into_dyn(),
+        Marker::Triangle => {
+            Polygon::new(vec![(x, y - r), (x - r, y + r), (x + r, y + r)], c.filled()).into_dyn()
+        }
+        Marker::Square => Rectangle::new([(x - r, y - r), (x + r, y + r)], c.filled()).into_dyn(),
+        Marker::Diamond => Polygon::new(
+            vec![
+                (x, y - r - 1),
+                (x + r + 1, y),
+                (x, y + r + 1),
+                (x - r - 1, y),
+            ],
+            c.filled(),
+        )
+        .into_dyn(),
+        Marker::Cross => PathElement::new(
+            vec![
+                (x - r, y - r),
+                (x + r, y + r),
+                (x, y),
+                (x - r, y + r),
+                (x + r, y - r),
+            ],
+            c.stroke_width(2),
+        )
+        .into_dyn(),
+    }
+}
+
+/// How a legend entry is drawn.
+#[derive(Debug, Clone, Copy)]
+enum Key {
+    Marker(RGBColor, Marker),
+    Line(RGBColor, Marker),
+    Bar(RGBColor),
+    Note,
+}
+
+/// Width of the legend panel right of the plot, px.
+const LEGEND_WIDTH: u32 = 270;
+
+/// Splits `root` into the plot area and a legend panel on its right (legends never cover
+/// data) and draws the legend there.
+fn split_with_legend<'a, DB: DrawingBackend + 'a>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    entries: &[(String, Key)],
+) -> Result<DrawingArea<DB, plotters::coord::Shift>, PlotError> {
+    let (w, _) = root.dim_in_pixel();
+    let (plot, legend) = root.split_horizontally(w.saturating_sub(LEGEND_WIDTH));
+    let font = ("sans-serif", 14).into_font();
+    let mut y = 50;
+    for (label, key) in entries {
+        let text: String = if label.chars().count() > 34 {
+            format!("{}...", label.chars().take(33).collect::<String>())
+        } else {
+            label.clone()
+        };
+        let mx = 14;
+        match *key {
+            Key::Marker(c, m) => legend.draw(&marker_element(m, (mx, y), 4, c)),
+            Key::Line(c, m) => legend
+                .draw(&PathElement::new(vec![(2, y), (26, y)], c.stroke_width(2)))
+                .and_then(|_| legend.draw(&marker_element(m, (mx, y), 4, c))),
+            Key::Bar(c) => legend.draw(&Rectangle::new([(6, y - 6), (22, y + 6)], c.filled())),
+            Key::Note => Ok(()),
+        }
+        .map_err(|e| err(title, e))?;
+        legend
+            .draw(&Text::new(text, (32, y - 7), font.clone()))
+            .map_err(|e| err(title, e))?;
+        y += 22;
+    }
+    Ok(plot)
+}
+
+/// A series of a grouped bar chart: a value per category, optionally a standard deviation
+/// (drawn as a +-2 sigma error bar). A NaN value is a bar that does not exist: the chart
+/// marks it "n.i." (not identifiable), and the legend says so.
+#[derive(Debug, Clone, Default)]
+pub struct BarSeries {
+    /// Legend text.
+    pub name: String,
+    /// One value per category (NaN: not identifiable / no estimate).
+    pub values: Vec<f64>,
+    /// Standard deviations per category, when known.
+    pub std: Option<Vec<f64>>,
+}
+
+impl From<(String, Vec<f64>)> for BarSeries {
+    fn from((name, values): (String, Vec<f64>)) -> Self {
+        Self {
+            name,
+            values,
+            std: None,
+        }
+    }
+}
 
 /// Grouped bar chart: one group per category, one bar per series. Returns the SVG text.
 pub fn grouped_bars(
@@ -33,22 +191,60 @@ pub fn grouped_bars(
     categories: &[String],
     series: &[(String, Vec<f64>)],
 ) -> Result<String, PlotError> {
+    let s: Vec<BarSeries> = series.iter().cloned().map(BarSeries::from).collect();
+    grouped_bars_with_errors(title, y_label, categories, &s)
+}
+
+/// Grouped bars with +-2 sigma error bars where a series has standard deviations, and "n.i."
+/// where a value is NaN (not identifiable). The legend is outside the plot, on the right.
+pub fn grouped_bars_with_errors(
+    title: &str,
+    y_label: &str,
+    categories: &[String],
+    series: &[BarSeries],
+) -> Result<String, PlotError> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (900, 500)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1000, 500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(title, e))?;
+        let top = |s: &BarSeries, i: usize| {
+            let v = s.values[i];
+            let e = s
+                .std
+                .as_ref()
+                .and_then(|e| e.get(i))
+                .copied()
+                .unwrap_or(0.0);
+            v + 2.0 * e.max(0.0)
+        };
         let ymax = series
             .iter()
-            .flat_map(|s| s.1.iter())
-            .copied()
+            .flat_map(|s| (0..s.values.len()).map(move |i| top(s, i)))
             .filter(|v| v.is_finite())
             .fold(0.0f64, f64::max)
             * 1.15
             + 1e-9;
+        let any_missing = series.iter().any(|s| s.values.iter().any(|v| v.is_nan()));
+        let mut entries: Vec<(String, Key)> = series
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let name = if s.std.is_some() {
+                    format!("{} (+-2 sd)", s.name)
+                } else {
+                    s.name.clone()
+                };
+                (name, Key::Bar(style(i).0))
+            })
+            .collect();
+        if any_missing {
+            entries.push(("n.i. = not identifiable".into(), Key::Note));
+        }
+        let area = split_with_legend(&root, title, &entries)?;
         let n = categories.len();
         let k = series.len().max(1) as f64;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
+        let mut chart = ChartBuilder::on(&area)
+            .caption(title, ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(60)
@@ -70,26 +266,55 @@ pub fn grouped_bars(
             .y_desc(y_label)
             .draw()
             .map_err(|e| err(title, e))?;
-        for (si, (name, vals)) in series.iter().enumerate() {
-            let c = COLORS[si % COLORS.len()];
-            let w = 0.8 / k;
+        let w = 0.8 / k;
+        for (si, s) in series.iter().enumerate() {
+            let c = style(si).0;
+            let x_of = |i: usize| i as f64 - 0.4 + w * si as f64;
             chart
-                .draw_series(vals.iter().enumerate().filter(|(_, v)| v.is_finite()).map(
-                    |(i, v)| {
-                        let x0 = i as f64 - 0.4 + w * si as f64;
-                        Rectangle::new([(x0, 0.0), (x0 + w * 0.9, *v)], c.filled())
+                .draw_series(
+                    s.values
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, v)| v.is_finite())
+                        .map(|(i, v)| {
+                            Rectangle::new([(x_of(i), 0.0), (x_of(i) + w * 0.9, *v)], c.filled())
+                        }),
+                )
+                .map_err(|e| err(title, e))?;
+            if let Some(sd) = &s.std {
+                chart
+                    .draw_series(
+                        s.values
+                            .iter()
+                            .zip(sd)
+                            .enumerate()
+                            .filter(|(_, (v, e))| v.is_finite() && e.is_finite())
+                            .map(|(i, (v, e))| {
+                                let x = x_of(i) + w * 0.45;
+                                ErrorBar::new_vertical(
+                                    x,
+                                    (v - 2.0 * e).max(0.0),
+                                    *v,
+                                    v + 2.0 * e,
+                                    BLACK.stroke_width(1),
+                                    6,
+                                )
+                            }),
+                    )
+                    .map_err(|e| err(title, e))?;
+            }
+            chart
+                .draw_series(s.values.iter().enumerate().filter(|(_, v)| v.is_nan()).map(
+                    |(i, _)| {
+                        Text::new(
+                            "n.i.",
+                            (x_of(i), ymax * 0.02),
+                            ("sans-serif", 11).into_font().color(&c),
+                        )
                     },
                 ))
-                .map_err(|e| err(title, e))?
-                .label(name.clone())
-                .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], c.filled()));
+                .map_err(|e| err(title, e))?;
         }
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()
-            .map_err(|e| err(title, e))?;
         root.present().map_err(|e| err(title, e))?;
     }
     Ok(svg)
@@ -103,8 +328,18 @@ pub fn spectrum(
 ) -> Result<String, PlotError> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (900, 500)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1000, 500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(title, e))?;
+        let mut entries: Vec<(String, Key)> = series
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (s.0.clone(), Key::Line(style(i).0, style(i).1)))
+            .collect();
+        let grey = RGBColor(120, 120, 120);
+        if let Some((name, _)) = &threshold {
+            entries.push((name.clone(), Key::Line(grey, Marker::Cross)));
+        }
+        let area = split_with_legend(&root, title, &entries)?;
         let pos = |v: f64| v.max(1e-18);
         let all: Vec<f64> = series
             .iter()
@@ -118,8 +353,8 @@ pub fn spectrum(
             .min(ymax / 10.0)
             / 3.0;
         let n = series.iter().map(|s| s.1.len()).max().unwrap_or(1);
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
+        let mut chart = ChartBuilder::on(&area)
+            .caption(title, ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(70)
@@ -132,8 +367,8 @@ pub fn spectrum(
             .y_label_formatter(&|y| format!("{y:.0e}"))
             .draw()
             .map_err(|e| err(title, e))?;
-        for (si, (name, vals)) in series.iter().enumerate() {
-            let c = COLORS[si % COLORS.len()];
+        for (si, (_, vals)) in series.iter().enumerate() {
+            let (c, m) = style(si);
             chart
                 .draw_series(LineSeries::new(
                     vals.iter()
@@ -141,40 +376,31 @@ pub fn spectrum(
                         .map(|(i, v)| (i as f64 + 1.0, pos(*v))),
                     c.stroke_width(2),
                 ))
-                .map_err(|e| err(title, e))?
-                .label(name.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], c));
+                .map_err(|e| err(title, e))?;
             chart
-                .draw_series(
-                    vals.iter()
-                        .enumerate()
-                        .map(|(i, v)| Circle::new((i as f64 + 1.0, pos(*v)), 3, c.filled())),
-                )
+                .draw_series(vals.iter().enumerate().map(|(i, v)| {
+                    EmptyElement::at((i as f64 + 1.0, pos(*v)))
+                        + marker_element::<SVGBackend>(m, (0, 0), 3, c)
+                }))
                 .map_err(|e| err(title, e))?;
         }
-        if let Some((name, t)) = threshold {
-            let c = RGBColor(120, 120, 120);
+        if let Some((_, t)) = threshold {
             chart
-                .draw_series(LineSeries::new(
+                .draw_series(DashedLineSeries::new(
                     vec![(0.0, t), (n as f64 + 1.0, t)],
-                    c.stroke_width(1),
+                    6,
+                    4,
+                    grey.stroke_width(1),
                 ))
-                .map_err(|e| err(title, e))?
-                .label(name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 15, y)], c));
+                .map_err(|e| err(title, e))?;
         }
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()
-            .map_err(|e| err(title, e))?;
         root.present().map_err(|e| err(title, e))?;
     }
     Ok(svg)
 }
 
-/// Scatter plot of several (x, y) series.
+/// Scatter plot of several (x, y) series, each with its own colour and marker; the legend
+/// is outside the plot.
 pub fn scatter(
     title: &str,
     x_label: &str,
@@ -183,8 +409,14 @@ pub fn scatter(
 ) -> Result<String, PlotError> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (900, 500)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1000, 500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(title, e))?;
+        let entries: Vec<(String, Key)> = series
+            .iter()
+            .enumerate()
+            .map(|(i, s)| (s.0.clone(), Key::Marker(style(i).0, style(i).1)))
+            .collect();
+        let area = split_with_legend(&root, title, &entries)?;
         let pts: Vec<(f64, f64)> = series
             .iter()
             .flat_map(|s| s.1.iter().copied())
@@ -202,8 +434,8 @@ pub fn scatter(
         }
         let px = (x1 - x0).abs().max(1e-9) * 0.05;
         let py = (y1 - y0).abs().max(1e-9) * 0.1;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
+        let mut chart = ChartBuilder::on(&area)
+            .caption(title, ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(60)
@@ -215,25 +447,79 @@ pub fn scatter(
             .y_desc(y_label)
             .draw()
             .map_err(|e| err(title, e))?;
-        for (si, (name, vals)) in series.iter().enumerate() {
-            let c = COLORS[si % COLORS.len()];
+        for (si, (_, vals)) in series.iter().enumerate() {
+            let (c, m) = style(si);
             chart
                 .draw_series(
                     vals.iter()
                         .filter(|(x, y)| x.is_finite() && y.is_finite())
-                        .map(|p| Circle::new(*p, 3, c.filled())),
+                        .map(|p| {
+                            EmptyElement::at(*p) + marker_element::<SVGBackend>(m, (0, 0), 3, c)
+                        }),
                 )
-                .map_err(|e| err(title, e))?
-                .label(name.clone())
-                .legend(move |(x, y)| Circle::new((x + 5, y), 3, c.filled()));
+                .map_err(|e| err(title, e))?;
         }
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()
-            .map_err(|e| err(title, e))?;
         root.present().map_err(|e| err(title, e))?;
     }
     Ok(svg)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_sixty_series_have_distinct_styles() {
+        let styles: Vec<((u8, u8, u8), Marker)> = (0..60)
+            .map(|i| {
+                let (c, m) = style(i);
+                ((c.0, c.1, c.2), m)
+            })
+            .collect();
+        for i in 0..60 {
+            for j in 0..i {
+                assert_ne!(styles[i], styles[j], "series {i} and {j}");
+            }
+        }
+        // 20 distinct colours.
+        let mut colours: Vec<_> = PALETTE.iter().map(|c| (c.0, c.1, c.2)).collect();
+        colours.sort();
+        colours.dedup();
+        assert_eq!(colours.len(), 20);
+    }
+
+    #[test]
+    fn sixteen_series_draw_with_their_own_colours_and_legend() {
+        let series: Vec<(String, Vec<(f64, f64)>)> = (0..16)
+            .map(|k| (format!("sensor s{k}"), vec![(k as f64, (k * k) as f64)]))
+            .collect();
+        let svg = scatter("t", "x", "y", &series).unwrap();
+        for k in 0..16 {
+            assert!(svg.contains(&format!("sensor s{k}")), "legend entry {k}");
+            let (c, _) = style(k);
+            let hex = format!("#{:02X}{:02X}{:02X}", c.0, c.1, c.2);
+            assert!(
+                svg.to_uppercase().contains(&hex),
+                "colour of series {k}: {hex}"
+            );
+        }
+    }
+
+    #[test]
+    fn missing_bars_are_marked_not_identifiable() {
+        let svg = grouped_bars_with_errors(
+            "t",
+            "um",
+            &["a".into(), "b".into()],
+            &[BarSeries {
+                name: "est".into(),
+                values: vec![1.0, f64::NAN],
+                std: Some(vec![0.1, f64::NAN]),
+            }],
+        )
+        .unwrap();
+        assert!(svg.contains("n.i."));
+        assert!(svg.contains("not identifiable"));
+        assert!(svg.contains("est (+-2 sd)"));
+    }
 }

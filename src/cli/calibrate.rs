@@ -840,6 +840,7 @@ pub fn fit_with(
         r.push_str(&format!("- `{f}`\n"));
     }
     set.add(dir.join("report.md"), r);
+    crate::html::stage_report_html(&mut set, dir, "cpm calibration report");
     Ok(Fitted { cal, set, value })
 }
 

@@ -30,6 +30,7 @@ pub mod identifiability;
 pub mod plots;
 pub mod refine;
 pub mod simulate;
+pub mod validate;
 
 /// Exit codes of `cpm`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -160,6 +161,8 @@ pub enum Command {
     Refine(refine::RefineArgs),
     /// Choose sensor sockets and poses for a campaign (experiment design).
     Design(design::DesignArgs),
+    /// Check a calibrated robot on held-out measurements against a reference robot.
+    Validate(validate::ValidateArgs),
 }
 
 /// What a command gives back when it did not fail.
@@ -244,6 +247,7 @@ pub fn execute(cli: &Cli, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         Command::Export(a) => export::run(a, ctx),
         Command::Refine(a) => refine::run(a, ctx),
         Command::Design(a) => design::run(a, ctx),
+        Command::Validate(a) => validate::run(a, ctx),
     }
 }
 

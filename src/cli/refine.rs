@@ -311,6 +311,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         s.push_str(&format!("- `{f}`\n"));
     }
     set.add(dir.join("report.md"), s);
+    crate::html::stage_report_html(&mut set, dir, "cpm refinement report");
     let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.fit.robot.robot.as_path())
         .chain(args.fit.data.iter().map(std::path::PathBuf::as_path))
         .collect();

@@ -262,6 +262,13 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
         values.retain(|(x, _)| *x != e);
         values.push((e, v));
     }
+    if !args.truth_effect.is_empty() {
+        // Provenance: the header says which effects were simulated, with their values.
+        what = format!(
+            "{what}, plus --truth-effect {}",
+            args.truth_effect.join(" --truth-effect ")
+        );
+    }
     for (e, _) in &values {
         if !effects.contains(e) {
             effects.push(*e);

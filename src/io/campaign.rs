@@ -1450,6 +1450,86 @@ pub fn write_pose_list(poses: &[Pose]) -> String {
     s
 }
 
+/// Reads compensated commands (what [`write_commands`] writes, `cpm compensate`'s output):
+/// per row the target pose and the `reading_1..reading_N` to command, `N = num_links`;
+/// the `length_k_mm` columns are accepted and ignored (they follow from the readings).
+pub fn read_commands_file(
+    path: &Path,
+    num_links: usize,
+) -> Result<Vec<(PoseRow, Vec<f64>)>, ReadError> {
+    let file = path.display().to_string();
+    let mut t = Table::from_reader(open(path)?, &file)?;
+    commands_table(&mut t, num_links).map_err(|e| finish(&mut t, e))
+}
+
+fn commands_table<R: Read>(
+    t: &mut Table<R>,
+    num_links: usize,
+) -> Result<Vec<(PoseRow, Vec<f64>)>, InputError> {
+    let o = orientation(t)?;
+    let ks = t.reading_columns()?;
+    if ks.len() != num_links {
+        return Err(InputError::field(
+            &t.file,
+            t.header_line,
+            format!("reading_{}", ks.len().min(num_links) + 1),
+            format!(
+                "{} reading columns for a robot with {num_links} links",
+                ks.len()
+            ),
+        ));
+    }
+    t.check_columns(
+        &["x_mm", "y_mm", "z_mm"],
+        &["pose", "time_s", "temperature_c"],
+        |h| {
+            RPY_COLUMNS.contains(&h)
+                || QUATERNION_COLUMNS.contains(&h)
+                || super::table::reading_index(h).is_some()
+                || h.strip_prefix("length_")
+                    .and_then(|r| r.strip_suffix("_mm"))
+                    .is_some_and(|k| {
+                        k.parse::<usize>()
+                            .is_ok_and(|k| (1..=num_links).contains(&k))
+                    })
+        },
+    )?;
+    let mut out = Vec::new();
+    while let Some(row) = t.next_row()? {
+        let t: &Header = t;
+        if out.len() >= MAX_ROWS {
+            return Err(too_many_rows(t, &row, MAX_ROWS));
+        }
+        let label = match t.text(&row, "pose") {
+            Some(l) if !l.is_empty() => l.to_string(),
+            Some(_) => return Err(t.err(&row, "pose", "missing value")),
+            None => (out.len() + 1).to_string(),
+        };
+        let (pose, _) = parse_pose(t, &row, o)?;
+        let mut readings = Vec::with_capacity(num_links);
+        for k in 1..=num_links {
+            readings.push(t.number(&row, &format!("reading_{k}"))?);
+        }
+        out.push((
+            PoseRow {
+                line: row.line,
+                label,
+                pose,
+                time_s: t.optional_number(&row, "time_s")?,
+                temperature_c: t.optional_number(&row, "temperature_c")?,
+            },
+            readings,
+        ));
+    }
+    if out.is_empty() {
+        return Err(InputError::file(
+            &t.file,
+            "no commands: the file has a header but no rows",
+        ));
+    }
+    Ok(out)
+}
+
 /// Writes compensated commands: per target its pose, the link readings to command and the
 /// link lengths they mean.
 pub fn write_commands(

@@ -17,7 +17,7 @@ use crate::{CalibError, Campaign, MeasurementModel};
 /// estimated from the residual, start at the nominal geometry.
 #[derive(Debug, Clone, Default)]
 pub struct IdentifyOptions {
-    /// Least-squares options (damping strategy etc.). Default: cpm-lm's defaults (Nielsen).
+    /// Least-squares options (damping strategy etc.). Default: cpm-lm's defaults (the trust-region damping, [`cpm_lm::Damping::TrustRegion`]).
     pub lm: cpm_lm::Options,
     /// Rank thresholds. Default [`RankOptions::default`].
     pub rank: RankOptions,

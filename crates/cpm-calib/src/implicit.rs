@@ -679,6 +679,9 @@ pub fn identify_implicit_calibration(
         sigma_um,
         sigma_estimated,
         sigma_excludes_outliers: false,
+        // The implicit formulation is least squares only (no robust loss).
+        downweighted_share: 0.0,
+        robust_failed: false,
         outliers,
         initial_rms_um: imp.initial_reading_rms_um,
         residual_rms_um: imp.reading_rms_um,

@@ -347,6 +347,7 @@ pub mod check;
 pub mod damping;
 pub mod error;
 pub mod loss;
+pub mod numeric;
 pub mod options;
 pub mod problem;
 pub mod report;
@@ -357,11 +358,17 @@ pub use check::{check_jacobian, check_sparse_jacobian, JacobianCheck};
 pub use damping::Damping;
 pub use error::{EvalStage, LmError};
 pub use loss::Loss;
+pub use numeric::{Difference, NumericJacobian};
 pub use options::{GeodesicAcceleration, Options, Scaling};
 pub use problem::{DenseJacobian, ModelError, Problem, SparseJacobian};
 pub use report::{IterationRecord, Report, TerminationReason, Timings};
 pub use solver::{minimize, minimize_sparse, IterationCallback, LinearSolver, Solver};
 pub use stats::Statistics;
+
+/// The faer version this crate is built on, re-exported so that a user's
+/// [`DenseJacobian::jacobian`] can name `cpm_lm::faer::MatMut` without matching faer's version
+/// and features by hand.
+pub use faer;
 
 /// The examples of the crate's README.md, run as doctests.
 #[cfg(doctest)]

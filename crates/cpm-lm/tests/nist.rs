@@ -214,3 +214,50 @@ fn geodesic_acceleration_table() {
         "accelerated runs below LRE 6: {failed:#?}"
     );
 }
+
+/// A user without an analytic Jacobian: the same problems with finite-difference Jacobians
+/// (`NumericJacobian`). The minimum is defined by the residuals alone, so the certified
+/// values are still reached; the differenced Jacobian only changes the path and the
+/// statistics. Run with `-- --nocapture` for the table.
+#[test]
+fn nist_strd_with_finite_difference_jacobians() {
+    use cpm_lm::{Difference, NumericJacobian};
+    let mut worst = [f64::INFINITY; 2];
+    let mut sum = [0.0; 2];
+    let mut runs = 0;
+    for name in names() {
+        let d = load(name);
+        for start in [&d.start1, &d.start2] {
+            runs += 1;
+            for (k, scheme) in [Difference::Forward, Difference::Central]
+                .into_iter()
+                .enumerate()
+            {
+                let mut p = NumericJacobian::new(NistProblem::new(&d), scheme);
+                let mut x = start.clone();
+                let report = minimize(&mut p, &mut x, &Options::default()).unwrap();
+                let l = min_lre(&x, &d.certified);
+                println!("{name:<10} {scheme:?}: LRE {l:.2} ({})", report.termination);
+                worst[k] = worst[k].min(l);
+                sum[k] += l;
+            }
+        }
+    }
+    println!(
+        "finite differences over {runs} runs: forward min {:.2} mean {:.2}; central min {:.2} mean {:.2}",
+        worst[0],
+        sum[0] / runs as f64,
+        worst[1],
+        sum[1] / runs as f64
+    );
+    assert!(
+        worst[1] >= 6.0,
+        "central differences: min LRE {:.2}",
+        worst[1]
+    );
+    assert!(
+        worst[0] >= 4.5,
+        "forward differences: min LRE {:.2}",
+        worst[0]
+    );
+}
