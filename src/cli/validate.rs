@@ -62,6 +62,20 @@ pub struct ValidateArgs {
     pub json: bool,
 }
 
+impl ValidateArgs {
+    /// Every input file (an output may not replace one).
+    fn inputs(&self) -> Vec<&std::path::Path> {
+        self.robot
+            .iter()
+            .chain(std::iter::once(&self.reference))
+            .chain(self.data.iter())
+            .chain(self.commands.iter())
+            .chain(self.truth.iter())
+            .map(|p| p.as_path())
+            .collect()
+    }
+}
+
 /// Prediction errors of one robot on one group of observations.
 #[derive(Debug, Clone, Default)]
 struct Errors {
@@ -308,16 +322,7 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
             serde_json::to_string_pretty(&value)?,
         );
         set.add(dir.join("compensation.md"), md);
-        let inputs: Vec<&std::path::Path> = args
-            .robot
-            .iter()
-            .chain(std::iter::once(&args.reference))
-            .chain(args.data.iter())
-            .chain(args.commands.iter())
-            .chain(args.truth.iter())
-            .map(|p| p.as_path())
-            .collect();
-        written = common::commit_dir(set, dir, &inputs, "validate", ctx)?;
+        written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }
     if args.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&value)?)?;
@@ -491,16 +496,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         );
         set.add(dir.join("validation.md"), md.clone());
         set.add(dir.join("validation.svg"), svg);
-        let inputs: Vec<&std::path::Path> = args
-            .robot
-            .iter()
-            .chain(std::iter::once(&args.reference))
-            .chain(args.data.iter())
-            .chain(args.commands.iter())
-            .chain(args.truth.iter())
-            .map(|p| p.as_path())
-            .collect();
-        written = common::commit_dir(set, dir, &inputs, "validate", ctx)?;
+        written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }
     if args.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&value)?)?;
