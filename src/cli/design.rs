@@ -390,11 +390,7 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     }
     r.push_str("\n## Files\n\n- `poses.csv`: the poses to drive (`--plan` of `cpm simulate` / `cpm identifiability`).\n- `sockets.csv`: the chosen socket pairs.\n- `robot.toml`: the robot description with these sensors: measure with it, then `cpm calibrate --robot robot.toml`.\n");
     set.add(dir.join("report.md"), r);
-    crate::html::stage_report_html(&mut set, dir, "cpm experiment design");
-    let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
-        .chain(args.sockets.as_deref())
-        .collect();
-    let written = common::commit_dir(set, dir, &inputs_paths, "design", ctx)?;
+    let written = commit_design(set, dir, args, "cpm experiment design", ctx)?;
     ctx.finish();
     if args.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&summary)?)?;
@@ -578,11 +574,13 @@ fn run_limited(
     }
     r.push_str("\n## Files\n\n- `setup_sheet.md`, `setup_sheet.csv`: what to mount, then which poses to drive, setup by setup.\n- `plans/<setup>.csv`: each setup's poses (`cpm simulate --plan plans/<setup>.csv --sensors <setup>`).\n- `robot.toml`: the robot description with one sensor per setup: measure each setup into its own readings file, then `cpm calibrate --robot robot.toml --data s01.csv --data s02.csv ...`.\n");
     set.add(dir.join("report.md"), r);
-    crate::html::stage_report_html(&mut set, dir, "cpm experiment design (instrument limits)");
-    let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
-        .chain(args.sockets.as_deref())
-        .collect();
-    let written = common::commit_dir(set, dir, &inputs_paths, "design", ctx)?;
+    let written = commit_design(
+        set,
+        dir,
+        args,
+        "cpm experiment design (instrument limits)",
+        ctx,
+    )?;
     ctx.finish();
     if args.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&summary)?)?;
@@ -604,4 +602,20 @@ fn run_limited(
         }
     }
     Ok(Outcome::Done)
+}
+
+/// Stages `report.html` beside the staged `report.md` and commits the design's result
+/// directory (the robot and the sockets file are inputs it may not replace).
+fn commit_design(
+    mut set: OutputSet,
+    dir: &std::path::Path,
+    args: &DesignArgs,
+    title: &str,
+    ctx: &Ctx<'_>,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    crate::html::stage_report_html(&mut set, dir, title);
+    let inputs: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
+        .chain(args.sockets.as_deref())
+        .collect();
+    common::commit_dir(set, dir, &inputs, "design", ctx)
 }

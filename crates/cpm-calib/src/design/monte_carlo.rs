@@ -291,26 +291,7 @@ pub fn monte_carlo(
     options: &MonteCarloOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<MonteCarloReport, CalibError> {
-    if options.runs == 0 {
-        return Err(CalibError::invalid("runs", "must be at least 1"));
-    }
-    let sigma = options.noise.sigma_um();
-    if !(sigma.is_finite() && sigma > 0.0) {
-        return Err(CalibError::invalid(
-            "noise",
-            "a Monte Carlo study needs noise with a positive standard deviation",
-        ));
-    }
-    let ident = crate::identifiability(model, &plan.skeleton(), sigma, &RankOptions::default())?;
-    let crlb: Vec<f64> = ident
-        .crlb_std_um
-        .iter()
-        .map(|c| c.unwrap_or(f64::INFINITY))
-        .collect();
-    let opts = IdentifyOptions {
-        sigma_um: Some(sigma),
-        ..identify_options.clone()
-    };
+    let (crlb, opts) = prepare(model, &plan.skeleton(), identify_options, options)?;
     Ok(monte_carlo_with(
         truth_um,
         &crlb,
@@ -342,6 +323,35 @@ pub fn monte_carlo_campaign(
     options: &MonteCarloOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<MonteCarloReport, CalibError> {
+    let (crlb, opts) = prepare(model, skeleton, identify_options, options)?;
+    Ok(monte_carlo_with(
+        truth_um,
+        &crlb,
+        options.runs,
+        options.seed,
+        |seed| {
+            let sim = SimulationOptions {
+                noise: options.noise,
+                repeats: 1,
+                seed,
+            };
+            let data = crate::simulate_campaign(model, truth_um, skeleton, &sim).ok()?;
+            let cal = identify(model, &data, &opts).ok()?;
+            Some(cal.estimate_um)
+        },
+        progress,
+    ))
+}
+
+/// The checks and bounds every Monte Carlo study starts with: at least one run, noise with a
+/// positive standard deviation; the Cramér-Rao bounds of `skeleton` (infinite where a
+/// parameter is not determined) and the identification options at that noise.
+fn prepare(
+    model: &MeasurementModel,
+    skeleton: &crate::Campaign,
+    identify_options: &IdentifyOptions,
+    options: &MonteCarloOptions,
+) -> Result<(Vec<f64>, IdentifyOptions), CalibError> {
     if options.runs == 0 {
         return Err(CalibError::invalid("runs", "must be at least 1"));
     }
@@ -362,21 +372,5 @@ pub fn monte_carlo_campaign(
         sigma_um: Some(sigma),
         ..identify_options.clone()
     };
-    Ok(monte_carlo_with(
-        truth_um,
-        &crlb,
-        options.runs,
-        options.seed,
-        |seed| {
-            let sim = SimulationOptions {
-                noise: options.noise,
-                repeats: 1,
-                seed,
-            };
-            let data = crate::simulate_campaign(model, truth_um, skeleton, &sim).ok()?;
-            let cal = identify(model, &data, &opts).ok()?;
-            Some(cal.estimate_um)
-        },
-        progress,
-    ))
+    Ok((crlb, opts))
 }
