@@ -2,49 +2,14 @@
 //! (both example robots, wide random ranges), and the pose at which the old hand-written
 //! SVD failed (issue 13) is accepted by every command.
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use cpm::geometry::Pose;
 use cpm::io::Robot;
 use proptest::prelude::*;
 
-fn example(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("examples")
-        .join(name)
-        .display()
-        .to_string()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("reach-{name}"));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn cpm(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_cpm"))
-        .args(args)
-        .output()
-        .expect("run cpm")
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = cpm(args);
-    assert!(
-        o.status.success(),
-        "cpm {args:?} failed ({:?}):\n{}{}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8(o.stdout).unwrap()
-}
-
-fn p(path: &Path) -> String {
-    path.display().to_string()
-}
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{cpm, example, ok, p, scratch};
 
 /// The paper-cube pose (J1 condition number about 775) on which the one-sided Jacobi SVD
 /// did not converge, so that `simulate`, `identifiability` and `compensate` refused it as
@@ -64,7 +29,7 @@ fn the_pose_that_broke_the_jacobi_svd_is_accepted_everywhere() {
     assert!((700.0..850.0).contains(&c), "condition {c}");
     assert!(cpm::kinematics::reachable_at(&table, &regression_pose(), 1e4).is_ok());
 
-    let d = scratch("regression-pose");
+    let d = scratch("reach", "regression-pose");
     let mut poses = vec![regression_pose()];
     poses.extend(cpm::calib::paper::random_workspace_poses(
         &table, 59, 40.0, 8.0, 3.0, 17,
@@ -123,7 +88,7 @@ fn the_pose_that_broke_the_jacobi_svd_is_accepted_everywhere() {
 
 fn round_trip(robot: &str, n: usize, range_mm: f64, range_deg: f64, seed: u64) {
     let robot = example(robot);
-    let d = scratch(&format!("rt-{seed}-{range_mm:.0}-{range_deg:.0}"));
+    let d = scratch("reach", &format!("rt-{seed}-{range_mm:.0}-{range_deg:.0}"));
     let data = d.join("data.csv");
     let (n, mm, deg, seed) = (
         n.to_string(),
@@ -222,7 +187,7 @@ fn cube_with_16_gauges(dir: &Path) -> PathBuf {
 #[test]
 #[ignore]
 fn a_million_readings_round_trip() {
-    let d = scratch("million");
+    let d = scratch("reach", "million");
     let robot = p(&cube_with_16_gauges(&d));
     let data = d.join("data.csv");
     ok(&[

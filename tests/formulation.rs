@@ -1,7 +1,10 @@
 //! The two formulations of `cpm calibrate` (nested, implicit) give the same estimates on a
 //! campaign both can fit, and the outputs say which one was used. Simulated data.
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
+
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{example, ok, scratch};
 
 use cpm::calib::paper::{designed_sensors, random_workspace_poses};
 use cpm::calib::{simulate, IdentifyOptions, MeasurementModel, Plan, SimulationOptions};
@@ -61,36 +64,6 @@ fn nested_and_implicit_agree_to_a_tenth_of_a_standard_deviation() {
     );
 }
 
-fn example(name: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("examples")
-        .join(name)
-        .display()
-        .to_string()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("formulation-{name}"));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = Command::new(env!("CARGO_BIN_EXE_cpm"))
-        .args(args)
-        .output()
-        .expect("run cpm");
-    assert!(
-        o.status.success(),
-        "cpm {args:?} failed ({:?}):\n{}{}",
-        o.status.code(),
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8(o.stdout).unwrap()
-}
-
 fn read_json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -110,7 +83,7 @@ fn per_joint(v: &serde_json::Value) -> Vec<Option<f64>> {
 
 #[test]
 fn calibrate_says_which_formulation_and_both_agree() {
-    let d = scratch("cli");
+    let d = scratch("formulation", "cli");
     let robot = example("hexapod_66.toml");
     let mut truth = RobotDescription::load(&robot).unwrap();
     truth.installation_errors_um = Some(
