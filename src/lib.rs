@@ -14,3 +14,4 @@ pub mod io;
 pub mod output;
 pub mod paper_report;
 pub mod plot;
+pub mod report;

@@ -1,0 +1,242 @@
+//! Numbers for people: every number in report.md, report.html and the CSV files cpm writes
+//! goes through here, so none shows more digits than its uncertainty supports, and none
+//! shows as `-0.000`, `3.0000000000000004` or `NaN`.
+//!
+//! ```
+//! use cpm::report::format::{fixed, with_sd};
+//! assert_eq!(fixed(-0.00001, 3), "0.000");
+//! assert_eq!(fixed(0.1 + 0.2, 3), "0.300");
+//! assert_eq!(with_sd(12.34567, 0.0123), ("12.346".to_string(), "0.012".to_string()));
+//! ```
+
+/// What is printed for a number that does not exist (not determined, not finite).
+pub const NOT_DETERMINED: &str = "n.d.";
+
+/// Most decimals ever printed (beyond this an `f64` has nothing left to say at report scale).
+pub const MAX_DECIMALS: usize = 12;
+
+/// `x` with `decimals` decimals; a value that rounds to zero is printed without a sign;
+/// a non-finite value as [`NOT_DETERMINED`].
+pub fn fixed(x: f64, decimals: usize) -> String {
+    if !x.is_finite() {
+        return NOT_DETERMINED.to_string();
+    }
+    let decimals = decimals.min(MAX_DECIMALS);
+    let s = format!("{x:.decimals$}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.bytes().all(|b| b == b'0' || b == b'.') => rest.to_string(),
+        _ => s,
+    }
+}
+
+/// [`fixed`] of an optional value ([`NOT_DETERMINED`] when `None`).
+pub fn opt_fixed(x: Option<f64>, decimals: usize) -> String {
+    x.map_or_else(|| NOT_DETERMINED.to_string(), |x| fixed(x, decimals))
+}
+
+/// The decimals that show a standard deviation `sd` with two significant digits (`None`
+/// when `sd` is not a positive finite number).
+pub fn decimals_for(sd: f64) -> Option<usize> {
+    if !(sd.is_finite() && sd > 0.0) {
+        return None;
+    }
+    let e = sd.log10().floor() as i64;
+    // Rounding may carry into the next decade (0.0996 -> 0.10): two digits either way.
+    Some((1 - e).clamp(0, MAX_DECIMALS as i64) as usize)
+}
+
+/// An estimate and its standard deviation, both rounded to two significant digits of the
+/// standard deviation; `fallback` decimals when the deviation is unknown or zero.
+pub fn with_sd_or(x: f64, sd: f64, fallback: usize) -> (String, String) {
+    let d = decimals_for(sd).unwrap_or(fallback);
+    (fixed(x, d), fixed(sd, d))
+}
+
+/// [`with_sd_or`] with 3 decimals as the fallback.
+pub fn with_sd(x: f64, sd: f64) -> (String, String) {
+    with_sd_or(x, sd, 3)
+}
+
+/// An optional estimate and optional deviation as table cells ([`NOT_DETERMINED`] for what is
+/// missing), rounded as [`with_sd_or`].
+pub fn opt_with_sd(x: Option<f64>, sd: Option<f64>, fallback: usize) -> (String, String) {
+    let d = sd.and_then(decimals_for).unwrap_or(fallback);
+    (opt_fixed(x, d), opt_fixed(sd, d))
+}
+
+/// `x` with `digits` significant digits in plain notation (for numbers without a stated
+/// uncertainty: residuals, ratios); exponent notation outside 1e-4..1e9.
+pub fn sig(x: f64, digits: usize) -> String {
+    if !x.is_finite() {
+        return NOT_DETERMINED.to_string();
+    }
+    let digits = digits.clamp(1, 15);
+    if x == 0.0 {
+        return fixed(0.0, digits - 1);
+    }
+    let a = x.abs();
+    if !(1e-4..1e9).contains(&a) {
+        return sci(x, digits);
+    }
+    let e = a.log10().floor() as i64;
+    let d = (digits as i64 - 1 - e).clamp(0, MAX_DECIMALS as i64) as usize;
+    fixed(x, d)
+}
+
+/// `x` in exponent notation with `digits` significant digits (`1.2e-5`); no negative zero.
+pub fn sci(x: f64, digits: usize) -> String {
+    if !x.is_finite() {
+        return NOT_DETERMINED.to_string();
+    }
+    let d = digits.clamp(1, 15) - 1;
+    let s = format!("{:.d$e}", if x == 0.0 { 0.0 } else { x });
+    s
+}
+
+/// A p-value: two significant digits in exponent notation, `< 1e-300` below that.
+pub fn p_value(p: f64) -> String {
+    if !p.is_finite() {
+        NOT_DETERMINED.to_string()
+    } else if p < 1e-300 {
+        "< 1e-300".to_string()
+    } else {
+        sci(p, 2)
+    }
+}
+
+/// `yes` / `no` for a flag in user text (never `true`/`false`).
+pub fn yes_no(b: bool) -> &'static str {
+    if b {
+        "yes"
+    } else {
+        "no"
+    }
+}
+
+/// The artefacts no user text may contain: a negative zero, a float printed at full
+/// precision (`3.0000000000000004`, `0.30000000000000004`), `NaN`/`inf`. Returns the first
+/// offending token found in `text`, for tests and checks.
+pub fn find_artefact(text: &str) -> Option<String> {
+    for raw in text.split(|c: char| !(c.is_ascii_alphanumeric() || c == '.' || c == '-')) {
+        let tok = raw.trim_end_matches('.');
+        if tok.is_empty() {
+            continue;
+        }
+        if tok == "NaN" || tok == "inf" || tok == "-inf" {
+            return Some(tok.to_string());
+        }
+        let Ok(v) = tok.parse::<f64>() else {
+            continue;
+        };
+        if tok.starts_with('-') && v == 0.0 {
+            return Some(tok.to_string());
+        }
+        let digits = tok
+            .split(['e', 'E'])
+            .next()
+            .unwrap_or("")
+            .chars()
+            .filter(char::is_ascii_digit)
+            .count();
+        if digits >= 16 && tok.contains('.') {
+            return Some(tok.to_string());
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn negative_zero_is_unsigned() {
+        assert_eq!(fixed(-0.0, 3), "0.000");
+        assert_eq!(fixed(-0.0004, 3), "0.000");
+        assert_eq!(fixed(-0.0005001, 3), "-0.001");
+        assert_eq!(fixed(-0.4, 0), "0");
+        assert_eq!(sig(-0.0, 3), "0.00");
+        assert_eq!(sci(-0.0, 2), "0.0e0");
+    }
+
+    #[test]
+    fn float_noise_is_rounded_away() {
+        assert_eq!(fixed(0.1 + 0.2, 3), "0.300");
+        assert_eq!(sig(3.0000000000000004, 3), "3.00");
+        assert_eq!(sig(0.000123456, 2), "0.00012");
+        assert_eq!(sig(1234.6, 3), "1235");
+        assert_eq!(sig(2.5e-7, 2), "2.5e-7");
+        assert_eq!(fixed(f64::NAN, 3), NOT_DETERMINED);
+        assert_eq!(opt_fixed(None, 3), NOT_DETERMINED);
+    }
+
+    #[test]
+    fn estimates_are_rounded_to_their_deviation() {
+        assert_eq!(with_sd(12.34567, 0.0123), ("12.346".into(), "0.012".into()));
+        assert_eq!(with_sd(12.34567, 1.5), ("12.3".into(), "1.5".into()));
+        assert_eq!(with_sd(1234.5, 23.0), ("1234".into(), "23".into()));
+        assert_eq!(with_sd(-0.0001, 0.02), ("0.000".into(), "0.020".into()));
+        assert_eq!(with_sd_or(1.23456, 0.0, 2), ("1.23".into(), "0.00".into()));
+        assert_eq!(
+            opt_with_sd(Some(1.0), None, 1),
+            ("1.0".into(), NOT_DETERMINED.into())
+        );
+        assert_eq!(decimals_for(0.0996), Some(3));
+        assert_eq!(decimals_for(-1.0), None);
+    }
+
+    #[test]
+    fn p_values() {
+        assert_eq!(p_value(0.0), "< 1e-300");
+        assert_eq!(p_value(0.01234), "1.2e-2");
+        assert_eq!(yes_no(true), "yes");
+    }
+
+    #[test]
+    fn artefacts_are_found() {
+        assert_eq!(find_artefact("rms -0.000 um"), Some("-0.000".into()));
+        assert_eq!(find_artefact("x = 3.0000000000000004."), Some("3.0000000000000004".into()));
+        assert_eq!(find_artefact("| NaN |"), Some("NaN".into()));
+        assert_eq!(find_artefact("link-0 at -0.5 um, p 1.2e-5, s1"), None);
+        assert_eq!(find_artefact("2026-11-23 file_0.csv"), None);
+    }
+
+    proptest! {
+        #[test]
+        fn fixed_never_prints_negative_zero_and_round_trips(
+            x in prop_oneof![-1e6f64..1e6, -1e-3f64..1e-3, Just(-0.0)],
+            d in 0usize..10,
+        ) {
+            let s = fixed(x, d);
+            let back: f64 = s.parse().unwrap();
+            prop_assert!(!(s.starts_with('-') && back == 0.0), "{s}");
+            prop_assert!(find_artefact(&s).is_none(), "{s}");
+            let tol = 0.5 * 10f64.powi(-(d as i32)) + x.abs() * 1e-15;
+            prop_assert!((back - x).abs() <= tol, "{x} -> {s}");
+        }
+
+        #[test]
+        fn estimates_round_trip_within_a_twentieth_of_their_deviation(
+            x in -1e6f64..1e6,
+            sd in prop_oneof![1e-6f64..1e-3, 1e-3f64..1e3],
+        ) {
+            let (v, s) = with_sd(x, sd);
+            let (bv, bs): (f64, f64) = (v.parse().unwrap(), s.parse().unwrap());
+            prop_assert!(!(v.starts_with('-') && bv == 0.0), "{v}");
+            prop_assert!((bv - x).abs() <= sd / 20.0 + x.abs() * 1e-15, "{x} +- {sd} -> {v}");
+            prop_assert!((bs - sd).abs() <= sd / 20.0 + 1e-12, "{sd} -> {s}");
+            // Two significant digits of the deviation (three when rounding carried).
+            let sig_digits = s.trim_start_matches(['0', '.']).chars().filter(char::is_ascii_digit).count();
+            prop_assert!((2..=3).contains(&sig_digits) || bs >= 10.0, "{sd} -> {s}");
+        }
+
+        #[test]
+        fn sig_round_trips_relatively(x in prop_oneof![-1e8f64..1e8, -1e-2f64..1e-2], n in 1usize..8) {
+            let s = sig(x, n);
+            let back: f64 = s.parse().unwrap();
+            prop_assert!(!(s.starts_with('-') && back == 0.0), "{s}");
+            prop_assert!((back - x).abs() <= x.abs() * 0.5 * 10f64.powi(1 - n as i32) + 1e-12, "{x} -> {s}");
+        }
+    }
+}
