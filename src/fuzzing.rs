@@ -167,7 +167,7 @@ pub fn calibrate(data: &[u8]) {
             for want in ["calibration.json", "report.md", "calibrated.toml"] {
                 assert!(names.iter().any(|n| n == want), "{want} missing: {names:?}");
             }
-            let json = serde_json::to_string(&f.value).expect("calibration.json serializes");
+            let json = f.report.json().expect("calibration.json serializes");
             let back: serde_json::Value = serde_json::from_str(&json).expect("valid JSON");
             assert_eq!(
                 back["outliers"].as_array().map(Vec::len),

@@ -10,6 +10,8 @@ use super::{plots, Ctx, Outcome};
 use crate::calib::{Calibration, Campaign, IdentifyOptions, MeasurementModel};
 use crate::io::{self, Merged, Provenance, Robot};
 use crate::output::OutputSet;
+use crate::report::calibrate::{CalibrateReport, CalibratedFile};
+use crate::report::fit::FitReport;
 
 /// Arguments of `cpm calibrate`.
 #[derive(Debug, Clone, Args)]
@@ -163,86 +165,6 @@ pub fn provenance_lines(p: &Provenance, simulated: bool, command: &str) -> Vec<S
         v.push("SIMULATED data: this calibration is of a simulated machine.".into());
     }
     v
-}
-
-fn cell(v: Option<f64>, digits: usize) -> String {
-    v.filter(|x| x.is_finite())
-        .map_or("n.d.".to_string(), |x| format!("{x:.digits$}"))
-}
-
-/// The report's sections on a fit: data, fit, identifiability, estimates.
-pub fn fit_report(
-    s: &mut String,
-    robot: &Robot,
-    model: &MeasurementModel,
-    campaign: &Campaign,
-    cal: &Calibration,
-    loss: &cpm_lm::Loss,
-) {
-    let names = model.parameter_names();
-    s.push_str(&format!(
-        "- Robot: `{}` ({} links, {} sensors); clearance {} um per joint.\n",
-        robot.file,
-        robot.num_links(),
-        robot.table.sensors.len(),
-        model.clearance.radius_um
-    ));
-    s.push_str(&format!(
-        "- Data: {} length readings and {} tracker pose measurements at {} poses{}.\n",
-        campaign.readings.len(),
-        campaign.pose_measurements.len(),
-        campaign.poses.len(),
-        if campaign.simulated {
-            " (**SIMULATED**)"
-        } else {
-            ""
-        }
-    ));
-    s.push_str(&format!("- Model: {}.\n", common::describe_model(model)));
-    s.push_str(&format!("- Loss: {}.\n", common::describe_loss(loss)));
-    s.push_str(&format!(
-        "- Residual RMS {:.3} um (at the start {:.3} um); noise {} {:.3} um.\n",
-        cal.residual_rms_um,
-        cal.initial_rms_um,
-        if cal.sigma_estimated {
-            "estimated from the residual:"
-        } else {
-            "declared:"
-        },
-        cal.sigma_um
-    ));
-    s.push_str(&format!(
-        "- Solver: {}{}.\n\n",
-        cal.solver.brief(),
-        if cal.solver.was_successful() {
-            ""
-        } else {
-            " — **did not converge: treat the estimates with suspicion**"
-        }
-    ));
-    s.push_str("## What the data identify\n\n");
-    s.push_str(&cal.identifiability.summary().replace("\n  - ", "\n- "));
-    s.push_str(&format!(
-        "\nCramér-Rao bounds: RMS {} um, worst {} um over the determined parameters.\n\n",
-        cell(cal.identifiability.crlb_rms_um(), 3),
-        cell(cal.identifiability.crlb_max_um(), 3)
-    ));
-    s.push_str("## Estimates\n\nn.d. = not determined by the data: no estimate exists, whatever a solver would print. The numbers `#` match `estimates.svg`.\n\n| # | parameter | estimate | std |\n|---|---|---|---|\n");
-    let mut plotted = 0;
-    for (k, n) in names.iter().enumerate() {
-        let num = if cal.estimate_um[k].is_some() {
-            plotted += 1;
-            plotted.to_string()
-        } else {
-            String::new()
-        };
-        s.push_str(&format!(
-            "| {num} | {n} | {} | {} |\n",
-            cell(cal.estimate_um[k], 3),
-            cell(cal.std_um[k], 3)
-        ));
-    }
-    s.push('\n');
 }
 
 /// The `estimates.svg` figure: determined installation errors with error bars.
@@ -414,25 +336,6 @@ pub fn misfit_message(m: &crate::calib::misfit::Misfit) -> String {
     )
 }
 
-/// `calibration.json`'s `misfit` object (null when the noise was estimated).
-pub fn misfit_json(cal: &Calibration) -> serde_json::Value {
-    match misfit(cal) {
-        Some(m) => json!({
-            "chi2": m.chi2,
-            "dof": m.dof,
-            "chi2_per_dof": m.chi2_per_dof,
-            "p_value": m.p_value,
-            "residual_rms_um": m.residual_rms_um,
-            "sigma_um": m.sigma_um,
-            "outliers_left_out": m.outliers_left_out,
-            "inconsistent": m.inconsistent(),
-            "rule": format!("inconsistent when p < {} and chi2/dof > {}", crate::calib::misfit::MISFIT_P, crate::calib::misfit::MISFIT_CHI2_PER_DOF),
-            "message": if m.inconsistent() { Some(misfit_message(&m).replace("**", "")) } else { None },
-        }),
-        None => serde_json::Value::Null,
-    }
-}
-
 /// What the data did not determine, how the fit ended, and whether the model fits the
 /// declared noise, in a few lines for the top of a report (empty when all is well).
 pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
@@ -518,233 +421,14 @@ pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<Ob
     }
 }
 
-/// The `outliers` array of `calibration.json`: per flagged observation its file, line, what
-/// it is and its residual.
-pub fn outliers_json(robot: &Robot, merged: &Merged, cal: &Calibration) -> serde_json::Value {
-    serde_json::Value::Array(
-        cal.outliers
-            .iter()
-            .map(|&k| {
-                let o = observation_origin(robot, merged, k);
-                json!({
-                    "observation": k + 1,
-                    "file": o.as_ref().map(|o| o.file.clone()),
-                    "line": o.as_ref().map(|o| o.line),
-                    "what": o.as_ref().map(|o| o.what.clone()),
-                    "residual_um": cal.residuals_um.get(k).copied().filter(|v| v.is_finite()),
-                })
-            })
-            .collect(),
-    )
-}
-
-/// The report's outlier section (nothing when none were flagged).
-pub fn outliers_report(s: &mut String, robot: &Robot, merged: &Merged, cal: &Calibration) {
-    if cal.outliers.is_empty() {
-        return;
-    }
-    s.push_str("## Outliers
-
-Observations whose residual is more than 5 robust standard deviations (1.4826 x MAD) from the median. With `--robust` their influence on the fit is limited; without it they pull on every estimate. Check the instrument log at these lines.
-
-| file:line | observation | residual (um) |
-|---|---|---|
-");
-    for &k in &cal.outliers {
-        let r = cal.residuals_um.get(k).copied().unwrap_or(f64::NAN);
-        match observation_origin(robot, merged, k) {
-            Some(o) => s.push_str(&format!(
-                "| {}:{} | {} | {r:.3} |
-",
-                o.file, o.line, o.what
-            )),
-            None => s.push_str(&format!(
-                "| ? | observation {} | {r:.3} |
-",
-                k + 1
-            )),
-        }
-    }
-    s.push('\n');
-}
-
 /// A fit and its staged outputs (not yet written).
 pub struct Fitted {
     /// The calibration.
     pub cal: Calibration,
     /// `calibration.json`, `report.md`, the figures and `calibrated.toml`, staged in `dir`.
     pub set: OutputSet,
-    /// The contents of `calibration.json`.
-    pub value: serde_json::Value,
-}
-
-/// A parameter's name, estimate and standard deviation (`None` when not determined).
-type NamedValue = (String, Option<f64>, Option<f64>);
-
-/// The fitted values of one effect block: (name, estimate, standard deviation).
-fn block_values(
-    model: &MeasurementModel,
-    cal: &Calibration,
-    effect: crate::calib::Effect,
-) -> Option<Vec<NamedValue>> {
-    let names = model.parameter_names();
-    let b = model
-        .blocks()
-        .into_iter()
-        .find(|b| b.effect == Some(effect))?;
-    Some(
-        (b.offset..b.offset + b.len)
-            .map(|k| {
-                (
-                    names[k].clone(),
-                    cal.estimate_um.get(k).copied().flatten(),
-                    cal.std_um.get(k).copied().flatten(),
-                )
-            })
-            .collect(),
-    )
-}
-
-/// `calibration.json`'s `registration` object: the automatic registration of the tracker
-/// files (per file: translation mm, rotation deg, RMS before and after; reading offsets mm per
-/// link), the fit's refinements of it (`tracker_frame`, `link_offset`) and their gauge
-/// freedoms; null without tracker files.
-pub fn registration_json(
-    merged: &Merged,
-    model: &MeasurementModel,
-    cal: &Calibration,
-) -> serde_json::Value {
-    let Some(r) = &merged.registration else {
-        return serde_json::Value::Null;
-    };
-    let vals = |e| {
-        block_values(model, cal, e).map(|v| {
-            v.into_iter()
-                .map(|(n, v, s)| json!({"name": n, "value": v, "std": s}))
-                .collect::<Vec<_>>()
-        })
-    };
-    let gauge: Vec<String> = cal
-        .identifiability
-        .blind_directions
-        .iter()
-        .filter(|b| b.description.contains("tracker"))
-        .map(|b| b.description.clone())
-        .collect();
-    json!({
-        "apply_threshold_mm": io::REGISTRATION_APPLY_MM,
-        "failure": r.failure,
-        "sessions": r.sessions.iter().map(|s| {
-            let f = &s.frame;
-            let [ro, pi, ya] = f.as_pose().rpy_deg();
-            json!({
-                "file": s.file,
-                "poses": f.poses,
-                "applied": s.applied,
-                "largest_move_mm": s.largest_move_mm,
-                "translation_mm": [f.translation_mm.x, f.translation_mm.y, f.translation_mm.z],
-                "translation_sd_mm": f.translation_sd_mm,
-                "rotation_vector_deg": f.rotation_vector_deg(),
-                "rotation_sd_deg": f.rotation_sd_deg,
-                "rotation_angle_deg": f.rotation_angle_deg(),
-                "roll_pitch_yaw_deg": [ro, pi, ya],
-                "rms_before_mm": f.rms_before_mm,
-                "rms_after_mm": f.rms_after_mm,
-                "orientation_rms_before_deg": f.orientation_rms_before_deg,
-                "orientation_rms_after_deg": f.orientation_rms_after_deg,
-            })
-        }).collect::<Vec<_>>(),
-        "link_reading_offset_mm": r.link_offset_mm,
-        "link_reading_offset_sd_mm": r.link_offset_sd_mm,
-        "offsets_estimated": r.offsets_estimated,
-        "offsets_applied": r.offsets_applied,
-        "variance_factor": r.variance_factor,
-        "refined_by_fit": {
-            "tracker_frame": vals(crate::calib::Effect::TrackerFrame),
-            "link_offset": vals(crate::calib::Effect::LinkOffset),
-            "gauge_freedoms": gauge,
-        },
-    })
-}
-
-/// The registration section of report.md (nothing without tracker files).
-pub fn registration_report(
-    s: &mut String,
-    merged: &Merged,
-    model: &MeasurementModel,
-    cal: &Calibration,
-) {
-    let Some(r) = &merged.registration else {
-        return;
-    };
-    s.push_str("## Tracker registration\n\n");
-    if let Some(why) = &r.failure {
-        s.push_str(&format!("The automatic registration of the tracker frames failed ({why}); the measured poses were used as logged.\n\n"));
-        return;
-    }
-    s.push_str(&format!("Each tracker file (session) gets its own frame, found from the data against the nominal forward kinematics of its readings (closed form, then Gauss-Newton with one reading offset per link shared by the files); a frame that moves a measured position by more than {} mm, or offsets larger than that, are applied to the data before the fit, smaller ones are left to the fit. Standard deviations are scaled by the registration's variance factor ({:.3}).\n\n", io::REGISTRATION_APPLY_MM, r.variance_factor));
-    s.push_str("| file | poses | translation, mm (sd) | rotation vector, deg (sd) | angle, deg | RMS before, mm | RMS after, mm | applied |\n|---|---|---|---|---|---|---|---|\n");
-    for x in &r.sessions {
-        let f = &x.frame;
-        let t = f.translation_mm;
-        let w = f.rotation_vector_deg();
-        s.push_str(&format!(
-            "| {} | {} | {:.3} ({:.3}), {:.3} ({:.3}), {:.3} ({:.3}) | {:.4} ({:.4}), {:.4} ({:.4}), {:.4} ({:.4}) | {:.4} | {:.3} | {:.4} | {} |\n",
-            x.file, f.poses,
-            t.x, f.translation_sd_mm[0], t.y, f.translation_sd_mm[1], t.z, f.translation_sd_mm[2],
-            w[0], f.rotation_sd_deg[0], w[1], f.rotation_sd_deg[1], w[2], f.rotation_sd_deg[2],
-            f.rotation_angle_deg(), f.rms_before_mm, f.rms_after_mm,
-            if x.applied { "yes" } else { "no (small)" }
-        ));
-    }
-    s.push('\n');
-    if r.offsets_estimated {
-        s.push_str(&format!(
-            "Link reading offsets (true length = logged length + offset), mm: {}; {}.\n\n",
-            r.link_offset_mm
-                .iter()
-                .zip(&r.link_offset_sd_mm)
-                .enumerate()
-                .map(|(i, (o, sd))| format!("link {} {o:.3} +- {sd:.3}", i + 1))
-                .collect::<Vec<_>>()
-                .join(", "),
-            if r.offsets_applied {
-                "applied to the commanded lengths before the fit and folded into `calibrated.toml`"
-            } else {
-                "not applied (small: left to `link_offset`)"
-            }
-        ));
-    } else {
-        s.push_str("Link reading offsets were not estimated (the poses cannot tell them from the frames).\n\n");
-    }
-    for e in [
-        crate::calib::Effect::TrackerFrame,
-        crate::calib::Effect::LinkOffset,
-    ] {
-        if let Some(v) = block_values(model, cal, e) {
-            s.push_str(&format!(
-                "Refined by the fit, `{}` (on top of the registration): {}.\n\n",
-                e.name(),
-                v.iter()
-                    .map(|(n, v, sd)| match (v, sd) {
-                        (Some(v), Some(sd)) => format!("{n} {v:.2} +- {sd:.2}"),
-                        _ => format!("{n} not determined"),
-                    })
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ));
-        }
-    }
-    let gauge: Vec<&str> = cal
-        .identifiability
-        .blind_directions
-        .iter()
-        .filter(|b| b.description.contains("tracker"))
-        .map(|b| b.description.as_str())
-        .collect();
-    if !gauge.is_empty() {
-        s.push_str(&format!("Gauge freedoms of the refinement: {} (the fit determines the tracker frame only together with the installation errors; these directions are not determined).\n\n", gauge.join("; ")));
-    }
+    /// The report (`calibration.json`, report.md and report.html are renderings of it).
+    pub report: crate::report::calibrate::CalibrateReport,
 }
 
 /// Fits the inputs and stages every output of `cpm calibrate` in memory, for `dir`: nothing
@@ -771,26 +455,8 @@ pub fn fit_with(
     let cal = super::formulation::identify_with(formulation, model, campaign, &inputs.identify)
         .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
-    let mut value = io::calibration_json(model, campaign, &cal, &inputs.provenance);
-    value["formulation"] = json!(formulation.key());
-    value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
-    value["robust"] = json!({
-        "downweighted_share": cal.downweighted_share,
-        "downweight_level": crate::calib::DOWNWEIGHT_LEVEL,
-        "max_downweighted_share": crate::calib::MAX_DOWNWEIGHTED_SHARE,
-        "failed": cal.robust_failed,
-    });
-    value["outliers"] = outliers_json(&inputs.robot, &inputs.merged, &cal);
-    value["registration"] = registration_json(&inputs.merged, model, &cal);
-    value["misfit"] = misfit_json(&cal);
-    value["warnings"] = json!(warnings(model, &cal)
-        .iter()
-        .map(|w| w.replace("**", ""))
-        .collect::<Vec<_>>());
-    set.add(
-        dir.join("calibration.json"),
-        serde_json::to_string_pretty(&value)?,
-    );
+    let fit = FitReport::new(inputs, model, &cal, Some(formulation));
+    set.add(dir.join("calibration.json"), fit.to_json()?);
     let figures = stage_figures(&mut set, dir, &inputs.robot, model, campaign, &cal)?;
     let notes = stage_calibrated(
         &mut set,
@@ -802,46 +468,19 @@ pub fn fit_with(
         None,
         "Calibrated",
     )?;
-    let mut r = String::new();
-    r.push_str("# Calibration report\n\n");
-    if cal.simulated {
-        r.push_str("**The measurements are SIMULATED.**\n\n");
-    }
-    for l in provenance_lines(&inputs.provenance, cal.simulated, "Calibrated") {
-        r.push_str(&format!("{l}\n"));
-    }
-    r.push_str(&format!("Formulation: {}.\n", formulation.describe()));
-    r.push('\n');
-    for w in warnings(model, &cal) {
-        r.push_str(&format!("- {w}\n"));
-    }
-    if cal.sigma_excludes_outliers {
-        r.push_str("- The noise was estimated from the residuals without the flagged outliers (robust fit); the standard deviations use it.\n");
-    }
-    r.push('\n');
-    fit_report(
-        &mut r,
-        &inputs.robot,
-        model,
-        campaign,
-        &cal,
-        &inputs.identify.lm.loss,
-    );
-    outliers_report(&mut r, &inputs.robot, &inputs.merged, &cal);
-    registration_report(&mut r, &inputs.merged, model, &cal);
-    r.push_str("## Outputs\n\n- `calibration.json`: estimates, standard deviations, what is not determined, residual, solver report.\n");
-    r.push_str(&format!(
-        "- `calibrated.toml`: the robot description with the {} ({} installation-error components left at nominal); `link_offset`/`link_scale` folded into the link reading models, `socket_error` into the sensor sockets{}.\n",
-        if minimum_norm { "minimum-norm solution" } else { "determined installation errors" },
-        notes.undetermined.len(),
-        if notes.known_effects.is_empty() { String::new() } else { format!(", the values of {} in `[calibration.known_effects]`", notes.known_effects.join(", ")) }
-    ));
-    for f in &figures {
-        r.push_str(&format!("- `{f}`\n"));
-    }
-    set.add(dir.join("report.md"), r);
+    let report = CalibrateReport {
+        provenance: provenance_lines(&inputs.provenance, cal.simulated, "Calibrated"),
+        calibrated: CalibratedFile {
+            minimum_norm,
+            undetermined: notes.undetermined.len(),
+            known_effects: notes.known_effects.clone(),
+        },
+        figures: figures.iter().map(|f| f.to_string()).collect(),
+        fit,
+    };
+    set.add(dir.join("report.md"), report.markdown());
     crate::html::stage_report_html(&mut set, dir, "cpm calibration report");
-    Ok(Fitted { cal, set, value })
+    Ok(Fitted { cal, set, report })
 }
 
 /// Runs `cpm calibrate`.
@@ -853,7 +492,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         common::describe_model(model),
         inputs.merged.campaign.len()
     ));
-    let Fitted { cal, set, value } =
+    let Fitted { cal, set, report } =
         fit_with(&inputs, &args.fit.out, args.minimum_norm, args.formulation)?;
     ctx.stage("writing the results");
     let dir = &args.fit.out;
@@ -871,7 +510,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.fit.json {
         let v = json!({
             "simulated": cal.simulated,
-            "formulation": value["formulation"],
+            "formulation": report.fit.formulation,
             "out": dir.display().to_string(),
             "files": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
             "rank": cal.identifiability.rank,
@@ -881,8 +520,8 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             "converged": cal.solver.was_successful(),
             "downweighted_share": cal.downweighted_share,
             "robust_failed": cal.robust_failed,
-            "not_determined": value["not_determined"],
-            "outliers": value["outliers"],
+            "not_determined": report.fit.not_determined,
+            "outliers": report.fit.outliers,
         });
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else {

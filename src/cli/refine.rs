@@ -2,16 +2,16 @@
 //! each with an F-test, its BIC change and cross-validation (cpm_calib::refine), and write
 //! `refine.json`, `report.md`, `calibration.json`, figures and `calibrated.toml`.
 use clap::Args;
-use serde_json::{json, Value};
 
-use super::calibrate::{
-    self, fit_report, provenance_lines, stage_calibrated, stage_figures, FitArgs,
-};
+use super::calibrate::{self, provenance_lines, stage_calibrated, stage_figures, FitArgs};
 use super::common;
 use super::{plots, usage_error, Ctx, Outcome};
-use crate::calib::{refine, Effect, RefineOptions, Refinement};
-use crate::io::{self, parse_effects};
+use crate::calib::{refine, Effect, RefineOptions};
+use crate::io::parse_effects;
 use crate::output::OutputSet;
+use crate::report::calibrate::CalibratedFile;
+use crate::report::fit::FitReport;
+use crate::report::refine::{RefineDoc, RefineReport};
 
 /// Arguments of `cpm refine`.
 #[derive(Debug, Clone, Args)]
@@ -34,119 +34,6 @@ pub struct RefineArgs {
     /// Folds of the cross-validation over poses.
     #[arg(long, value_name = "K", default_value_t = 5)]
     pub folds: usize,
-}
-
-fn param_json(effect: Effect, params: &[(String, Option<f64>, Option<f64>)]) -> Value {
-    Value::Array(
-        params
-            .iter()
-            .enumerate()
-            .map(|(k, (n, v, s))| {
-                json!({
-                    "name": n,
-                    "value": v.filter(|x| x.is_finite()),
-                    "std": s.filter(|x| x.is_finite()),
-                    "unit": effect.param_unit(k),
-                })
-            })
-            .collect(),
-    )
-}
-
-/// The sentence about the candidates of a last round that added nothing: those left out as
-/// confounded with the model (novelty below `min_novelty`), with their novelty, and those
-/// not significant. `None` when the rounds ended otherwise.
-pub fn last_round_message(r: &Refinement, min_novelty: f64) -> Option<String> {
-    if r.last_round.is_empty() {
-        return None;
-    }
-    let confounded: Vec<String> = r
-        .last_round
-        .iter()
-        .filter(|c| c.novelty < min_novelty)
-        .map(|c| format!("`{}` (novelty {:.4})", c.effect.name(), c.novelty))
-        .collect();
-    let weak: Vec<String> = r
-        .last_round
-        .iter()
-        .filter(|c| c.novelty >= min_novelty)
-        .map(|c| match c.p_value {
-            Some(p) => format!("`{}` (p {p:.2e})", c.effect.name()),
-            None => format!("`{}` (no fit)", c.effect.name()),
-        })
-        .collect();
-    let mut s = String::new();
-    if !confounded.is_empty() {
-        s.push_str(&format!(
-            "Left out as barely separable from the installation errors and effects already in the model on this design (novelty, the fraction of the effect's signature the model cannot already explain, below {min_novelty}): {}; the data cannot tell such an effect apart, so the residual says nothing about it: a design with more varied poses (`cpm design`) can. ",
-            confounded.join(", ")
-        ));
-    }
-    if !weak.is_empty() {
-        s.push_str(&format!(
-            "Not significant (after the Bonferroni correction, or no BIC gain): {}.",
-            weak.join(", ")
-        ));
-    }
-    Some(s.trim_end().to_string())
-}
-
-/// The `refine.json` document.
-pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
-    let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
-    json!({
-        "cpm_version": env!("CARGO_PKG_VERSION"),
-        "simulated": simulated,
-        "initial": {
-            "rms_um": r.initial_diagnostics.rms_um,
-            "residual_white": r.initial_diagnostics.white,
-            "significant": r.initial_diagnostics.significant,
-        },
-        "steps": r.steps.iter().map(|s| json!({
-            "effect": s.effect.name(),
-            "p_value": finite(s.p_value),
-            "delta_bic": finite(s.delta_bic),
-            "rms_before_um": s.rms_before_um,
-            "rms_after_um": s.rms_after_um,
-            "cv_rms_before_um": s.cv_rms_before_um,
-            "cv_rms_after_um": s.cv_rms_after_um,
-            "parameters": param_json(s.effect, &s.parameters),
-            "candidates": s.candidates.iter().map(|c| json!({
-                "effect": c.effect.name(),
-                "novelty": c.novelty,
-                "p_value": c.p_value,
-                "delta_bic": c.delta_bic,
-                "rms_um": c.rms_um,
-                "cv_rms_um": c.cv_rms_um,
-            })).collect::<Vec<_>>(),
-        })).collect::<Vec<_>>(),
-        "last_round": r.last_round.iter().map(|c| json!({
-            "effect": c.effect.name(),
-            "novelty": c.novelty,
-            "confounded": c.novelty < RefineOptions::default().min_novelty,
-            "p_value": c.p_value,
-            "delta_bic": c.delta_bic,
-            "rms_um": c.rms_um,
-        })).collect::<Vec<_>>(),
-        "min_novelty": RefineOptions::default().min_novelty,
-        "final": {
-            "effects": r.model.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
-            "rms_um": r.calibration.residual_rms_um,
-            "cv_rms_um": r.final_cv_rms_um,
-            "residual_white": r.final_diagnostics.white,
-            "consistent_with_noise": r.final_diagnostics.consistent_with_noise,
-            "unexplained_structure": r.unexplained_structure,
-            "converged": r.calibration.solver.was_successful(),
-            "downweighted_share": r.calibration.downweighted_share,
-            "robust_failed": r.calibration.robust_failed,
-        },
-        "outliers_before": r.outliers_before.len(),
-        "rejected_by_cross_validation": r.rejected_by_cv.iter().map(|(e, before, after)| json!({
-            "effect": e.name(),
-            "cv_rms_before_um": before,
-            "cv_rms_with_um": after,
-        })).collect::<Vec<_>>(),
-    })
 }
 
 /// Runs `cpm refine`.
@@ -185,21 +72,10 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let dir = &args.fit.out;
     let cal = &r.calibration;
     let mut set = OutputSet::new();
-    let doc = refine_json(&r, campaign.simulated);
-    set.add(dir.join("refine.json"), serde_json::to_string_pretty(&doc)?);
-    let mut value = io::calibration_json(&r.model, campaign, cal, &inputs.provenance);
-    value["robust_loss"] = json!(common::describe_loss(&inputs.identify.lm.loss));
-    value["outliers"] = calibrate::outliers_json(&inputs.robot, &inputs.merged, cal);
-    value["registration"] = calibrate::registration_json(&inputs.merged, &r.model, cal);
-    value["misfit"] = calibrate::misfit_json(cal);
-    value["warnings"] = json!(calibrate::warnings(&r.model, cal)
-        .iter()
-        .map(|w| w.replace("**", ""))
-        .collect::<Vec<_>>());
-    set.add(
-        dir.join("calibration.json"),
-        serde_json::to_string_pretty(&value)?,
-    );
+    let doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
+    set.add(dir.join("refine.json"), doc.to_json()?);
+    let fit = FitReport::new(&inputs, &r.model, cal, None);
+    set.add(dir.join("calibration.json"), fit.to_json()?);
     let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;
     set.add(
         dir.join("residuals_before_after.svg"),
@@ -228,89 +104,21 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         Some(&r.model.effects),
         "Refined",
     )?;
-    let mut s = String::from("# Refinement report\n\n");
-    if campaign.simulated {
-        s.push_str("**The measurements are SIMULATED.**\n\n");
-    }
-    for l in provenance_lines(&inputs.provenance, campaign.simulated, "Refined") {
-        s.push_str(&format!("{l}\n"));
-    }
-    s.push('\n');
-    for w in calibrate::warnings(&r.model, cal) {
-        s.push_str(&format!("- {w}\n"));
-    }
-    s.push_str(&format!(
-        "\nStarting model: {}. Residual RMS {:.3} um, white: {}.\n\n## Steps\n\n",
-        common::describe_model(&inputs.model),
-        r.initial_diagnostics.rms_um,
-        r.initial_diagnostics.white
-    ));
-    if !r.outliers_before.is_empty() {
-        s.push_str(&format!(
-            "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations.\n\n",
-            r.outliers_before.len()
-        ));
-    }
-    for (e, before, after) in &r.rejected_by_cv {
-        s.push_str(&format!(
-            "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {before:.3} -> {after:.3} um (no better).\n",
-            e.name()
-        ));
-    }
-    if !r.rejected_by_cv.is_empty() {
-        s.push('\n');
-    }
-    let last = last_round_message(&r, options.min_novelty);
-    if r.steps.is_empty() {
-        match &last {
-            Some(m) => s.push_str(&format!("No effect was added. {m}\n\n")),
-            None => s.push_str("No effect was added: the residual was already white and consistent with the noise (or no candidate was left).\n\n"),
-        }
-    }
-    for (i, st) in r.steps.iter().enumerate() {
-        s.push_str(&format!(
-            "### {}. `{}`\n\n- F-test p-value {:.3e}, BIC change {:.2}\n- RMS {:.3} -> {:.3} um; cross-validated {:.3} -> {:.3} um\n\n| parameter | estimate | std |\n|---|---|---|\n",
-            i + 1, st.effect.name(), st.p_value, st.delta_bic, st.rms_before_um, st.rms_after_um, st.cv_rms_before_um, st.cv_rms_after_um
-        ));
-        for (n, v, sd) in &st.parameters {
-            s.push_str(&format!(
-                "| {n} | {} | {} |\n",
-                v.map_or("n.d.".into(), |x| format!("{x:.4}")),
-                sd.map_or("n.d.".into(), |x| format!("{x:.4}"))
-            ));
-        }
-        s.push('\n');
-    }
-    if let (false, Some(m)) = (r.steps.is_empty(), &last) {
-        s.push_str(&format!("The last round added nothing. {m}\n\n"));
-    }
-    s.push_str(&format!(
-        "## Final\n\n- Effects: {}\n- RMS {:.3} um, cross-validated {:.3} um, residual white: {}\n- Unexplained structure: {}\n\n",
-        common::effect_list(&r.model.effects),
-        cal.residual_rms_um,
-        r.final_cv_rms_um,
-        r.final_diagnostics.white,
-        if r.unexplained_structure.is_empty() { "none".to_string() } else { r.unexplained_structure.join(", ") }
-    ));
-    fit_report(
-        &mut s,
-        &inputs.robot,
-        &r.model,
-        campaign,
-        cal,
-        &inputs.identify.lm.loss,
-    );
-    calibrate::outliers_report(&mut s, &inputs.robot, &inputs.merged, cal);
-    calibrate::registration_report(&mut s, &inputs.merged, &r.model, cal);
-    s.push_str(&format!(
-        "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models, socket_error into the sensor sockets{}\n",
-        notes.undetermined.len(),
-        if notes.known_effects.is_empty() { String::new() } else { format!("; values of {} in `[calibration.known_effects]`", notes.known_effects.join(", ")) }
-    ));
-    for f in &figures {
-        s.push_str(&format!("- `{f}`\n"));
-    }
-    set.add(dir.join("report.md"), s);
+    let last = doc.last_round_message();
+    let report = RefineReport {
+        provenance: provenance_lines(&inputs.provenance, campaign.simulated, "Refined"),
+        starting_model: common::describe_model(&inputs.model),
+        final_effects: common::effect_list(&r.model.effects),
+        calibrated: CalibratedFile {
+            minimum_norm: false,
+            undetermined: notes.undetermined.len(),
+            known_effects: notes.known_effects.clone(),
+        },
+        figures: figures.iter().map(|f| f.to_string()).collect(),
+        fit,
+        doc,
+    };
+    set.add(dir.join("report.md"), report.markdown());
     crate::html::stage_report_html(&mut set, dir, "cpm refinement report");
     let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.fit.robot.robot.as_path())
         .chain(args.fit.data.iter().map(std::path::PathBuf::as_path))
@@ -327,7 +135,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         ctx.note(m.replace('`', ""));
     }
     if args.fit.json {
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&doc)?)?;
+        writeln!(ctx.out, "{}", report.doc.to_json()?)?;
     } else {
         writeln!(
             ctx.out,

@@ -83,6 +83,22 @@ pub fn sig(x: f64, digits: usize) -> String {
     fixed(x, d)
 }
 
+/// A stated constant (a threshold, a declared clearance) as short as it reads: at most 6
+/// significant digits, trailing zeros dropped (`0.02`, `10`, `2.5`).
+pub fn short(x: f64) -> String {
+    let s = sig(x, 6);
+    let (mantissa, exponent) = match s.split_once('e') {
+        Some((m, e)) => (m, format!("e{e}")),
+        None => (s.as_str(), String::new()),
+    };
+    let mantissa = if mantissa.contains('.') {
+        mantissa.trim_end_matches('0').trim_end_matches('.')
+    } else {
+        mantissa
+    };
+    format!("{mantissa}{exponent}")
+}
+
 /// `x` in exponent notation with `digits` significant digits (`1.2e-5`); no negative zero.
 pub fn sci(x: f64, digits: usize) -> String {
     if !x.is_finite() {
@@ -184,6 +200,15 @@ mod tests {
         );
         assert_eq!(decimals_for(0.0996), Some(3));
         assert_eq!(decimals_for(-1.0), None);
+    }
+
+    #[test]
+    fn constants_read_short() {
+        assert_eq!(short(0.02), "0.02");
+        assert_eq!(short(10.0), "10");
+        assert_eq!(short(0.1 + 0.2), "0.3");
+        assert_eq!(short(-0.0), "0");
+        assert_eq!(short(1.5e-7), "1.5e-7");
     }
 
     #[test]

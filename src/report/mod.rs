@@ -2,3 +2,6 @@
 //! of the same value, so what the text says and what the JSON holds cannot drift apart.
 //! Numbers in text go through [`format`].
 pub mod format;
+pub mod calibrate;
+pub mod fit;
+pub mod refine;

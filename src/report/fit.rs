@@ -1,0 +1,805 @@
+//! The report of one fit (`cpm calibrate`, and the final model of `cpm refine`): the typed
+//! value behind `calibration.json` and the fit sections of report.md.
+//!
+//! [`FitReport`] serialises to `calibration.json` (every key listed in docs/formats.md);
+//! [`FitReport::markdown_sections`] renders the "Data / Fit", "What the data identify",
+//! "Estimates", "Outliers" and "Tracker registration" sections from the same value.
+use serde::Serialize;
+
+use super::format::{fixed, opt_fixed, opt_with_sd, short, sig, with_sd};
+use crate::calib::{Calibration, Campaign, Effect, MeasurementModel};
+use crate::cli::calibrate::{misfit, misfit_message, observation_origin, warnings, Inputs};
+use crate::cli::common;
+use crate::geometry::InstallationErrors;
+use crate::io::robot::split_params;
+use crate::io::{self, Provenance};
+
+fn finite(v: Option<f64>) -> Option<f64> {
+    v.filter(|x| x.is_finite())
+}
+
+/// Installation errors per joint, um: `base[i] = [dx, dy, dz]` of link i+1's base joint.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PerJoint {
+    /// Base joints.
+    pub base: Vec<[Option<f64>; 3]>,
+    /// Platform joints.
+    pub platform: Vec<[Option<f64>; 3]>,
+}
+
+impl PerJoint {
+    /// From installation-error values in model order (6 per link; `None` where unknown).
+    pub fn new(values: &[Option<f64>]) -> Self {
+        let side = |s: usize| {
+            (0..values.len() / 6)
+                .map(|i| std::array::from_fn(|a| finite(values[6 * i + 3 * s + a])))
+                .collect()
+        };
+        Self {
+            base: side(0),
+            platform: side(1),
+        }
+    }
+}
+
+/// One fitted parameter of an effect.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct EffectParameter {
+    /// Its name (`backlash.1`, ...).
+    pub name: String,
+    /// The estimate (`null`: not determined).
+    pub value: Option<f64>,
+    /// Its standard deviation.
+    pub std: Option<f64>,
+    /// The unit of both.
+    pub unit: String,
+}
+
+/// The fitted parameters of one effect.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct EffectEstimates {
+    /// The effect's name.
+    pub effect: String,
+    /// Its parameters.
+    pub parameters: Vec<EffectParameter>,
+}
+
+/// A known (not fitted) effect applied in every prediction.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct KnownEffectValues {
+    /// The effect's name.
+    pub effect: String,
+    /// The unit of the values.
+    pub unit: String,
+    /// The values.
+    pub values: Vec<f64>,
+}
+
+/// A blind direction of the fit.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct BlindDirection {
+    /// What it is, in words.
+    pub description: String,
+    /// Its dimension.
+    pub dimensions: usize,
+}
+
+/// What the data determine about one parameter.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ParameterIdentifiability {
+    /// The parameter.
+    pub name: String,
+    /// Determined on its own.
+    pub determined: bool,
+    /// The fraction of it in the null space.
+    pub null_fraction: f64,
+    /// Its Cramér-Rao bound, um.
+    pub crlb_std: Option<f64>,
+}
+
+/// `calibration.json`'s `identifiability` object.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct IdentifiabilityReport {
+    /// Parameters fitted.
+    pub parameters: usize,
+    /// Observations.
+    pub observations: usize,
+    /// Numerical rank.
+    pub rank: usize,
+    /// Relative rank tolerance.
+    pub rank_rtol: f64,
+    /// Absolute singular-value threshold.
+    pub threshold: f64,
+    /// Parameters determined on their own.
+    pub determined: usize,
+    /// Singular values of the scaled Jacobian.
+    pub singular_values: Vec<f64>,
+    /// Named blind directions.
+    pub blind_directions: Vec<BlindDirection>,
+    /// Null-space dimensions no name explains.
+    pub unexplained_null_dimensions: usize,
+    /// The noise used, um.
+    pub sigma_um: f64,
+    /// RMS of the Cramér-Rao bounds of the determined parameters, um.
+    pub crlb_rms_um: Option<f64>,
+    /// Largest of them, um.
+    pub crlb_max_um: Option<f64>,
+    /// Per parameter.
+    pub per_parameter: Vec<ParameterIdentifiability>,
+}
+
+/// `calibration.json`'s `solver` object.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SolverReport {
+    /// The solver converged.
+    pub converged: bool,
+    /// Why it stopped.
+    pub termination: String,
+    /// Iterations.
+    pub iterations: usize,
+    /// Cost at the start.
+    pub initial_cost: f64,
+    /// Cost at the end.
+    pub final_cost: f64,
+    /// One line.
+    pub summary: String,
+}
+
+/// `calibration.json`'s `robust` object (calibrate only).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RobustReport {
+    /// Share of observations the robust loss down-weighted.
+    pub downweighted_share: f64,
+    /// Weight below which an observation counts as down-weighted.
+    pub downweight_level: f64,
+    /// Share above which the robust fit is declared failed.
+    pub max_downweighted_share: f64,
+    /// The robust fit failed.
+    pub failed: bool,
+}
+
+/// One flagged outlier observation.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Outlier {
+    /// 1-based observation number.
+    pub observation: usize,
+    /// Its file.
+    pub file: Option<String>,
+    /// Its line.
+    pub line: Option<usize>,
+    /// What it is.
+    pub what: Option<String>,
+    /// Its residual, um.
+    pub residual_um: Option<f64>,
+}
+
+/// `calibration.json`'s `misfit` object.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct MisfitReport {
+    /// Chi-square.
+    pub chi2: f64,
+    /// Degrees of freedom.
+    pub dof: usize,
+    /// Chi-square per degree of freedom.
+    pub chi2_per_dof: f64,
+    /// p-value.
+    pub p_value: f64,
+    /// Residual RMS, um.
+    pub residual_rms_um: f64,
+    /// Declared noise, um.
+    pub sigma_um: f64,
+    /// Outliers left out of the test.
+    pub outliers_left_out: usize,
+    /// The test rejects the model.
+    pub inconsistent: bool,
+    /// The rule.
+    pub rule: String,
+    /// What it means (when inconsistent).
+    pub message: Option<String>,
+}
+
+/// One tracker session's registration.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SessionReport {
+    /// The file.
+    pub file: String,
+    /// Poses in it.
+    pub poses: usize,
+    /// The frame was applied to the data.
+    pub applied: bool,
+    /// Largest move of a measured position, mm.
+    pub largest_move_mm: f64,
+    /// Translation, mm.
+    pub translation_mm: [f64; 3],
+    /// Its standard deviations, mm.
+    pub translation_sd_mm: [f64; 3],
+    /// Rotation vector, deg.
+    pub rotation_vector_deg: [f64; 3],
+    /// Its standard deviations, deg.
+    pub rotation_sd_deg: [f64; 3],
+    /// Rotation angle, deg.
+    pub rotation_angle_deg: f64,
+    /// Roll, pitch, yaw, deg.
+    pub roll_pitch_yaw_deg: [f64; 3],
+    /// Position RMS before, mm.
+    pub rms_before_mm: f64,
+    /// Position RMS after, mm.
+    pub rms_after_mm: f64,
+    /// Orientation RMS before, deg.
+    pub orientation_rms_before_deg: f64,
+    /// Orientation RMS after, deg.
+    pub orientation_rms_after_deg: f64,
+}
+
+/// A fitted value refining the registration.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct NamedEstimate {
+    /// The parameter.
+    pub name: String,
+    /// Its estimate.
+    pub value: Option<f64>,
+    /// Its standard deviation.
+    pub std: Option<f64>,
+}
+
+/// What the fit refined on top of the registration.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RefinedByFit {
+    /// `tracker_frame` parameters (when modelled).
+    pub tracker_frame: Option<Vec<NamedEstimate>>,
+    /// `link_offset` parameters (when modelled).
+    pub link_offset: Option<Vec<NamedEstimate>>,
+    /// Gauge freedoms of the refinement.
+    pub gauge_freedoms: Vec<String>,
+}
+
+/// `calibration.json`'s `registration` object.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RegistrationSummary {
+    /// Frames moving a position by more than this are applied, mm.
+    pub apply_threshold_mm: f64,
+    /// Why the registration failed.
+    pub failure: Option<String>,
+    /// Per tracker file.
+    pub sessions: Vec<SessionReport>,
+    /// Link reading offsets, mm.
+    pub link_reading_offset_mm: Vec<f64>,
+    /// Their standard deviations, mm.
+    pub link_reading_offset_sd_mm: Vec<f64>,
+    /// The offsets were estimated.
+    pub offsets_estimated: bool,
+    /// The offsets were applied.
+    pub offsets_applied: bool,
+    /// Variance factor of the registration.
+    pub variance_factor: f64,
+    /// The fit's refinements.
+    pub refined_by_fit: RefinedByFit,
+}
+
+/// One row of the estimates table (every parameter of the model).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParameterRow {
+    /// Its name.
+    pub name: String,
+    /// Its estimate, `None` when not determined.
+    pub estimate: Option<f64>,
+    /// Its standard deviation.
+    pub std: Option<f64>,
+}
+
+/// What report.md says about the fit beyond calibration.json.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FitText {
+    /// Robot description file.
+    pub robot_file: String,
+    /// Links.
+    pub links: usize,
+    /// Sensors.
+    pub sensors: usize,
+    /// Joint clearance radius, um.
+    pub clearance_um: f64,
+    /// The model, in words.
+    pub model: String,
+    /// The formulation, in words (calibrate).
+    pub formulation: Option<String>,
+    /// Every parameter, in model order.
+    pub parameters: Vec<ParameterRow>,
+    /// The warnings, in markdown.
+    pub warnings: Vec<String>,
+    /// Whether the standard deviations use a noise estimated without the outliers.
+    pub sigma_excludes_outliers_note: bool,
+}
+
+/// The report of one fit: `calibration.json` when serialised, the fit sections of report.md
+/// through [`FitReport::markdown_sections`].
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct FitReport {
+    /// The cpm version.
+    pub cpm_version: String,
+    /// The data are simulated.
+    pub simulated: bool,
+    /// The robot description file.
+    pub robot: String,
+    /// The measurement files.
+    pub data: Vec<String>,
+    /// Length readings.
+    pub readings: usize,
+    /// Tracker pose measurements.
+    pub pose_measurements: usize,
+    /// Poses.
+    pub poses: usize,
+    /// Installation errors, um.
+    pub installation_errors_um: PerJoint,
+    /// Their standard deviations, um.
+    pub std_um: PerJoint,
+    /// The minimum-norm solution, um.
+    pub minimum_norm_um: PerJoint,
+    /// Installation-error components not determined.
+    pub not_determined: Vec<String>,
+    /// The fitted effects.
+    pub effects: Vec<EffectEstimates>,
+    /// Known values applied in every prediction (the estimates are on top of them).
+    pub known_effects: Vec<KnownEffectValues>,
+    /// Residual RMS, um.
+    pub residual_rms_um: f64,
+    /// Residual RMS at the start, um.
+    pub initial_rms_um: f64,
+    /// The noise, um.
+    pub sigma_um: f64,
+    /// The noise was estimated from the residual.
+    pub sigma_estimated: bool,
+    /// The noise estimate leaves the outliers out.
+    pub sigma_excludes_outliers: bool,
+    /// What the data identify.
+    pub identifiability: IdentifiabilityReport,
+    /// How the solver ended.
+    pub solver: SolverReport,
+    /// `nested` or `implicit` (calibrate only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub formulation: Option<String>,
+    /// The loss, in words.
+    pub robust_loss: String,
+    /// The robust fit's bookkeeping (calibrate only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub robust: Option<RobustReport>,
+    /// Flagged outliers.
+    pub outliers: Vec<Outlier>,
+    /// The tracker registration (`null` without tracker files).
+    pub registration: Option<RegistrationSummary>,
+    /// The chi-square test against the declared noise (`null` when estimated).
+    pub misfit: Option<MisfitReport>,
+    /// The warnings, plain text.
+    pub warnings: Vec<String>,
+    /// What only the text says.
+    #[serde(skip)]
+    pub text: FitText,
+}
+
+fn named_block(model: &MeasurementModel, cal: &Calibration, e: Effect) -> Option<Vec<NamedEstimate>> {
+    let names = model.parameter_names();
+    let b = model.blocks().into_iter().find(|b| b.effect == Some(e))?;
+    Some(
+        (b.offset..b.offset + b.len)
+            .map(|k| NamedEstimate {
+                name: names[k].clone(),
+                value: cal.estimate_um.get(k).copied().flatten(),
+                std: cal.std_um.get(k).copied().flatten(),
+            })
+            .collect(),
+    )
+}
+
+impl FitReport {
+    /// The report of `cal`, a fit of `model` to the inputs' campaign.
+    pub fn new(
+        inputs: &Inputs,
+        model: &MeasurementModel,
+        cal: &Calibration,
+        formulation: Option<crate::cli::formulation::Formulation>,
+    ) -> Self {
+        let campaign: &Campaign = &inputs.merged.campaign;
+        let provenance: &Provenance = &inputs.provenance;
+        let ni = model.num_installation_params();
+        let names = model.parameter_names();
+        let sensors: Vec<String> = model.nominal.sensors.iter().map(|s| s.name.clone()).collect();
+        let est = split_params(model, &cal.estimate_um);
+        let sd = split_params(model, &cal.std_um);
+        let effects = est
+            .effects
+            .iter()
+            .zip(&sd.effects)
+            .map(|((e, v), (_, s))| EffectEstimates {
+                effect: e.name().to_string(),
+                parameters: v
+                    .iter()
+                    .zip(s)
+                    .enumerate()
+                    .map(|(k, (v, s))| EffectParameter {
+                        name: e.param_name(k, &sensors),
+                        value: finite(*v),
+                        std: finite(*s),
+                        unit: e.param_unit(k).to_string(),
+                    })
+                    .collect(),
+            })
+            .collect();
+        let minimum_norm: Vec<Option<f64>> = cal.minimum_norm_um.iter().map(|v| Some(*v)).collect();
+        let id = &cal.identifiability;
+        let identifiability = IdentifiabilityReport {
+            parameters: id.num_params,
+            observations: id.num_readings,
+            rank: id.rank,
+            rank_rtol: id.rank_rtol,
+            threshold: id.threshold,
+            determined: id.num_determined(),
+            singular_values: id.singular_values.clone(),
+            blind_directions: id
+                .blind_directions
+                .iter()
+                .map(|b| BlindDirection {
+                    description: b.description.clone(),
+                    dimensions: b.dimensions,
+                })
+                .collect(),
+            unexplained_null_dimensions: id.unexplained_null_dimensions,
+            sigma_um: id.sigma_um,
+            crlb_rms_um: finite(id.crlb_rms_um()),
+            crlb_max_um: finite(id.crlb_max_um()),
+            per_parameter: names
+                .iter()
+                .enumerate()
+                .map(|(k, n)| ParameterIdentifiability {
+                    name: n.clone(),
+                    determined: id.determined[k],
+                    null_fraction: id.null_fraction[k],
+                    crlb_std: finite(id.crlb_std_um[k]),
+                })
+                .collect(),
+        };
+        let outliers = cal
+            .outliers
+            .iter()
+            .map(|&k| {
+                let o = observation_origin(&inputs.robot, &inputs.merged, k);
+                Outlier {
+                    observation: k + 1,
+                    file: o.as_ref().map(|o| o.file.clone()),
+                    line: o.as_ref().map(|o| o.line),
+                    what: o.as_ref().map(|o| o.what.clone()),
+                    residual_um: finite(cal.residuals_um.get(k).copied()),
+                }
+            })
+            .collect();
+        let registration = inputs.merged.registration.as_ref().map(|r| RegistrationSummary {
+            apply_threshold_mm: io::REGISTRATION_APPLY_MM,
+            failure: r.failure.clone(),
+            sessions: r
+                .sessions
+                .iter()
+                .map(|s| {
+                    let f = &s.frame;
+                    SessionReport {
+                        file: s.file.clone(),
+                        poses: f.poses,
+                        applied: s.applied,
+                        largest_move_mm: s.largest_move_mm,
+                        translation_mm: [f.translation_mm.x, f.translation_mm.y, f.translation_mm.z],
+                        translation_sd_mm: f.translation_sd_mm,
+                        rotation_vector_deg: f.rotation_vector_deg(),
+                        rotation_sd_deg: f.rotation_sd_deg,
+                        rotation_angle_deg: f.rotation_angle_deg(),
+                        roll_pitch_yaw_deg: f.as_pose().rpy_deg(),
+                        rms_before_mm: f.rms_before_mm,
+                        rms_after_mm: f.rms_after_mm,
+                        orientation_rms_before_deg: f.orientation_rms_before_deg,
+                        orientation_rms_after_deg: f.orientation_rms_after_deg,
+                    }
+                })
+                .collect(),
+            link_reading_offset_mm: r.link_offset_mm.clone(),
+            link_reading_offset_sd_mm: r.link_offset_sd_mm.clone(),
+            offsets_estimated: r.offsets_estimated,
+            offsets_applied: r.offsets_applied,
+            variance_factor: r.variance_factor,
+            refined_by_fit: RefinedByFit {
+                tracker_frame: named_block(model, cal, Effect::TrackerFrame),
+                link_offset: named_block(model, cal, Effect::LinkOffset),
+                gauge_freedoms: id
+                    .blind_directions
+                    .iter()
+                    .filter(|b| b.description.contains("tracker"))
+                    .map(|b| b.description.clone())
+                    .collect(),
+            },
+        });
+        let misfit = misfit(cal).map(|m| MisfitReport {
+            chi2: m.chi2,
+            dof: m.dof,
+            chi2_per_dof: m.chi2_per_dof,
+            p_value: m.p_value,
+            residual_rms_um: m.residual_rms_um,
+            sigma_um: m.sigma_um,
+            outliers_left_out: m.outliers_left_out,
+            inconsistent: m.inconsistent(),
+            rule: format!(
+                "inconsistent when p < {} and chi2/dof > {}",
+                crate::calib::misfit::MISFIT_P,
+                crate::calib::misfit::MISFIT_CHI2_PER_DOF
+            ),
+            message: m
+                .inconsistent()
+                .then(|| misfit_message(&m).replace("**", "")),
+        });
+        let warnings_md = warnings(model, cal);
+        let calibrate = formulation.is_some();
+        Self {
+            cpm_version: env!("CARGO_PKG_VERSION").to_string(),
+            simulated: cal.simulated,
+            robot: provenance.robot.clone(),
+            data: provenance.data.clone(),
+            readings: campaign.readings.len(),
+            pose_measurements: campaign.pose_measurements.len(),
+            poses: campaign.poses.len(),
+            installation_errors_um: PerJoint::new(&cal.estimate_um[..ni]),
+            std_um: PerJoint::new(&cal.std_um[..ni]),
+            minimum_norm_um: PerJoint::new(&minimum_norm[..ni]),
+            not_determined: (0..ni)
+                .filter(|&k| cal.estimate_um[k].is_none())
+                .map(InstallationErrors::component_name)
+                .collect(),
+            effects,
+            known_effects: model
+                .known_effects
+                .iter()
+                .map(|k| KnownEffectValues {
+                    effect: k.effect.name().to_string(),
+                    unit: k.effect.unit().to_string(),
+                    values: k.values.clone(),
+                })
+                .collect(),
+            residual_rms_um: cal.residual_rms_um,
+            initial_rms_um: cal.initial_rms_um,
+            sigma_um: cal.sigma_um,
+            sigma_estimated: cal.sigma_estimated,
+            sigma_excludes_outliers: cal.sigma_excludes_outliers,
+            identifiability,
+            solver: SolverReport {
+                converged: cal.solver.was_successful(),
+                termination: cal.solver.termination.to_string(),
+                iterations: cal.solver.num_iterations(),
+                initial_cost: cal.solver.initial_cost,
+                final_cost: cal.solver.final_cost,
+                summary: cal.solver.brief(),
+            },
+            formulation: formulation.map(|f| f.key().to_string()),
+            robust_loss: common::describe_loss(&inputs.identify.lm.loss),
+            robust: calibrate.then(|| RobustReport {
+                downweighted_share: cal.downweighted_share,
+                downweight_level: crate::calib::DOWNWEIGHT_LEVEL,
+                max_downweighted_share: crate::calib::MAX_DOWNWEIGHTED_SHARE,
+                failed: cal.robust_failed,
+            }),
+            outliers,
+            registration,
+            misfit,
+            warnings: warnings_md.iter().map(|w| w.replace("**", "")).collect(),
+            text: FitText {
+                robot_file: inputs.robot.file.clone(),
+                links: inputs.robot.num_links(),
+                sensors: inputs.robot.table.sensors.len(),
+                clearance_um: model.clearance.radius_um,
+                model: common::describe_model(model),
+                formulation: formulation.map(|f| f.describe().to_string()),
+                parameters: names
+                    .iter()
+                    .enumerate()
+                    .map(|(k, n)| ParameterRow {
+                        name: n.clone(),
+                        estimate: cal.estimate_um[k],
+                        std: cal.std_um[k],
+                    })
+                    .collect(),
+                warnings: warnings_md,
+                sigma_excludes_outliers_note: cal.sigma_excludes_outliers,
+            },
+        }
+    }
+
+    /// `calibration.json`, pretty-printed (keys sorted, as every cpm JSON file).
+    pub fn to_json(&self) -> serde_json::Result<String> {
+        serde_json::to_string_pretty(&serde_json::to_value(self)?)
+    }
+
+    /// The warnings as a markdown list (with the note on the noise estimate), then a blank line.
+    pub fn markdown_warnings(&self, s: &mut String) {
+        for w in &self.text.warnings {
+            s.push_str(&format!("- {w}\n"));
+        }
+        if self.text.sigma_excludes_outliers_note {
+            s.push_str("- The noise was estimated from the residuals without the flagged outliers (robust fit); the standard deviations use it.\n");
+        }
+        s.push('\n');
+    }
+
+    /// The report's sections on the fit: data and fit, what the data identify, estimates,
+    /// outliers, tracker registration.
+    pub fn markdown_sections(&self, s: &mut String) {
+        let t = &self.text;
+        s.push_str(&format!(
+            "- Robot: `{}` ({} links, {} sensors); clearance {} um per joint.\n",
+            t.robot_file,
+            t.links,
+            t.sensors,
+            short(t.clearance_um)
+        ));
+        s.push_str(&format!(
+            "- Data: {} length readings and {} tracker pose measurements at {} poses{}.\n",
+            self.readings,
+            self.pose_measurements,
+            self.poses,
+            if self.simulated { " (**SIMULATED**)" } else { "" }
+        ));
+        s.push_str(&format!("- Model: {}.\n", t.model));
+        s.push_str(&format!("- Loss: {}.\n", self.robust_loss));
+        s.push_str(&format!(
+            "- Residual RMS {} um (at the start {} um); noise {} {} um.\n",
+            sig(self.residual_rms_um, 3),
+            sig(self.initial_rms_um, 3),
+            if self.sigma_estimated {
+                "estimated from the residual:"
+            } else {
+                "declared:"
+            },
+            sig(self.sigma_um, 3)
+        ));
+        s.push_str(&format!(
+            "- Solver: {}{}.\n\n",
+            self.solver.summary,
+            if self.solver.converged {
+                ""
+            } else {
+                " — **did not converge: treat the estimates with suspicion**"
+            }
+        ));
+        let id = &self.identifiability;
+        s.push_str("## What the data identify\n\n");
+        s.push_str(&format!(
+            "rank {} of {} from {} readings (threshold {} = rtol x s_max); {} parameters determined on their own\n",
+            id.rank,
+            id.parameters,
+            id.observations,
+            super::format::sci(id.threshold, 3),
+            id.determined
+        ));
+        if id.rank < id.parameters {
+            s.push_str(&format!("{} blind directions:\n", id.parameters - id.rank));
+            for b in &id.blind_directions {
+                s.push_str(&format!("- {} ({} dim)\n", b.description, b.dimensions));
+            }
+            if id.unexplained_null_dimensions > 0 {
+                s.push_str(&format!(
+                    "- {} further combined directions (mixtures of several joints; see the null-space vectors)\n",
+                    id.unexplained_null_dimensions
+                ));
+            }
+        }
+        s.push_str(&format!(
+            "\nCramér-Rao bounds: RMS {} um, worst {} um over the determined parameters.\n\n",
+            opt_fixed(id.crlb_rms_um, 3),
+            opt_fixed(id.crlb_max_um, 3)
+        ));
+        s.push_str("## Estimates\n\nn.d. = not determined by the data: no estimate exists, whatever a solver would print. Each estimate is rounded to two significant digits of its standard deviation. The numbers `#` match `estimates.svg`.\n\n| # | parameter | estimate | std |\n|---|---|---|---|\n");
+        let mut plotted = 0;
+        for p in &t.parameters {
+            let num = if p.estimate.is_some() {
+                plotted += 1;
+                plotted.to_string()
+            } else {
+                String::new()
+            };
+            let (v, sd) = opt_with_sd(p.estimate, p.std, 3);
+            s.push_str(&format!("| {num} | {} | {v} | {sd} |\n", p.name));
+        }
+        s.push('\n');
+        self.markdown_outliers(s);
+        self.markdown_registration(s);
+    }
+
+    fn markdown_outliers(&self, s: &mut String) {
+        if self.outliers.is_empty() {
+            return;
+        }
+        s.push_str("## Outliers\n\nObservations whose residual is more than 5 robust standard deviations (1.4826 x MAD) from the median. With `--robust` their influence on the fit is limited; without it they pull on every estimate. Check the instrument log at these lines.\n\n| file:line | observation | residual (um) |\n|---|---|---|\n");
+        for o in &self.outliers {
+            let r = opt_fixed(o.residual_um, 3);
+            match (&o.file, o.line, &o.what) {
+                (Some(f), Some(l), Some(w)) => s.push_str(&format!("| {f}:{l} | {w} | {r} |\n")),
+                _ => s.push_str(&format!("| ? | observation {} | {r} |\n", o.observation)),
+            }
+        }
+        s.push('\n');
+    }
+
+    fn markdown_registration(&self, s: &mut String) {
+        let Some(r) = &self.registration else {
+            return;
+        };
+        s.push_str("## Tracker registration\n\n");
+        if let Some(why) = &r.failure {
+            s.push_str(&format!("The automatic registration of the tracker frames failed ({why}); the measured poses were used as logged.\n\n"));
+            return;
+        }
+        s.push_str(&format!("Each tracker file (session) gets its own frame, found from the data against the nominal forward kinematics of its readings (closed form, then Gauss-Newton with one reading offset per link shared by the files); a frame that moves a measured position by more than {} mm, or offsets larger than that, are applied to the data before the fit, smaller ones are left to the fit. Standard deviations are scaled by the registration's variance factor ({}).\n\n", short(r.apply_threshold_mm), sig(r.variance_factor, 3)));
+        s.push_str("| file | poses | translation, mm (sd) | rotation vector, deg (sd) | angle, deg | RMS before, mm | RMS after, mm | applied |\n|---|---|---|---|---|---|---|---|\n");
+        let triple = |v: &[f64; 3], sd: &[f64; 3]| {
+            (0..3)
+                .map(|a| {
+                    let (v, sd) = with_sd(v[a], sd[a]);
+                    format!("{v} ({sd})")
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        for x in &r.sessions {
+            s.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                x.file,
+                x.poses,
+                triple(&x.translation_mm, &x.translation_sd_mm),
+                triple(&x.rotation_vector_deg, &x.rotation_sd_deg),
+                fixed(x.rotation_angle_deg, 4),
+                sig(x.rms_before_mm, 3),
+                sig(x.rms_after_mm, 3),
+                if x.applied { "yes" } else { "no (small)" }
+            ));
+        }
+        s.push('\n');
+        if r.offsets_estimated {
+            s.push_str(&format!(
+                "Link reading offsets (true length = logged length + offset), mm: {}; {}.\n\n",
+                r.link_reading_offset_mm
+                    .iter()
+                    .zip(&r.link_reading_offset_sd_mm)
+                    .enumerate()
+                    .map(|(i, (o, sd))| {
+                        let (o, sd) = with_sd(*o, *sd);
+                        format!("link {} {o} +- {sd}", i + 1)
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if r.offsets_applied {
+                    "applied to the commanded lengths before the fit and folded into `calibrated.toml`"
+                } else {
+                    "not applied (small: left to `link_offset`)"
+                }
+            ));
+        } else {
+            s.push_str("Link reading offsets were not estimated (the poses cannot tell them from the frames).\n\n");
+        }
+        for (e, v) in [
+            (Effect::TrackerFrame, &r.refined_by_fit.tracker_frame),
+            (Effect::LinkOffset, &r.refined_by_fit.link_offset),
+        ] {
+            if let Some(v) = v {
+                s.push_str(&format!(
+                    "Refined by the fit, `{}` (on top of the registration): {}.\n\n",
+                    e.name(),
+                    v.iter()
+                        .map(|p| match (p.value, p.std) {
+                            (Some(v), Some(sd)) => {
+                                let (v, sd) = with_sd(v, sd);
+                                format!("{} {v} +- {sd}", p.name)
+                            }
+                            _ => format!("{} not determined", p.name),
+                        })
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ));
+            }
+        }
+        let gauge = &r.refined_by_fit.gauge_freedoms;
+        if !gauge.is_empty() {
+            s.push_str(&format!("Gauge freedoms of the refinement: {} (the fit determines the tracker frame only together with the installation errors; these directions are not determined).\n\n", gauge.join("; ")));
+        }
+    }
+}

@@ -1,0 +1,388 @@
+//! The report of `cpm refine`: `refine.json`, the final model's `calibration.json` and
+//! report.md (hence report.html), all from one [`RefineReport`].
+use serde::Serialize;
+
+use super::calibrate::CalibratedFile;
+use super::fit::FitReport;
+use super::format::{fixed, opt_with_sd, p_value, short, sig, yes_no};
+use crate::calib::Refinement;
+
+fn finite(v: f64) -> Option<f64> {
+    v.is_finite().then_some(v)
+}
+
+/// The residual of the starting model.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Initial {
+    /// Residual RMS, um.
+    pub rms_um: f64,
+    /// The residual passed the whiteness tests.
+    pub residual_white: bool,
+    /// The structure the tests found.
+    pub significant: Vec<String>,
+}
+
+/// One fitted parameter of an added effect.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct StepParameter {
+    /// Its name.
+    pub name: String,
+    /// Its estimate (`null`: not determined).
+    pub value: Option<f64>,
+    /// Its standard deviation.
+    pub std: Option<f64>,
+    /// The unit of both.
+    pub unit: String,
+}
+
+/// A candidate's score in a round.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct CandidateReport {
+    /// The effect.
+    pub effect: String,
+    /// Fraction of its signature the model cannot already explain.
+    pub novelty: f64,
+    /// F-test p-value.
+    pub p_value: Option<f64>,
+    /// BIC change.
+    pub delta_bic: Option<f64>,
+    /// Residual RMS with it, um.
+    pub rms_um: Option<f64>,
+    /// Cross-validated RMS with it, um.
+    pub cv_rms_um: Option<f64>,
+}
+
+/// One added effect.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct StepReport {
+    /// The effect.
+    pub effect: String,
+    /// F-test p-value.
+    pub p_value: Option<f64>,
+    /// BIC change.
+    pub delta_bic: Option<f64>,
+    /// RMS before, um.
+    pub rms_before_um: f64,
+    /// RMS after, um.
+    pub rms_after_um: f64,
+    /// Cross-validated RMS before, um.
+    pub cv_rms_before_um: f64,
+    /// Cross-validated RMS after, um.
+    pub cv_rms_after_um: f64,
+    /// Its fitted parameters.
+    pub parameters: Vec<StepParameter>,
+    /// Every candidate of the round.
+    pub candidates: Vec<CandidateReport>,
+}
+
+/// A candidate of the last round (which added nothing).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LastRoundCandidate {
+    /// The effect.
+    pub effect: String,
+    /// Its novelty.
+    pub novelty: f64,
+    /// Left out as confounded with the model (novelty below `min_novelty`).
+    pub confounded: bool,
+    /// F-test p-value.
+    pub p_value: Option<f64>,
+    /// BIC change.
+    pub delta_bic: Option<f64>,
+    /// Residual RMS with it, um.
+    pub rms_um: Option<f64>,
+}
+
+/// The final model.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Final {
+    /// Its effects.
+    pub effects: Vec<String>,
+    /// Residual RMS, um.
+    pub rms_um: f64,
+    /// Cross-validated RMS, um.
+    pub cv_rms_um: f64,
+    /// The residual passed the whiteness tests.
+    pub residual_white: bool,
+    /// The residual is consistent with the declared noise.
+    pub consistent_with_noise: Option<bool>,
+    /// Structure left in the residual.
+    pub unexplained_structure: Vec<String>,
+    /// The final fit converged.
+    pub converged: bool,
+    /// Share down-weighted by the robust loss.
+    pub downweighted_share: f64,
+    /// The robust fit failed.
+    pub robust_failed: bool,
+}
+
+/// An effect that passed the F-test and BIC but not cross-validation.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RejectedByCv {
+    /// The effect.
+    pub effect: String,
+    /// Cross-validated RMS without it, um.
+    pub cv_rms_before_um: f64,
+    /// Cross-validated RMS with it, um.
+    pub cv_rms_with_um: f64,
+}
+
+/// `refine.json`.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RefineDoc {
+    /// The cpm version.
+    pub cpm_version: String,
+    /// The data are simulated.
+    pub simulated: bool,
+    /// The starting model's residual.
+    pub initial: Initial,
+    /// The added effects, in order.
+    pub steps: Vec<StepReport>,
+    /// The last round's candidates.
+    pub last_round: Vec<LastRoundCandidate>,
+    /// The novelty below which a candidate is left out.
+    pub min_novelty: f64,
+    /// The final model.
+    #[serde(rename = "final")]
+    pub final_: Final,
+    /// Outliers flagged by the first fit.
+    pub outliers_before: usize,
+    /// Effects rejected by cross-validation.
+    pub rejected_by_cross_validation: Vec<RejectedByCv>,
+}
+
+impl RefineDoc {
+    /// From a refinement (`min_novelty` as used by it).
+    pub fn new(r: &Refinement, simulated: bool, min_novelty: f64) -> Self {
+        let cal = &r.calibration;
+        Self {
+            cpm_version: env!("CARGO_PKG_VERSION").to_string(),
+            simulated,
+            initial: Initial {
+                rms_um: r.initial_diagnostics.rms_um,
+                residual_white: r.initial_diagnostics.white,
+                significant: r.initial_diagnostics.significant.clone(),
+            },
+            steps: r
+                .steps
+                .iter()
+                .map(|s| StepReport {
+                    effect: s.effect.name().to_string(),
+                    p_value: finite(s.p_value),
+                    delta_bic: finite(s.delta_bic),
+                    rms_before_um: s.rms_before_um,
+                    rms_after_um: s.rms_after_um,
+                    cv_rms_before_um: s.cv_rms_before_um,
+                    cv_rms_after_um: s.cv_rms_after_um,
+                    parameters: s
+                        .parameters
+                        .iter()
+                        .enumerate()
+                        .map(|(k, (n, v, sd))| StepParameter {
+                            name: n.clone(),
+                            value: v.filter(|x| x.is_finite()),
+                            std: sd.filter(|x| x.is_finite()),
+                            unit: s.effect.param_unit(k).to_string(),
+                        })
+                        .collect(),
+                    candidates: s
+                        .candidates
+                        .iter()
+                        .map(|c| CandidateReport {
+                            effect: c.effect.name().to_string(),
+                            novelty: c.novelty,
+                            p_value: c.p_value,
+                            delta_bic: c.delta_bic,
+                            rms_um: c.rms_um,
+                            cv_rms_um: c.cv_rms_um,
+                        })
+                        .collect(),
+                })
+                .collect(),
+            last_round: r
+                .last_round
+                .iter()
+                .map(|c| LastRoundCandidate {
+                    effect: c.effect.name().to_string(),
+                    novelty: c.novelty,
+                    confounded: c.novelty < min_novelty,
+                    p_value: c.p_value,
+                    delta_bic: c.delta_bic,
+                    rms_um: c.rms_um,
+                })
+                .collect(),
+            min_novelty,
+            final_: Final {
+                effects: r.model.effects.iter().map(|e| e.name().to_string()).collect(),
+                rms_um: cal.residual_rms_um,
+                cv_rms_um: r.final_cv_rms_um,
+                residual_white: r.final_diagnostics.white,
+                consistent_with_noise: r.final_diagnostics.consistent_with_noise,
+                unexplained_structure: r.unexplained_structure.clone(),
+                converged: cal.solver.was_successful(),
+                downweighted_share: cal.downweighted_share,
+                robust_failed: cal.robust_failed,
+            },
+            outliers_before: r.outliers_before.len(),
+            rejected_by_cross_validation: r
+                .rejected_by_cv
+                .iter()
+                .map(|(e, before, after)| RejectedByCv {
+                    effect: e.name().to_string(),
+                    cv_rms_before_um: *before,
+                    cv_rms_with_um: *after,
+                })
+                .collect(),
+        }
+    }
+
+    /// `refine.json`, pretty-printed (keys sorted).
+    pub fn to_json(&self) -> serde_json::Result<String> {
+        serde_json::to_string_pretty(&serde_json::to_value(self)?)
+    }
+
+    /// The sentence about a last round that added nothing: candidates left out as confounded
+    /// with the model, with their novelty, and those not significant. `None` when the rounds
+    /// ended otherwise.
+    pub fn last_round_message(&self) -> Option<String> {
+        if self.last_round.is_empty() {
+            return None;
+        }
+        let confounded: Vec<String> = self
+            .last_round
+            .iter()
+            .filter(|c| c.confounded)
+            .map(|c| format!("`{}` (novelty {})", c.effect, fixed(c.novelty, 4)))
+            .collect();
+        let weak: Vec<String> = self
+            .last_round
+            .iter()
+            .filter(|c| !c.confounded)
+            .map(|c| match c.p_value {
+                Some(p) => format!("`{}` (p {})", c.effect, p_value(p)),
+                None => format!("`{}` (no fit)", c.effect),
+            })
+            .collect();
+        let mut s = String::new();
+        if !confounded.is_empty() {
+            s.push_str(&format!(
+                "Left out as barely separable from the installation errors and effects already in the model on this design (novelty, the fraction of the effect's signature the model cannot already explain, below {}): {}; the data cannot tell such an effect apart, so the residual says nothing about it: a design with more varied poses (`cpm design`) can. ",
+                short(self.min_novelty),
+                confounded.join(", ")
+            ));
+        }
+        if !weak.is_empty() {
+            s.push_str(&format!(
+                "Not significant (after the Bonferroni correction, or no BIC gain): {}.",
+                weak.join(", ")
+            ));
+        }
+        Some(s.trim_end().to_string())
+    }
+}
+
+/// Everything `cpm refine` reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefineReport {
+    /// refine.json.
+    pub doc: RefineDoc,
+    /// The final model's fit: calibration.json.
+    pub fit: FitReport,
+    /// The provenance lines atop the report.
+    pub provenance: Vec<String>,
+    /// The starting model, in words.
+    pub starting_model: String,
+    /// The final model's effects, in words.
+    pub final_effects: String,
+    /// What calibrated.toml holds.
+    pub calibrated: CalibratedFile,
+    /// The figure files written.
+    pub figures: Vec<String>,
+}
+
+impl RefineReport {
+    /// report.md.
+    pub fn markdown(&self) -> String {
+        let d = &self.doc;
+        let mut s = String::from("# Refinement report\n\n");
+        if d.simulated {
+            s.push_str("**The measurements are SIMULATED.**\n\n");
+        }
+        for l in &self.provenance {
+            s.push_str(&format!("{l}\n"));
+        }
+        s.push('\n');
+        for w in &self.fit.text.warnings {
+            s.push_str(&format!("- {w}\n"));
+        }
+        s.push_str(&format!(
+            "\nStarting model: {}. Residual RMS {} um, white: {}.\n\n## Steps\n\n",
+            self.starting_model,
+            sig(d.initial.rms_um, 3),
+            yes_no(d.initial.residual_white)
+        ));
+        if d.outliers_before > 0 {
+            s.push_str(&format!(
+                "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations.\n\n",
+                d.outliers_before
+            ));
+        }
+        for x in &d.rejected_by_cross_validation {
+            s.push_str(&format!(
+                "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {} -> {} um (no better).\n",
+                x.effect,
+                sig(x.cv_rms_before_um, 4),
+                sig(x.cv_rms_with_um, 4)
+            ));
+        }
+        if !d.rejected_by_cross_validation.is_empty() {
+            s.push('\n');
+        }
+        let last = d.last_round_message();
+        if d.steps.is_empty() {
+            match &last {
+                Some(m) => s.push_str(&format!("No effect was added. {m}\n\n")),
+                None => s.push_str("No effect was added: the residual was already white and consistent with the noise (or no candidate was left).\n\n"),
+            }
+        }
+        for (i, st) in d.steps.iter().enumerate() {
+            s.push_str(&format!(
+                "### {}. `{}`\n\n- F-test p-value {}, BIC change {}\n- RMS {} -> {} um; cross-validated {} -> {} um\n\n| parameter | estimate | std |\n|---|---|---|\n",
+                i + 1,
+                st.effect,
+                st.p_value.map_or("n.d.".into(), p_value),
+                st.delta_bic.map_or("n.d.".into(), |b| fixed(b, 1)),
+                sig(st.rms_before_um, 3),
+                sig(st.rms_after_um, 3),
+                sig(st.cv_rms_before_um, 3),
+                sig(st.cv_rms_after_um, 3)
+            ));
+            for p in &st.parameters {
+                let (v, sd) = opt_with_sd(p.value, p.std, 4);
+                s.push_str(&format!("| {} | {v} | {sd} |\n", p.name));
+            }
+            s.push('\n');
+        }
+        if let (false, Some(m)) = (d.steps.is_empty(), &last) {
+            s.push_str(&format!("The last round added nothing. {m}\n\n"));
+        }
+        s.push_str(&format!(
+            "## Final\n\n- Effects: {}\n- RMS {} um, cross-validated {} um, residual white: {}\n- Unexplained structure: {}\n\n",
+            self.final_effects,
+            sig(d.final_.rms_um, 3),
+            sig(d.final_.cv_rms_um, 3),
+            yes_no(d.final_.residual_white),
+            if d.final_.unexplained_structure.is_empty() { "none".to_string() } else { d.final_.unexplained_structure.join(", ") }
+        ));
+        self.fit.markdown_sections(&mut s);
+        let c = &self.calibrated;
+        s.push_str(&format!(
+            "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models, socket_error into the sensor sockets{}\n",
+            c.undetermined,
+            if c.known_effects.is_empty() { String::new() } else { format!("; values of {} in `[calibration.known_effects]`", c.known_effects.join(", ")) }
+        ));
+        for f in &self.figures {
+            s.push_str(&format!("- `{f}`\n"));
+        }
+        s
+    }
+}
