@@ -375,7 +375,11 @@ pub struct FitReport {
     pub text: FitText,
 }
 
-fn named_block(model: &MeasurementModel, cal: &Calibration, e: Effect) -> Option<Vec<NamedEstimate>> {
+fn named_block(
+    model: &MeasurementModel,
+    cal: &Calibration,
+    e: Effect,
+) -> Option<Vec<NamedEstimate>> {
     let names = model.parameter_names();
     let b = model.blocks().into_iter().find(|b| b.effect == Some(e))?;
     Some(
@@ -401,7 +405,12 @@ impl FitReport {
         let provenance: &Provenance = &inputs.provenance;
         let ni = model.num_installation_params();
         let names = model.parameter_names();
-        let sensors: Vec<String> = model.nominal.sensors.iter().map(|s| s.name.clone()).collect();
+        let sensors: Vec<String> = model
+            .nominal
+            .sensors
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
         let est = split_params(model, &cal.estimate_um);
         let sd = split_params(model, &cal.std_um);
         let effects = est
@@ -470,48 +479,56 @@ impl FitReport {
                 }
             })
             .collect();
-        let registration = inputs.merged.registration.as_ref().map(|r| RegistrationSummary {
-            apply_threshold_mm: io::REGISTRATION_APPLY_MM,
-            failure: r.failure.clone(),
-            sessions: r
-                .sessions
-                .iter()
-                .map(|s| {
-                    let f = &s.frame;
-                    SessionReport {
-                        file: s.file.clone(),
-                        poses: f.poses,
-                        applied: s.applied,
-                        largest_move_mm: s.largest_move_mm,
-                        translation_mm: [f.translation_mm.x, f.translation_mm.y, f.translation_mm.z],
-                        translation_sd_mm: f.translation_sd_mm,
-                        rotation_vector_deg: f.rotation_vector_deg(),
-                        rotation_sd_deg: f.rotation_sd_deg,
-                        rotation_angle_deg: f.rotation_angle_deg(),
-                        roll_pitch_yaw_deg: f.as_pose().rpy_deg(),
-                        rms_before_mm: f.rms_before_mm,
-                        rms_after_mm: f.rms_after_mm,
-                        orientation_rms_before_deg: f.orientation_rms_before_deg,
-                        orientation_rms_after_deg: f.orientation_rms_after_deg,
-                    }
-                })
-                .collect(),
-            link_reading_offset_mm: r.link_offset_mm.clone(),
-            link_reading_offset_sd_mm: r.link_offset_sd_mm.clone(),
-            offsets_estimated: r.offsets_estimated,
-            offsets_applied: r.offsets_applied,
-            variance_factor: r.variance_factor,
-            refined_by_fit: RefinedByFit {
-                tracker_frame: named_block(model, cal, Effect::TrackerFrame),
-                link_offset: named_block(model, cal, Effect::LinkOffset),
-                gauge_freedoms: id
-                    .blind_directions
+        let registration = inputs
+            .merged
+            .registration
+            .as_ref()
+            .map(|r| RegistrationSummary {
+                apply_threshold_mm: io::REGISTRATION_APPLY_MM,
+                failure: r.failure.clone(),
+                sessions: r
+                    .sessions
                     .iter()
-                    .filter(|b| b.description.contains("tracker"))
-                    .map(|b| b.description.clone())
+                    .map(|s| {
+                        let f = &s.frame;
+                        SessionReport {
+                            file: s.file.clone(),
+                            poses: f.poses,
+                            applied: s.applied,
+                            largest_move_mm: s.largest_move_mm,
+                            translation_mm: [
+                                f.translation_mm.x,
+                                f.translation_mm.y,
+                                f.translation_mm.z,
+                            ],
+                            translation_sd_mm: f.translation_sd_mm,
+                            rotation_vector_deg: f.rotation_vector_deg(),
+                            rotation_sd_deg: f.rotation_sd_deg,
+                            rotation_angle_deg: f.rotation_angle_deg(),
+                            roll_pitch_yaw_deg: f.as_pose().rpy_deg(),
+                            rms_before_mm: f.rms_before_mm,
+                            rms_after_mm: f.rms_after_mm,
+                            orientation_rms_before_deg: f.orientation_rms_before_deg,
+                            orientation_rms_after_deg: f.orientation_rms_after_deg,
+                        }
+                    })
                     .collect(),
-            },
-        });
+                link_reading_offset_mm: r.link_offset_mm.clone(),
+                link_reading_offset_sd_mm: r.link_offset_sd_mm.clone(),
+                offsets_estimated: r.offsets_estimated,
+                offsets_applied: r.offsets_applied,
+                variance_factor: r.variance_factor,
+                refined_by_fit: RefinedByFit {
+                    tracker_frame: named_block(model, cal, Effect::TrackerFrame),
+                    link_offset: named_block(model, cal, Effect::LinkOffset),
+                    gauge_freedoms: id
+                        .blind_directions
+                        .iter()
+                        .filter(|b| b.description.contains("tracker"))
+                        .map(|b| b.description.clone())
+                        .collect(),
+                },
+            });
         let misfit = misfit(cal).map(|m| MisfitReport {
             chi2: m.chi2,
             dof: m.dof,
@@ -637,7 +654,11 @@ impl FitReport {
             self.readings,
             self.pose_measurements,
             self.poses,
-            if self.simulated { " (**SIMULATED**)" } else { "" }
+            if self.simulated {
+                " (**SIMULATED**)"
+            } else {
+                ""
+            }
         ));
         s.push_str(&format!("- Model: {}.\n", t.model));
         s.push_str(&format!("- Loss: {}.\n", self.robust_loss));

@@ -221,7 +221,10 @@ mod tests {
     #[test]
     fn artefacts_are_found() {
         assert_eq!(find_artefact("rms -0.000 um"), Some("-0.000".into()));
-        assert_eq!(find_artefact("x = 3.0000000000000004."), Some("3.0000000000000004".into()));
+        assert_eq!(
+            find_artefact("x = 3.0000000000000004."),
+            Some("3.0000000000000004".into())
+        );
         assert_eq!(find_artefact("| NaN |"), Some("NaN".into()));
         assert_eq!(find_artefact("link-0 at -0.5 um, p 1.2e-5, s1"), None);
         assert_eq!(find_artefact("2026-11-23 file_0.csv"), None);

@@ -212,7 +212,12 @@ impl RefineDoc {
                 .collect(),
             min_novelty,
             final_: Final {
-                effects: r.model.effects.iter().map(|e| e.name().to_string()).collect(),
+                effects: r
+                    .model
+                    .effects
+                    .iter()
+                    .map(|e| e.name().to_string())
+                    .collect(),
                 rms_um: cal.residual_rms_um,
                 cv_rms_um: r.final_cv_rms_um,
                 residual_white: r.final_diagnostics.white,

@@ -1,0 +1,278 @@
+//! The typed reports of `cpm calibrate` and `cpm refine`: every JSON key the files had before
+//! the reports were typed is still there (key sets recorded from the untyped code in
+//! tests/data/report_keys, one per run below), and no report.md or CSV file shows a
+//! formatting artefact (`-0.000`, `3.0000000000000004`, `NaN`, a Debug name).
+//!
+//! The data are SIMULATED (`cpm simulate`, seeded), one reading spiked to give an outlier.
+#[path = "common/cli.rs"]
+mod cli;
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use cli::{example, ok, p, scratch};
+
+/// Every key path of a JSON value (`/a/b`, arrays as `[]`).
+fn key_paths(v: &serde_json::Value, prefix: &str, out: &mut BTreeSet<String>) {
+    match v {
+        serde_json::Value::Object(m) => {
+            for (k, x) in m {
+                let q = format!("{prefix}/{k}");
+                out.insert(q.clone());
+                key_paths(x, &q, out);
+            }
+        }
+        serde_json::Value::Array(a) => {
+            for x in a {
+                key_paths(x, &format!("{prefix}[]"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+fn keys_of(path: &Path) -> BTreeSet<String> {
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+    let mut out = BTreeSet::new();
+    key_paths(&v, "", &mut out);
+    out
+}
+
+fn recorded(name: &str) -> BTreeSet<String> {
+    let f = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/report_keys")
+        .join(format!("{name}.txt"));
+    std::fs::read_to_string(f)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect()
+}
+
+fn assert_keeps(name: &str, file: &Path) {
+    let old = recorded(name);
+    assert!(old.len() > 20, "{name}: fixture too small");
+    let new = keys_of(file);
+    let missing: Vec<_> = old.difference(&new).collect();
+    assert!(
+        missing.is_empty(),
+        "{}: keys lost: {missing:?}",
+        file.display()
+    );
+}
+
+/// Simulated length readings (40 poses, the paper's Table 2, seed 4) with reading 21 spiked
+/// by 0.5 mm.
+fn lengths(dir: &Path) -> PathBuf {
+    let f = dir.join("len.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--random",
+        "40",
+        "--paper-table2",
+        "--seed",
+        "4",
+        "--out",
+        &p(&f),
+    ]);
+    let text = std::fs::read_to_string(&f).unwrap();
+    let mut n = 0;
+    let lines: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.starts_with(|c: char| c.is_ascii_digit()) {
+                n += 1;
+                if n == 21 {
+                    let mut v: Vec<String> = l.split(',').map(str::to_string).collect();
+                    v[8] = format!("{}", v[8].parse::<f64>().unwrap() + 0.5);
+                    return v.join(",");
+                }
+            }
+            l.to_string()
+        })
+        .collect();
+    std::fs::write(&f, lines.join("\n") + "\n").unwrap();
+    f
+}
+
+/// Every report.md and .csv file under `dir` (recursively), checked for artefacts.
+fn assert_clean_text(dir: &Path) -> usize {
+    let mut checked = 0;
+    for e in std::fs::read_dir(dir).unwrap() {
+        let path = e.unwrap().path();
+        if path.is_dir() {
+            checked += assert_clean_text(&path);
+            continue;
+        }
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if !(name.ends_with(".md") || name.ends_with(".csv"))
+            || name == "len.csv"
+            || name == "bl.csv"
+            || name == "poses_in.csv"
+        {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        if let Some(a) = cpm::report::format::find_artefact(&text) {
+            panic!("{}: formatting artefact {a:?}", path.display());
+        }
+        for debug in [
+            "AOptimal", "DOptimal", "EOptimal", "Some(", "None", ": true", ": false", "| true",
+            "| false",
+        ] {
+            if name.ends_with(".md") {
+                assert!(
+                    !text.contains(debug),
+                    "{}: Debug text {debug:?}",
+                    path.display()
+                );
+            }
+        }
+        checked += 1;
+    }
+    checked
+}
+
+#[test]
+fn calibrate_keeps_every_json_key_and_writes_clean_text() {
+    let d = scratch("report-model", "calibrate");
+    let len = lengths(&d);
+    let cal = d.join("cal");
+    // Declared noise 1 um: the misfit object is filled; the spike is flagged as an outlier.
+    let o = cli::cpm(&[
+        "calibrate",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--data",
+        &p(&len),
+        "--sigma-um",
+        "1",
+        "--out",
+        &p(&cal),
+    ]);
+    assert!(cal.join("calibration.json").exists(), "{o:?}");
+    assert_keeps("calibrate_lengths", &cal.join("calibration.json"));
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(cal.join("calibration.json")).unwrap())
+            .unwrap();
+    assert!(
+        !j["outliers"].as_array().unwrap().is_empty(),
+        "{}",
+        j["outliers"]
+    );
+    assert!(j["misfit"].is_object());
+
+    let poses = d.join("poses_in.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--random",
+        "30",
+        "--range-deg",
+        "12",
+        "--measure",
+        "poses",
+        "--noise",
+        "gaussian:10",
+        "--orientation-noise-urad",
+        "20",
+        "--seed",
+        "3",
+        "--paper-table2",
+        "--out",
+        &p(&poses),
+    ]);
+    let calp = d.join("calp");
+    ok(&[
+        "calibrate",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--data",
+        &p(&poses),
+        "--effects",
+        "link_offset,tracker_frame",
+        "--out",
+        &p(&calp),
+    ]);
+    assert_keeps("calibrate_tracker", &calp.join("calibration.json"));
+    let report = std::fs::read_to_string(calp.join("report.md")).unwrap();
+    assert!(report.contains("## Tracker registration"), "{report}");
+    assert!(assert_clean_text(&d) >= 2);
+}
+
+#[test]
+fn refine_keeps_every_json_key_and_writes_clean_text() {
+    let d = scratch("report-model", "refine");
+    let len = lengths(&d);
+    let r = d.join("ref");
+    let _ = cli::cpm(&[
+        "refine",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--data",
+        &p(&len),
+        "--max-steps",
+        "1",
+        "--candidates",
+        "link_offset,backlash",
+        "--out",
+        &p(&r),
+    ]);
+    assert_keeps("refine_no_step", &r.join("refine.json"));
+
+    let bl = d.join("bl.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--random",
+        "60",
+        "--paper-table2",
+        "--truth-effect",
+        "backlash=8,8,8,8,8,8",
+        "--noise",
+        "gaussian:1",
+        "--seed",
+        "5",
+        "--out",
+        &p(&bl),
+    ]);
+    let rb = d.join("refb");
+    ok(&[
+        "refine",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--data",
+        &p(&bl),
+        "--sigma-um",
+        "1",
+        "--max-steps",
+        "2",
+        "--candidates",
+        "link_offset,backlash",
+        "--out",
+        &p(&rb),
+    ]);
+    assert_keeps("refine_step", &rb.join("refine.json"));
+    assert_keeps("refine_calibration", &rb.join("calibration.json"));
+    // The text says what refine.json says, rounded to the deviation: 8 um of backlash, found.
+    let j: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rb.join("refine.json")).unwrap()).unwrap();
+    let step = &j["steps"][0];
+    assert_eq!(step["effect"], "backlash");
+    let report = std::fs::read_to_string(rb.join("report.md")).unwrap();
+    for par in step["parameters"].as_array().unwrap() {
+        let (v, sd) = cpm::report::format::with_sd(
+            par["value"].as_f64().unwrap(),
+            par["std"].as_f64().unwrap(),
+        );
+        let row = format!("| {} | {v} | {sd} |", par["name"].as_str().unwrap());
+        assert!(report.contains(&row), "{row} not in\n{report}");
+        assert!((par["value"].as_f64().unwrap() - 8.0).abs() < 1.5, "{par}");
+    }
+    assert!(assert_clean_text(&d) >= 2);
+}
