@@ -332,68 +332,17 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         desc.to_toml_string()?
     );
     let dir = &args.out;
-    let last_gauge = d.gauge.last();
-    let summary = json!({
-        "robot": robot.file,
-        "poses": d.poses.len(),
-        "sensors": d.sensors.iter().map(|s| s.name.clone()).collect::<Vec<_>>(),
-        "readings": d.num_readings(),
-        "candidates": d.candidates,
-        "criterion": format!("{:?}", d.criterion),
-        "rank": d.indices.rank,
-        "parameters": d.indices.num_params,
-        "sigma_um": d.indices.sigma_um,
-        "crlb_rms_um": d.indices.crlb_rms_um,
-        "crlb_max_um": d.indices.crlb_max_um,
-        "crlb_worst_direction_um": d.indices.crlb_worst_um,
-        "condition": d.indices.o2_condition,
-        "gauge_freedoms_left": last_gauge.map(|g| g.socket_freedoms()),
-        "sensor_lengths_mm": d.sensor_lengths_mm,
-        "log": d.log,
-    });
+    let report = crate::report::design::DesignReport::new(&robot.file, &d);
     let mut set = OutputSet::new();
     set.add(dir.join("poses.csv"), io::write_pose_list(&d.poses));
     set.add(dir.join("sockets.csv"), d.sockets_csv());
     set.add(dir.join("robot.toml"), robot_toml);
-    set.add(
-        dir.join("design.json"),
-        serde_json::to_string_pretty(&summary)?,
-    );
-    let mut r = String::from("# Calibration design\n\n");
-    r.push_str(&format!(
-        "- Robot: `{}`; {} poses x {} socket pairs = {} readings ({:?} criterion, {} admissible candidates).\n- Rank {} of {}; Cramér-Rao bounds for {} um of sensor noise: RMS {:.3} um, worst parameter {:.3} um, worst direction {:.3} um.\n",
-        robot.file, d.poses.len(), d.sensors.len(), d.num_readings(), d.criterion, d.candidates,
-        d.indices.rank, d.indices.num_params, d.indices.sigma_um, d.indices.crlb_rms_um, d.indices.crlb_max_um, d.indices.crlb_worst_um
-    ));
-    if let Some(g) = last_gauge {
-        r.push_str(&format!(
-            "- Gauge freedoms left by the socket layout: {}.\n",
-            g.socket_freedoms()
-        ));
-    }
-    r.push_str("\n## Sensors (gauge travel over the poses)\n\n| sensor | base socket (mm, {B}) | platform socket (mm, {P}) | length range (mm) |\n|---|---|---|---|\n");
-    for (s, (lo, hi)) in d.sensors.iter().zip(&d.sensor_lengths_mm) {
-        r.push_str(&format!(
-            "| {} | ({:.1}, {:.1}, {:.1}) | ({:.1}, {:.1}, {:.1}) | {lo:.1} .. {hi:.1} |\n",
-            s.name,
-            s.base_mm.x,
-            s.base_mm.y,
-            s.base_mm.z,
-            s.platform_mm.x,
-            s.platform_mm.y,
-            s.platform_mm.z
-        ));
-    }
-    r.push_str("\n## How it was chosen\n\n");
-    for l in &d.log {
-        r.push_str(&format!("- {l}\n"));
-    }
-    r.push_str("\n## Files\n\n- `poses.csv`: the poses to drive (`--plan` of `cpm simulate` / `cpm identifiability`).\n- `sockets.csv`: the chosen socket pairs.\n- `robot.toml`: the robot description with these sensors: measure with it, then `cpm calibrate --robot robot.toml`.\n");
-    set.add(dir.join("report.md"), r);
+    set.add(dir.join("design.json"), report.to_json()?);
+    set.add(dir.join("report.md"), report.markdown());
     let written = commit_design(set, dir, args, "cpm experiment design", ctx)?;
     ctx.finish();
     if args.json {
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&summary)?)?;
+        writeln!(ctx.out, "{}", report.to_json()?)?;
     } else {
         writeln!(
             ctx.out,
@@ -563,8 +512,8 @@ fn run_limited(
     );
     let mut r = String::from("# Calibration design under an instrument's limits\n\n");
     r.push_str(&format!(
-        "- Robot: `{}`; {} setups, {} readings ({:?} criterion; {} candidate poses within the joint limits, {} candidate readings).\n- Rank {} of {}; Cramér-Rao bounds for {} um of sensor noise: RMS {:.3} um, worst parameter {:.3} um.\n- Largest gauge travel in a setup {:.1} mm (stroke {} mm); smallest gauge-link clearance {:.1} mm (at least {} mm); largest cone angle {:.1} deg (base), {:.1} deg (platform), at most {} deg.\n\n",
-        robot.file, d.setups.len(), d.num_readings(), d.criterion, d.candidate_poses, d.candidate_readings,
+        "- Robot: `{}`; {} setups, {} readings ({} criterion; {} candidate poses within the joint limits, {} candidate readings).\n- Rank {} of {}; Cramér-Rao bounds for {} um of sensor noise: RMS {:.3} um, worst parameter {:.3} um.\n- Largest gauge travel in a setup {:.1} mm (stroke {} mm); smallest gauge-link clearance {:.1} mm (at least {} mm); largest cone angle {:.1} deg (base), {:.1} deg (platform), at most {} deg.\n\n",
+        robot.file, d.setups.len(), d.num_readings(), crate::report::design::criterion_text(d.criterion), d.candidate_poses, d.candidate_readings,
         d.indices.rank, d.indices.num_params, d.indices.sigma_um, d.indices.crlb_rms_um, d.indices.crlb_max_um,
         d.max_travel_mm(), stroke, d.min_clearance_mm(), args.clearance_mm, max_base, max_platform, args.cone_deg
     ));

@@ -2,6 +2,7 @@
 //! of the same value, so what the text says and what the JSON holds cannot drift apart.
 //! Numbers in text go through [`format`].
 pub mod calibrate;
+pub mod design;
 pub mod fit;
 pub mod format;
 pub mod refine;
