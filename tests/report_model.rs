@@ -274,6 +274,12 @@ fn refine_keeps_every_json_key_and_writes_clean_text() {
         assert!(report.contains(&row), "{row} not in\n{report}");
         assert!((par["value"].as_f64().unwrap() - 8.0).abs() < 1.5, "{par}");
     }
+    // The estimates figure has one panel per physical group, its unit on the axis.
+    let svg = std::fs::read_to_string(rb.join("estimates.svg")).unwrap();
+    for axis in ["installation errors, um", "backlash, um"] {
+        assert!(svg.contains(axis), "estimates.svg lacks the axis {axis:?}");
+    }
+    assert!(!svg.contains("unit in report.md"));
     assert!(assert_clean_text(&d) >= 2);
 }
 

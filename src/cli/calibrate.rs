@@ -169,23 +169,40 @@ pub fn provenance_lines(p: &Provenance, simulated: bool, command: &str) -> Vec<S
 
 /// The `estimates.svg` figure: determined installation errors with error bars.
 pub fn estimates_figure(model: &MeasurementModel, cal: &Calibration) -> anyhow::Result<String> {
-    let names = model.parameter_names();
-    let points: Vec<(String, f64, f64)> = (0..model.num_params())
-        .filter_map(|k| {
-            cal.estimate_um[k].map(|v| (names[k].clone(), v, cal.std_um[k].unwrap_or(0.0)))
-        })
-        .collect();
+    // One panel per physical group and unit: the installation errors, then each effect's
+    // parameters of one unit; numbered as the determined rows of report.md's table.
+    let mut groups: Vec<plots::EstimateGroup> = Vec::new();
+    let mut number = 0;
+    for b in model.blocks() {
+        for k in b.offset..b.offset + b.len {
+            let Some(v) = cal.estimate_um.get(k).copied().flatten() else {
+                continue;
+            };
+            number += 1;
+            let label = match b.effect {
+                Some(e) => format!("{}, {}", e.name(), e.param_unit(k - b.offset)),
+                None => "installation errors, um".to_string(),
+            };
+            let point = (number, v, cal.std_um[k].unwrap_or(0.0));
+            match groups.iter_mut().find(|g| g.label == label) {
+                Some(g) => g.points.push(point),
+                None => groups.push(plots::EstimateGroup {
+                    label,
+                    points: vec![point],
+                }),
+            }
+        }
+    }
     Ok(plots::estimates(
         &format!(
-            "Determined parameters, +-2 std{}",
+            "Determined parameters with +-2 std error bars{}",
             if cal.simulated {
                 " (SIMULATED data)"
             } else {
                 ""
             }
         ),
-        "estimate (unit in report.md)",
-        &points,
+        &groups,
     )?)
 }
 

@@ -124,67 +124,81 @@ pub fn residuals_before_after(
     )
 }
 
-/// Estimates with +-2 standard deviation error bars: one point per determined parameter
-/// (`labels[k]`, `value`, `std`), numbered along x.
-pub fn estimates(
-    title: &str,
-    y_label: &str,
-    points: &[(String, f64, f64)],
-) -> Result<String, PlotError> {
+/// A physical group of estimates in one panel: its axis label with the unit (`installation
+/// errors, um`) and its points `(number as in report.md, estimate, standard deviation)`.
+pub struct EstimateGroup {
+    /// Axis label, with the unit.
+    pub label: String,
+    /// The points.
+    pub points: Vec<(usize, f64, f64)>,
+}
+
+/// Estimates with +-2 sigma error bars, one panel per physical group (so each axis carries
+/// one unit); the parameter numbers match report.md's table. No legend covers the data: the
+/// title says what the bars are.
+pub fn estimates(title: &str, groups: &[EstimateGroup]) -> Result<String, PlotError> {
+    let groups: Vec<&EstimateGroup> = groups.iter().filter(|g| !g.points.is_empty()).collect();
+    let panel_h = 320u32;
+    let height = 50 + panel_h * groups.len().max(1) as u32;
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1000, 500)).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, (1000, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(title, e))?;
-        let (mut lo, mut hi) = (0.0f64, 0.0f64);
-        for (_, v, s) in points {
-            lo = lo.min(v - 2.0 * s);
-            hi = hi.max(v + 2.0 * s);
-        }
-        let pad = ((hi - lo).abs() * 0.1).max(1e-6);
-        let n = points.len().max(1);
-        let labels: Vec<String> = points.iter().map(|p| p.0.clone()).collect();
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0f64..(n as f64 + 1.0), (lo - pad)..(hi + pad))
+        let root = root
+            .titled(title, ("sans-serif", 20))
             .map_err(|e| err(title, e))?;
-        chart
-            .configure_mesh()
-            .x_desc("parameter (numbered as in report.md)")
-            .y_desc(y_label)
-            .x_label_formatter(&|x| {
-                let i = x.round();
-                if (x - i).abs() < 1e-6 && i >= 1.0 && (i as usize) <= labels.len() {
-                    format!("{}", i as usize)
-                } else {
-                    String::new()
-                }
-            })
-            .draw()
-            .map_err(|e| err(title, e))?;
+        let panels = root.split_evenly((groups.len().max(1), 1));
         let blue = RGBColor(31, 119, 180);
-        chart
-            .draw_series(points.iter().enumerate().map(|(i, (_, v, s))| {
-                let x = i as f64 + 1.0;
-                ErrorBar::new_vertical(x, v - 2.0 * s, *v, v + 2.0 * s, blue.filled(), 6)
-            }))
-            .map_err(|e| err(title, e))?
-            .label("estimate +- 2 std")
-            .legend(move |(x, y)| Circle::new((x + 5, y), 3, blue.filled()));
-        chart
-            .draw_series(LineSeries::new(
-                vec![(0.0, 0.0), (n as f64 + 1.0, 0.0)],
-                RGBColor(150, 150, 150).stroke_width(1),
-            ))
-            .map_err(|e| err(title, e))?;
-        chart
-            .configure_series_labels()
-            .border_style(BLACK)
-            .background_style(WHITE.mix(0.8))
-            .draw()
-            .map_err(|e| err(title, e))?;
+        for (g, area) in groups.iter().zip(&panels) {
+            let (mut lo, mut hi) = (0.0f64, 0.0f64);
+            for (_, v, s) in &g.points {
+                lo = lo.min(v - 2.0 * s);
+                hi = hi.max(v + 2.0 * s);
+            }
+            let pad = ((hi - lo).abs() * 0.1).max(1e-6);
+            let first = g.points.iter().map(|p| p.0).min().unwrap_or(1) as f64;
+            let last = g.points.iter().map(|p| p.0).max().unwrap_or(1) as f64;
+            let mut chart = ChartBuilder::on(area)
+                .margin(10)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
+                .build_cartesian_2d((first - 1.0)..(last + 1.0), (lo - pad)..(hi + pad))
+                .map_err(|e| err(title, e))?;
+            let numbers: Vec<usize> = g.points.iter().map(|p| p.0).collect();
+            chart
+                .configure_mesh()
+                .x_desc("parameter (numbered as in report.md)")
+                .y_desc(g.label.as_str())
+                .x_label_formatter(&|x| {
+                    let i = x.round();
+                    if (x - i).abs() < 1e-6 && i >= 1.0 && numbers.contains(&(i as usize)) {
+                        format!("{}", i as usize)
+                    } else {
+                        String::new()
+                    }
+                })
+                .y_label_formatter(&|y| crate::report::format::short(*y))
+                .draw()
+                .map_err(|e| err(title, e))?;
+            chart
+                .draw_series(g.points.iter().map(|(i, v, s)| {
+                    ErrorBar::new_vertical(
+                        *i as f64,
+                        v - 2.0 * s,
+                        *v,
+                        v + 2.0 * s,
+                        blue.filled(),
+                        6,
+                    )
+                }))
+                .map_err(|e| err(title, e))?;
+            chart
+                .draw_series(LineSeries::new(
+                    vec![(first - 1.0, 0.0), (last + 1.0, 0.0)],
+                    RGBColor(150, 150, 150).stroke_width(1),
+                ))
+                .map_err(|e| err(title, e))?;
+        }
         root.present().map_err(|e| err(title, e))?;
     }
     Ok(svg)

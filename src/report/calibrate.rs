@@ -40,7 +40,7 @@ impl CalibrateReport {
             r.push_str("**The measurements are SIMULATED.**\n\n");
         }
         for l in &self.provenance {
-            r.push_str(&format!("{l}\n"));
+            r.push_str(&format!("{l}\n\n"));
         }
         if let Some(form) = &f.text.formulation {
             r.push_str(&format!("Formulation: {form}.\n"));

@@ -642,6 +642,7 @@ impl FitReport {
     /// outliers, tracker registration.
     pub fn markdown_sections(&self, s: &mut String) {
         let t = &self.text;
+        s.push_str("## Data and fit\n\n");
         s.push_str(&format!(
             "- Robot: `{}` ({} links, {} sensors); clearance {} um per joint.\n",
             t.robot_file,
@@ -671,7 +672,11 @@ impl FitReport {
             } else {
                 "declared:"
             },
-            sig(self.sigma_um, 3)
+            if self.sigma_estimated {
+                sig(self.sigma_um, 3)
+            } else {
+                short(self.sigma_um)
+            }
         ));
         s.push_str(&format!(
             "- Solver: {}{}.\n\n",
@@ -685,7 +690,7 @@ impl FitReport {
         let id = &self.identifiability;
         s.push_str("## What the data identify\n\n");
         s.push_str(&format!(
-            "rank {} of {} from {} readings (threshold {} = rtol x s_max); {} parameters determined on their own\n",
+            "Rank {} of {} from {} readings (threshold {} = rtol x s_max); {} parameters determined on their own.\n\n",
             id.rank,
             id.parameters,
             id.observations,
@@ -693,7 +698,10 @@ impl FitReport {
             id.determined
         ));
         if id.rank < id.parameters {
-            s.push_str(&format!("{} blind directions:\n", id.parameters - id.rank));
+            s.push_str(&format!(
+                "{} blind directions:\n\n",
+                id.parameters - id.rank
+            ));
             for b in &id.blind_directions {
                 s.push_str(&format!("- {} ({} dim)\n", b.description, b.dimensions));
             }
@@ -706,8 +714,10 @@ impl FitReport {
         }
         s.push_str(&format!(
             "\nCramér-Rao bounds: RMS {} um, worst {} um over the determined parameters.\n\n",
-            opt_fixed(id.crlb_rms_um, 3),
-            opt_fixed(id.crlb_max_um, 3)
+            id.crlb_rms_um
+                .map_or_else(|| "n.d.".to_string(), |v| sig(v, 3)),
+            id.crlb_max_um
+                .map_or_else(|| "n.d.".to_string(), |v| sig(v, 3))
         ));
         s.push_str("## Estimates\n\nn.d. = not determined by the data: no estimate exists, whatever a solver would print. Each estimate is rounded to two significant digits of its standard deviation. The numbers `#` match `estimates.svg`.\n\n| # | parameter | estimate | std |\n|---|---|---|---|\n");
         let mut plotted = 0;

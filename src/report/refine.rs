@@ -313,7 +313,7 @@ impl RefineReport {
             s.push_str("**The measurements are SIMULATED.**\n\n");
         }
         for l in &self.provenance {
-            s.push_str(&format!("{l}\n"));
+            s.push_str(&format!("{l}\n\n"));
         }
         s.push('\n');
         for w in &self.fit.text.warnings {
