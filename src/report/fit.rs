@@ -590,7 +590,7 @@ impl FitReport {
             },
             formulation: formulation.map(|f| f.key().to_string()),
             robust_loss: common::describe_loss(&inputs.identify.lm.loss),
-            robust: calibrate.then(|| RobustReport {
+            robust: calibrate.then_some(RobustReport {
                 downweighted_share: cal.downweighted_share,
                 downweight_level: crate::calib::DOWNWEIGHT_LEVEL,
                 max_downweighted_share: crate::calib::MAX_DOWNWEIGHTED_SHARE,
