@@ -19,7 +19,7 @@ fn finite(v: Option<f64>) -> Option<f64> {
 }
 
 /// Installation errors per joint, um: `base[i] = [dx, dy, dz]` of link i+1's base joint.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, PartialEq, Default)]
 pub struct PerJoint {
     /// Base joints.
     pub base: Vec<[Option<f64>; 3]>,
@@ -98,7 +98,7 @@ pub struct ParameterIdentifiability {
 }
 
 /// `calibration.json`'s `identifiability` object.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, PartialEq, Default)]
 pub struct IdentifiabilityReport {
     /// Parameters fitted.
     pub parameters: usize,
@@ -129,7 +129,7 @@ pub struct IdentifiabilityReport {
 }
 
 /// `calibration.json`'s `solver` object.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, PartialEq, Default)]
 pub struct SolverReport {
     /// The solver converged.
     pub converged: bool,
@@ -312,7 +312,7 @@ pub struct FitText {
 
 /// The report of one fit: `calibration.json` when serialised, the fit sections of report.md
 /// through [`FitReport::markdown_sections`].
-#[derive(Debug, Clone, Serialize, PartialEq)]
+#[derive(Debug, Clone, Serialize, PartialEq, Default)]
 pub struct FitReport {
     /// The cpm version.
     pub cpm_version: String,
@@ -831,6 +831,65 @@ impl FitReport {
         let gauge = &r.refined_by_fit.gauge_freedoms;
         if !gauge.is_empty() {
             s.push_str(&format!("Gauge freedoms of the refinement: {} (the fit determines the tracker frame only together with the installation errors; these directions are not determined).\n\n", gauge.join("; ")));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::format::find_artefact;
+
+    #[test]
+    fn markdown_rounds_to_the_deviation_and_shows_no_artefact() {
+        let row = |name: &str, estimate, std| ParameterRow {
+            name: name.into(),
+            estimate,
+            std,
+        };
+        let f = FitReport {
+            residual_rms_um: 3.0000000000000004,
+            initial_rms_um: 0.1 + 0.2,
+            sigma_um: 1.0,
+            identifiability: IdentifiabilityReport {
+                rank: 3,
+                parameters: 4,
+                crlb_rms_um: Some(-0.0),
+                ..Default::default()
+            },
+            outliers: vec![Outlier {
+                observation: 7,
+                file: None,
+                line: None,
+                what: None,
+                residual_um: Some(-0.00001),
+            }],
+            text: FitText {
+                clearance_um: 10.000000000000002,
+                parameters: vec![
+                    row("a [um]", Some(-0.00001), Some(0.02)),
+                    row("b [um]", Some(12.34567), Some(1.5)),
+                    row("c [um]", None, None),
+                    row("d [um]", Some(0.1 + 0.2), None),
+                ],
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let mut s = String::new();
+        f.markdown_sections(&mut s);
+        assert_eq!(find_artefact(&s), None, "{s}");
+        for want in [
+            "| 1 | a [um] | 0.000 | 0.020 |",
+            "| 2 | b [um] | 12.3 | 1.5 |",
+            "|  | c [um] | n.d. | n.d. |",
+            "| 3 | d [um] | 0.300 | n.d. |",
+            "Residual RMS 3.00 um (at the start 0.300 um); noise declared: 1 um",
+            "clearance 10 um",
+            "| ? | observation 7 | 0.000 |",
+            "1 blind direction:",
+        ] {
+            assert!(s.contains(want), "{want:?} not in\n{s}");
         }
     }
 }
