@@ -698,9 +698,10 @@ impl FitReport {
             id.determined
         ));
         if id.rank < id.parameters {
+            let blind = id.parameters - id.rank;
             s.push_str(&format!(
-                "{} blind directions:\n\n",
-                id.parameters - id.rank
+                "{blind} blind direction{}:\n\n",
+                if blind == 1 { "" } else { "s" }
             ));
             for b in &id.blind_directions {
                 s.push_str(&format!("- {} ({} dim)\n", b.description, b.dimensions));
