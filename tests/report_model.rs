@@ -112,6 +112,7 @@ fn assert_clean_text(dir: &Path) -> usize {
             || name == "len.csv"
             || name == "bl.csv"
             || name == "poses_in.csv"
+            || name == "sockets_in.csv"
         {
             continue;
         }
@@ -201,6 +202,16 @@ fn calibrate_keeps_every_json_key_and_writes_clean_text() {
     assert_keeps("calibrate_tracker", &calp.join("calibration.json"));
     let report = std::fs::read_to_string(calp.join("report.md")).unwrap();
     assert!(report.contains("## Tracker registration"), "{report}");
+    // The commands compensate writes from the calibrated description: no float noise.
+    ok(&[
+        "compensate",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+        "--poses",
+        &example("targets.csv"),
+        "--out",
+        &p(&d.join("commands.csv")),
+    ]);
     assert!(assert_clean_text(&d) >= 2);
 }
 
@@ -303,7 +314,50 @@ fn design_keeps_every_json_key_and_names_its_criterion() {
     assert_keeps("design", &out.join("design.json"));
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("(A-optimal criterion"), "{report}");
-    // poses.csv is written by cpm::io at full precision (a plan read back by simulate).
-    std::fs::remove_file(out.join("poses.csv")).unwrap();
-    assert!(assert_clean_text(&d) >= 2);
+    assert!(assert_clean_text(&d) >= 3);
+}
+
+/// Under an instrument's limits: design.json's keys, the criterion in words, and setup
+/// sheets and plans without `-0.000000000` (which the library's CSV writers print).
+#[test]
+fn limited_design_keeps_every_json_key_and_writes_clean_csv() {
+    let d = scratch("report-model", "limited");
+    let sockets = d.join("sockets_in.csv");
+    let c = cpm::calib::design::SocketCandidates::paper_cubic();
+    let mut text = String::from("name,side,x_mm,y_mm,z_mm\n");
+    for (side, list) in [("base", &c.base), ("platform", &c.platform)] {
+        for s in list.iter() {
+            let v = s.position_mm;
+            text.push_str(&format!("{},{side},{},{},{}\n", s.name, v.x, v.y, v.z));
+        }
+    }
+    std::fs::write(&sockets, text).unwrap();
+    let out = d.join("lim");
+    ok(&[
+        "design",
+        "--robot",
+        &example("paper_cubic.toml"),
+        "--sockets",
+        &p(&sockets),
+        "--readings",
+        "240",
+        "--candidates",
+        "200",
+        "--range-mm",
+        "100",
+        "--range-deg",
+        "20",
+        "--stroke-mm",
+        "80",
+        "--setups",
+        "8",
+        "--out",
+        &p(&out),
+    ]);
+    assert_keeps("design_limited", &out.join("design.json"));
+    let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(report.contains("(A-optimal criterion;"), "{report}");
+    std::fs::remove_file(&sockets).unwrap();
+    // report.md, setup_sheet.md, setup_sheet.csv and one plan per setup.
+    assert!(assert_clean_text(&d) >= 5);
 }

@@ -197,7 +197,8 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
         "robot {}, targets {}; readings to command (length = length_at_zero_mm + mm_per_unit * reading)",
         robot.file, file
     );
-    let csv = io::write_commands(&targets, &readings, &lengths, &note);
+    let csv =
+        crate::report::format::tidy_csv(&io::write_commands(&targets, &readings, &lengths, &note));
     ctx.finish();
     match &args.out {
         Some(out) => {

@@ -4,7 +4,6 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use serde_json::json;
 
 use super::common::{self, RobotArg};
 use super::{input_error, usage_error, Ctx, Outcome};
@@ -16,6 +15,7 @@ use crate::calib::Effect;
 use crate::geometry::description::SensorSpec;
 use crate::io::{self, table::Table, InputError, Robot};
 use crate::output::OutputSet;
+use crate::report::format::tidy_csv;
 
 /// Optimality criterion of the pose selection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -334,8 +334,11 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let dir = &args.out;
     let report = crate::report::design::DesignReport::new(&robot.file, &d);
     let mut set = OutputSet::new();
-    set.add(dir.join("poses.csv"), io::write_pose_list(&d.poses));
-    set.add(dir.join("sockets.csv"), d.sockets_csv());
+    set.add(
+        dir.join("poses.csv"),
+        tidy_csv(&io::write_pose_list(&d.poses)),
+    );
+    set.add(dir.join("sockets.csv"), tidy_csv(&d.sockets_csv()));
     set.add(dir.join("robot.toml"), robot_toml);
     set.add(dir.join("design.json"), report.to_json()?);
     set.add(dir.join("report.md"), report.markdown());
@@ -454,75 +457,20 @@ fn run_limited(
         env!("CARGO_PKG_VERSION"),
         with_sensors(robot, &d.sensors())?
     );
-    let (max_base, max_platform) = d.max_cone_deg(&robot.table);
-    let (moves, bars) = d.remounts();
-    let summary = json!({
-        "robot": robot.file,
-        "limited": true,
-        "setups": d.setups.iter().map(|s| json!({
-            "sensor": s.name,
-            "base_socket": s.base.name,
-            "platform_socket": s.platform.name,
-            "bar_mm": s.bar_mm,
-            "window_mm": [s.window_mm.0, s.window_mm.1],
-            "poses": s.poses.len(),
-            "travel_mm": s.travel_mm(),
-            "min_clearance_mm": s.min_clearance_mm(),
-            "plan": format!("plans/{}.csv", s.name),
-        })).collect::<Vec<_>>(),
-        "readings": d.num_readings(),
-        "candidate_poses": d.candidate_poses,
-        "candidate_readings": d.candidate_readings,
-        "criterion": format!("{:?}", d.criterion),
-        "rank": d.indices.rank,
-        "parameters": d.indices.num_params,
-        "sigma_um": d.indices.sigma_um,
-        "crlb_rms_um": d.indices.crlb_rms_um,
-        "crlb_max_um": d.indices.crlb_max_um,
-        "max_travel_mm": d.max_travel_mm(),
-        "min_clearance_mm": d.min_clearance_mm(),
-        "max_base_cone_deg": max_base,
-        "max_platform_cone_deg": max_platform,
-        "socket_moves": moves,
-        "bar_changes": bars,
-        "constraints": {
-            "gauge": constraints.gauge.kind.name(),
-            "stroke_mm": stroke,
-            "shortest_mm": constraints.gauge.shortest_mm,
-            "longest_mm": constraints.gauge.longest_mm,
-            "bars_mm": constraints.gauge.bars_mm,
-            "clearance_mm": constraints.clearance.gauge_link_mm,
-            "cone_deg": args.cone_deg,
-        },
-        "log": d.log,
-    });
+    let report =
+        crate::report::design::LimitedDesignReport::new(robot, &d, &constraints, args.cone_deg);
     let mut set = OutputSet::new();
     set.add(dir.join("robot.toml"), robot_toml);
     set.add(dir.join("setup_sheet.md"), d.setup_sheet_md(&robot.table));
-    set.add(dir.join("setup_sheet.csv"), d.setup_sheet_csv());
+    set.add(dir.join("setup_sheet.csv"), tidy_csv(&d.setup_sheet_csv()));
     for (k, s) in d.setups.iter().enumerate() {
         set.add(
             dir.join("plans").join(format!("{}.csv", s.name)),
-            d.setup_poses_csv(k),
+            tidy_csv(&d.setup_poses_csv(k)),
         );
     }
-    set.add(
-        dir.join("design.json"),
-        serde_json::to_string_pretty(&summary)?,
-    );
-    let mut r = String::from("# Calibration design under an instrument's limits\n\n");
-    r.push_str(&format!(
-        "- Robot: `{}`; {} setups, {} readings ({} criterion; {} candidate poses within the joint limits, {} candidate readings).\n- Rank {} of {}; Cramér-Rao bounds for {} um of sensor noise: RMS {:.3} um, worst parameter {:.3} um.\n- Largest gauge travel in a setup {:.1} mm (stroke {} mm); smallest gauge-link clearance {:.1} mm (at least {} mm); largest cone angle {:.1} deg (base), {:.1} deg (platform), at most {} deg.\n\n",
-        robot.file, d.setups.len(), d.num_readings(), crate::report::design::criterion_text(d.criterion), d.candidate_poses, d.candidate_readings,
-        d.indices.rank, d.indices.num_params, d.indices.sigma_um, d.indices.crlb_rms_um, d.indices.crlb_max_um,
-        d.max_travel_mm(), stroke, d.min_clearance_mm(), args.clearance_mm, max_base, max_platform, args.cone_deg
-    ));
-    r.push_str("## How it was chosen\n\n");
-    for l in &d.log {
-        r.push_str(&format!("- {l}\n"));
-    }
-    r.push_str("\n## Files\n\n- `setup_sheet.md`, `setup_sheet.csv`: what to mount, then which poses to drive, setup by setup.\n- `plans/<setup>.csv`: each setup's poses (`cpm simulate --plan plans/<setup>.csv --sensors <setup>`).\n- `robot.toml`: the robot description with one sensor per setup: measure each setup into its own readings file, then `cpm calibrate --robot robot.toml --data s01.csv --data s02.csv ...`.\n");
-    set.add(dir.join("report.md"), r);
+    set.add(dir.join("design.json"), report.to_json()?);
+    set.add(dir.join("report.md"), report.markdown());
     let written = commit_design(
         set,
         dir,
@@ -532,7 +480,7 @@ fn run_limited(
     )?;
     ctx.finish();
     if args.json {
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&summary)?)?;
+        writeln!(ctx.out, "{}", report.to_json()?)?;
     } else {
         writeln!(
             ctx.out,

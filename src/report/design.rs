@@ -143,3 +143,176 @@ impl DesignReport {
         r
     }
 }
+
+/// One setup of a design under an instrument's limits.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct SetupRow {
+    /// The sensor (setup) name.
+    pub sensor: String,
+    /// Its base socket.
+    pub base_socket: String,
+    /// Its platform socket.
+    pub platform_socket: String,
+    /// Bar length (ball bar), mm.
+    pub bar_mm: f64,
+    /// Measuring window, mm.
+    pub window_mm: [f64; 2],
+    /// Poses driven in it.
+    pub poses: usize,
+    /// Gauge travel over them, mm.
+    pub travel_mm: f64,
+    /// Smallest gauge-link clearance, mm.
+    pub min_clearance_mm: f64,
+    /// Its plan file.
+    pub plan: String,
+}
+
+/// The instrument's limits as given.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LimitsRow {
+    /// Gauge kind.
+    pub gauge: String,
+    /// Stroke, mm.
+    pub stroke_mm: f64,
+    /// Shortest gauge, mm.
+    pub shortest_mm: f64,
+    /// Longest gauge, mm.
+    pub longest_mm: f64,
+    /// Bar lengths, mm.
+    pub bars_mm: Vec<f64>,
+    /// Least gauge-link clearance, mm.
+    pub clearance_mm: f64,
+    /// Largest joint cone angle, deg.
+    pub cone_deg: f64,
+}
+
+/// `design.json` of `cpm design --stroke-mm` (the keys cpm has always written) and its
+/// report.md.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct LimitedDesignReport {
+    /// The robot description file.
+    pub robot: String,
+    /// Always true: a design under limits.
+    pub limited: bool,
+    /// The setups.
+    pub setups: Vec<SetupRow>,
+    /// Readings.
+    pub readings: usize,
+    /// Candidate poses within the joint limits.
+    pub candidate_poses: usize,
+    /// Candidate readings.
+    pub candidate_readings: usize,
+    /// The criterion's Rust name (`AOptimal`), kept for readers of older files.
+    pub criterion: String,
+    /// Rank.
+    pub rank: usize,
+    /// Parameters.
+    pub parameters: usize,
+    /// Sensor noise assumed, um.
+    pub sigma_um: f64,
+    /// RMS Cramér-Rao bound, um.
+    pub crlb_rms_um: f64,
+    /// Worst parameter's bound, um.
+    pub crlb_max_um: f64,
+    /// Largest gauge travel in a setup, mm.
+    pub max_travel_mm: f64,
+    /// Smallest gauge-link clearance, mm.
+    pub min_clearance_mm: f64,
+    /// Largest base cone angle, deg.
+    pub max_base_cone_deg: f64,
+    /// Largest platform cone angle, deg.
+    pub max_platform_cone_deg: f64,
+    /// Socket moves between setups.
+    pub socket_moves: usize,
+    /// Bar changes between setups.
+    pub bar_changes: usize,
+    /// The limits.
+    pub constraints: LimitsRow,
+    /// How it was chosen.
+    pub log: Vec<String>,
+    /// The criterion, in words.
+    #[serde(skip)]
+    pub criterion_text: String,
+}
+
+impl LimitedDesignReport {
+    /// From a design under `constraints` (cone angle `cone_deg`) of the robot `robot`.
+    pub fn new(
+        robot: &crate::io::Robot,
+        d: &crate::calib::design::SetupDesign,
+        constraints: &crate::calib::design::Constraints,
+        cone_deg: f64,
+    ) -> Self {
+        let (max_base, max_platform) = d.max_cone_deg(&robot.table);
+        let (moves, bars) = d.remounts();
+        Self {
+            robot: robot.file.clone(),
+            limited: true,
+            setups: d
+                .setups
+                .iter()
+                .map(|s| SetupRow {
+                    sensor: s.name.clone(),
+                    base_socket: s.base.name.clone(),
+                    platform_socket: s.platform.name.clone(),
+                    bar_mm: s.bar_mm,
+                    window_mm: [s.window_mm.0, s.window_mm.1],
+                    poses: s.poses.len(),
+                    travel_mm: s.travel_mm(),
+                    min_clearance_mm: s.min_clearance_mm(),
+                    plan: format!("plans/{}.csv", s.name),
+                })
+                .collect(),
+            readings: d.num_readings(),
+            candidate_poses: d.candidate_poses,
+            candidate_readings: d.candidate_readings,
+            criterion: format!("{:?}", d.criterion),
+            rank: d.indices.rank,
+            parameters: d.indices.num_params,
+            sigma_um: d.indices.sigma_um,
+            crlb_rms_um: d.indices.crlb_rms_um,
+            crlb_max_um: d.indices.crlb_max_um,
+            max_travel_mm: d.max_travel_mm(),
+            min_clearance_mm: d.min_clearance_mm(),
+            max_base_cone_deg: max_base,
+            max_platform_cone_deg: max_platform,
+            socket_moves: moves,
+            bar_changes: bars,
+            constraints: LimitsRow {
+                gauge: constraints.gauge.kind.name().to_string(),
+                stroke_mm: constraints.gauge.stroke_mm,
+                shortest_mm: constraints.gauge.shortest_mm,
+                longest_mm: constraints.gauge.longest_mm,
+                bars_mm: constraints.gauge.bars_mm.clone(),
+                clearance_mm: constraints.clearance.gauge_link_mm,
+                cone_deg,
+            },
+            log: d.log.clone(),
+            criterion_text: criterion_text(d.criterion),
+        }
+    }
+
+    /// `design.json`, pretty-printed (keys sorted).
+    pub fn to_json(&self) -> serde_json::Result<String> {
+        serde_json::to_string_pretty(&serde_json::to_value(self)?)
+    }
+
+    /// report.md.
+    pub fn markdown(&self) -> String {
+        let c = &self.constraints;
+        let mut r = String::from("# Calibration design under an instrument's limits\n\n");
+        r.push_str(&format!(
+            "- Robot: `{}`; {} setups, {} readings ({} criterion; {} candidate poses within the joint limits, {} candidate readings).\n- Rank {} of {}; Cramér-Rao bounds for {} um of sensor noise: RMS {} um, worst parameter {} um.\n- Largest gauge travel in a setup {} mm (stroke {} mm); smallest gauge-link clearance {} mm (at least {} mm); largest cone angle {} deg (base), {} deg (platform), at most {} deg.\n\n",
+            self.robot, self.setups.len(), self.readings, self.criterion_text, self.candidate_poses, self.candidate_readings,
+            self.rank, self.parameters, short(self.sigma_um), sig(self.crlb_rms_um, 3), sig(self.crlb_max_um, 3),
+            fixed(self.max_travel_mm, 1), short(c.stroke_mm), fixed(self.min_clearance_mm, 1), short(c.clearance_mm),
+            fixed(self.max_base_cone_deg, 1), fixed(self.max_platform_cone_deg, 1), short(c.cone_deg)
+        ));
+        r.push_str("## How it was chosen\n\n");
+        for l in &self.log {
+            r.push_str(&format!("- {l}\n"));
+        }
+        r.push_str("\n## Files\n\n- `setup_sheet.md`, `setup_sheet.csv`: what to mount, then which poses to drive, setup by setup.\n- `plans/<setup>.csv`: each setup's poses (`cpm simulate --plan plans/<setup>.csv --sensors <setup>`).\n- `robot.toml`: the robot description with one sensor per setup: measure each setup into its own readings file, then `cpm calibrate --robot robot.toml --data s01.csv --data s02.csv ...`.\n");
+        r
+    }
+}

@@ -129,6 +129,68 @@ pub fn yes_no(b: bool) -> &'static str {
     }
 }
 
+/// A CSV text as cpm writes it for people and controllers: a numeric field that is a
+/// negative zero (`-0.000`) loses its sign, and one printed at full `f64` precision
+/// (`3.0000000000000004`, 16 or more significant digits) is rounded to 12 significant
+/// digits (far below any uncertainty of a length in mm or an angle in deg). Other fields,
+/// comments (`#` lines) and the line structure are kept.
+pub fn tidy_csv(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for line in text.split_inclusive('\n') {
+        let (body, end) = match line.strip_suffix('\n') {
+            Some(b) => (b, "\n"),
+            None => (line, ""),
+        };
+        if body.starts_with('#') {
+            out.push_str(line);
+            continue;
+        }
+        let fields: Vec<String> = body.split(',').map(tidy_field).collect();
+        out.push_str(&fields.join(","));
+        out.push_str(end);
+    }
+    out
+}
+
+fn tidy_field(f: &str) -> String {
+    let t = f.trim_end_matches('\r');
+    let cr = &f[t.len()..];
+    let numeric = !t.is_empty()
+        && t.bytes()
+            .all(|b| b.is_ascii_digit() || matches!(b, b'-' | b'+' | b'.' | b'e' | b'E'));
+    let Some(v) = numeric.then(|| t.parse::<f64>().ok()).flatten() else {
+        return f.to_string();
+    };
+    if v == 0.0 && t.starts_with('-') {
+        return format!("{}{cr}", &t[1..]);
+    }
+    let digits = t
+        .split(['e', 'E'])
+        .next()
+        .unwrap_or("")
+        .trim_start_matches(['-', '+', '0', '.'])
+        .bytes()
+        .filter(u8::is_ascii_digit)
+        .count();
+    if digits >= 16 && v.is_finite() {
+        let a = v.abs();
+        let s = if (1e-4..1e12).contains(&a) {
+            let e = a.log10().floor() as i64;
+            let d = (11 - e).clamp(0, 17) as usize;
+            let s = format!("{v:.d$}");
+            if s.contains('.') {
+                s.trim_end_matches('0').trim_end_matches('.').to_string()
+            } else {
+                s
+            }
+        } else {
+            format!("{v:.11e}")
+        };
+        return format!("{s}{cr}");
+    }
+    f.to_string()
+}
+
 /// The artefacts no user text may contain: a negative zero, a float printed at full
 /// precision (`3.0000000000000004`, `0.30000000000000004`), `NaN`/`inf`. Returns the first
 /// offending token found in `text`, for tests and checks.
@@ -147,10 +209,12 @@ pub fn find_artefact(text: &str) -> Option<String> {
         if tok.starts_with('-') && v == 0.0 {
             return Some(tok.to_string());
         }
+        // Significant digits: leading zeros do not count.
         let digits = tok
             .split(['e', 'E'])
             .next()
             .unwrap_or("")
+            .trim_start_matches(['-', '+', '0', '.'])
             .chars()
             .filter(char::is_ascii_digit)
             .count();
@@ -230,7 +294,26 @@ mod tests {
         assert_eq!(find_artefact("2026-11-23 file_0.csv"), None);
     }
 
+    #[test]
+    fn csv_is_tidied_field_by_field() {
+        let t = "# note -0.000 kept\npose,x_mm,s1\n1,-0.000000000,3.0000000000000004\n2,-0.5,s-0\n3,320.27761321306946,0.1\r\n";
+        assert_eq!(
+            tidy_csv(t),
+            "# note -0.000 kept\npose,x_mm,s1\n1,0.000000000,3\n2,-0.5,s-0\n3,320.277613213,0.1\r\n"
+        );
+        assert_eq!(tidy_csv("a,b"), "a,b");
+    }
+
     proptest! {
+        #[test]
+        fn tidy_csv_keeps_values_to_twelve_digits(x in prop_oneof![-1e6f64..1e6, -1e-3f64..1e-3]) {
+            let field = format!("{x}");
+            let t = tidy_csv(&format!("{field},{field}\n"));
+            let back: f64 = t.trim_end().split(',').next().unwrap().parse().unwrap();
+            prop_assert!((back - x).abs() <= x.abs() * 1e-11, "{x} -> {t}");
+            prop_assert!(find_artefact(&t).is_none(), "{t}");
+        }
+
         #[test]
         fn fixed_never_prints_negative_zero_and_round_trips(
             x in prop_oneof![-1e6f64..1e6, -1e-3f64..1e-3, Just(-0.0)],
