@@ -264,6 +264,7 @@ pub fn grouped_bars_with_errors(
                 }
             })
             .y_desc(y_label)
+            .y_label_formatter(&|y| crate::report::format::short(*y))
             .draw()
             .map_err(|e| err(title, e))?;
         let w = 0.8 / k;
@@ -445,6 +446,8 @@ pub fn scatter(
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
+            .x_label_formatter(&|x| crate::report::format::short(*x))
+            .y_label_formatter(&|y| crate::report::format::short(*y))
             .draw()
             .map_err(|e| err(title, e))?;
         for (si, (_, vals)) in series.iter().enumerate() {
