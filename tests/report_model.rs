@@ -361,3 +361,74 @@ fn limited_design_keeps_every_json_key_and_writes_clean_csv() {
     // report.md, setup_sheet.md, setup_sheet.csv and one plan per setup.
     assert!(assert_clean_text(&d) >= 5);
 }
+
+/// While `cpm::io::calibration_json` (the untyped builder the commands used before) exists,
+/// the typed report must agree with it on every key and value it has, for length readings
+/// and for tracker poses with effects.
+#[test]
+fn typed_fit_report_agrees_with_the_untyped_builder() {
+    use cpm::calib::{identify, IdentifyOptions};
+    use cpm::cli::calibrate::Inputs;
+    use cpm::io::{Provenance, Robot};
+    let d = scratch("report-model", "agree");
+    let len = lengths(&d);
+    let poses = d.join("poses_in.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &example("hexapod_66.toml"),
+        "--random",
+        "25",
+        "--range-deg",
+        "12",
+        "--measure",
+        "poses",
+        "--seed",
+        "9",
+        "--paper-table2",
+        "--out",
+        &p(&poses),
+    ]);
+    for (data, effects) in [
+        (len, vec![]),
+        (
+            poses,
+            vec![
+                cpm::calib::Effect::LinkOffset,
+                cpm::calib::Effect::TrackerFrame,
+            ],
+        ),
+    ] {
+        let robot = Robot::load(Path::new(&example("hexapod_66.toml"))).unwrap();
+        let model = robot.model(&effects);
+        let merged = cpm::cli::common::load_data(
+            std::slice::from_ref(&data),
+            &robot,
+            &cpm::cli::common::read_options(&model),
+        )
+        .unwrap();
+        let identify_options = IdentifyOptions::default();
+        let cal = identify(&model, &merged.campaign, &identify_options).unwrap();
+        let provenance = Provenance {
+            robot: robot.file.clone(),
+            data: vec![p(&data)],
+        };
+        let untyped = cpm::io::calibration_json(&model, &merged.campaign, &cal, &provenance);
+        let inputs = Inputs {
+            robot,
+            model: model.clone(),
+            merged,
+            identify: identify_options,
+            provenance,
+        };
+        let typed = serde_json::to_value(cpm::report::fit::FitReport::new(
+            &inputs, &model, &cal, None,
+        ))
+        .unwrap();
+        let untyped = untyped.as_object().unwrap();
+        assert!(untyped.len() > 15);
+        for (k, v) in untyped {
+            assert_eq!(&typed[k], v, "{}: key {k}", data.display());
+        }
+    }
+}
