@@ -87,10 +87,11 @@ fn known_values(model: &MeasurementModel) -> Vec<KnownEffect> {
     let (n, s) = (model.nominal.num_links(), model.nominal.sensors.len());
     Effect::ALL
         .iter()
-        .map(|&effect| KnownEffect {
+        .enumerate()
+        .map(|(index, &effect)| KnownEffect {
             effect,
             values: (0..effect.num_params(n, s))
-                .map(|k| 20.0 * ((k as f64 + 1.0) * 0.9 + effect as usize as f64).cos())
+                .map(|k| 20.0 * ((k as f64 + 1.0) * 0.9 + index as f64).cos())
                 .collect(),
         })
         .collect()

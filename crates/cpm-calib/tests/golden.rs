@@ -113,7 +113,11 @@ fn every_built_in_effect_predicts_as_before_the_redesign() {
             assert!((a - b).abs() < 1e-12, "{}: parameter {a} vs {b}", g.name);
         }
         for (k, (a, b)) in g.predictions_mm.iter().zip(&c.predictions_mm).enumerate() {
-            assert!((a - b).abs() < 1e-12, "{}: prediction {k}: {a} vs {b}", g.name);
+            assert!(
+                (a - b).abs() < 1e-12,
+                "{}: prediction {k}: {a} vs {b}",
+                g.name
+            );
         }
         let dense = |entries: &[(usize, usize, f64)]| {
             let mut m = nalgebra::DMatrix::zeros(g.rows, g.cols);
@@ -134,6 +138,10 @@ fn every_built_in_effect_predicts_as_before_the_redesign() {
             }
         }
         // The campaign has readings, tracker measurements and every channel's columns.
-        assert!(jg.column_iter().all(|col| col.iter().any(|v| *v != 0.0)), "{}", g.name);
+        assert!(
+            jg.column_iter().all(|col| col.iter().any(|v| *v != 0.0)),
+            "{}",
+            g.name
+        );
     }
 }
