@@ -44,17 +44,16 @@
 //! ```
 //! use std::sync::Arc;
 //! use cpm_calib::effects::{Channel, EffectInput, EffectModel};
-//! use cpm_calib::model::{predict, Prepared};
 //! use cpm_calib::paper::{designed_sensors, random_workspace_poses};
-//! use cpm_calib::*;
+//! use cpm_calib::{model::Predictions, *};
 //!
-//! /// Links that grow with the platform height: `dL_i = theta (z - z_home) / 100 mm`, um.
+//! /// Links that grow with the platform height: `dL_i = theta_i (z - z_home) / 100 mm`, um.
 //! #[derive(Debug)]
 //! struct HeightGrowth;
 //! impl EffectModel for HeightGrowth {
 //!     fn name(&self) -> &str { "height_growth" }
 //!     fn num_params(&self, links: usize, _sensors: usize) -> usize { links }
-//!     fn param_name(&self, k: usize, _sensors: &[String]) -> String { format!("link {}", k + 1) }
+//!     fn param_name(&self, k: usize, _: &[String]) -> String { format!("link {}", k + 1) }
 //!     fn unit(&self) -> &str { "um" }
 //!     fn channels(&self) -> &[Channel] { &[Channel::LinkLength] }
 //!     fn link_coefficient(&self, k: usize, link: usize, input: &EffectInput) -> f64 {
@@ -62,28 +61,23 @@
 //!         if k == link { 1e-3 * dz / 100.0 } else { 0.0 }
 //!     }
 //! }
-//!
 //! let effect = Effect::register(Arc::new(HeightGrowth)).unwrap();
+//!
 //! let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
 //! model.nominal.sensors = designed_sensors();
 //! model.effects = vec![effect];
 //! let poses = random_workspace_poses(&model.nominal, 30, 100.0, 25.0, 3.0, 7);
-//! let plan = Plan { poses, sensors: (0..16).collect() };
-//! let mut truth = vec![0.0; model.num_params()];
-//! truth[36..].copy_from_slice(&[20.0, -15.0, 10.0, 25.0, -20.0, 15.0]);
-//! // Its Jacobian against finite differences (cpm-lm's checker).
-//! let campaign = plan.skeleton();
-//! let prepared = Prepared::new(&model, &campaign).unwrap();
-//! let f = |p: &[f64], y: &mut [f64]| y.copy_from_slice(&predict(&model, &prepared, &campaign, p, None).unwrap());
-//! let mut jac = nalgebra::DMatrix::zeros(campaign.len(), model.num_params());
-//! predict(&model, &prepared, &campaign, &truth, Some(&mut jac)).unwrap();
-//! let check = cpm_lm::check_jacobian(f, &truth, &jac, &cpm_lm::CheckOptions::default()).unwrap();
-//! assert!(check.passed(), "{check:?}");
-//! // Data that carry it; refine, offered it as a candidate, adds it.
+//! let skeleton = Plan { poses, sensors: (0..16).collect() }.skeleton();
+//! let mut truth = vec![0.0; 36];
+//! truth.extend([20.0, -15.0, 10.0, 25.0, -20.0, 15.0]);
+//! // Its Jacobian against central differences (cpm-lm's checker; 0.5 um steps).
+//! let mut problem = Predictions::new(&model, &skeleton).unwrap();
+//! let check = cpm_lm::check_jacobian(&mut problem, &truth, 0.025).unwrap();
+//! assert!(check.is_consistent(1e-5), "{check}");
+//! // Data that carry it: refine, offered it as a candidate, adds it.
 //! let sim = SimulationOptions { noise: Noise::Gaussian { sigma_um: 2.0 }, repeats: 1, seed: 1 };
-//! let data = simulate_campaign(&model, &truth, &campaign, &sim).unwrap();
-//! let mut options = RefineOptions::default();
-//! options.candidates = vec![Effect::LinkScale, effect];
+//! let data = simulate_campaign(&model, &truth, &skeleton, &sim).unwrap();
+//! let mut options = RefineOptions { candidates: vec![Effect::LinkScale, effect], ..Default::default() };
 //! options.identify.sigma_um = Some(2.0);
 //! model.effects.clear();
 //! let r = refine(&model, &data, &options).unwrap();

@@ -677,3 +677,51 @@ fn predict_exact(
     }
     Ok(y)
 }
+
+/// A campaign's predictions as a [`cpm_lm`] problem (residuals = predicted observations, mm;
+/// parameters in the model's units): to check a model's Jacobian, a user effect's above all,
+/// with [`cpm_lm::check_jacobian`].
+pub struct Predictions<'a> {
+    model: &'a MeasurementModel,
+    prepared: Prepared,
+    campaign: &'a Campaign,
+}
+
+impl<'a> Predictions<'a> {
+    /// Prepares `campaign` for `model`.
+    pub fn new(model: &'a MeasurementModel, campaign: &'a Campaign) -> Result<Self, CalibError> {
+        Ok(Self {
+            model,
+            prepared: Prepared::new(model, campaign)?,
+            campaign,
+        })
+    }
+}
+
+impl cpm_lm::Problem for Predictions<'_> {
+    fn num_params(&self) -> usize {
+        self.model.num_params()
+    }
+    fn num_residuals(&self) -> usize {
+        self.campaign.len()
+    }
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), cpm_lm::ModelError> {
+        r.copy_from_slice(&predict(self.model, &self.prepared, self.campaign, x, None)?);
+        Ok(())
+    }
+}
+
+impl cpm_lm::DenseJacobian for Predictions<'_> {
+    fn jacobian(
+        &mut self,
+        x: &[f64],
+        mut jac: cpm_lm::faer::MatMut<'_, f64>,
+    ) -> Result<(), cpm_lm::ModelError> {
+        let mut j = DMatrix::zeros(self.campaign.len(), self.model.num_params());
+        predict(self.model, &self.prepared, self.campaign, x, Some(&mut j))?;
+        for (r, c) in (0..j.nrows()).flat_map(|r| (0..j.ncols()).map(move |c| (r, c))) {
+            jac[(r, c)] = j[(r, c)];
+        }
+        Ok(())
+    }
+}
