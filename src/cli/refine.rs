@@ -34,6 +34,10 @@ pub struct RefineArgs {
     /// Folds of the cross-validation over poses.
     #[arg(long, value_name = "K", default_value_t = 5)]
     pub folds: usize,
+    /// Highest degree of the pose error map terms scanned and proposed (0: none, at most 3;
+    /// default: `[pose_map] degree` of the description, else 2).
+    #[arg(long, value_name = "D")]
+    pub pose_map_degree: Option<u8>,
 }
 
 fn param_json(effect: Effect, params: &[(String, Option<f64>, Option<f64>)]) -> Value {
@@ -129,6 +133,17 @@ pub fn refine_json(r: &Refinement, simulated: bool) -> Value {
             "rms_um": c.rms_um,
         })).collect::<Vec<_>>(),
         "min_novelty": RefineOptions::default().min_novelty,
+        "pose_structure": r.initial_pose_structure.iter().take(5).map(|p| json!({
+            "effect": p.effect.name(),
+            "dimensions": p.dimensions,
+            "explained_share": p.explained_share,
+            "p_value": p.p_value,
+        })).collect::<Vec<_>>(),
+        "pose_range": {
+            "min_xyz_mm_rpy_deg": r.pose_range.min,
+            "max_xyz_mm_rpy_deg": r.pose_range.max,
+            "note": "pose map terms describe these commanded poses only; they do not extrapolate",
+        },
         "final": {
             "effects": r.model.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
             "rms_um": r.calibration.residual_rms_um,
@@ -164,6 +179,13 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     };
     let inputs = args.fit.load(ctx)?;
     let campaign = &inputs.merged.campaign;
+    let pose_map_degree = args
+        .pose_map_degree
+        .or(inputs.robot.description.pose_map.and_then(|p| p.degree))
+        .unwrap_or(2);
+    if pose_map_degree > 3 {
+        return Err(usage_error("--pose-map-degree must be 0 to 3"));
+    }
     ctx.stage(format!(
         "refining: {} to {} observations, up to {} effects from {} candidates (each round fits every candidate)",
         common::describe_model(&inputs.model),
@@ -176,6 +198,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         alpha: args.alpha,
         max_steps: args.max_steps,
         folds: args.folds,
+        pose_map_degree,
         identify: inputs.identify.clone(),
         ..RefineOptions::default()
     };
@@ -292,6 +315,17 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         r.final_diagnostics.white,
         if r.unexplained_structure.is_empty() { "none".to_string() } else { r.unexplained_structure.join(", ") }
     ));
+    if r.model
+        .effects
+        .iter()
+        .any(|e| matches!(e, Effect::PoseMap(_)))
+    {
+        let (lo, hi) = (r.pose_range.min, r.pose_range.max);
+        s.push_str(&format!(
+            "The pose error map describes the poses it was fitted on and does not extrapolate: x {:.1} to {:.1} mm, y {:.1} to {:.1} mm, z {:.1} to {:.1} mm, roll {:.2} to {:.2} deg, pitch {:.2} to {:.2} deg, yaw {:.2} to {:.2} deg (written to `calibrated.toml` `[pose_map]`; `cpm compensate` flags targets outside).\n\n",
+            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2], lo[3], hi[3], lo[4], hi[4], lo[5], hi[5]
+        ));
+    }
     fit_report(
         &mut s,
         &inputs.robot,

@@ -326,7 +326,9 @@ pub fn pose_map_scan(
     let old = j.columns(0, model.num_params()).into_owned();
     let (sv, u, _) = crate::linalg::thin_svd(&old)?;
     let smax = sv.first().copied().unwrap_or(0.0);
-    let keep: Vec<usize> = (0..sv.len()).filter(|&i| sv[i] > rank_rtol * smax).collect();
+    let keep: Vec<usize> = (0..sv.len())
+        .filter(|&i| sv[i] > rank_rtol * smax)
+        .collect();
     let k0 = keep.len();
     let u = u.select_columns(&keep);
     let r = nalgebra::DVector::from_column_slice(residuals_um);

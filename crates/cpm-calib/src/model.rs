@@ -706,7 +706,13 @@ impl cpm_lm::Problem for Predictions<'_> {
         self.campaign.len()
     }
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), cpm_lm::ModelError> {
-        r.copy_from_slice(&predict(self.model, &self.prepared, self.campaign, x, None)?);
+        r.copy_from_slice(&predict(
+            self.model,
+            &self.prepared,
+            self.campaign,
+            x,
+            None,
+        )?);
         Ok(())
     }
 }

@@ -177,7 +177,14 @@ impl PoseRange {
         };
         for p in &campaign.poses {
             let a = p.rpy_deg();
-            let v = [p.position_mm.x, p.position_mm.y, p.position_mm.z, a[0], a[1], a[2]];
+            let v = [
+                p.position_mm.x,
+                p.position_mm.y,
+                p.position_mm.z,
+                a[0],
+                a[1],
+                a[2],
+            ];
             for i in 0..6 {
                 r.min[i] = r.min[i].min(v[i]);
                 r.max[i] = r.max[i].max(v[i]);
@@ -189,7 +196,14 @@ impl PoseRange {
     /// True when `pose` lies inside the range (within `margin` mm and degrees).
     pub fn contains(&self, pose: &cpm_geometry::Pose, margin: f64) -> bool {
         let a = pose.rpy_deg();
-        let v = [pose.position_mm.x, pose.position_mm.y, pose.position_mm.z, a[0], a[1], a[2]];
+        let v = [
+            pose.position_mm.x,
+            pose.position_mm.y,
+            pose.position_mm.z,
+            a[0],
+            a[1],
+            a[2],
+        ];
         (0..6).all(|i| v[i] >= self.min[i] - margin && v[i] <= self.max[i] + margin)
     }
 }

@@ -218,7 +218,11 @@ fn pose_map_columns_match_central_differences() {
         .map(|n| Effect::parse(n).unwrap())
         .collect();
     let mut effects = terms.clone();
-    effects.extend([Effect::SensorScale, Effect::SocketError, Effect::TrackerFrame]);
+    effects.extend([
+        Effect::SensorScale,
+        Effect::SocketError,
+        Effect::TrackerFrame,
+    ]);
     let mut model = model_with(&effects);
     model.known_effects = vec![
         KnownEffect {
@@ -259,7 +263,8 @@ fn pose_map_terms_move_the_platform_as_declared() {
     let home = plain.nominal.home;
     for (k, r) in c.readings.iter().enumerate() {
         let commanded = c.poses[r.pose];
-        let (fk, _) = cpm_kinematics::forward(&table, &lengths[r.pose], &commanded, &plain.fk).unwrap();
+        let (fk, _) =
+            cpm_kinematics::forward(&table, &lengths[r.pose], &commanded, &plain.fk).unwrap();
         let m = ((commanded.position_mm.y - home.position_mm.y) / 100.0).powi(2);
         let twist = nalgebra::Vector6::from_iterator(
             values
@@ -269,7 +274,11 @@ fn pose_map_terms_move_the_platform_as_declared() {
         );
         let moved = fk.perturbed(&twist);
         let expected = table.sensors[r.sensor].length_mm(&moved) + plain.sensor_correction_mm();
-        assert!((y[k] - expected).abs() < 1e-9, "reading {k}: {} vs {expected}", y[k]);
+        assert!(
+            (y[k] - expected).abs() < 1e-9,
+            "reading {k}: {} vs {expected}",
+            y[k]
+        );
     }
 }
 
@@ -283,9 +292,18 @@ fn pose_map_names_round_trip() {
         let json = serde_json::to_string(e).unwrap();
         assert_eq!(serde_json::from_str::<Effect>(&json).unwrap(), *e);
     }
-    for bad in ["pose_map_", "pose_map_w", "pose_map_y4", "pose_map_y_y", "pose_map_x2_y2"] {
+    for bad in [
+        "pose_map_",
+        "pose_map_w",
+        "pose_map_y4",
+        "pose_map_y_y",
+        "pose_map_x2_y2",
+    ] {
         assert!(Effect::parse(bad).is_err(), "{bad}");
     }
     // Built-in names are unchanged in files.
-    assert_eq!(serde_json::to_string(&Effect::LinkOffset).unwrap(), "\"link_offset\"");
+    assert_eq!(
+        serde_json::to_string(&Effect::LinkOffset).unwrap(),
+        "\"link_offset\""
+    );
 }

@@ -82,7 +82,10 @@ fn check_case(name: &str, data: &Campaign, term: &str) {
         "{name}: CV RMS {} um",
         r.final_cv_rms_um
     );
-    assert!(first.cv_rms_before_um > 1.1 * sigma_um(), "{name}: {first:?}");
+    assert!(
+        first.cv_rms_before_um > 1.1 * sigma_um(),
+        "{name}: {first:?}"
+    );
     // The 36 installation errors stay within their bounds (4 standard deviations).
     let truth = InstallationErrors::paper_table2().to_vec_um();
     let cal = &r.calibration;
@@ -100,7 +103,11 @@ fn check_case(name: &str, data: &Campaign, term: &str) {
     }
     assert!(determined > 0, "{name}: nothing determined");
     // The pose range the map was fitted on is reported.
-    assert!(r.pose_range.max[1] - r.pose_range.min[1] > 100.0, "{:?}", r.pose_range);
+    assert!(
+        r.pose_range.max[1] - r.pose_range.min[1] > 100.0,
+        "{:?}",
+        r.pose_range
+    );
 }
 
 #[test]
@@ -138,7 +145,10 @@ fn clean_count(seeds: std::ops::Range<u64>) -> Vec<(u64, Vec<Effect>)> {
 #[test]
 fn clean_campaigns_get_nothing_added() {
     let added = clean_count(0..20);
-    eprintln!("clean campaigns: something added in {} of 20 seeds {added:?}", added.len());
+    eprintln!(
+        "clean campaigns: something added in {} of 20 seeds {added:?}",
+        added.len()
+    );
     assert!(added.len() <= 1, "{added:?}");
 }
 
@@ -147,6 +157,9 @@ fn clean_campaigns_get_nothing_added() {
 #[ignore]
 fn clean_campaigns_get_nothing_added_in_95_of_100_seeds() {
     let added = clean_count(0..100);
-    eprintln!("clean campaigns: something added in {} of 100 seeds {added:?}", added.len());
+    eprintln!(
+        "clean campaigns: something added in {} of 100 seeds {added:?}",
+        added.len()
+    );
     assert!(added.len() <= 5, "{added:?}");
 }
