@@ -361,6 +361,11 @@ pub fn pose_map_scan(
             p_value,
         });
     }
-    out.sort_by(|a, b| a.p_value.total_cmp(&b.p_value));
+    // p-values underflow to 0 for strong structure: the explained share breaks the tie.
+    out.sort_by(|a, b| {
+        a.p_value
+            .total_cmp(&b.p_value)
+            .then(b.explained_share.total_cmp(&a.explained_share))
+    });
     Ok(out)
 }
