@@ -62,15 +62,13 @@
 //!     }
 //! }
 //! let effect = Effect::register(Arc::new(HeightGrowth)).unwrap();
-//!
 //! let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
 //! model.nominal.sensors = designed_sensors();
 //! model.effects = vec![effect];
 //! let poses = random_workspace_poses(&model.nominal, 30, 100.0, 25.0, 3.0, 7);
 //! let skeleton = Plan { poses, sensors: (0..16).collect() }.skeleton();
-//! let mut truth = vec![0.0; 36];
-//! truth.extend([20.0, -15.0, 10.0, 25.0, -20.0, 15.0]);
-//! // Its Jacobian against central differences (cpm-lm's checker; 0.5 um steps).
+//! let truth = [vec![0.0; 36], vec![20.0, -15.0, 10.0, 25.0, -20.0, 15.0]].concat();
+//! // Its Jacobian against central differences (cpm-lm's checker, relative step 0.025).
 //! let mut problem = Predictions::new(&model, &skeleton).unwrap();
 //! let check = cpm_lm::check_jacobian(&mut problem, &truth, 0.025).unwrap();
 //! assert!(check.is_consistent(1e-5), "{check}");
