@@ -137,7 +137,8 @@ pub struct Refinement {
     pub final_diagnostics: ResidualDiagnostics,
     /// Final cross-validated RMS, um.
     pub final_cv_rms_um: f64,
-    /// Regressors the final residual still follows (no library effect explained them).
+    /// Regressors the final residual still follows (no library effect explained them), and
+    /// pose map terms it still follows (`pose map pose_map_y2`).
     pub unexplained_structure: Vec<String>,
     /// Residuals of the first fit, um (for plots).
     pub initial_residuals_um: Vec<f64>,
@@ -509,6 +510,15 @@ pub fn refine(
         Vec::new()
     } else {
         let mut u = diag.significant.clone();
+        // Pose map terms the final residual still follows (not added: steps exhausted, or
+        // they did not pass the tests).
+        let scanned = pose_structure.len().max(1) as f64;
+        u.extend(
+            pose_structure
+                .iter()
+                .filter(|s| s.p_value < options.alpha / scanned)
+                .map(|s| format!("pose map {}", s.effect.name())),
+        );
         if u.is_empty() && !diag.white {
             u.push("acquisition order".to_string());
         }
