@@ -60,6 +60,8 @@ impl AtPose {
 pub(crate) struct Kin {
     links: Vec<LinkState>,
     j1: Matrix6<f64>,
+    /// LU of J1^T, for `v = J1^-T g` of every reading at the pose.
+    lu_t: nalgebra::LU<f64, nalgebra::U6, nalgebra::U6>,
     rt: Matrix3<f64>,
     /// exp(twist) and the left Jacobian of SO(3) at the twist's rotation.
     e: Matrix3<f64>,
@@ -82,6 +84,7 @@ impl Kin {
         let w = Vector3::new(at.twist[3], at.twist[4], at.twist[5]);
         Self {
             links,
+            lu_t: j1.transpose().lu(),
             j1,
             rt: fk.rotation.matrix().transpose(),
             e: *Rotation3::new(w).matrix(),
@@ -248,12 +251,7 @@ impl<'a> Channels<'a> {
         } else {
             g
         };
-        let v = kin
-            .j1
-            .transpose()
-            .lu()
-            .solve(&g_fk)
-            .ok_or_else(|| kin.singular())?;
+        let v = kin.lu_t.solve(&g_fk).ok_or_else(|| kin.singular())?;
         row.fill(0.0);
         // dy/de = -v^T J2, J2 row i: [-z_i^T, (R^T z_i)^T] in the columns of link i.
         for (i, ls) in kin.links.iter().enumerate() {
