@@ -234,4 +234,10 @@ fn a_calibrated_pose_map_is_written_applied_and_bounded() {
     );
     let report = std::fs::read_to_string(refined.join("report.md")).unwrap();
     assert!(report.contains("does not extrapolate"), "{report}");
+    assert!(
+        report.contains(
+            "Pose-correlated structure in the first residual (pose map scan): `pose_map_y2`"
+        ),
+        "{report}"
+    );
 }

@@ -268,6 +268,27 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         r.initial_diagnostics.rms_um,
         r.initial_diagnostics.white
     ));
+    let alpha_scan = options.alpha / r.initial_pose_structure.len().max(1) as f64;
+    let pose_structure: Vec<String> = r
+        .initial_pose_structure
+        .iter()
+        .filter(|p| p.p_value < alpha_scan)
+        .take(3)
+        .map(|p| {
+            format!(
+                "`{}` ({:.1} % of the residual sum of squares, p {:.1e})",
+                p.effect.name(),
+                100.0 * p.explained_share,
+                p.p_value
+            )
+        })
+        .collect();
+    if !pose_structure.is_empty() {
+        s.push_str(&format!(
+            "Pose-correlated structure in the first residual (pose map scan): {}.\n\n",
+            pose_structure.join(", ")
+        ));
+    }
     if !r.outliers_before.is_empty() {
         s.push_str(&format!(
             "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations.\n\n",
