@@ -277,6 +277,23 @@ pub fn stage_calibrated(
             spec.length_at_zero_mm += o * spec.mm_per_unit / orig.mm_per_unit;
         }
     }
+    // A pose error map describes the poses it was fitted on: their range goes with it.
+    if model
+        .effects
+        .iter()
+        .any(|e| matches!(e, crate::calib::Effect::PoseMap(_)))
+    {
+        let range = crate::calib::refine::PoseRange::of(&inputs.merged.campaign);
+        let spec = desc
+            .pose_map
+            .get_or_insert(crate::geometry::description::PoseMapSpec {
+                degree: None,
+                fitted_min: None,
+                fitted_max: None,
+            });
+        spec.fitted_min = Some(range.min);
+        spec.fitted_max = Some(range.max);
+    }
     let mut header = provenance_lines(&inputs.provenance, cal.simulated, command);
     if !cal.solver.was_successful() {
         header.push(format!(

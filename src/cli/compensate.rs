@@ -11,6 +11,10 @@
 //! each link last moved: the targets are visited in file order, and the first target gets no
 //! backlash correction (its approach is unknown) unless `--from-home` says the machine starts
 //! at home. `thermal_drift` needs `--temperature-c`; without it no drift is corrected.
+//!
+//! A known pose error map (`pose_map_*` terms) moves the platform from where the lengths put
+//! it: each target is aimed at the target moved back by the map. The map describes the poses
+//! it was fitted on only (`[pose_map]` of the description): targets outside are flagged.
 use std::path::PathBuf;
 
 use clap::Args;
@@ -76,6 +80,10 @@ pub fn commands_for(
     previous: Option<&PoseContext>,
     temperature_c: Option<f64>,
 ) -> Result<Commands, cpm_clearance::ClearanceError> {
+    // A known pose error map moves the platform by `twist` from where the lengths put it:
+    // aim at the target moved back (the map's variable is the commanded pose; the twist is
+    // micrometres, so evaluating it at the target rather than the aim is second order).
+    let pose = &pose_map_aim(robot, model, pose, previous, temperature_c)?;
     let mut target = cpm_kinematics::inverse_lengths(&robot.table, pose);
     if model.clearance.radius_um > 0.0 {
         let shift = model
@@ -115,6 +123,38 @@ pub fn commands_for(
         context,
         last_change_mm,
     })
+}
+
+/// The pose to command so that a known pose error map puts the platform at `pose`.
+fn pose_map_aim(
+    robot: &io::Robot,
+    model: &MeasurementModel,
+    pose: &crate::geometry::Pose,
+    previous: Option<&PoseContext>,
+    temperature_c: Option<f64>,
+) -> Result<crate::geometry::Pose, cpm_clearance::ClearanceError> {
+    if !model
+        .known_effects
+        .iter()
+        .any(|k| k.effect.acts_through(crate::calib::Channel::PlatformPose))
+    {
+        return Ok(*pose);
+    }
+    let lengths = cpm_kinematics::inverse_lengths(&robot.table, pose);
+    let context = model.pose_context(pose, lengths, previous, temperature_c, None)?;
+    Ok(pose.perturbed(&-model.known_pose_twist(&context, pose, 0.0)))
+}
+
+/// True when `pose` lies outside the range `[pose_map]` says the known pose map was fitted on.
+fn outside_pose_map_range(robot: &io::Robot, pose: &crate::geometry::Pose) -> bool {
+    match robot.description.pose_map {
+        Some(crate::geometry::description::PoseMapSpec {
+            fitted_min: Some(min),
+            fitted_max: Some(max),
+            ..
+        }) => !crate::calib::refine::PoseRange { min, max }.contains(pose, 1e-6),
+        _ => false,
+    }
 }
 
 /// Runs `cpm compensate`.
@@ -193,6 +233,11 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
         lengths.push(l);
         readings.push(u);
     }
+    let outside: Vec<&str> = targets
+        .iter()
+        .filter(|t| outside_pose_map_range(&robot, &t.pose))
+        .map(|t| t.label.as_str())
+        .collect();
     let note = format!(
         "robot {}, targets {}; readings to command (length = length_at_zero_mm + mm_per_unit * reading)",
         robot.file, file
@@ -200,6 +245,14 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
     let csv =
         crate::report::format::tidy_csv(&io::write_commands(&targets, &readings, &lengths, &note));
     ctx.finish();
+    if !outside.is_empty() {
+        ctx.note(format!(
+            "{} target(s) lie outside the pose range the pose error map of {} was fitted on ([pose_map]); the map does not extrapolate, so their commands carry its error unknown: {}",
+            outside.len(),
+            robot.file,
+            outside.join(", ")
+        ));
+    }
     match &args.out {
         Some(out) => {
             if common::write_out("--out", out, &inputs, &csv, ctx)? == Target::Stdout {
@@ -212,6 +265,7 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
                     "robot": robot.file,
                     "clearance_um": robot.clearance().radius_um,
                     "known_effects": model.known_effects.iter().map(|k| k.effect.name()).collect::<Vec<_>>(),
+                    "outside_pose_map_range": outside,
                 });
                 writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
             } else {

@@ -34,6 +34,10 @@ pub struct RefineArgs {
     /// Folds of the cross-validation over poses.
     #[arg(long, value_name = "K", default_value_t = 5)]
     pub folds: usize,
+    /// Highest degree of the pose error map terms scanned and proposed (0: none, at most 3;
+    /// default: `[pose_map] degree` of the description, else 2).
+    #[arg(long, value_name = "D")]
+    pub pose_map_degree: Option<u8>,
 }
 
 /// Runs `cpm refine`.
@@ -51,6 +55,13 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     };
     let inputs = args.fit.load(ctx)?;
     let campaign = &inputs.merged.campaign;
+    let pose_map_degree = args
+        .pose_map_degree
+        .or(inputs.robot.description.pose_map.and_then(|p| p.degree))
+        .unwrap_or(2);
+    if pose_map_degree > 3 {
+        return Err(usage_error("--pose-map-degree must be 0 to 3"));
+    }
     ctx.stage(format!(
         "refining: {} to {} observations, up to {} effects from {} candidates (each round fits every candidate)",
         common::describe_model(&inputs.model),
@@ -63,6 +74,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         alpha: args.alpha,
         max_steps: args.max_steps,
         folds: args.folds,
+        pose_map_degree,
         identify: inputs.identify.clone(),
         ..RefineOptions::default()
     };
@@ -115,6 +127,15 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             known_effects: notes.known_effects.clone(),
         },
         figures: figures.iter().map(|f| f.to_string()).collect(),
+        significant_pose_structure: {
+            let alpha_scan = options.alpha / r.initial_pose_structure.len().max(1) as f64;
+            doc.pose_structure
+                .iter()
+                .filter(|p| p.p_value < alpha_scan)
+                .take(3)
+                .cloned()
+                .collect()
+        },
         fit,
         doc,
     };

@@ -210,7 +210,18 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
         // Known effect values of the truth beyond those of the robot are simulated too.
         let (robot_model, truth_model) = (robot.model(&[]), t.model(&[]));
         let mut known = Vec::new();
-        for e in Effect::ALL {
+        // The library and any other effect (a pose map term) either description knows.
+        let mut library = Effect::ALL.to_vec();
+        for k in truth_model
+            .known_effects
+            .iter()
+            .chain(&robot_model.known_effects)
+        {
+            if !library.contains(&k.effect) {
+                library.push(k.effect);
+            }
+        }
+        for e in library {
             let (a, b) = (truth_model.known(e), robot_model.known(e));
             if a.is_none() && b.is_none() {
                 continue;
@@ -347,12 +358,15 @@ fn simulate_poses(
             .pose_context(p, cmd.clone(), previous.as_ref(), None, None)
             .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
         let known = model.known_link_shift_mm(&ctx, 0.0);
+        let pose_map = model.known_pose_twist(&ctx, p, 0.0);
         previous = Some(ctx);
         let eff: Vec<f64> = (0..n)
             .map(|i| cmd[i] + shift[i] + known[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
             .collect();
         let (reached, _) = cpm_kinematics::forward(&true_table, &eff, p, &model.fk)
             .map_err(|source| crate::calib::CalibError::Kinematics { pose: j, source })?;
+        // A known pose error map moves the platform from where the lengths put it.
+        let reached = reached.perturbed(&pose_map);
         let mut twist = nalgebra::Vector6::zeros();
         for a in 0..3 {
             twist[a] = draw(noise, &mut rng) * 1e-3;

@@ -126,6 +126,30 @@ pub struct RejectedByCv {
     pub cv_rms_with_um: f64,
 }
 
+/// A pose map term's share of the first residual (the pose map scan).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PoseStructureReport {
+    /// The pose map term.
+    pub effect: String,
+    /// Dimensions it adds beyond the model.
+    pub dimensions: usize,
+    /// Share of the residual sum of squares it would explain.
+    pub explained_share: f64,
+    /// Its p-value (uncorrected).
+    pub p_value: f64,
+}
+
+/// The commanded poses' range: what a pose map describes.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PoseRangeReport {
+    /// Smallest x, y, z (mm), roll, pitch, yaw (deg).
+    pub min_xyz_mm_rpy_deg: [f64; 6],
+    /// Largest x, y, z (mm), roll, pitch, yaw (deg).
+    pub max_xyz_mm_rpy_deg: [f64; 6],
+    /// What the range means.
+    pub note: String,
+}
+
 /// `refine.json`.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct RefineDoc {
@@ -141,6 +165,10 @@ pub struct RefineDoc {
     pub last_round: Vec<LastRoundCandidate>,
     /// The novelty below which a candidate is left out.
     pub min_novelty: f64,
+    /// The five pose map terms that explain most of the first residual.
+    pub pose_structure: Vec<PoseStructureReport>,
+    /// The range of the commanded poses.
+    pub pose_range: PoseRangeReport,
     /// The final model.
     #[serde(rename = "final")]
     pub final_: Final,
@@ -211,6 +239,23 @@ impl RefineDoc {
                 })
                 .collect(),
             min_novelty,
+            pose_structure: r
+                .initial_pose_structure
+                .iter()
+                .take(5)
+                .map(|p| PoseStructureReport {
+                    effect: p.effect.name().to_string(),
+                    dimensions: p.dimensions,
+                    explained_share: p.explained_share,
+                    p_value: p.p_value,
+                })
+                .collect(),
+            pose_range: PoseRangeReport {
+                min_xyz_mm_rpy_deg: r.pose_range.min,
+                max_xyz_mm_rpy_deg: r.pose_range.max,
+                note: "pose map terms describe these commanded poses only; they do not extrapolate"
+                    .to_string(),
+            },
             final_: Final {
                 effects: r
                     .model
@@ -302,6 +347,9 @@ pub struct RefineReport {
     pub calibrated: CalibratedFile,
     /// The figure files written.
     pub figures: Vec<String>,
+    /// Pose map terms of the first residual significant after the Bonferroni correction over
+    /// every term scanned (a subset of `doc.pose_structure`, at most three).
+    pub significant_pose_structure: Vec<PoseStructureReport>,
 }
 
 impl RefineReport {
@@ -325,6 +373,24 @@ impl RefineReport {
             sig(d.initial.rms_um, 3),
             yes_no(d.initial.residual_white)
         ));
+        if !self.significant_pose_structure.is_empty() {
+            let terms: Vec<String> = self
+                .significant_pose_structure
+                .iter()
+                .map(|p| {
+                    format!(
+                        "`{}` ({} % of the residual sum of squares, p {})",
+                        p.effect,
+                        fixed(100.0 * p.explained_share, 1),
+                        p_value(p.p_value)
+                    )
+                })
+                .collect();
+            s.push_str(&format!(
+                "Pose-correlated structure in the first residual (pose map scan): {}.\n\n",
+                terms.join(", ")
+            ));
+        }
         if d.outliers_before > 0 {
             s.push_str(&format!(
                 "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations.\n\n",
@@ -378,6 +444,15 @@ impl RefineReport {
             yes_no(d.final_.residual_white),
             if d.final_.unexplained_structure.is_empty() { "none".to_string() } else { d.final_.unexplained_structure.join(", ") }
         ));
+        if d.final_.effects.iter().any(|e| e.starts_with("pose_map")) {
+            let (lo, hi) = (&d.pose_range.min_xyz_mm_rpy_deg, &d.pose_range.max_xyz_mm_rpy_deg);
+            let mm = |k: usize| format!("{} to {}", fixed(lo[k], 1), fixed(hi[k], 1));
+            let deg = |k: usize| format!("{} to {}", fixed(lo[k], 2), fixed(hi[k], 2));
+            s.push_str(&format!(
+                "The pose error map describes the poses it was fitted on and does not extrapolate: x {} mm, y {} mm, z {} mm, roll {} deg, pitch {} deg, yaw {} deg (written to `calibrated.toml` `[pose_map]`; `cpm compensate` flags targets outside).\n\n",
+                mm(0), mm(1), mm(2), deg(3), deg(4), deg(5)
+            ));
+        }
         self.fit.markdown_sections(&mut s);
         let c = &self.calibrated;
         s.push_str(&format!(

@@ -3,7 +3,7 @@
 //! regressors (pose coordinates, time, temperature, each link's length, force and motion
 //! direction).
 use serde::{Deserialize, Serialize};
-use statrs::distribution::{ChiSquared, ContinuousCDF, Normal, StudentsT};
+use statrs::distribution::{ChiSquared, ContinuousCDF, FisherSnedecor, Normal, StudentsT};
 
 use crate::model::Prepared;
 use crate::{Campaign, MeasurementModel};
@@ -271,4 +271,101 @@ pub fn diagnose(
         white: runs_p > alpha && ljung_box_p > alpha,
         consistent_with_noise: chi2_p.map(|p| p > alpha),
     }
+}
+
+/// How much of a residual one pose map term would explain (a score test: the F statistic of
+/// the residual's projection on the term's Jacobian columns outside the current model's column
+/// space, without refitting).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PoseStructure {
+    /// The pose map term.
+    pub effect: crate::Effect,
+    /// Dimensions the term adds beyond the current model.
+    pub dimensions: usize,
+    /// Share of the residual sum of squares it would explain.
+    pub explained_share: f64,
+    /// Upper-tail p-value of its F statistic (no correction for the number of terms scanned).
+    pub p_value: f64,
+}
+
+/// Scans every pose map term of degree 1 to `degree` not already in `model` against the
+/// residual `residuals_um` (weighted as [`crate::identify()`] weighs them, with `sigma_um` as
+/// the reference noise) of a fit at `at`: the pose-correlated structure a platform pose error
+/// map could remove, most significant first. Directions of a term less than `min_novelty` outside
+/// the model's column space (relative to the term's column norm) count as confounded.
+pub fn pose_map_scan(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    at: &[f64],
+    residuals_um: &[f64],
+    sigma_um: Option<f64>,
+    degree: u8,
+    rank_rtol: f64,
+    min_novelty: f64,
+) -> Result<Vec<PoseStructure>, crate::CalibError> {
+    let terms: Vec<crate::Effect> = crate::Effect::pose_maps(degree)
+        .into_iter()
+        .filter(|e| !model.effects.contains(e))
+        .collect();
+    let m = campaign.len();
+    if terms.is_empty() || residuals_um.len() != m {
+        return Ok(Vec::new());
+    }
+    let mut aug = model.clone();
+    aug.effects.extend(terms.iter().copied());
+    let mut start = at.to_vec();
+    start.resize(aug.num_params(), 0.0);
+    let prepared = Prepared::new(&aug, campaign)?;
+    let mut j = nalgebra::DMatrix::zeros(m, aug.num_params());
+    crate::model::predict(&aug, &prepared, campaign, &start, Some(&mut j))?;
+    let w = campaign.observation_weights(sigma_um.unwrap_or(campaign.pose_sigma()));
+    for (r, w) in w.iter().enumerate() {
+        let mut row = j.row_mut(r);
+        row *= 1e3 * w;
+    }
+    let old = j.columns(0, model.num_params()).into_owned();
+    let (sv, u, _) = crate::linalg::thin_svd(&old)?;
+    let smax = sv.first().copied().unwrap_or(0.0);
+    let keep: Vec<usize> = (0..sv.len())
+        .filter(|&i| sv[i] > rank_rtol * smax)
+        .collect();
+    let k0 = keep.len();
+    let u = u.select_columns(&keep);
+    let r = nalgebra::DVector::from_column_slice(residuals_um);
+    let rss: f64 = r.norm_squared();
+    let mut out = Vec::new();
+    for (t, e) in terms.iter().enumerate() {
+        let b = j.columns(model.num_params() + 6 * t, 6).into_owned();
+        let outside = &b - &u * (u.transpose() * &b);
+        let Ok((sb, ub, _)) = crate::linalg::thin_svd(&outside) else {
+            continue;
+        };
+        let bmax = b.norm();
+        let keep: Vec<usize> = (0..sb.len())
+            .filter(|&i| sb[i] > min_novelty * bmax && bmax > 0.0)
+            .collect();
+        let dk = keep.len();
+        if dk == 0 || m <= k0 + dk || rss <= 0.0 {
+            continue;
+        }
+        let q = ub.select_columns(&keep);
+        let explained = (q.transpose() * &r).norm_squared().min(rss);
+        let f = (explained / dk as f64) / ((rss - explained).max(1e-300) / (m - k0 - dk) as f64);
+        let p_value = FisherSnedecor::new(dk as f64, (m - k0 - dk) as f64)
+            .map(|d| 1.0 - d.cdf(f))
+            .unwrap_or(1.0);
+        out.push(PoseStructure {
+            effect: *e,
+            dimensions: dk,
+            explained_share: explained / rss,
+            p_value,
+        });
+    }
+    // p-values underflow to 0 for strong structure: the explained share breaks the tie.
+    out.sort_by(|a, b| {
+        a.p_value
+            .total_cmp(&b.p_value)
+            .then(b.explained_share.total_cmp(&a.explained_share))
+    });
+    Ok(out)
 }

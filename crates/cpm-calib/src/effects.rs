@@ -24,15 +24,163 @@
 //! | `screw_periodic` | 2 per link (sin, cos), um | periodic screw error with the lead as period: `dL = a sin(2 pi L / lead) + b cos(2 pi L / lead)` | lengths sample the period densely (stroke steps not multiples of the lead) |
 //! | `socket_error` | 6 per sensor (base xyz, platform xyz), um | socket positions off their nominal place | several poses with varied orientation; gauge freedoms as for joints |
 //!
+//! `pose_map_*` terms (6 parameters each: dx, dy, dz um, rx, ry, rz urad per unit of a monomial
+//! in the commanded pose) act on the platform pose itself: see [`PoseTerm`] for when they are
+//! identifiable and why they never extrapolate.
+//!
 //! `tracker_frame` (6 parameters: translation um, rotation urad) registers a tracker's frame in
 //! the base frame; it acts on pose measurements only and brings 6 gauge freedoms with it (the
 //! whole machine and the tracker frame moved or rotated together), which the identifiability
 //! analysis names.
+//!
+//! ## Effects as a trait
+//! Every effect is a type implementing [`EffectModel`]: its name, parameter names and units,
+//! the [`Channel`]s it acts through, and its coefficients (linear in its parameters) given a
+//! pose's [`EffectInput`]. [`Effect`] is the copyable catalogue id the model, the files and the
+//! command line use: the twelve built-ins, the pose-map terms, and user effects registered with
+//! [`Effect::register`]. The measurement model composes the channels, so a new effect is one type
+//! in one file:
+//!
+//! ```
+//! use std::sync::Arc;
+//! use cpm_calib::effects::{Channel, EffectInput, EffectModel};
+//! use cpm_calib::paper::{designed_sensors, random_workspace_poses};
+//! use cpm_calib::{model::Predictions, *};
+//!
+//! /// Links that grow with the platform height: `dL_i = theta_i (z - z_home) / 100 mm`, um.
+//! #[derive(Debug)]
+//! struct HeightGrowth;
+//! impl EffectModel for HeightGrowth {
+//!     fn name(&self) -> &str { "height_growth" }
+//!     fn num_params(&self, links: usize, _sensors: usize) -> usize { links }
+//!     fn param_name(&self, k: usize, _: &[String]) -> String { format!("link {}", k + 1) }
+//!     fn unit(&self) -> &str { "um" }
+//!     fn channels(&self) -> &[Channel] { &[Channel::LinkLength] }
+//!     fn link_coefficient(&self, k: usize, link: usize, input: &EffectInput) -> f64 {
+//!         let dz = input.commanded.position_mm.z - input.home.position_mm.z;
+//!         if k == link { 1e-3 * dz / 100.0 } else { 0.0 }
+//!     }
+//! }
+//! let effect = Effect::register(Arc::new(HeightGrowth)).unwrap();
+//! let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
+//! model.nominal.sensors = designed_sensors();
+//! model.effects = vec![effect];
+//! let poses = random_workspace_poses(&model.nominal, 30, 100.0, 25.0, 3.0, 7);
+//! let skeleton = Plan { poses, sensors: (0..16).collect() }.skeleton();
+//! let truth = [vec![0.0; 36], vec![20.0, -15.0, 10.0, 25.0, -20.0, 15.0]].concat();
+//! // Its Jacobian against central differences (cpm-lm's checker, relative step 0.025).
+//! let mut problem = Predictions::new(&model, &skeleton).unwrap();
+//! let check = cpm_lm::check_jacobian(&mut problem, &truth, 0.025).unwrap();
+//! assert!(check.is_consistent(1e-5), "{check}");
+//! // Data that carry it: refine, offered it as a candidate, adds it.
+//! let sim = SimulationOptions { noise: Noise::Gaussian { sigma_um: 2.0 }, repeats: 1, seed: 1 };
+//! let data = simulate_campaign(&model, &truth, &skeleton, &sim).unwrap();
+//! let mut options = RefineOptions { candidates: vec![Effect::LinkScale, effect], ..Default::default() };
+//! options.identify.sigma_um = Some(2.0);
+//! model.effects.clear();
+//! let r = refine(&model, &data, &options).unwrap();
+//! assert_eq!(r.steps[0].effect, effect);
+//! ```
+use std::collections::HashMap;
+use std::sync::{Arc, OnceLock, RwLock};
+
+use cpm_geometry::Pose;
+use nalgebra::{Rotation3, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
-/// A named effect.
+mod builtin;
+mod pose_map;
+
+pub use builtin::*;
+pub use pose_map::{PoseMap, PoseTerm, POSE_ANGLE_SCALE_DEG, POSE_LENGTH_SCALE_MM};
+
+/// A way an effect reaches the predicted observations.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
+pub enum Channel {
+    /// The effective link lengths, `dL_i = sum_k c_ik theta_k` ([`EffectModel::link_coefficient`]):
+    /// the platform moves through forward kinematics.
+    LinkLength,
+    /// The reading itself, `y = g (1 + sum_k a_k theta_k) + sum_k b_k theta_k` with `g` the
+    /// geometric length ([`EffectModel::sensor_coefficients`]).
+    SensorReading,
+    /// The sensor sockets, moved by `sum_k (db_k, dp_k) theta_k`
+    /// ([`EffectModel::socket_coefficients`]).
+    SensorSocket,
+    /// The platform pose after forward kinematics, moved by the twist `sum_k c_k theta_k`
+    /// (translation mm, rotation rad, base frame; [`EffectModel::pose_coefficients`]).
+    PlatformPose,
+    /// The tracker frame: six parameters, translation (um) then rotation vector (urad), through
+    /// [`EffectModel::tracker_registration`]; acts on pose measurements only.
+    TrackerFrame,
+}
+
+/// What an effect may know about a pose.
+#[derive(Debug, Clone, Copy)]
+pub struct EffectInput<'a> {
+    /// Commanded link lengths, forces, motion direction, temperature, time.
+    pub context: &'a PoseContext,
+    /// The commanded platform pose.
+    pub commanded: &'a Pose,
+    /// The machine's home pose.
+    pub home: &'a Pose,
+    /// Settings of the effects.
+    pub settings: &'a EffectSettings,
+    /// Start of the campaign's clock, s.
+    pub t0_s: f64,
+}
+
+/// An effect: a named block of parameters and the channels it acts through. Coefficients are
+/// per unit of a parameter, in mm (or rad, or per unit of reading for a sensor gain); every
+/// channel but the tracker frame is linear in the parameters. Methods of channels the effect
+/// does not list keep their default (zero).
+pub trait EffectModel: std::fmt::Debug + Send + Sync {
+    /// Name in files and on the command line (lower case, no spaces or commas).
+    fn name(&self) -> &str;
+    /// Number of parameters for a machine with `links` links and `sensors` sensors.
+    fn num_params(&self, links: usize, sensors: usize) -> usize;
+    /// Name of parameter `k` (`sensor_names` for effects per sensor).
+    fn param_name(&self, k: usize, sensor_names: &[String]) -> String;
+    /// Unit of the parameters, as shown in parameter names.
+    fn unit(&self) -> &str;
+    /// Unit of parameter `k`. Default: [`unit`](Self::unit).
+    fn param_unit(&self, _k: usize) -> &str {
+        self.unit()
+    }
+    /// The channels the effect acts through.
+    fn channels(&self) -> &[Channel];
+    /// True when the effect needs the axial link forces in [`PoseContext::forces_n`].
+    fn needs_forces(&self) -> bool {
+        false
+    }
+    /// Link length channel: mm of link `link`'s effective length per unit of parameter `k`.
+    fn link_coefficient(&self, _k: usize, _link: usize, _input: &EffectInput) -> f64 {
+        0.0
+    }
+    /// Sensor reading channel: (gain per unit, offset mm per unit) of parameter `k` on the
+    /// readings of `sensor`.
+    fn sensor_coefficients(&self, _k: usize, _sensor: usize) -> (f64, f64) {
+        (0.0, 0.0)
+    }
+    /// Sensor socket channel: (base socket, platform socket) moves of `sensor` per unit of
+    /// parameter `k`, mm (platform socket in platform coordinates).
+    fn socket_coefficients(&self, _k: usize, _sensor: usize) -> (Vector3<f64>, Vector3<f64>) {
+        (Vector3::zeros(), Vector3::zeros())
+    }
+    /// Platform pose channel: the twist (mm, rad; base frame) of the platform per unit of
+    /// parameter `k` at a pose.
+    fn pose_coefficients(&self, _k: usize, _input: &EffectInput) -> Vector6<f64> {
+        Vector6::zeros()
+    }
+    /// Tracker frame channel: the registration `p_tracker = R p + t` (t in mm) for parameter
+    /// values `q` (tx, ty, tz um; rx, ry, rz urad).
+    fn tracker_registration(&self, q: &[f64]) -> (Vector3<f64>, Rotation3<f64>) {
+        tracker_registration(q)
+    }
+}
+
+/// A named effect: the copyable catalogue id of an [`EffectModel`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Effect {
     /// Constant length offset per link, um.
     LinkOffset,
@@ -59,10 +207,23 @@ pub enum Effect {
     /// Registration of the tracker frame in the base frame: translation (um) and small
     /// rotation (urad); acts on pose measurements only.
     TrackerFrame,
+    /// One term of the pose error map: a monomial in the commanded pose acting on the
+    /// platform pose's six components.
+    PoseMap(PoseTerm),
+    /// A user effect registered with [`Effect::register`] (index in the registry).
+    User(u32),
+}
+
+type Registry = RwLock<Vec<(&'static str, &'static dyn EffectModel)>>;
+
+fn registry() -> &'static Registry {
+    static R: OnceLock<Registry> = OnceLock::new();
+    R.get_or_init(|| RwLock::new(Vec::new()))
 }
 
 impl Effect {
-    /// Every effect of the library, in a fixed order.
+    /// Every built-in effect of the library, in a fixed order (the pose map terms are a
+    /// family apart: [`Effect::pose_maps`]).
     pub const ALL: [Effect; 12] = [
         Effect::LinkOffset,
         Effect::LinkScale,
@@ -78,104 +239,146 @@ impl Effect {
         Effect::TrackerFrame,
     ];
 
-    /// The effect's name in files and on the command line.
-    pub fn name(&self) -> &'static str {
+    /// Every pose map term up to `degree` (at most 3), lowest degree first.
+    pub fn pose_maps(degree: u8) -> Vec<Effect> {
+        PoseTerm::all(degree)
+            .into_iter()
+            .map(Effect::PoseMap)
+            .collect()
+    }
+
+    /// Registers a user effect and returns its id; registering a model under a name already
+    /// registered replaces it (same id). Fails when the name is a built-in's, a pose map
+    /// term's, empty, or holds whitespace or a comma.
+    pub fn register(model: Arc<dyn EffectModel>) -> Result<Effect, String> {
+        let name = model.name().to_string();
+        if name.is_empty() || name.contains(|c: char| c.is_whitespace() || c == ',') {
+            return Err(format!(
+                "effect name `{name}` must be non-empty, without spaces or commas"
+            ));
+        }
+        if Effect::ALL.iter().any(|e| e.name() == name) || PoseTerm::parse(&name).is_some() {
+            return Err(format!(
+                "effect name `{name}` is taken by a built-in effect"
+            ));
+        }
+        let leaked: &'static dyn EffectModel = &**Box::leak(Box::new(model));
+        let mut reg = registry()
+            .write()
+            .map_err(|_| "effect registry poisoned".to_string())?;
+        if let Some(i) = reg.iter().position(|(n, _)| *n == name) {
+            reg[i].1 = leaked;
+            return Ok(Effect::User(i as u32));
+        }
+        reg.push((Box::leak(name.into_boxed_str()), leaked));
+        Ok(Effect::User(reg.len() as u32 - 1))
+    }
+
+    /// The effect's model (its name, parameters, channels and coefficients).
+    pub fn model(&self) -> &'static dyn EffectModel {
         match self {
-            Effect::LinkOffset => "link_offset",
-            Effect::LinkScale => "link_scale",
-            Effect::LinkNonlinearity => "link_nonlinearity",
-            Effect::SensorOffset => "sensor_offset",
-            Effect::SensorScale => "sensor_scale",
-            Effect::Clearance => "clearance",
-            Effect::ThermalDrift => "thermal_drift",
-            Effect::Backlash => "backlash",
-            Effect::Compliance => "compliance",
-            Effect::ScrewPeriodic => "screw_periodic",
-            Effect::SocketError => "socket_error",
-            Effect::TrackerFrame => "tracker_frame",
+            Effect::LinkOffset => &LinkOffset,
+            Effect::LinkScale => &LinkScale,
+            Effect::LinkNonlinearity => &LinkNonlinearity,
+            Effect::SensorOffset => &SensorOffset,
+            Effect::SensorScale => &SensorScale,
+            Effect::Clearance => &Clearance,
+            Effect::ThermalDrift => &ThermalDrift,
+            Effect::Backlash => &Backlash,
+            Effect::Compliance => &Compliance,
+            Effect::ScrewPeriodic => &ScrewPeriodic,
+            Effect::SocketError => &SocketError,
+            Effect::TrackerFrame => &TrackerFrame,
+            Effect::PoseMap(t) => t.model(),
+            Effect::User(i) => {
+                registry()
+                    .read()
+                    .expect("effect registry")
+                    .get(*i as usize)
+                    .expect("registered effect")
+                    .1
+            }
         }
     }
 
-    /// Parses a name; the error lists the known names.
+    /// The effect's name in files and on the command line.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Effect::PoseMap(t) => t.name(),
+            Effect::User(i) => {
+                registry()
+                    .read()
+                    .expect("effect registry")
+                    .get(*i as usize)
+                    .expect("registered effect")
+                    .0
+            }
+            e => e.model().name(),
+        }
+    }
+
+    /// Parses a name (a built-in, a pose map term such as `pose_map_y2` or `pose_map_x_roll`,
+    /// or a registered user effect); the error lists the known names.
     pub fn parse(name: &str) -> Result<Effect, String> {
-        Effect::ALL
-            .iter()
-            .copied()
-            .find(|e| e.name() == name)
-            .ok_or_else(|| {
-                format!(
-                    "unknown effect `{name}` (known: {})",
-                    Effect::ALL.map(|e| e.name()).join(", ")
-                )
-            })
+        if let Some(e) = Effect::ALL.iter().copied().find(|e| e.name() == name) {
+            return Ok(e);
+        }
+        if let Some(t) = PoseTerm::parse(name) {
+            return Ok(Effect::PoseMap(t));
+        }
+        if let Ok(reg) = registry().read() {
+            if let Some(i) = reg.iter().position(|(n, _)| *n == name) {
+                return Ok(Effect::User(i as u32));
+            }
+        }
+        Err(format!(
+            "unknown effect `{name}` (known: {}, and pose map terms pose_map_<monomial> such as pose_map_y, pose_map_y2, pose_map_x_roll)",
+            Effect::ALL.map(|e| e.name()).join(", ")
+        ))
     }
 
     /// Number of parameters for a machine with `links` links and `sensors` sensors.
     pub fn num_params(&self, links: usize, sensors: usize) -> usize {
-        match self {
-            Effect::LinkOffset
-            | Effect::LinkScale
-            | Effect::ThermalDrift
-            | Effect::Backlash
-            | Effect::Compliance => links,
-            Effect::LinkNonlinearity | Effect::ScrewPeriodic => 2 * links,
-            Effect::SensorOffset | Effect::SensorScale => sensors,
-            Effect::Clearance => 1,
-            Effect::SocketError => 6 * sensors,
-            Effect::TrackerFrame => 6,
-        }
+        self.model().num_params(links, sensors)
     }
 
     /// Unit of the parameters.
     pub fn unit(&self) -> &'static str {
-        match self {
-            Effect::LinkScale | Effect::SensorScale => "ppm",
-            Effect::ThermalDrift => "ppm/K",
-            Effect::Compliance => "um/kN",
-            Effect::TrackerFrame => "um (translation), urad (rotation)",
-            _ => "um",
-        }
+        self.model().unit()
     }
 
     /// Unit of parameter `k`.
     pub fn param_unit(&self, k: usize) -> &'static str {
-        match self {
-            Effect::TrackerFrame if k >= 3 => "urad",
-            Effect::TrackerFrame => "um",
-            _ => self.unit(),
-        }
+        self.model().param_unit(k)
     }
 
     /// Name of parameter `k` of this effect.
     pub fn param_name(&self, k: usize, sensor_names: &[String]) -> String {
-        let sensor = |s: usize| {
-            sensor_names
-                .get(s)
-                .cloned()
-                .unwrap_or_else(|| format!("{}", s + 1))
-        };
-        match self {
-            Effect::LinkNonlinearity => {
-                format!("link {} {}", k / 2 + 1, ["quadratic", "cubic"][k % 2])
-            }
-            Effect::ScrewPeriodic => format!("link {} {}", k / 2 + 1, ["sin", "cos"][k % 2]),
-            Effect::SensorOffset | Effect::SensorScale => format!("sensor {}", sensor(k)),
-            Effect::Clearance => "radius".to_string(),
-            Effect::SocketError => format!(
-                "sensor {} {} {}",
-                sensor(k / 6),
-                if k % 6 < 3 { "base" } else { "platform" },
-                ["dx", "dy", "dz"][k % 3]
-            ),
-            Effect::TrackerFrame => ["tx", "ty", "tz", "rx", "ry", "rz"][k].to_string(),
-            _ => format!("link {}", k + 1),
-        }
+        self.model().param_name(k, sensor_names)
+    }
+
+    /// True when the effect acts through `channel`.
+    pub fn acts_through(&self, channel: Channel) -> bool {
+        self.model().channels().contains(&channel)
     }
 }
 
 impl std::fmt::Display for Effect {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
+    }
+}
+
+impl Serialize for Effect {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.name())
+    }
+}
+
+impl<'de> Deserialize<'de> for Effect {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(d)?;
+        Effect::parse(&name).map_err(serde::de::Error::custom)
     }
 }
 
@@ -242,6 +445,8 @@ impl PoseContext {
 
 /// Link-channel coefficient of parameter `k` of `effect` on link `link`: mm of effective
 /// length per unit of the parameter (zero where the parameter does not touch that link).
+/// The effect sees the identity as commanded and home pose: use
+/// [`EffectModel::link_coefficient`] for effects that read the pose.
 pub fn link_coefficient(
     effect: Effect,
     k: usize,
@@ -250,67 +455,50 @@ pub fn link_coefficient(
     settings: &EffectSettings,
     t0_s: f64,
 ) -> f64 {
-    let l = ctx.commanded_mm[link];
-    match effect {
-        Effect::LinkOffset if k == link => 1e-3,
-        Effect::LinkScale if k == link => 1e-6 * l,
-        Effect::LinkNonlinearity if k / 2 == link => {
-            let u = (l - ctx.home_mm[link]) / settings.nonlinearity_scale_mm;
-            1e-3 * if k.is_multiple_of(2) {
-                u * u
-            } else {
-                u * u * u
-            }
-        }
-        Effect::Clearance => {
-            let t = ctx.forces_n[link];
-            2e-3 * if t > 0.0 {
-                1.0
-            } else if t < 0.0 {
-                -1.0
-            } else {
-                0.0
-            }
-        }
-        Effect::ThermalDrift if k == link => 1e-6 * l * ctx.drift_variable(settings, t0_s),
-        Effect::Backlash if k == link => 1e-3 * ctx.motion_sign[link],
-        Effect::Compliance if k == link => 1e-3 * ctx.forces_n[link] / 1000.0,
-        Effect::ScrewPeriodic if k / 2 == link => {
-            let ph = std::f64::consts::TAU * l / settings.screw_lead_mm;
-            1e-3 * if k.is_multiple_of(2) {
-                ph.sin()
-            } else {
-                ph.cos()
-            }
-        }
-        _ => 0.0,
-    }
+    let pose = Pose::identity();
+    effect.model().link_coefficient(
+        k,
+        link,
+        &EffectInput {
+            context: ctx,
+            commanded: &pose,
+            home: &pose,
+            settings,
+            t0_s,
+        },
+    )
 }
 
 /// The `tracker_frame` registration of parameters `q` (tx, ty, tz um; rx, ry, rz urad): the
 /// translation (mm) and rotation that take a point of the base frame into the tracker frame,
 /// `p_tracker = R p + t`.
-pub fn tracker_registration(q: &[f64]) -> (nalgebra::Vector3<f64>, nalgebra::Rotation3<f64>) {
+pub fn tracker_registration(q: &[f64]) -> (Vector3<f64>, Rotation3<f64>) {
     (
-        nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3,
-        nalgebra::Rotation3::new(nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-6),
+        Vector3::new(q[0], q[1], q[2]) * 1e-3,
+        Rotation3::new(Vector3::new(q[3], q[4], q[5]) * 1e-6),
     )
 }
 
 /// True when the effect acts through the link channel.
 pub fn is_link_effect(effect: Effect) -> bool {
-    !matches!(
-        effect,
-        Effect::SensorOffset | Effect::SensorScale | Effect::SocketError | Effect::TrackerFrame
-    )
+    effect.acts_through(Channel::LinkLength)
 }
 
 /// Sensor-channel coefficient of parameter `k` of `effect` for a reading of `sensor` whose
 /// predicted length is `length_mm`: mm of reading per unit of the parameter.
 pub fn sensor_coefficient(effect: Effect, k: usize, sensor: usize, length_mm: f64) -> f64 {
-    match effect {
-        Effect::SensorOffset if k == sensor => 1e-3,
-        Effect::SensorScale if k == sensor => 1e-6 * length_mm,
-        _ => 0.0,
+    let (gain, offset) = effect.model().sensor_coefficients(k, sensor);
+    gain * length_mm + offset
+}
+
+/// Interned names (`&'static str`) of generated effects such as pose map terms.
+pub(crate) fn intern(name: String) -> &'static str {
+    static NAMES: OnceLock<RwLock<HashMap<String, &'static str>>> = OnceLock::new();
+    let names = NAMES.get_or_init(|| RwLock::new(HashMap::new()));
+    if let Some(s) = names.read().expect("names").get(&name) {
+        return s;
     }
+    let mut w = names.write().expect("names");
+    w.entry(name.clone())
+        .or_insert_with(|| Box::leak(name.into_boxed_str()))
 }

@@ -294,11 +294,12 @@ pub fn supported(model: &MeasurementModel, campaign: &Campaign) -> Result<(), Ca
             "the implicit formulation takes length readings only; use identify() for tracker data",
         ));
     }
-    if let Some(e) = model
-        .effects
-        .iter()
-        .find(|e| matches!(e, Effect::SocketError | Effect::TrackerFrame))
-    {
+    if let Some(e) = model.effects.iter().find(|e| {
+        matches!(
+            e,
+            Effect::SocketError | Effect::TrackerFrame | Effect::PoseMap(_) | Effect::User(_)
+        )
+    }) {
         return Err(CalibError::invalid(
             "effects",
             format!("`{e}` is not supported by the implicit formulation"),

@@ -27,6 +27,7 @@
 
 pub mod accuracy;
 pub mod campaign;
+mod compose;
 pub mod design;
 pub mod diagnostics;
 pub mod effects;
@@ -44,7 +45,7 @@ pub mod simulate;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
 pub use campaign::{Campaign, Plan, Reading};
-pub use effects::{Effect, EffectSettings, KnownEffect};
+pub use effects::{Channel, Effect, EffectInput, EffectModel, EffectSettings, KnownEffect};
 pub use error::CalibError;
 pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
 pub use identify::{

@@ -9,12 +9,10 @@
 use cpm_clearance::{ClearanceModel, Load};
 use cpm_geometry::{InstallationErrors, JointTable, Pose};
 use cpm_kinematics::{forward, ForwardOptions};
-use nalgebra::{DMatrix, Matrix6, Vector6};
+use nalgebra::DMatrix;
 
-use crate::effects::{
-    is_link_effect, link_coefficient, sensor_coefficient, tracker_registration, Effect,
-    EffectSettings, KnownEffect, PoseContext,
-};
+use crate::compose::{AtPose, Channels, Kin};
+use crate::effects::{Channel, Effect, EffectInput, EffectSettings, KnownEffect, PoseContext};
 use crate::{CalibError, Campaign};
 
 /// Exact (nested forward kinematics) or the paper's first-order model (eq. 12/15).
@@ -116,10 +114,8 @@ impl MeasurementModel {
         let mut m = self.clone();
         m.nominal.sensors = sensors;
         m.known_effects.retain(|k| {
-            !matches!(
-                k.effect,
-                Effect::SensorOffset | Effect::SensorScale | Effect::SocketError
-            )
+            !(k.effect.acts_through(Channel::SensorReading)
+                || k.effect.acts_through(Channel::SensorSocket))
         });
         m
     }
@@ -134,18 +130,60 @@ impl MeasurementModel {
 
     /// The change of each link's effective length (mm) the known link-channel effects make
     /// at a pose with context `ctx` (`t0_s`: start of the campaign's clock).
+    /// Effects that read the commanded pose see the home pose: use
+    /// [`known_link_shift_at`](Self::known_link_shift_at) for those.
     pub fn known_link_shift_mm(&self, ctx: &PoseContext, t0_s: f64) -> Vec<f64> {
-        let n = self.nominal.num_links();
-        let mut out = vec![0.0; n];
+        self.known_link_shift_at(ctx, &self.nominal.home, t0_s)
+    }
+
+    /// [`known_link_shift_mm`](Self::known_link_shift_mm) at the commanded pose `commanded`.
+    pub fn known_link_shift_at(&self, ctx: &PoseContext, commanded: &Pose, t0_s: f64) -> Vec<f64> {
+        let input = EffectInput {
+            context: ctx,
+            commanded,
+            home: &self.nominal.home,
+            settings: &self.effect_settings,
+            t0_s,
+        };
+        let mut out = vec![0.0; self.nominal.num_links()];
         for k in self
             .known_effects
             .iter()
-            .filter(|k| is_link_effect(k.effect))
+            .filter(|k| k.effect.acts_through(Channel::LinkLength))
         {
+            let e = k.effect.model();
             for (i, o) in out.iter_mut().enumerate() {
                 for (q, v) in k.values.iter().enumerate() {
-                    *o += link_coefficient(k.effect, q, i, ctx, &self.effect_settings, t0_s) * v;
+                    *o += e.link_coefficient(q, i, &input) * v;
                 }
+            }
+        }
+        out
+    }
+
+    /// The platform pose twist (mm, rad) the known pose-channel effects (the pose map) make
+    /// at commanded pose `commanded`: the platform sits at `pose.perturbed(twist)`.
+    pub fn known_pose_twist(
+        &self,
+        ctx: &PoseContext,
+        commanded: &Pose,
+        t0_s: f64,
+    ) -> nalgebra::Vector6<f64> {
+        let input = EffectInput {
+            context: ctx,
+            commanded,
+            home: &self.nominal.home,
+            settings: &self.effect_settings,
+            t0_s,
+        };
+        let mut out = nalgebra::Vector6::zeros();
+        for k in self
+            .known_effects
+            .iter()
+            .filter(|k| k.effect.acts_through(Channel::PlatformPose))
+        {
+            for (q, v) in k.values.iter().enumerate() {
+                out += k.effect.model().pose_coefficients(q, &input) * *v;
             }
         }
         out
@@ -156,7 +194,7 @@ impl MeasurementModel {
         self.effects
             .iter()
             .chain(self.known_effects.iter().map(|k| &k.effect))
-            .any(|e| matches!(e, Effect::Clearance | Effect::Compliance))
+            .any(|e| e.model().needs_forces())
     }
 
     /// What the effects need to know about a pose: `commanded_mm` the commanded link lengths,
@@ -277,20 +315,26 @@ impl MeasurementModel {
             ));
         }
         let mut table = InstallationErrors::try_from_vec_um(&params[..ni])?.apply(&self.nominal)?;
-        // Socket errors, um, 6 per sensor (base xyz, platform xyz): known, then estimated.
-        let mut move_sockets = |q: &[f64]| {
-            for (s, q) in table.sensors.iter_mut().zip(q.chunks_exact(6)) {
-                s.base_mm += nalgebra::Vector3::new(q[0], q[1], q[2]) * 1e-3;
-                s.platform_mm += nalgebra::Vector3::new(q[3], q[4], q[5]) * 1e-3;
+        // The socket channel: known values, then estimated ones.
+        let mut move_sockets = |e: Effect, q: &[f64]| {
+            let e = e.model();
+            for (si, s) in table.sensors.iter_mut().enumerate() {
+                for (k, v) in q.iter().enumerate() {
+                    let (db, dp) = e.socket_coefficients(k, si);
+                    s.base_mm += db * *v;
+                    s.platform_mm += dp * *v;
+                }
             }
         };
-        if let Some(q) = self.known(Effect::SocketError) {
-            move_sockets(q);
+        for k in &self.known_effects {
+            if k.effect.acts_through(Channel::SensorSocket) {
+                move_sockets(k.effect, &k.values);
+            }
         }
         if params.len() > ni {
             for b in self.blocks() {
-                if b.effect == Some(Effect::SocketError) {
-                    move_sockets(&params[b.offset..b.offset + b.len]);
+                if let Some(e) = b.effect.filter(|e| e.acts_through(Channel::SensorSocket)) {
+                    move_sockets(e, &params[b.offset..b.offset + b.len]);
                 }
             }
         }
@@ -439,8 +483,8 @@ impl Prepared {
         let mut lengths_mm = lengths_mm;
         if !model.known_effects.is_empty() {
             let t0 = campaign_t0_s(campaign);
-            for (l, ctx) in lengths_mm.iter_mut().zip(&contexts) {
-                for (a, d) in l.iter_mut().zip(model.known_link_shift_mm(ctx, t0)) {
+            for ((l, ctx), pose) in lengths_mm.iter_mut().zip(&contexts).zip(&campaign.poses) {
+                for (a, d) in l.iter_mut().zip(model.known_link_shift_at(ctx, pose, t0)) {
                     *a += d;
                 }
             }
@@ -570,226 +614,63 @@ fn predict_exact(
             format!("the identification Jacobian needs six links, the table has {n}"),
         ));
     }
-    let blocks = model.blocks();
-    let link_blocks: Vec<_> = blocks
-        .iter()
-        .filter(|b| b.effect.is_some_and(is_link_effect))
-        .collect();
-    let sensor_blocks: Vec<_> = blocks
-        .iter()
-        .filter(|b| matches!(b.effect, Some(Effect::SensorOffset | Effect::SensorScale)))
-        .collect();
-    let socket_block = blocks
-        .iter()
-        .find(|b| b.effect == Some(Effect::SocketError));
-    let tracker_block = blocks
-        .iter()
-        .find(|b| b.effect == Some(Effect::TrackerFrame));
-    // The estimated registration (reg) composed with the known one (known): a point p of the
-    // base frame is at reg_r (known_r p + known_t) + reg_t in the tracker frame.
-    let (reg_t, reg_r) = match tracker_block {
-        Some(b) => tracker_registration(&params[b.offset..b.offset + 6]),
-        None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
-    };
-    let (known_t, known_r) = match model.known(Effect::TrackerFrame) {
-        Some(q) => tracker_registration(q),
-        None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
-    };
-    // Known sensor offsets (mm) and scale factors per sensor; the estimated ones add on top.
-    let mut sensor_offset_mm = vec![0.0; table.sensors.len()];
-    let mut sensor_gain = vec![1.0; table.sensors.len()];
-    if let Some(v) = model.known(Effect::SensorOffset) {
-        for (o, v) in sensor_offset_mm.iter_mut().zip(v) {
-            *o += v * 1e-3;
-        }
-    }
-    if let Some(v) = model.known(Effect::SensorScale) {
-        for (g, v) in sensor_gain.iter_mut().zip(v) {
-            *g += v * 1e-6;
-        }
-    }
-    let estimated_gain = |si: usize| {
-        sensor_blocks
-            .iter()
-            .filter(|b| b.effect == Some(Effect::SensorScale))
-            .map(|b| params[b.offset + si] * 1e-6)
-            .sum::<f64>()
-    };
+    let channels = Channels::new(model, params);
     let m_readings = campaign.readings.len();
-    let settings = &model.effect_settings;
-    let sensor_corr = model.sensor_correction_mm();
     let mut y = vec![0.0; campaign.len()];
-    // Link-channel coefficients of one pose: links x (link-effect parameters).
-    let mut coeff: Vec<Vec<(usize, f64)>> = vec![Vec::new(); n];
-    let mut lengths = vec![0.0; n];
+    let mut at = AtPose::new(n);
     for (j, readings) in prepared.by_pose.iter().enumerate() {
         let measurements = &prepared.measurements_by_pose[j];
         if readings.is_empty() && measurements.is_empty() {
             continue;
         }
-        let ctx = &prepared.contexts[j];
-        lengths.copy_from_slice(&prepared.lengths_mm[j]);
-        for (i, c) in coeff.iter_mut().enumerate() {
-            c.clear();
-            for b in &link_blocks {
-                let e = b.effect.expect("effect");
-                for k in 0..b.len {
-                    let a = link_coefficient(e, k, i, ctx, settings, prepared.t0_s);
-                    if a != 0.0 {
-                        c.push((b.offset + k, a));
-                        lengths[i] += a * params[b.offset + k];
-                    }
-                }
-            }
-        }
-        let start: Pose = campaign.poses[j];
-        let (pose, _) = forward(&table, &lengths, &start, &model.fk)
+        let input = EffectInput {
+            context: &prepared.contexts[j],
+            commanded: &campaign.poses[j],
+            home: &model.nominal.home,
+            settings: &model.effect_settings,
+            t0_s: prepared.t0_s,
+        };
+        channels.at_pose(&input, &prepared.lengths_mm[j], &mut at);
+        let (fk, _) = forward(&table, &at.lengths, &campaign.poses[j], &model.fk)
             .map_err(|source| CalibError::Kinematics { pose: j, source })?;
+        let pose = if at.twist == nalgebra::Vector6::zeros() {
+            fk
+        } else {
+            fk.perturbed(&at.twist)
+        };
         for &k in readings {
             let si = campaign.readings[k].sensor;
-            let geometric = table.sensors[si].length_mm(&pose);
-            let mut yk = geometric * sensor_gain[si] + sensor_offset_mm[si] + sensor_corr;
-            for b in &sensor_blocks {
-                let e = b.effect.expect("effect");
-                for q in 0..b.len {
-                    yk += sensor_coefficient(e, q, si, geometric) * params[b.offset + q];
-                }
-            }
-            y[k] = yk;
+            y[k] = channels.reading(si, table.sensors[si].length_mm(&pose));
         }
         // Tracker observations: position in the tracker frame (mm) and the rotation from the
         // measured to the predicted orientation (mrad).
-        let tracker_position = reg_r * (known_r * pose.position_mm + known_t) + reg_t;
-        let tracker_rotation = reg_r * known_r * pose.rotation;
+        let (tracked_mm, tracked_rotation) = channels.tracked(&pose);
         let mut omegas = Vec::with_capacity(measurements.len());
         for &q in measurements {
-            let pm = &campaign.pose_measurements[q];
+            let w = cpm_geometry::rotation::log(
+                &(tracked_rotation * campaign.pose_measurements[q].measured.rotation.inverse()),
+            );
             let o = m_readings + 6 * q;
-            let w =
-                cpm_geometry::rotation::log(&(tracker_rotation * pm.measured.rotation.inverse()));
-            for a in 0..3 {
-                y[o + a] = tracker_position[a];
-                y[o + 3 + a] = w[a] * 1e3;
-            }
+            y[o..o + 3].copy_from_slice(tracked_mm.as_slice());
+            y[o + 3..o + 6].copy_from_slice((w * 1e3).as_slice());
             omegas.push(w);
         }
         if let Some(jac) = jacobian.as_deref_mut() {
-            let links = cpm_kinematics::inverse(&table, &pose);
-            let mut j1 = Matrix6::zeros();
-            for (i, ls) in links.iter().enumerate() {
-                let m = ls.s_mm.cross(&ls.unit);
-                j1.set_row(
-                    i,
-                    &Vector6::new(ls.unit.x, ls.unit.y, ls.unit.z, m.x, m.y, m.z).transpose(),
-                );
-            }
-            let lu_t = j1.transpose().lu();
-            let rt = pose.rotation.matrix().transpose();
+            let kin = Kin::new(&table, &fk, &at, j);
             for &k in readings {
                 let si = campaign.readings[k].sensor;
-                let s = &table.sensors[si];
-                let g = cpm_kinematics::sensor_pose_gradient(s, &pose);
-                let v = lu_t.solve(&g).ok_or_else(|| CalibError::Kinematics {
-                    pose: j,
-                    source: cpm_kinematics::KinematicsError::singular(0, &j1),
-                })?;
-                let mut row = jac.row_mut(k);
-                row.fill(0.0);
-                // dy/de = -v^T J2, J2 row i: [-z_i^T, (R^T z_i)^T] in the columns of link i.
-                for (i, ls) in links.iter().enumerate() {
-                    let zp = rt * ls.unit;
-                    for a in 0..3 {
-                        row[6 * i + a] = v[i] * ls.unit[a] * 1e-3;
-                        row[6 * i + 3 + a] = -v[i] * zp[a] * 1e-3;
-                    }
-                    for &(p, a) in &coeff[i] {
-                        row[p] += v[i] * a;
-                    }
-                }
-                if let Some(b) = socket_block {
-                    // Direct socket terms plus nothing through the pose (sockets do not
-                    // change the closure).
-                    let q = pose.transform_point(&s.platform_mm) - s.base_mm;
-                    let u = q / q.norm();
-                    let up = rt * u;
-                    for a in 0..3 {
-                        row[b.offset + 6 * si + a] = -u[a] * 1e-3;
-                        row[b.offset + 6 * si + 3 + a] = up[a] * 1e-3;
-                    }
-                }
-                // Everything so far moves the geometric length, which the sensor's scale
-                // (known and estimated) multiplies.
-                let gain = sensor_gain[si] + estimated_gain(si);
-                if gain != 1.0 {
-                    row.iter_mut().for_each(|v| *v *= gain);
-                }
-                let geometric = s.length_mm(&pose);
-                for b in &sensor_blocks {
-                    let e = b.effect.expect("effect");
-                    for q in 0..b.len {
-                        row[b.offset + q] += sensor_coefficient(e, q, si, geometric);
-                    }
-                }
+                channels.reading_row(&kin, &at, &table.sensors[si], si, &pose, jac.row_mut(k))?;
             }
             if !measurements.is_empty() {
-                // dx/dp = J1^-1 (dL/dp - J2 de/dp): the pose twist per parameter.
-                let lu = j1.lu();
-                let mut dx = DMatrix::zeros(6, np);
-                let mut rhs = Vector6::zeros();
-                for p in 0..np {
-                    rhs.fill(0.0);
-                    let mut any = false;
-                    if p < 6 * n {
-                        let (i, a) = (p / 6, p % 6);
-                        let ls = &links[i];
-                        let zp = rt * ls.unit;
-                        // J2 entry per um: base -z, platform R^T z; dx = -J1^-1 J2 de.
-                        rhs[i] = if a < 3 { ls.unit[a] } else { -zp[a - 3] } * 1e-3;
-                        any = true;
-                    }
-                    for (i, c) in coeff.iter().enumerate() {
-                        for &(q, a) in c {
-                            if q == p {
-                                rhs[i] += a;
-                                any = true;
-                            }
-                        }
-                    }
-                    if any {
-                        let sol = lu.solve(&rhs).ok_or_else(|| CalibError::Kinematics {
-                            pose: j,
-                            source: cpm_kinematics::KinematicsError::singular(0, &j1),
-                        })?;
-                        dx.set_column(p, &sol);
-                    }
-                }
-                let rr = (reg_r * known_r).into_inner();
+                let dx = channels.twist_columns(&kin, &at, np)?;
                 for (&q, w) in measurements.iter().zip(&omegas) {
-                    let o = m_readings + 6 * q;
-                    let jl_inv = left_jacobian_inverse(w);
-                    let top = rr * dx.rows(0, 3);
-                    let bottom = jl_inv * rr * dx.rows(3, 3) * 1e3;
-                    for p in 0..np {
-                        for a in 0..3 {
-                            jac[(o + a, p)] = top[(a, p)];
-                            jac[(o + 3 + a, p)] = bottom[(a, p)];
-                        }
-                    }
-                    if let Some(b) = tracker_block {
-                        let skew = tracker_position - reg_t;
-                        for a in 0..3 {
-                            jac[(o + a, b.offset + a)] = 1e-3;
-                        }
-                        // d(exp(d) R t)/dd = -[R t]x, per urad.
-                        let sk = skew.cross_matrix() * -1e-6;
-                        let jr = jl_inv * 1e-3;
-                        for a in 0..3 {
-                            for c in 0..3 {
-                                jac[(o + a, b.offset + 3 + c)] = sk[(a, c)];
-                                jac[(o + 3 + a, b.offset + 3 + c)] = jr[(a, c)];
-                            }
-                        }
-                    }
+                    channels.tracker_rows(
+                        &mut jac.as_view_mut(),
+                        m_readings + 6 * q,
+                        w,
+                        &dx,
+                        &tracked_mm,
+                    );
                 }
             }
         }
@@ -797,14 +678,56 @@ fn predict_exact(
     Ok(y)
 }
 
-/// Inverse of the left Jacobian of SO(3) at rotation vector `w`: `d log(exp(d) exp(w)) / dd`.
-fn left_jacobian_inverse(w: &nalgebra::Vector3<f64>) -> nalgebra::Matrix3<f64> {
-    let th = w.norm();
-    let k = w.cross_matrix();
-    let i = nalgebra::Matrix3::identity();
-    if th < 1e-8 {
-        return i - k * 0.5 + k * k / 12.0;
+/// A campaign's predictions as a [`cpm_lm`] problem (residuals = predicted observations, mm;
+/// parameters in the model's units): to check a model's Jacobian, a user effect's above all,
+/// with [`cpm_lm::check_jacobian`].
+pub struct Predictions<'a> {
+    model: &'a MeasurementModel,
+    prepared: Prepared,
+    campaign: &'a Campaign,
+}
+
+impl<'a> Predictions<'a> {
+    /// Prepares `campaign` for `model`.
+    pub fn new(model: &'a MeasurementModel, campaign: &'a Campaign) -> Result<Self, CalibError> {
+        Ok(Self {
+            model,
+            prepared: Prepared::new(model, campaign)?,
+            campaign,
+        })
     }
-    let c = 1.0 / (th * th) - (1.0 + th.cos()) / (2.0 * th * th.sin());
-    i - k * 0.5 + k * k * c
+}
+
+impl cpm_lm::Problem for Predictions<'_> {
+    fn num_params(&self) -> usize {
+        self.model.num_params()
+    }
+    fn num_residuals(&self) -> usize {
+        self.campaign.len()
+    }
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), cpm_lm::ModelError> {
+        r.copy_from_slice(&predict(
+            self.model,
+            &self.prepared,
+            self.campaign,
+            x,
+            None,
+        )?);
+        Ok(())
+    }
+}
+
+impl cpm_lm::DenseJacobian for Predictions<'_> {
+    fn jacobian(
+        &mut self,
+        x: &[f64],
+        mut jac: cpm_lm::faer::MatMut<'_, f64>,
+    ) -> Result<(), cpm_lm::ModelError> {
+        let mut j = DMatrix::zeros(self.campaign.len(), self.model.num_params());
+        predict(self.model, &self.prepared, self.campaign, x, Some(&mut j))?;
+        for (r, c) in (0..j.nrows()).flat_map(|r| (0..j.ncols()).map(move |c| (r, c))) {
+            jac[(r, c)] = j[(r, c)];
+        }
+        Ok(())
+    }
 }

@@ -18,6 +18,17 @@
 //! campaign without them, so no effect is bent to a spike. The final model is then fitted to
 //! the whole campaign ([`Refinement::calibration`], which flags them again).
 //!
+//! **Pose error maps.** Each round the diagnostics also scan every pose map term up to
+//! [`RefineOptions::pose_map_degree`] ([`crate::diagnostics::pose_map_scan`], a score test on
+//! the residual); the terms significant at `alpha / (terms scanned)` (at most
+//! [`RefineOptions::pose_map_proposals`], most significant first) join the round's candidates
+//! and go through the same confounding check, F-test, BIC and cross-validation. The
+//! Bonferroni correction of the round counts every scanned term. A model with a pose map
+//! describes the poses it was fitted on only: [`Refinement::pose_range`] reports them.
+//!
+//! User effects ([`Effect::register`]) are candidates like the built-ins: list them in
+//! [`RefineOptions::candidates`].
+//!
 //! Rounds stop when no candidate is significant, when the residual is white and consistent with
 //! the declared noise, or after `max_steps`. What remains correlated with a regressor is
 //! reported as unexplained structure, by name, rather than forced into an effect.
@@ -45,6 +56,11 @@ pub struct RefineOptions {
     /// it to be tried. Default 0.02 (link offsets are typically ~0.01 against installation
     /// errors: a joint moved along its link is an offset but for the link's change of direction).
     pub min_novelty: f64,
+    /// Highest degree of the pose map terms the diagnostics scan for and propose (0: none,
+    /// at most 3). Default 2 (27 terms).
+    pub pose_map_degree: u8,
+    /// Most pose map terms proposed per round. Default 3.
+    pub pose_map_proposals: usize,
     /// Identification options (declared noise in `sigma_um`).
     pub identify: IdentifyOptions,
 }
@@ -57,6 +73,8 @@ impl Default for RefineOptions {
             max_steps: 4,
             folds: 5,
             min_novelty: 0.02,
+            pose_map_degree: 2,
+            pose_map_proposals: 3,
             identify: IdentifyOptions::default(),
         }
     }
@@ -119,7 +137,8 @@ pub struct Refinement {
     pub final_diagnostics: ResidualDiagnostics,
     /// Final cross-validated RMS, um.
     pub final_cv_rms_um: f64,
-    /// Regressors the final residual still follows (no library effect explained them).
+    /// Regressors the final residual still follows (no library effect explained them), and
+    /// pose map terms it still follows (`pose map pose_map_y2`).
     pub unexplained_structure: Vec<String>,
     /// Residuals of the first fit, um (for plots).
     pub initial_residuals_um: Vec<f64>,
@@ -133,6 +152,61 @@ pub struct Refinement {
     /// Candidates that passed the F-test and BIC but were not added because the
     /// cross-validated RMS did not improve: (effect, CV RMS before, with it), um.
     pub rejected_by_cv: Vec<(Effect, f64, f64)>,
+    /// The pose map scan of the first fit's residual (empty when
+    /// [`RefineOptions::pose_map_degree`] is 0), most significant first.
+    pub initial_pose_structure: Vec<crate::diagnostics::PoseStructure>,
+    /// The range of the commanded poses the final model was fitted on; a pose map term
+    /// describes these poses only and does not extrapolate.
+    pub pose_range: PoseRange,
+}
+
+/// The range of a campaign's commanded poses: x, y, z (mm) and roll, pitch, yaw (deg).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseRange {
+    /// Smallest x, y, z (mm), roll, pitch, yaw (deg).
+    pub min: [f64; 6],
+    /// Largest x, y, z (mm), roll, pitch, yaw (deg).
+    pub max: [f64; 6],
+}
+
+impl PoseRange {
+    /// The range of `campaign`'s poses.
+    pub fn of(campaign: &Campaign) -> PoseRange {
+        let mut r = PoseRange {
+            min: [f64::INFINITY; 6],
+            max: [f64::NEG_INFINITY; 6],
+        };
+        for p in &campaign.poses {
+            let a = p.rpy_deg();
+            let v = [
+                p.position_mm.x,
+                p.position_mm.y,
+                p.position_mm.z,
+                a[0],
+                a[1],
+                a[2],
+            ];
+            for i in 0..6 {
+                r.min[i] = r.min[i].min(v[i]);
+                r.max[i] = r.max[i].max(v[i]);
+            }
+        }
+        r
+    }
+
+    /// True when `pose` lies inside the range (within `margin` mm and degrees).
+    pub fn contains(&self, pose: &cpm_geometry::Pose, margin: f64) -> bool {
+        let a = pose.rpy_deg();
+        let v = [
+            pose.position_mm.x,
+            pose.position_mm.y,
+            pose.position_mm.z,
+            a[0],
+            a[1],
+            a[2],
+        ];
+        (0..6).all(|i| v[i] >= self.min[i] - margin && v[i] <= self.max[i] + margin)
+    }
 }
 
 fn rss(r: &[f64]) -> f64 {
@@ -288,22 +362,51 @@ pub fn refine(
         &cal.minimum_norm_um,
     )?;
     let mut rejected_by_cv = Vec::new();
+    let scan = |mdl: &MeasurementModel, cal: &Calibration| {
+        if options.pose_map_degree == 0 {
+            return Ok(Vec::new());
+        }
+        crate::diagnostics::pose_map_scan(
+            mdl,
+            campaign,
+            &cal.minimum_norm_um,
+            &cal.residuals_um,
+            sigma,
+            options.pose_map_degree,
+            options.identify.rank.rank_rtol,
+            options.min_novelty,
+        )
+    };
+    let initial_pose_structure = scan(&current, &cal)?;
+    let mut pose_structure = initial_pose_structure.clone();
     let mut steps = Vec::new();
     let mut last_round = Vec::new();
     for _ in 0..options.max_steps {
         if diag.white && diag.consistent_with_noise == Some(true) && diag.significant.is_empty() {
             break;
         }
-        let remaining: Vec<Effect> = options
+        let mut remaining: Vec<Effect> = options
             .candidates
             .iter()
             .copied()
             .filter(|e| !current.effects.contains(e))
             .collect();
+        // Pose map terms the scan finds significant (Bonferroni over every scanned term).
+        let scanned = pose_structure.len();
+        let library = remaining.len();
+        for s in pose_structure
+            .iter()
+            .filter(|s| s.p_value < options.alpha / scanned as f64)
+            .take(options.pose_map_proposals)
+        {
+            if !remaining.contains(&s.effect) {
+                remaining.push(s.effect);
+            }
+        }
         if remaining.is_empty() {
             break;
         }
-        let level = options.alpha / remaining.len() as f64;
+        let level = options.alpha / (library + scanned).max(1) as f64;
         let rss0 = rss(&cal.residuals_um);
         let k0 = cal.identifiability.rank;
         let bic0 = bic(rss0, m, k0);
@@ -401,11 +504,21 @@ pub fn refine(
         cal = c1;
         cv = cv1;
         diag = diag_of(&current, &cal)?;
+        pose_structure = scan(&current, &cal)?;
     }
     let unexplained_structure = if diag.consistent_with_noise == Some(true) && diag.white {
         Vec::new()
     } else {
         let mut u = diag.significant.clone();
+        // Pose map terms the final residual still follows (not added: steps exhausted, or
+        // they did not pass the tests).
+        let scanned = pose_structure.len().max(1) as f64;
+        u.extend(
+            pose_structure
+                .iter()
+                .filter(|s| s.p_value < options.alpha / scanned)
+                .map(|s| format!("pose map {}", s.effect.name())),
+        );
         if u.is_empty() && !diag.white {
             u.push("acquisition order".to_string());
         }
@@ -433,5 +546,7 @@ pub fn refine(
         last_round,
         outliers_before,
         rejected_by_cv,
+        initial_pose_structure,
+        pose_range: PoseRange::of(full),
     })
 }

@@ -87,10 +87,11 @@ fn known_values(model: &MeasurementModel) -> Vec<KnownEffect> {
     let (n, s) = (model.nominal.num_links(), model.nominal.sensors.len());
     Effect::ALL
         .iter()
-        .map(|&effect| KnownEffect {
+        .enumerate()
+        .map(|(index, &effect)| KnownEffect {
             effect,
             values: (0..effect.num_params(n, s))
-                .map(|k| 20.0 * ((k as f64 + 1.0) * 0.9 + effect as usize as f64).cos())
+                .map(|k| 20.0 * ((k as f64 + 1.0) * 0.9 + index as f64).cos())
                 .collect(),
         })
         .collect()
@@ -206,4 +207,103 @@ fn effect_names_parse_and_unknown_names_are_listed() {
     }
     let err = Effect::parse("link_ofset").unwrap_err();
     assert!(err.contains("link_offset"), "{err}");
+}
+
+#[test]
+fn pose_map_columns_match_central_differences() {
+    // Pose map terms beside the socket, sensor and tracker channels, estimated on top of known
+    // pose map values large enough (hundreds of urad) that the moved pose matters.
+    let terms: Vec<Effect> = ["pose_map_y", "pose_map_y2", "pose_map_x_roll", "pose_map_z"]
+        .iter()
+        .map(|n| Effect::parse(n).unwrap())
+        .collect();
+    let mut effects = terms.clone();
+    effects.extend([
+        Effect::SensorScale,
+        Effect::SocketError,
+        Effect::TrackerFrame,
+    ]);
+    let mut model = model_with(&effects);
+    model.known_effects = vec![
+        KnownEffect {
+            effect: terms[0],
+            values: vec![30.0, -20.0, 15.0, 400.0, -300.0, 250.0],
+        },
+        KnownEffect {
+            effect: Effect::parse("pose_map_x").unwrap(),
+            values: vec![-10.0, 25.0, 5.0, -200.0, 350.0, 100.0],
+        },
+    ];
+    let c = timed_campaign(&model, 8, 31);
+    let mut p = params_for(&model);
+    for v in p.iter_mut().skip(36).take(24) {
+        *v *= 40.0;
+    }
+    check_columns(&model, &c, &p);
+}
+
+#[test]
+fn pose_map_terms_move_the_platform_as_declared() {
+    // Independent of the channel code: a known pose map term must give the readings of the
+    // platform moved by the twist the term declares, computed here by hand.
+    let effect = Effect::parse("pose_map_y2").unwrap();
+    assert_eq!(effect.name(), "pose_map_y2");
+    let mut model = model_with(&[]);
+    let values = vec![12.0, -8.0, 30.0, 60.0, -40.0, 25.0];
+    let plain = model.clone();
+    model.known_effects = vec![KnownEffect {
+        effect,
+        values: values.clone(),
+    }];
+    let c = timed_campaign(&model, 6, 5);
+    let p = InstallationErrors::paper_table2().to_vec_um();
+    let y = predict(&model, &Prepared::new(&model, &c).unwrap(), &c, &p, None).unwrap();
+    let table = plain.table_with(&p).unwrap();
+    let lengths = plain.effective_lengths(&c).unwrap();
+    let home = plain.nominal.home;
+    for (k, r) in c.readings.iter().enumerate() {
+        let commanded = c.poses[r.pose];
+        let (fk, _) =
+            cpm_kinematics::forward(&table, &lengths[r.pose], &commanded, &plain.fk).unwrap();
+        let m = ((commanded.position_mm.y - home.position_mm.y) / 100.0).powi(2);
+        let twist = nalgebra::Vector6::from_iterator(
+            values
+                .iter()
+                .enumerate()
+                .map(|(a, v)| v * m * if a < 3 { 1e-3 } else { 1e-6 }),
+        );
+        let moved = fk.perturbed(&twist);
+        let expected = table.sensors[r.sensor].length_mm(&moved) + plain.sensor_correction_mm();
+        assert!(
+            (y[k] - expected).abs() < 1e-9,
+            "reading {k}: {} vs {expected}",
+            y[k]
+        );
+    }
+}
+
+#[test]
+fn pose_map_names_round_trip() {
+    let all = Effect::pose_maps(3);
+    assert_eq!(Effect::pose_maps(2).len(), 27);
+    assert_eq!(all.len(), 83);
+    for e in &all {
+        assert_eq!(Effect::parse(e.name()).unwrap(), *e);
+        let json = serde_json::to_string(e).unwrap();
+        assert_eq!(serde_json::from_str::<Effect>(&json).unwrap(), *e);
+    }
+    for bad in [
+        "pose_map_",
+        "pose_map_w",
+        "pose_map_y4",
+        "pose_map_y_y",
+        "pose_map_x2_y2",
+    ] {
+        assert!(Effect::parse(bad).is_err(), "{bad}");
+    }
+    // Built-in names are unchanged in files.
+    assert_eq!(
+        serde_json::to_string(&Effect::LinkOffset).unwrap(),
+        "\"link_offset\""
+    );
 }

@@ -72,6 +72,9 @@ pub struct RobotDescription {
     /// (`[installation_errors_um]`). Optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub installation_errors_um: Option<InstallationErrorsSpec>,
+    /// The pose error map's settings and fitted range (`[pose_map]`). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose_map: Option<PoseMapSpec>,
 }
 
 /// `[home]`: the home pose.
@@ -682,6 +685,7 @@ impl RobotDescription {
             load: None,
             calibration: None,
             installation_errors_um: None,
+            pose_map: None,
         }
     }
 
@@ -727,6 +731,9 @@ impl RobotDescription {
     /// Semantic checks; the first problem found.
     fn check(&self) -> Result<(), Problem> {
         use Seg::{Index, Key, Name};
+        if let Some(p) = &self.pose_map {
+            p.check()?;
+        }
         position3(&self.home.position_mm, &[Key("home"), Key("position_mm")])?;
         finite3(&self.home.rpy_deg, &[Key("home"), Key("rpy_deg")])?;
         let n = self.links.len();
@@ -960,5 +967,76 @@ impl RobotDescription {
             }
         }
         Ok(())
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// [pose_map]: the pose error map (a self-contained section).
+
+/// `[pose_map]`: the pose error map's scan degree and the range of commanded poses its terms
+/// were fitted on. The terms themselves are effects like any other (`pose_map_y2` in
+/// `[calibration] effects` to estimate, in `[calibration.known_effects]` when known); a map
+/// describes the fitted range only and does not extrapolate.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoseMapSpec {
+    /// Highest degree of the terms `cpm refine` scans for (0 to 3). Default 2.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degree: Option<u8>,
+    /// Smallest commanded x, y, z (mm), roll, pitch, yaw (deg) of the poses the known terms
+    /// were fitted on. Written by `cpm calibrate` / `cpm refine`; optional.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "exact_opt"
+    )]
+    pub fitted_min: Option<[f64; 6]>,
+    /// Largest commanded x, y, z (mm), roll, pitch, yaw (deg) of the fitted poses.
+    #[serde(
+        default,
+        skip_serializing_if = "Option::is_none",
+        deserialize_with = "exact_opt"
+    )]
+    pub fitted_max: Option<[f64; 6]>,
+}
+
+impl PoseMapSpec {
+    fn check(&self) -> Result<(), Problem> {
+        use Seg::{Index, Key};
+        if let Some(d) = self.degree {
+            if d > 3 {
+                return Err(Problem::new(
+                    &[Key("pose_map"), Key("degree")],
+                    format!("must be 0 to 3, got {d}"),
+                ));
+            }
+        }
+        for (key, v) in [
+            ("fitted_min", self.fitted_min),
+            ("fitted_max", self.fitted_max),
+        ] {
+            if let Some(i) = v.and_then(|v| v.iter().position(|x| !x.is_finite())) {
+                return Err(Problem::new(
+                    &[Key("pose_map"), Key(key), Index(i)],
+                    "must be finite",
+                ));
+            }
+        }
+        match (self.fitted_min, self.fitted_max) {
+            (Some(lo), Some(hi)) => {
+                if let Some(i) = (0..6).find(|&i| lo[i] > hi[i]) {
+                    return Err(Problem::new(
+                        &[Key("pose_map"), Key("fitted_min"), Index(i)],
+                        format!("{} is above fitted_max {}", lo[i], hi[i]),
+                    ));
+                }
+                Ok(())
+            }
+            (None, None) => Ok(()),
+            _ => Err(Problem::new(
+                &[Key("pose_map")],
+                "give both fitted_min and fitted_max, or neither",
+            )),
+        }
     }
 }

@@ -551,10 +551,20 @@ fn documentation_examples_load() {
         .skip(1)
         .map(|b| b.split("```").next().unwrap())
         .collect();
-    assert_eq!(blocks.len(), 3);
-    // In the order of the document: [calibration.known_effects], the paper, the encoder link.
+    assert_eq!(blocks.len(), 4);
+    // In the order of the document: [calibration.known_effects], [pose_map], the paper, the
+    // encoder link.
     let known_block = blocks[0];
-    let blocks = &blocks[1..];
+    let pose_map_block = blocks[1];
+    let blocks = &blocks[2..];
+
+    // The [pose_map] example, appended to the paper's description.
+    let d = RobotDescription::from_toml_str(&format!("{}\n{pose_map_block}", paper_text()), "doc")
+        .unwrap();
+    let p = d.pose_map.unwrap();
+    assert_eq!(p.fitted_min.unwrap()[1], -97.5);
+    assert_eq!(p.fitted_max.unwrap()[2], 489.5);
+    assert_eq!(d.calibration.unwrap().known_effects["pose_map_y2"].len(), 6);
 
     // The abridged paper example, with links 2 to 5 filled in.
     let middle: String = JointTable::paper_cubic().links[1..5]
@@ -637,4 +647,32 @@ fn deep_nesting_does_not_overflow() {
     }
     let s = format!("{}= 1", "a.".repeat(100_000));
     assert!(RobotDescription::from_toml_str(&s, "<deep keys>").is_err());
+}
+
+/// `[pose_map]`: the fitted range must be finite, ordered and given whole; the degree 0 to 3.
+#[test]
+fn pose_map_section_is_checked() {
+    let text = paper_text();
+    for (table, needle) in [
+        ("degree = 4", "pose_map.degree: must be 0 to 3, got 4"),
+        (
+            "fitted_min = [0, 0, 0, 0, 0, 0]",
+            "pose_map: give both fitted_min and fitted_max, or neither",
+        ),
+        (
+            "fitted_min = [0, 5, 0, 0, 0, 0]\nfitted_max = [1, 1, 1, 1, 1, 1]",
+            "pose_map.fitted_min[2]: 5 is above fitted_max 1",
+        ),
+    ] {
+        let msg = err_message(RobotDescription::from_toml_str(
+            &format!("{text}\n[pose_map]\n{table}\n"),
+            "robot.toml",
+        ));
+        assert!(msg.contains(needle), "{msg}");
+    }
+    let ok = format!("{text}\n[pose_map]\ndegree = 3\nfitted_min = [0, 0, 0, 0, 0, 0]\nfitted_max = [1, 1, 1, 1, 1, 1]\n");
+    let d = RobotDescription::from_toml_str(&ok, "robot.toml").unwrap();
+    assert_eq!(d.pose_map.unwrap().degree, Some(3));
+    let back = RobotDescription::from_toml_str(&d.to_toml_string().unwrap(), "rt").unwrap();
+    assert_eq!(back, d);
 }

@@ -1,0 +1,414 @@
+//! How the measurement model composes the effects' channels into a prediction and its Jacobian
+//! (see [`crate::effects::Channel`]): the link channel changes the lengths forward kinematics
+//! closes on, the platform pose channel moves the pose forward kinematics found, the socket
+//! channel moves the sensors (applied to the joint table), the sensor channel maps the geometric
+//! length to the reading, and the tracker frame channel maps the pose into the tracker's frame.
+use cpm_geometry::{JointTable, Pose, Sensor};
+use cpm_kinematics::{KinematicsError, LinkState};
+use nalgebra::{DMatrix, DMatrixViewMut, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
+
+use crate::effects::{Channel, EffectInput, EffectModel};
+use crate::{CalibError, MeasurementModel};
+
+/// One block of estimated (or known) values acting through a channel.
+#[derive(Clone, Copy)]
+struct Active<'a> {
+    model: &'static dyn EffectModel,
+    offset: usize,
+    values: &'a [f64],
+}
+
+/// The effects of a model at a parameter vector, sorted by channel.
+pub(crate) struct Channels<'a> {
+    link: Vec<Active<'a>>,
+    sensor: Vec<Active<'a>>,
+    socket: Vec<Active<'a>>,
+    pose: Vec<Active<'a>>,
+    known_pose: Vec<Active<'a>>,
+    tracker: Option<Active<'a>>,
+    reg: (Vector3<f64>, Rotation3<f64>),
+    known_reg: (Vector3<f64>, Rotation3<f64>),
+    sensor_gain: Vec<f64>,
+    sensor_offset_mm: Vec<f64>,
+    sensor_corr: f64,
+}
+
+/// What the channels make of one pose: link coefficients and lengths, the pose twist.
+pub(crate) struct AtPose {
+    /// Link-channel coefficients per link: (parameter, mm per unit).
+    coeff: Vec<Vec<(usize, f64)>>,
+    /// Effective lengths with the estimated link effects, mm.
+    pub lengths: Vec<f64>,
+    /// Platform pose twist (mm, rad), known and estimated.
+    pub twist: Vector6<f64>,
+    /// Pose-channel columns: (parameter, twist per unit).
+    pose_cols: Vec<(usize, Vector6<f64>)>,
+}
+
+impl AtPose {
+    pub fn new(links: usize) -> Self {
+        Self {
+            coeff: vec![Vec::new(); links],
+            lengths: vec![0.0; links],
+            twist: Vector6::zeros(),
+            pose_cols: Vec::new(),
+        }
+    }
+}
+
+/// The kinematic derivatives at the pose forward kinematics found.
+pub(crate) struct Kin {
+    links: Vec<LinkState>,
+    j1: Matrix6<f64>,
+    /// LU of J1^T, for `v = J1^-T g` of every reading at the pose.
+    lu_t: nalgebra::LU<f64, nalgebra::U6, nalgebra::U6>,
+    rt: Matrix3<f64>,
+    /// exp(twist) and the left Jacobian of SO(3) at the twist's rotation.
+    e: Matrix3<f64>,
+    jl: Matrix3<f64>,
+    moved: bool,
+    pose: usize,
+}
+
+impl Kin {
+    pub fn new(table: &JointTable, fk: &Pose, at: &AtPose, pose: usize) -> Self {
+        let links = cpm_kinematics::inverse(table, fk);
+        let mut j1 = Matrix6::zeros();
+        for (i, ls) in links.iter().enumerate() {
+            let m = ls.s_mm.cross(&ls.unit);
+            j1.set_row(
+                i,
+                &Vector6::new(ls.unit.x, ls.unit.y, ls.unit.z, m.x, m.y, m.z).transpose(),
+            );
+        }
+        let w = Vector3::new(at.twist[3], at.twist[4], at.twist[5]);
+        Self {
+            links,
+            lu_t: j1.transpose().lu(),
+            j1,
+            rt: fk.rotation.matrix().transpose(),
+            e: *Rotation3::new(w).matrix(),
+            jl: left_jacobian(&w),
+            moved: at.twist != Vector6::zeros(),
+            pose,
+        }
+    }
+
+    fn singular(&self) -> CalibError {
+        CalibError::Kinematics {
+            pose: self.pose,
+            source: KinematicsError::singular(0, &self.j1),
+        }
+    }
+
+    /// A pose-channel twist per unit, as a twist of the final pose.
+    fn pose_column(&self, c: &Vector6<f64>) -> Vector6<f64> {
+        let r = self.jl * Vector3::new(c[3], c[4], c[5]);
+        Vector6::new(c[0], c[1], c[2], r.x, r.y, r.z)
+    }
+}
+
+fn active<'a>(model: &MeasurementModel, params: &'a [f64], channel: Channel) -> Vec<Active<'a>> {
+    model
+        .blocks()
+        .into_iter()
+        .filter_map(|b| {
+            let e = b.effect?.model();
+            e.channels().contains(&channel).then(|| Active {
+                model: e,
+                offset: b.offset,
+                values: &params[b.offset..b.offset + b.len],
+            })
+        })
+        .collect()
+}
+
+impl<'a> Channels<'a> {
+    pub fn new(model: &'a MeasurementModel, params: &'a [f64]) -> Self {
+        let known = |c: Channel| -> Vec<Active<'a>> {
+            model
+                .known_effects
+                .iter()
+                .filter(|k| k.effect.acts_through(c))
+                .map(|k| Active {
+                    model: k.effect.model(),
+                    offset: 0,
+                    values: &k.values,
+                })
+                .collect()
+        };
+        let identity = (Vector3::zeros(), Rotation3::identity());
+        let tracker = active(model, params, Channel::TrackerFrame)
+            .first()
+            .copied();
+        let reg = tracker.map_or(identity, |a| a.model.tracker_registration(a.values));
+        let known_reg = known(Channel::TrackerFrame)
+            .first()
+            .map_or(identity, |a| a.model.tracker_registration(a.values));
+        // Known sensor offsets (mm) and gains per sensor; the estimated ones add on top.
+        let s = model.nominal.sensors.len();
+        let mut sensor_offset_mm = vec![0.0; s];
+        let mut sensor_gain = vec![1.0; s];
+        for a in known(Channel::SensorReading) {
+            for si in 0..s {
+                for (k, v) in a.values.iter().enumerate() {
+                    let (g, o) = a.model.sensor_coefficients(k, si);
+                    sensor_gain[si] += g * v;
+                    sensor_offset_mm[si] += o * v;
+                }
+            }
+        }
+        Self {
+            link: active(model, params, Channel::LinkLength),
+            sensor: active(model, params, Channel::SensorReading),
+            socket: active(model, params, Channel::SensorSocket),
+            pose: active(model, params, Channel::PlatformPose),
+            known_pose: known(Channel::PlatformPose),
+            tracker,
+            reg,
+            known_reg,
+            sensor_gain,
+            sensor_offset_mm,
+            sensor_corr: model.sensor_correction_mm(),
+        }
+    }
+
+    /// Link lengths and coefficients, and the pose twist, at one pose.
+    pub fn at_pose(&self, input: &EffectInput, prepared_mm: &[f64], at: &mut AtPose) {
+        at.lengths.copy_from_slice(prepared_mm);
+        for (i, c) in at.coeff.iter_mut().enumerate() {
+            c.clear();
+            for b in &self.link {
+                for (k, v) in b.values.iter().enumerate() {
+                    let a = b.model.link_coefficient(k, i, input);
+                    if a != 0.0 {
+                        c.push((b.offset + k, a));
+                        at.lengths[i] += a * v;
+                    }
+                }
+            }
+        }
+        at.twist.fill(0.0);
+        at.pose_cols.clear();
+        for b in &self.known_pose {
+            for (k, v) in b.values.iter().enumerate() {
+                at.twist += b.model.pose_coefficients(k, input) * *v;
+            }
+        }
+        for b in &self.pose {
+            for (k, v) in b.values.iter().enumerate() {
+                let c = b.model.pose_coefficients(k, input);
+                if c != Vector6::zeros() {
+                    at.twist += c * *v;
+                    at.pose_cols.push((b.offset + k, c));
+                }
+            }
+        }
+    }
+
+    /// The reading of sensor `si` whose geometric length is `geometric` mm.
+    pub fn reading(&self, si: usize, geometric: f64) -> f64 {
+        let mut y = geometric * self.sensor_gain[si] + self.sensor_offset_mm[si] + self.sensor_corr;
+        for b in &self.sensor {
+            for (q, v) in b.values.iter().enumerate() {
+                let (g, o) = b.model.sensor_coefficients(q, si);
+                y += (g * geometric + o) * v;
+            }
+        }
+        y
+    }
+
+    /// The pose in the tracker's frame: position (mm) and rotation.
+    pub fn tracked(&self, pose: &Pose) -> (Vector3<f64>, Rotation3<f64>) {
+        let ((kt, kr), (rt, rr)) = (self.known_reg, self.reg);
+        (
+            rr * (kr * pose.position_mm + kt) + rt,
+            rr * kr * pose.rotation,
+        )
+    }
+
+    /// The Jacobian row (mm per unit) of a reading of `sensor` (index `si`) at `pose`.
+    pub fn reading_row(
+        &self,
+        kin: &Kin,
+        at: &AtPose,
+        sensor: &Sensor,
+        si: usize,
+        pose: &Pose,
+        mut row: nalgebra::MatrixViewMut<
+            f64,
+            nalgebra::U1,
+            nalgebra::Dyn,
+            nalgebra::U1,
+            nalgebra::Dyn,
+        >,
+    ) -> Result<(), CalibError> {
+        let g = cpm_kinematics::sensor_pose_gradient(sensor, pose);
+        // The gradient with respect to the pose forward kinematics found.
+        let g_fk = if kin.moved {
+            let w = kin.e.transpose() * Vector3::new(g[3], g[4], g[5]);
+            Vector6::new(g[0], g[1], g[2], w.x, w.y, w.z)
+        } else {
+            g
+        };
+        let v = kin.lu_t.solve(&g_fk).ok_or_else(|| kin.singular())?;
+        row.fill(0.0);
+        // dy/de = -v^T J2, J2 row i: [-z_i^T, (R^T z_i)^T] in the columns of link i.
+        for (i, ls) in kin.links.iter().enumerate() {
+            let zp = kin.rt * ls.unit;
+            for a in 0..3 {
+                row[6 * i + a] = v[i] * ls.unit[a] * 1e-3;
+                row[6 * i + 3 + a] = -v[i] * zp[a] * 1e-3;
+            }
+            for &(p, a) in &at.coeff[i] {
+                row[p] += v[i] * a;
+            }
+        }
+        if !self.socket.is_empty() {
+            // Sockets move the reading directly, not the closure.
+            let q = pose.transform_point(&sensor.platform_mm) - sensor.base_mm;
+            let u = q / q.norm();
+            let up = pose.rotation.matrix().transpose() * u;
+            for b in &self.socket {
+                for k in 0..b.values.len() {
+                    let (db, dp) = b.model.socket_coefficients(k, si);
+                    if db != Vector3::zeros() || dp != Vector3::zeros() {
+                        row[b.offset + k] += -u.dot(&db) + up.dot(&dp);
+                    }
+                }
+            }
+        }
+        for (p, c) in &at.pose_cols {
+            row[*p] += g.dot(&kin.pose_column(c));
+        }
+        // Everything so far moves the geometric length, which the sensor's gain multiplies.
+        let mut gain = self.sensor_gain[si];
+        let mut est = 0.0;
+        for b in &self.sensor {
+            for (q, v) in b.values.iter().enumerate() {
+                est += b.model.sensor_coefficients(q, si).0 * v;
+            }
+        }
+        gain += est;
+        if gain != 1.0 {
+            row.iter_mut().for_each(|v| *v *= gain);
+        }
+        let geometric = sensor.length_mm(pose);
+        for b in &self.sensor {
+            for q in 0..b.values.len() {
+                let (g, o) = b.model.sensor_coefficients(q, si);
+                row[b.offset + q] += g * geometric + o;
+            }
+        }
+        Ok(())
+    }
+
+    /// The final pose's twist per parameter (6 x np): `J1^-1 (dL/dp - J2 de/dp)` moved by the
+    /// pose channel, plus the pose channel's own columns.
+    pub fn twist_columns(
+        &self,
+        kin: &Kin,
+        at: &AtPose,
+        np: usize,
+    ) -> Result<DMatrix<f64>, CalibError> {
+        let n = kin.links.len();
+        let lu = kin.j1.lu();
+        let mut dx = DMatrix::zeros(6, np);
+        let mut rhs = Vector6::zeros();
+        for p in 0..np {
+            rhs.fill(0.0);
+            let mut any = false;
+            if p < 6 * n {
+                let (i, a) = (p / 6, p % 6);
+                let ls = &kin.links[i];
+                let zp = kin.rt * ls.unit;
+                // J2 entry per um: base -z, platform R^T z; dx = -J1^-1 J2 de.
+                rhs[i] = if a < 3 { ls.unit[a] } else { -zp[a - 3] } * 1e-3;
+                any = true;
+            }
+            for (i, c) in at.coeff.iter().enumerate() {
+                for &(q, a) in c {
+                    if q == p {
+                        rhs[i] += a;
+                        any = true;
+                    }
+                }
+            }
+            if any {
+                let sol = lu.solve(&rhs).ok_or_else(|| kin.singular())?;
+                dx.set_column(p, &sol);
+            }
+        }
+        if kin.moved {
+            let bottom = kin.e * dx.rows(3, 3);
+            dx.rows_mut(3, 3).copy_from(&bottom);
+        }
+        for (p, c) in &at.pose_cols {
+            let col = kin.pose_column(c);
+            for a in 0..6 {
+                dx[(a, *p)] += col[a];
+            }
+        }
+        Ok(dx)
+    }
+
+    /// The six Jacobian rows of a tracker measurement at `row0` whose orientation residual is
+    /// the rotation vector `w`; `dx` from [`twist_columns`](Self::twist_columns).
+    pub fn tracker_rows(
+        &self,
+        jac: &mut DMatrixViewMut<f64>,
+        row0: usize,
+        w: &Vector3<f64>,
+        dx: &DMatrix<f64>,
+        tracker_position: &Vector3<f64>,
+    ) {
+        let rr = (self.reg.1 * self.known_reg.1).into_inner();
+        let jl_inv = left_jacobian_inverse(w);
+        let top = rr * dx.rows(0, 3);
+        let bottom = jl_inv * rr * dx.rows(3, 3) * 1e3;
+        for p in 0..dx.ncols() {
+            for a in 0..3 {
+                jac[(row0 + a, p)] = top[(a, p)];
+                jac[(row0 + 3 + a, p)] = bottom[(a, p)];
+            }
+        }
+        if let Some(b) = self.tracker {
+            let skew = tracker_position - self.reg.0;
+            for a in 0..3 {
+                jac[(row0 + a, b.offset + a)] = 1e-3;
+            }
+            // d(exp(d) R t)/dd = -[R t]x, per urad.
+            let sk = skew.cross_matrix() * -1e-6;
+            let jr = jl_inv * 1e-3;
+            for a in 0..3 {
+                for c in 0..3 {
+                    jac[(row0 + a, b.offset + 3 + c)] = sk[(a, c)];
+                    jac[(row0 + 3 + a, b.offset + 3 + c)] = jr[(a, c)];
+                }
+            }
+        }
+    }
+}
+
+/// Left Jacobian of SO(3) at rotation vector `w`: `exp(w + d) = exp(J_l d) exp(w)`.
+fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
+    let th = w.norm();
+    let k = w.cross_matrix();
+    let i = Matrix3::identity();
+    if th < 1e-8 {
+        return i + k * 0.5 + k * k / 6.0;
+    }
+    i + k * ((1.0 - th.cos()) / (th * th)) + k * k * ((th - th.sin()) / (th * th * th))
+}
+
+/// Inverse of the left Jacobian of SO(3) at rotation vector `w`: `d log(exp(d) exp(w)) / dd`.
+fn left_jacobian_inverse(w: &Vector3<f64>) -> Matrix3<f64> {
+    let th = w.norm();
+    let k = w.cross_matrix();
+    let i = Matrix3::identity();
+    if th < 1e-8 {
+        return i - k * 0.5 + k * k / 12.0;
+    }
+    let c = 1.0 / (th * th) - (1.0 + th.cos()) / (2.0 * th * th.sin());
+    i - k * 0.5 + k * k * c
+}
