@@ -637,6 +637,9 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
     s
 }
 
+/// The name of the gauge in the designed campaign's `robot.toml`.
+pub const DESIGNED_GAUGE: &str = "gauge";
+
 /// The files of a campaign under limits on the paper's cube, as (name, contents):
 /// `robot.toml` (the cube with one `[[sensor]]` per setup of `design`), `readings.csv`
 /// (`data`, readings format; marked simulated when `data` is, `note` on that line),
@@ -648,18 +651,31 @@ pub fn designed_files(
     file: &str,
 ) -> Result<Vec<(&'static str, String)>, String> {
     let mut desc = cpm_geometry::description::RobotDescription::paper_cubic();
-    desc.sensors = design
-        .sensors()
-        .iter()
-        .map(cpm_geometry::description::SensorSpec::from_sensor)
-        .collect();
+    // The candidate socket places, the gauge (one sensor per setup names it and its bar) and
+    // the limits: `cpm design` and `cpm calibrate` read them back.
+    let cands = cpm_calib::design::SocketCandidates::paper_cubic();
+    for (side, list) in [
+        (cpm_geometry::description::SocketSide::Base, &cands.base),
+        (
+            cpm_geometry::description::SocketSide::Platform,
+            &cands.platform,
+        ),
+    ] {
+        desc.sockets
+            .extend(list.iter().map(|s| cpm_geometry::description::SocketSpec {
+                name: s.name.clone(),
+                side,
+                position_mm: s.position_mm.into(),
+            }));
+    }
+    design.describe(&mut desc, DESIGNED_GAUGE);
     let toml = desc.to_toml_string().map_err(|e| e.to_string())?;
     let robot = crate::io::Robot::from_description(desc, file).map_err(|e| e.to_string())?;
     Ok(vec![
         (
             "robot.toml",
             format!(
-                "# The paper's cube with the sockets of a campaign under limits:\n# one [[sensor]] per setup (socket pair + bar), in mounting order; see setup_sheet.md.\n\n{toml}"
+                "# The paper's cube with the sockets of a campaign under limits:\n# one [[sensor]] per setup (socket pair + bar), in mounting order; see setup_sheet.md;\n# the candidate socket places ([[socket]]), the gauge ([[gauge]]) and the limits ([limits]).\n\n{toml}"
             ),
         ),
         ("readings.csv", crate::io::write_readings(data, &robot, note)),

@@ -35,6 +35,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::{GeometryError, InstallationErrors, JointTable, Link, Pose, Sensor};
 
+mod instruments;
+pub use instruments::{
+    GaugeKindSpec, GaugeSpec, LimitsSpec, SocketRegionSpec, SocketSide, SocketSpec,
+    DEFAULT_BALLBAR_SHORTEST_MM, DEFAULT_CONE_DEG, DEFAULT_GAUGE_LINK_CLEARANCE_MM,
+    DEFAULT_LONGEST_MM, DEFAULT_REGION_GRID, DEFAULT_TELESCOPING_SHORTEST_MM,
+    MAX_DESCRIBED_SOCKETS,
+};
+
 /// Standard gravity, mm/s^2; the default gravity is `[0, 0, -STANDARD_GRAVITY_MM_S2]`.
 pub const STANDARD_GRAVITY_MM_S2: f64 = 9806.65;
 
@@ -72,6 +80,24 @@ pub struct RobotDescription {
     /// (`[installation_errors_um]`). Optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub installation_errors_um: Option<InstallationErrorsSpec>,
+    /// Length gauges available for a campaign (`[[gauge]]`), possibly none
+    /// (see [`instruments`](GaugeSpec)).
+    #[serde(rename = "gauge", default, skip_serializing_if = "Vec::is_empty")]
+    pub gauges: Vec<GaugeSpec>,
+    /// Candidate socket places (`[[socket]]`), possibly none.
+    #[serde(rename = "socket", default, skip_serializing_if = "Vec::is_empty")]
+    pub sockets: Vec<SocketSpec>,
+    /// Boxes of candidate socket places (`[[socket_region]]`), possibly none.
+    #[serde(
+        rename = "socket_region",
+        default,
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub socket_regions: Vec<SocketRegionSpec>,
+    /// What the machine allows a design (`[limits]`): joint cones, link radius, gauge-link
+    /// clearance. Optional (defaults stated in [`LimitsSpec`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limits: Option<LimitsSpec>,
 }
 
 /// `[home]`: the home pose.
@@ -177,6 +203,14 @@ pub struct SensorSpec {
     /// Platform socket centre in {P}, mm.
     #[serde(deserialize_with = "exact")]
     pub platform_mm: [f64; 3],
+    /// The `[[gauge]]` this sensor is read with (a setup of that gauge). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gauge: Option<String>,
+    /// The extension bar of this setup, mm: its readings lie in the gauge's window
+    /// `[shortest + bar, shortest + bar + stroke]`. Optional (needs `gauge`; without it only
+    /// the gauge's range and stroke are checked).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bar_mm: Option<f64>,
 }
 
 impl SensorSpec {
@@ -191,6 +225,8 @@ impl SensorSpec {
             name: sensor.name.clone(),
             base_mm: sensor.base_mm.into(),
             platform_mm: sensor.platform_mm.into(),
+            gauge: None,
+            bar_mm: None,
         }
     }
 }
@@ -682,6 +718,10 @@ impl RobotDescription {
             load: None,
             calibration: None,
             installation_errors_um: None,
+            gauges: Vec::new(),
+            sockets: Vec::new(),
+            socket_regions: Vec::new(),
+            limits: None,
         }
     }
 
@@ -959,6 +999,7 @@ impl RobotDescription {
                 }
             }
         }
+        self.check_instruments()?;
         Ok(())
     }
 }

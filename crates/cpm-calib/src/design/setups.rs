@@ -29,6 +29,7 @@
 //!
 //! [`check_reading`] re-checks a reading from scratch; the design's figures (gauge travel per
 //! setup, smallest clearance, largest cone angle) are measured on the chosen readings.
+use cpm_geometry::description::{RobotDescription, SensorSpec};
 use cpm_geometry::{JointTable, Pose, Sensor};
 use cpm_kinematics::sensor_pose_gradient;
 use nalgebra::{DMatrix, Matrix6, RowDVector, Vector6};
@@ -171,6 +172,29 @@ pub struct SetupDesign {
 }
 
 impl SetupDesign {
+    /// Writes the design into a robot description: one `[[sensor]]` per setup naming the
+    /// gauge `gauge_name` and its bar, the gauge as a `[[gauge]]` (replacing one of that
+    /// name) and the limits as `[limits]`, so `cpm calibrate` checks readings against each
+    /// setup's window and `cpm design` can read the limits back.
+    pub fn describe(&self, desc: &mut RobotDescription, gauge_name: &str) {
+        let radius = desc.gauge(Some(gauge_name)).and_then(|g| g.radius_mm);
+        let spec = self.constraints.gauge.to_spec(gauge_name, radius);
+        match desc.gauges.iter_mut().find(|g| g.name == gauge_name) {
+            Some(g) => *g = spec,
+            None => desc.gauges.push(spec),
+        }
+        desc.limits = Some(self.constraints.to_limits_spec(desc.limits.as_ref()));
+        desc.sensors = self
+            .setups
+            .iter()
+            .map(|s| SensorSpec {
+                gauge: Some(gauge_name.to_string()),
+                bar_mm: Some(s.bar_mm),
+                ..SensorSpec::from_sensor(&s.sensor())
+            })
+            .collect();
+    }
+
     /// Readings: poses summed over the setups.
     pub fn num_readings(&self) -> usize {
         self.setups.iter().map(|s| s.poses.len()).sum()
