@@ -540,6 +540,7 @@ fn limited_json(l: &cpm_calib::paper::LimitedOutcome) -> serde_json::Value {
         "rms_error_um": opt(l.error_vs_truth_um.map(|x| x.0)),
         "max_error_um": opt(l.error_vs_truth_um.map(|x| x.1)),
         "monte_carlo": l.monte_carlo.as_ref().map(monte_carlo_json).unwrap_or(serde_json::Value::Null),
+        "worst_error": l.monte_carlo.as_ref().map(limited_worst_json).unwrap_or(serde_json::Value::Null),
         "tradeoff": l.tradeoff.iter().map(|t| json!({
             "stroke_mm": t.stroke_mm,
             "setups": t.setups,
@@ -552,6 +553,22 @@ fn limited_json(l: &cpm_calib::paper::LimitedOutcome) -> serde_json::Value {
         })).collect::<Vec<_>>(),
         "log": d.log,
         "files": ["designed/robot.toml", "designed/readings.csv", "designed/setup_sheet.md", "designed/setup_sheet.csv"],
+    })
+}
+
+/// The worst-error target, in both readings: (a) the largest per-parameter Monte Carlo
+/// RMS error, (b) the largest absolute error over all runs and parameters, with the share of
+/// runs whose largest error is within 6 um.
+fn limited_worst_json(m: &MonteCarloReport) -> serde_json::Value {
+    let names = cpm_calib::identifiability::parameter_names(6);
+    let worst = m.worst_parameter();
+    json!({
+        "worst_parameter": worst.map(|(k, _)| names.get(k).cloned().unwrap_or_default()),
+        "worst_parameter_rms_error_um": worst.map(|(_, p)| finite(p.rms_error_um)),
+        "worst_parameter_crlb_um": worst.map(|(_, p)| finite(p.crlb_um)),
+        "max_abs_error_um_all_runs": finite(m.max_error_um_worst),
+        "fraction_runs_max_le_6um": m.fraction_max_within(6.0),
+        "target_um": 6.0,
     })
 }
 
@@ -584,8 +601,20 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
             m.runs, m.first_seed, m.first_seed + m.runs as u64 - 1, m.failed_runs, m.rms_error_um, m.crlb_rms_um, m.efficiency,
             m.max_error_um_mean, m.max_error_um_p95, m.max_error_um_worst, 100.0 * m.fraction_within(2.0, 6.0)
         ));
+        if let Some((k, p)) = m.worst_parameter() {
+            let names = cpm_calib::identifiability::parameter_names(6);
+            s.push_str(&format!(
+                "- **Worst error, two readings of the target (at most 6 um)**: (a) the largest per-parameter Monte Carlo RMS error is {:.2} um (`{}`, Cramér-Rao {:.2} um); (b) the largest absolute error over all {} runs and 36 parameters is {:.2} um, and {:.0} % of the runs have every error within 6 um.\n",
+                p.rms_error_um,
+                names.get(k).map_or("?", String::as_str),
+                p.crlb_um,
+                m.runs,
+                m.max_error_um_worst,
+                100.0 * m.fraction_max_within(6.0)
+            ));
+        }
     }
-    s.push_str("- Files: `designed/robot.toml` (the cube with one `[[sensor]]` per setup), `designed/readings.csv` (the simulated readings of this seed, readings format, marked simulated), `designed/setup_sheet.md` and `designed/setup_sheet.csv` (what to mount, then which poses to drive, in order). `cpm calibrate --robot designed/robot.toml --data designed/readings.csv --out cal/` fits them.\n\n");
+    s.push_str("- Files: `designed/robot.toml` (the cube with one `[[sensor]]` per setup, naming the gauge and its bar; the `[[gauge]]`, the candidate `[[socket]]` places and the `[limits]`, so `cpm design --robot designed/robot.toml` designs under the same limits and `cpm calibrate` refuses readings outside a setup's window), `designed/readings.csv` (the simulated readings of this seed, readings format, marked simulated), `designed/setup_sheet.md` and `designed/setup_sheet.csv` (what to mount, then which poses to drive, in order). `cpm calibrate --robot designed/robot.toml --data designed/readings.csv --out cal/` fits them.\n\n");
     s.push_str("| setup | base socket | platform socket | bar (mm) | window (mm) | readings | lengths used (mm) | travel (mm) | min clearance (mm) |\n|---|---|---|---|---|---|---|---|---|\n");
     for st in &d.setups {
         let (lo, hi) = st.length_range_mm();

@@ -34,6 +34,9 @@ impl SensorWindow {
     }
 }
 
+/// The shortest and the longest length seen so far, each with where it was seen.
+type Span = Option<((f64, usize), (f64, usize))>;
+
 /// Readings may leave a window by this much, mm (rounding of the files).
 pub const WINDOW_TOLERANCE_MM: f64 = 1e-6;
 
@@ -73,7 +76,7 @@ pub fn check_readings(robot: &Robot, merged: &Merged) -> Result<(), InputError> 
         .map(|s| s.name.as_str())
         .collect();
     // Per sensor: (shortest, its reading index), (longest, its reading index).
-    let mut span: Vec<Option<((f64, usize), (f64, usize))>> = vec![None; windows.len()];
+    let mut span: Vec<Span> = vec![None; windows.len()];
     for (k, r) in merged.campaign.readings.iter().enumerate() {
         let Some(Some(w)) = windows.get(r.sensor) else {
             continue;
@@ -144,7 +147,7 @@ pub fn check_plan(
             continue;
         };
         let sensor = &robot.table.sensors[s];
-        let mut range: Option<((f64, usize), (f64, usize))> = None;
+        let mut range: Span = None;
         for (k, p) in poses.iter().enumerate() {
             let l = (p.position_mm + p.rotation * sensor.platform_mm - sensor.base_mm).norm();
             let (lo, hi) = w.window_mm;

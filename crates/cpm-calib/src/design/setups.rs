@@ -73,6 +73,10 @@ pub struct SetupOptions {
     /// weighted criterion; a round is kept when it lowers the largest per-parameter bound.
     /// Pulls the worst parameter towards the RMS. Default 2.
     pub minimax_rounds: usize,
+    /// Exponent of the minimax reweighting: each round multiplies parameter `k`'s weight by
+    /// `(v_k / mean v)^exponent` (weights accumulate over the rounds); larger pulls harder on
+    /// the worst parameter. Default 1.
+    pub minimax_exponent: f64,
 }
 
 impl Default for SetupOptions {
@@ -91,6 +95,7 @@ impl Default for SetupOptions {
             seed: 1,
             edge_margin_mm: 1.0,
             minimax_rounds: 2,
+            minimax_exponent: 1.0,
         }
     }
 }
@@ -903,15 +908,27 @@ pub fn design_setups(
         let inv = m.cholesky()?.inverse();
         Some((0..n).map(|k| inv[(k, k)]).collect())
     };
+    // Weights accumulate over the rounds (w_k <- w_k (v_k / mean)^exponent, normalised):
+    // a multiplicative-weights approach to the minimax of the variances; each round starts
+    // from the best selection so far and the best is kept.
+    let mut weights = vec![1.0; n];
+    let mut best_worst =
+        variances(&sel.chosen).map_or(f64::INFINITY, |v| v.iter().copied().fold(0.0, f64::max));
+    let mut current = sel.clone();
     for round in 0..options.minimax_rounds {
-        let Some(v) = variances(&sel.chosen) else {
+        let Some(v) = variances(&current.chosen) else {
             break;
         };
         let worst = v.iter().copied().fold(0.0, f64::max);
         let mean = v.iter().sum::<f64>() / n as f64;
-        // Column k scaled by 1 / sqrt(w_k), w_k = v_k / mean: A-optimality of the scaled
-        // problem is sum_k v_k' / w_k.
-        let d: Vec<f64> = v.iter().map(|vk| (mean / vk.max(1e-300)).sqrt()).collect();
+        for (w, vk) in weights.iter_mut().zip(&v) {
+            *w *= (vk / mean).powf(options.minimax_exponent);
+        }
+        let wmean = weights.iter().sum::<f64>() / n as f64;
+        weights.iter_mut().for_each(|w| *w /= wmean);
+        // Column k scaled by 1 / sqrt(w_k): the scaled problem's variances are w_k v_k, so
+        // its A-optimality is sum_k w_k v_k.
+        let d: Vec<f64> = weights.iter().map(|w| 1.0 / w.max(1e-300).sqrt()).collect();
         let scaled: Vec<DMatrix<f64>> = blocks
             .iter()
             .map(|b| DMatrix::from_fn(1, n, |_, c| b[(0, c)] * d[c]))
@@ -920,12 +937,13 @@ pub fn design_setups(
             max_exchanges: options.select.max_exchanges.min(40),
             ..options.select
         };
-        let next = select_blocks(&scaled, n_read, None, Some(&sel.chosen), &quick)?;
+        let next = select_blocks(&scaled, n_read, None, Some(&current.chosen), &quick)?;
         let Some(v2) = variances(&next.chosen) else {
             break;
         };
         let worst2 = v2.iter().copied().fold(0.0, f64::max);
         let sigma = constraints.gauge.sigma_um;
+        let kept = worst2 < best_worst;
         log.push(format!(
             "minimax round {}: {} exchanges on the variance-weighted criterion; worst parameter bound {:.3} -> {:.3} um, RMS {:.3} -> {:.3} um{}",
             round + 1,
@@ -934,13 +952,16 @@ pub fn design_setups(
             sigma * worst2.sqrt(),
             sigma * mean.sqrt(),
             sigma * (v2.iter().sum::<f64>() / n as f64).sqrt(),
-            if worst2 < worst { "" } else { " (not kept)" }
+            if kept { "" } else { " (not the best so far)" }
         ));
-        if worst2 < worst {
-            sel = next;
-        } else {
+        if kept {
+            best_worst = worst2;
+            sel = next.clone();
+        }
+        if next.exchanges == 0 {
             break;
         }
+        current = next;
     }
     // Assemble the setups.
     let mut groups: Vec<Vec<&Cand>> = vec![Vec::new(); chosen.len()];
