@@ -637,9 +637,9 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
     }
     if !l.tradeoff.is_empty() {
         s.push_str(&format!(
-            "\n### Stroke against precision\n\nThe same limits (clearance {} mm, cones {} deg, at most {} setups) and budget ({} readings) for gauges of shorter stroke (2 mm: a ballbar); Cramér-Rao bounds at the nominal geometry for the paper's noise. The other strokes' searches use at most {} exchanges (the campaign above {}); a setup's readings keep an edge margin of up to a quarter of the stroke inside its window, so a 2 mm ballbar travels at most 1 mm.\n\n| stroke (mm) | setups | readings | rank | Cramér-Rao RMS (um) | worst parameter (um) | largest travel (mm) | smallest clearance (mm) |\n|---|---|---|---|---|---|---|---|\n",
+            "\n### Stroke against precision\n\nThe same limits (clearance {} mm, cones {} deg, at most {} setups) and budget ({} readings) for gauges of shorter stroke (2 mm: a ballbar); Cramér-Rao bounds at the nominal geometry for the paper's noise. The other strokes' searches use at most {} exchanges (the campaign above {}) and no minimax rounds (the campaign above {}), so their worst-parameter column is the A-optimal design's; a setup's readings keep an edge margin of up to a quarter of the stroke inside its window, so a 2 mm ballbar travels at most 1 mm.\n\n| stroke (mm) | setups | readings | rank | Cramér-Rao RMS (um) | worst parameter (um) | largest travel (mm) | smallest clearance (mm) |\n|---|---|---|---|---|---|---|---|\n",
             c.clearance.gauge_link_mm, c.joints.base_cone_deg, l.options.max_setups, max_readings,
-            l.options.tradeoff_exchanges, l.options.search.select.max_exchanges
+            l.options.tradeoff_exchanges, l.options.search.select.max_exchanges, l.options.search.minimax_rounds
         ));
         for t in &l.tradeoff {
             let f = |v: f64| {

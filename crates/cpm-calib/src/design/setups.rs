@@ -70,12 +70,12 @@ pub struct SetupOptions {
     pub edge_margin_mm: f64,
     /// Rounds of minimax reweighting after the reading selection: the parameters are
     /// weighted by their Cramér-Rao variance and the readings exchanged again on the
-    /// weighted criterion; a round is kept when it lowers the largest per-parameter bound.
-    /// Pulls the worst parameter towards the RMS. Default 2.
+    /// weighted criterion; the selection with the lowest largest per-parameter bound is kept.
+    /// Pulls the worst parameter towards the RMS. Default 4.
     pub minimax_rounds: usize,
     /// Exponent of the minimax reweighting: each round multiplies parameter `k`'s weight by
     /// `(v_k / mean v)^exponent` (weights accumulate over the rounds); larger pulls harder on
-    /// the worst parameter. Default 1.
+    /// the worst parameter. Default 2.
     pub minimax_exponent: f64,
 }
 
@@ -94,8 +94,8 @@ impl Default for SetupOptions {
             workspace: Workspace::default(),
             seed: 1,
             edge_margin_mm: 1.0,
-            minimax_rounds: 2,
-            minimax_exponent: 1.0,
+            minimax_rounds: 4,
+            minimax_exponent: 2.0,
         }
     }
 }
