@@ -1229,6 +1229,56 @@ mod tests {
         assert!(d.setup_sheet_md(table).contains("| setup |"));
     }
 
+    /// The minimax rounds lower the largest per-parameter bound (against the same search
+    /// without them), at a small cost in RMS; the design still honours the limits.
+    #[test]
+    fn minimax_rounds_lower_the_worst_parameter_bound() {
+        let model = MeasurementModel::new(JointTable::paper_cubic());
+        let (cands, _) =
+            default_candidates(&model.nominal, &Workspace::default(), 300, 100.0, 25.0, 9);
+        let constraints = Constraints::default();
+        let run = |rounds: usize| {
+            let opts = SetupOptions {
+                max_readings: 400,
+                max_setups: 8,
+                windows_per_pair: 3,
+                screening_projections: 6,
+                projections: 60,
+                minimax_rounds: rounds,
+                ..SetupOptions::default()
+            };
+            design_setups(
+                &model,
+                &SocketCandidates::paper_cubic(),
+                &cands,
+                &constraints,
+                &opts,
+                &|_| {},
+            )
+            .unwrap()
+        };
+        let plain = run(0);
+        let minimax = run(4);
+        let (a, b) = (&plain.indices, &minimax.indices);
+        assert_eq!((a.rank, b.rank), (36, 36));
+        assert!(
+            b.crlb_max_um < 0.97 * a.crlb_max_um,
+            "worst bound {} -> {} um; {:?}",
+            a.crlb_max_um,
+            b.crlb_max_um,
+            minimax.log
+        );
+        assert!(
+            b.crlb_rms_um < 1.1 * a.crlb_rms_um,
+            "{} -> {}",
+            a.crlb_rms_um,
+            b.crlb_rms_um
+        );
+        assert!(minimax.max_travel_mm() <= constraints.gauge.stroke_mm + 1e-9);
+        assert!(minimax.min_clearance_mm() >= constraints.clearance.gauge_link_mm);
+        assert!(minimax.log.iter().any(|l| l.starts_with("minimax round 1")));
+    }
+
     #[test]
     fn impossible_limits_are_an_error_not_a_design() {
         let model = MeasurementModel::new(JointTable::paper_cubic());
