@@ -2,9 +2,11 @@
 //!
 //! A description is what a user writes to tell `cpm` about a robot: where the joints are
 //! (nominally), which length sensors exist, the home pose, how link readings map to lengths,
-//! and optionally the joint clearance, the load on the platform, calibration settings and a set
-//! of installation errors. `docs/robot-description.md` documents every key; the structs here
-//! mirror the file one to one and every table rejects unknown keys.
+//! and optionally the joint clearance, the load on the platform, calibration settings, a set
+//! of installation errors, and the instruments and limits of an experiment (`[[gauge]]`,
+//! `[[socket]]`, `[[socket_region]]`, `[limits]`; see [`GaugeSpec`], [`LimitsSpec`]).
+//! `docs/robot-description.md` documents every key; the structs here mirror the file one to
+//! one and every table rejects unknown keys.
 //!
 //! Units follow the file convention of `cpm`: millimetres (`_mm`), micrometres for
 //! clearance and installation errors (`_um`), degrees for angles (`_deg`), kilograms, newtons.
