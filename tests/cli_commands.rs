@@ -1207,6 +1207,8 @@ fn design_under_limits_writes_setup_plans_simulate_and_calibrate_read() {
     let desc = Robot::load(&out.join("robot.toml")).unwrap().description;
     assert_eq!(desc.gauges.len(), 1);
     assert_eq!(desc.gauges[0].stroke_mm, 80.0);
+    // The example declares no noise: none is written for the gauge.
+    assert_eq!(desc.gauges[0].noise_um, None);
     let limits = desc.limits.unwrap();
     assert_eq!(
         (limits.base_cone_deg, limits.gauge_link_clearance_mm),

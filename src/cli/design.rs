@@ -523,12 +523,25 @@ fn criterion(arg: CriterionArg) -> Criterion {
 /// The description `robot` with one sensor per setup of `design` instead of its own, the
 /// gauge and the limits (known sensor effects dropped).
 fn described(
+    args: &DesignArgs,
     robot: &Robot,
     design: &crate::calib::design::SetupDesign,
     gauge_name: &str,
 ) -> anyhow::Result<String> {
     let mut desc = robot.description.clone();
     design.describe(&mut desc, gauge_name);
+    // A noise nobody declared (the bounds' default of 1 um) is not written as the gauge's.
+    let declared = args.sigma_um.is_some()
+        || robot.sensor_noise_um().is_some()
+        || robot
+            .description
+            .gauge(Some(gauge_name))
+            .is_some_and(|g| g.noise_um.is_some());
+    if !declared {
+        if let Some(g) = desc.gauges.iter_mut().find(|g| g.name == gauge_name) {
+            g.noise_um = None;
+        }
+    }
     if let Some(c) = desc.calibration.as_mut() {
         for e in [
             Effect::SensorOffset,
@@ -645,7 +658,7 @@ fn run_limited(
         "# {} with one sensor per setup of cpm design {} (see setup_sheet.md), the gauge\n# and the limits of the design\n\n{}",
         robot.file,
         env!("CARGO_PKG_VERSION"),
-        described(robot, &d, gauge_name)?
+        described(args, robot, &d, gauge_name)?
     );
     let (max_base, max_platform) = d.max_cone_deg(&robot.table);
     let (moves, bars) = d.remounts();
