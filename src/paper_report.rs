@@ -540,6 +540,7 @@ fn limited_json(l: &cpm_calib::paper::LimitedOutcome) -> serde_json::Value {
         "rms_error_um": opt(l.error_vs_truth_um.map(|x| x.0)),
         "max_error_um": opt(l.error_vs_truth_um.map(|x| x.1)),
         "monte_carlo": l.monte_carlo.as_ref().map(monte_carlo_json).unwrap_or(serde_json::Value::Null),
+        "worst_error": l.monte_carlo.as_ref().map(limited_worst_json).unwrap_or(serde_json::Value::Null),
         "tradeoff": l.tradeoff.iter().map(|t| json!({
             "stroke_mm": t.stroke_mm,
             "setups": t.setups,
@@ -552,6 +553,22 @@ fn limited_json(l: &cpm_calib::paper::LimitedOutcome) -> serde_json::Value {
         })).collect::<Vec<_>>(),
         "log": d.log,
         "files": ["designed/robot.toml", "designed/readings.csv", "designed/setup_sheet.md", "designed/setup_sheet.csv"],
+    })
+}
+
+/// The worst-error target, in both readings: (a) the largest per-parameter Monte Carlo
+/// RMS error, (b) the largest absolute error over all runs and parameters, with the share of
+/// runs whose largest error is within 6 um.
+fn limited_worst_json(m: &MonteCarloReport) -> serde_json::Value {
+    let names = cpm_calib::identifiability::parameter_names(6);
+    let worst = m.worst_parameter();
+    json!({
+        "worst_parameter": worst.map(|(k, _)| names.get(k).cloned().unwrap_or_default()),
+        "worst_parameter_rms_error_um": worst.map(|(_, p)| finite(p.rms_error_um)),
+        "worst_parameter_crlb_um": worst.map(|(_, p)| finite(p.crlb_um)),
+        "max_abs_error_um_all_runs": finite(m.max_error_um_worst),
+        "fraction_runs_max_le_6um": m.fraction_max_within(6.0),
+        "target_um": 6.0,
     })
 }
 
@@ -584,8 +601,20 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
             m.runs, m.first_seed, m.first_seed + m.runs as u64 - 1, m.failed_runs, m.rms_error_um, m.crlb_rms_um, m.efficiency,
             m.max_error_um_mean, m.max_error_um_p95, m.max_error_um_worst, 100.0 * m.fraction_within(2.0, 6.0)
         ));
+        if let Some((k, p)) = m.worst_parameter() {
+            let names = cpm_calib::identifiability::parameter_names(6);
+            s.push_str(&format!(
+                "- **Worst error, two readings of the target (at most 6 um)**: (a) the largest per-parameter Monte Carlo RMS error is {:.2} um (`{}`, Cramér-Rao {:.2} um); (b) the largest absolute error over all {} runs and 36 parameters is {:.2} um, and {:.0} % of the runs have every error within 6 um.\n",
+                p.rms_error_um,
+                names.get(k).map_or("?", String::as_str),
+                p.crlb_um,
+                m.runs,
+                m.max_error_um_worst,
+                100.0 * m.fraction_max_within(6.0)
+            ));
+        }
     }
-    s.push_str("- Files: `designed/robot.toml` (the cube with one `[[sensor]]` per setup), `designed/readings.csv` (the simulated readings of this seed, readings format, marked simulated), `designed/setup_sheet.md` and `designed/setup_sheet.csv` (what to mount, then which poses to drive, in order). `cpm calibrate --robot designed/robot.toml --data designed/readings.csv --out cal/` fits them.\n\n");
+    s.push_str("- Files: `designed/robot.toml` (the cube with one `[[sensor]]` per setup, naming the gauge and its bar; the `[[gauge]]`, the candidate `[[socket]]` places and the `[limits]`, so `cpm design --robot designed/robot.toml` designs under the same limits and `cpm calibrate` refuses readings outside a setup's window), `designed/readings.csv` (the simulated readings of this seed, readings format, marked simulated), `designed/setup_sheet.md` and `designed/setup_sheet.csv` (what to mount, then which poses to drive, in order). `cpm calibrate --robot designed/robot.toml --data designed/readings.csv --out cal/` fits them.\n\n");
     s.push_str("| setup | base socket | platform socket | bar (mm) | window (mm) | readings | lengths used (mm) | travel (mm) | min clearance (mm) |\n|---|---|---|---|---|---|---|---|---|\n");
     for st in &d.setups {
         let (lo, hi) = st.length_range_mm();
@@ -608,9 +637,9 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
     }
     if !l.tradeoff.is_empty() {
         s.push_str(&format!(
-            "\n### Stroke against precision\n\nThe same limits (clearance {} mm, cones {} deg, at most {} setups) and budget ({} readings) for gauges of shorter stroke (2 mm: a ballbar); Cramér-Rao bounds at the nominal geometry for the paper's noise. The other strokes' searches use at most {} exchanges (the campaign above {}); a setup's readings keep an edge margin of up to a quarter of the stroke inside its window, so a 2 mm ballbar travels at most 1 mm.\n\n| stroke (mm) | setups | readings | rank | Cramér-Rao RMS (um) | worst parameter (um) | largest travel (mm) | smallest clearance (mm) |\n|---|---|---|---|---|---|---|---|\n",
+            "\n### Stroke against precision\n\nThe same limits (clearance {} mm, cones {} deg, at most {} setups) and budget ({} readings) for gauges of shorter stroke (2 mm: a ballbar); Cramér-Rao bounds at the nominal geometry for the paper's noise. The other strokes' searches use at most {} exchanges (the campaign above {}) and no minimax rounds (the campaign above {}), so their worst-parameter column is the A-optimal design's; a setup's readings keep an edge margin of up to a quarter of the stroke inside its window, so a 2 mm ballbar travels at most 1 mm.\n\n| stroke (mm) | setups | readings | rank | Cramér-Rao RMS (um) | worst parameter (um) | largest travel (mm) | smallest clearance (mm) |\n|---|---|---|---|---|---|---|---|\n",
             c.clearance.gauge_link_mm, c.joints.base_cone_deg, l.options.max_setups, max_readings,
-            l.options.tradeoff_exchanges, l.options.search.select.max_exchanges
+            l.options.tradeoff_exchanges, l.options.search.select.max_exchanges, l.options.search.minimax_rounds
         ));
         for t in &l.tradeoff {
             let f = |v: f64| {
@@ -637,6 +666,9 @@ fn limited_md(l: &cpm_calib::paper::LimitedOutcome, max_readings: usize) -> Stri
     s
 }
 
+/// The name of the gauge in the designed campaign's `robot.toml`.
+pub const DESIGNED_GAUGE: &str = "gauge";
+
 /// The files of a campaign under limits on the paper's cube, as (name, contents):
 /// `robot.toml` (the cube with one `[[sensor]]` per setup of `design`), `readings.csv`
 /// (`data`, readings format; marked simulated when `data` is, `note` on that line),
@@ -648,18 +680,31 @@ pub fn designed_files(
     file: &str,
 ) -> Result<Vec<(&'static str, String)>, String> {
     let mut desc = cpm_geometry::description::RobotDescription::paper_cubic();
-    desc.sensors = design
-        .sensors()
-        .iter()
-        .map(cpm_geometry::description::SensorSpec::from_sensor)
-        .collect();
+    // The candidate socket places, the gauge (one sensor per setup names it and its bar) and
+    // the limits: `cpm design` and `cpm calibrate` read them back.
+    let cands = cpm_calib::design::SocketCandidates::paper_cubic();
+    for (side, list) in [
+        (cpm_geometry::description::SocketSide::Base, &cands.base),
+        (
+            cpm_geometry::description::SocketSide::Platform,
+            &cands.platform,
+        ),
+    ] {
+        desc.sockets
+            .extend(list.iter().map(|s| cpm_geometry::description::SocketSpec {
+                name: s.name.clone(),
+                side,
+                position_mm: s.position_mm.into(),
+            }));
+    }
+    design.describe(&mut desc, DESIGNED_GAUGE);
     let toml = desc.to_toml_string().map_err(|e| e.to_string())?;
     let robot = crate::io::Robot::from_description(desc, file).map_err(|e| e.to_string())?;
     Ok(vec![
         (
             "robot.toml",
             format!(
-                "# The paper's cube with the sockets of a campaign under limits:\n# one [[sensor]] per setup (socket pair + bar), in mounting order; see setup_sheet.md.\n\n{toml}"
+                "# The paper's cube with the sockets of a campaign under limits:\n# one [[sensor]] per setup (socket pair + bar), in mounting order; see setup_sheet.md;\n# the candidate socket places ([[socket]]), the gauge ([[gauge]]) and the limits ([limits]).\n\n{toml}"
             ),
         ),
         ("readings.csv", crate::io::write_readings(data, &robot, note)),

@@ -573,6 +573,74 @@ fn design_writes_a_plan_that_identifies_everything() {
         .map(|k| k.effect)
         .collect();
     assert_eq!(known, vec![cpm::calib::Effect::Backlash]);
+    // The chosen sockets (sockets.csv, socket pairs) read back through --sockets: the same
+    // socket places, and a design from them keeps them all.
+    let pairs = std::fs::read_to_string(out.join("sockets.csv")).unwrap();
+    let back = cpm::cli::design::read_sockets(&pairs, "sockets.csv").unwrap();
+    let count = |f: fn(&cpm::geometry::Sensor) -> cpm::geometry::Vector3<f64>| {
+        let mut v: Vec<_> = designed.table.sensors.iter().map(f).collect();
+        v.dedup_by(|a, b| (*a - *b).norm() < 1e-9);
+        let mut distinct: Vec<cpm::geometry::Vector3<f64>> = Vec::new();
+        for x in v {
+            if !distinct.iter().any(|y| (x - y).norm() < 1e-9) {
+                distinct.push(x);
+            }
+        }
+        distinct
+    };
+    let (bases, platforms) = (count(|s| s.base_mm), count(|s| s.platform_mm));
+    assert_eq!(back.base.len(), bases.len());
+    assert_eq!(back.platform.len(), platforms.len());
+    for (got, want) in back.base.iter().zip(&bases) {
+        assert!((got.position_mm - want).norm() < 1e-9);
+    }
+    for (got, want) in back.platform.iter().zip(&platforms) {
+        assert!((got.position_mm - want).norm() < 1e-9);
+    }
+    let again = d.join("again");
+    let text = ok(&[
+        "design",
+        "--robot",
+        &robot,
+        "--sockets",
+        &p(&out.join("sockets.csv")),
+        "--base-sockets",
+        &bases.len().to_string(),
+        "--platform-sockets",
+        &platforms.len().to_string(),
+        "--readings",
+        "360",
+        "--candidates",
+        "150",
+        "--out",
+        &p(&again),
+        "--json",
+    ]);
+    let w: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(w["rank"], 36);
+    assert_eq!(
+        w["sensors"].as_array().unwrap().len(),
+        bases.len() * platforms.len()
+    );
+    // A pair file with a bad number names its line and column.
+    let bad = pairs.replacen(
+        &pairs
+            .lines()
+            .nth(1)
+            .unwrap()
+            .split(',')
+            .nth(1)
+            .unwrap()
+            .to_string(),
+        "abc",
+        1,
+    );
+    let e = cpm::cli::design::read_sockets(&bad, "sockets.csv").unwrap_err();
+    assert_eq!(
+        (e.line, e.field.as_deref()),
+        (Some(2), Some("base_x_mm")),
+        "{e}"
+    );
     // Too few socket places in the description: a clear error, nothing written.
     let o = cpm(&[
         "design",
@@ -1008,6 +1076,41 @@ fn designed_files_under_limits_round_trip_through_calibrate() {
         .collect();
     let expected: Vec<String> = design.setups.iter().map(|s| s.name.clone()).collect();
     assert_eq!(names, expected);
+    // It carries the candidate sockets, the gauge and the limits, so `cpm design` reads them
+    // back: a design under the same limits from the same socket places.
+    let desc = &loaded.description;
+    assert_eq!(desc.sockets.len(), 16);
+    assert_eq!(desc.gauges[0].stroke_mm, 200.0);
+    assert!(desc.sensors.iter().all(|s| s.bar_mm.is_some()));
+    let text = ok(&[
+        "design",
+        "--robot",
+        &p(&robot),
+        "--readings",
+        "120",
+        "--candidates",
+        "100",
+        "--range-mm",
+        "100",
+        "--range-deg",
+        "20",
+        "--setups",
+        "6",
+        "--out",
+        &p(&d.join("again")),
+        "--json",
+    ]);
+    let w: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(w["limited"], true);
+    assert_eq!(w["constraints"]["stroke_mm"], 200.0);
+    assert_eq!(w["constraints"]["clearance_mm"], 30.0);
+    assert_eq!(w["constraints"]["cone_deg"], 40.0);
+    assert!(w["max_travel_mm"].as_f64().unwrap() <= 200.0 + 1e-9);
+    assert!(w["min_clearance_mm"].as_f64().unwrap() >= 30.0);
+    for s in w["setups"].as_array().unwrap() {
+        let b = s["base_socket"].as_str().unwrap();
+        assert!(desc.sockets.iter().any(|x| x.name == b), "{b}");
+    }
 }
 
 /// `cpm design --stroke-mm`: setup plans that `cpm simulate` and `cpm calibrate` read, every
@@ -1099,4 +1202,195 @@ fn design_under_limits_writes_setup_plans_simulate_and_calibrate_read() {
     assert_eq!(c["rank"], v["rank"]);
     let cal = read_json(&d.join("cal").join("calibration.json"));
     assert_eq!(cal["readings"], v["readings"]);
+
+    // The written description carries the gauge, the limits and each setup's gauge and bar.
+    let desc = Robot::load(&out.join("robot.toml")).unwrap().description;
+    assert_eq!(desc.gauges.len(), 1);
+    assert_eq!(desc.gauges[0].stroke_mm, 80.0);
+    // The example declares no noise: none is written for the gauge.
+    assert_eq!(desc.gauges[0].noise_um, None);
+    let limits = desc.limits.unwrap();
+    assert_eq!(
+        (limits.base_cone_deg, limits.gauge_link_clearance_mm),
+        (40.0, Some(30.0))
+    );
+    for (sensor, s) in desc.sensors.iter().zip(v["setups"].as_array().unwrap()) {
+        assert_eq!(sensor.gauge.as_deref(), Some("gauge"));
+        let (lo, hi) = desc.gauges[0].window_mm(sensor.bar_mm.unwrap());
+        assert!((lo - s["window_mm"][0].as_f64().unwrap()).abs() < 1e-9);
+        assert!((hi - s["window_mm"][1].as_f64().unwrap()).abs() < 1e-9);
+    }
+
+    // `cpm design` reads the limits back from that description (no --stroke-mm), and a flag
+    // overrides one of them.
+    let again = d.join("again");
+    let text = ok(&[
+        "design",
+        "--robot",
+        &robot,
+        "--sockets",
+        &p(&sockets),
+        "--readings",
+        "120",
+        "--candidates",
+        "100",
+        "--range-mm",
+        "100",
+        "--range-deg",
+        "20",
+        "--setups",
+        "6",
+        "--cone-deg",
+        "35",
+        "--out",
+        &p(&again),
+        "--json",
+    ]);
+    let w: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(w["limited"], true);
+    assert_eq!(w["constraints"]["stroke_mm"], 80.0);
+    assert_eq!(w["constraints"]["clearance_mm"], 30.0);
+    assert_eq!(w["constraints"]["base_cone_deg"], 35.0);
+    assert!(w["max_travel_mm"].as_f64().unwrap() <= 80.0 + 1e-9);
+    assert!(w["max_base_cone_deg"].as_f64().unwrap() <= 35.0 + 1e-9);
+    assert!(w["max_platform_cone_deg"].as_f64().unwrap() <= 35.0 + 1e-9);
+
+    // A reading outside its setup's window is refused, naming its file, line and field: the
+    // same readings with the description's first setup given a bar one stroke longer.
+    let mut shifted = desc.clone();
+    *shifted.sensors[0].bar_mm.as_mut().unwrap() += 80.0;
+    let shifted_path = d.join("shifted.toml");
+    std::fs::write(&shifted_path, shifted.to_toml_string().unwrap()).unwrap();
+    let csv = std::fs::read_to_string(&data[0]).unwrap();
+    let header_line = csv.lines().position(|l| !l.starts_with('#')).unwrap() + 1;
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &p(&shifted_path),
+        "--data",
+        &data[0],
+        "--out",
+        &p(&d.join("cal_bad")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    let want = format!(
+        "{}:{}: field length_mm: sensor `{}` read",
+        data[0],
+        header_line + 1,
+        v["setups"][0]["sensor"].as_str().unwrap()
+    );
+    assert!(err.contains(&want), "{err}\nwant {want}");
+    assert!(err.contains("outside") && err.contains("bar"), "{err}");
+    assert!(!d.join("cal_bad").exists());
+}
+
+/// A sensor that names a gauge: its readings within one stroke, and a plan that leaves the
+/// gauge's range is refused by `cpm simulate`.
+#[test]
+fn readings_beyond_a_gauges_stroke_are_refused() {
+    let d = scratch("gauge-stroke");
+    let mut r = RobotDescription::load(example("paper_cubic.toml")).unwrap();
+    r.gauges.push(cpm::geometry::description::GaugeSpec {
+        name: "lg".into(),
+        kind: Default::default(),
+        stroke_mm: 20.0,
+        shortest_mm: Some(200.0),
+        longest_mm: Some(500.0),
+        bars_mm: Vec::new(),
+        noise_um: None,
+        radius_mm: None,
+    });
+    r.sensors[0].gauge = Some("lg".into());
+    let robot = d.join("robot.toml");
+    std::fs::write(&robot, r.to_toml_string().unwrap()).unwrap();
+    // A 60 mm circle: the paper's sensor spans more than 20 mm.
+    let o = cpm(&[
+        "simulate",
+        "--robot",
+        &p(&robot),
+        "--circle",
+        "--radius-mm",
+        "60",
+        "--count",
+        "12",
+        "--out",
+        &p(&d.join("sim.csv")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("--circle:") && err.contains("20 mm stroke"),
+        "{err}"
+    );
+    // The same readings simulated without the gauge, then calibrated with it: refused at the
+    // first reading that takes the span beyond the stroke.
+    let mut plain = r.clone();
+    plain.sensors[0].gauge = None;
+    let plain_path = d.join("plain.toml");
+    std::fs::write(&plain_path, plain.to_toml_string().unwrap()).unwrap();
+    ok(&[
+        "simulate",
+        "--robot",
+        &p(&plain_path),
+        "--circle",
+        "--radius-mm",
+        "60",
+        "--count",
+        "12",
+        "--out",
+        &p(&d.join("sim.csv")),
+    ]);
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &p(&robot),
+        "--data",
+        &p(&d.join("sim.csv")),
+        "--out",
+        &p(&d.join("cal")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("field length_mm") && err.contains("stroke"),
+        "{err}"
+    );
+    // A plan file: home, then 30 mm along y (the sensor shortens by 28 mm): refused at the
+    // second pose's line.
+    let plan = d.join("plan.csv");
+    std::fs::write(
+        &plan,
+        "pose,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\nhome,0,0,410,0,0,0\nshift,0,30,410,0,0,0\n",
+    )
+    .unwrap();
+    let o = cpm(&[
+        "simulate",
+        "--robot",
+        &p(&robot),
+        "--plan",
+        &p(&plan),
+        "--out",
+        &p(&d.join("sim2.csv")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains(&format!("{}:3: sensor `paper` would read", p(&plan))),
+        "{err}"
+    );
+    assert!(!d.join("sim2.csv").exists());
+    // Within the stroke: read.
+    ok(&[
+        "simulate",
+        "--robot",
+        &p(&robot),
+        "--circle",
+        "--radius-mm",
+        "3",
+        "--count",
+        "12",
+        "--out",
+        &p(&d.join("small.csv")),
+    ]);
 }

@@ -542,6 +542,56 @@ const CASES: &[Case] = &[
         Some("link[6].base_mm"),
         "its z (3rd) component is 1e300 mm: implausibly far",
     ),
+    // Issue 16: gauges, socket places and limits.
+    case(
+        "robot_gauge_stroke.toml",
+        Toml,
+        Some(77),
+        Some("gauge[1].stroke_mm"),
+        "must be finite and > 0, got 0",
+    ),
+    case(
+        "robot_gauge_unknown_key.toml",
+        Toml,
+        Some(78),
+        Some("travel_mm"),
+        "unknown field `travel_mm`",
+    ),
+    case(
+        "robot_gauge_bar_too_long.toml",
+        Toml,
+        Some(78),
+        Some("gauge[1].bars_mm[2]"),
+        "a 900 mm bar puts the window's end at 1250 mm, beyond longest_mm = 1000 mm",
+    ),
+    case(
+        "robot_sensor_unknown_gauge.toml",
+        Toml,
+        Some(46),
+        Some("sensor[1].gauge"),
+        "unknown gauge `nope` (the [[gauge]] tables have: none)",
+    ),
+    case(
+        "robot_limits_cone.toml",
+        Toml,
+        Some(76),
+        Some("limits.base_cone_deg"),
+        "must be in (0, 180] deg, got 200",
+    ),
+    case(
+        "robot_socket_region_reversed.toml",
+        Toml,
+        Some(79),
+        Some("socket_region[1].max_mm"),
+        "its y (2nd) component -1 is below min_mm's 0",
+    ),
+    case(
+        "robot_socket_side.toml",
+        Toml,
+        Some(77),
+        Some("side"),
+        "unknown variant `middle`, expected `base` or `platform`",
+    ),
     // Issue 14: arrays longer than their fields, a load that overflows, a machine singular at
     // home, a zero declared noise (like --sigma-um 0) and a sensor name that reads as a comment.
     case(

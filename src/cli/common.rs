@@ -164,6 +164,8 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
         for r in &rows {
             io::campaign::check_reachable(table, &r.pose, ratio, &file, r.line, &r.label)?;
         }
+        let poses: Vec<_> = rows.iter().map(|r| r.pose).collect();
+        super::gauges::check_plan(robot, &sensors, &poses, &|k| (file.clone(), rows[k].line))?;
         return Ok(PlanSpec {
             conditions: rows.iter().map(|r| (r.time_s, r.temperature_c)).collect(),
             plan: Plan {
@@ -210,6 +212,9 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
         }
         poses
     };
+    let how = if args.circle { "--circle" } else { "--random" };
+    super::gauges::check_plan(robot, &sensors, &poses, &|k| (how.to_string(), k + 1))
+        .map_err(|e| usage_error(e.to_string()))?;
     Ok(PlanSpec {
         conditions: vec![(None, None); poses.len()],
         plan: Plan { poses, sensors },
@@ -247,7 +252,11 @@ pub fn load_data(
     options: &ReadOptions,
 ) -> anyhow::Result<Merged> {
     let files = io::read_data_files(paths, robot, options)?;
-    Ok(merge(files, robot))
+    let merged = merge(files, robot);
+    if options.check_sensor_lengths {
+        super::gauges::check_readings(robot, &merged)?;
+    }
+    Ok(merged)
 }
 
 /// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;

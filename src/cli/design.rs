@@ -8,11 +8,11 @@ use clap::{Args, ValueEnum};
 use super::common::{self, RobotArg};
 use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::design::{
-    candidates, design, design_setups, sockets::Socket, Clearance, Constraints, Criterion,
-    DesignOptions, Gauge, GaugeKind, JointLimits, SelectOptions, SetupOptions, SocketCandidates,
+    candidates, design, design_setups, sockets::Socket, Constraints, Criterion, DesignOptions,
+    Gauge, GaugeKind, SelectOptions, SetupOptions, SocketCandidates,
 };
 use crate::calib::Effect;
-use crate::geometry::description::SensorSpec;
+use crate::geometry::description::{SensorSpec, SocketSide};
 use crate::io::{self, table::Table, InputError, Robot};
 use crate::output::OutputSet;
 use crate::report::format::tidy_csv;
@@ -47,7 +47,9 @@ pub struct DesignArgs {
     #[command(flatten)]
     pub robot: RobotArg,
     /// Candidate socket places, CSV `name,side,x_mm,y_mm,z_mm` (side `base` in {B} or
-    /// `platform` in {P}); default: the sockets of the description's `[[sensor]]` tables.
+    /// `platform` in {P}), or socket pairs as `cpm design` writes them in `sockets.csv`;
+    /// default: the description's `[[socket]]` and `[[socket_region]]` places, else the
+    /// sockets of its `[[sensor]]` tables.
     #[arg(long, value_name = "SOCKETS.csv")]
     pub sockets: Option<PathBuf>,
     /// Reading budget (poses x socket pairs).
@@ -83,26 +85,36 @@ pub struct DesignArgs {
     /// Design under an instrument's limits: the gauge's stroke per setup, mm. Turns the
     /// setup design on (one socket pair with one bar per setup; readings only within the
     /// stroke, the clearance and the joint cones); writes setup_sheet.md/.csv and plans/.
+    /// The setup design is also on when the description declares a `[[gauge]]`: its
+    /// `[[gauge]]` and `[limits]` give the limits, and the flags below override them.
     #[arg(long, value_name = "MM")]
     pub stroke_mm: Option<f64>,
-    /// Kind of gauge (with --stroke-mm).
-    #[arg(long, value_enum, default_value_t = GaugeArg::Telescoping)]
-    pub gauge: GaugeArg,
-    /// Shortest socket-to-socket length the gauge reads, mm (with --stroke-mm).
-    #[arg(long, value_name = "MM", default_value_t = 150.0)]
-    pub shortest_mm: f64,
-    /// Longest socket-to-socket length the gauge reads with any bar, mm (with --stroke-mm).
-    #[arg(long, value_name = "MM", default_value_t = 1000.0)]
-    pub longest_mm: f64,
-    /// Extension bars available, mm, comma-separated (with --stroke-mm; default: any length).
+    /// The description's `[[gauge]]` to design for (default: its first).
+    #[arg(long, value_name = "NAME")]
+    pub gauge_name: Option<String>,
+    /// Kind of gauge (default: the description's gauge, else telescoping).
+    #[arg(long, value_enum)]
+    pub gauge: Option<GaugeArg>,
+    /// Shortest socket-to-socket length the gauge reads, mm (default: the description's
+    /// gauge, else 150; 100 for a ballbar).
+    #[arg(long, value_name = "MM")]
+    pub shortest_mm: Option<f64>,
+    /// Longest socket-to-socket length the gauge reads with any bar, mm (default: the
+    /// description's gauge, else 1000).
+    #[arg(long, value_name = "MM")]
+    pub longest_mm: Option<f64>,
+    /// Extension bars available, mm, comma-separated (default: the description's gauge's
+    /// `bars_mm`, else any length).
     #[arg(long, value_name = "MM,..", value_delimiter = ',')]
     pub bars_mm: Vec<f64>,
-    /// Smallest distance between the gauge axis and any link axis, mm (with --stroke-mm).
-    #[arg(long, value_name = "MM", default_value_t = 30.0)]
-    pub clearance_mm: f64,
-    /// Largest cone angle of every base and platform joint from home, deg (with --stroke-mm).
-    #[arg(long, value_name = "DEG", default_value_t = 40.0)]
-    pub cone_deg: f64,
+    /// Smallest distance between the gauge axis and any link axis, mm (default: the
+    /// description's `[limits]`, else 30).
+    #[arg(long, value_name = "MM")]
+    pub clearance_mm: Option<f64>,
+    /// Largest cone angle of every base and platform joint from home, deg (default: the
+    /// description's `[limits]`, else 40).
+    #[arg(long, value_name = "DEG")]
+    pub cone_deg: Option<f64>,
     /// Most setups (gauge mounts) (with --stroke-mm).
     #[arg(long, value_name = "N", default_value_t = 16)]
     pub setups: usize,
@@ -139,7 +151,21 @@ pub fn read_sockets_from<R: std::io::Read>(
     })
 }
 
+/// Columns of the socket-pair format `cpm design` writes as `sockets.csv`.
+pub const SOCKET_PAIR_COLUMNS: [&str; 7] = [
+    "name",
+    "base_x_mm",
+    "base_y_mm",
+    "base_z_mm",
+    "platform_x_mm",
+    "platform_y_mm",
+    "platform_z_mm",
+];
+
 fn sockets_table<R: std::io::Read>(t: &mut Table<R>) -> Result<SocketCandidates, InputError> {
+    if t.has("base_x_mm") && !t.has("side") {
+        return socket_pairs_table(t);
+    }
     t.check_columns(&["name", "side", "x_mm", "y_mm", "z_mm"], &[], |_| false)?;
     let mut c = SocketCandidates {
         base: Vec::new(),
@@ -200,12 +226,66 @@ fn sockets_table<R: std::io::Read>(t: &mut Table<R>) -> Result<SocketCandidates,
     Ok(c)
 }
 
-/// Candidate sockets from a description's sensors (distinct positions on each side).
+/// The socket-pair format (`cpm design`'s `sockets.csv`): each distinct base and platform
+/// position of the pairs is a candidate place, named `b1, b2, ...` and `p1, p2, ...` in order
+/// of first appearance.
+fn socket_pairs_table<R: std::io::Read>(t: &mut Table<R>) -> Result<SocketCandidates, InputError> {
+    t.check_columns(&SOCKET_PAIR_COLUMNS, &[], |_| false)?;
+    let mut c = SocketCandidates {
+        base: Vec::new(),
+        platform: Vec::new(),
+    };
+    let mut rows = 0usize;
+    while let Some(row) = t.next_row()? {
+        let t: &io::table::Header = t;
+        rows += 1;
+        if rows > MAX_SOCKETS {
+            return Err(InputError::line(
+                &t.file,
+                row.line,
+                format!("more than {MAX_SOCKETS} socket pairs"),
+            ));
+        }
+        t.required_text(&row, "name")?;
+        for (list, prefix) in [(&mut c.base, "base"), (&mut c.platform, "platform")] {
+            let p = [
+                t.number(&row, &format!("{prefix}_x_mm"))?,
+                t.number(&row, &format!("{prefix}_y_mm"))?,
+                t.number(&row, &format!("{prefix}_z_mm"))?,
+            ];
+            let v = nalgebra::Vector3::from(p);
+            if !list.iter().any(|s| (s.position_mm - v).norm() < 1e-9) {
+                let name = format!("{}{}", &prefix[..1], list.len() + 1);
+                list.push(Socket::new(&name, p));
+            }
+        }
+    }
+    if rows == 0 {
+        return Err(InputError::file(
+            &t.file,
+            "no sockets: the file has a header but no rows",
+        ));
+    }
+    Ok(c)
+}
+
+/// Candidate sockets of a description: its `[[socket]]` and `[[socket_region]]` places when
+/// it has any, else its sensors' sockets (distinct positions on each side).
 pub fn sockets_of(robot: &Robot) -> SocketCandidates {
     let mut c = SocketCandidates {
         base: Vec::new(),
         platform: Vec::new(),
     };
+    let places = robot.description.socket_places();
+    if !places.is_empty() {
+        for (name, side, p) in places {
+            match side {
+                SocketSide::Base => c.base.push(Socket::new(&name, p)),
+                SocketSide::Platform => c.platform.push(Socket::new(&name, p)),
+            }
+        }
+        return c;
+    }
     for s in &robot.table.sensors {
         if !c
             .base
@@ -237,14 +317,22 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         Some(p) => read_sockets_from(io::campaign::open(p)?, &p.display().to_string())?,
         None => sockets_of(&robot),
     };
+    let limits = limited_constraints(args, &robot)?;
     if sockets.base.len() < args.base_sockets || sockets.platform.len() < args.platform_sockets {
         return Err(input_error(format!(
             "{} base and {} platform socket places to choose from ({}), {} and {} asked for: give more places with --sockets FILE or ask for fewer",
             sockets.base.len(),
             sockets.platform.len(),
-            args.sockets
-                .as_ref()
-                .map_or_else(|| format!("the [[sensor]] tables of {}", robot.file), |p| p.display().to_string()),
+            args.sockets.as_ref().map_or_else(
+                || {
+                    if robot.description.socket_places().is_empty() {
+                        format!("the [[sensor]] tables of {}", robot.file)
+                    } else {
+                        format!("the [[socket]] and [[socket_region]] tables of {}", robot.file)
+                    }
+                },
+                |p| p.display().to_string()
+            ),
             args.base_sockets,
             args.platform_sockets
         )));
@@ -286,8 +374,17 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             rejected.total()
         )));
     }
-    if let Some(stroke) = args.stroke_mm {
-        return run_limited(args, ctx, &robot, &model, &sockets, &cands, stroke, sigma);
+    if let Some((constraints, gauge_name)) = limits {
+        return run_limited(
+            args,
+            ctx,
+            &robot,
+            &model,
+            &sockets,
+            &cands,
+            constraints,
+            &gauge_name,
+        );
     }
     let options = DesignOptions {
         max_readings: args.readings,
@@ -375,10 +472,28 @@ fn criterion(arg: CriterionArg) -> Criterion {
     }
 }
 
-/// The description `robot` with `sensors` instead of its own (known sensor effects dropped).
-fn with_sensors(robot: &Robot, sensors: &[crate::geometry::Sensor]) -> anyhow::Result<String> {
+/// The description `robot` with one sensor per setup of `design` instead of its own, the
+/// gauge and the limits (known sensor effects dropped).
+fn described(
+    args: &DesignArgs,
+    robot: &Robot,
+    design: &crate::calib::design::SetupDesign,
+    gauge_name: &str,
+) -> anyhow::Result<String> {
     let mut desc = robot.description.clone();
-    desc.sensors = sensors.iter().map(SensorSpec::from_sensor).collect();
+    design.describe(&mut desc, gauge_name);
+    // A noise nobody declared (the bounds' default of 1 um) is not written as the gauge's.
+    let declared = args.sigma_um.is_some()
+        || robot.sensor_noise_um().is_some()
+        || robot
+            .description
+            .gauge(Some(gauge_name))
+            .is_some_and(|g| g.noise_um.is_some());
+    if !declared {
+        if let Some(g) = desc.gauges.iter_mut().find(|g| g.name == gauge_name) {
+            g.noise_um = None;
+        }
+    }
     if let Some(c) = desc.calibration.as_mut() {
         for e in [
             Effect::SensorOffset,
@@ -391,6 +506,69 @@ fn with_sensors(robot: &Robot, sensors: &[crate::geometry::Sensor]) -> anyhow::R
     Ok(desc.to_toml_string()?)
 }
 
+/// The limits of a design under limits: the description's `[[gauge]]` (`--gauge-name`, else
+/// its first) and `[limits]`, overridden by the flags; `None` (the unconstrained design) when
+/// neither `--stroke-mm` nor a `[[gauge]]` is given. Also the gauge's name in the written
+/// description.
+fn limited_constraints(
+    args: &DesignArgs,
+    robot: &Robot,
+) -> anyhow::Result<Option<(Constraints, String)>> {
+    let declared = Constraints::from_description(&robot.description, args.gauge_name.as_deref())
+        .map_err(|e| usage_error(format!("--gauge-name: {e}")))?;
+    if declared.is_none() && args.stroke_mm.is_none() {
+        return Ok(None);
+    }
+    let name = match (&declared, &args.gauge_name) {
+        (_, Some(n)) => n.clone(),
+        (Some(_), None) => robot.description.gauges[0].name.clone(),
+        (None, None) => "gauge".to_string(),
+    };
+    let mut c = declared.unwrap_or_else(|| {
+        let gauge = match args.gauge {
+            Some(GaugeArg::Ballbar) => Gauge::ballbar(),
+            _ => Gauge::default(),
+        };
+        Constraints {
+            gauge: Gauge {
+                sigma_um: robot.sensor_noise_um().unwrap_or(1.0),
+                ..gauge
+            },
+            ..Constraints::default()
+        }
+    });
+    if let Some(k) = args.gauge {
+        c.gauge.kind = match k {
+            GaugeArg::Telescoping => GaugeKind::Telescoping,
+            GaugeArg::Ballbar => GaugeKind::Ballbar,
+        };
+    }
+    if let Some(v) = args.stroke_mm {
+        c.gauge.stroke_mm = v;
+    }
+    if let Some(v) = args.shortest_mm {
+        c.gauge.shortest_mm = v;
+    }
+    if let Some(v) = args.longest_mm {
+        c.gauge.longest_mm = v;
+    }
+    if !args.bars_mm.is_empty() {
+        c.gauge.bars_mm = args.bars_mm.clone();
+    }
+    if let Some(v) = args.sigma_um {
+        c.gauge.sigma_um = common::sigma(Some(v), robot)?.unwrap_or(v);
+    }
+    if let Some(v) = args.clearance_mm {
+        c.clearance.gauge_link_mm = v;
+    }
+    if let Some(v) = args.cone_deg {
+        c.joints.base_cone_deg = v;
+        c.joints.platform_cone_deg = v;
+    }
+    c.validate().map_err(|e| usage_error(e.to_string()))?;
+    Ok(Some((c, name)))
+}
+
 #[allow(clippy::too_many_arguments)]
 fn run_limited(
     args: &DesignArgs,
@@ -399,36 +577,12 @@ fn run_limited(
     model: &crate::calib::MeasurementModel,
     sockets: &SocketCandidates,
     cands: &[crate::geometry::Pose],
-    stroke: f64,
-    sigma: f64,
+    constraints: Constraints,
+    gauge_name: &str,
 ) -> anyhow::Result<Outcome> {
     if args.setups == 0 || args.setups > 1000 {
         return Err(usage_error("--setups must be between 1 and 1000"));
     }
-    let constraints = Constraints {
-        gauge: Gauge {
-            kind: match args.gauge {
-                GaugeArg::Telescoping => GaugeKind::Telescoping,
-                GaugeArg::Ballbar => GaugeKind::Ballbar,
-            },
-            stroke_mm: stroke,
-            shortest_mm: args.shortest_mm,
-            longest_mm: args.longest_mm,
-            bars_mm: args.bars_mm.clone(),
-            sigma_um: sigma,
-        },
-        clearance: Clearance {
-            gauge_link_mm: args.clearance_mm,
-            link_link_mm: None,
-        },
-        joints: JointLimits {
-            base_cone_deg: args.cone_deg,
-            platform_cone_deg: args.cone_deg,
-        },
-    };
-    constraints
-        .validate()
-        .map_err(|e| usage_error(e.to_string()))?;
     let options = SetupOptions {
         max_readings: args.readings,
         max_setups: args.setups,
@@ -452,13 +606,13 @@ fn run_limited(
     ctx.stage("writing the design");
     let dir = &args.out;
     let robot_toml = format!(
-        "# {} with one sensor per setup of cpm design {} (see setup_sheet.md)\n\n{}",
+        "# {} with one sensor per setup of cpm design {} (see setup_sheet.md), the gauge\n# and the limits of the design\n\n{}",
         robot.file,
         env!("CARGO_PKG_VERSION"),
-        with_sensors(robot, &d.sensors())?
+        described(args, robot, &d, gauge_name)?
     );
     let report =
-        crate::report::design::LimitedDesignReport::new(robot, &d, &constraints, args.cone_deg);
+        crate::report::design::LimitedDesignReport::new(robot, &d, &constraints, gauge_name);
     let mut set = OutputSet::new();
     set.add(dir.join("robot.toml"), robot_toml);
     set.add(dir.join("setup_sheet.md"), d.setup_sheet_md(&robot.table));

@@ -26,6 +26,7 @@ pub mod compensate;
 pub mod design;
 pub mod export;
 pub mod formulation;
+pub mod gauges;
 pub mod identifiability;
 pub mod plots;
 pub mod refine;

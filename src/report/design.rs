@@ -172,6 +172,8 @@ pub struct SetupRow {
 pub struct LimitsRow {
     /// Gauge kind.
     pub gauge: String,
+    /// The gauge's name in the written description.
+    pub gauge_name: String,
     /// Stroke, mm.
     pub stroke_mm: f64,
     /// Shortest gauge, mm.
@@ -182,8 +184,14 @@ pub struct LimitsRow {
     pub bars_mm: Vec<f64>,
     /// Least gauge-link clearance, mm.
     pub clearance_mm: f64,
-    /// Largest joint cone angle, deg.
+    /// Largest joint cone angle (the base joints'; kept for older readers), deg.
     pub cone_deg: f64,
+    /// Largest base joint cone angle, deg.
+    pub base_cone_deg: f64,
+    /// Largest platform joint cone angle, deg.
+    pub platform_cone_deg: f64,
+    /// Least link-link clearance (when link radii are declared), mm.
+    pub link_link_clearance_mm: Option<f64>,
 }
 
 /// `design.json` of `cpm design --stroke-mm` (the keys cpm has always written) and its
@@ -236,12 +244,13 @@ pub struct LimitedDesignReport {
 }
 
 impl LimitedDesignReport {
-    /// From a design under `constraints` (cone angle `cone_deg`) of the robot `robot`.
+    /// From a design under `constraints` of the robot `robot`, with the gauge named
+    /// `gauge_name`.
     pub fn new(
         robot: &crate::io::Robot,
         d: &crate::calib::design::SetupDesign,
         constraints: &crate::calib::design::Constraints,
-        cone_deg: f64,
+        gauge_name: &str,
     ) -> Self {
         let (max_base, max_platform) = d.max_cone_deg(&robot.table);
         let (moves, bars) = d.remounts();
@@ -280,12 +289,16 @@ impl LimitedDesignReport {
             bar_changes: bars,
             constraints: LimitsRow {
                 gauge: constraints.gauge.kind.name().to_string(),
+                gauge_name: gauge_name.to_string(),
                 stroke_mm: constraints.gauge.stroke_mm,
                 shortest_mm: constraints.gauge.shortest_mm,
                 longest_mm: constraints.gauge.longest_mm,
                 bars_mm: constraints.gauge.bars_mm.clone(),
                 clearance_mm: constraints.clearance.gauge_link_mm,
-                cone_deg,
+                cone_deg: constraints.joints.base_cone_deg,
+                base_cone_deg: constraints.joints.base_cone_deg,
+                platform_cone_deg: constraints.joints.platform_cone_deg,
+                link_link_clearance_mm: constraints.clearance.link_link_mm,
             },
             log: d.log.clone(),
             criterion_text: criterion_text(d.criterion),
@@ -306,7 +319,7 @@ impl LimitedDesignReport {
             self.robot, self.setups.len(), self.readings, self.criterion_text, self.candidate_poses, self.candidate_readings,
             self.rank, self.parameters, short(self.sigma_um), sig(self.crlb_rms_um, 3), sig(self.crlb_max_um, 3),
             fixed(self.max_travel_mm, 1), short(c.stroke_mm), fixed(self.min_clearance_mm, 1), short(c.clearance_mm),
-            fixed(self.max_base_cone_deg, 1), fixed(self.max_platform_cone_deg, 1), short(c.cone_deg)
+            fixed(self.max_base_cone_deg, 1), fixed(self.max_platform_cone_deg, 1), short(c.base_cone_deg.max(c.platform_cone_deg))
         ));
         r.push_str("## How it was chosen\n\n");
         for l in &self.log {

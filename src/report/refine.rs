@@ -445,7 +445,10 @@ impl RefineReport {
             if d.final_.unexplained_structure.is_empty() { "none".to_string() } else { d.final_.unexplained_structure.join(", ") }
         ));
         if d.final_.effects.iter().any(|e| e.starts_with("pose_map")) {
-            let (lo, hi) = (&d.pose_range.min_xyz_mm_rpy_deg, &d.pose_range.max_xyz_mm_rpy_deg);
+            let (lo, hi) = (
+                &d.pose_range.min_xyz_mm_rpy_deg,
+                &d.pose_range.max_xyz_mm_rpy_deg,
+            );
             let mm = |k: usize| format!("{} to {}", fixed(lo[k], 1), fixed(hi[k], 1));
             let deg = |k: usize| format!("{} to {}", fixed(lo[k], 2), fixed(hi[k], 2));
             s.push_str(&format!(

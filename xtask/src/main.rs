@@ -6,7 +6,7 @@ use std::time::Instant;
 
 fn usage() -> ExitCode {
     eprintln!(
-        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N] [--limited off|setups=N,minimax=N,mc=N,exchanges=N,projections=N,windows=N,tradeoff=0|1]\n                                           run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--seed N]    implicit-loop calibration of a simulated N-pose campaign (16 socket pairs); one JSON line\n  scale --sweep [--nested-max N]           10^3, 10^4, 10^5 poses side by side (nested too up to N, default 10^5)"
+        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N] [--limited off|setups=N,minimax=N,mc=N,exchanges=N,projections=N,windows=N,tradeoff=0|1,minimax_exp10=N]\n                                           run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--seed N]    implicit-loop calibration of a simulated N-pose campaign (16 socket pairs); one JSON line\n  scale --sweep [--nested-max N]           10^3, 10^4, 10^5 poses side by side (nested too up to N, default 10^5)"
     );
     ExitCode::from(2)
 }
@@ -213,6 +213,8 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
                         "projections" => l.search.projections = n,
                         "windows" => l.search.windows_per_pair = n,
                         "tradeoff" => l.tradeoff = n != 0,
+                        // The minimax reweighting's exponent in tenths (10 = 1.0).
+                        "minimax_exp10" => l.search.minimax_exponent = n as f64 / 10.0,
                         _ => {
                             eprintln!("error: --limited: unknown key `{k}`");
                             return ExitCode::from(2);
@@ -278,6 +280,15 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
                     l["max_platform_cone_deg"].as_f64().unwrap_or(f64::NAN),
                     l["monte_carlo"]["rms_error_um"], l["monte_carlo"]["max_error_um_worst"], l["crlb_rms_um"]
                 );
+                let w = &l["worst_error"];
+                if !w.is_null() {
+                    println!(
+                        "  worst error: (a) largest per-parameter Monte Carlo RMS {} um ({}); (b) largest |error| over all runs {} um, {:.0} % of runs within 6 um",
+                        w["worst_parameter_rms_error_um"], w["worst_parameter"],
+                        w["max_abs_error_um_all_runs"],
+                        100.0 * w["fraction_runs_max_le_6um"].as_f64().unwrap_or(f64::NAN)
+                    );
+                }
                 for t in l["tradeoff"].as_array().into_iter().flatten() {
                     println!(
                         "  stroke {:>5} mm: Cramér-Rao RMS {} um (worst {} um), {} readings, {} setups",

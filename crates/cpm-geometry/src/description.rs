@@ -2,9 +2,11 @@
 //!
 //! A description is what a user writes to tell `cpm` about a robot: where the joints are
 //! (nominally), which length sensors exist, the home pose, how link readings map to lengths,
-//! and optionally the joint clearance, the load on the platform, calibration settings and a set
-//! of installation errors. `docs/robot-description.md` documents every key; the structs here
-//! mirror the file one to one and every table rejects unknown keys.
+//! and optionally the joint clearance, the load on the platform, calibration settings, a set
+//! of installation errors, and the instruments and limits of an experiment (`[[gauge]]`,
+//! `[[socket]]`, `[[socket_region]]`, `[limits]`; see [`GaugeSpec`], [`LimitsSpec`]).
+//! `docs/robot-description.md` documents every key; the structs here mirror the file one to
+//! one and every table rejects unknown keys.
 //!
 //! Units follow the file convention of `cpm`: millimetres (`_mm`), micrometres for
 //! clearance and installation errors (`_um`), degrees for angles (`_deg`), kilograms, newtons.
@@ -34,6 +36,14 @@ use nalgebra::{Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 use crate::{GeometryError, InstallationErrors, JointTable, Link, Pose, Sensor};
+
+mod instruments;
+pub use instruments::{
+    GaugeKindSpec, GaugeSpec, LimitsSpec, SocketRegionSpec, SocketSide, SocketSpec,
+    DEFAULT_BALLBAR_SHORTEST_MM, DEFAULT_CONE_DEG, DEFAULT_GAUGE_LINK_CLEARANCE_MM,
+    DEFAULT_LONGEST_MM, DEFAULT_REGION_GRID, DEFAULT_TELESCOPING_SHORTEST_MM,
+    MAX_DESCRIBED_SOCKETS,
+};
 
 /// Standard gravity, mm/s^2; the default gravity is `[0, 0, -STANDARD_GRAVITY_MM_S2]`.
 pub const STANDARD_GRAVITY_MM_S2: f64 = 9806.65;
@@ -75,6 +85,24 @@ pub struct RobotDescription {
     /// The pose error map's settings and fitted range (`[pose_map]`). Optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub pose_map: Option<PoseMapSpec>,
+    /// Length gauges available for a campaign (`[[gauge]]`), possibly none
+    /// (see [`instruments`](GaugeSpec)).
+    #[serde(rename = "gauge", default, skip_serializing_if = "Vec::is_empty")]
+    pub gauges: Vec<GaugeSpec>,
+    /// Candidate socket places (`[[socket]]`), possibly none.
+    #[serde(rename = "socket", default, skip_serializing_if = "Vec::is_empty")]
+    pub sockets: Vec<SocketSpec>,
+    /// Boxes of candidate socket places (`[[socket_region]]`), possibly none.
+    #[serde(
+        rename = "socket_region",
+        default,
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub socket_regions: Vec<SocketRegionSpec>,
+    /// What the machine allows a design (`[limits]`): joint cones, link radius, gauge-link
+    /// clearance. Optional (defaults stated in [`LimitsSpec`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limits: Option<LimitsSpec>,
 }
 
 /// `[home]`: the home pose.
@@ -180,6 +208,14 @@ pub struct SensorSpec {
     /// Platform socket centre in {P}, mm.
     #[serde(deserialize_with = "exact")]
     pub platform_mm: [f64; 3],
+    /// The `[[gauge]]` this sensor is read with (a setup of that gauge). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gauge: Option<String>,
+    /// The extension bar of this setup, mm: its readings lie in the gauge's window
+    /// `[shortest + bar, shortest + bar + stroke]`. Optional (needs `gauge`; without it only
+    /// the gauge's range and stroke are checked).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bar_mm: Option<f64>,
 }
 
 impl SensorSpec {
@@ -194,6 +230,8 @@ impl SensorSpec {
             name: sensor.name.clone(),
             base_mm: sensor.base_mm.into(),
             platform_mm: sensor.platform_mm.into(),
+            gauge: None,
+            bar_mm: None,
         }
     }
 }
@@ -686,6 +724,10 @@ impl RobotDescription {
             calibration: None,
             installation_errors_um: None,
             pose_map: None,
+            gauges: Vec::new(),
+            sockets: Vec::new(),
+            socket_regions: Vec::new(),
+            limits: None,
         }
     }
 
@@ -966,6 +1008,7 @@ impl RobotDescription {
                 }
             }
         }
+        self.check_instruments()?;
         Ok(())
     }
 }

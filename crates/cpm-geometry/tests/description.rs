@@ -551,12 +551,13 @@ fn documentation_examples_load() {
         .skip(1)
         .map(|b| b.split("```").next().unwrap())
         .collect();
-    assert_eq!(blocks.len(), 4);
-    // In the order of the document: [calibration.known_effects], [pose_map], the paper, the
-    // encoder link.
+    assert_eq!(blocks.len(), 5);
+    // In the order of the document: [calibration.known_effects], [pose_map], the
+    // instruments, the paper, the encoder link.
     let known_block = blocks[0];
     let pose_map_block = blocks[1];
-    let blocks = &blocks[2..];
+    let instruments_block = blocks[2];
+    let blocks = &blocks[3..];
 
     // The [pose_map] example, appended to the paper's description.
     let d = RobotDescription::from_toml_str(&format!("{}\n{pose_map_block}", paper_text()), "doc")
@@ -565,6 +566,24 @@ fn documentation_examples_load() {
     assert_eq!(p.fitted_min.unwrap()[1], -97.5);
     assert_eq!(p.fitted_max.unwrap()[2], 489.5);
     assert_eq!(d.calibration.unwrap().known_effects["pose_map_y2"].len(), 6);
+
+    // The instruments example, added to the paper's cube: the gauge, the region, the limits,
+    // and a setup whose window holds its length at home.
+    let text = format!("{}\n{instruments_block}", paper_text());
+    let d = RobotDescription::from_toml_str(&text, "doc").unwrap();
+    let g = d.gauge(None).unwrap();
+    assert_eq!((g.name.as_str(), g.stroke_mm), ("lg200", 200.0));
+    assert_eq!(d.socket_places().len(), 25);
+    let l = d.limits.unwrap();
+    assert_eq!(
+        (l.link_link_mm(), l.gauge_link_mm(Some(g))),
+        (Some(40.0), 30.0)
+    );
+    let s = &d.sensors[1];
+    let (lo, hi) = g.window_mm(s.bar_mm.unwrap());
+    let home = d.joint_table().unwrap().sensors[1].length_mm(&d.home.pose());
+    assert!(lo <= home && home <= hi, "{lo} {home} {hi}");
+    assert!((home - 581.5).abs() < 0.05, "{home}");
 
     // The abridged paper example, with links 2 to 5 filled in.
     let middle: String = JointTable::paper_cubic().links[1..5]

@@ -31,6 +31,7 @@
 //! assert_eq!(c.joints.base_cone_deg, 40.0);
 //! assert!(c.validate().is_ok());
 //! ```
+use cpm_geometry::description::{GaugeKindSpec, GaugeSpec, LimitsSpec, RobotDescription};
 use cpm_geometry::{JointTable, Pose, Sensor};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -311,6 +312,117 @@ impl Constraints {
             }
         }
         Ok(())
+    }
+}
+
+impl Gauge {
+    /// From a description's `[[gauge]]`: its values with the defaults the description
+    /// documents (noise: the gauge's `noise_um`, else `default_sigma_um`).
+    pub fn from_spec(spec: &GaugeSpec, default_sigma_um: f64) -> Self {
+        Self {
+            kind: match spec.kind {
+                GaugeKindSpec::Telescoping => GaugeKind::Telescoping,
+                GaugeKindSpec::Ballbar => GaugeKind::Ballbar,
+            },
+            stroke_mm: spec.stroke_mm,
+            shortest_mm: spec.shortest_length_mm(),
+            longest_mm: spec.longest_length_mm(),
+            bars_mm: spec.bars_mm.clone(),
+            sigma_um: spec.noise_um.unwrap_or(default_sigma_um),
+        }
+    }
+
+    /// As a description's `[[gauge]]` named `name` (every value written out; `radius_mm`
+    /// given by the caller).
+    pub fn to_spec(&self, name: &str, radius_mm: Option<f64>) -> GaugeSpec {
+        GaugeSpec {
+            name: name.to_string(),
+            kind: match self.kind {
+                GaugeKind::Telescoping => GaugeKindSpec::Telescoping,
+                GaugeKind::Ballbar => GaugeKindSpec::Ballbar,
+            },
+            stroke_mm: self.stroke_mm,
+            shortest_mm: Some(self.shortest_mm),
+            longest_mm: Some(self.longest_mm),
+            bars_mm: self.bars_mm.clone(),
+            noise_um: Some(self.sigma_um),
+            radius_mm,
+        }
+    }
+}
+
+impl Constraints {
+    /// The limits a description declares: its `[[gauge]]` named `gauge` (the first when
+    /// `None`) and its `[limits]` (defaults stated in [`LimitsSpec`]). `Ok(None)` when the
+    /// description has no gauge; `Err` when the named gauge does not exist. The gauge's
+    /// noise defaults to `[calibration] sensor_noise_um`, else the paper's uniform +-10 um.
+    ///
+    /// ```
+    /// use cpm_calib::design::Constraints;
+    /// use cpm_geometry::description::{GaugeSpec, GaugeKindSpec, LimitsSpec, RobotDescription};
+    /// let mut d = RobotDescription::paper_cubic();
+    /// assert!(Constraints::from_description(&d, None).unwrap().is_none());
+    /// d.gauges.push(GaugeSpec { name: "bb".into(), kind: GaugeKindSpec::Ballbar, stroke_mm: 2.0,
+    ///     shortest_mm: None, longest_mm: None, bars_mm: vec![], noise_um: None, radius_mm: Some(5.0) });
+    /// d.limits = Some(LimitsSpec { link_radius_mm: Some(20.0), ..LimitsSpec::default() });
+    /// let c = Constraints::from_description(&d, None).unwrap().unwrap();
+    /// assert_eq!(c.gauge.shortest_mm, 100.0);
+    /// assert_eq!(c.clearance.gauge_link_mm, 25.0); // link radius + gauge radius
+    /// assert_eq!(c.clearance.link_link_mm, Some(40.0));
+    /// assert!(Constraints::from_description(&d, Some("nope")).is_err());
+    /// ```
+    pub fn from_description(
+        desc: &RobotDescription,
+        gauge: Option<&str>,
+    ) -> Result<Option<Self>, CalibError> {
+        let spec = match (gauge, desc.gauge(gauge)) {
+            (_, Some(g)) => g,
+            (Some(name), None) => {
+                return Err(CalibError::invalid(
+                    "gauge",
+                    format!(
+                        "no [[gauge]] named `{name}` in the description (it has: {})",
+                        desc.gauges
+                            .iter()
+                            .map(|g| g.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                ))
+            }
+            (None, None) => return Ok(None),
+        };
+        let default_sigma = desc
+            .calibration
+            .as_ref()
+            .and_then(|c| c.sensor_noise_um)
+            .unwrap_or(10.0 / 3f64.sqrt());
+        let limits = desc.limits.unwrap_or_default();
+        Ok(Some(Self {
+            gauge: Gauge::from_spec(spec, default_sigma),
+            clearance: Clearance {
+                gauge_link_mm: limits.gauge_link_mm(Some(spec)),
+                link_link_mm: limits.link_link_mm(),
+            },
+            joints: JointLimits {
+                base_cone_deg: limits.base_cone_deg,
+                platform_cone_deg: limits.platform_cone_deg,
+            },
+        }))
+    }
+
+    /// As a description's `[limits]`, keeping `previous`'s link radius (the link-link
+    /// clearance is twice the link radius; one set without a radius is written as the
+    /// radius it implies).
+    pub fn to_limits_spec(&self, previous: Option<&LimitsSpec>) -> LimitsSpec {
+        LimitsSpec {
+            base_cone_deg: self.joints.base_cone_deg,
+            platform_cone_deg: self.joints.platform_cone_deg,
+            link_radius_mm: previous
+                .and_then(|l| l.link_radius_mm)
+                .or(self.clearance.link_link_mm.map(|d| 0.5 * d)),
+            gauge_link_clearance_mm: Some(self.clearance.gauge_link_mm),
+        }
     }
 }
 

@@ -119,6 +119,35 @@ impl MonteCarloReport {
         hits as f64 / self.runs.max(1) as f64
     }
 
+    /// The parameter with the largest Monte Carlo RMS error: `(index, its figures)`; the
+    /// first "worst error" of a design (the other is [`MonteCarloReport::max_error_um_worst`],
+    /// the largest absolute error over all runs and parameters). `None` without parameters.
+    ///
+    /// ```
+    /// use cpm_calib::design::monte_carlo::monte_carlo_with;
+    /// let r = monte_carlo_with(&[0.0, 0.0], &[1.0, 1.0], 3, 1, |seed| {
+    ///     Some(vec![Some(1.0), Some(seed as f64)])
+    /// }, &|_, _| {});
+    /// let (k, p) = r.worst_parameter().unwrap();
+    /// assert_eq!(k, 1); // errors 1, 2, 3: RMS sqrt(14 / 3) > 1
+    /// assert!((p.rms_error_um - (14.0f64 / 3.0).sqrt()).abs() < 1e-12);
+    /// assert_eq!(r.fraction_max_within(2.0), 2.0 / 3.0);
+    /// ```
+    pub fn worst_parameter(&self) -> Option<(usize, ParameterStats)> {
+        self.parameters
+            .iter()
+            .copied()
+            .enumerate()
+            .filter(|(_, p)| p.rms_error_um.is_finite())
+            .max_by(|a, b| a.1.rms_error_um.total_cmp(&b.1.rms_error_um))
+    }
+
+    /// Fraction of the runs attempted whose largest |error| over the parameters is at most
+    /// `max_um` (failed runs count as misses).
+    pub fn fraction_max_within(&self, max_um: f64) -> f64 {
+        self.fraction_within(f64::INFINITY, max_um)
+    }
+
     /// One line: the headline figures.
     pub fn brief(&self) -> String {
         format!(
