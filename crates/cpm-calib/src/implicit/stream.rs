@@ -19,24 +19,19 @@ use std::time::{Duration, Instant};
 
 use cpm_geometry::JointTable;
 use cpm_lm::{IterationRecord, Report, TerminationReason, Timings};
-use faer::linalg::matmul::matmul;
-use faer::{Accum, Mat, Par};
 use nalgebra::{DMatrix, Matrix6, Vector6};
 use rayon::prelude::*;
 
 use super::Implicit;
+use crate::effects::sensor_coefficient;
 
 /// Poses per chunk (the unit of parallel work and of the ordered partial sums).
 const POSES_PER_CHUNK: usize = 256;
-/// Poses whose `Z_j` are gathered before each `S -= Z^T Z` product.
-const Z_POSES: usize = 32;
 
 /// One pose's rows: local part, residual and global entries (`gcols` are indices among
 /// the globals).
 #[derive(Default)]
 struct Block {
-    entries: Vec<(usize, usize)>,
-    values: Vec<f64>,
     r: Vec<f64>,
     local: Vec<Vector6<f64>>,
     gptr: Vec<usize>,
@@ -63,16 +58,18 @@ impl Block {
 }
 
 impl Implicit<'_> {
-    /// Evaluates configuration `j`'s residuals and Jacobian rows at `x` into `b`.
+    /// Evaluates configuration `j`'s residuals and Jacobian rows at `x` into `b` through the
+    /// general pattern and value functions (the reference [`Implicit::fill_block`] is
+    /// tested against).
+    #[cfg(test)]
     fn load_block(&self, x: &[f64], table: &JointTable, j: usize, b: &mut Block) {
         let g0 = 6 * self.num_poses;
         let o = self.row0[j];
         let nrows = 6 + self.prepared.by_pose[j].len();
-        b.entries.clear();
-        self.visit_pose_pattern(j, &mut |r, c| b.entries.push((r - o, c)));
-        b.values.clear();
-        b.values.resize(b.entries.len(), 0.0);
-        self.pose_values(x, table, j, &mut b.values);
+        let mut entries = Vec::new();
+        self.visit_pose_pattern(j, &mut |r, c| entries.push((r - o, c)));
+        let mut values = vec![0.0; entries.len()];
+        self.pose_values(x, table, j, &mut values);
         b.r.clear();
         b.r.resize(nrows, 0.0);
         self.pose_residuals(&x[6 * j..6 * j + 6], &x[g0..], table, j, &mut b.r);
@@ -83,7 +80,7 @@ impl Implicit<'_> {
         b.gvals.clear();
         b.gptr.push(0);
         let mut row = 0;
-        for (&(r, c), &v) in b.entries.iter().zip(&b.values) {
+        for (&(r, c), &v) in entries.iter().zip(&values) {
             while row < r {
                 b.gptr.push(b.gcols.len());
                 row += 1;
@@ -102,10 +99,86 @@ impl Implicit<'_> {
     }
 }
 
+
+impl Implicit<'_> {
+    /// Evaluates configuration `j`'s residuals and Jacobian rows into `b`, for pose
+    /// corrections `p` and globals `globals` (joint table `table`): the work of
+    /// [`Implicit::pose_residuals`] and [`Implicit::pose_values`] in one pass over the
+    /// links and sensors, with the rows in the same order and the same values.
+    fn fill_block(
+        &self,
+        p: &[f64],
+        globals: &[f64],
+        table: &JointTable,
+        j: usize,
+        b: &mut Block,
+    ) {
+        b.r.clear();
+        b.local.clear();
+        b.gptr.clear();
+        b.gcols.clear();
+        b.gvals.clear();
+        b.gptr.push(0);
+        let (pose, dw) = self.pose_from(p, j);
+        let jlt = super::left_jacobian(&dw).transpose();
+        let rm = pose.rotation.matrix();
+        let rt = rm.transpose();
+        let w = self.w_enc;
+        let lengths = &self.prepared.lengths_mm[j];
+        for (i, l) in table.links.iter().enumerate() {
+            let s = rm * l.platform_mm;
+            let q = pose.position_mm + s - l.base_mm;
+            let len = q.norm();
+            let z = q / len;
+            let m = jlt * s.cross(&z) * 1e-3;
+            let mut target = lengths[i];
+            for &(pi, a) in self.links(j, i) {
+                target += a * globals[pi];
+            }
+            b.r.push((len - target) * 1e3 * w);
+            b.local
+                .push(Vector6::new(z.x, z.y, z.z, m.x, m.y, m.z) * w);
+            let zp = rt * z;
+            for c in 0..3 {
+                b.gcols.push(6 * i + c);
+                b.gvals.push(-z[c] * w);
+            }
+            for c in 0..3 {
+                b.gcols.push(6 * i + 3 + c);
+                b.gvals.push(zp[c] * w);
+            }
+            for &(pi, a) in self.links(j, i) {
+                b.gcols.push(pi);
+                b.gvals.push(-a * 1e3 * w);
+            }
+            b.gptr.push(b.gcols.len());
+        }
+        for &k in &self.prepared.by_pose[j] {
+            let rd = &self.campaign.readings[k];
+            let s = &table.sensors[rd.sensor];
+            let sp = rm * s.platform_mm;
+            let q = pose.position_mm + sp - s.base_mm;
+            let geometric = q.norm();
+            let u = q / geometric;
+            let m = jlt * sp.cross(&u) * 1e-3;
+            let mut y = geometric + self.sensor_corr;
+            for &(pi, e, qq) in &self.sensor_params[rd.sensor] {
+                let a = sensor_coefficient(e, qq, rd.sensor, geometric);
+                y += a * globals[pi];
+                b.gcols.push(pi);
+                b.gvals.push(a * 1e3);
+            }
+            b.r.push((y - rd.length_mm) * 1e3);
+            b.local.push(Vector6::new(u.x, u.y, u.z, m.x, m.y, m.z));
+            b.gptr.push(b.gcols.len());
+        }
+    }
+}
+
 /// Partial sums of the reduce pass over a chunk of poses.
 pub(super) struct Reduced {
-    /// `sum (G_j^T G_j - Z_j^T Z_j)` (without the global damping).
-    pub(super) s: Mat<f64>,
+    /// `sum (G_j^T G_j - Z_j^T Z_j)` (without the global damping), `ng x ng` column-major.
+    pub(super) s: Vec<f64>,
     /// `-sum Z_j^T z_j`.
     rhs: Vec<f64>,
     /// Gradient of the globals, `sum G_j^T r_j`.
@@ -123,7 +196,7 @@ pub(super) struct Reduced {
 impl Reduced {
     fn zeros(ng: usize) -> Self {
         Self {
-            s: Mat::zeros(ng, ng),
+            s: vec![0.0; ng * ng],
             rhs: vec![0.0; ng],
             gg: vec![0.0; ng],
             norms_g: vec![0.0; ng],
@@ -134,7 +207,9 @@ impl Reduced {
     }
 
     fn add(&mut self, o: &Reduced) {
-        self.s += &o.s;
+        for (a, b) in self.s.iter_mut().zip(&o.s) {
+            *a += b;
+        }
         for (a, b) in self.rhs.iter_mut().zip(&o.rhs) {
             *a += b;
         }
@@ -150,10 +225,27 @@ impl Reduced {
     }
 }
 
+/// Solves `L y = b` in place for the lower-triangular `L` of a 6 x 6 Cholesky factor.
+#[inline]
+fn forward6(l: &Matrix6<f64>, y: &mut Vector6<f64>) {
+    for a in 0..6 {
+        let mut v = y[a];
+        for q in 0..a {
+            v -= l[(a, q)] * y[q];
+        }
+        y[a] = v / l[(a, a)];
+    }
+}
+
 /// The reduce pass at `x` and damping `mu`. With `update_scales` the local scales `d`
 /// (`6 * num_poses`) grow to the column norms first; with `skip_singular` a pose whose
 /// block is singular keeps its `G_j^T G_j` and is left out of the elimination (the
 /// identifiability pass), otherwise it marks the result failed.
+///
+/// Per pose, with rows `k` of local part `l_k` and global part `g_k` and
+/// `U_j + mu D_j^2 = C C^T`: `G^T G - Z^T Z = sum_{k,k'} (delta_kk' - y_k . y_k') g_k g_k'^T`
+/// over the rows that touch globals, `y_k = C^-1 l_k` (the sparsity of the `g_k` is kept:
+/// a closure touches only its link's six installation errors).
 pub(super) fn reduce(
     p: &Implicit<'_>,
     x: &[f64],
@@ -164,6 +256,8 @@ pub(super) fn reduce(
     skip_singular: bool,
 ) -> Reduced {
     let ng = p.num_globals;
+    let g0 = 6 * p.num_poses;
+    let globals = &x[g0..];
     let parts: Vec<Reduced> = d
         .par_chunks_mut(6 * POSES_PER_CHUNK)
         .enumerate()
@@ -171,39 +265,11 @@ pub(super) fn reduce(
             let j0 = c * POSES_PER_CHUNK;
             let mut acc = Reduced::zeros(ng);
             let mut b = Block::default();
-            let zcap = 6 * Z_POSES;
-            let mut zt = Mat::<f64>::zeros(ng, zcap);
-            let mut zl = Mat::<f64>::zeros(zcap, 1);
-            let mut zcols = 0usize;
-            let flush = |acc: &mut Reduced, zt: &Mat<f64>, zl: &Mat<f64>, cols: usize| {
-                if cols == 0 || ng == 0 {
-                    return;
-                }
-                let z = zt.as_ref().subcols(0, cols);
-                matmul(
-                    acc.s.as_mut(),
-                    Accum::Add,
-                    z,
-                    z.transpose(),
-                    -1.0,
-                    Par::Seq,
-                );
-                let mut rhs = Mat::<f64>::zeros(ng, 1);
-                matmul(
-                    rhs.as_mut(),
-                    Accum::Replace,
-                    z,
-                    zl.as_ref().subrows(0, cols),
-                    1.0,
-                    Par::Seq,
-                );
-                for (k, v) in acc.rhs.iter_mut().enumerate() {
-                    *v -= rhs[(k, 0)];
-                }
-            };
+            let mut rows: Vec<usize> = Vec::new();
+            let mut ys: Vec<Vector6<f64>> = Vec::new();
             for (t, dj) in dc.chunks_mut(6).enumerate() {
                 let j = j0 + t;
-                p.load_block(x, table, j, &mut b);
+                p.fill_block(&x[6 * j..6 * j + 6], globals, table, j, &mut b);
                 let (u, gl) = b.local_normal();
                 acc.ss += b.r.iter().map(|v| v * v).sum::<f64>();
                 for a in 0..6 {
@@ -218,64 +284,65 @@ pub(super) fn reduce(
                         acc.gmax_local = acc.gmax_local.max(gl[a].abs() / cn);
                     }
                 }
-                if zcols + 6 > zcap {
-                    flush(&mut acc, &zt, &zl, zcols);
-                    zcols = 0;
-                }
-                for a in 0..6 {
-                    zt.col_as_slice_mut(zcols + a).fill(0.0);
-                }
+                rows.clear();
                 for k in 0..b.r.len() {
                     let (cols, vals) = b.globals(k);
                     if cols.is_empty() {
                         continue;
                     }
-                    let (l, r) = (&b.local[k], b.r[k]);
+                    rows.push(k);
+                    let r = b.r[k];
                     for (&c, &v) in cols.iter().zip(vals) {
                         acc.gg[c] += v * r;
                         acc.norms_g[c] += v * v;
-                        for a in 0..6 {
-                            zt[(c, zcols + a)] += l[a] * v;
-                        }
-                        let sc = acc.s.col_as_slice_mut(c);
-                        for (&c2, &v2) in cols.iter().zip(vals) {
-                            sc[c2] += v * v2;
-                        }
                     }
                 }
                 let mut a_mat = u;
                 for a in 0..6 {
                     a_mat[(a, a)] += mu * dj[a] * dj[a];
                 }
-                let Some(ch) = a_mat.cholesky() else {
-                    if !skip_singular {
-                        acc.failed = true;
-                    }
+                let factor = a_mat.cholesky();
+                if factor.is_none() && !skip_singular {
+                    acc.failed = true;
                     continue;
-                };
-                let lm = ch.l();
-                // Row a of Z: (w_a - sum_{q<a} L_aq z_q) / L_aa; z = L^-1 (-g_l).
-                for a in 0..6 {
-                    for q in 0..a {
-                        let laq = lm[(a, q)];
-                        for c in 0..ng {
-                            let v = zt[(c, zcols + q)];
-                            zt[(c, zcols + a)] -= laq * v;
+                }
+                // Without a factor (a singular pose in the identifiability pass) only
+                // G^T G enters.
+                ys.clear();
+                let mut zl = -gl;
+                if let Some(ch) = &factor {
+                    let lm = ch.l();
+                    forward6(&lm, &mut zl);
+                    for &k in &rows {
+                        let mut y = b.local[k];
+                        forward6(&lm, &mut y);
+                        ys.push(y);
+                    }
+                }
+                for (ka, &k) in rows.iter().enumerate() {
+                    let (ck, vk) = b.globals(k);
+                    if factor.is_some() {
+                        let proj = ys[ka].dot(&zl);
+                        for (&c, &v) in ck.iter().zip(vk) {
+                            acc.rhs[c] -= v * proj;
                         }
                     }
-                    let inv = 1.0 / lm[(a, a)];
-                    for c in 0..ng {
-                        zt[(c, zcols + a)] *= inv;
+                    for (kb, &k2) in rows.iter().enumerate() {
+                        let mut w = if k == k2 { 1.0 } else { 0.0 };
+                        if factor.is_some() {
+                            w -= ys[ka].dot(&ys[kb]);
+                        }
+                        let (ck2, vk2) = b.globals(k2);
+                        for (&c, &v) in ck.iter().zip(vk) {
+                            let wv = w * v;
+                            let col = &mut acc.s[c * ng..(c + 1) * ng];
+                            for (&c2, &v2) in ck2.iter().zip(vk2) {
+                                col[c2] += wv * v2;
+                            }
+                        }
                     }
-                    let mut v = -gl[a];
-                    for q in 0..a {
-                        v -= lm[(a, q)] * zl[(zcols + q, 0)];
-                    }
-                    zl[(zcols + a, 0)] = v * inv;
                 }
-                zcols += 6;
             }
-            flush(&mut acc, &zt, &zl, zcols);
             acc
         })
         .collect();
@@ -319,16 +386,18 @@ fn step(
             let mut s = StepSums::default();
             let mut b = Block::default();
             let mut rt = Vec::new();
+            let mut gd: Vec<f64> = Vec::new();
             for (t, hj) in hc.chunks_mut(6).enumerate() {
                 let j = j0 + t;
-                p.load_block(x, table, j, &mut b);
+                p.fill_block(&x[6 * j..6 * j + 6], &x[6 * p.num_poses..], table, j, &mut b);
                 let (mut u, gl) = b.local_normal();
                 let dj = &d[6 * j..6 * j + 6];
                 for a in 0..6 {
                     u[(a, a)] += mu * dj[a] * dj[a];
                 }
                 let mut rhs = -gl;
-                let mut gd = vec![0.0; b.r.len()];
+                gd.clear();
+                gd.resize(b.r.len(), 0.0);
                 for (k, gdk) in gd.iter_mut().enumerate() {
                     let (cols, vals) = b.globals(k);
                     *gdk = cols.iter().zip(vals).map(|(&c, &v)| v * dg[c]).sum();
@@ -450,7 +519,7 @@ pub(super) fn minimize(
         let mut solved = !red.failed;
         if solved && ng > 0 {
             let s = DMatrix::from_fn(ng, ng, |r, c| {
-                red.s[(r, c)] + if r == c { mu * d[nl + r] * d[nl + r] } else { 0.0 }
+                red.s[c * ng + r] + if r == c { mu * d[nl + r] * d[nl + r] } else { 0.0 }
             });
             match s.cholesky() {
                 Some(ch) => {
@@ -587,4 +656,51 @@ pub(super) fn minimize(
         linear_solver: "Schur complement (streamed)",
         statistics: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::paper::{designed_sensors, random_workspace_poses};
+    use crate::{simulate, Effect, MeasurementModel, Plan, SimulationOptions};
+
+    /// The fused block evaluation gives the rows of the general pattern / value functions
+    /// (which the finite-difference test checks), at a point off the start.
+    #[test]
+    fn fused_block_matches_the_general_rows() {
+        let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
+        model.nominal.sensors = designed_sensors();
+        model.effects = vec![Effect::LinkOffset, Effect::SensorScale];
+        let plan = Plan {
+            poses: random_workspace_poses(&model.nominal, 5, 100.0, 25.0, 3.0, 3),
+            sensors: (0..16).collect(),
+        };
+        let truth = vec![2.0; model.num_params()];
+        let data = simulate(&model, &truth, &plan, &SimulationOptions::default()).unwrap();
+        let p = super::super::build(&model, &data, &super::super::ImplicitOptions::default())
+            .unwrap();
+        let n = 6 * p.num_poses + p.num_globals;
+        let x: Vec<f64> = (0..n).map(|k| 30.0 * ((k as f64) * 0.7).sin()).collect();
+        let g0 = 6 * p.num_poses;
+        let table = model.table_with(&x[g0..]).unwrap();
+        let (mut a, mut b) = (Block::default(), Block::default());
+        for j in 0..p.num_poses {
+            p.load_block(&x, &table, j, &mut a);
+            p.fill_block(&x[6 * j..6 * j + 6], &x[g0..], &table, j, &mut b);
+            assert_eq!(a.gptr, b.gptr);
+            assert_eq!(a.gcols, b.gcols);
+            let close = |u: f64, v: f64| (u - v).abs() <= 1e-12 * (1.0 + u.abs());
+            for (u, v) in a.r.iter().zip(&b.r) {
+                assert!(close(*u, *v), "pose {j}: residual {u} vs {v}");
+            }
+            for (u, v) in a.gvals.iter().zip(&b.gvals) {
+                assert!(close(*u, *v), "pose {j}: global entry {u} vs {v}");
+            }
+            for (u, v) in a.local.iter().zip(&b.local) {
+                for c in 0..6 {
+                    assert!(close(u[c], v[c]), "pose {j}: local entry {u} vs {v}");
+                }
+            }
+        }
+    }
 }
