@@ -445,6 +445,10 @@ fn build<'a>(
             link_ptr.push(link_coeff.len());
         }
     }
+    // The pose contexts served the link coefficients only (at 10^5 poses they hold about
+    // 40 MB).
+    let mut prepared = prepared;
+    prepared.contexts = Vec::new();
     let sensor_params: Vec<Vec<(usize, Effect, usize)>> = (0..model.nominal.sensors.len())
         .map(|sensor| {
             blocks

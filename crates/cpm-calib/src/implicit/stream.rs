@@ -13,8 +13,9 @@
 //!    reduction, and the residuals at the trial point.
 //!
 //! Memory is the parameters, their scales and one `ng x ng` matrix per chunk of poses;
-//! time is linear in the readings. The damping is Nielsen's rule (one solve per trial) with
-//! Marquardt scaling; the stopping tests are those of `cpm-lm`.
+//! time is linear in the readings. Gauss-Newton steps are taken while they gain well, then
+//! Nielsen's damping rule (one solve per trial) with Marquardt scaling; the stopping tests
+//! are those of `cpm-lm`.
 use std::time::{Duration, Instant};
 
 use cpm_geometry::JointTable;
@@ -462,8 +463,13 @@ pub(super) fn minimize(
     let mut records: Vec<IterationRecord> = Vec::new();
     let (mut residual_evaluations, mut jacobian_evaluations) = (1usize, 0usize);
     let (mut accepted_steps, mut rejected_steps) = (0usize, 0usize);
-    // mu0 = tau * max(||J_k||^2 / d_k^2) = tau with d_k = ||J_k|| at the start.
-    let mut mu = options.tau;
+    // Gauss-Newton steps (mu = 0) while they are accepted with a gain ratio of at least
+    // 1/4: a nearly linear problem (the usual calibration) then converges in a few passes
+    // where Nielsen's rule, lowering mu by at most 3 per step, would crawl. The first
+    // failure (singular system, or a poor or rejected step) switches to Nielsen's rule from
+    // mu0 = tau * max(||J_k||^2 / d_k^2) = tau (d_k = ||J_k|| at the start).
+    let mut gauss_newton = true;
+    let mut mu = 0.0;
     let mut nu = 2.0;
     let mut new_jac = true;
     let mut cost = f64::NAN;
@@ -521,7 +527,17 @@ pub(super) fn minimize(
             let s = DMatrix::from_fn(ng, ng, |r, c| {
                 red.s[c * ng + r] + if r == c { mu * d[nl + r] * d[nl + r] } else { 0.0 }
             });
+            let diag: Vec<f64> = (0..ng).map(|b| s[(b, b)]).collect();
             match s.cholesky() {
+                // Undamped, a pivot below 1e-10 of its diagonal entry is a direction the
+                // data do not determine (a blind combination): its Gauss-Newton step would
+                // be noise of any size, so the damped steps take over.
+                Some(ch)
+                    if mu == 0.0
+                        && (0..ng).any(|b| ch.l_dirty()[(b, b)].powi(2) < 1e-10 * diag[b]) =>
+                {
+                    solved = false;
+                }
                 Some(ch) => {
                     let rhs = nalgebra::DVector::from_fn(ng, |b, _| red.rhs[b] - red.gg[b]);
                     let sol = ch.solve(&rhs);
@@ -566,8 +582,13 @@ pub(super) fn minimize(
         }
         if !solved {
             rejected_steps += 1;
-            mu *= nu;
-            nu *= 2.0;
+            if gauss_newton {
+                gauss_newton = false;
+                mu = options.tau;
+            } else {
+                mu *= nu;
+                nu *= 2.0;
+            }
             rec.elapsed = start.elapsed();
             records.push(rec);
             if mu.is_nan() || mu >= 1e300 {
@@ -598,6 +619,8 @@ pub(super) fn minimize(
             -1.0
         };
         let accept = cost_trial < cost && rho > 0.0;
+        // A Gauss-Newton step that gains poorly hands over to the damped steps.
+        let leave_gauss_newton = gauss_newton && !(accept && rho >= 0.25);
         let cost_before = cost;
         if accept {
             for (xv, hv) in x[..nl].iter_mut().zip(&h) {
@@ -609,13 +632,23 @@ pub(super) fn minimize(
             cost = cost_trial;
             new_jac = true;
             accepted_steps += 1;
-            let t = 2.0 * rho - 1.0;
-            mu = (mu * (1.0 / 3.0f64).max(1.0 - t * t * t)).max(1e-300);
-            nu = 2.0;
+            if leave_gauss_newton {
+                gauss_newton = false;
+                mu = options.tau;
+            } else if !gauss_newton {
+                let t = 2.0 * rho - 1.0;
+                mu = (mu * (1.0 / 3.0f64).max(1.0 - t * t * t)).max(1e-300);
+                nu = 2.0;
+            }
         } else {
             rejected_steps += 1;
-            mu *= nu;
-            nu *= 2.0;
+            if gauss_newton {
+                gauss_newton = false;
+                mu = options.tau;
+            } else {
+                mu *= nu;
+                nu *= 2.0;
+            }
         }
         rec.cost = cost;
         rec.trial_cost = cost_trial;
@@ -652,7 +685,7 @@ pub(super) fn minimize(
         timings,
         num_params: n,
         num_residuals: m,
-        damping: cpm_lm::Damping::Nielsen.name(),
+        damping: "Gauss-Newton, then Nielsen",
         linear_solver: "Schur complement (streamed)",
         statistics: None,
     })
