@@ -101,7 +101,13 @@ fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
 struct Implicit<'a> {
     model: &'a MeasurementModel,
     campaign: &'a Campaign,
-    prepared: Prepared,
+    /// Effective link lengths of every configuration, mm.
+    lengths_mm: Vec<[f64; 6]>,
+    /// Readings taken at configuration `j`: `reading_idx[reading_ptr[j]..reading_ptr[j + 1]]`
+    /// (indices into the campaign's readings; one flat list rather than a vector per
+    /// configuration).
+    reading_ptr: Vec<usize>,
+    reading_idx: Vec<usize>,
     /// First residual row of each configuration.
     row0: Vec<usize>,
     /// Link-channel coefficients (global index, mm per unit) of configuration `j`, link `i`:
@@ -120,6 +126,10 @@ struct Implicit<'a> {
 }
 
 impl Implicit<'_> {
+    fn readings_of(&self, j: usize) -> &[usize] {
+        &self.reading_idx[self.reading_ptr[j]..self.reading_ptr[j + 1]]
+    }
+
     fn links(&self, j: usize, i: usize) -> &[(usize, f64)] {
         &self.link_coeff[self.link_ptr[6 * j + i]..self.link_ptr[6 * j + i + 1]]
     }
@@ -156,13 +166,13 @@ impl Implicit<'_> {
         let rm = pose.rotation.matrix();
         for (i, l) in table.links.iter().enumerate() {
             let q = pose.position_mm + rm * l.platform_mm - l.base_mm;
-            let mut target = self.prepared.lengths_mm[j][i];
+            let mut target = self.lengths_mm[j][i];
             for &(p, a) in self.links(j, i) {
                 target += a * globals[p];
             }
             r[i] = (q.norm() - target) * 1e3 * self.w_enc;
         }
-        for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
+        for (t, &k) in self.readings_of(j).iter().enumerate() {
             let rd = &self.campaign.readings[k];
             let s = &table.sensors[rd.sensor];
             let geometric = s.length_mm(&pose);
@@ -193,7 +203,7 @@ impl Implicit<'_> {
                 let mut r = Vec::new();
                 for &j in js {
                     r.clear();
-                    r.resize(6 + self.prepared.by_pose[j].len(), 0.0);
+                    r.resize(6 + self.readings_of(j).len(), 0.0);
                     self.pose_residuals(&x[6 * j..6 * j + 6], &x[g0..], &table, j, &mut r);
                     sc += r[..6].iter().map(|v| (v / self.w_enc).powi(2)).sum::<f64>();
                     sr += r[6..].iter().map(|v| v * v).sum::<f64>();
@@ -212,7 +222,7 @@ impl Implicit<'_> {
             if let Some(dst) = dst.as_deref_mut() {
                 let mut t = 0;
                 for j in 256 * c..(256 * (c + 1)).min(self.num_poses) {
-                    for &k in &self.prepared.by_pose[j] {
+                    for &k in self.readings_of(j) {
                         dst[k] = out[t];
                         t += 1;
                     }
@@ -236,7 +246,7 @@ impl Problem for Implicit<'_> {
         let table = self.model.table_with(globals)?;
         for j in 0..self.num_poses {
             let o = self.row0[j];
-            let n = 6 + self.prepared.by_pose[j].len();
+            let n = 6 + self.readings_of(j).len();
             self.pose_residuals(&x[6 * j..6 * j + 6], globals, &table, j, &mut r[o..o + n]);
         }
         Ok(())
@@ -260,7 +270,7 @@ impl Implicit<'_> {
                 visit(o + i, g0 + q);
             }
         }
-        for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
+        for (t, &k) in self.readings_of(j).iter().enumerate() {
             for c in 0..6 {
                 visit(o + 6 + t, 6 * j + c);
             }
@@ -306,7 +316,7 @@ impl Implicit<'_> {
                 v += 1;
             }
         }
-        for &k in &self.prepared.by_pose[j] {
+        for &k in self.readings_of(j) {
             let rd = &self.campaign.readings[k];
             let s = &table.sensors[rd.sensor];
             let sp = rm * s.platform_mm;
@@ -445,10 +455,22 @@ fn build<'a>(
             link_ptr.push(link_coeff.len());
         }
     }
-    // The pose contexts served the link coefficients only (at 10^5 poses they hold about
-    // 40 MB).
-    let mut prepared = prepared;
-    prepared.contexts = Vec::new();
+    // Only the lengths and the readings per configuration are kept, flat (the prepared
+    // campaign's pose contexts served the link coefficients only; at 10^5 poses they hold
+    // about 40 MB).
+    let lengths_mm: Vec<[f64; 6]> = prepared
+        .lengths_mm
+        .iter()
+        .map(|l| std::array::from_fn(|i| l[i]))
+        .collect();
+    let mut reading_ptr = Vec::with_capacity(np + 1);
+    let mut reading_idx = Vec::with_capacity(campaign.readings.len());
+    reading_ptr.push(0);
+    for b in &prepared.by_pose {
+        reading_idx.extend_from_slice(b);
+        reading_ptr.push(reading_idx.len());
+    }
+    drop(prepared);
     let sensor_params: Vec<Vec<(usize, Effect, usize)>> = (0..model.nominal.sensors.len())
         .map(|sensor| {
             blocks
@@ -465,7 +487,9 @@ fn build<'a>(
     Ok(Implicit {
         model,
         campaign,
-        prepared,
+        lengths_mm,
+        reading_ptr,
+        reading_idx,
         row0,
         link_coeff,
         link_ptr,

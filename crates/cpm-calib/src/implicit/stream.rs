@@ -66,7 +66,7 @@ impl Implicit<'_> {
     fn load_block(&self, x: &[f64], table: &JointTable, j: usize, b: &mut Block) {
         let g0 = 6 * self.num_poses;
         let o = self.row0[j];
-        let nrows = 6 + self.prepared.by_pose[j].len();
+        let nrows = 6 + self.readings_of(j).len();
         let mut entries = Vec::new();
         self.visit_pose_pattern(j, &mut |r, c| entries.push((r - o, c)));
         let mut values = vec![0.0; entries.len()];
@@ -125,7 +125,7 @@ impl Implicit<'_> {
         let rm = pose.rotation.matrix();
         let rt = rm.transpose();
         let w = self.w_enc;
-        let lengths = &self.prepared.lengths_mm[j];
+        let lengths = &self.lengths_mm[j];
         for (i, l) in table.links.iter().enumerate() {
             let s = rm * l.platform_mm;
             let q = pose.position_mm + s - l.base_mm;
@@ -154,7 +154,7 @@ impl Implicit<'_> {
             }
             b.gptr.push(b.gcols.len());
         }
-        for &k in &self.prepared.by_pose[j] {
+        for &k in self.readings_of(j) {
             let rd = &self.campaign.readings[k];
             let s = &table.sensors[rd.sensor];
             let sp = rm * s.platform_mm;
