@@ -10,9 +10,15 @@ use cpm_geometry::{InstallationErrors, JointTable};
 fn cpu_seconds() -> f64 {
     // utime + stime of this process (Linux), in clock ticks of 1/100 s.
     let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    let Some(p) = stat.rfind(')') else { return f64::NAN };
+    let Some(p) = stat.rfind(')') else {
+        return f64::NAN;
+    };
     let f: Vec<&str> = stat[p + 2..].split_whitespace().collect();
-    let t = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(f64::NAN);
+    let t = |i: usize| {
+        f.get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(f64::NAN)
+    };
     (t(11) + t(12)) / 100.0
 }
 

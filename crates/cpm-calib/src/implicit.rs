@@ -186,11 +186,7 @@ impl Implicit<'_> {
 
     /// Sums of squared closure (unweighted) and reading residuals at `x`, and the reading
     /// residuals in the campaign's order when `readings` is given.
-    fn summary(
-        &self,
-        x: &[f64],
-        readings: Option<&mut [f64]>,
-    ) -> Result<(f64, f64), CalibError> {
+    fn summary(&self, x: &[f64], readings: Option<&mut [f64]>) -> Result<(f64, f64), CalibError> {
         use rayon::prelude::*;
         let g0 = 6 * self.num_poses;
         let table = self.model.table_with(&x[g0..])?;

@@ -151,8 +151,16 @@ fn streamed_schur_matches_the_stored_jacobian_solver() {
         .unwrap()
     };
     let (s, e) = (run(true), run(false));
-    assert!(s.solver.termination.was_successful(), "{}", s.solver.brief());
-    assert!(e.solver.termination.was_successful(), "{}", e.solver.brief());
+    assert!(
+        s.solver.termination.was_successful(),
+        "{}",
+        s.solver.brief()
+    );
+    assert!(
+        e.solver.termination.was_successful(),
+        "{}",
+        e.solver.brief()
+    );
     assert_eq!(s.solver.linear_solver, "Schur complement (streamed)");
     assert_eq!(
         s.identifiability.num_determined(),
@@ -164,7 +172,10 @@ fn streamed_schur_matches_the_stored_jacobian_solver() {
             (Some(a), Some(b)) => {
                 let sd = e.std_um[k].unwrap();
                 let sa = s.std_um[k].unwrap();
-                assert!((a - b).abs() < 1e-4 * sd, "{k}: streamed {a} stored {b} (std {sd})");
+                assert!(
+                    (a - b).abs() < 1e-4 * sd,
+                    "{k}: streamed {a} stored {b} (std {sd})"
+                );
                 assert!((sa - sd).abs() < 1e-6 * sd, "{k}: std {sa} vs {sd}");
             }
             (None, None) => {}

@@ -80,11 +80,9 @@ pub fn link_forces_n(
                 condition: smax / smin,
             });
         }
-        let t = svd
-            .solve(&w, 0.0)
-            .map_err(|_| ClearanceError::Singular {
-                condition: f64::INFINITY,
-            })?;
+        let t = svd.solve(&w, 0.0).map_err(|_| ClearanceError::Singular {
+            condition: f64::INFINITY,
+        })?;
         return Ok(t.iter().copied().collect());
     }
     let svd = j1.transpose().svd(true, true);

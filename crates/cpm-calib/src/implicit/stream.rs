@@ -100,20 +100,12 @@ impl Implicit<'_> {
     }
 }
 
-
 impl Implicit<'_> {
     /// Evaluates configuration `j`'s residuals and Jacobian rows into `b`, for pose
     /// corrections `p` and globals `globals` (joint table `table`): the work of
     /// [`Implicit::pose_residuals`] and [`Implicit::pose_values`] in one pass over the
     /// links and sensors, with the rows in the same order and the same values.
-    fn fill_block(
-        &self,
-        p: &[f64],
-        globals: &[f64],
-        table: &JointTable,
-        j: usize,
-        b: &mut Block,
-    ) {
+    fn fill_block(&self, p: &[f64], globals: &[f64], table: &JointTable, j: usize, b: &mut Block) {
         b.r.clear();
         b.local.clear();
         b.gptr.clear();
@@ -137,8 +129,7 @@ impl Implicit<'_> {
                 target += a * globals[pi];
             }
             b.r.push((len - target) * 1e3 * w);
-            b.local
-                .push(Vector6::new(z.x, z.y, z.z, m.x, m.y, m.z) * w);
+            b.local.push(Vector6::new(z.x, z.y, z.z, m.x, m.y, m.z) * w);
             let zp = rt * z;
             for c in 0..3 {
                 b.gcols.push(6 * i + c);
@@ -390,7 +381,13 @@ fn step(
             let mut gd: Vec<f64> = Vec::new();
             for (t, hj) in hc.chunks_mut(6).enumerate() {
                 let j = j0 + t;
-                p.fill_block(&x[6 * j..6 * j + 6], &x[6 * p.num_poses..], table, j, &mut b);
+                p.fill_block(
+                    &x[6 * j..6 * j + 6],
+                    &x[6 * p.num_poses..],
+                    table,
+                    j,
+                    &mut b,
+                );
                 let (mut u, gl) = b.local_normal();
                 let dj = &d[6 * j..6 * j + 6];
                 for a in 0..6 {
@@ -525,7 +522,12 @@ pub(super) fn minimize(
         let mut solved = !red.failed;
         if solved && ng > 0 {
             let s = DMatrix::from_fn(ng, ng, |r, c| {
-                red.s[c * ng + r] + if r == c { mu * d[nl + r] * d[nl + r] } else { 0.0 }
+                red.s[c * ng + r]
+                    + if r == c {
+                        mu * d[nl + r] * d[nl + r]
+                    } else {
+                        0.0
+                    }
             });
             let diag: Vec<f64> = (0..ng).map(|b| s[(b, b)]).collect();
             match s.cholesky() {
@@ -710,8 +712,8 @@ mod tests {
         };
         let truth = vec![2.0; model.num_params()];
         let data = simulate(&model, &truth, &plan, &SimulationOptions::default()).unwrap();
-        let p = super::super::build(&model, &data, &super::super::ImplicitOptions::default())
-            .unwrap();
+        let p =
+            super::super::build(&model, &data, &super::super::ImplicitOptions::default()).unwrap();
         let n = 6 * p.num_poses + p.num_globals;
         let x: Vec<f64> = (0..n).map(|k| 30.0 * ((k as f64) * 0.7).sin()).collect();
         let g0 = 6 * p.num_poses;
