@@ -13,8 +13,13 @@ fn usage() -> ExitCode {
 
 /// Peak resident set size of this process, MiB (Linux; `None` elsewhere).
 fn peak_rss_mb() -> Option<f64> {
+    status_mb("VmHWM:")
+}
+
+/// A memory figure of /proc/self/status (`VmHWM:` peak, `VmRSS:` current), MB.
+fn status_mb(key: &str) -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let line = status.lines().find(|l| l.starts_with(key))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
 }
@@ -128,6 +133,8 @@ fn scale(args: &[String]) -> ExitCode {
     // Reset the peak (Linux: `5` to clear_refs resets VmHWM) so that `peak_rss_mb_fit` is
     // the peak while fitting (the campaign included), not the simulation's.
     let reset = std::fs::write("/proc/self/clear_refs", "5").is_ok();
+    // Resident at the start of the fit (the simulated campaign and what the allocator kept).
+    let rss_at_start_mb = status_mb("VmRSS:");
     let cpu0 = cpu_seconds();
     let t0 = Instant::now();
     let implicit = identify_implicit(
@@ -159,6 +166,7 @@ fn scale(args: &[String]) -> ExitCode {
         "termination": r.solver.termination.to_string(),
         "peak_rss_mb_fit": if reset { peak_rss_mb() } else { None },
         "peak_rss_mb_before_fit": rss_before_mb,
+        "rss_mb_at_fit_start": rss_at_start_mb,
         "solver_seconds": {
             "total": r.solver.elapsed.as_secs_f64(),
             "residuals": r.solver.timings.residuals.as_secs_f64(),

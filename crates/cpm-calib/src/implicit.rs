@@ -454,19 +454,23 @@ fn build<'a>(
     // Only the lengths and the readings per configuration are kept, flat (the prepared
     // campaign's pose contexts served the link coefficients only; at 10^5 poses they hold
     // about 40 MB).
-    let lengths_mm: Vec<[f64; 6]> = prepared
-        .lengths_mm
-        .iter()
+    // (The campaign's own lists are taken out and the rest, the contexts above all,
+    // freed before the flat copies are made, each list freed as it is copied.)
+    let mut prepared = prepared;
+    let by_pose = std::mem::take(&mut prepared.by_pose);
+    let lengths = std::mem::take(&mut prepared.lengths_mm);
+    drop(prepared);
+    let lengths_mm: Vec<[f64; 6]> = lengths
+        .into_iter()
         .map(|l| std::array::from_fn(|i| l[i]))
         .collect();
     let mut reading_ptr = Vec::with_capacity(np + 1);
     let mut reading_idx = Vec::with_capacity(campaign.readings.len());
     reading_ptr.push(0);
-    for b in &prepared.by_pose {
-        reading_idx.extend_from_slice(b);
+    for b in by_pose {
+        reading_idx.extend_from_slice(&b);
         reading_ptr.push(reading_idx.len());
     }
-    drop(prepared);
     let sensor_params: Vec<Vec<(usize, Effect, usize)>> = (0..model.nominal.sensors.len())
         .map(|sensor| {
             blocks
