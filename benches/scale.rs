@@ -37,5 +37,26 @@ fn formulations(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, formulations);
+/// The implicit formulation's two solvers side by side: the streamed Schur accumulation (no
+/// stored Jacobian, parallel over poses) and cpm-lm's general Schur solver on the stored
+/// sparse Jacobian (the peer: the same normal equations, the same result).
+fn implicit_solvers(c: &mut Criterion) {
+    let mut group = c.benchmark_group("implicit");
+    group.sample_size(10);
+    for poses in [1000usize, 10_000] {
+        let (model, data) = campaign(poses);
+        for (label, streamed) in [("streamed", true), ("stored_jacobian", false)] {
+            let opts = ImplicitOptions {
+                streamed,
+                ..ImplicitOptions::default()
+            };
+            group.bench_with_input(BenchmarkId::new(label, poses), &poses, |b, _| {
+                b.iter(|| identify_implicit(&model, black_box(&data), &opts))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, formulations, implicit_solvers);
 criterion_main!(benches);

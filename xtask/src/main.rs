@@ -6,15 +6,20 @@ use std::time::Instant;
 
 fn usage() -> ExitCode {
     eprintln!(
-        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N] [--limited off|setups=N,minimax=N,mc=N,exchanges=N,projections=N,windows=N,tradeoff=0|1,minimax_exp10=N]\n                                           run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--seed N]    implicit-loop calibration of a simulated N-pose campaign (16 socket pairs); one JSON line\n  scale --sweep [--nested-max N]           10^3, 10^4, 10^5 poses side by side (nested too up to N, default 10^5)"
+        "usage: cargo xtask <task>\n\ntasks:\n  reproduce-paper [--out DIR] [--seed N] [--limited off|setups=N,minimax=N,mc=N,exchanges=N,projections=N,windows=N,tradeoff=0|1,minimax_exp10=N]\n                                           run the paper's example end to end (simulated)\n  scale --poses N [--nested] [--stored] [--seed N]\n                                           implicit-loop calibration of a simulated N-pose campaign (16 socket pairs; --stored: cpm-lm's solver on the stored Jacobian); one JSON line\n  scale --sweep [--nested-max N]           10^3, 10^4, 10^5 poses side by side (nested too up to N, default 10^5)"
     );
     ExitCode::from(2)
 }
 
 /// Peak resident set size of this process, MiB (Linux; `None` elsewhere).
 fn peak_rss_mb() -> Option<f64> {
+    status_mb("VmHWM:")
+}
+
+/// A memory figure of /proc/self/status (`VmHWM:` peak, `VmRSS:` current), MB.
+fn status_mb(key: &str) -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let line = status.lines().find(|l| l.starts_with(key))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
 }
@@ -74,6 +79,7 @@ fn scale(args: &[String]) -> ExitCode {
     use cpm::calib::*;
     let mut poses = 1000usize;
     let mut nested = false;
+    let mut stored = false;
     let mut seed = 1u64;
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -93,6 +99,7 @@ fn scale(args: &[String]) -> ExitCode {
                 }
             },
             "--nested" => nested = true,
+            "--stored" => stored = true,
             _ => return usage(),
         }
     }
@@ -123,9 +130,21 @@ fn scale(args: &[String]) -> ExitCode {
             .sqrt()
     };
     let rss_before_mb = peak_rss_mb();
+    // Reset the peak (Linux: `5` to clear_refs resets VmHWM) so that `peak_rss_mb_fit` is
+    // the peak while fitting (the campaign included), not the simulation's.
+    let reset = std::fs::write("/proc/self/clear_refs", "5").is_ok();
+    // Resident at the start of the fit (the simulated campaign and what the allocator kept).
+    let rss_at_start_mb = status_mb("VmRSS:");
     let cpu0 = cpu_seconds();
     let t0 = Instant::now();
-    let implicit = identify_implicit(&model, &data, &ImplicitOptions::default());
+    let implicit = identify_implicit(
+        &model,
+        &data,
+        &ImplicitOptions {
+            streamed: !stored,
+            ..ImplicitOptions::default()
+        },
+    );
     let seconds = t0.elapsed().as_secs_f64();
     let cpu = cpu_seconds().zip(cpu0).map(|(b, a)| b - a);
     let r = match implicit {
@@ -137,7 +156,7 @@ fn scale(args: &[String]) -> ExitCode {
     };
     let mut line = serde_json::json!({
         "simulated": true,
-        "formulation": "implicit (Schur)",
+        "formulation": if stored { "implicit (Schur, stored Jacobian)" } else { "implicit (Schur, streamed)" },
         "poses": poses,
         "readings": data.readings.len(),
         "seconds": seconds,
@@ -145,8 +164,9 @@ fn scale(args: &[String]) -> ExitCode {
         "iterations": r.solver.num_iterations(),
         "seconds_per_iteration": seconds / r.solver.num_iterations().max(1) as f64,
         "termination": r.solver.termination.to_string(),
-        "peak_rss_mb": peak_rss_mb(),
+        "peak_rss_mb_fit": if reset { peak_rss_mb() } else { None },
         "peak_rss_mb_before_fit": rss_before_mb,
+        "rss_mb_at_fit_start": rss_at_start_mb,
         "solver_seconds": {
             "total": r.solver.elapsed.as_secs_f64(),
             "residuals": r.solver.timings.residuals.as_secs_f64(),

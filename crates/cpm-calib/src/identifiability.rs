@@ -397,8 +397,8 @@ fn analyze_with(
     };
     // faer's SVD (nalgebra's bidiagonal SVD loses accuracy on some small matrices); the
     // padded matrix is square, so V is complete.
-    let (sv, v) = match crate::linalg::thin_svd(jm) {
-        Ok((sv, _, v)) => (sv, v),
+    let (sv, v) = match crate::linalg::svd_values_and_v(jm) {
+        Ok(sv_v) => sv_v,
         Err(e) if strict => return Err(e.into()),
         Err(_) => (vec![0.0; np], DMatrix::identity(np, np)),
     };

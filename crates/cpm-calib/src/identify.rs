@@ -120,13 +120,40 @@ struct Subspace<'a> {
     basis: DMatrix<f64>,
     measured_mm: Vec<f64>,
     weights: Vec<f64>,
+    /// The full Jacobian at `cached_theta` (when `cached`), computed with the predictions
+    /// there: the solver asks for the Jacobian at the point whose residuals it has just
+    /// accepted, and the forward kinematics of every pose would otherwise run twice.
     full_jac: DMatrix<f64>,
+    cached_theta: Vec<f64>,
+    cached_y: Vec<f64>,
+    cached: bool,
 }
 
 impl Subspace<'_> {
     fn errors(&self, theta: &[f64]) -> Vec<f64> {
         let e = &self.start_um + &self.basis * DVector::from_column_slice(theta);
         e.iter().copied().collect()
+    }
+
+    /// Predictions and the full Jacobian at `theta` (kept for a later call at the same
+    /// point).
+    fn evaluate(&mut self, theta: &[f64]) -> Result<(), CalibError> {
+        if self.cached && self.cached_theta == theta {
+            return Ok(());
+        }
+        self.cached = false;
+        let e = self.errors(theta);
+        self.cached_y = predict(
+            self.model,
+            self.prepared,
+            self.campaign,
+            &e,
+            Some(&mut self.full_jac),
+        )?;
+        self.cached_theta.clear();
+        self.cached_theta.extend_from_slice(theta);
+        self.cached = true;
+        Ok(())
     }
 }
 
@@ -138,16 +165,10 @@ impl Problem for Subspace<'_> {
         self.measured_mm.len()
     }
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
-        let y = predict(
-            self.model,
-            self.prepared,
-            self.campaign,
-            &self.errors(x),
-            None,
-        )?;
+        self.evaluate(x)?;
         for (((ri, yi), mi), w) in r
             .iter_mut()
-            .zip(&y)
+            .zip(&self.cached_y)
             .zip(&self.measured_mm)
             .zip(&self.weights)
         {
@@ -159,14 +180,7 @@ impl Problem for Subspace<'_> {
 
 impl DenseJacobian for Subspace<'_> {
     fn jacobian(&mut self, x: &[f64], mut jac: faer::MatMut<'_, f64>) -> Result<(), ModelError> {
-        let e = self.errors(x);
-        predict(
-            self.model,
-            self.prepared,
-            self.campaign,
-            &e,
-            Some(&mut self.full_jac),
-        )?;
+        self.evaluate(x)?;
         let reduced = &self.full_jac * &self.basis * 1e3;
         for c in 0..reduced.ncols() {
             for r in 0..reduced.nrows() {
@@ -273,9 +287,9 @@ pub fn identify(
         j
     };
     let mut j0 = DMatrix::zeros(m, np);
-    predict(model, &prepared, campaign, &start, Some(&mut j0))?;
+    let y0 = predict(model, &prepared, campaign, &start, Some(&mut j0))?;
     let patterns = physical_patterns(model, campaign);
-    let first = try_analyze(&weigh(j0), 1.0, &options.rank, &patterns)?;
+    let first = try_analyze(&weigh(j0.clone()), 1.0, &options.rank, &patterns)?;
     if first.rank == 0 {
         return Err(CalibError::NoInformation(
             "the identification Jacobian is zero: the readings do not depend on any installation error".into(),
@@ -289,7 +303,11 @@ pub fn identify(
         basis: first.row_space(),
         measured_mm: campaign.observations(),
         weights: weights.clone(),
-        full_jac: DMatrix::zeros(m, np),
+        // The start (theta = 0) is evaluated already.
+        full_jac: j0,
+        cached_theta: vec![0.0; first.rank],
+        cached_y: y0,
+        cached: true,
     };
     let mut theta = vec![0.0; first.rank];
     let mut r0 = vec![0.0; m];
@@ -314,8 +332,9 @@ pub fn identify(
         cpm_lm::minimize(&mut problem, &mut theta, &options.lm)?
     };
     let e_hat = problem.errors(&theta);
-    let mut jf = DMatrix::zeros(m, np);
-    let y = predict(model, &prepared, campaign, &e_hat, Some(&mut jf))?;
+    problem.evaluate(&theta)?;
+    let y = std::mem::take(&mut problem.cached_y);
+    let jf = std::mem::replace(&mut problem.full_jac, DMatrix::zeros(0, 0));
     let residuals_um: Vec<f64> = y
         .iter()
         .zip(&problem.measured_mm)

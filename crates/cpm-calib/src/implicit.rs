@@ -21,6 +21,8 @@ use crate::identifiability::{analyze, Identifiability, RankOptions};
 use crate::model::Prepared;
 use crate::{CalibError, Campaign, MeasurementModel};
 
+mod stream;
+
 /// Options of [`identify_implicit`].
 #[derive(Debug, Clone)]
 pub struct ImplicitOptions {
@@ -33,6 +35,11 @@ pub struct ImplicitOptions {
     pub lm: cpm_lm::Options,
     /// Rank thresholds for the globals.
     pub rank: RankOptions,
+    /// Accumulate the reduced (Schur) normal equations pose by pose, with no stored
+    /// Jacobian (memory linear in the poses only, parallel over the poses; Nielsen damping,
+    /// `lm.damping`, `lm.acceleration` and `lm.linear_solver` are not used). `false` runs
+    /// `cpm-lm`'s general solver on the stored sparse Jacobian. Default `true`.
+    pub streamed: bool,
 }
 
 impl Default for ImplicitOptions {
@@ -48,6 +55,7 @@ impl Default for ImplicitOptions {
                 ..cpm_lm::Options::default()
             },
             rank: RankOptions::default(),
+            streamed: true,
         }
     }
 }
@@ -93,7 +101,13 @@ fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
 struct Implicit<'a> {
     model: &'a MeasurementModel,
     campaign: &'a Campaign,
-    prepared: Prepared,
+    /// Effective link lengths of every configuration, mm.
+    lengths_mm: Vec<[f64; 6]>,
+    /// Readings taken at configuration `j`: `reading_idx[reading_ptr[j]..reading_ptr[j + 1]]`
+    /// (indices into the campaign's readings; one flat list rather than a vector per
+    /// configuration).
+    reading_ptr: Vec<usize>,
+    reading_idx: Vec<usize>,
     /// First residual row of each configuration.
     row0: Vec<usize>,
     /// Link-channel coefficients (global index, mm per unit) of configuration `j`, link `i`:
@@ -112,14 +126,23 @@ struct Implicit<'a> {
 }
 
 impl Implicit<'_> {
+    fn readings_of(&self, j: usize) -> &[usize] {
+        &self.reading_idx[self.reading_ptr[j]..self.reading_ptr[j + 1]]
+    }
+
     fn links(&self, j: usize, i: usize) -> &[(usize, f64)] {
         &self.link_coeff[self.link_ptr[6 * j + i]..self.link_ptr[6 * j + i + 1]]
     }
 
     fn pose(&self, x: &[f64], j: usize) -> (Pose, Vector3<f64>) {
+        self.pose_from(&x[6 * j..6 * j + 6], j)
+    }
+
+    /// Pose of configuration `j` from its six corrections (um, urad).
+    fn pose_from(&self, p: &[f64], j: usize) -> (Pose, Vector3<f64>) {
         let c = &self.campaign.poses[j];
-        let dt = Vector3::new(x[6 * j], x[6 * j + 1], x[6 * j + 2]) * 1e-3;
-        let dw = Vector3::new(x[6 * j + 3], x[6 * j + 4], x[6 * j + 5]) * 1e-6;
+        let dt = Vector3::new(p[0], p[1], p[2]) * 1e-3;
+        let dw = Vector3::new(p[3], p[4], p[5]) * 1e-6;
         (
             Pose::new(
                 c.position_mm + dt,
@@ -127,6 +150,82 @@ impl Implicit<'_> {
             ),
             dw,
         )
+    }
+
+    /// Residuals of configuration `j` (six closures, then its readings) for pose
+    /// corrections `p` and globals `globals` (whose joint table is `table`).
+    fn pose_residuals(
+        &self,
+        p: &[f64],
+        globals: &[f64],
+        table: &cpm_geometry::JointTable,
+        j: usize,
+        r: &mut [f64],
+    ) {
+        let (pose, _) = self.pose_from(p, j);
+        let rm = pose.rotation.matrix();
+        for (i, l) in table.links.iter().enumerate() {
+            let q = pose.position_mm + rm * l.platform_mm - l.base_mm;
+            let mut target = self.lengths_mm[j][i];
+            for &(p, a) in self.links(j, i) {
+                target += a * globals[p];
+            }
+            r[i] = (q.norm() - target) * 1e3 * self.w_enc;
+        }
+        for (t, &k) in self.readings_of(j).iter().enumerate() {
+            let rd = &self.campaign.readings[k];
+            let s = &table.sensors[rd.sensor];
+            let geometric = s.length_mm(&pose);
+            let mut y = geometric + self.sensor_corr;
+            for &(p, e, q) in &self.sensor_params[rd.sensor] {
+                y += sensor_coefficient(e, q, rd.sensor, geometric) * globals[p];
+            }
+            r[6 + t] = (y - rd.length_mm) * 1e3;
+        }
+    }
+
+    /// Sums of squared closure (unweighted) and reading residuals at `x`, and the reading
+    /// residuals in the campaign's order when `readings` is given.
+    fn summary(&self, x: &[f64], readings: Option<&mut [f64]>) -> Result<(f64, f64), CalibError> {
+        use rayon::prelude::*;
+        let g0 = 6 * self.num_poses;
+        let table = self.model.table_with(&x[g0..])?;
+        let parts: Vec<(f64, f64, Vec<f64>)> = (0..self.num_poses)
+            .collect::<Vec<_>>()
+            .par_chunks(256)
+            .map(|js| {
+                let (mut sc, mut sr) = (0.0, 0.0);
+                let mut out = Vec::new();
+                let mut r = Vec::new();
+                for &j in js {
+                    r.clear();
+                    r.resize(6 + self.readings_of(j).len(), 0.0);
+                    self.pose_residuals(&x[6 * j..6 * j + 6], &x[g0..], &table, j, &mut r);
+                    sc += r[..6].iter().map(|v| (v / self.w_enc).powi(2)).sum::<f64>();
+                    sr += r[6..].iter().map(|v| v * v).sum::<f64>();
+                    if readings.is_some() {
+                        out.extend_from_slice(&r[6..]);
+                    }
+                }
+                (sc, sr, out)
+            })
+            .collect();
+        let (mut sc, mut sr) = (0.0, 0.0);
+        let mut dst = readings;
+        for (c, (a, b, out)) in parts.into_iter().enumerate() {
+            sc += a;
+            sr += b;
+            if let Some(dst) = dst.as_deref_mut() {
+                let mut t = 0;
+                for j in 256 * c..(256 * (c + 1)).min(self.num_poses) {
+                    for &k in self.readings_of(j) {
+                        dst[k] = out[t];
+                        t += 1;
+                    }
+                }
+            }
+        }
+        Ok((sc, sr))
     }
 }
 
@@ -142,27 +241,9 @@ impl Problem for Implicit<'_> {
         let globals = &x[g0..];
         let table = self.model.table_with(globals)?;
         for j in 0..self.num_poses {
-            let (pose, _) = self.pose(x, j);
             let o = self.row0[j];
-            let rm = pose.rotation.matrix();
-            for (i, l) in table.links.iter().enumerate() {
-                let q = pose.position_mm + rm * l.platform_mm - l.base_mm;
-                let mut target = self.prepared.lengths_mm[j][i];
-                for &(p, a) in self.links(j, i) {
-                    target += a * globals[p];
-                }
-                r[o + i] = (q.norm() - target) * 1e3 * self.w_enc;
-            }
-            for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
-                let rd = &self.campaign.readings[k];
-                let s = &table.sensors[rd.sensor];
-                let geometric = s.length_mm(&pose);
-                let mut y = geometric + self.sensor_corr;
-                for &(p, e, q) in &self.sensor_params[rd.sensor] {
-                    y += sensor_coefficient(e, q, rd.sensor, geometric) * globals[p];
-                }
-                r[o + 6 + t] = (y - rd.length_mm) * 1e3;
-            }
+            let n = 6 + self.readings_of(j).len();
+            self.pose_residuals(&x[6 * j..6 * j + 6], globals, &table, j, &mut r[o..o + n]);
         }
         Ok(())
     }
@@ -185,7 +266,7 @@ impl Implicit<'_> {
                 visit(o + i, g0 + q);
             }
         }
-        for (t, &k) in self.prepared.by_pose[j].iter().enumerate() {
+        for (t, &k) in self.readings_of(j).iter().enumerate() {
             for c in 0..6 {
                 visit(o + 6 + t, 6 * j + c);
             }
@@ -231,7 +312,7 @@ impl Implicit<'_> {
                 v += 1;
             }
         }
-        for &k in &self.prepared.by_pose[j] {
+        for &k in self.readings_of(j) {
             let rd = &self.campaign.readings[k];
             let s = &table.sensors[rd.sensor];
             let sp = rm * s.platform_mm;
@@ -371,6 +452,26 @@ fn build<'a>(
             link_ptr.push(link_coeff.len());
         }
     }
+    // Only the lengths and the readings per configuration are kept, flat (the prepared
+    // campaign's pose contexts served the link coefficients only; at 10^5 poses they hold
+    // about 40 MB).
+    // (The campaign's own lists are taken out and the rest, the contexts above all,
+    // freed before the flat copies are made, each list freed as it is copied.)
+    let mut prepared = prepared;
+    let by_pose = std::mem::take(&mut prepared.by_pose);
+    let lengths = std::mem::take(&mut prepared.lengths_mm);
+    drop(prepared);
+    let lengths_mm: Vec<[f64; 6]> = lengths
+        .into_iter()
+        .map(|l| std::array::from_fn(|i| l[i]))
+        .collect();
+    let mut reading_ptr = Vec::with_capacity(np + 1);
+    let mut reading_idx = Vec::with_capacity(campaign.readings.len());
+    reading_ptr.push(0);
+    for b in by_pose {
+        reading_idx.extend_from_slice(&b);
+        reading_ptr.push(reading_idx.len());
+    }
     let sensor_params: Vec<Vec<(usize, Effect, usize)>> = (0..model.nominal.sensors.len())
         .map(|sensor| {
             blocks
@@ -387,7 +488,9 @@ fn build<'a>(
     Ok(Implicit {
         model,
         campaign,
-        prepared,
+        lengths_mm,
+        reading_ptr,
+        reading_idx,
         row0,
         link_coeff,
         link_ptr,
@@ -421,118 +524,28 @@ pub fn identify_implicit(
     options: &ImplicitOptions,
 ) -> Result<ImplicitCalibration, CalibError> {
     let mut problem = build(model, campaign, options)?;
-    let (np, ng, rows) = (problem.num_poses, problem.num_globals, problem.rows);
-    let mut lm = options.lm.clone();
-    lm.linear_solver = LinearSolver::Schur {
-        local_block_sizes: vec![6; np],
-    };
-    let mut x = vec![0.0; 6 * np + ng];
-    let reading_rms = |problem: &Implicit<'_>, r: &[f64]| {
-        let mut s2 = 0.0;
-        for j in 0..np {
-            let o = problem.row0[j] + 6;
-            s2 += r[o..o + problem.prepared.by_pose[j].len()]
-                .iter()
-                .map(|v| v * v)
-                .sum::<f64>();
-        }
-        (s2 / campaign.readings.len().max(1) as f64).sqrt()
-    };
-    let initial_reading_rms_um = {
-        let mut r0 = vec![0.0; rows];
-        problem
-            .residuals(&x, &mut r0)
-            .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
-        reading_rms(&problem, &r0)
-    };
-    let solver = cpm_lm::minimize_sparse(&mut problem, &mut x, &lm)?;
-    // Reduced information of the globals: S = sum_j (G_j^T G_j - G_j^T L_j (L_j^T L_j)^-1 L_j^T G_j).
-    let mut r = vec![0.0; rows];
-    problem
-        .residuals(&x, &mut r)
-        .map_err(|e| CalibError::invalid("implicit residuals", e.to_string()))?;
+    let (np, ng) = (problem.num_poses, problem.num_globals);
     let g0 = 6 * np;
-    let table = model.table_with(&x[g0..])?;
-    // One configuration at a time, in fixed-size buffers; only the rows that touch globals
-    // (the closures, and readings with sensor-channel effects) enter G^T G and L^T G. With
-    // A = L L^T, B^T A^-1 B = Z^T Z for Z = L^-1 B; the rows of Z are gathered (as columns)
-    // into a chunk and subtracted with one matrix product per chunk.
-    const ZCHUNK: usize = 32 * 6;
-    let mut gtg = vec![0.0; ng * ng];
-    let mut zt = faer::Mat::<f64>::zeros(ng, ZCHUNK);
-    let mut red = faer::Mat::<f64>::zeros(ng, ng);
-    let mut zcols = 0usize;
-    let flush = |red: &mut faer::Mat<f64>, zt: &faer::Mat<f64>, cols: usize| {
-        if cols > 0 {
-            let z = zt.as_ref().subcols(0, cols);
-            faer::linalg::matmul::matmul(
-                red.as_mut(),
-                faer::Accum::Add,
-                z,
-                z.transpose(),
-                -1.0,
-                faer::Par::Seq,
-            );
-        }
-    };
-    let mut entries: Vec<(usize, usize)> = Vec::new();
-    let mut values = Vec::new();
-    let mut grow: Vec<(usize, f64)> = Vec::new();
-    let mut b = vec![0.0; 6 * ng];
-    for j in 0..np {
-        entries.clear();
-        problem.visit_pose_pattern(j, &mut |r, c| entries.push((r, c)));
-        values.resize(entries.len(), 0.0);
-        problem.pose_values(&x, &table, j, &mut values);
-        let mut a = nalgebra::Matrix6::<f64>::zeros();
-        b.fill(0.0);
-        let mut q = 0;
-        while q < entries.len() {
-            let row = entries[q].0;
-            let mut l = nalgebra::Vector6::<f64>::zeros();
-            grow.clear();
-            while q < entries.len() && entries[q].0 == row {
-                let (col, val) = (entries[q].1, values[q]);
-                if col < g0 {
-                    l[col - 6 * j] += val;
-                } else {
-                    grow.push((col - g0, val));
-                }
-                q += 1;
-            }
-            a += l * l.transpose();
-            for &(c, v) in &grow {
-                for k in 0..6 {
-                    b[k * ng + c] += l[k] * v;
-                }
-                let gc = &mut gtg[c * ng..(c + 1) * ng];
-                for &(c2, v2) in &grow {
-                    gc[c2] += v * v2;
-                }
-            }
-        }
-        let Some(ch) = a.cholesky() else {
-            continue;
+    let mut x = vec![0.0; g0 + ng];
+    let (_, initial_ss) = problem.summary(&x, None)?;
+    let initial_reading_rms_um = (initial_ss / campaign.readings.len().max(1) as f64).sqrt();
+    let solver = if options.streamed {
+        stream::minimize(&problem, &mut x, &options.lm)?
+    } else {
+        let mut lm = options.lm.clone();
+        lm.linear_solver = LinearSolver::Schur {
+            local_block_sizes: vec![6; np],
         };
-        let lm = ch.l();
-        if zcols + 6 > ZCHUNK {
-            flush(&mut red, &zt, zcols);
-            zcols = 0;
-        }
-        // Row k of Z: (b_k - sum_{p<k} L_kp z_p) / L_kk.
-        for k in 0..6 {
-            for c in 0..ng {
-                let mut v = b[k * ng + c];
-                for p in 0..k {
-                    v -= lm[(k, p)] * zt[(c, zcols + p)];
-                }
-                zt[(c, zcols + k)] = v / lm[(k, k)];
-            }
-        }
-        zcols += 6;
-    }
-    flush(&mut red, &zt, zcols);
-    let s = DMatrix::<f64>::from_fn(ng, ng, |r, c| gtg[r * ng + c] + red[(r, c)]);
+        cpm_lm::minimize_sparse(&mut problem, &mut x, &lm)?
+    };
+    // Reduced information of the globals: S = sum_j (G_j^T G_j - G_j^T L_j (L_j^T L_j)^-1
+    // L_j^T G_j), accumulated pose by pose (no damping; a singular pose block is left out
+    // of the elimination).
+    let table = model.table_with(&x[g0..])?;
+    let mut no_scale = vec![0.0; g0];
+    let red = stream::reduce(&problem, &x, &table, 0.0, &mut no_scale, false, true);
+    drop(no_scale);
+    let s = DMatrix::<f64>::from_fn(ng, ng, |r, c| red.s[c * ng + r]);
     let eig = nalgebra::SymmetricEigen::new(s);
     let mut pseudo = DMatrix::<f64>::zeros(ng, ng);
     for c in 0..ng {
@@ -553,21 +566,9 @@ pub fn identify_implicit(
         .map(|k| ident.determined[k].then_some(globals[k]))
         .collect();
     let poses = (0..np).map(|j| problem.pose(&x, j).0).collect();
-    let mut sc = 0.0;
-    let mut sr = 0.0;
-    let mut nr = 0usize;
     let mut reading_residuals_um = vec![0.0; campaign.readings.len()];
-    for j in 0..np {
-        let o = problem.row0[j];
-        for i in 0..6 {
-            sc += (r[o + i] / problem.w_enc).powi(2);
-        }
-        for (t, &k) in problem.prepared.by_pose[j].iter().enumerate() {
-            sr += r[o + 6 + t].powi(2);
-            reading_residuals_um[k] = r[o + 6 + t];
-            nr += 1;
-        }
-    }
+    let (sc, sr) = problem.summary(&x, Some(&mut reading_residuals_um))?;
+    let nr = campaign.readings.len();
     Ok(ImplicitCalibration {
         std_um: ident.crlb_std_um.clone(),
         estimate_um,
@@ -623,6 +624,7 @@ pub fn identify_implicit_calibration(
             sensor_sigma_um: reference,
             lm,
             rank: options.rank,
+            streamed: true,
         },
     )?;
     let m = imp.reading_residuals_um.len();

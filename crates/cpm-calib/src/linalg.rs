@@ -41,9 +41,76 @@ pub fn thin_svd(a: &DMatrix<f64>) -> Result<ThinSvd, SvdError> {
     ))
 }
 
+/// Singular values (descending) and right singular vectors (`n x min(m, n)`) of `a`, like
+/// [`thin_svd`] without the left vectors (which the identifiability analysis does not use:
+/// for a tall Jacobian forming them costs more than the rest of the decomposition).
+pub fn svd_values_and_v(a: &DMatrix<f64>) -> Result<(Vec<f64>, DMatrix<f64>), SvdError> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::svd::{svd, svd_scratch, ComputeSvdVectors};
+    let (m, n) = a.shape();
+    if m == 0 || n == 0 {
+        return Err(SvdError::Shape { rows: m, cols: n });
+    }
+    if let Some(k) = a.iter().position(|v| !v.is_finite()) {
+        return Err(SvdError::NonFinite {
+            rows: m,
+            cols: n,
+            row: k % m + 1,
+            col: k / m + 1,
+        });
+    }
+    let e = scaling_exponent(a.iter()).unwrap_or(0);
+    let f = faer::Mat::<f64>::from_fn(m, n, |i, j| times_pow2(a[(i, j)], -e));
+    let k = m.min(n);
+    let mut s = faer::diag::Diag::<f64>::zeros(k);
+    let mut v = faer::Mat::<f64>::zeros(n, k);
+    let par = faer::get_global_parallelism();
+    let mut mem = MemBuffer::new(svd_scratch::<f64>(
+        m,
+        n,
+        ComputeSvdVectors::No,
+        ComputeSvdVectors::Thin,
+        par,
+        Default::default(),
+    ));
+    svd(
+        f.as_ref(),
+        s.as_mut(),
+        None,
+        Some(v.as_mut()),
+        par,
+        MemStack::new(&mut mem),
+        Default::default(),
+    )
+    .map_err(|_| SvdError::NoConvergence { rows: m, cols: n })?;
+    let sc = s.column_vector();
+    let sv: Vec<f64> = (0..k).map(|i| times_pow2(sc[i], e)).collect();
+    Ok((sv, DMatrix::from_fn(n, k, |i, j| v[(i, j)])))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn values_and_v_match_the_thin_svd() {
+        for (m, n) in [(7, 4), (40, 36), (3, 5)] {
+            let a = DMatrix::from_fn(m, n, |i, j| {
+                ((i * 7 + j * 3) as f64).cos() + 2.0 * (i == j) as u8 as f64
+            });
+            let (s0, _, v0) = thin_svd(&a).unwrap();
+            let (s1, v1) = svd_values_and_v(&a).unwrap();
+            for (x, y) in s0.iter().zip(&s1) {
+                assert!((x - y).abs() < 1e-12 * s0[0], "{m}x{n}: {x} vs {y}");
+            }
+            // Singular vectors up to sign (the values are distinct here).
+            for c in 0..s0.len() {
+                let d = v0.column(c).dot(&v1.column(c)).abs();
+                assert!((d - 1.0).abs() < 1e-10, "{m}x{n} column {c}: {d}");
+            }
+        }
+        assert!(svd_values_and_v(&DMatrix::from_element(2, 2, f64::NAN)).is_err());
+    }
 
     #[test]
     fn reconstructs_a_matrix() {

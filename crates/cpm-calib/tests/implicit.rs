@@ -123,3 +123,82 @@ fn implicit_jacobian_matches_finite_differences() {
     // Central differences with a relative step of 1e-4 carry ~1e-5 relative error here.
     assert!(check.is_consistent(1e-4), "{check}");
 }
+
+/// The streamed Schur accumulation (no stored Jacobian, parallel over the poses) against
+/// `cpm-lm`'s general Schur solver on the stored sparse Jacobian: the same estimates, the
+/// same Cramér-Rao bounds and residuals, with link and sensor effects and unequal numbers of
+/// readings per pose (readings dropped), across more poses than one parallel chunk holds.
+#[test]
+fn streamed_schur_matches_the_stored_jacobian_solver() {
+    let (model, mut data, _) = setup(300, &[Effect::LinkOffset, Effect::SensorScale]);
+    // Unequal blocks: drop every seventh reading.
+    let mut k = 0;
+    data.readings.retain(|_| {
+        k += 1;
+        k % 7 != 0
+    });
+    let run = |streamed: bool| {
+        identify_implicit(
+            &model,
+            &data,
+            &ImplicitOptions {
+                encoder_sigma_um: 0.5,
+                sensor_sigma_um: 3.0,
+                streamed,
+                ..ImplicitOptions::default()
+            },
+        )
+        .unwrap()
+    };
+    let (s, e) = (run(true), run(false));
+    assert!(
+        s.solver.termination.was_successful(),
+        "{}",
+        s.solver.brief()
+    );
+    assert!(
+        e.solver.termination.was_successful(),
+        "{}",
+        e.solver.brief()
+    );
+    assert_eq!(s.solver.linear_solver, "Schur complement (streamed)");
+    assert_eq!(
+        s.identifiability.num_determined(),
+        e.identifiability.num_determined()
+    );
+    assert!(s.identifiability.num_determined() > 36);
+    for k in 0..model.num_params() {
+        match (s.estimate_um[k], e.estimate_um[k]) {
+            (Some(a), Some(b)) => {
+                let sd = e.std_um[k].unwrap();
+                let sa = s.std_um[k].unwrap();
+                assert!(
+                    (a - b).abs() < 1e-4 * sd,
+                    "{k}: streamed {a} stored {b} (std {sd})"
+                );
+                assert!((sa - sd).abs() < 1e-6 * sd, "{k}: std {sa} vs {sd}");
+            }
+            (None, None) => {}
+            other => panic!("{k}: determined differently: {other:?}"),
+        }
+    }
+    assert!((s.reading_rms_um - e.reading_rms_um).abs() < 1e-6 * e.reading_rms_um);
+    assert!((s.closure_rms_um - e.closure_rms_um).abs() < 1e-4 * e.closure_rms_um + 1e-9);
+    assert_eq!(s.initial_reading_rms_um, e.initial_reading_rms_um);
+    assert_eq!(s.reading_residuals_um.len(), data.readings.len());
+    for (a, b) in s.reading_residuals_um.iter().zip(&e.reading_residuals_um) {
+        assert!((a - b).abs() < 1e-3, "{a} vs {b}");
+    }
+    // The residuals are in the campaign's order: the largest one is the same reading.
+    let argmax = |r: &[f64]| {
+        r.iter()
+            .enumerate()
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+            .unwrap()
+            .0
+    };
+    assert_eq!(
+        argmax(&s.reading_residuals_um),
+        argmax(&e.reading_residuals_um)
+    );
+}

@@ -68,6 +68,23 @@ pub fn link_forces_n(
 ) -> Result<Vec<f64>, ClearanceError> {
     let j1: DMatrix<f64> = cpm_kinematics::j1(table, pose);
     let w = platform_wrench(load, pose);
+    if j1.nrows() == 6 {
+        // Six links (the usual hexapod): the same decomposition on a fixed-size matrix, on
+        // the stack (it runs for every pose of a campaign when clearance is modelled).
+        let a = nalgebra::Matrix6::from_fn(|r, c| j1[(c, r)]);
+        let svd = a.svd(true, true);
+        let smax = svd.singular_values.max();
+        let smin = svd.singular_values.min();
+        if !(smin > smax * 1e-10) {
+            return Err(ClearanceError::Singular {
+                condition: smax / smin,
+            });
+        }
+        let t = svd.solve(&w, 0.0).map_err(|_| ClearanceError::Singular {
+            condition: f64::INFINITY,
+        })?;
+        return Ok(t.iter().copied().collect());
+    }
     let svd = j1.transpose().svd(true, true);
     let smax = svd.singular_values.max();
     let smin = svd.singular_values.min();
