@@ -5,9 +5,9 @@
 //! ([`InputError`]), e.g. `data.csv:17: field length_mm: "abc" is not a number`.
 //!
 //! ```
-//! use cpm::io::{read_data, write_readings, ReadOptions, Robot};
-//! use cpm::calib::{campaign::paper_circle, simulate, MeasurementModel, Plan, SimulationOptions};
-//! let robot = Robot::from_description(cpm::geometry::RobotDescription::paper_cubic(), "cube.toml").unwrap();
+//! use cpm_io::{read_data, write_readings, ReadOptions, Robot};
+//! use cpm_calib::{campaign::paper_circle, simulate, MeasurementModel, Plan, SimulationOptions};
+//! let robot = Robot::from_description(cpm_geometry::RobotDescription::paper_cubic(), "cube.toml").unwrap();
 //! let model = robot.model(&[]);
 //! let plan = Plan { poses: paper_circle(&robot.table.home), sensors: vec![0] };
 //! let data = simulate(&model, &vec![0.0; 36], &plan, &SimulationOptions::default()).unwrap();
