@@ -1,8 +1,36 @@
-//! File formats of the `cpm` command: measurement CSV files, pose lists, robot descriptions
-//! as calibration models, and `calibration.json`. `docs/formats.md` documents each format.
+//! File formats of `cpm` as a library: robot descriptions (TOML) as calibration models,
+//! measurement CSV files (length-sensor readings, tracker pose measurements, pose lists,
+//! actuator commands) and `calibration.json`. `docs/formats.md` and
+//! `docs/robot-description.md` document each format.
+//!
+//! A calibration program can depend on this crate alone (with `cpm-calib`) to read what the
+//! `cpm` command reads, without the command line's dependencies (clap, plotters,
+//! indicatif). The `cpm` crate re-exports it as `cpm::io`.
 //!
 //! Every reader names the file, the line and the field of the first problem it finds
-//! ([`InputError`]), e.g. `data.csv:17: field length_mm: "abc" is not a number`.
+//! ([`InputError`]), e.g. `data.csv:17: field length_mm: "abc" is not a number`; a file that
+//! cannot be read at all is a [`ReadError::Io`]. Readers stream a file row by row and stop at
+//! the first bad row.
+//!
+//! One's own robot from files: a description and a readings file (`examples/` ships a 6-6
+//! hexapod and 90 simulated readings of it), read and fitted:
+//!
+//! ```
+//! use cpm_io::{read_data_file, ReadOptions, Robot};
+//! use std::path::Path;
+//! let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+//! let robot = Robot::load(&examples.join("hexapod_66.toml")).unwrap();
+//! let data = read_data_file(&examples.join("hexapod_66_readings.csv"), &robot,
+//!                           &ReadOptions::default()).unwrap();
+//! assert_eq!(data.campaign.readings.len(), 90);
+//! assert!(data.campaign.simulated); // the file says so in its first line
+//! // The model carries the description's clearance, load and [calibration] settings.
+//! let model = robot.model(&[]);
+//! let cal = cpm_calib::identify(&model, &data.campaign, &Default::default()).unwrap();
+//! println!("{}", cal.identifiability.summary());
+//! ```
+//!
+//! Writing and reading back, and what a bad row gives:
 //!
 //! ```
 //! use cpm_io::{read_data, write_readings, ReadOptions, Robot};
