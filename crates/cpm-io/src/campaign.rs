@@ -592,9 +592,28 @@ fn link_reading_columns(t: &Header, n: usize) -> Result<bool, InputError> {
     Ok(true)
 }
 
+/// The names of the first `reading_k` columns (no name made for every row).
+const READING_NAMES: [&str; 12] = [
+    "reading_1",
+    "reading_2",
+    "reading_3",
+    "reading_4",
+    "reading_5",
+    "reading_6",
+    "reading_7",
+    "reading_8",
+    "reading_9",
+    "reading_10",
+    "reading_11",
+    "reading_12",
+];
+
 fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>, InputError> {
     (1..=n)
-        .map(|k| t.number(row, &format!("reading_{k}")))
+        .map(|k| match READING_NAMES.get(k - 1) {
+            Some(name) => t.number(row, name),
+            None => t.number(row, &format!("reading_{k}")),
+        })
         .collect()
 }
 

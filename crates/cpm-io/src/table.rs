@@ -372,7 +372,13 @@ impl Header {
 
     /// Index of a column.
     pub fn column(&self, name: &str) -> Option<usize> {
-        self.index.get(name).copied()
+        // A few columns: comparing the names is quicker than hashing one (a reader looks up
+        // a dozen columns in every row).
+        if self.headers.len() <= 32 {
+            self.headers.iter().position(|h| h == name)
+        } else {
+            self.index.get(name).copied()
+        }
     }
 
     /// Checks the header: every name in `required` present, every column known (in
