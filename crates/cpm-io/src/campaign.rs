@@ -245,24 +245,49 @@ fn raw_pose(t: &Header, row: &Row, o: Orientation) -> Result<RawPose, InputError
         .chain(orientation_columns(o))
     {
         let v = t.number(row, c)?;
-        if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
-            return Err(t.err(
-                row,
-                c,
-                format!("{v:e} mm is implausibly far (over 1 km): positions are in mm"),
-            ));
-        }
-        if c.ends_with("_deg") && v.abs() > 360.0 {
-            return Err(t.err(
-                row,
-                c,
-                format!("{v} degrees: an angle is within [-360, 360] (angles are in degrees)"),
-            ));
-        }
+        check_pose_cell(t, row, c, v)?;
         raw.cells[raw.len] = (*c, v);
         raw.len += 1;
     }
     Ok(raw)
+}
+
+/// [`raw_pose`] with the columns looked up once: `(name, column)` of each pose column.
+fn raw_pose_at(
+    t: &Header,
+    row: &Row,
+    columns: &[(&'static str, usize)],
+) -> Result<RawPose, InputError> {
+    let mut raw = RawPose {
+        cells: [("", 0.0); 7],
+        len: 0,
+    };
+    for &(c, col) in columns {
+        let v = t.number_at(row, col)?;
+        check_pose_cell(t, row, c, v)?;
+        raw.cells[raw.len] = (c, v);
+        raw.len += 1;
+    }
+    Ok(raw)
+}
+
+/// Positions within 1 km, angles within [-360, 360] degrees.
+fn check_pose_cell(t: &Header, row: &Row, c: &str, v: f64) -> Result<(), InputError> {
+    if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
+        return Err(t.err(
+            row,
+            c,
+            format!("{v:e} mm is implausibly far (over 1 km): positions are in mm"),
+        ));
+    }
+    if c.ends_with("_deg") && v.abs() > 360.0 {
+        return Err(t.err(
+            row,
+            c,
+            format!("{v} degrees: an angle is within [-360, 360] (angles are in degrees)"),
+        ));
+    }
+    Ok(())
 }
 
 /// The pose the numbers of a row make (a quaternion must have unit norm).
@@ -717,14 +742,30 @@ fn read_readings_table<R: Read>(
         line: 0,
         fields: Vec::new(),
     };
+    // The columns, looked up once (check_columns and orientation made sure they exist).
+    let col = |name: &str| t.column(name).expect("a checked column");
+    let (pose_col, sensor_col, length_col) = (col("pose"), col("sensor"), col("length_mm"));
+    let (time_col, temperature_col, simulated_col) = (
+        t.column("time_s"),
+        t.column("temperature_c"),
+        t.column("simulated"),
+    );
+    let pose_columns: Vec<(&'static str, usize)> = ["x_mm", "y_mm", "z_mm"]
+        .iter()
+        .chain(orientation_columns(o))
+        .map(|c| (*c, col(c)))
+        .collect();
+    // The pose cells of the previous row as written: a row of the same pose that repeats
+    // them exactly has the same numbers, already checked.
+    let mut previous_cells: Vec<String> = Vec::new();
     while t.next_row_into(&mut next)? {
         let row = &next;
         let t: &Header = t;
         if reading_lines.len() >= options.max_rows {
             return Err(too_many_rows(t, row, options.max_rows));
         }
-        let label = t.required_text(row, "pose")?;
-        let sensor_name = t.required_text(row, "sensor")?;
+        let label = t.required_text_at(row, pose_col)?;
+        let sensor_name = t.required_text_at(row, sensor_col)?;
         let sensor = robot.table.sensor_index(sensor_name).ok_or_else(|| {
             t.err(
                 row,
@@ -736,20 +777,35 @@ fn read_readings_table<R: Read>(
                 ),
             )
         })?;
-        let raw = raw_pose(t, row, o)?;
+        let same_as_previous = previous.is_some_and(|j| labels[j] == label)
+            && pose_columns
+                .iter()
+                .zip(&previous_cells)
+                .all(|((_, c), p)| row.fields[*c] == *p);
         let known = match previous {
             Some(j) if labels[j] == label => Some(j),
             _ => by_label.get(label).copied(),
         };
-        // A repeated pose that agrees with its first row is that row's pose: not made again.
-        let pose = match known {
-            Some(j) if raw.agrees(&entries[j].raw) => None,
-            _ => Some(pose_of(t, row, o, &raw)?),
+        let (raw, pose) = if same_as_previous {
+            // The previous row's pose, cell for cell: it agreed with its pose's first row.
+            let j = known.expect("the previous row's pose");
+            (entries[j].raw, None)
+        } else {
+            let raw = raw_pose_at(t, row, &pose_columns)?;
+            // A repeated pose that agrees with its first row is that row's pose: not made
+            // again.
+            let pose = match known {
+                Some(j) if raw.agrees(&entries[j].raw) => None,
+                _ => Some(pose_of(t, row, o, &raw)?),
+            };
+            previous_cells.clear();
+            previous_cells.extend(pose_columns.iter().map(|(_, c)| row.fields[*c].clone()));
+            (raw, pose)
         };
-        let length_mm = t.number(row, "length_mm")?;
-        let time_s = t.optional_number(row, "time_s")?;
-        let temperature_c = t.optional_number(row, "temperature_c")?;
-        if t.optional_bool(row, "simulated")? == Some(true) {
+        let length_mm = t.number_at(row, length_col)?;
+        let time_s = t.optional_number_at(row, time_col)?;
+        let temperature_c = t.optional_number_at(row, temperature_col)?;
+        if t.optional_bool_at(row, simulated_col)? == Some(true) {
             campaign.simulated = true;
         }
         let link = if logged {

@@ -426,9 +426,8 @@ impl Header {
 
     /// A required text field: present and non-empty.
     pub fn required_text<'a>(&self, row: &'a Row, name: &str) -> Result<&'a str, InputError> {
-        match self.text(row, name) {
-            Some(t) if !t.is_empty() => Ok(t),
-            Some(_) => Err(self.err(row, name, "missing value")),
+        match self.column(name) {
+            Some(col) => self.required_text_at(row, col),
             None => Err(InputError::field(
                 &self.file,
                 self.header_line,
@@ -440,36 +439,72 @@ impl Header {
 
     /// A required finite number.
     pub fn number(&self, row: &Row, name: &str) -> Result<f64, InputError> {
-        let t = self.required_text(row, name)?;
-        parse_number(t).map_err(|m| self.err(row, name, m))
+        match self.column(name) {
+            Some(col) => self.number_at(row, col),
+            None => self.required_text(row, name).map(|_| f64::NAN),
+        }
     }
 
     /// An optional finite number: `None` when the column is absent or the cell empty.
     pub fn optional_number(&self, row: &Row, name: &str) -> Result<Option<f64>, InputError> {
-        match self.text(row, name) {
-            None | Some("") => Ok(None),
-            Some(t) => parse_number(t)
-                .map(Some)
-                .map_err(|m| self.err(row, name, m)),
-        }
+        self.optional_number_at(row, self.column(name))
     }
 
     /// An optional boolean (`true`/`false`, `yes`/`no`, `1`/`0`).
     pub fn optional_bool(&self, row: &Row, name: &str) -> Result<Option<bool>, InputError> {
-        match self.text(row, name) {
+        self.optional_bool_at(row, self.column(name))
+    }
+
+    /// [`required_text`](Self::required_text) of column `col` (an index from
+    /// [`column`](Self::column): a reader that looks up its columns once).
+    pub fn required_text_at<'a>(&self, row: &'a Row, col: usize) -> Result<&'a str, InputError> {
+        match row.fields.get(col).map(String::as_str) {
+            Some(t) if !t.is_empty() => Ok(t),
+            _ => Err(self.err(row, &self.headers[col], "missing value")),
+        }
+    }
+
+    /// [`number`](Self::number) of column `col`.
+    pub fn number_at(&self, row: &Row, col: usize) -> Result<f64, InputError> {
+        let t = self.required_text_at(row, col)?;
+        parse_number(t).map_err(|m| self.err(row, &self.headers[col], m))
+    }
+
+    /// [`optional_number`](Self::optional_number) of column `col` (`None`: no such column).
+    pub fn optional_number_at(
+        &self,
+        row: &Row,
+        col: Option<usize>,
+    ) -> Result<Option<f64>, InputError> {
+        let Some(col) = col else { return Ok(None) };
+        match row.fields.get(col).map(String::as_str) {
             None | Some("") => Ok(None),
-            Some(t) => match t.to_ascii_lowercase().as_str() {
-                "true" | "yes" | "1" => Ok(Some(true)),
-                "false" | "no" | "0" => Ok(Some(false)),
-                _ => Err(self.err(
-                    row,
-                    name,
-                    format!(
-                        "{:?} is not a boolean (true/false, yes/no, 1/0)",
-                        shorten(t)
-                    ),
-                )),
-            },
+            Some(t) => parse_number(t)
+                .map(Some)
+                .map_err(|m| self.err(row, &self.headers[col], m)),
+        }
+    }
+
+    /// [`optional_bool`](Self::optional_bool) of column `col` (`None`: no such column).
+    pub fn optional_bool_at(
+        &self,
+        row: &Row,
+        col: Option<usize>,
+    ) -> Result<Option<bool>, InputError> {
+        let Some(col) = col else { return Ok(None) };
+        let name = &self.headers[col];
+        match row.fields.get(col).map(String::as_str) {
+            None | Some("") => Ok(None),
+            Some(t) if t.eq_ignore_ascii_case("true") || t.eq_ignore_ascii_case("yes") || t == "1" => Ok(Some(true)),
+            Some(t) if t.eq_ignore_ascii_case("false") || t.eq_ignore_ascii_case("no") || t == "0" => Ok(Some(false)),
+            Some(t) => Err(self.err(
+                row,
+                name,
+                format!(
+                    "{:?} is not a boolean (true/false, yes/no, 1/0)",
+                    shorten(t)
+                ),
+            )),
         }
     }
 

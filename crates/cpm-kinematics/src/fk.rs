@@ -43,7 +43,22 @@ pub struct ForwardReport {
 
 /// 2-norm condition number of a 6x6 matrix (infinite when it is exactly singular); an
 /// error when an entry is not finite or the SVD fails (see [`crate::linalg`]).
+///
+/// nalgebra's SVD of the fixed-size matrix, several times faster than the general one
+/// (forward kinematics over a long step and the reachability check of every pose of a
+/// 10^6-row file call it); the general, exactly scaled one ([`crate::linalg`]) when that does
+/// not converge or the matrix is so large or small that it could overflow.
 pub fn condition_number(m: &Matrix6<f64>) -> Result<f64, SvdError> {
+    let largest = m.amax();
+    if m.iter().all(|v| v.is_finite()) && (1e-100..1e100).contains(&largest) {
+        if let Some(svd) = m.try_svd(false, false, f64::EPSILON, 10_000) {
+            let sv = svd.singular_values;
+            let (max, min) = (sv.max(), sv.min());
+            if max.is_finite() && min >= 0.0 {
+                return Ok(if min > 0.0 { max / min } else { f64::INFINITY });
+            }
+        }
+    }
     let d = DMatrix::from_column_slice(6, 6, m.as_slice());
     crate::linalg::condition_number(&d)
 }

@@ -79,23 +79,16 @@ const PATH_SAMPLES: usize = 32;
 /// finite (a link of zero length at a finite pose); an error when J1 has fewer than six
 /// rows or the SVD fails on it.
 ///
-/// Six links (J1 square, finite) take nalgebra's SVD of the fixed-size 6 x 6 matrix, several
-/// times faster than the general one (reading a 10^6-row file checks tens of thousands of
-/// poses); other shapes, and the rare matrix on which it does not converge, take
+/// Six links take [`crate::fk::condition_number`] (the fixed-size SVD), other shapes
 /// [`crate::linalg::condition_number`].
 pub fn j1_condition(table: &JointTable, pose: &Pose) -> Result<f64, SvdError> {
     let j = j1(table, pose);
-    if j.shape() == (6, 6) && j.iter().all(|v| v.is_finite()) {
-        let m = nalgebra::Matrix6::from_iterator(j.iter().copied());
-        if let Some(svd) = m.try_svd(false, false, f64::EPSILON, 10_000) {
-            let sv = svd.singular_values;
-            let (max, min) = (sv.max(), sv.min());
-            if max.is_finite() && min >= 0.0 {
-                return Ok(if min > 0.0 { max / min } else { f64::INFINITY });
-            }
-        }
-    }
-    match crate::linalg::condition_number(&j) {
+    let c = if j.shape() == (6, 6) {
+        crate::fk::condition_number(&nalgebra::Matrix6::from_iterator(j.iter().copied()))
+    } else {
+        crate::linalg::condition_number(&j)
+    };
+    match c {
         Err(SvdError::NonFinite { .. }) if pose.is_finite() => Ok(f64::INFINITY),
         other => other,
     }
