@@ -189,10 +189,19 @@ pub fn reachable_at(
         return Err(Unreachable::Invalid);
     }
     within_length_limits(table, pose)?;
-    let c = j1_condition(table, pose).map_err(Unreachable::Svd)?;
-    let acceptable = c <= max_condition; // false for NaN
-    if !acceptable {
-        return Err(Unreachable::NearSingular { condition: c });
+    // The condition number (an SVD) only when a cheap upper bound of it exceeds the limit.
+    let j = j1(table, pose);
+    let surely_acceptable = j.shape() == (6, 6)
+        && crate::fk::condition_at_most(
+            &nalgebra::Matrix6::from_iterator(j.iter().copied()),
+            max_condition,
+        );
+    if !surely_acceptable {
+        let c = j1_condition(table, pose).map_err(Unreachable::Svd)?;
+        let acceptable = c <= max_condition; // false for NaN
+        if !acceptable {
+            return Err(Unreachable::NearSingular { condition: c });
+        }
     }
     let lengths = inverse_lengths(table, pose);
     let radius_mm = table

@@ -130,6 +130,16 @@ proptest! {
         let pose = Pose::from_xyz_rpy(x, y, z, r, p, w);
         let fast = j1_condition(&t, &pose).unwrap();
         let general = cpm_kinematics::linalg::condition_number(&j1(&t, &pose)).unwrap();
+        // The cheap bound never accepts what the condition number refuses, and is tight to
+        // a factor 6.
+        let m = nalgebra::Matrix6::from_iterator(j1(&t, &pose).iter().copied());
+        for limit in [general * 0.999, general * 1.001, general * 6.001, 1e10] {
+            let sure = cpm_kinematics::fk::condition_at_most(&m, limit);
+            prop_assert!(!sure || general <= limit * (1.0 + 1e-9), "{limit} {general}");
+            if limit >= general * 6.001 && general < 1e8 {
+                prop_assert!(sure, "{limit} {general}");
+            }
+        }
         if general < 1e12 {
             prop_assert!((fast / general - 1.0).abs() < 1e-9 * general.max(1.0), "{fast} vs {general}");
         } else {
