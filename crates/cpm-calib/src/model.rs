@@ -138,7 +138,11 @@ impl MeasurementModel {
             .clearance
             .as_ref()
             .map_or_else(ClearanceModel::none, ClearanceModel::from);
-        m.load = description.load.as_ref().map(Load::from).unwrap_or_default();
+        m.load = description
+            .load
+            .as_ref()
+            .map(Load::from)
+            .unwrap_or_default();
         if let Some(c) = &description.calibration {
             let s = &mut m.effect_settings;
             s.screw_lead_mm = c.screw_lead_mm.unwrap_or(s.screw_lead_mm);

@@ -25,8 +25,7 @@ fn readings_text(robot: &Robot, poses: usize) -> String {
         sensors: (0..16).collect(),
     };
     let truth = InstallationErrors::paper_table2().to_vec_um();
-    let data =
-        simulate(&model, &truth, &plan, &SimulationOptions::default()).expect("simulate");
+    let data = simulate(&model, &truth, &plan, &SimulationOptions::default()).expect("simulate");
     write_readings(&data, robot, "benchmark")
 }
 
@@ -50,8 +49,13 @@ fn readings(c: &mut Criterion) {
         let rows = poses * 16;
         group.bench_with_input(BenchmarkId::from_parameter(rows), &text, |b, text| {
             b.iter(|| {
-                let d = read_data(black_box(text), "readings.csv", &robot, &ReadOptions::default())
-                    .expect("read");
+                let d = read_data(
+                    black_box(text),
+                    "readings.csv",
+                    &robot,
+                    &ReadOptions::default(),
+                )
+                .expect("read");
                 assert_eq!(d.campaign.readings.len(), rows);
                 d
             })

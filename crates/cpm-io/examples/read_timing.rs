@@ -25,7 +25,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             sensors: (0..16).collect(),
         };
         let truth = InstallationErrors::paper_table2().to_vec_um();
-        let data = simulate(&robot.model(&[]), &truth, &plan, &SimulationOptions::default())?;
+        let data = simulate(
+            &robot.model(&[]),
+            &truth,
+            &plan,
+            &SimulationOptions::default(),
+        )?;
         std::fs::write(&path, write_readings(&data, &robot, "read_timing"))?;
     }
     let bytes = std::fs::metadata(&path)?.len();

@@ -495,8 +495,16 @@ impl Header {
         let name = &self.headers[col];
         match row.fields.get(col).map(String::as_str) {
             None | Some("") => Ok(None),
-            Some(t) if t.eq_ignore_ascii_case("true") || t.eq_ignore_ascii_case("yes") || t == "1" => Ok(Some(true)),
-            Some(t) if t.eq_ignore_ascii_case("false") || t.eq_ignore_ascii_case("no") || t == "0" => Ok(Some(false)),
+            Some(t)
+                if t.eq_ignore_ascii_case("true") || t.eq_ignore_ascii_case("yes") || t == "1" =>
+            {
+                Ok(Some(true))
+            }
+            Some(t)
+                if t.eq_ignore_ascii_case("false") || t.eq_ignore_ascii_case("no") || t == "0" =>
+            {
+                Ok(Some(false))
+            }
             Some(t) => Err(self.err(
                 row,
                 name,
