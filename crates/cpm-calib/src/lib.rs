@@ -22,6 +22,41 @@
 //! assert!(cal.identifiability.rank < 36);
 //! assert!(cal.estimate_um.iter().all(|e| e.is_none()));
 //! ```
+//!
+//! # One's own robot from files
+//!
+//! A robot description (`docs/robot-description.md`) gives the model with the clearance and
+//! load it declares ([`MeasurementModel::from_description`];
+//! [`MeasurementModel::with_paper_clearance`] is the paper's 10 um and assumed load). The
+//! `cpm-io` crate reads the measurement files (`docs/formats.md`): here the 90 simulated
+//! readings of the 6-6 hexapod that `examples/` ships.
+//!
+//! ```
+//! use cpm_calib::{identifiability, identify, IdentifyOptions, MeasurementModel, RankOptions};
+//! use cpm_geometry::RobotDescription;
+//! use std::path::Path;
+//!
+//! let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+//! let description = RobotDescription::load(examples.join("hexapod_66.toml"))?;
+//! let model = MeasurementModel::from_description(&description)?;
+//! assert_eq!(model.load.platform_mass_kg, 10.0); // as declared, not the paper's 20 kg
+//!
+//! let robot = cpm_io::Robot::from_description(description, "hexapod_66.toml")?;
+//! let data = cpm_io::read_data_file(&examples.join("hexapod_66_readings.csv"), &robot,
+//!                                   &cpm_io::ReadOptions::default())?;
+//! assert_eq!(robot.model(&[]), model); // cpm-io builds the same model
+//!
+//! // What the campaign can determine (Cramér-Rao bounds per um of sensor noise) ...
+//! let before = identifiability(&model, &data.campaign, 1.0, &RankOptions::default())?;
+//! println!("{}", before.summary());
+//! // ... and the fit.
+//! let cal = identify(&model, &data.campaign, &IdentifyOptions::default())?;
+//! println!("solver: {}", cal.solver.brief());
+//! println!("residual RMS {:.2} um; {} of {} parameters determined", cal.residual_rms_um,
+//!          cal.estimate_um.iter().flatten().count(), model.num_params());
+//! assert!(cal.simulated);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 

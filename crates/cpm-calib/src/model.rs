@@ -63,8 +63,29 @@ pub struct Block {
 }
 
 impl MeasurementModel {
-    /// The model of a nominal table with the paper's clearance (10 um) and the default load.
+    /// The model of a nominal table with the paper's example clearance and load: the same as
+    /// [`with_paper_clearance`](Self::with_paper_clearance), which says so in its name.
+    ///
+    /// It assumes a 10 um clearance at every joint (hard sign rule) and a 20 kg platform with
+    /// its centre of mass 100 mm below the platform frame. For one's own machine use
+    /// [`from_description`](Self::from_description) (the clearance and load its description
+    /// declares), or set [`clearance`](Self::clearance) and [`load`](Self::load).
     pub fn new(nominal: JointTable) -> Self {
+        Self::with_paper_clearance(nominal)
+    }
+
+    /// The model of a nominal table with the paper's example clearance and load: a 10 um
+    /// clearance at every joint with the paper's hard sign rule ([`ClearanceModel::default`]),
+    /// the assumed 20 kg platform load ([`Load::default`]), exact forward kinematics, no
+    /// effects beside the installation errors.
+    ///
+    /// ```
+    /// use cpm_calib::MeasurementModel;
+    /// let m = MeasurementModel::with_paper_clearance(cpm_geometry::JointTable::paper_cubic());
+    /// assert_eq!(m.clearance.radius_um, 10.0);
+    /// assert_eq!(m.load.platform_mass_kg, 20.0);
+    /// ```
+    pub fn with_paper_clearance(nominal: JointTable) -> Self {
         Self {
             nominal,
             clearance: ClearanceModel::default(),
@@ -76,6 +97,69 @@ impl MeasurementModel {
             effect_settings: EffectSettings::default(),
             known_effects: Vec::new(),
         }
+    }
+
+    /// The model of a robot description: its joints (with its `[installation_errors_um]`
+    /// applied when it has that table), sensors and home pose; its `[clearance]` (no clearance
+    /// without that table) and `[load]` (the default [`Load`] without it); the effect settings
+    /// and known effect values of its `[calibration]`. No effect is estimated: set
+    /// [`effects`](Self::effects) for that.
+    ///
+    /// Errors: an invalid description ([`CalibError::Geometry`]) or an unknown or wrongly
+    /// sized known effect ([`CalibError::Invalid`]).
+    ///
+    /// ```
+    /// use cpm_calib::MeasurementModel;
+    /// use cpm_geometry::RobotDescription;
+    /// // One's own machine: examples/hexapod_66.toml declares its clearance and load.
+    /// let d = RobotDescription::load("../../examples/hexapod_66.toml").unwrap();
+    /// let m = MeasurementModel::from_description(&d).unwrap();
+    /// let c = d.clearance.unwrap();
+    /// assert_eq!(m.clearance.radius_um, c.radius_um);
+    /// assert_eq!(m.load.platform_mass_kg, d.load.unwrap().platform_mass_kg);
+    /// assert_eq!(m.nominal.num_links(), 6);
+    /// // Without a [clearance] table there is none (not the paper's 10 um).
+    /// let mut bare = d.clone();
+    /// bare.clearance = None;
+    /// assert_eq!(MeasurementModel::from_description(&bare).unwrap().clearance.radius_um, 0.0);
+    /// ```
+    pub fn from_description(
+        description: &cpm_geometry::RobotDescription,
+    ) -> Result<Self, CalibError> {
+        let nominal = description.joint_table()?;
+        let table = match description.installation_errors()? {
+            Some(e) => e.apply(&nominal)?,
+            None => nominal,
+        };
+        let mut m = Self::with_paper_clearance(table);
+        m.clearance = description
+            .clearance
+            .as_ref()
+            .map_or_else(ClearanceModel::none, ClearanceModel::from);
+        m.load = description
+            .load
+            .as_ref()
+            .map(Load::from)
+            .unwrap_or_default();
+        if let Some(c) = &description.calibration {
+            let s = &mut m.effect_settings;
+            s.screw_lead_mm = c.screw_lead_mm.unwrap_or(s.screw_lead_mm);
+            s.reference_temperature_c = c
+                .reference_temperature_c
+                .unwrap_or(s.reference_temperature_c);
+            s.nonlinearity_scale_mm = c.nonlinearity_scale_mm.unwrap_or(s.nonlinearity_scale_mm);
+            for (name, values) in &c.known_effects {
+                let effect = Effect::parse(name).map_err(|why| {
+                    CalibError::invalid(format!("calibration.known_effects.{name}"), why)
+                })?;
+                m.known_effects.push(KnownEffect {
+                    effect,
+                    values: values.clone(),
+                });
+            }
+            m.check_known_effects()?;
+        }
+        Ok(m)
     }
 
     /// Checks [`known_effects`](Self::known_effects): one entry per effect, each with as many

@@ -55,6 +55,23 @@ impl Default for ClearanceModel {
     }
 }
 
+impl From<&cpm_geometry::description::ClearanceSpec> for ClearanceModel {
+    /// The clearance of a robot description's `[clearance]` table: its radius, the hard sign
+    /// rule when `smooth_force_n` is 0 and the smooth one of that width otherwise.
+    fn from(spec: &cpm_geometry::description::ClearanceSpec) -> Self {
+        Self {
+            radius_um: spec.radius_um,
+            rule: if spec.smooth_force_n > 0.0 {
+                SignRule::Smooth {
+                    force_scale_n: spec.smooth_force_n,
+                }
+            } else {
+                SignRule::Hard
+            },
+        }
+    }
+}
+
 impl ClearanceModel {
     /// No clearance.
     pub fn none() -> Self {

@@ -24,6 +24,21 @@ pub struct Load {
     pub external_moment_nmm: Vector3<f64>,
 }
 
+impl From<&cpm_geometry::description::LoadSpec> for Load {
+    /// The load of a robot description's `[load]` table, field by field.
+    fn from(spec: &cpm_geometry::description::LoadSpec) -> Self {
+        Self {
+            platform_mass_kg: spec.platform_mass_kg,
+            platform_com_mm: Vector3::from(spec.platform_com_mm),
+            payload_mass_kg: spec.payload_mass_kg,
+            payload_com_mm: Vector3::from(spec.payload_com_mm),
+            gravity_mm_s2: Vector3::from(spec.gravity_mm_s2),
+            external_force_n: Vector3::from(spec.external_force_n),
+            external_moment_nmm: Vector3::from(spec.external_moment_nmm),
+        }
+    }
+}
+
 impl Default for Load {
     fn default() -> Self {
         Self {

@@ -43,9 +43,35 @@ pub struct ForwardReport {
 
 /// 2-norm condition number of a 6x6 matrix (infinite when it is exactly singular); an
 /// error when an entry is not finite or the SVD fails (see [`crate::linalg`]).
+///
+/// nalgebra's SVD of the fixed-size matrix, several times faster than the general one
+/// (forward kinematics over a long step and the reachability check of every pose of a
+/// 10^6-row file call it); the general, exactly scaled one ([`crate::linalg`]) when that does
+/// not converge or the matrix is so large or small that it could overflow.
 pub fn condition_number(m: &Matrix6<f64>) -> Result<f64, SvdError> {
+    let largest = m.amax();
+    if m.iter().all(|v| v.is_finite()) && (1e-100..1e100).contains(&largest) {
+        if let Some(svd) = m.try_svd(false, false, f64::EPSILON, 10_000) {
+            let sv = svd.singular_values;
+            let (max, min) = (sv.max(), sv.min());
+            if max.is_finite() && min >= 0.0 {
+                return Ok(if min > 0.0 { max / min } else { f64::INFINITY });
+            }
+        }
+    }
     let d = DMatrix::from_column_slice(6, 6, m.as_slice());
     crate::linalg::condition_number(&d)
+}
+
+/// True when the 2-norm condition number of `m` is certainly at most `bound`:
+/// `|m|_F |m^-1|_F` bounds it from above (and is at most 6 times it), at the cost of an
+/// inverse rather than an SVD. False when that bound exceeds `bound` (the condition number
+/// may still be below: compute it), or `m` is singular or not finite.
+pub fn condition_at_most(m: &Matrix6<f64>, bound: f64) -> bool {
+    let Some(inv) = m.try_inverse() else {
+        return false;
+    };
+    m.norm() * inv.norm() <= bound // false for NaN
 }
 
 /// A 6x6 matrix as rows, for the allocation-free solver.
@@ -237,7 +263,17 @@ pub fn forward(
         let scale = (options.max_step_mm / dt.norm().max(1e-300))
             .min(options.max_step_rad / dw.norm().max(1e-300))
             .min(1.0);
-        if scale < 1.0 {
+        // The condition number only when an upper bound of it (cheap) could exceed the limit:
+        // the same decision, without an SVD at every long step.
+        let surely_acceptable = || {
+            let m = Matrix6::from_fn(|i, j| jac[i][j]);
+            if n == 6 {
+                condition_at_most(&m, options.max_condition)
+            } else {
+                condition_at_most(&m, options.max_condition * options.max_condition)
+            }
+        };
+        if scale < 1.0 && !surely_acceptable() {
             let c = reported_condition(&jac, n)?;
             let acceptable = c <= options.max_condition; // false for NaN
             if !acceptable {

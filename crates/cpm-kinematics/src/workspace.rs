@@ -78,8 +78,17 @@ const PATH_SAMPLES: usize = 32;
 /// Condition number (2-norm) of J1 at `pose`; infinite when J1 is exactly singular or not
 /// finite (a link of zero length at a finite pose); an error when J1 has fewer than six
 /// rows or the SVD fails on it.
+///
+/// Six links take [`crate::fk::condition_number`] (the fixed-size SVD), other shapes
+/// [`crate::linalg::condition_number`].
 pub fn j1_condition(table: &JointTable, pose: &Pose) -> Result<f64, SvdError> {
-    match crate::linalg::condition_number(&j1(table, pose)) {
+    let j = j1(table, pose);
+    let c = if j.shape() == (6, 6) {
+        crate::fk::condition_number(&nalgebra::Matrix6::from_iterator(j.iter().copied()))
+    } else {
+        crate::linalg::condition_number(&j)
+    };
+    match c {
         Err(SvdError::NonFinite { .. }) if pose.is_finite() => Ok(f64::INFINITY),
         other => other,
     }
@@ -180,10 +189,19 @@ pub fn reachable_at(
         return Err(Unreachable::Invalid);
     }
     within_length_limits(table, pose)?;
-    let c = j1_condition(table, pose).map_err(Unreachable::Svd)?;
-    let acceptable = c <= max_condition; // false for NaN
-    if !acceptable {
-        return Err(Unreachable::NearSingular { condition: c });
+    // The condition number (an SVD) only when a cheap upper bound of it exceeds the limit.
+    let j = j1(table, pose);
+    let surely_acceptable = j.shape() == (6, 6)
+        && crate::fk::condition_at_most(
+            &nalgebra::Matrix6::from_iterator(j.iter().copied()),
+            max_condition,
+        );
+    if !surely_acceptable {
+        let c = j1_condition(table, pose).map_err(Unreachable::Svd)?;
+        let acceptable = c <= max_condition; // false for NaN
+        if !acceptable {
+            return Err(Unreachable::NearSingular { condition: c });
+        }
     }
     let lengths = inverse_lengths(table, pose);
     let radius_mm = table

@@ -118,6 +118,34 @@ proptest! {
         let c = j1_condition(&t, &p).unwrap();
         prop_assert!((c * c - c2).abs() < 1e-6 * c2);
     }
+
+    #[test]
+    fn condition_of_j1_agrees_with_the_general_svd(
+        x in -300.0..300.0f64, y in -300.0..300.0f64, z in -100.0..900.0f64,
+        r in -1.5..1.5f64, p in -1.5..1.5f64, w in -3.1..3.1f64, hexapod in any::<bool>(),
+    ) {
+        // j1_condition takes nalgebra's fixed-size SVD for six links; the faer one (exactly
+        // scaled) is the reference, over poses far and near singular alike.
+        let t = if hexapod { JointTable::hexapod_66() } else { JointTable::paper_cubic() };
+        let pose = Pose::from_xyz_rpy(x, y, z, r, p, w);
+        let fast = j1_condition(&t, &pose).unwrap();
+        let general = cpm_kinematics::linalg::condition_number(&j1(&t, &pose)).unwrap();
+        // The cheap bound never accepts what the condition number refuses, and is tight to
+        // a factor 6.
+        let m = nalgebra::Matrix6::from_iterator(j1(&t, &pose).iter().copied());
+        for limit in [general * 0.999, general * 1.001, general * 6.001, 1e10] {
+            let sure = cpm_kinematics::fk::condition_at_most(&m, limit);
+            prop_assert!(!sure || general <= limit * (1.0 + 1e-9), "{limit} {general}");
+            if limit >= general * 6.001 && general < 1e8 {
+                prop_assert!(sure, "{limit} {general}");
+            }
+        }
+        if general < 1e12 {
+            prop_assert!((fast / general - 1.0).abs() < 1e-9 * general.max(1.0), "{fast} vs {general}");
+        } else {
+            prop_assert!(fast > 1e10, "{fast} vs {general}");
+        }
+    }
 }
 
 #[test]

@@ -13,10 +13,9 @@
 use std::path::Path;
 
 use cpm_calib::{Effect, EffectSettings, KnownEffect, MeasurementModel};
-use cpm_clearance::{ClearanceModel, Load, SignRule};
+use cpm_clearance::{ClearanceModel, Load};
 use cpm_geometry::description::{CalibrationSpec, RobotDescription};
 use cpm_geometry::{InstallationErrors, JointTable};
-use nalgebra::Vector3;
 
 use super::{read_text, InputError, ReadError};
 
@@ -186,16 +185,7 @@ impl Robot {
     /// The joint clearance of the description; none without a `[clearance]` table.
     pub fn clearance(&self) -> ClearanceModel {
         match &self.description.clearance {
-            Some(c) => ClearanceModel {
-                radius_um: c.radius_um,
-                rule: if c.smooth_force_n > 0.0 {
-                    SignRule::Smooth {
-                        force_scale_n: c.smooth_force_n,
-                    }
-                } else {
-                    SignRule::Hard
-                },
-            },
+            Some(c) => ClearanceModel::from(c),
             None => ClearanceModel::none(),
         }
     }
@@ -203,15 +193,7 @@ impl Robot {
     /// The load of the description; `cpm`'s default load without a `[load]` table.
     pub fn platform_load(&self) -> Load {
         match &self.description.load {
-            Some(l) => Load {
-                platform_mass_kg: l.platform_mass_kg,
-                platform_com_mm: Vector3::from(l.platform_com_mm),
-                payload_mass_kg: l.payload_mass_kg,
-                payload_com_mm: Vector3::from(l.payload_com_mm),
-                gravity_mm_s2: Vector3::from(l.gravity_mm_s2),
-                external_force_n: Vector3::from(l.external_force_n),
-                external_moment_nmm: Vector3::from(l.external_moment_nmm),
-            },
+            Some(l) => Load::from(l),
             None => Load::default(),
         }
     }

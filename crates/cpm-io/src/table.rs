@@ -72,6 +72,9 @@ pub struct Table<R: Read> {
     pub header: Header,
     reader: BufReader<R>,
     buf: Vec<u8>,
+    /// The unquoted bytes of the fields of the current line, and where each field ends in it.
+    unquoted: Vec<u8>,
+    ends: Vec<usize>,
     line: usize,
     io_error: Option<std::io::Error>,
 }
@@ -104,6 +107,8 @@ impl<R: Read> Table<R> {
             },
             reader: BufReader::with_capacity(64 * 1024, source),
             buf: Vec::new(),
+            unquoted: Vec::new(),
+            ends: Vec::new(),
             line: 0,
             io_error: None,
         };
@@ -137,9 +142,19 @@ impl<R: Read> Table<R> {
 
     /// The next data row, `None` at the end; every row has as many fields as the header.
     pub fn next_row(&mut self) -> Result<Option<Row>, InputError> {
-        let Some(row) = self.next_record()? else {
-            return Ok(None);
+        let mut row = Row {
+            line: 0,
+            fields: Vec::new(),
         };
+        Ok(self.next_row_into(&mut row)?.then_some(row))
+    }
+
+    /// [`next_row`](Self::next_row) into a row that is reused from call to call (its
+    /// strings keep their allocations): false at the end. The fast way through a large file.
+    pub fn next_row_into(&mut self, row: &mut Row) -> Result<bool, InputError> {
+        if !self.next_record_into(row)? {
+            return Ok(false);
+        }
         let (len, expected) = (row.fields.len(), self.header.headers.len());
         if len != expected {
             return Err(InputError::line(
@@ -151,7 +166,7 @@ impl<R: Read> Table<R> {
                 ),
             ));
         }
-        Ok(Some(row))
+        Ok(true)
     }
 
     /// The I/O error that stopped the reading, if one did (the returned [`InputError`] then
@@ -220,50 +235,71 @@ impl<R: Read> Table<R> {
 
     /// The next line that is neither a comment nor blank, split into trimmed UTF-8 fields.
     fn next_record(&mut self) -> Result<Option<Row>, InputError> {
+        let mut row = Row {
+            line: 0,
+            fields: Vec::new(),
+        };
+        Ok(self.next_record_into(&mut row)?.then_some(row))
+    }
+
+    /// [`next_record`](Self::next_record) into a reused row: false at the end.
+    fn next_record_into(&mut self, row: &mut Row) -> Result<bool, InputError> {
         loop {
             if !self.read_line()? {
-                return Ok(None);
+                return Ok(false);
             }
             if self.buf.first() == Some(&b'#') || self.buf.trim_ascii().is_empty() {
                 continue;
             }
             let line = self.line;
-            let raw = split_fields(&self.buf).map_err(|(col, m)| {
+            split_fields(&self.buf, &mut self.unquoted, &mut self.ends).map_err(|(col, m)| {
                 match self.header.headers.get(col - 1) {
                     Some(name) => InputError::field(&self.header.file, line, name, m),
                     None => InputError::line(&self.header.file, line, format!("column {col}: {m}")),
                 }
             })?;
-            let mut fields = Vec::with_capacity(raw.len());
-            for (k, f) in raw.into_iter().enumerate() {
-                match String::from_utf8(f) {
-                    Ok(s) => fields.push(s),
-                    Err(_) => {
-                        let what = "not UTF-8 text (save the file as UTF-8)";
-                        return Err(match self.header.headers.get(k) {
-                            Some(name) => InputError::field(&self.header.file, line, name, what),
-                            None => InputError::line(&self.header.file, line, what),
-                        });
+            row.line = line;
+            row.fields.truncate(self.ends.len());
+            let mut start = 0;
+            for (k, &end) in self.ends.iter().enumerate() {
+                let Ok(text) = std::str::from_utf8(&self.unquoted[start..end]) else {
+                    let what = "not UTF-8 text (save the file as UTF-8)";
+                    return Err(match self.header.headers.get(k) {
+                        Some(name) => InputError::field(&self.header.file, line, name, what),
+                        None => InputError::line(&self.header.file, line, what),
+                    });
+                };
+                match row.fields.get_mut(k) {
+                    Some(f) => {
+                        f.clear();
+                        f.push_str(text);
                     }
+                    None => row.fields.push(text.to_string()),
                 }
+                start = end;
             }
-            return Ok(Some(Row { line, fields }));
+            return Ok(true);
         }
     }
 }
 
 /// Splits one CSV line into trimmed fields: commas separate, a field that starts with `"`
-/// is quoted (`""` is a quote inside it).
-fn split_fields(line: &[u8]) -> Result<Vec<Vec<u8>>, (usize, &'static str)> {
-    let mut fields = Vec::new();
+/// is quoted (`""` is a quote inside it). The fields' bytes go one after the other into
+/// `out`, and `ends[k]` is where field `k` ends in it (both cleared first).
+fn split_fields(
+    line: &[u8],
+    out: &mut Vec<u8>,
+    ends: &mut Vec<usize>,
+) -> Result<(), (usize, &'static str)> {
+    out.clear();
+    ends.clear();
     let mut i = 0;
     loop {
         while i < line.len() && matches!(line[i], b' ' | b'\t') {
             i += 1;
         }
-        let mut field = Vec::new();
         if line.get(i) == Some(&b'"') {
-            let col = fields.len() + 1;
+            let col = ends.len() + 1;
             i += 1;
             loop {
                 match line.get(i) {
@@ -274,7 +310,7 @@ fn split_fields(line: &[u8]) -> Result<Vec<Vec<u8>>, (usize, &'static str)> {
                         ))
                     }
                     Some(b'"') if line.get(i + 1) == Some(&b'"') => {
-                        field.push(b'"');
+                        out.push(b'"');
                         i += 2;
                     }
                     Some(b'"') => {
@@ -282,7 +318,7 @@ fn split_fields(line: &[u8]) -> Result<Vec<Vec<u8>>, (usize, &'static str)> {
                         break;
                     }
                     Some(b) => {
-                        field.push(*b);
+                        out.push(*b);
                         i += 1;
                     }
                 }
@@ -293,17 +329,16 @@ fn split_fields(line: &[u8]) -> Result<Vec<Vec<u8>>, (usize, &'static str)> {
             if i < line.len() && line[i] != b',' {
                 return Err((col, "text after the closing quote (quote the whole field)"));
             }
-            fields.push(field);
         } else {
             let start = i;
             while i < line.len() && line[i] != b',' {
                 i += 1;
             }
-            field.extend_from_slice(line[start..i].trim_ascii());
-            fields.push(field);
+            out.extend_from_slice(line[start..i].trim_ascii());
         }
+        ends.push(out.len());
         if i >= line.len() {
-            return Ok(fields);
+            return Ok(());
         }
         i += 1; // the comma
     }
@@ -337,7 +372,13 @@ impl Header {
 
     /// Index of a column.
     pub fn column(&self, name: &str) -> Option<usize> {
-        self.index.get(name).copied()
+        // A few columns: comparing the names is quicker than hashing one (a reader looks up
+        // a dozen columns in every row).
+        if self.headers.len() <= 32 {
+            self.headers.iter().position(|h| h == name)
+        } else {
+            self.index.get(name).copied()
+        }
     }
 
     /// Checks the header: every name in `required` present, every column known (in
@@ -385,9 +426,8 @@ impl Header {
 
     /// A required text field: present and non-empty.
     pub fn required_text<'a>(&self, row: &'a Row, name: &str) -> Result<&'a str, InputError> {
-        match self.text(row, name) {
-            Some(t) if !t.is_empty() => Ok(t),
-            Some(_) => Err(self.err(row, name, "missing value")),
+        match self.column(name) {
+            Some(col) => self.required_text_at(row, col),
             None => Err(InputError::field(
                 &self.file,
                 self.header_line,
@@ -399,36 +439,80 @@ impl Header {
 
     /// A required finite number.
     pub fn number(&self, row: &Row, name: &str) -> Result<f64, InputError> {
-        let t = self.required_text(row, name)?;
-        parse_number(t).map_err(|m| self.err(row, name, m))
+        match self.column(name) {
+            Some(col) => self.number_at(row, col),
+            None => self.required_text(row, name).map(|_| f64::NAN),
+        }
     }
 
     /// An optional finite number: `None` when the column is absent or the cell empty.
     pub fn optional_number(&self, row: &Row, name: &str) -> Result<Option<f64>, InputError> {
-        match self.text(row, name) {
-            None | Some("") => Ok(None),
-            Some(t) => parse_number(t)
-                .map(Some)
-                .map_err(|m| self.err(row, name, m)),
-        }
+        self.optional_number_at(row, self.column(name))
     }
 
     /// An optional boolean (`true`/`false`, `yes`/`no`, `1`/`0`).
     pub fn optional_bool(&self, row: &Row, name: &str) -> Result<Option<bool>, InputError> {
-        match self.text(row, name) {
+        self.optional_bool_at(row, self.column(name))
+    }
+
+    /// [`required_text`](Self::required_text) of column `col` (an index from
+    /// [`column`](Self::column): a reader that looks up its columns once).
+    pub fn required_text_at<'a>(&self, row: &'a Row, col: usize) -> Result<&'a str, InputError> {
+        match row.fields.get(col).map(String::as_str) {
+            Some(t) if !t.is_empty() => Ok(t),
+            _ => Err(self.err(row, &self.headers[col], "missing value")),
+        }
+    }
+
+    /// [`number`](Self::number) of column `col`.
+    pub fn number_at(&self, row: &Row, col: usize) -> Result<f64, InputError> {
+        let t = self.required_text_at(row, col)?;
+        parse_number(t).map_err(|m| self.err(row, &self.headers[col], m))
+    }
+
+    /// [`optional_number`](Self::optional_number) of column `col` (`None`: no such column).
+    pub fn optional_number_at(
+        &self,
+        row: &Row,
+        col: Option<usize>,
+    ) -> Result<Option<f64>, InputError> {
+        let Some(col) = col else { return Ok(None) };
+        match row.fields.get(col).map(String::as_str) {
             None | Some("") => Ok(None),
-            Some(t) => match t.to_ascii_lowercase().as_str() {
-                "true" | "yes" | "1" => Ok(Some(true)),
-                "false" | "no" | "0" => Ok(Some(false)),
-                _ => Err(self.err(
-                    row,
-                    name,
-                    format!(
-                        "{:?} is not a boolean (true/false, yes/no, 1/0)",
-                        shorten(t)
-                    ),
-                )),
-            },
+            Some(t) => parse_number(t)
+                .map(Some)
+                .map_err(|m| self.err(row, &self.headers[col], m)),
+        }
+    }
+
+    /// [`optional_bool`](Self::optional_bool) of column `col` (`None`: no such column).
+    pub fn optional_bool_at(
+        &self,
+        row: &Row,
+        col: Option<usize>,
+    ) -> Result<Option<bool>, InputError> {
+        let Some(col) = col else { return Ok(None) };
+        let name = &self.headers[col];
+        match row.fields.get(col).map(String::as_str) {
+            None | Some("") => Ok(None),
+            Some(t)
+                if t.eq_ignore_ascii_case("true") || t.eq_ignore_ascii_case("yes") || t == "1" =>
+            {
+                Ok(Some(true))
+            }
+            Some(t)
+                if t.eq_ignore_ascii_case("false") || t.eq_ignore_ascii_case("no") || t == "0" =>
+            {
+                Ok(Some(false))
+            }
+            Some(t) => Err(self.err(
+                row,
+                name,
+                format!(
+                    "{:?} is not a boolean (true/false, yes/no, 1/0)",
+                    shorten(t)
+                ),
+            )),
         }
     }
 

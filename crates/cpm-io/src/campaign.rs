@@ -205,38 +205,99 @@ fn orientation_columns(o: Orientation) -> &'static [&'static str] {
     }
 }
 
-/// The numbers a pose was made of, by column (for agreement checks).
-type RawPose = Vec<(&'static str, f64)>;
+/// The numbers a pose was made of, by column (for agreement checks): position, then three
+/// angles or four quaternion components.
+#[derive(Debug, Clone, Copy)]
+struct RawPose {
+    cells: [(&'static str, f64); 7],
+    len: usize,
+}
+
+impl RawPose {
+    fn iter(&self) -> std::slice::Iter<'_, (&'static str, f64)> {
+        self.cells[..self.len].iter()
+    }
+
+    fn value(&self, k: usize) -> f64 {
+        self.cells[k].1
+    }
+
+    /// True when every number agrees with `other`'s ([`close`]).
+    fn agrees(&self, other: &RawPose) -> bool {
+        self.len == other.len && self.iter().zip(other.iter()).all(|(a, b)| close(a.1, b.1))
+    }
+}
 
 /// The pose of a row, and the raw numbers it was made of (for agreement checks).
 fn parse_pose(t: &Header, row: &Row, o: Orientation) -> Result<(Pose, RawPose), InputError> {
-    let mut raw = Vec::with_capacity(7);
+    let raw = raw_pose(t, row, o)?;
+    Ok((pose_of(t, row, o, &raw)?, raw))
+}
+
+/// The numbers of a row's pose columns, each checked for its range.
+fn raw_pose(t: &Header, row: &Row, o: Orientation) -> Result<RawPose, InputError> {
+    let mut raw = RawPose {
+        cells: [("", 0.0); 7],
+        len: 0,
+    };
     for c in ["x_mm", "y_mm", "z_mm"]
         .iter()
         .chain(orientation_columns(o))
     {
         let v = t.number(row, c)?;
-        if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
-            return Err(t.err(
-                row,
-                c,
-                format!("{v:e} mm is implausibly far (over 1 km): positions are in mm"),
-            ));
-        }
-        if c.ends_with("_deg") && v.abs() > 360.0 {
-            return Err(t.err(
-                row,
-                c,
-                format!("{v} degrees: an angle is within [-360, 360] (angles are in degrees)"),
-            ));
-        }
-        raw.push((*c, v));
+        check_pose_cell(t, row, c, v)?;
+        raw.cells[raw.len] = (*c, v);
+        raw.len += 1;
     }
-    let p = [raw[0].1, raw[1].1, raw[2].1];
-    let pose = match o {
-        Orientation::Rpy => Pose::from_xyz_rpy_deg(p, [raw[3].1, raw[4].1, raw[5].1]),
+    Ok(raw)
+}
+
+/// [`raw_pose`] with the columns looked up once: `(name, column)` of each pose column.
+fn raw_pose_at(
+    t: &Header,
+    row: &Row,
+    columns: &[(&'static str, usize)],
+) -> Result<RawPose, InputError> {
+    let mut raw = RawPose {
+        cells: [("", 0.0); 7],
+        len: 0,
+    };
+    for &(c, col) in columns {
+        let v = t.number_at(row, col)?;
+        check_pose_cell(t, row, c, v)?;
+        raw.cells[raw.len] = (c, v);
+        raw.len += 1;
+    }
+    Ok(raw)
+}
+
+/// Positions within 1 km, angles within [-360, 360] degrees.
+fn check_pose_cell(t: &Header, row: &Row, c: &str, v: f64) -> Result<(), InputError> {
+    if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
+        return Err(t.err(
+            row,
+            c,
+            format!("{v:e} mm is implausibly far (over 1 km): positions are in mm"),
+        ));
+    }
+    if c.ends_with("_deg") && v.abs() > 360.0 {
+        return Err(t.err(
+            row,
+            c,
+            format!("{v} degrees: an angle is within [-360, 360] (angles are in degrees)"),
+        ));
+    }
+    Ok(())
+}
+
+/// The pose the numbers of a row make (a quaternion must have unit norm).
+fn pose_of(t: &Header, row: &Row, o: Orientation, raw: &RawPose) -> Result<Pose, InputError> {
+    let v = |k| raw.value(k);
+    let p = [v(0), v(1), v(2)];
+    Ok(match o {
+        Orientation::Rpy => Pose::from_xyz_rpy_deg(p, [v(3), v(4), v(5)]),
         Orientation::Quaternion => {
-            let q = [raw[3].1, raw[4].1, raw[5].1, raw[6].1];
+            let q = [v(3), v(4), v(5), v(6)];
             let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
             if (norm - 1.0).abs() > 1e-3 {
                 return Err(t.err(
@@ -248,8 +309,7 @@ fn parse_pose(t: &Header, row: &Row, o: Orientation) -> Result<(Pose, RawPose), 
             Pose::try_from_quaternion(Vector3::from(p), q)
                 .map_err(|e| t.err(row, "qw", e.to_string()))?
         }
-    };
-    Ok((pose, raw))
+    })
 }
 
 fn close(a: f64, b: f64) -> bool {
@@ -359,18 +419,39 @@ pub fn check_reachable(
     line: usize,
     label: &str,
 ) -> Result<(), InputError> {
-    let home_condition = cpm_kinematics::workspace::j1_condition(table, &table.home);
-    let (bound, c0) = match home_condition {
-        Ok(c0) if c0.is_finite() => ((max_condition_ratio * c0).max(10.0), c0),
-        Ok(c0) => (f64::INFINITY, c0),
-        Err(e) => {
-            return Err(InputError::line(
-                file,
-                line,
-                format!("J1's condition number at the robot's home pose: {e}"),
-            ))
-        }
-    };
+    let bound = condition_bound(table, max_condition_ratio, file, line)?;
+    check_reachable_within(table, pose, bound, file, line, label)
+}
+
+/// The largest J1 condition number [`check_reachable`] accepts (`max_condition_ratio` times
+/// home's, at least 10), and home's; the error names `line`.
+fn condition_bound(
+    table: &JointTable,
+    max_condition_ratio: f64,
+    file: &str,
+    line: usize,
+) -> Result<(f64, f64), InputError> {
+    match cpm_kinematics::workspace::j1_condition(table, &table.home) {
+        Ok(c0) if c0.is_finite() => Ok(((max_condition_ratio * c0).max(10.0), c0)),
+        Ok(c0) => Ok((f64::INFINITY, c0)),
+        Err(e) => Err(InputError::line(
+            file,
+            line,
+            format!("J1's condition number at the robot's home pose: {e}"),
+        )),
+    }
+}
+
+/// [`check_reachable`] with the bound of [`condition_bound`] computed once (for the many
+/// poses of one file).
+fn check_reachable_within(
+    table: &JointTable,
+    pose: &Pose,
+    (bound, c0): (f64, f64),
+    file: &str,
+    line: usize,
+    label: &str,
+) -> Result<(), InputError> {
     let why = match reachable_at(table, pose, bound) {
         Ok(()) => return Ok(()),
         Err(Unreachable::LengthLimit {
@@ -536,9 +617,28 @@ fn link_reading_columns(t: &Header, n: usize) -> Result<bool, InputError> {
     Ok(true)
 }
 
+/// The names of the first `reading_k` columns (no name made for every row).
+const READING_NAMES: [&str; 12] = [
+    "reading_1",
+    "reading_2",
+    "reading_3",
+    "reading_4",
+    "reading_5",
+    "reading_6",
+    "reading_7",
+    "reading_8",
+    "reading_9",
+    "reading_10",
+    "reading_11",
+    "reading_12",
+];
+
 fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>, InputError> {
     (1..=n)
-        .map(|k| t.number(row, &format!("reading_{k}")))
+        .map(|k| match READING_NAMES.get(k - 1) {
+            Some(name) => t.number(row, name),
+            None => t.number(row, &format!("reading_{k}")),
+        })
         .collect()
 }
 
@@ -633,16 +733,42 @@ fn read_readings_table<R: Read>(
     let mut commanded = Vec::new();
     let mut reading_lines = Vec::new();
     let mut angles: AngleCells = Vec::new();
-    while let Some(row) = t.next_row()? {
+    // J1's condition number at home, computed at the first pose.
+    let mut bound = None;
+    // The pose of the previous row (rows of one pose usually follow each other).
+    let mut previous: Option<usize> = None;
+    // One row after the other, its strings reused.
+    let mut next = Row {
+        line: 0,
+        fields: Vec::new(),
+    };
+    // The columns, looked up once (check_columns and orientation made sure they exist).
+    let col = |name: &str| t.column(name).expect("a checked column");
+    let (pose_col, sensor_col, length_col) = (col("pose"), col("sensor"), col("length_mm"));
+    let (time_col, temperature_col, simulated_col) = (
+        t.column("time_s"),
+        t.column("temperature_c"),
+        t.column("simulated"),
+    );
+    let pose_columns: Vec<(&'static str, usize)> = ["x_mm", "y_mm", "z_mm"]
+        .iter()
+        .chain(orientation_columns(o))
+        .map(|c| (*c, col(c)))
+        .collect();
+    // The pose cells of the previous row as written: a row of the same pose that repeats
+    // them exactly has the same numbers, already checked.
+    let mut previous_cells: Vec<String> = Vec::new();
+    while t.next_row_into(&mut next)? {
+        let row = &next;
         let t: &Header = t;
         if reading_lines.len() >= options.max_rows {
-            return Err(too_many_rows(t, &row, options.max_rows));
+            return Err(too_many_rows(t, row, options.max_rows));
         }
-        let label = t.required_text(&row, "pose")?.to_string();
-        let sensor_name = t.required_text(&row, "sensor")?;
+        let label = t.required_text_at(row, pose_col)?;
+        let sensor_name = t.required_text_at(row, sensor_col)?;
         let sensor = robot.table.sensor_index(sensor_name).ok_or_else(|| {
             t.err(
-                &row,
+                row,
                 "sensor",
                 format!(
                     "unknown sensor {:?} (the robot description has: {})",
@@ -651,27 +777,51 @@ fn read_readings_table<R: Read>(
                 ),
             )
         })?;
-        let (pose, raw) = parse_pose(t, &row, o)?;
-        let length_mm = t.number(&row, "length_mm")?;
-        let time_s = t.optional_number(&row, "time_s")?;
-        let temperature_c = t.optional_number(&row, "temperature_c")?;
-        if t.optional_bool(&row, "simulated")? == Some(true) {
+        let same_as_previous = previous.is_some_and(|j| labels[j] == label)
+            && pose_columns
+                .iter()
+                .zip(&previous_cells)
+                .all(|((_, c), p)| row.fields[*c] == *p);
+        let known = match previous {
+            Some(j) if labels[j] == label => Some(j),
+            _ => by_label.get(label).copied(),
+        };
+        let (raw, pose) = if same_as_previous {
+            // The previous row's pose, cell for cell: it agreed with its pose's first row.
+            let j = known.expect("the previous row's pose");
+            (entries[j].raw, None)
+        } else {
+            let raw = raw_pose_at(t, row, &pose_columns)?;
+            // A repeated pose that agrees with its first row is that row's pose: not made
+            // again.
+            let pose = match known {
+                Some(j) if raw.agrees(&entries[j].raw) => None,
+                _ => Some(pose_of(t, row, o, &raw)?),
+            };
+            previous_cells.clear();
+            previous_cells.extend(pose_columns.iter().map(|(_, c)| row.fields[*c].clone()));
+            (raw, pose)
+        };
+        let length_mm = t.number_at(row, length_col)?;
+        let time_s = t.optional_number_at(row, time_col)?;
+        let temperature_c = t.optional_number_at(row, temperature_col)?;
+        if t.optional_bool_at(row, simulated_col)? == Some(true) {
             campaign.simulated = true;
         }
         let link = if logged {
-            Some(link_readings(t, &row, n)?)
+            Some(link_readings(t, row, n)?)
         } else {
             None
         };
-        let j = match by_label.get(&label) {
-            Some(&j) => {
+        let j = match known {
+            Some(j) => {
                 let e = &entries[j];
-                for ((name, a), (_, b)) in raw.iter().zip(&e.raw) {
+                for ((name, a), (_, b)) in raw.iter().zip(e.raw.iter()) {
                     if !close(*a, *b) {
                         return Err(t.err(
-                            &row,
+                            row,
                             name,
-                            format!("{} differs from {} given for pose {:?} on line {}: rows of one pose share one commanded pose (a repeated pose label?)", show(*a, None), show(*b, None), shorten(&label), e.line),
+                            format!("{} differs from {} given for pose {:?} on line {}: rows of one pose share one commanded pose (a repeated pose label?)", show(*a, None), show(*b, None), shorten(label), e.line),
                         ));
                     }
                 }
@@ -679,9 +829,9 @@ fn read_readings_table<R: Read>(
                     for (k, (x, y)) in a.iter().zip(b).enumerate() {
                         if !close(*x, *y) {
                             return Err(t.err(
-                                &row,
+                                row,
                                 &format!("reading_{}", k + 1),
-                                format!("{x} differs from {y} given for pose {:?} on line {}: rows of one pose share one command", shorten(&label), e.line),
+                                format!("{x} differs from {y} given for pose {:?} on line {}: rows of one pose share one command", shorten(label), e.line),
                             ));
                         }
                     }
@@ -689,6 +839,7 @@ fn read_readings_table<R: Read>(
                 j
             }
             None => {
+                let pose = pose.expect("a new pose is made");
                 let j = entries.len();
                 check_position_units(&t.file, row.line, &pose.position_mm, robot)?;
                 if o == Orientation::Rpy {
@@ -697,14 +848,16 @@ fn read_readings_table<R: Read>(
                     }
                 }
                 if options.max_condition_ratio.is_finite() {
-                    check_reachable(
-                        &robot.table,
-                        &pose,
-                        options.max_condition_ratio,
-                        &t.file,
-                        row.line,
-                        &label,
-                    )?;
+                    let b = match bound {
+                        Some(b) => b,
+                        None => *bound.insert(condition_bound(
+                            &robot.table,
+                            options.max_condition_ratio,
+                            &t.file,
+                            row.line,
+                        )?),
+                    };
+                    check_reachable_within(&robot.table, &pose, b, &t.file, row.line, label)?;
                 }
                 if let Some(u) = &link {
                     commanded.push(check_link_readings(
@@ -718,23 +871,24 @@ fn read_readings_table<R: Read>(
                         "",
                     )?);
                 }
-                by_label.insert(label.clone(), j);
+                by_label.insert(label.to_string(), j);
                 entries.push(PoseEntry {
                     raw,
                     readings: link,
                     line: row.line,
                 });
-                labels.push(label);
+                labels.push(label.to_string());
                 campaign.poses.push(pose);
                 j
             }
         };
+        previous = Some(j);
         if options.check_sensor_lengths {
             let s = &robot.table.sensors[sensor];
             let nominal = s.length_mm(&campaign.poses[j]);
             if !((length_mm - nominal).abs() <= tolerance_mm(nominal)) {
                 return Err(t.err(
-                    &row,
+                    row,
                     "length_mm",
                     format!(
                         "{} mm is far from the nominal length of sensor {sensor_name:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?",

@@ -1,0 +1,67 @@
+//! File formats of `cpm` as a library: robot descriptions (TOML) as calibration models,
+//! measurement CSV files (length-sensor readings, tracker pose measurements, pose lists,
+//! actuator commands) and `calibration.json`. `docs/formats.md` and
+//! `docs/robot-description.md` document each format.
+//!
+//! A calibration program can depend on this crate alone (with `cpm-calib`) to read what the
+//! `cpm` command reads, without the command line's dependencies (clap, plotters,
+//! indicatif). The `cpm` crate re-exports it as `cpm::io`.
+//!
+//! Every reader names the file, the line and the field of the first problem it finds
+//! ([`InputError`]), e.g. `data.csv:17: field length_mm: "abc" is not a number`; a file that
+//! cannot be read at all is a [`ReadError::Io`]. Readers stream a file row by row and stop at
+//! the first bad row.
+//!
+//! One's own robot from files: a description and a readings file (`examples/` ships a 6-6
+//! hexapod and 90 simulated readings of it), read and fitted:
+//!
+//! ```
+//! use cpm_io::{read_data_file, ReadOptions, Robot};
+//! use std::path::Path;
+//! let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+//! let robot = Robot::load(&examples.join("hexapod_66.toml")).unwrap();
+//! let data = read_data_file(&examples.join("hexapod_66_readings.csv"), &robot,
+//!                           &ReadOptions::default()).unwrap();
+//! assert_eq!(data.campaign.readings.len(), 90);
+//! assert!(data.campaign.simulated); // the file says so in its first line
+//! // The model carries the description's clearance, load and [calibration] settings.
+//! let model = robot.model(&[]);
+//! let cal = cpm_calib::identify(&model, &data.campaign, &Default::default()).unwrap();
+//! println!("{}", cal.identifiability.summary());
+//! ```
+//!
+//! Writing and reading back, and what a bad row gives:
+//!
+//! ```
+//! use cpm_io::{read_data, write_readings, ReadOptions, Robot};
+//! use cpm_calib::{campaign::paper_circle, simulate, MeasurementModel, Plan, SimulationOptions};
+//! let robot = Robot::from_description(cpm_geometry::RobotDescription::paper_cubic(), "cube.toml").unwrap();
+//! let model = robot.model(&[]);
+//! let plan = Plan { poses: paper_circle(&robot.table.home), sensors: vec![0] };
+//! let data = simulate(&model, &vec![0.0; 36], &plan, &SimulationOptions::default()).unwrap();
+//! let text = write_readings(&data, &robot, "example");
+//! assert!(text.starts_with("# simulated by cpm"));
+//! let back = read_data(&text, "data.csv", &robot, &ReadOptions::default()).unwrap();
+//! assert_eq!(back.campaign.readings.len(), 36);
+//! assert!(back.campaign.simulated);
+//! let bad = text.replace("paper,", "nosuch,");
+//! let err = read_data(&bad, "data.csv", &robot, &ReadOptions::default()).unwrap_err();
+//! assert!(err.to_string().starts_with("data.csv:3: field sensor: unknown sensor \"nosuch\""));
+//! ```
+pub mod calibration;
+pub mod campaign;
+pub mod error;
+pub mod robot;
+pub mod table;
+
+pub use calibration::{calibration_json, Provenance};
+pub use campaign::{
+    merge, read_commands_file, read_data, read_data_file, read_data_files, read_data_from,
+    read_pose_list, read_pose_list_file, read_pose_list_from, read_pose_measurements,
+    read_readings, register_tracker_files, write_commands, write_pose_list,
+    write_pose_measurements, write_readings, DataFile, Merged, PoseRow, ReadOptions,
+    RegistrationReport, SessionRegistration, TrackerRow, MAX_ROWS, REGISTRATION_APPLY_MM,
+};
+pub use error::{read_text, InputError, ReadError};
+pub use robot::{calibrated_description, calibrated_toml, parse_effects, Robot};
+pub use table::FileKind;
