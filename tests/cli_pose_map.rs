@@ -205,6 +205,8 @@ fn a_calibrated_pose_map_is_written_applied_and_bounded() {
         "none",
         "--candidates",
         "sensor_offset",
+        "--pose-map-degree",
+        "2",
         "--sigma-um",
         "0.3",
         "--out",

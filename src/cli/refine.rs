@@ -35,7 +35,7 @@ pub struct RefineArgs {
     #[arg(long, value_name = "K", default_value_t = 5)]
     pub folds: usize,
     /// Highest degree of the pose error map terms scanned and proposed (0: none, at most 3;
-    /// default: `[pose_map] degree` of the description, else 2).
+    /// default: 0 with `--candidates`, else `[pose_map] degree` of the description, else 2).
     #[arg(long, value_name = "D")]
     pub pose_map_degree: Option<u8>,
 }
@@ -55,10 +55,18 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     };
     let inputs = args.fit.load(ctx)?;
     let campaign = &inputs.merged.campaign;
-    let pose_map_degree = args
-        .pose_map_degree
-        .or(inputs.robot.description.pose_map.and_then(|p| p.degree))
-        .unwrap_or(2);
+    // An explicit --candidates list is the whole candidate set: the pose map scan joins it
+    // only when --pose-map-degree asks for it.
+    let pose_map_degree = match (args.pose_map_degree, &args.candidates) {
+        (Some(d), _) => d,
+        (None, Some(_)) => 0,
+        (None, None) => inputs
+            .robot
+            .description
+            .pose_map
+            .and_then(|p| p.degree)
+            .unwrap_or(2),
+    };
     if pose_map_degree > 3 {
         return Err(usage_error("--pose-map-degree must be 0 to 3"));
     }
