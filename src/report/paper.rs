@@ -553,10 +553,7 @@ fn accuracy(o: &CampaignOutcome) -> AccuracySummary {
         ),
         minimum_norm_rms_position_um: o.accuracy_minimum_norm.calibrated.rms_position_um,
         minimum_norm_max_position_um: o.accuracy_minimum_norm.calibrated.max_position_um,
-        minimum_norm_rms_orientation_urad: o
-            .accuracy_minimum_norm
-            .calibrated
-            .rms_orientation_urad,
+        minimum_norm_rms_orientation_urad: o.accuracy_minimum_norm.calibrated.rms_orientation_urad,
     }
 }
 
@@ -926,10 +923,12 @@ impl PaperReport {
             "- Chosen by `cpm_calib::design` ({}, at most {} readings): base sockets {} mm in {{B}}; platform sockets {} mm in {{P}}; every base socket paired with every platform socket: {} sensors read at {} poses = {} readings.\n",
             dz.criterion, tx.max_readings, sockets_text(&dz.base_sockets), sockets_text(&dz.platform_sockets), dz.sensor_length_range_mm.len(), d.poses, d.readings
         ));
-        let (lo, hi, travel) = dz.sensor_length_range_mm.iter().fold(
-            (f64::INFINITY, 0.0f64, 0.0f64),
-            |(a, b, c), r| (a.min(r.min), b.max(r.max), c.max(r.max - r.min)),
-        );
+        let (lo, hi, travel) = dz
+            .sensor_length_range_mm
+            .iter()
+            .fold((f64::INFINITY, 0.0f64, 0.0f64), |(a, b, c), r| {
+                (a.min(r.min), b.max(r.max), c.max(r.max - r.min))
+            });
         s.push_str(&format!(
             "- The gauge spans {} to {} mm between its sockets over the design; one sensor's length changes by at most {} mm over the poses (`cpm_calib::design::Design::sensor_lengths_mm`).\n",
             fixed(lo, 0), fixed(hi, 0), fixed(travel, 0)
