@@ -1,6 +1,6 @@
 //! The report of `cargo xtask reproduce-paper`: `summary.json` and report.md (hence
 //! report.html) rendered from one [`PaperReport`], built from a
-//! [`PaperReproduction`](crate::calib::paper::PaperReproduction).
+//! [`PaperReproduction`] (`cpm_calib::paper`).
 //!
 //! [`PaperReport::summary`] is `summary.json` with the keys it has always had;
 //! [`PaperReport::text`] carries what only the text shows (per-parameter tables, the
