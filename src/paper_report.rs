@@ -1,7 +1,6 @@
 //! Rendering of the paper reproduction: `report.md` and `summary.json` (both from the typed
 //! [`PaperReport`]) and SVG figures.
 use cpm_calib::paper::PaperReproduction;
-use cpm_geometry::InstallationErrors;
 
 use crate::output::OutputSet;
 use crate::plot;
@@ -12,6 +11,7 @@ pub fn summary_json(r: &PaperReproduction) -> serde_json::Value {
     PaperReport::new(r).summary_json()
 }
 
+/// The norm of each joint's error on `side` (0 base, 1 platform) from the 36 components.
 fn norms(v: &[f64], side: usize) -> Vec<f64> {
     (0..v.len() / 6)
         .map(|i| {
@@ -21,51 +21,54 @@ fn norms(v: &[f64], side: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Stages every output file of the reproduction into `out`, under `dir`.
+/// Per-joint error norms with their standard deviation (first order, components taken as
+/// independent: sd(|e|) = sqrt(sum (e_a / |e|)^2 sd_a^2)); a joint with a component the data
+/// do not determine has no norm (NaN: drawn "n.i.", not identifiable).
+fn joint_norms(est: &[(Option<f64>, Option<f64>)], side: usize) -> (Vec<f64>, Vec<f64>) {
+    (0..est.len() / 6)
+        .map(|i| {
+            let o = 6 * i + 3 * side;
+            let e: Option<Vec<(f64, f64)>> =
+                (o..o + 3).map(|k| Some((est[k].0?, est[k].1?))).collect();
+            match e {
+                Some(e) => {
+                    let n = e.iter().map(|(v, _)| v * v).sum::<f64>().sqrt();
+                    let sd = if n > 0.0 {
+                        e.iter()
+                            .map(|(v, s)| (v / n * s).powi(2))
+                            .sum::<f64>()
+                            .sqrt()
+                    } else {
+                        e.iter().map(|(_, s)| s * s).sum::<f64>().sqrt()
+                    };
+                    (n, sd)
+                }
+                None => (f64::NAN, f64::NAN),
+            }
+        })
+        .unzip()
+}
+
+/// Stages every output file of the reproduction into `out`, under `dir`: the figures,
+/// `summary.json`, `report.md` and `report.html`, all from one [`PaperReport`].
 pub fn render(
     r: &PaperReproduction,
     dir: &std::path::Path,
     out: &mut OutputSet,
 ) -> Result<(), plot::PlotError> {
-    let t2 = InstallationErrors::paper_table2().to_vec_um();
-    let t3 = InstallationErrors::paper_table3().to_vec_um();
-    let p = &r.paper.calibration;
-    let d = &r.designed.calibration;
-    // Per-joint error norms with their standard deviation (first order, components taken
-    // as independent: sd(|e|) = sqrt(sum (e_a / |e|)^2 sd_a^2)); a joint with a component
-    // the data do not determine has no norm (NaN: drawn "n.i.", not identifiable).
-    let joint_norms = |c: &cpm_calib::Calibration, side: usize| -> (Vec<f64>, Vec<f64>) {
-        (0..6)
-            .map(|i| {
-                let o = 6 * i + 3 * side;
-                let e: Option<Vec<(f64, f64)>> = (o..o + 3)
-                    .map(|k| Some((c.estimate_um[k]?, c.std_um[k]?)))
-                    .collect();
-                match e {
-                    Some(e) => {
-                        let n = e.iter().map(|(v, _)| v * v).sum::<f64>().sqrt();
-                        let sd = if n > 0.0 {
-                            e.iter()
-                                .map(|(v, s)| (v / n * s).powi(2))
-                                .sum::<f64>()
-                                .sqrt()
-                        } else {
-                            e.iter().map(|(_, s)| s * s).sum::<f64>().sqrt()
-                        };
-                        (n, sd)
-                    }
-                    None => (f64::NAN, f64::NAN),
-                }
-            })
-            .unzip()
-    };
+    let report = PaperReport::new(r);
+    let c = &report.text.components;
+    let t2: Vec<f64> = c.iter().map(|c| c.table2).collect();
+    let t3: Vec<f64> = c.iter().map(|c| c.table3).collect();
+    let p: Vec<_> = c.iter().map(|c| (c.paper, c.paper_std)).collect();
+    let d: Vec<_> = c.iter().map(|c| (c.designed, c.designed_std)).collect();
     let links: Vec<String> = (1..=6).map(|i| format!("link {i}")).collect();
     for (side, name, file) in [
         (1, "platform", "fig5_platform.svg"),
         (0, "base", "fig6_base.svg"),
     ] {
-        let (pn, ps) = joint_norms(p, side);
-        let (dn, ds) = joint_norms(d, side);
+        let (pn, ps) = joint_norms(&p, side);
+        let (dn, ds) = joint_norms(&d, side);
         let svg = plot::grouped_bars_with_errors(
             &format!(
                 "Per-joint error norm, {name} side (simulated; cf. paper Fig. {})",
@@ -95,20 +98,19 @@ pub fn render(
         &[
             (
                 "paper design (circle, 1 sensor)".to_string(),
-                p.identifiability.singular_values.clone(),
+                report.summary.paper_design.singular_values.clone(),
             ),
             (
                 "designed (16 sensors, orientation changes)".to_string(),
-                d.identifiability.singular_values.clone(),
+                report.text.designed_singular_values.clone(),
             ),
         ],
         Some((
             "paper-design rank threshold".to_string(),
-            p.identifiability.threshold,
+            report.text.rank_threshold,
         )),
     )?;
     out.add(dir.join("singular_values.svg"), svg);
-    let report = PaperReport::new(r);
     out.add(
         dir.join("summary.json"),
         serde_json::to_string_pretty(&report.summary_json()).unwrap_or_default(),

@@ -534,8 +534,13 @@ pub struct PaperText {
     pub socket_candidates: (usize, usize),
     /// Largest Cramér-Rao standard deviation of a compensated combination, um.
     pub compensation_max_std_um: f64,
-    /// The 36 components side by side.
+    /// The 36 components side by side (in [`InstallationErrors`] order: link by link, base
+    /// dx dy dz then platform dx dy dz).
     pub components: Vec<ComponentRow>,
+    /// Singular values of the designed campaign's identification Jacobian.
+    pub designed_singular_values: Vec<f64>,
+    /// The paper design's absolute rank threshold on the singular values.
+    pub rank_threshold: f64,
 }
 
 fn accuracy(o: &CampaignOutcome) -> AccuracySummary {
@@ -789,6 +794,8 @@ impl PaperReport {
                     designed_std: d.std_um[k],
                 })
                 .collect(),
+            designed_singular_values: d.identifiability.singular_values.clone(),
+            rank_threshold: p.identifiability.threshold,
         };
         Self { summary, text }
     }
