@@ -432,3 +432,82 @@ fn typed_fit_report_agrees_with_the_untyped_builder() {
         }
     }
 }
+
+/// `cargo xtask reproduce-paper`'s summary.json, from the typed `PaperReport`: every key the
+/// untyped `json!` value had (recorded from a full run of it in
+/// tests/data/report_keys/reproduce_paper.txt) is still written, report.md shows no
+/// formatting artefact, and its text quotes the numbers the JSON holds. The reproduction is
+/// SIMULATED, here with small budgets so the test stays fast (the key set does not depend on
+/// the budgets as long as every study runs at least once).
+#[test]
+fn reproduce_paper_summary_keeps_its_keys() {
+    use cpm::calib::paper::{reproduce, LimitedOptions, PaperOptions};
+    let mut options = PaperOptions {
+        design_candidates: 150,
+        monte_carlo_runs: 2,
+        validation_poses: 10,
+        ..PaperOptions::default()
+    };
+    options.design.max_readings = 320;
+    let mut limited = LimitedOptions {
+        max_setups: 6,
+        monte_carlo_runs: 2,
+        tradeoff: true,
+        tradeoff_exchanges: 2,
+        ..LimitedOptions::default()
+    };
+    limited.search.minimax_rounds = 0;
+    limited.search.select.max_exchanges = 4;
+    limited.search.projections = 40;
+    limited.search.windows_per_pair = 2;
+    options.limited = Some(limited);
+    let r = reproduce(&options, |_| {}).unwrap();
+    let dir = scratch("report_model", "reproduce_paper");
+    let mut files = cpm::output::OutputSet::new();
+    cpm::paper_report::render(&r, &dir, &mut files).unwrap();
+    cpm::paper_report::render_limited(&r, &dir, &mut files).unwrap();
+    files.commit().unwrap();
+    assert_keeps("reproduce_paper", &dir.join("summary.json"));
+    let report = cpm::report::paper::PaperReport::new(&r);
+    // The JSON written is the typed summary, and the free functions agree with it.
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(written["seed"], serde_json::json!(options.seed));
+    assert_eq!(
+        written["paper_design"]["rank"],
+        serde_json::json!(r.paper.calibration.identifiability.rank)
+    );
+    assert_eq!(
+        written["designed"]["monte_carlo"]["runs"],
+        serde_json::json!(2)
+    );
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    assert_eq!(md, report.report_md());
+    assert_eq!(md, cpm::paper_report::report_md(&r));
+    assert!(
+        md.contains(&format!(
+            "**Rank of the identification Jacobian: {} of 36**",
+            report.summary.paper_design.rank
+        )),
+        "{md}"
+    );
+    let l = report.summary.limited.as_ref().unwrap();
+    assert_eq!(
+        l.tradeoff.len(),
+        cpm::calib::paper::TRADEOFF_STROKES_MM.len()
+    );
+    assert!(md.contains(&format!(
+        "**{} readings in {} setups;",
+        l.readings, l.setups
+    )));
+    // report.md and the setup sheet are for people; designed/readings.csv is simulated
+    // input data at full precision, as `cpm simulate` writes it.
+    for name in ["report.md", "designed/setup_sheet.md"] {
+        let text = std::fs::read_to_string(dir.join(name)).unwrap();
+        assert_eq!(cpm::report::format::find_artefact(&text), None, "{name}");
+        assert!(
+            !text.contains("AOptimal") && !text.contains("Some("),
+            "{name}"
+        );
+    }
+}

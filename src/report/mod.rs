@@ -5,4 +5,5 @@ pub mod calibrate;
 pub mod design;
 pub mod fit;
 pub mod format;
+pub mod paper;
 pub mod refine;
