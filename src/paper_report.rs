@@ -168,7 +168,7 @@ pub fn designed_files(
         ),
         ("readings.csv", crate::io::write_readings(data, &robot, note)),
         ("setup_sheet.md", design.setup_sheet_md(&robot.table)),
-        ("setup_sheet.csv", design.setup_sheet_csv()),
+        ("setup_sheet.csv", crate::report::format::tidy_csv(&design.setup_sheet_csv())),
     ])
 }
 

@@ -502,7 +502,11 @@ fn reproduce_paper_summary_keeps_its_keys() {
     )));
     // report.md and the setup sheet are for people; designed/readings.csv is simulated
     // input data at full precision, as `cpm simulate` writes it.
-    for name in ["report.md", "designed/setup_sheet.md"] {
+    for name in [
+        "report.md",
+        "designed/setup_sheet.md",
+        "designed/setup_sheet.csv",
+    ] {
         let text = std::fs::read_to_string(dir.join(name)).unwrap();
         assert_eq!(cpm::report::format::find_artefact(&text), None, "{name}");
         assert!(

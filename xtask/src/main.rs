@@ -284,10 +284,15 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
                 summary["paper_design"]["readings"], summary["paper_design"]["rank"],
                 r.paper.calibration.residual_rms_um, r.table3.plus, r.table3.minus
             );
+            // Console figures rounded to three significant digits (the JSON keeps them whole).
+            let g = |v: &serde_json::Value| match v.as_f64() {
+                Some(x) => cpm::report::format::sig(x, 3),
+                None => v.to_string(),
+            };
             println!(
                 "designed:     {} readings, rank {} of 36, error vs Table 2 RMS {} um, max {} um, Cramér-Rao RMS {} um",
                 summary["designed"]["readings"], summary["designed"]["rank"],
-                summary["designed"]["rms_error_um"], summary["designed"]["max_error_um"], summary["designed"]["crlb_rms_um"]
+                g(&summary["designed"]["rms_error_um"]), g(&summary["designed"]["max_error_um"]), g(&summary["designed"]["crlb_rms_um"])
             );
             let l = &summary["limited"];
             if !l.is_null() {
@@ -298,21 +303,21 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
                     l["min_clearance_mm"].as_f64().unwrap_or(f64::NAN),
                     l["max_base_cone_deg"].as_f64().unwrap_or(f64::NAN),
                     l["max_platform_cone_deg"].as_f64().unwrap_or(f64::NAN),
-                    l["monte_carlo"]["rms_error_um"], l["monte_carlo"]["max_error_um_worst"], l["crlb_rms_um"]
+                    g(&l["monte_carlo"]["rms_error_um"]), g(&l["monte_carlo"]["max_error_um_worst"]), g(&l["crlb_rms_um"])
                 );
                 let w = &l["worst_error"];
                 if !w.is_null() {
                     println!(
                         "  worst error: (a) largest per-parameter Monte Carlo RMS {} um ({}); (b) largest |error| over all runs {} um, {:.0} % of runs within 6 um",
-                        w["worst_parameter_rms_error_um"], w["worst_parameter"],
-                        w["max_abs_error_um_all_runs"],
+                        g(&w["worst_parameter_rms_error_um"]), w["worst_parameter"],
+                        g(&w["max_abs_error_um_all_runs"]),
                         100.0 * w["fraction_runs_max_le_6um"].as_f64().unwrap_or(f64::NAN)
                     );
                 }
                 for t in l["tradeoff"].as_array().into_iter().flatten() {
                     println!(
                         "  stroke {:>5} mm: Cramér-Rao RMS {} um (worst {} um), {} readings, {} setups",
-                        t["stroke_mm"], t["crlb_rms_um"], t["crlb_max_um"], t["readings"], t["setups"]
+                        g(&t["stroke_mm"]), g(&t["crlb_rms_um"]), g(&t["crlb_max_um"]), t["readings"], t["setups"]
                     );
                 }
             }
