@@ -24,61 +24,54 @@ fn sign(t: f64) -> f64 {
     }
 }
 
-/// `link_offset`: constant length error per link, um.
-#[derive(Debug, Clone, Copy)]
-pub struct LinkOffset;
-impl EffectModel for LinkOffset {
-    fn name(&self) -> &str {
-        "link_offset"
-    }
-    fn num_params(&self, links: usize, _: usize) -> usize {
-        links
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        link_name(k)
-    }
-    fn unit(&self) -> &str {
-        "um"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[Channel::LinkLength]
-    }
-    fn link_coefficient(&self, k: usize, link: usize, _: &EffectInput) -> f64 {
-        if k == link {
-            1e-3
-        } else {
-            0.0
+/// One parameter per link acting on that link's length alone: the type, its name, unit, and
+/// the length change per unit of the parameter (mm) of link `link` given the pose's input.
+macro_rules! per_link_effect {
+    ($(#[$doc:meta])* $ty:ident, $name:literal, $unit:literal, forces: $forces:literal,
+     |$link:ident, $input:ident| $coefficient:expr) => {
+        $(#[$doc])*
+        #[derive(Debug, Clone, Copy)]
+        pub struct $ty;
+        impl EffectModel for $ty {
+            fn name(&self) -> &str {
+                $name
+            }
+            fn num_params(&self, links: usize, _: usize) -> usize {
+                links
+            }
+            fn param_name(&self, k: usize, _: &[String]) -> String {
+                link_name(k)
+            }
+            fn unit(&self) -> &str {
+                $unit
+            }
+            fn channels(&self) -> &[Channel] {
+                &[Channel::LinkLength]
+            }
+            fn needs_forces(&self) -> bool {
+                $forces
+            }
+            fn link_coefficient(&self, k: usize, $link: usize, $input: &EffectInput) -> f64 {
+                if k == $link {
+                    $coefficient
+                } else {
+                    0.0
+                }
+            }
         }
-    }
+    };
 }
 
-/// `link_scale`: actuator scale per link, `dL = theta 1e-6 L`, ppm.
-#[derive(Debug, Clone, Copy)]
-pub struct LinkScale;
-impl EffectModel for LinkScale {
-    fn name(&self) -> &str {
-        "link_scale"
-    }
-    fn num_params(&self, links: usize, _: usize) -> usize {
-        links
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        link_name(k)
-    }
-    fn unit(&self) -> &str {
-        "ppm"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[Channel::LinkLength]
-    }
-    fn link_coefficient(&self, k: usize, link: usize, input: &EffectInput) -> f64 {
-        if k == link {
-            1e-6 * input.context.commanded_mm[link]
-        } else {
-            0.0
-        }
-    }
-}
+per_link_effect!(
+    /// `link_offset`: constant length error per link, um.
+    LinkOffset, "link_offset", "um", forces: false, |_link, _input| 1e-3
+);
+
+per_link_effect!(
+    /// `link_scale`: actuator scale per link, `dL = theta 1e-6 L`, ppm.
+    LinkScale, "link_scale", "ppm", forces: false,
+    |link, input| 1e-6 * input.context.commanded_mm[link]
+);
 
 /// `link_nonlinearity`: `dL = a u^2 + b u^3`, `u = (L - L_home) / scale`, um.
 #[derive(Debug, Clone, Copy)]
@@ -188,92 +181,26 @@ impl EffectModel for Clearance {
     }
 }
 
-/// `thermal_drift`: `dL = theta 1e-6 L (T - T_0)` (or hours without temperature), ppm/K.
-#[derive(Debug, Clone, Copy)]
-pub struct ThermalDrift;
-impl EffectModel for ThermalDrift {
-    fn name(&self) -> &str {
-        "thermal_drift"
-    }
-    fn num_params(&self, links: usize, _: usize) -> usize {
-        links
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        link_name(k)
-    }
-    fn unit(&self) -> &str {
-        "ppm/K"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[Channel::LinkLength]
-    }
-    fn link_coefficient(&self, k: usize, link: usize, input: &EffectInput) -> f64 {
-        if k != link {
-            return 0.0;
-        }
+per_link_effect!(
+    /// `thermal_drift`: `dL = theta 1e-6 L (T - T_0)` (or hours without temperature), ppm/K.
+    ThermalDrift, "thermal_drift", "ppm/K", forces: false,
+    |link, input| {
         let ctx = input.context;
         1e-6 * ctx.commanded_mm[link] * ctx.drift_variable(input.settings, input.t0_s)
     }
-}
+);
 
-/// `backlash`: half the lost motion per link, `dL = theta s_i`, um.
-#[derive(Debug, Clone, Copy)]
-pub struct Backlash;
-impl EffectModel for Backlash {
-    fn name(&self) -> &str {
-        "backlash"
-    }
-    fn num_params(&self, links: usize, _: usize) -> usize {
-        links
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        link_name(k)
-    }
-    fn unit(&self) -> &str {
-        "um"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[Channel::LinkLength]
-    }
-    fn link_coefficient(&self, k: usize, link: usize, input: &EffectInput) -> f64 {
-        if k == link {
-            1e-3 * input.context.motion_sign[link]
-        } else {
-            0.0
-        }
-    }
-}
+per_link_effect!(
+    /// `backlash`: half the lost motion per link, `dL = theta s_i`, um.
+    Backlash, "backlash", "um", forces: false,
+    |link, input| 1e-3 * input.context.motion_sign[link]
+);
 
-/// `compliance`: axial stretch under load, `dL = theta t_i / 1000`, um per kN.
-#[derive(Debug, Clone, Copy)]
-pub struct Compliance;
-impl EffectModel for Compliance {
-    fn name(&self) -> &str {
-        "compliance"
-    }
-    fn num_params(&self, links: usize, _: usize) -> usize {
-        links
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        link_name(k)
-    }
-    fn unit(&self) -> &str {
-        "um/kN"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[Channel::LinkLength]
-    }
-    fn needs_forces(&self) -> bool {
-        true
-    }
-    fn link_coefficient(&self, k: usize, link: usize, input: &EffectInput) -> f64 {
-        if k == link {
-            1e-3 * input.context.forces_n[link] / 1000.0
-        } else {
-            0.0
-        }
-    }
-}
+per_link_effect!(
+    /// `compliance`: axial stretch under load, `dL = theta t_i / 1000`, um per kN.
+    Compliance, "compliance", "um/kN", forces: true,
+    |link, input| 1e-3 * input.context.forces_n[link] / 1000.0
+);
 
 /// `screw_periodic`: `dL = a sin(2 pi L / lead) + b cos(2 pi L / lead)`, um.
 #[derive(Debug, Clone, Copy)]
