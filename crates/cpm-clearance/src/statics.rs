@@ -87,17 +87,6 @@ pub fn link_forces_n(
         // Six links (the usual hexapod): the same decomposition on a fixed-size matrix, on
         // the stack (it runs for every pose of a campaign when clearance is modelled).
         let a = nalgebra::Matrix6::from_fn(|r, c| j1[(c, r)]);
-        // The common case without an SVD: when `|A|_F |A^-1|_F` (an upper bound of the
-        // condition number) is within the limit, A is certainly well conditioned and its
-        // inverse gives the forces (a campaign's preparation runs this for every pose).
-        if let Some(inv) = a.try_inverse() {
-            if a.norm() * inv.norm() <= 1e10 {
-                let t = inv * w;
-                if t.iter().all(|v| v.is_finite()) {
-                    return Ok(t.iter().copied().collect());
-                }
-            }
-        }
         // nalgebra's unbounded SVD can loop for ever on some exactly singular matrices: a
         // bounded number of sweeps, and a failure to converge is a singular pose.
         let svd = a

@@ -102,8 +102,8 @@ fn invalid_radius_is_rejected() {
 
 #[test]
 fn forces_match_an_svd_solve_over_wide_poses_and_singular_poses_fail() {
-    // The six-link path solves with an inverse when the condition bound allows: the same
-    // forces as nalgebra's SVD solve of J1^T t = w, over wide random poses and loads.
+    // The same forces as nalgebra's SVD solve of J1^T t = w over wide random poses and
+    // loads; a singular J1 fails (and does not hang the SVD).
     let table = JointTable::paper_cubic();
     let mut state = 99u64;
     let mut u = || {
