@@ -400,6 +400,9 @@ pub fn spectrum(
     Ok(svg)
 }
 
+/// Named series of `(x, y)` points, as [`scatter`] draws them.
+pub type Series = Vec<(String, Vec<(f64, f64)>)>;
+
 /// The most points a [`scatter`] draws; above it the series are thinned by [`thin_extremes`]
 /// (a scatter of 10^6 residuals is a 90 MB SVG that shows no more than this).
 pub const MAX_SCATTER_POINTS: usize = 20_000;
@@ -413,7 +416,7 @@ pub const MAX_SCATTER_POINTS: usize = 20_000;
 pub fn thin_extremes(
     series: &[(String, Vec<(f64, f64)>)],
     max_points: usize,
-) -> (Vec<(String, Vec<(f64, f64)>)>, usize, usize) {
+) -> (Series, usize, usize) {
     let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
     let total: usize = series
         .iter()
