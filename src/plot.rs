@@ -400,23 +400,107 @@ pub fn spectrum(
     Ok(svg)
 }
 
+/// Named series of `(x, y)` points, as [`scatter`] draws them.
+pub type Series = Vec<(String, Vec<(f64, f64)>)>;
+
+/// The most points a [`scatter`] draws; above it the series are thinned by [`thin_extremes`]
+/// (a scatter of 10^6 residuals is a 90 MB SVG that shows no more than this).
+pub const MAX_SCATTER_POINTS: usize = 20_000;
+
+/// Thins series of finite `(x, y)` points to about `max_points` in all, deterministically
+/// and keeping the envelope: each series' x range is cut into equal bins (as many as its
+/// share of `max_points`, halved), and in each bin the points with the lowest and the highest
+/// y are kept (in their original order). The outliers a residual plot is read for survive;
+/// points in between are left out. Series already small enough are returned whole. Returns
+/// the thinned series and the number of points kept and given (finite ones).
+pub fn thin_extremes(
+    series: &[(String, Vec<(f64, f64)>)],
+    max_points: usize,
+) -> (Series, usize, usize) {
+    let finite = |p: &&(f64, f64)| p.0.is_finite() && p.1.is_finite();
+    let total: usize = series
+        .iter()
+        .map(|s| s.1.iter().filter(finite).count())
+        .sum();
+    if total <= max_points {
+        let whole: Vec<_> = series
+            .iter()
+            .map(|(n, v)| (n.clone(), v.iter().filter(finite).copied().collect()))
+            .collect();
+        return (whole, total, total);
+    }
+    let mut kept = 0;
+    let out = series
+        .iter()
+        .map(|(name, vals)| {
+            let pts: Vec<(f64, f64)> = vals.iter().filter(finite).copied().collect();
+            // This series' share of the budget, at least one bin.
+            let share = (max_points as f64 * pts.len() as f64 / total as f64).floor() as usize;
+            let bins = (share / 2).max(1);
+            if pts.len() <= 2 * bins {
+                kept += pts.len();
+                return (name.clone(), pts);
+            }
+            let (lo, hi) = pts
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+            let width = (hi - lo) / bins as f64;
+            let bin = |x: f64| {
+                if width > 0.0 {
+                    (((x - lo) / width) as usize).min(bins - 1)
+                } else {
+                    0
+                }
+            };
+            // Index of the lowest and the highest y per bin.
+            let mut low: Vec<Option<usize>> = vec![None; bins];
+            let mut high: Vec<Option<usize>> = vec![None; bins];
+            for (i, p) in pts.iter().enumerate() {
+                let b = bin(p.0);
+                if low[b].is_none_or(|j| p.1 < pts[j].1) {
+                    low[b] = Some(i);
+                }
+                if high[b].is_none_or(|j| p.1 > pts[j].1) {
+                    high[b] = Some(i);
+                }
+            }
+            let mut keep: Vec<usize> = low.into_iter().chain(high).flatten().collect();
+            keep.sort_unstable();
+            keep.dedup();
+            kept += keep.len();
+            (name.clone(), keep.into_iter().map(|i| pts[i]).collect())
+        })
+        .collect();
+    (out, kept, total)
+}
+
 /// Scatter plot of several (x, y) series, each with its own colour and marker; the legend
-/// is outside the plot.
+/// is outside the plot. Above [`MAX_SCATTER_POINTS`] points the series are thinned by
+/// [`thin_extremes`] and the legend says so (how many of how many are drawn, and which).
 pub fn scatter(
     title: &str,
     x_label: &str,
     y_label: &str,
     series: &[(String, Vec<(f64, f64)>)],
 ) -> Result<String, PlotError> {
+    let (series, drawn, total) = thin_extremes(series, MAX_SCATTER_POINTS);
+    let series = &series[..];
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1000, 500)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(title, e))?;
-        let entries: Vec<(String, Key)> = series
+        let mut entries: Vec<(String, Key)> = series
             .iter()
             .enumerate()
             .map(|(i, s)| (s.0.clone(), Key::Marker(style(i).0, style(i).1)))
             .collect();
+        if drawn < total {
+            entries.push((String::new(), Key::Note));
+            entries.push((format!("thinned: {drawn} of {total} points"), Key::Note));
+            entries.push(("drawn: lowest and highest".to_string(), Key::Note));
+            entries.push(("residual per series in each".to_string(), Key::Note));
+            entries.push(("of equal bins along the x axis".to_string(), Key::Note));
+        }
         let area = split_with_legend(&root, title, &entries)?;
         let pts: Vec<(f64, f64)> = series
             .iter()
@@ -506,6 +590,59 @@ mod tests {
                 "colour of series {k}: {hex}"
             );
         }
+    }
+
+    #[test]
+    fn thinning_keeps_the_extremes_and_says_so() {
+        // Three series of 30,000 points each, pseudo-random residuals with one planted
+        // outlier per series; x the pose number.
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        let series: Vec<(String, Vec<(f64, f64)>)> = (0..3)
+            .map(|s| {
+                let mut v: Vec<(f64, f64)> = (0..30_000)
+                    .map(|k| ((k / 16) as f64 + 1.0, next()))
+                    .collect();
+                v[7_777 + s * 100].1 = 40.0 + s as f64;
+                v[20_001 - s * 100].1 = -50.0 - s as f64;
+                (format!("sensor {s}"), v)
+            })
+            .collect();
+        let (thin, kept, total) = thin_extremes(&series, MAX_SCATTER_POINTS);
+        assert_eq!(total, 90_000);
+        assert_eq!(kept, thin.iter().map(|s| s.1.len()).sum::<usize>());
+        assert!(kept <= MAX_SCATTER_POINTS + 2 * series.len(), "{kept}");
+        assert!(kept > MAX_SCATTER_POINTS / 2, "{kept}");
+        for (s, ((_, full), (_, t))) in series.iter().zip(&thin).enumerate() {
+            let max = |v: &[(f64, f64)]| v.iter().map(|p| p.1).fold(f64::MIN, f64::max);
+            let min = |v: &[(f64, f64)]| v.iter().map(|p| p.1).fold(f64::MAX, f64::min);
+            assert_eq!(max(t), 40.0 + s as f64);
+            assert_eq!(min(t), -50.0 - s as f64);
+            assert_eq!(max(t), max(full));
+            // Every kept point is one of the series', in order.
+            let mut it = full.iter();
+            assert!(t.iter().all(|p| it.any(|q| q == p)));
+        }
+        // Deterministic, and small series are left whole.
+        assert_eq!(thin_extremes(&series, MAX_SCATTER_POINTS).0, thin);
+        let small = vec![(
+            "a".to_string(),
+            vec![(1.0, 2.0), (f64::NAN, 1.0), (2.0, 3.0)],
+        )];
+        let (whole, k, t) = thin_extremes(&small, 10);
+        assert_eq!((k, t), (2, 2));
+        assert_eq!(whole[0].1, vec![(1.0, 2.0), (2.0, 3.0)]);
+        // The figure says it is thinned, and how many points it draws.
+        let svg = scatter("t", "pose", "residual (um)", &series).unwrap();
+        assert!(svg.contains(&format!("thinned: {kept} of 90000 points")));
+        assert!(svg.len() < 8_000_000, "{} bytes", svg.len());
+        let svg = scatter("t", "x", "y", &small).unwrap();
+        assert!(!svg.contains("thinned"));
     }
 
     #[test]

@@ -21,18 +21,30 @@ fn residual_series(
     x_tracker: impl Fn(usize) -> Option<f64>,
 ) -> Vec<(String, Vec<(f64, f64)>)> {
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    // Series index per sensor index (series in the order sensors first appear).
+    let mut slot: Vec<Option<usize>> = Vec::new();
     for (k, r) in campaign.readings.iter().enumerate() {
         let (Some(res), Some(xv)) = (residuals_um.get(k), x(k)) else {
             continue;
         };
-        let name = format!(
-            "sensor {}",
-            sensor_names.get(r.sensor).cloned().unwrap_or_default()
-        );
-        match series.iter_mut().find(|s| s.0 == name) {
-            Some(s) => s.1.push((xv, *res)),
-            None => series.push((name, vec![(xv, *res)])),
+        if slot.len() <= r.sensor {
+            slot.resize(r.sensor + 1, None);
         }
+        let i = *slot[r.sensor].get_or_insert_with(|| {
+            let name = format!(
+                "sensor {}",
+                sensor_names.get(r.sensor).cloned().unwrap_or_default()
+            );
+            // Two sensors of the same name share a series, as before.
+            match series.iter().position(|s| s.0 == name) {
+                Some(i) => i,
+                None => {
+                    series.push((name, Vec::new()));
+                    series.len() - 1
+                }
+            }
+        });
+        series[i].1.push((xv, *res));
     }
     let m = campaign.readings.len();
     if residuals_um.len() == m + 6 * campaign.pose_measurements.len()

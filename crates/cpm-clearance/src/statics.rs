@@ -87,7 +87,13 @@ pub fn link_forces_n(
         // Six links (the usual hexapod): the same decomposition on a fixed-size matrix, on
         // the stack (it runs for every pose of a campaign when clearance is modelled).
         let a = nalgebra::Matrix6::from_fn(|r, c| j1[(c, r)]);
-        let svd = a.svd(true, true);
+        // nalgebra's unbounded SVD can loop for ever on some exactly singular matrices: a
+        // bounded number of sweeps, and a failure to converge is a singular pose.
+        let svd = a
+            .try_svd(true, true, f64::EPSILON, 10_000)
+            .ok_or(ClearanceError::Singular {
+                condition: f64::INFINITY,
+            })?;
         let smax = svd.singular_values.max();
         let smin = svd.singular_values.min();
         if !(smin > smax * 1e-10) {
@@ -100,7 +106,12 @@ pub fn link_forces_n(
         })?;
         return Ok(t.iter().copied().collect());
     }
-    let svd = j1.transpose().svd(true, true);
+    let svd = j1
+        .transpose()
+        .try_svd(true, true, f64::EPSILON, 10_000)
+        .ok_or(ClearanceError::Singular {
+            condition: f64::INFINITY,
+        })?;
     let smax = svd.singular_values.max();
     let smin = svd.singular_values.min();
     if !(smin > smax * 1e-10) {

@@ -99,3 +99,57 @@ fn invalid_radius_is_rejected() {
         .unwrap_err();
     assert!(e.to_string().contains("radius_um"));
 }
+
+#[test]
+fn forces_match_an_svd_solve_over_wide_poses_and_singular_poses_fail() {
+    // The same forces as nalgebra's SVD solve of J1^T t = w over wide random poses and
+    // loads; a singular J1 fails (and does not hang the SVD).
+    let table = JointTable::paper_cubic();
+    let mut state = 99u64;
+    let mut u = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    for _ in 0..300 {
+        let pose = Pose::from_xyz_rpy(
+            200.0 * u(),
+            200.0 * u(),
+            400.0 + 100.0 * u(),
+            0.6 * u(),
+            0.6 * u(),
+            0.6 * u(),
+        );
+        let load = Load {
+            external_force_n: Vector3::new(100.0 * u(), 100.0 * u(), 100.0 * u()),
+            ..Load::default()
+        };
+        let j1 = cpm_kinematics::j1(&table, &pose);
+        let w = platform_wrench(&load, &pose);
+        let a = j1.transpose();
+        let svd = a.clone().try_svd(true, true, f64::EPSILON, 10_000).unwrap();
+        let cond = svd.singular_values.max() / svd.singular_values.min();
+        match link_forces_n(&table, &pose, &load) {
+            Ok(t) => {
+                assert!(cond <= 1e10, "{cond}");
+                let want = svd
+                    .solve(&nalgebra::DVector::from_column_slice(w.as_slice()), 0.0)
+                    .unwrap();
+                let scale = want.amax().max(1.0);
+                for (a, b) in t.iter().zip(want.iter()) {
+                    assert!((a - b).abs() <= 1e-9 * scale, "{a} vs {b} (cond {cond})");
+                }
+            }
+            Err(e) => assert!(cond > 1e10, "{e} at condition {cond}"),
+        }
+    }
+    // A planar platform (all joints in one plane with the base): J1 is singular.
+    let mut flat = table.clone();
+    for l in &mut flat.links {
+        l.base_mm.z = 0.0;
+        l.platform_mm.z = 0.0;
+    }
+    let pose = Pose::from_xyz_rpy(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    assert!(link_forces_n(&flat, &pose, &Load::default()).is_err());
+}
