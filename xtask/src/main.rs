@@ -129,6 +129,8 @@ fn scale(args: &[String]) -> ExitCode {
             / 36.0)
             .sqrt()
     };
+    // The plan's poses are in the campaign too: only the campaign goes into the fit.
+    drop(plan);
     let rss_before_mb = peak_rss_mb();
     // Reset the peak (Linux: `5` to clear_refs resets VmHWM) so that `peak_rss_mb_fit` is
     // the peak while fitting (the campaign included), not the simulation's.
