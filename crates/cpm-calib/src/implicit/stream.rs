@@ -217,18 +217,6 @@ impl Reduced {
     }
 }
 
-/// Solves `L y = b` in place for the lower-triangular `L` of a 6 x 6 Cholesky factor.
-#[inline]
-fn forward6(l: &Matrix6<f64>, y: &mut Vector6<f64>) {
-    for a in 0..6 {
-        let mut v = y[a];
-        for q in 0..a {
-            v -= l[(a, q)] * y[q];
-        }
-        y[a] = v / l[(a, a)];
-    }
-}
-
 /// The reduce pass at `x` and damping `mu`. With `update_scales` the local scales `d`
 /// (`6 * num_poses`) grow to the column norms first; with `skip_singular` a pose whose
 /// block is singular keeps its `G_j^T G_j` and is left out of the elimination (the
@@ -303,11 +291,12 @@ pub(super) fn reduce(
                 ys.clear();
                 let mut zl = -gl;
                 if let Some(ch) = &factor {
+                    // The factor's diagonal is positive, so the triangular solves succeed.
                     let lm = ch.l();
-                    forward6(&lm, &mut zl);
+                    lm.solve_lower_triangular_mut(&mut zl);
                     for &k in &rows {
                         let mut y = b.local[k];
-                        forward6(&lm, &mut y);
+                        lm.solve_lower_triangular_mut(&mut y);
                         ys.push(y);
                     }
                 }
