@@ -186,6 +186,7 @@ fn pose_measurements_round_trip_and_quaternions() {
                 pose: j,
                 measured: *p,
                 time_s: Some(j as f64),
+                temperature_c: None,
             })
             .collect(),
         poses,
@@ -343,18 +344,44 @@ fn bad_tracker_files() {
 fn calibrated_description_folds_link_offset_and_scale_exactly() {
     let robot = encoder_hexapod();
     let model = robot.model(&[Effect::LinkOffset, Effect::LinkScale]);
-    let mut params: Vec<Option<f64>> = vec![Some(0.0); model.num_params()];
-    params[0] = Some(10.0); // link 1 base dx, um
-    params[7] = None; // link 2 base dy: not determined
+    let mut params: Vec<f64> = vec![0.0; model.num_params()];
+    let mut determined = vec![true; model.num_params()];
+    params[0] = 10.0; // link 1 base dx, um
+    params[7] = -4.0; // link 2 base dy: not determined on its own, written all the same
+    determined[7] = false;
     let offsets = [12.0, -7.0, 0.0, 3.0, 25.0, -1.0];
     let scales = [100.0, -50.0, 0.0, 20.0, 5.0, 1.0];
     for i in 0..6 {
-        params[36 + i] = Some(offsets[i]);
-        params[42 + i] = Some(scales[i]);
+        params[36 + i] = offsets[i];
+        params[42 + i] = scales[i];
     }
-    let (d, notes) = calibrated_description(&robot, &model, &params, None);
+    let (d, notes) = calibrated_description(&robot, &model, &params, &determined, None);
     assert_eq!(notes.undetermined, vec!["link 2 base dy".to_string()]);
-    assert!((d.links[0].base_mm[0] - (robot.table.links[0].base_mm.x + 0.010)).abs() < 1e-12);
+    // The design joints stay; the installation errors carry the fit, undetermined ones too.
+    assert_eq!(
+        d.links,
+        robot
+            .description
+            .links
+            .iter()
+            .zip(&d.links)
+            .map(|(a, b)| cpm::geometry::description::LinkSpec {
+                length_at_zero_mm: b.length_at_zero_mm,
+                mm_per_unit: b.mm_per_unit,
+                ..*a
+            })
+            .collect::<Vec<_>>()
+    );
+    let errors = d.installation_errors_um.as_ref().unwrap();
+    assert_eq!(errors.base[0][0], 10.0);
+    assert_eq!(errors.base[1][1], -4.0);
+    let back = Robot::from_description(d.clone(), "cal.toml").unwrap();
+    assert!(
+        (back.table.links[0].base_mm.x - (robot.table.links[0].base_mm.x + 0.010)).abs() < 1e-12
+    );
+    assert!(
+        (back.table.links[1].base_mm.y - (robot.table.links[1].base_mm.y - 0.004)).abs() < 1e-12
+    );
     for i in 0..6 {
         for u in [0.0, 120_000.0, 260_000.0] {
             let commanded = robot.length_mm(i, u);
@@ -389,18 +416,26 @@ fn calibrated_description_adds_effect_values_to_the_known_ones() {
     });
     let robot = Robot::from_description(d, "known.toml").unwrap();
     let model = robot.model(&[Effect::Backlash, Effect::Compliance]);
-    let mut params: Vec<Option<f64>> = vec![Some(0.0); model.num_params()];
+    let mut params: Vec<f64> = vec![0.0; model.num_params()];
+    let mut determined = vec![true; model.num_params()];
     let fit = [0.5, -1.0, 0.25, 0.0, 2.0, -3.0];
     for i in 0..6 {
-        params[36 + i] = Some(fit[i]);
-        params[42 + i] = Some(10.0 * (i as f64 + 1.0));
+        params[36 + i] = fit[i];
+        params[42 + i] = 10.0 * (i as f64 + 1.0);
     }
-    params[37] = None;
-    let (desc, notes) = calibrated_description(&robot, &model, &params, Some(&[Effect::Backlash]));
+    determined[37] = false;
+    let (desc, notes) = calibrated_description(
+        &robot,
+        &model,
+        &params,
+        &determined,
+        Some(&[Effect::Backlash]),
+    );
     assert_eq!(notes.known_effects, vec!["backlash", "compliance"]);
     assert_eq!(notes.undetermined_effects.len(), 1);
     let known = &desc.calibration.as_ref().unwrap().known_effects;
-    assert_eq!(known["backlash"], vec![1.5, 2.0, 3.25, 4.0, 7.0, 3.0]);
+    // Link 2's backlash is not determined on its own: written at the fit's point all the same.
+    assert_eq!(known["backlash"], vec![1.5, 1.0, 3.25, 4.0, 7.0, 3.0]);
     assert_eq!(
         known["compliance"],
         vec![10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
@@ -414,7 +449,7 @@ fn calibrated_description_adds_effect_values_to_the_known_ones() {
         sensors: (0..robot.table.sensors.len()).collect(),
     };
     let c = plan.skeleton();
-    let full: Vec<f64> = params.iter().map(|v| v.unwrap_or(0.0)).collect();
+    let full: Vec<f64> = params.clone();
     let prepared = cpm::calib::model::Prepared::new(&model, &c).unwrap();
     let y_fit = cpm::calib::model::predict(&model, &prepared, &c, &full, None).unwrap();
     let loaded = back.model(&[]);
@@ -429,8 +464,6 @@ fn calibrated_description_adds_effect_values_to_the_known_ones() {
     let differs = y_fit.iter().zip(&unfit).any(|(a, b)| (a - b).abs() > 1e-4);
     assert!(differs, "the known values should matter");
     for (a, b) in y_fit.iter().zip(&y_back) {
-        // Link 2's backlash was not determined: the fit used 0 on top of the known 2.0, the
-        // description keeps 2.0; everything else is the same machine.
         assert!((a - b).abs() < 1e-9, "fit {a} vs loaded back {b}");
     }
 }

@@ -22,8 +22,9 @@ pub struct CalibrateArgs {
     /// Robot, data, effects, noise, solver and output: as for `cpm refine`.
     #[command(flatten)]
     pub fit: FitArgs,
-    /// Write the minimum-norm solution into calibrated.toml (blind directions at nominal)
-    /// rather than only the components the data determine on their own.
+    /// Kept for compatibility: calibrated.toml always holds the fit's complete point (the
+    /// minimum-norm solution when the data do not determine every parameter), which
+    /// reproduces the fit; the undetermined components are named in its header.
     #[arg(long)]
     pub minimum_norm: bool,
     /// Formulation of the fit: `auto` (nested below 100,000 readings, implicit from there
@@ -255,12 +256,28 @@ pub fn stage_calibrated(
     declare: Option<&[crate::calib::Effect]>,
     command: &str,
 ) -> anyhow::Result<io::robot::CalibratedNotes> {
-    let params: Vec<Option<f64>> = if minimum_norm {
-        cal.minimum_norm_um.iter().map(|v| Some(*v)).collect()
-    } else {
-        cal.estimate_um.clone()
-    };
-    let (mut desc, notes) = io::calibrated_description(&inputs.robot, model, &params, declare);
+    // The point the fit ended at, complete: a rank-deficient fit writes its point of the
+    // solution set (the minimum-norm one), never a mix of fitted and nominal components.
+    let _ = minimum_norm;
+    let (mut desc, notes) = io::calibrated_description(
+        &inputs.robot,
+        model,
+        &cal.minimum_norm_um,
+        &cal.identifiability.determined,
+        declare,
+    );
+    // Where it came from (validate's default reference) and whether the data were simulated.
+    {
+        let c = desc.calibration.get_or_insert_with(Default::default);
+        let from = std::path::Path::new(&inputs.robot.file);
+        c.calibrated_from = Some(
+            std::fs::canonicalize(from)
+                .unwrap_or_else(|_| from.to_path_buf())
+                .display()
+                .to_string(),
+        );
+        c.simulated = cal.simulated;
+    }
     // Reading offsets the registration applied to the data belong to the link reading models.
     if let Some(r) = inputs
         .merged
@@ -300,9 +317,6 @@ pub fn stage_calibrated(
             "WARNING: the solver did not converge ({}): these joints are where it stopped, not a calibration.",
             cal.solver.termination
         ));
-    }
-    if minimum_norm {
-        header.push("Minimum-norm solution: components the data do not determine on their own are set from the identifiable combinations, blind directions at nominal.".into());
     }
     let text = io::calibrated_toml(&desc, &notes, &header).map_err(super::trouble)?;
     // The file must load back.

@@ -86,9 +86,10 @@ pub fn commands_for(
     let pose = &pose_map_aim(robot, model, pose, previous, temperature_c)?;
     let mut target = cpm_kinematics::inverse_lengths(&robot.table, pose);
     if model.clearance.radius_um > 0.0 {
-        let shift = model
-            .clearance
-            .link_corrections_mm(&robot.table, pose, &model.load)?;
+        let shift =
+            model
+                .clearance
+                .link_corrections_mm(model.statics_table(), pose, &model.load)?;
         for (l, s) in target.iter_mut().zip(shift) {
             *l -= s;
         }

@@ -351,7 +351,7 @@ fn simulate_poses(
         let cmd = cpm_kinematics::inverse_lengths(&robot.table, p);
         let shift = model
             .clearance
-            .link_corrections_mm(&robot.table, p, &model.load)
+            .link_corrections_mm(model.statics_table(), p, &model.load)
             .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
         // The robot's known link effects (a calibrated description's) act on the machine too.
         let ctx = model
@@ -384,6 +384,7 @@ fn simulate_poses(
             pose: j,
             measured,
             time_s: None,
+            temperature_c: None,
         });
         commanded.push(cmd);
     }

@@ -213,6 +213,7 @@ fn reached_errors(
                 pose: j,
                 measured: t.pose,
                 time_s: t.time_s,
+                temperature_c: None,
             })
             .collect(),
         simulated: true,

@@ -51,8 +51,7 @@ impl CalibrateReport {
         r.push_str("## Outputs\n\n- `calibration.json`: estimates, standard deviations, what is not determined, residual, solver report.\n");
         let c = &self.calibrated;
         r.push_str(&format!(
-            "- `calibrated.toml`: the robot description with the {} ({} installation-error components left at nominal); `link_offset`/`link_scale` folded into the link reading models, `socket_error` into the sensor sockets{}.\n",
-            if c.minimum_norm { "minimum-norm solution" } else { "determined installation errors" },
+            "- `calibrated.toml`: the robot description with the fitted installation errors in `[installation_errors_um]` ({} components not determined on their own, written at the fit's minimum-norm point, which reproduces the fit); `link_offset`/`link_scale` folded into the link reading models, `socket_error` into the sensor sockets{}.\n",
             c.undetermined,
             if c.known_effects.is_empty() { String::new() } else { format!(", the values of {} in `[calibration.known_effects]`", c.known_effects.join(", ")) }
         ));

@@ -459,7 +459,7 @@ impl RefineReport {
         self.fit.markdown_sections(&mut s);
         let c = &self.calibrated;
         s.push_str(&format!(
-            "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: determined installation errors ({} components left at nominal), effects declared; link_offset/link_scale folded into the link reading models, socket_error into the sensor sockets{}\n",
+            "## Outputs\n\n- `refine.json`, `calibration.json` (final model)\n- `calibrated.toml`: the fitted installation errors in `[installation_errors_um]` ({} components not determined on their own, written at the fit's minimum-norm point, which reproduces the fit), effects declared; link_offset/link_scale folded into the link reading models, socket_error into the sensor sockets{}\n",
             c.undetermined,
             if c.known_effects.is_empty() { String::new() } else { format!("; values of {} in `[calibration.known_effects]`", c.known_effects.join(", ")) }
         ));

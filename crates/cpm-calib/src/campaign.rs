@@ -26,6 +26,10 @@ pub struct PoseMeasurement {
     pub measured: Pose,
     /// Acquisition time, s, if logged.
     pub time_s: Option<f64>,
+    /// Temperature, deg C, if logged (what `thermal_drift` reads at a pose without a
+    /// temperature-logged reading).
+    #[serde(default)]
+    pub temperature_c: Option<f64>,
 }
 
 /// A measurement campaign: commanded poses and readings.
@@ -49,9 +53,21 @@ pub struct Campaign {
     pub orientation_sigma_urad: f64,
     /// True when the readings were simulated, not measured. Carried into every output.
     pub simulated: bool,
+    /// Poses (indices into [`poses`](Self::poses), increasing) at which a new session starts:
+    /// a campaign merged from several files starts each file's motion history afresh there
+    /// (a link's last motion direction, which `backlash` reads, is not carried across files),
+    /// as a campaign of one file does at its first pose. Default none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub session_starts: Vec<usize>,
 }
 
 impl Campaign {
+    /// True when pose `j` starts a session: the first pose, or one of
+    /// [`session_starts`](Self::session_starts).
+    pub fn starts_session(&self, j: usize) -> bool {
+        j == 0 || self.session_starts.binary_search(&j).is_ok()
+    }
+
     /// Number of observations: length readings plus six per pose measurement.
     pub fn len(&self) -> usize {
         self.readings.len() + 6 * self.pose_measurements.len()

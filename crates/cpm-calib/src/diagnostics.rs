@@ -62,7 +62,7 @@ pub fn regressors(
     let forces: Vec<Option<Vec<f64>>> = campaign
         .poses
         .iter()
-        .map(|p| cpm_clearance::link_forces_n(&model.nominal, p, &model.load).ok())
+        .map(|p| cpm_clearance::link_forces_n(model.statics_table(), p, &model.load).ok())
         .collect();
     for i in 0..n {
         push(format!("link {} length", i + 1), &|k| {

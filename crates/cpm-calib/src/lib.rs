@@ -76,6 +76,7 @@ pub mod model;
 pub mod paper;
 pub mod refine;
 pub mod registration;
+pub mod session;
 pub mod simulate;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};

@@ -49,6 +49,12 @@ pub struct MeasurementModel {
     /// estimated. An effect may be known and in [`effects`](Self::effects) at once; its
     /// parameters are then corrections on top of the known values. Default none.
     pub known_effects: Vec<KnownEffect>,
+    /// The design geometry, when it differs from [`nominal`](Self::nominal): the joints of a
+    /// robot description without its `[installation_errors_um]`. The link forces (joint
+    /// clearance, compliance) and the home link lengths of the effects are computed on it, so
+    /// that a calibrated description (the design plus the fitted installation errors) predicts
+    /// exactly what the fit predicted. Default `None`: [`nominal`](Self::nominal).
+    pub design: Option<JointTable>,
 }
 
 /// Where a block of parameters sits in the parameter vector.
@@ -96,6 +102,7 @@ impl MeasurementModel {
             effects: Vec::new(),
             effect_settings: EffectSettings::default(),
             known_effects: Vec::new(),
+            design: None,
         }
     }
 
@@ -127,11 +134,12 @@ impl MeasurementModel {
         description: &cpm_geometry::RobotDescription,
     ) -> Result<Self, CalibError> {
         let nominal = description.joint_table()?;
-        let table = match description.installation_errors()? {
-            Some(e) => e.apply(&nominal)?,
-            None => nominal,
+        let (table, design) = match description.installation_errors()? {
+            Some(e) => (e.apply(&nominal)?, Some(nominal)),
+            None => (nominal, None),
         };
         let mut m = Self::with_paper_clearance(table);
+        m.design = design;
         m.clearance = description
             .clearance
             .as_ref()
@@ -202,6 +210,12 @@ impl MeasurementModel {
                 || k.effect.acts_through(Channel::SensorSocket))
         });
         m
+    }
+
+    /// The geometry the link forces and the effects' home lengths are computed on: the
+    /// [`design`](Self::design) when set, else the [`nominal`](Self::nominal) table.
+    pub fn statics_table(&self) -> &JointTable {
+        self.design.as_ref().unwrap_or(&self.nominal)
     }
 
     /// The known values of `effect`, if any.
@@ -294,7 +308,7 @@ impl MeasurementModel {
     ) -> Result<PoseContext, cpm_clearance::ClearanceError> {
         let n = self.nominal.num_links();
         let forces_n = if self.needs_forces() {
-            cpm_clearance::link_forces_n(&self.nominal, pose, &self.load)?
+            cpm_clearance::link_forces_n(self.statics_table(), pose, &self.load)?
         } else {
             vec![0.0; n]
         };
@@ -315,7 +329,7 @@ impl MeasurementModel {
         // The home lengths are the same for every pose: carried over, computed once.
         let home_mm = match previous {
             Some(prev) => prev.home_mm.clone(),
-            None => cpm_kinematics::inverse_lengths(&self.nominal, &self.nominal.home),
+            None => cpm_kinematics::inverse_lengths(self.statics_table(), &self.nominal.home),
         };
         Ok(PoseContext {
             commanded_mm,
@@ -448,7 +462,7 @@ impl MeasurementModel {
             };
             let dl = self
                 .clearance
-                .link_corrections_mm(&self.nominal, pose, &self.load)
+                .link_corrections_mm(self.statics_table(), pose, &self.load)
                 .map_err(|source| CalibError::Clearance { pose: j, source })?;
             for (a, b) in l.iter_mut().zip(&dl) {
                 *a += b;
@@ -634,7 +648,16 @@ fn contexts(
         let temperature_c = mean(
             rs.iter()
                 .filter_map(|&k| campaign.readings[k].temperature_c),
-        );
+        )
+        .or_else(|| {
+            mean(
+                campaign
+                    .pose_measurements
+                    .iter()
+                    .filter(|p| p.pose == j)
+                    .filter_map(|p| p.temperature_c),
+            )
+        });
         let time_s = mean(
             rs.iter()
                 .filter_map(|&k| campaign.readings[k].time_s)
@@ -647,7 +670,17 @@ fn contexts(
                 ),
         );
         let ctx = model
-            .pose_context(pose, commanded_mm, out.last(), temperature_c, time_s)
+            .pose_context(
+                pose,
+                commanded_mm,
+                if campaign.starts_session(j) {
+                    None
+                } else {
+                    out.last()
+                },
+                temperature_c,
+                time_s,
+            )
             .map_err(|source| CalibError::Clearance { pose: j, source })?;
         out.push(ctx);
     }

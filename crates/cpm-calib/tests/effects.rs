@@ -30,6 +30,7 @@ fn timed_campaign(model: &MeasurementModel, poses: usize, seed: u64) -> Campaign
             pose: j,
             measured: c.poses[j].perturbed(&twist),
             time_s: Some(60.0 * j as f64),
+            temperature_c: None,
         });
     }
     c

@@ -43,6 +43,7 @@ fn campaign(model: &MeasurementModel) -> Campaign {
             pose: j,
             measured: c.poses[j].perturbed(&twist),
             time_s: Some(45.0 * j as f64 + 10.0),
+            temperature_c: None,
         });
     }
     c

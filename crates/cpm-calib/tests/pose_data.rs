@@ -32,6 +32,7 @@ fn tracker_campaign(
             pose: j,
             measured: c.poses[j],
             time_s: Some(j as f64),
+            temperature_c: None,
         });
     }
     let prepared = Prepared::new(truth_model, &c).unwrap();

@@ -344,6 +344,15 @@ pub struct CalibrationSpec {
     /// by the calibration crate. Default none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub known_effects: BTreeMap<String, Vec<f64>>,
+    /// The description this calibration started from (written by `cpm calibrate` and
+    /// `cpm refine`: the path as given to them, made absolute), so that `cpm validate` can
+    /// take it as the reference by default. Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated_from: Option<String>,
+    /// True when the calibration was fitted to simulated data: every output made from this
+    /// description (compensation commands, controller files) says so. Default false.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub simulated: bool,
 }
 
 /// `[installation_errors_um]`: joint displacements, um, one row `[dx, dy, dz]` per link.

@@ -107,6 +107,8 @@ fn round_trip_with_every_section() {
         ]
         .into_iter()
         .collect(),
+        calibrated_from: Some("/work/robot.toml".into()),
+        simulated: true,
     });
     d.installation_errors_um = Some(InstallationErrorsSpec::from_errors(
         &InstallationErrors::paper_table2(),

@@ -1011,6 +1011,7 @@ fn read_pose_measurements_table<R: Read>(
             pose: j,
             measured,
             time_s,
+            temperature_c: None,
         });
         rows.push(TrackerRow {
             line: row.line,
@@ -1359,6 +1360,12 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
         }
         let c = f.campaign;
         let base = out.poses.len();
+        // Each file is a session: its motion history starts afresh.
+        if base > 0 && !c.poses.is_empty() {
+            out.session_starts.push(base);
+        }
+        out.session_starts
+            .extend(c.session_starts.iter().map(|s| s + base));
         out.simulated |= c.simulated;
         if any_commanded {
             match &c.commanded_lengths_mm {

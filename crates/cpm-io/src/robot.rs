@@ -3,8 +3,9 @@
 //!
 //! The geometry of a description is its joints plus its `[installation_errors_um]` when it
 //! has that table (a calibration result, for example). A calibrated description written by
-//! [`calibrated_description`] carries the calibrated joints in its `[[link]]` tables and no
-//! `[installation_errors_um]`, so that every reader of the file sees the calibrated machine.
+//! [`calibrated_description`] keeps the design joints in its `[[link]]` tables and carries the
+//! calibrated installation errors in `[installation_errors_um]`, so that every reader sees the
+//! calibrated machine and computes the link forces on the same design geometry as the fit.
 //! `link_offset` and `link_scale` are folded into each link's reading model exactly:
 //! with `L = length_at_zero_mm + mm_per_unit * u` the commanded length and the effective
 //! length `L (1 + 1e-6 s) + 1e-3 o`, the calibrated link has
@@ -202,6 +203,10 @@ impl Robot {
     /// and settings of `[calibration]`, and `effects` to estimate.
     pub fn model(&self, effects: &[Effect]) -> MeasurementModel {
         let mut m = MeasurementModel::new(self.table.clone());
+        if self.errors_applied {
+            // Checked when the robot was made (from_description).
+            m.design = self.description.joint_table().ok();
+        }
         m.clearance = self.clearance();
         m.load = self.platform_load();
         m.effects = effects.to_vec();
@@ -367,70 +372,85 @@ pub fn split_params(model: &MeasurementModel, params: &[Option<f64>]) -> SplitPa
 /// What [`calibrated_description`] did with the parameters.
 #[derive(Debug, Clone, Default)]
 pub struct CalibratedNotes {
-    /// Installation-error components left at nominal because the data do not determine them.
+    /// Installation-error components the data do not determine on their own: written at
+    /// the fit's point of the solution set (the minimum-norm one), which reproduces the fit,
+    /// but not measured values.
     pub undetermined: Vec<String>,
-    /// Effect parameters left out (at their previous value) because the data do not
-    /// determine them.
+    /// Effect parameters the data do not determine on their own (written at the fit's
+    /// point, like [`undetermined`](Self::undetermined)).
     pub undetermined_effects: Vec<String>,
     /// Effects written to `[calibration.known_effects]`.
     pub known_effects: Vec<String>,
+    /// Effects of the fit that describe a measurement session, not the machine, and are not
+    /// written (`tracker_frame`: every session registers its own frame).
+    pub session_effects: Vec<String>,
 }
 
-/// The calibrated description: `robot`'s description with the joints moved by the known
-/// installation errors in `params` (model order; `None` = not determined, left at nominal),
-/// `link_offset` / `link_scale` folded into the link reading models, `socket_error` moving
-/// the sensor sockets, every other effect's values added to `[calibration.known_effects]`
-/// (on top of the values the description already knew; an undetermined parameter keeps its
-/// previous value), and `[calibration] effects` set to `declare` when given. Reading the
-/// result back gives a model that predicts what the calibrated `model` predicts.
+/// The calibrated description: `robot`'s description with the fitted parameters `params`
+/// (model order, the complete point the fit ended at) written so that reading it back gives
+/// a model that predicts exactly what the fit predicted:
+///
+/// - the joints stay the design joints of `robot`'s description, and
+///   `[installation_errors_um]` holds its own installation errors (if any) plus the fitted
+///   ones: the link forces (joint clearance, compliance) are computed on the design joints by
+///   every reader ([`MeasurementModel::design`]), as in the fit;
+/// - `link_offset` / `link_scale` are folded into the link reading models (see the module
+///   doc), `socket_error` moves the sensor sockets;
+/// - every other effect's values are added to `[calibration.known_effects]` (on top of the
+///   values the description already knew), except `tracker_frame`, which belongs to the
+///   measurement session (listed in [`CalibratedNotes::session_effects`]);
+/// - `[calibration] effects` is set to `declare` when given.
+///
+/// `determined[k]` says whether the data determine parameter `k` on their own; those that
+/// are not are named in the notes (their values are still written: a point of the solution
+/// set, never a mix of fitted and nominal components).
 pub fn calibrated_description(
     robot: &Robot,
     model: &MeasurementModel,
-    params: &[Option<f64>],
+    params: &[f64],
+    determined: &[bool],
     declare: Option<&[Effect]>,
 ) -> (RobotDescription, CalibratedNotes) {
     let mut d = robot.description.clone();
     let mut notes = CalibratedNotes::default();
-    let split = split_params(model, params);
     let sensor_names: Vec<String> = robot.table.sensors.iter().map(|s| s.name.clone()).collect();
-    for (i, (spec, link)) in d.links.iter_mut().zip(&robot.table.links).enumerate() {
-        let mut base = link.base_mm;
-        let mut platform = link.platform_mm;
-        for a in 0..3 {
-            let kb = 6 * i + a;
-            let kp = 6 * i + 3 + a;
-            match split.installation_um.get(kb).copied().flatten() {
-                Some(v) => base[a] += v * 1e-3,
-                None => notes
-                    .undetermined
-                    .push(InstallationErrors::component_name(kb)),
-            }
-            match split.installation_um.get(kp).copied().flatten() {
-                Some(v) => platform[a] += v * 1e-3,
-                None => notes
-                    .undetermined
-                    .push(InstallationErrors::component_name(kp)),
+    let ni = model.num_installation_params();
+    let is_determined = |k: usize| determined.get(k).copied().unwrap_or(true);
+    // Installation errors: the description's own plus the fitted ones.
+    let mut errors = vec![0.0; ni];
+    if let Some(spec) = &d.installation_errors_um {
+        errors = spec.to_errors().to_vec_um();
+    }
+    for (k, e) in errors.iter_mut().enumerate() {
+        *e += params.get(k).copied().unwrap_or(0.0);
+        if !is_determined(k) {
+            notes
+                .undetermined
+                .push(InstallationErrors::component_name(k));
+        }
+    }
+    if let Ok(e) = InstallationErrors::try_from_vec_um(&errors) {
+        d.installation_errors_um =
+            Some(cpm_geometry::description::InstallationErrorsSpec::from_errors(&e));
+    }
+    let mut folded: Vec<(Effect, Vec<f64>)> = Vec::new();
+    for b in model.blocks() {
+        let Some(effect) = b.effect else { continue };
+        let values = &params[b.offset..b.offset + b.len];
+        for k in 0..b.len {
+            if !is_determined(b.offset + k) {
+                notes.undetermined_effects.push(format!(
+                    "{} {} [{}]",
+                    effect.name(),
+                    effect.param_name(k, &sensor_names),
+                    effect.param_unit(k)
+                ));
             }
         }
-        spec.base_mm = base.into();
-        spec.platform_mm = platform.into();
-    }
-    d.installation_errors_um = None;
-    for (effect, values) in &split.effects {
-        for (k, v) in values.iter().enumerate() {
-            let name = format!(
-                "{} {} [{}]",
-                effect.name(),
-                effect.param_name(k, &sensor_names),
-                effect.param_unit(k)
-            );
-            let Some(v) = v else {
-                notes.undetermined_effects.push(name);
-                continue;
-            };
-            match effect {
-                Effect::LinkOffset | Effect::LinkScale => {}
-                Effect::SocketError => {
+        match effect {
+            Effect::LinkOffset | Effect::LinkScale => folded.push((effect, values.to_vec())),
+            Effect::SocketError => {
+                for (k, v) in values.iter().enumerate() {
                     let s = &mut d.sensors[k / 6];
                     let side = if k % 6 < 3 {
                         &mut s.base_mm
@@ -439,46 +459,41 @@ pub fn calibrated_description(
                     };
                     side[k % 3] += v * 1e-3;
                 }
-                _ => {}
             }
-        }
-        if !matches!(
-            effect,
-            Effect::LinkOffset | Effect::LinkScale | Effect::SocketError
-        ) {
-            let known = d
-                .calibration
-                .get_or_insert_with(CalibrationSpec::default)
-                .known_effects
-                .entry(effect.name().to_string())
-                .or_insert_with(|| vec![0.0; values.len()]);
-            for (kv, v) in known.iter_mut().zip(values) {
-                *kv += v.unwrap_or(0.0);
+            Effect::TrackerFrame => notes.session_effects.push(effect.name().to_string()),
+            _ => {
+                let known = d
+                    .calibration
+                    .get_or_insert_with(CalibrationSpec::default)
+                    .known_effects
+                    .entry(effect.name().to_string())
+                    .or_insert_with(|| vec![0.0; values.len()]);
+                for (kv, v) in known.iter_mut().zip(values) {
+                    *kv += v;
+                }
+                notes.known_effects.push(effect.name().to_string());
             }
-            notes.known_effects.push(effect.name().to_string());
         }
     }
     // link_offset and link_scale: folded into the reading model (see the module doc).
-    let block = |which: Effect| {
-        split
-            .effects
-            .iter()
-            .find(|(e, _)| *e == which)
-            .map(|(_, v)| v.clone())
-    };
+    let block = |which: Effect| folded.iter().find(|(e, _)| *e == which).map(|(_, v)| v);
     let (offset, scale) = (block(Effect::LinkOffset), block(Effect::LinkScale));
     if offset.is_some() || scale.is_some() {
         for (i, spec) in d.links.iter_mut().enumerate() {
             let orig = &robot.description.links[i];
-            let s = scale.as_ref().and_then(|v| v[i]).unwrap_or(0.0);
-            let o = offset.as_ref().and_then(|v| v[i]).unwrap_or(0.0);
+            let s = scale.map_or(0.0, |v| v[i]);
+            let o = offset.map_or(0.0, |v| v[i]);
             let f = 1.0 + s * 1e-6;
             spec.length_at_zero_mm = orig.length_at_zero_mm * f + o * 1e-3;
             spec.mm_per_unit = orig.mm_per_unit * f;
         }
     }
     if let Some(effects) = declare {
-        let names: Vec<String> = effects.iter().map(|e| e.name().to_string()).collect();
+        let names: Vec<String> = effects
+            .iter()
+            .filter(|e| **e != Effect::TrackerFrame)
+            .map(|e| e.name().to_string())
+            .collect();
         match &mut d.calibration {
             Some(c) => c.effects = names,
             None if !names.is_empty() => {
@@ -505,18 +520,20 @@ pub fn calibrated_toml(
     for h in header {
         s.push_str(&format!("# {h}\n"));
     }
-    s.push_str("# Joint coordinates are nominal + the installation errors the data determine.\n");
-    if !notes.undetermined.is_empty() {
+    s.push_str("# The joints are the design joints; [installation_errors_um] holds the calibrated installation errors (every reader applies them).\n");
+    if !notes.undetermined.is_empty() || !notes.undetermined_effects.is_empty() {
         s.push_str(&format!(
-            "# Not determined by the data, left at nominal ({}): {}\n",
+            "# Not determined by the data on their own ({} installation-error components, {} effect parameters): written at the fit's minimum-norm point of the solution set, which reproduces the fit; they are not measured values. {}{}\n",
             notes.undetermined.len(),
-            notes.undetermined.join(", ")
+            notes.undetermined_effects.len(),
+            notes.undetermined.join(", "),
+            if notes.undetermined_effects.is_empty() { String::new() } else { format!("; {}", notes.undetermined_effects.join(", ")) }
         ));
     }
-    if !notes.undetermined_effects.is_empty() {
+    if !notes.session_effects.is_empty() {
         s.push_str(&format!(
-            "# Effect parameters not determined, left out: {}\n",
-            notes.undetermined_effects.join(", ")
+            "# Fitted but not written (they describe the measurement session, not the machine; every session registers its own): {}\n",
+            notes.session_effects.join(", ")
         ));
     }
     if !notes.known_effects.is_empty() {
