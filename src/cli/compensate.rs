@@ -240,8 +240,14 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
         .map(|t| t.label.as_str())
         .collect();
     let note = format!(
-        "robot {}, targets {}; readings to command (length = length_at_zero_mm + mm_per_unit * reading)",
-        robot.file, file
+        "{}robot {}, targets {}; readings to command (length = length_at_zero_mm + mm_per_unit * reading)",
+        if super::export::simulated(&robot) {
+            "SIMULATED calibration (fitted to simulated data), "
+        } else {
+            ""
+        },
+        robot.file,
+        file
     );
     let csv =
         crate::report::format::tidy_csv(&io::write_commands(&targets, &readings, &lengths, &note));

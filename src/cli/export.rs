@@ -117,6 +117,9 @@ pub fn linuxcnc_in(robot: &Robot, units: Units) -> String {
             .unwrap_or_default(),
         env!("CARGO_PKG_VERSION")
     );
+    if simulated(robot) {
+        s.push_str("# SIMULATED: this robot was calibrated from simulated data; these are not a real machine's settings.\n");
+    }
     s.push_str(&format!(
         "# Units: {u} (LinuxCNC LINEAR_UNITS = {u}). cpm link N (1-based, [[link]] order) = genhexkins joint N-1.\n"
     ));
@@ -191,6 +194,15 @@ pub fn linuxcnc_in(robot: &Robot, units: Units) -> String {
     s
 }
 
+/// True when the robot's calibration was fitted to simulated data (`[calibration] simulated`).
+pub fn simulated(robot: &Robot) -> bool {
+    robot
+        .description
+        .calibration
+        .as_ref()
+        .is_some_and(|c| c.simulated)
+}
+
 /// The INI snippet of [`linuxcnc_in`]: one `[JOINT_n]` section per link with `HOME_OFFSET`,
 /// `SCALE` and, where a backlash is known, `BACKLASH`, in `units`.
 pub fn linuxcnc_ini(robot: &Robot, units: Units) -> String {
@@ -207,6 +219,9 @@ pub fn linuxcnc_ini(robot: &Robot, units: Units) -> String {
         robot.file,
         env!("CARGO_PKG_VERSION")
     );
+    if simulated(robot) {
+        s.push_str("; SIMULATED: this robot was calibrated from simulated data; these are not a real machine's settings.\n");
+    }
     for (i, l) in robot.description.links.iter().enumerate() {
         s.push_str(&format!("\n[JOINT_{i}]\n; cpm link {}\n", i + 1));
         s.push_str(&format!(

@@ -207,6 +207,30 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
             values.push((Effect::LinkOffset, diff.link_offset_um.clone()));
             values.push((Effect::LinkScale, diff.link_scale_ppm.clone()));
         }
+        // The truth's sensor sockets (its [[sensor]] tables) where they differ from the
+        // robot's: simulated as socket errors, so the readings are the truth's.
+        if t.table.sensors.len() != robot.table.sensors.len() {
+            return Err(input_error(format!(
+                "{}: {} sensors, the robot {} has {}",
+                t.file,
+                t.table.sensors.len(),
+                robot.file,
+                robot.table.sensors.len()
+            )));
+        }
+        let sockets: Vec<f64> = t
+            .table
+            .sensors
+            .iter()
+            .zip(&robot.table.sensors)
+            .flat_map(|(a, b)| {
+                let (db, dp) = (a.base_mm - b.base_mm, a.platform_mm - b.platform_mm);
+                [db.x, db.y, db.z, dp.x, dp.y, dp.z].map(|v| v * 1e3)
+            })
+            .collect();
+        if sockets.iter().any(|v| *v != 0.0) {
+            values.push((Effect::SocketError, sockets));
+        }
         // Known effect values of the truth beyond those of the robot are simulated too.
         let (robot_model, truth_model) = (robot.model(&[]), t.model(&[]));
         let mut known = Vec::new();

@@ -34,8 +34,10 @@ pub struct ValidateArgs {
     pub robot: Option<PathBuf>,
     /// The reference robot the calibration is judged against, usually the nominal description
     /// the fit started from.
+    /// Default: the description `--robot` records it was calibrated from
+    /// (`[calibration] calibrated_from`, written by `cpm calibrate` and `cpm refine`).
     #[arg(long, value_name = "REFERENCE.toml")]
-    pub reference: PathBuf,
+    pub reference: Option<PathBuf>,
     /// Held-out measurement files (gauge readings or tracker poses); repeatable.
     #[arg(long, value_name = "DATA.csv", required_unless_present = "commands")]
     pub data: Vec<PathBuf>,
@@ -54,6 +56,14 @@ pub struct ValidateArgs {
     /// and `[calibration.known_effects]`), e.g. the `--truth` of `cpm simulate`.
     #[arg(long, value_name = "TRUTH.toml", requires = "commands")]
     pub truth: Option<PathBuf>,
+    /// With `--commands`: the machine comes to the first target from its home pose (as
+    /// `cpm compensate --from-home` assumed), so the first target's backlash is known.
+    #[arg(long, requires = "commands")]
+    pub from_home: bool,
+    /// With `--commands`: the temperature the machine runs at, deg C (as given to
+    /// `cpm compensate --temperature-c`; a known `thermal_drift` acts at it).
+    #[arg(long, value_name = "DEG_C", requires = "commands")]
+    pub temperature_c: Option<f64>,
     /// Also write validation.json, validation.md and validation.svg into this directory.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
@@ -67,7 +77,7 @@ impl ValidateArgs {
     fn inputs(&self) -> Vec<&std::path::Path> {
         self.robot
             .iter()
-            .chain(std::iter::once(&self.reference))
+            .chain(self.reference.iter())
             .chain(self.data.iter())
             .chain(self.commands.iter())
             .chain(self.truth.iter())
@@ -100,120 +110,266 @@ fn max_abs(v: &[f64]) -> f64 {
     )
 }
 
+fn mean_sd(v: &[f64]) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let sd = if v.len() > 1 {
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
+    } else {
+        0.0
+    };
+    (m, sd)
+}
+
+/// One held-out tracker file (a session) re-registered against one robot.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SessionCheck {
+    /// The file.
+    pub file: String,
+    /// The rough registration the reader applied: translation (mm) and rotation angle (deg)
+    /// of the tracker frame from the base frame.
+    pub rough_translation_mm: [f64; 3],
+    /// Its rotation angle, deg.
+    pub rough_rotation_deg: f64,
+    /// The frame fitted on top of it with the machine held fixed (tx ty tz um, rx ry rz urad).
+    pub frame: [f64; 6],
+    /// Standard deviations of `frame`.
+    pub frame_sd: [f64; 6],
+    /// Position error RMS (um, per coordinate) with the rough registration only.
+    pub rms_before_um: f64,
+    /// Position error RMS (um, per coordinate) with the session frame fitted.
+    pub rms_after_um: f64,
+}
+
+/// What one robot predicts on the held-out files.
+#[derive(Debug, Clone, Default)]
+struct RobotErrors {
+    names: Vec<String>,
+    groups: Vec<Errors>,
+    simulated: bool,
+    sessions: Vec<SessionCheck>,
+    /// Logged link lengths minus those the model needs for the measured poses, mm.
+    link_mm: Vec<f64>,
+    /// Position error per tracker pose (norm), um.
+    position_norm_um: Vec<f64>,
+    /// Tracker poses outside the pose range a known pose map was fitted on.
+    outside_pose_map: usize,
+    /// Tracker poses.
+    tracker_poses: usize,
+}
+
+/// The readings a controller sent for a file without logged link readings: its own inverse
+/// kinematics of the commanded poses through its own reading models. The machine `robot`
+/// turns them into lengths through *its* reading models, as the real machine does.
+fn commanded_lengths(
+    robot: &Robot,
+    controller: &Robot,
+    poses: &[crate::geometry::Pose],
+) -> Vec<Vec<f64>> {
+    poses
+        .iter()
+        .map(|p| {
+            crate::kinematics::ik::inverse_lengths(&controller.table, p)
+                .iter()
+                .enumerate()
+                .map(|(i, l)| robot.length_mm(i, controller.reading(i, *l)))
+                .collect()
+        })
+        .collect()
+}
+
 /// The groups (sensor names, or `file (tracker)`) and their errors for one robot.
 ///
 /// A file without logged link readings was driven by the controller's inverse kinematics of
 /// the commanded poses: that of `controller` (the reference robot), whichever robot predicts.
-fn errors_of(
-    robot: &Robot,
-    controller: &Robot,
-    paths: &[PathBuf],
-) -> anyhow::Result<(Vec<String>, Vec<Errors>, bool)> {
+/// Each tracker file is a session: its frame is fitted afresh with the robot held fixed.
+fn errors_of(robot: &Robot, controller: &Robot, paths: &[PathBuf]) -> anyhow::Result<RobotErrors> {
     let model: MeasurementModel = robot.model(&[]);
-    let options = ReadOptions::default();
-    let mut names: Vec<String> = Vec::new();
-    let mut groups: Vec<Errors> = Vec::new();
-    let mut simulated = false;
-    let group_of = |name: String, names: &mut Vec<String>, groups: &mut Vec<Errors>| match names
-        .iter()
-        .position(|n| *n == name)
-    {
-        Some(i) => i,
-        None => {
-            names.push(name);
-            groups.push(Errors::default());
-            names.len() - 1
-        }
+    // The machine is held fixed: the readers register the frame, never the link zeros.
+    let options = ReadOptions {
+        register_link_offsets: false,
+        ..ReadOptions::default()
+    };
+    let mut out = RobotErrors::default();
+    let group_of =
+        |name: String, out: &mut RobotErrors| match out.names.iter().position(|n| *n == name) {
+            Some(i) => i,
+            None => {
+                out.names.push(name);
+                out.groups.push(Errors::default());
+                out.names.len() - 1
+            }
+        };
+    let pose_map_range = match robot.description.pose_map {
+        Some(crate::geometry::description::PoseMapSpec {
+            fitted_min: Some(min),
+            fitted_max: Some(max),
+            ..
+        }) => Some(crate::calib::refine::PoseRange { min, max }),
+        _ => None,
     };
     for path in paths {
         let mut file = crate::io::read_data_file(path, robot, &options)?;
-        if file.campaign.commanded_lengths_mm.is_none() {
-            let lengths = file
-                .campaign
-                .poses
-                .iter()
-                .map(|p| crate::kinematics::ik::inverse_lengths(&controller.table, p))
-                .collect();
-            file.campaign.commanded_lengths_mm = Some(lengths);
-        }
-        let campaign: &Campaign = &file.campaign;
-        simulated |= campaign.simulated;
-        let prepared = Prepared::new(&model, campaign).map_err(|e| {
-            super::trouble(format!(
-                "{}: predicting with {}: {e}",
-                file.file, robot.file
-            ))
-        })?;
-        let zeros = vec![0.0; model.num_params()];
-        let predicted = predict(&model, &prepared, campaign, &zeros, None).map_err(|e| {
-            super::trouble(format!(
-                "{}: predicting with {}: {e}",
-                file.file, robot.file
-            ))
-        })?;
-        let observed = campaign.observations();
-        let nr = campaign.readings.len();
-        for (k, r) in campaign.readings.iter().enumerate() {
-            let name = robot.table.sensors[r.sensor].name.clone();
-            let g = group_of(name, &mut names, &mut groups);
-            groups[g].values_um.push((observed[k] - predicted[k]) * 1e3);
-        }
-        if !campaign.pose_measurements.is_empty() {
-            let g = group_of(format!("{} (tracker)", file.file), &mut names, &mut groups);
-            for q in 0..campaign.pose_measurements.len() {
-                for a in 0..3 {
-                    let k = nr + 6 * q + a;
-                    groups[g].values_um.push((observed[k] - predicted[k]) * 1e3);
-                }
-                for a in 3..6 {
-                    let k = nr + 6 * q + a;
-                    // Orientation observations are mrad.
-                    groups[g]
-                        .orientation_urad
-                        .push((observed[k] - predicted[k]) * 1e3);
-                }
-            }
-        }
         if file.kind == FileKind::Poses {
             return Err(super::usage_error(format!(
                 "{}: a pose list has no measurements to validate against",
                 file.file
             )));
         }
+        if file.campaign.commanded_lengths_mm.is_none() {
+            file.campaign.commanded_lengths_mm =
+                Some(commanded_lengths(robot, controller, &file.campaign.poses));
+        }
+        let campaign: &Campaign = &file.campaign;
+        out.simulated |= campaign.simulated;
+        let fail = |e: crate::calib::CalibError| {
+            super::trouble(format!(
+                "{}: predicting with {}: {e}",
+                file.file, robot.file
+            ))
+        };
+        let prepared = Prepared::new(&model, campaign).map_err(fail)?;
+        let (predicted, frame) = if campaign.pose_measurements.is_empty() {
+            let zeros = vec![0.0; model.num_params()];
+            (
+                predict(&model, &prepared, campaign, &zeros, None).map_err(fail)?,
+                None,
+            )
+        } else {
+            let s = crate::calib::session::register_session(&model, campaign).map_err(fail)?;
+            let before = predict(
+                &model,
+                &prepared,
+                campaign,
+                &vec![0.0; model.num_params()],
+                None,
+            )
+            .map_err(fail)?;
+            let observed = campaign.observations();
+            let nr = campaign.readings.len();
+            let positions = |y: &[f64]| -> Vec<f64> {
+                (0..campaign.pose_measurements.len())
+                    .flat_map(|q| (0..3).map(move |a| nr + 6 * q + a))
+                    .map(|k| (observed[k] - y[k]) * 1e3)
+                    .collect()
+            };
+            let rough = file
+                .registration
+                .as_ref()
+                .and_then(|r| r.sessions.iter().find(|x| x.file == file.file))
+                .filter(|x| x.applied);
+            out.sessions.push(SessionCheck {
+                file: file.file.clone(),
+                rough_translation_mm: rough.map_or([0.0; 3], |x| x.frame.translation_mm.into()),
+                rough_rotation_deg: rough.map_or(0.0, |x| x.frame.rotation_angle_deg()),
+                frame: s.frame,
+                frame_sd: s.frame_sd,
+                rms_before_um: rms(&positions(&before)),
+                rms_after_um: rms(&positions(&s.predicted)),
+            });
+            (s.predicted, Some(s.frame))
+        };
+        let observed = campaign.observations();
+        let nr = campaign.readings.len();
+        for (k, r) in campaign.readings.iter().enumerate() {
+            let name = robot.table.sensors[r.sensor].name.clone();
+            let g = group_of(name, &mut out);
+            out.groups[g]
+                .values_um
+                .push((observed[k] - predicted[k]) * 1e3);
+        }
+        if let Some(frame) = frame {
+            let g = group_of(format!("{} (tracker)", file.file), &mut out);
+            let (t, rot) = crate::calib::effects::tracker_registration(&frame);
+            let commanded = campaign.commanded_lengths_mm.as_ref();
+            for (q, pm) in campaign.pose_measurements.iter().enumerate() {
+                let d: Vec<f64> = (0..3)
+                    .map(|a| (observed[nr + 6 * q + a] - predicted[nr + 6 * q + a]) * 1e3)
+                    .collect();
+                out.groups[g].values_um.extend(&d);
+                out.position_norm_um
+                    .push((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
+                for a in 3..6 {
+                    let k = nr + 6 * q + a;
+                    // Orientation observations are mrad.
+                    out.groups[g]
+                        .orientation_urad
+                        .push((observed[k] - predicted[k]) * 1e3);
+                }
+                // The link lengths the model needs for the measured pose (base frame):
+                // inverse kinematics minus the shifts the model adds to a commanded length.
+                let m = pm.measured;
+                let base = crate::geometry::Pose::new(
+                    rot.inverse() * (m.position_mm - t),
+                    rot.inverse() * m.rotation,
+                );
+                if let Some(c) = commanded {
+                    let j = pm.pose;
+                    let needed = crate::kinematics::ik::inverse_lengths(&robot.table, &base);
+                    for i in 0..needed.len() {
+                        let shift = prepared.lengths_mm[j][i] - c[j][i];
+                        out.link_mm.push(c[j][i] - (needed[i] - shift));
+                    }
+                }
+                out.tracker_poses += 1;
+                if pose_map_range
+                    .as_ref()
+                    .is_some_and(|r| !r.contains(&campaign.poses[pm.pose], 1e-6))
+                {
+                    out.outside_pose_map += 1;
+                }
+            }
+        }
     }
-    Ok((names, groups, simulated))
+    Ok(out)
 }
 
 /// Pose errors (position um per target, orientation urad per target) the machine `truth`
 /// reaches when it executes link `readings` (its own reading models turn them into lengths,
 /// its known effects apply) aiming at `targets`.
+///
+/// `from_home`: the machine comes to the first target from its home pose (commanded with its
+/// own inverse kinematics there), so each link's last motion direction is known;
+/// `temperature_c`: the temperature the machine runs at (for a known `thermal_drift`).
 fn reached_errors(
     truth: &Robot,
     targets: &[crate::io::PoseRow],
     readings: &[Vec<f64>],
+    from_home: bool,
+    temperature_c: Option<f64>,
 ) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
     let links = &truth.description.links;
+    let home = usize::from(from_home);
+    let mut poses: Vec<crate::geometry::Pose> = Vec::new();
+    let mut lengths: Vec<Vec<f64>> = Vec::new();
+    if from_home {
+        poses.push(truth.table.home);
+        lengths.push(crate::kinematics::ik::inverse_lengths(
+            &truth.table,
+            &truth.table.home,
+        ));
+    }
+    poses.extend(targets.iter().map(|t| t.pose));
+    lengths.extend(readings.iter().map(|u| {
+        u.iter()
+            .zip(links)
+            .map(|(u, l)| l.length_at_zero_mm + l.mm_per_unit * u)
+            .collect::<Vec<f64>>()
+    }));
     let campaign = Campaign {
-        poses: targets.iter().map(|t| t.pose).collect(),
-        commanded_lengths_mm: Some(
-            readings
-                .iter()
-                .map(|u| {
-                    u.iter()
-                        .zip(links)
-                        .map(|(u, l)| l.length_at_zero_mm + l.mm_per_unit * u)
-                        .collect()
-                })
-                .collect(),
-        ),
+        poses,
+        commanded_lengths_mm: Some(lengths),
         pose_measurements: targets
             .iter()
             .enumerate()
             .map(|(j, t)| crate::calib::campaign::PoseMeasurement {
-                pose: j,
+                pose: j + home,
                 measured: t.pose,
                 time_s: t.time_s,
-                temperature_c: None,
+                temperature_c,
             })
             .collect(),
         simulated: true,
@@ -254,7 +410,12 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
     let (Some(commands), Some(truth)) = (&args.commands, &args.truth) else {
         return Err(super::usage_error("--commands needs --truth"));
     };
-    let reference = common::load_robot(&args.reference, ctx)?;
+    let Some(reference) = &args.reference else {
+        return Err(super::usage_error(
+            "--commands needs --reference (the robot whose inverse kinematics commands the uncompensated machine)",
+        ));
+    };
+    let reference = common::load_robot(reference, ctx)?;
     let truth = common::load_robot(truth, ctx)?;
     if truth.num_links() != reference.num_links() {
         return Err(super::input_error(format!(
@@ -279,8 +440,20 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
                 .collect()
         })
         .collect();
-    let (pos, rot) = reached_errors(&truth, &targets, &compensated)?;
-    let (pos_ref, rot_ref) = reached_errors(&truth, &targets, &nominal)?;
+    let (pos, rot) = reached_errors(
+        &truth,
+        &targets,
+        &compensated,
+        args.from_home,
+        args.temperature_c,
+    )?;
+    let (pos_ref, rot_ref) = reached_errors(
+        &truth,
+        &targets,
+        &nominal,
+        args.from_home,
+        args.temperature_c,
+    )?;
     let summary = |p: &[f64], r: &[f64]| {
         json!({
             "position_rms_um": rms(p),
@@ -345,6 +518,68 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
     Ok(Outcome::Done)
 }
 
+/// The sessions, link-length and pose-accuracy sections of validation.md.
+fn session_markdown(md: &mut String, cal: &RobotErrors, reference: &RobotErrors) {
+    if cal.sessions.is_empty() {
+        return;
+    }
+    md.push_str("\n## Sessions\n\nEach held-out tracker file is a session: its frame is registered afresh against each robot (held fixed), the rough registration of the reader first, then the six frame parameters through the prediction model. Frame: translation um, rotation urad, +- one standard deviation.\n\n| file | robot | rough frame (mm, deg) | fitted frame t (um) | fitted frame r (urad) | position RMS before (um) | after (um) |\n|---|---|---|---|---|---|---|\n");
+    for (label, e) in [("calibrated", cal), ("reference", reference)] {
+        for s in &e.sessions {
+            let t = s.rough_translation_mm;
+            let f = |a: usize| format!("{:.1}+-{:.1}", s.frame[a], s.frame_sd[a]);
+            md.push_str(&format!(
+                "| {} | {label} | ({:.3}, {:.3}, {:.3}), {:.4} | {}, {}, {} | {}, {}, {} | {:.3} | {:.3} |\n",
+                s.file, t[0], t[1], t[2], s.rough_rotation_deg, f(0), f(1), f(2), f(3), f(4), f(5), s.rms_before_um, s.rms_after_um
+            ));
+        }
+    }
+    md.push_str("\n| figure | calibrated | reference |\n|---|---|---|\n");
+    if !cal.link_mm.is_empty() {
+        md.push_str(&format!(
+            "| link-length error RMS (logged readings against the lengths the model needs for the measured poses), mm | {:.4} | {:.4} |\n",
+            rms(&cal.link_mm),
+            rms(&reference.link_mm)
+        ));
+    }
+    let (cm, cs) = mean_sd(&cal.position_norm_um);
+    let (rm, rs) = mean_sd(&reference.position_norm_um);
+    md.push_str(&format!(
+        "| pose accuracy (ISO 9283 style): mean position error, um | {cm:.3} | {rm:.3} |\n| its spread (standard deviation), um | {cs:.3} | {rs:.3} |\n| held-out poses | {} | {} |\n",
+        cal.tracker_poses, reference.tracker_poses
+    ));
+    if cal.outside_pose_map > 0 {
+        md.push_str(&format!(
+            "\n{} of {} held-out poses lie outside the pose range the calibrated pose error map was fitted on: the map does not extrapolate there.\n",
+            cal.outside_pose_map, cal.tracker_poses
+        ));
+    }
+}
+
+/// The reference robot: `--reference`, else the description the calibrated robot records
+/// it came from (`[calibration] calibrated_from`).
+fn reference_path(args: &ValidateArgs, robot: &Robot) -> anyhow::Result<PathBuf> {
+    if let Some(r) = &args.reference {
+        return Ok(r.clone());
+    }
+    let recorded = robot
+        .description
+        .calibration
+        .as_ref()
+        .and_then(|c| c.calibrated_from.clone());
+    match recorded {
+        Some(p) if std::path::Path::new(&p).exists() => Ok(PathBuf::from(p)),
+        Some(p) => Err(super::usage_error(format!(
+            "{} records that it was calibrated from {p}, which does not exist here: give --reference",
+            robot.file
+        ))),
+        None => Err(super::usage_error(format!(
+            "--reference is required: {} does not record the description it was calibrated from",
+            robot.file
+        ))),
+    }
+}
+
 /// Runs `cpm validate`.
 pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if let Some(out) = &args.out {
@@ -360,7 +595,8 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         ));
     };
     let robot = common::load_robot(robot, ctx)?;
-    let reference = common::load_robot(&args.reference, ctx)?;
+    let reference_path = reference_path(args, &robot)?;
+    let reference = common::load_robot(&reference_path, ctx)?;
     let sensors = |r: &Robot| {
         r.table
             .sensors
@@ -378,15 +614,16 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         )));
     }
     ctx.stage("predicting the held-out measurements");
-    let (names, cal, simulated) = errors_of(&robot, &reference, &args.data)?;
-    let (ref_names, reference_errors, _) =
-        errors_of(&reference, &reference, &args.data).map_err(|e| {
-            e.context(format!(
-                "reading the held-out data against the reference {} (its sensors: {})",
-                reference.file,
-                sensors(&reference).join(", ")
-            ))
-        })?;
+    let cal_errors = errors_of(&robot, &reference, &args.data)?;
+    let ref_errors = errors_of(&reference, &reference, &args.data).map_err(|e| {
+        e.context(format!(
+            "reading the held-out data against the reference {} (its sensors: {})",
+            reference.file,
+            sensors(&reference).join(", ")
+        ))
+    })?;
+    let (names, cal, simulated) = (&cal_errors.names, &cal_errors.groups, cal_errors.simulated);
+    let (ref_names, reference_errors) = (&ref_errors.names, &ref_errors.groups);
     if names != ref_names {
         return Err(super::input_error(format!(
             "the robot and the reference name different sensors ({} / {})",
@@ -402,9 +639,22 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 .collect(),
         )
     };
-    let (cal_all, cal_rot) = all(&cal);
-    let (ref_all, ref_rot) = all(&reference_errors);
-    let summary = |v: &[f64], rot: &[f64]| {
+    let (cal_all, cal_rot) = all(cal);
+    let (ref_all, ref_rot) = all(reference_errors);
+    let summary = |v: &[f64], rot: &[f64], e: &RobotErrors| {
+        let (mean, sd) = mean_sd(&e.position_norm_um);
+        json!({
+            "rms_um": rms(v),
+            "max_um": max_abs(v),
+            "orientation_rms_urad": if rot.is_empty() { serde_json::Value::Null } else { json!(rms(rot)) },
+            "link_rms_mm": if e.link_mm.is_empty() { serde_json::Value::Null } else { json!(rms(&e.link_mm)) },
+            "position_error_mean_um": if e.position_norm_um.is_empty() { serde_json::Value::Null } else { json!(mean) },
+            "position_error_sd_um": if e.position_norm_um.is_empty() { serde_json::Value::Null } else { json!(sd) },
+            "sessions": e.sessions,
+            "outside_pose_map_share": if e.tracker_poses == 0 { serde_json::Value::Null } else { json!(e.outside_pose_map as f64 / e.tracker_poses as f64) },
+        })
+    };
+    let group_summary = |v: &[f64], rot: &[f64]| {
         json!({
             "rms_um": rms(v),
             "max_um": max_abs(v),
@@ -413,13 +663,13 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     };
     let groups_json: Vec<serde_json::Value> = names
         .iter()
-        .zip(cal.iter().zip(&reference_errors))
+        .zip(cal.iter().zip(reference_errors))
         .map(|(n, (c, r))| {
             json!({
                 "name": n,
                 "count": c.values_um.len(),
-                "calibrated": summary(&c.values_um, &c.orientation_urad),
-                "reference": summary(&r.values_um, &r.orientation_urad),
+                "calibrated": group_summary(&c.values_um, &c.orientation_urad),
+                "reference": group_summary(&r.values_um, &r.orientation_urad),
             })
         })
         .collect();
@@ -428,8 +678,8 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         "robot": robot.file,
         "reference_robot": reference.file,
         "data": args.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-        "calibrated": summary(&cal_all, &cal_rot),
-        "reference": summary(&ref_all, &ref_rot),
+        "calibrated": summary(&cal_all, &cal_rot, &cal_errors),
+        "reference": summary(&ref_all, &ref_rot, &ref_errors),
         "groups": groups_json,
     });
     let mut md = String::from("# Validation on held-out data\n\n");
@@ -456,7 +706,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             max_abs(r)
         ));
     };
-    for (n, (c, r)) in names.iter().zip(cal.iter().zip(&reference_errors)) {
+    for (n, (c, r)) in names.iter().zip(cal.iter().zip(reference_errors)) {
         row(&mut md, n, c.values_um.len(), &c.values_um, &r.values_um);
     }
     row(&mut md, "**all**", cal_all.len(), &cal_all, &ref_all);
@@ -467,6 +717,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             rms(&ref_rot)
         ));
     }
+    session_markdown(&mut md, &cal_errors, &ref_errors);
     ctx.finish();
     let mut written = Vec::new();
     if let Some(dir) = &args.out {
@@ -476,7 +727,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 if simulated { " (SIMULATED data)" } else { "" }
             ),
             "RMS error (um)",
-            &names,
+            names,
             &[
                 (
                     "calibrated".to_string(),

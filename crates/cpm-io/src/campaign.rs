@@ -53,6 +53,9 @@ pub struct ReadOptions {
     /// the model applies to its predictions: registration works on the measured poses with
     /// it taken out. Default none.
     pub known_tracker_frame: Option<[f64; 6]>,
+    /// Let the registration of tracker files estimate one reading offset per link (applied
+    /// when large). Default true; `cpm validate` holds the machine fixed (false).
+    pub register_link_offsets: bool,
 }
 
 /// The most data rows of a measurement file or pose list by default: ten million.
@@ -66,6 +69,7 @@ impl Default for ReadOptions {
             max_rows: MAX_ROWS,
             register_tracker: true,
             known_tracker_frame: None,
+            register_link_offsets: true,
         }
     }
 }
@@ -1159,7 +1163,10 @@ pub fn register_tracker_files(
             cpm_calib::registration::register_with_corrections(
                 &robot.table,
                 &sessions,
-                &cpm_calib::registration::RegistrationOptions::default(),
+                &cpm_calib::registration::RegistrationOptions {
+                    estimate_link_offsets: options.register_link_offsets,
+                    ..Default::default()
+                },
                 &clearance,
             )
             .map_err(|e| e.to_string())
