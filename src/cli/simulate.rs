@@ -207,26 +207,22 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
             values.push((Effect::LinkOffset, diff.link_offset_um.clone()));
             values.push((Effect::LinkScale, diff.link_scale_ppm.clone()));
         }
-        // The truth's sensor sockets (its [[sensor]] tables) where they differ from the
-        // robot's: simulated as socket errors, so the readings are the truth's.
-        if t.table.sensors.len() != robot.table.sensors.len() {
-            return Err(input_error(format!(
-                "{}: {} sensors, the robot {} has {}",
-                t.file,
-                t.table.sensors.len(),
-                robot.file,
-                robot.table.sensors.len()
-            )));
-        }
-        let sockets: Vec<f64> = t
+        // The truth's sensor sockets (its [[sensor]] tables, matched by name) where they
+        // differ from the robot's: simulated as socket errors, so the readings are the
+        // truth's. A robot sensor the truth does not declare keeps the robot's sockets.
+        let sockets: Vec<f64> = robot
             .table
             .sensors
             .iter()
-            .zip(&robot.table.sensors)
-            .flat_map(|(a, b)| {
-                let (db, dp) = (a.base_mm - b.base_mm, a.platform_mm - b.platform_mm);
-                [db.x, db.y, db.z, dp.x, dp.y, dp.z].map(|v| v * 1e3)
-            })
+            .flat_map(
+                |b| match t.table.sensors.iter().find(|a| a.name == b.name) {
+                    Some(a) => {
+                        let (db, dp) = (a.base_mm - b.base_mm, a.platform_mm - b.platform_mm);
+                        [db.x, db.y, db.z, dp.x, dp.y, dp.z].map(|v| v * 1e3)
+                    }
+                    None => [0.0; 6],
+                },
+            )
             .collect();
         if sockets.iter().any(|v| *v != 0.0) {
             values.push((Effect::SocketError, sockets));

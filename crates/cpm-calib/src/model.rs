@@ -640,9 +640,13 @@ fn contexts(
 ) -> Result<Vec<PoseContext>, CalibError> {
     let mut out: Vec<PoseContext> = Vec::with_capacity(campaign.poses.len());
     for (j, pose) in campaign.poses.iter().enumerate() {
+        // The commanded lengths: logged, or the nominal inverse kinematics (never the
+        // effective lengths, which carry the clearance shift: an effect that reads the
+        // commanded length must see the same value whether the controller logged it or not).
         let commanded_mm = match &campaign.commanded_lengths_mm {
             Some(c) => c[j].clone(),
-            None => effective_mm[j].clone(),
+            None if model.clearance.radius_um == 0.0 => effective_mm[j].clone(),
+            None => cpm_kinematics::inverse_lengths(&model.nominal, pose),
         };
         let rs = &by_pose[j];
         let temperature_c = mean(

@@ -146,3 +146,34 @@ fn every_built_in_effect_predicts_as_before_the_redesign() {
         );
     }
 }
+
+/// A campaign without logged commanded lengths predicts exactly what the same campaign with
+/// its nominal inverse kinematics logged predicts: effects that read the commanded length
+/// (link scale, non-linearity, screw error, backlash) see the same value either way, joint
+/// clearance included. (Before, an unlogged campaign handed them the clearance-shifted
+/// effective lengths; the golden record was renewed for that fix.)
+#[test]
+fn unlogged_commands_are_the_nominal_inverse_kinematics() {
+    let m = model(true);
+    let mut c = campaign(&m);
+    c.pose_measurements.clear();
+    let params: Vec<f64> = (0..m.num_params())
+        .map(|k| 0.5 + (k as f64 * 0.37).sin())
+        .collect();
+    let predict = |c: &Campaign| {
+        let prepared = cpm_calib::model::Prepared::new(&m, c).unwrap();
+        cpm_calib::model::predict(&m, &prepared, c, &params, None).unwrap()
+    };
+    let unlogged = predict(&c);
+    c.commanded_lengths_mm = Some(
+        c.poses
+            .iter()
+            .map(|p| cpm_kinematics::inverse_lengths(&m.nominal, p))
+            .collect(),
+    );
+    let logged = predict(&c);
+    assert!(m.clearance.radius_um > 0.0);
+    for (a, b) in unlogged.iter().zip(&logged) {
+        assert!((a - b).abs() < 1e-12, "unlogged {a} vs logged {b}");
+    }
+}

@@ -1,0 +1,286 @@
+//! The round trip as the contract: what `cpm calibrate` writes (`calibrated.toml`) is read
+//! back by `cpm validate` into exactly the model the fit ended with, for every built-in
+//! effect, and the exact truth reproduces its own noise-free simulation.
+//!
+//! Data: simulated (labelled so) by `cpm simulate` from `examples/hexapod_66_truth.toml` plus
+//! the effect's values, driven by the controller's inverse kinematics (no `reading_k`), and an
+//! independent simulation written here from plain geometry (link lengths by inverse
+//! kinematics of the true joints, readings through the reading model), and the real Jugglebot
+//! session (`tests/data/jugglebot/`).
+#[path = "common/cli.rs"]
+mod cli;
+
+use std::path::Path;
+
+use cli::{cpm, example, ok, p, scratch};
+use cpm::calib::Effect;
+
+fn json(text: &str) -> serde_json::Value {
+    serde_json::from_str(text).unwrap()
+}
+
+fn read_json(path: &Path) -> serde_json::Value {
+    json(&std::fs::read_to_string(path).unwrap())
+}
+
+/// Values of `effect` for the hexapod of the examples: alternating, of the size a real
+/// machine shows in the effect's unit.
+fn truth_values(effect: Effect, links: usize, sensors: usize) -> Vec<f64> {
+    let n = effect.num_params(links, sensors);
+    let size = match effect {
+        Effect::LinkOffset => 20.0,
+        Effect::LinkScale => 300.0,
+        Effect::SensorOffset => 15.0,
+        Effect::SensorScale => 200.0,
+        Effect::SocketError => 40.0,
+        Effect::Clearance => 5.0,
+        Effect::Backlash => 6.0,
+        Effect::Compliance => 0.2,
+        Effect::ThermalDrift => 2.0,
+        Effect::ScrewPeriodic => 3.0,
+        Effect::LinkNonlinearity => 5.0,
+        _ => 10.0,
+    };
+    (0..n)
+        .map(|k| size * [1.0, -0.7, 0.4, 0.9, -1.1, 0.6][k % 6])
+        .collect()
+}
+
+/// `calibrate` with `effects` on `data`, then `validate` of its calibrated.toml on the same
+/// data (reference from the file): the file reproduces the fit. Returns (fit, file) RMS.
+fn fit_and_read_back(dir: &Path, robot: &str, data: &Path, effects: &str) -> (f64, f64) {
+    let cal = dir.join("cal");
+    ok(&[
+        "calibrate",
+        "--robot",
+        robot,
+        "--data",
+        &p(data),
+        "--effects",
+        effects,
+        "--out",
+        &p(&cal),
+    ]);
+    let fit = read_json(&cal.join("calibration.json"))["residual_rms_um"]
+        .as_f64()
+        .unwrap();
+    let v = json(&ok(&[
+        "validate",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+        "--data",
+        &p(data),
+        "--json",
+    ]));
+    (fit, v["calibrated"]["rms_um"].as_f64().unwrap())
+}
+
+/// Every built-in effect that a gauge campaign can carry: simulated from the truth with the
+/// effect, fitted with it, written, read back; the file reproduces the fit to 1e-9 mm (the
+/// RMS to a relative 1e-9), and the truth itself (the effect in its known values) reproduces
+/// its own noise-free simulation.
+#[test]
+fn every_effect_round_trips_through_calibrated_toml() {
+    let robot = example("hexapod_66.toml");
+    let truth_text = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap();
+    let mut table = Vec::new();
+    for effect in [
+        Effect::LinkOffset,
+        Effect::LinkScale,
+        Effect::SensorOffset,
+        Effect::SensorScale,
+        Effect::Backlash,
+        Effect::Compliance,
+        Effect::ScrewPeriodic,
+        Effect::LinkNonlinearity,
+        Effect::Clearance,
+        Effect::SocketError,
+    ] {
+        let name = effect.name();
+        let dir = scratch("roundtrip", name);
+        let values = truth_values(effect, 6, 3);
+        let list = values
+            .iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(", ");
+        // The truth as a description: the example's truth plus the effect's known values.
+        let truth = dir.join("truth.toml");
+        std::fs::write(
+            &truth,
+            format!("{truth_text}\n[calibration.known_effects]\n{name} = [{list}]\n"),
+        )
+        .unwrap();
+        for (noise, file) in [("gaussian:1", "data.csv"), ("none", "exact.csv")] {
+            ok(&[
+                "simulate",
+                "--robot",
+                &robot,
+                "--random",
+                "70",
+                "--truth",
+                &p(&truth),
+                "--noise",
+                noise,
+                "--seed",
+                "3",
+                "--out",
+                &p(&dir.join(file)),
+            ]);
+        }
+        // The exact truth reproduces its own noise-free simulation at every pose.
+        let v = json(&ok(&[
+            "validate",
+            "--robot",
+            &p(&truth),
+            "--reference",
+            &robot,
+            "--data",
+            &p(&dir.join("exact.csv")),
+            "--json",
+        ]));
+        let exact = v["calibrated"]["max_um"].as_f64().unwrap();
+        assert!(
+            exact < 1e-6,
+            "{name}: the truth misses its own simulation by {exact} um"
+        );
+        let (fit, file) = fit_and_read_back(&dir, &robot, &dir.join("data.csv"), name);
+        table.push(format!("{name}: fit {fit:.4} um, file {file:.4} um"));
+        assert!(
+            (fit - file).abs() <= 1e-9 * fit.max(1.0),
+            "{name}: fit {fit} um, calibrated.toml {file} um"
+        );
+    }
+    println!("{}", table.join("\n"));
+}
+
+/// A rank-deficient fit (socket errors beside the installation errors) writes its own point
+/// of the solution set: the file reproduces the fit instead of the nominal machine.
+#[test]
+fn a_rank_deficient_fit_writes_a_point_that_reproduces_it() {
+    let robot = example("hexapod_66.toml");
+    let dir = scratch("roundtrip", "rank-deficient");
+    let data = dir.join("data.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "60",
+        "--truth",
+        &example("hexapod_66_truth.toml"),
+        "--noise",
+        "gaussian:1",
+        "--seed",
+        "1",
+        "--out",
+        &p(&data),
+    ]);
+    let (fit, file) = fit_and_read_back(&dir, &robot, &data, "socket_error");
+    let j = read_json(&dir.join("cal/calibration.json"));
+    assert!(
+        j["identifiability"]["rank"].as_u64().unwrap()
+            < j["identifiability"]["parameters"].as_u64().unwrap()
+    );
+    assert!(
+        (fit - file).abs() <= 1e-9 * fit.max(1.0),
+        "fit {fit}, file {file}"
+    );
+    let toml = std::fs::read_to_string(dir.join("cal/calibrated.toml")).unwrap();
+    assert!(toml.contains("# Not determined by the data on their own"));
+}
+
+/// An independent simulation: poses of the true machine (truth joints, by plain inverse
+/// kinematics), readings `reading_k` through the robot's reading model, gauge lengths as
+/// socket distances; no `cpm simulate`. Folded link offsets and scales (a reading model unlike
+/// the nominal one) must survive the round trip.
+#[test]
+fn link_offsets_and_scales_survive_on_independently_simulated_readings() {
+    use cpm::geometry::Pose;
+    let robot_path = example("hexapod_66.toml");
+    let robot = cpm::io::Robot::load(Path::new(&robot_path)).unwrap();
+    let truth = cpm::io::Robot::load(Path::new(&example("hexapod_66_truth.toml"))).unwrap();
+    let (offset_mm, scale) = (
+        [0.02, -0.015, 0.01, 0.025, -0.02, 0.015],
+        [3e-4, -2e-4, 1e-4, 0.0, 2e-4, -1e-4],
+    );
+    let home = robot.table.home;
+    let mut csv = String::from("# independent simulation (tests/roundtrip.rs): simulated data\npose,sensor,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,length_mm");
+    for k in 1..=6 {
+        csv.push_str(&format!(",reading_{k}"));
+    }
+    csv.push('\n');
+    let mut state: u64 = 12345;
+    let mut rnd = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    };
+    for j in 0..50 {
+        let [r, pi, y] = home.rpy_deg();
+        let pose = Pose::from_xyz_rpy_deg(
+            [
+                home.position_mm.x + 30.0 * rnd(),
+                home.position_mm.y + 30.0 * rnd(),
+                home.position_mm.z + 20.0 * rnd(),
+            ],
+            [r + 5.0 * rnd(), pi + 5.0 * rnd(), y + 5.0 * rnd()],
+        );
+        // The true machine's link lengths at this (actual) pose, and the readings that give
+        // them: true length = (nominal reading model)(1 + scale) + offset.
+        let readings: Vec<f64> = truth
+            .table
+            .links
+            .iter()
+            .enumerate()
+            .map(|(i, l)| {
+                let len = (pose.position_mm + pose.rotation * l.platform_mm - l.base_mm).norm();
+                robot.reading(i, (len - offset_mm[i]) / (1.0 + scale[i]))
+            })
+            .collect();
+        for (si, s) in truth.table.sensors.iter().enumerate() {
+            let len = (pose.position_mm + pose.rotation * s.platform_mm - s.base_mm).norm();
+            let a = pose.rpy_deg();
+            csv.push_str(&format!(
+                "{j},{},{},{},{},{},{},{},{}",
+                robot.table.sensors[si].name,
+                pose.position_mm.x,
+                pose.position_mm.y,
+                pose.position_mm.z,
+                a[0],
+                a[1],
+                a[2],
+                len
+            ));
+            for u in &readings {
+                csv.push_str(&format!(",{u}"));
+            }
+            csv.push('\n');
+        }
+    }
+    let dir = scratch("roundtrip", "independent");
+    let data = dir.join("data.csv");
+    std::fs::write(&data, csv).unwrap();
+    // The robot description has joint clearance; the independent truth has none: calibrate a
+    // copy without it.
+    let text = std::fs::read_to_string(&robot_path).unwrap();
+    let bare = dir.join("robot.toml");
+    let cut = text.replace("[clearance]\nradius_um = 10.0\n", "");
+    assert_ne!(cut, text);
+    std::fs::write(&bare, cut).unwrap();
+    let (fit, file) = fit_and_read_back(&dir, &p(&bare), &data, "link_offset,link_scale");
+    assert!(
+        fit < 1e-3,
+        "noise-free independent data should fit exactly: {fit} um"
+    );
+    assert!((fit - file).abs() <= 1e-6, "fit {fit}, file {file}");
+    let out = cpm(&[
+        "validate",
+        "--robot",
+        &p(&dir.join("cal/calibrated.toml")),
+        "--data",
+        &p(&data),
+    ]);
+    assert!(out.status.success());
+}
