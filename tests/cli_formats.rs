@@ -351,10 +351,8 @@ fn calibrated_description_folds_link_offset_and_scale_exactly() {
     determined[7] = false;
     let offsets = [12.0, -7.0, 0.0, 3.0, 25.0, -1.0];
     let scales = [100.0, -50.0, 0.0, 20.0, 5.0, 1.0];
-    for i in 0..6 {
-        params[36 + i] = offsets[i];
-        params[42 + i] = scales[i];
-    }
+    params[36..42].copy_from_slice(&offsets);
+    params[42..48].copy_from_slice(&scales);
     let (d, notes) = calibrated_description(&robot, &model, &params, &determined, None);
     assert_eq!(notes.undetermined, vec!["link 2 base dy".to_string()]);
     // The design joints stay; the installation errors carry the fit, undetermined ones too.
