@@ -817,14 +817,14 @@ mod tests {
         assert!(d.limits.is_none());
         // The free design goes beyond the limits below (else the test proves nothing).
         assert!(
-            d.max_cone_deg.0 > 8.0 || d.min_clearance_mm < 25.0,
+            d.max_cone_deg.0 > 20.0 && d.max_cone_deg.1 > 25.0 && d.min_clearance_mm < 25.0,
             "{:?}",
             (d.max_cone_deg, d.min_clearance_mm)
         );
         let limits = DesignLimits {
             joints: JointLimits {
-                base_cone_deg: 8.0,
-                platform_cone_deg: 12.0,
+                base_cone_deg: 20.0,
+                platform_cone_deg: 25.0,
             },
             clearance: Clearance {
                 gauge_link_mm: 25.0,
@@ -844,7 +844,7 @@ mod tests {
                 assert!(limits::gauge_clearance_mm(t, s, p) >= 25.0);
             }
         }
-        assert!(d.max_cone_deg.0 <= 8.0 && d.max_cone_deg.1 <= 12.0);
+        assert!(d.max_cone_deg.0 <= 20.0 && d.max_cone_deg.1 <= 25.0);
         assert!(d.min_clearance_mm >= 25.0);
         // Limits nothing keeps: errors naming them.
         let impossible = |l: DesignLimits| {
