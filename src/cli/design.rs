@@ -634,19 +634,6 @@ fn plain_limits(
             from.push(format!("[limits] {} of {}", what.join(", "), robot.file));
         }
     }
-    let defaults: Vec<&str> = [
-        (args.cone_deg.is_none() && declared.is_none(), "--cone-deg"),
-        (
-            args.clearance_mm.is_none()
-                && declared.is_none_or(|l| {
-                    l.gauge_link_clearance_mm.is_none() && l.link_radius_mm.is_none()
-                }),
-            "--clearance-mm",
-        ),
-    ]
-    .into_iter()
-    .filter_map(|(d, n)| d.then_some(n))
-    .collect();
     let limits = DesignLimits {
         joints: JointLimits {
             base_cone_deg: args.cone_deg.unwrap_or(spec.base_cone_deg),
@@ -657,11 +644,18 @@ fn plain_limits(
             link_link_mm: spec.link_link_mm(),
         },
     };
-    if !defaults.is_empty() {
+    // Limits neither the flags nor the description give: their defaults, stated.
+    if args.cone_deg.is_none() && declared.is_none() {
         from.push(format!(
-            "the default {} ({} deg cones, {} mm gauge-link clearance)",
-            defaults.join(" and "),
-            limits.joints.base_cone_deg,
+            "the default --cone-deg {}",
+            limits.joints.base_cone_deg
+        ));
+    }
+    let described_clearance =
+        declared.is_some_and(|l| l.gauge_link_clearance_mm.is_some() || l.link_radius_mm.is_some());
+    if args.clearance_mm.is_none() && !described_clearance {
+        from.push(format!(
+            "the default --clearance-mm {}",
             limits.clearance.gauge_link_mm
         ));
     }
