@@ -155,3 +155,43 @@ fn linuxcnc_export_in_mm_and_inch_with_ini() {
     // The HAL text carries the INI snippet as comments.
     assert!(hal_mm.contains("# [JOINT_5]"));
 }
+
+#[test]
+fn status_lines_go_to_stderr_when_stdout_carries_data() {
+    let dir = scratch("status");
+    let r = robot(&dir).display().to_string();
+    let run = |args: &[&str]| {
+        let o = Command::new(env!("CARGO_BIN_EXE_cpm"))
+            .args(["export", "--format", "linuxcnc", "--robot", &r])
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (
+            String::from_utf8(o.stdout).unwrap(),
+            String::from_utf8(o.stderr).unwrap(),
+        )
+    };
+    let ini = dir.join("j.ini").display().to_string();
+    let hal = dir.join("j.hal").display().to_string();
+    // `--ini F > joints.hal`: stdout is the HAL file and nothing else (it had `wrote F`).
+    let (out, err) = run(&["--ini", &ini]);
+    assert!(!out.contains("wrote"), "{out}");
+    assert!(out.lines().all(|l| l.is_empty()
+        || l.starts_with('#')
+        || l.starts_with("setp ")
+        || l.starts_with("loadrt ")));
+    assert_eq!(err.trim(), format!("wrote {ini}"));
+    // `--quiet` drops the status line there.
+    let (_, err) = run(&["--ini", &ini, "--quiet"]);
+    assert!(err.is_empty(), "{err}");
+    // `--ini - --out F`: the INI on stdout, the status of F on stderr.
+    let (out, err) = run(&["--ini", "-", "--out", &hal]);
+    assert!(out.starts_with("; LinuxCNC joints of"), "{out}");
+    assert!(!out.contains("wrote"), "{out}");
+    assert_eq!(err.trim(), format!("wrote {hal}"));
+    // Both to files: stdout carries only the status lines.
+    let (out, err) = run(&["--ini", &ini, "--out", &hal]);
+    assert_eq!(out, format!("wrote {ini}\nwrote {hal}\n"));
+    assert!(err.is_empty(), "{err}");
+}

@@ -282,19 +282,7 @@ fn export_from(robot: &str, out: &str) -> Output {
 #[test]
 fn a_closed_or_full_standard_output_is_an_io_error() {
     // `cpm export ... >&-`
-    let o = Command::new("sh")
-        .arg("-c")
-        .arg("exec \"$0\" export --format linuxcnc --robot \"$1\" >&-")
-        .arg(env!("CARGO_BIN_EXE_cpm"))
-        .arg(example("hexapod_66.toml"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
-    assert!(
-        stderr(&o).contains("standard output is closed"),
-        "{}",
-        stderr(&o)
-    );
+    assert_stdout_closed(&export_in_shell(">&-"));
     // ... > /dev/full
     let full = std::fs::OpenOptions::new()
         .write(true)
@@ -323,6 +311,61 @@ fn a_closed_or_full_standard_output_is_an_io_error() {
     .output()
     .unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
+
+#[test]
+fn stdout_on_dev_null_opened_read_write_is_not_closed() {
+    // Python's `subprocess.DEVNULL` opens /dev/null O_RDWR, as the Rust runtime does on a
+    // closed descriptor 1; it was refused as closed (exit 4).
+    let export = |stdout: Stdio| {
+        cmd(&[
+            "export",
+            "--format",
+            "linuxcnc",
+            "--robot",
+            &example("hexapod_66.toml"),
+        ])
+        .stdout(stdout)
+        .output()
+        .unwrap()
+    };
+    let dev_null = || {
+        std::fs::File::options()
+            .read(true)
+            .write(true)
+            .open("/dev/null")
+            .unwrap()
+    };
+    let o = export(Stdio::from(dev_null()));
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).is_empty(), "{}", stderr(&o));
+    // The same through a shell (`1<>/dev/null`), and with stdin and stderr closed too.
+    let o = export_in_shell("1<>/dev/null <&-");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // A closed stdout is still refused when stdin is closed as well.
+    assert_stdout_closed(&export_in_shell(">&- <&-"));
+}
+
+/// `cpm export` of the hexapod example run by `sh` with `redirections`.
+fn export_in_shell(redirections: &str) -> Output {
+    Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "exec \"$0\" export --format linuxcnc --robot \"$1\" {redirections}"
+        ))
+        .arg(env!("CARGO_BIN_EXE_cpm"))
+        .arg(example("hexapod_66.toml"))
+        .output()
+        .unwrap()
+}
+
+fn assert_stdout_closed(o: &Output) {
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(o));
+    assert!(
+        stderr(o).contains("standard output is closed"),
+        "{}",
+        stderr(o)
+    );
 }
 
 // ---------------------------------------------------------------------------------------

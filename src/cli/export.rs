@@ -267,15 +267,31 @@ pub fn run(args: &ExportArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         .as_ref()
         .map(|p| (p, linuxcnc_ini(&robot, args.units)));
     ctx.finish();
+    // Status lines go to stderr whenever stdout carries data (`--ini F > joints.hal`).
+    let data_on_stdout = match &args.out {
+        None => true,
+        Some(out) => common::out_target("--out", out, &inputs)? == Target::Stdout,
+    } || match &args.ini {
+        Some(path) => common::out_target("--ini", path, &inputs)? == Target::Stdout,
+        None => false,
+    };
+    let wrote = |path: &std::path::Path, ctx: &mut Ctx<'_>| -> anyhow::Result<()> {
+        if data_on_stdout {
+            ctx.status(format!("wrote {}", path.display()));
+        } else {
+            writeln!(ctx.out, "wrote {}", path.display())?;
+        }
+        Ok(())
+    };
     if let Some((path, ini)) = &ini {
         if common::write_out("--ini", path, &inputs, ini, ctx)? != Target::Stdout {
-            writeln!(ctx.out, "wrote {}", path.display())?;
+            wrote(path, ctx)?;
         }
     }
     match &args.out {
         Some(out) => {
             if common::write_out("--out", out, &inputs, &text, ctx)? != Target::Stdout {
-                writeln!(ctx.out, "wrote {}", out.display())?;
+                wrote(out, ctx)?;
             }
         }
         None => write!(ctx.out, "{text}")?,

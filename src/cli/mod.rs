@@ -224,6 +224,18 @@ impl<'a> Ctx<'a> {
         }
     }
 
+    /// A status line (`wrote FILE`) on stderr, for a command whose standard output carries
+    /// data (not with `--quiet`).
+    pub fn status(&self, message: impl AsRef<str>) {
+        if self.quiet {
+            return;
+        }
+        match &self.progress {
+            Some(b) => b.println(message.as_ref()),
+            None => eprintln!("{}", message.as_ref()),
+        }
+    }
+
     /// Removes the progress display.
     pub fn finish(&mut self) {
         if let Some(b) = self.progress.take() {
@@ -314,12 +326,40 @@ pub fn render_error(err: &anyhow::Error) -> String {
     parts.join(": ")
 }
 
+/// Whether descriptor 1 was open when the process started, as recorded by
+/// [`record_stdout_at_start`]: 0 not recorded, 1 open, 2 closed.
+static STDOUT_AT_START: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+/// Records whether descriptor 1 is open now (Linux, with `/proc` mounted; else nothing is
+/// recorded). The `cpm` binary calls it from an `.init_array` entry, before the Rust runtime
+/// reopens a closed standard descriptor on `/dev/null`; [`run`] then tells `cpm ... >&-`
+/// (refused) from a parent's read-write `/dev/null` such as Python's `subprocess.DEVNULL`
+/// (accepted). Opens no descriptor (it must not take the number 1 itself).
+pub fn record_stdout_at_start() {
+    #[cfg(target_os = "linux")]
+    {
+        use std::sync::atomic::Ordering;
+        if std::fs::symlink_metadata("/proc/self/fd").is_ok() {
+            let open = std::fs::symlink_metadata("/proc/self/fd/1").is_ok();
+            STDOUT_AT_START.store(if open { 1 } else { 2 }, Ordering::Relaxed);
+        }
+    }
+}
+
 /// True when descriptor 1 was closed when `cpm` started (`cpm ... >&-`).
 ///
 /// The Rust runtime opens `/dev/null` read-write on a closed standard descriptor before
-/// `main`, so a closed stdout shows as `/dev/null` open for reading and writing (a shell's
-/// `>/dev/null` opens it write-only, which is fine).
+/// `main`. When [`record_stdout_at_start`] ran before it (the `cpm` binary on Linux), its
+/// record decides. Otherwise (`/proc` not mounted, [`run`] called from another program) the
+/// guess is best-effort: `/dev/null` open for reading and writing counts as closed (a shell's
+/// `>/dev/null` opens it write-only, which is fine; a parent's read-write `/dev/null` is
+/// then refused too).
 fn stdout_closed(stdout: &std::io::Stdout) -> bool {
+    match STDOUT_AT_START.load(std::sync::atomic::Ordering::Relaxed) {
+        1 => return false,
+        2 => return true,
+        _ => {}
+    }
     #[cfg(target_os = "linux")]
     {
         use rustix::fs::{fcntl_getfl, fstat, major, minor, FileType, OFlags};

@@ -57,6 +57,14 @@ pub struct DesignReport {
     pub sensor_lengths_mm: Vec<(f64, f64)>,
     /// How it was chosen.
     pub log: Vec<String>,
+    /// The limits honoured (joint cones, clearances), `null` when none were given.
+    pub limits: Option<crate::calib::design::DesignLimits>,
+    /// Largest base joint cone angle over the poses, deg.
+    pub max_base_cone_deg: f64,
+    /// Largest platform joint cone angle over the poses, deg.
+    pub max_platform_cone_deg: f64,
+    /// Smallest distance between a sensor axis and a link axis over the poses, mm.
+    pub min_clearance_mm: f64,
     /// The criterion, in words.
     #[serde(skip)]
     pub criterion_text: String,
@@ -85,6 +93,10 @@ impl DesignReport {
             gauge_freedoms_left: d.gauge.last().map(|g| g.socket_freedoms()),
             sensor_lengths_mm: d.sensor_lengths_mm.clone(),
             log: d.log.clone(),
+            limits: d.limits,
+            max_base_cone_deg: d.max_cone_deg.0,
+            max_platform_cone_deg: d.max_cone_deg.1,
+            min_clearance_mm: d.min_clearance_mm,
             criterion_text: criterion_text(d.criterion),
             sensor_rows: d
                 .sensors
@@ -115,6 +127,26 @@ impl DesignReport {
             r.push_str(&format!(
                 "- Gauge freedoms left by the socket layout: {g}.\n"
             ));
+        }
+        let reached = format!(
+            "largest joint cones {} deg (base) and {} deg (platform), smallest sensor-link clearance {} mm",
+            fixed(self.max_base_cone_deg, 1),
+            fixed(self.max_platform_cone_deg, 1),
+            fixed(self.min_clearance_mm, 1)
+        );
+        match &self.limits {
+            Some(l) => r.push_str(&format!(
+                "- Limits honoured: joint cones at most {} deg (base) and {} deg (platform), sensor axes at least {} mm from the link axes{}; {reached}.\n",
+                short(l.joints.base_cone_deg),
+                short(l.joints.platform_cone_deg),
+                short(l.clearance.gauge_link_mm),
+                l.clearance
+                    .link_link_mm
+                    .map_or(String::new(), |d| format!(", link axes at least {} mm apart", short(d)))
+            )),
+            None => r.push_str(&format!(
+                "- No joint or clearance limits given (`--cone-deg`, `--clearance-mm`, `[limits]`): {reached}.\n"
+            )),
         }
         r.push_str("\n## Sensors (gauge travel over the poses)\n\n| sensor | base socket (mm, {B}) | platform socket (mm, {P}) | length range (mm) |\n|---|---|---|---|\n");
         let xyz = |v: &[f64; 3]| {

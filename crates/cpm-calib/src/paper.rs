@@ -143,8 +143,12 @@ pub fn random_workspace_poses(
 ) -> Vec<Pose> {
     let c0 = j1_condition(table, &table.home);
     let mut out = Vec::with_capacity(n);
-    let mut batch = seed;
-    while out.len() < n && batch < seed + 100 {
+    // At most 100 batches, seeded `seed, seed + 1, ...` (wrapping: every u64 is a seed).
+    for k in 0..100u64 {
+        if out.len() >= n {
+            break;
+        }
+        let batch = seed.wrapping_add(k);
         for p in random_poses(&table.home, n, dpos_mm, dang_deg, batch.wrapping_mul(7919)) {
             if out.len() == n {
                 break;
@@ -155,7 +159,6 @@ pub fn random_workspace_poses(
                 out.push(p);
             }
         }
-        batch += 1;
     }
     out
 }
@@ -306,7 +309,7 @@ fn limited_campaign(
     let setup_options = SetupOptions {
         max_readings: options.design.max_readings,
         max_setups: limited.max_setups,
-        seed: options.seed + 2,
+        seed: options.seed.wrapping_add(2),
         ..limited.search
     };
     let sockets = SocketCandidates::paper_cubic();
@@ -357,7 +360,7 @@ fn limited_campaign(
             ident,
             &MonteCarloOptions {
                 runs: limited.monte_carlo_runs,
-                seed: options.seed + 3000,
+                seed: options.seed.wrapping_add(3000),
                 noise: options.noise,
             },
             &|_, _| {},
@@ -529,7 +532,13 @@ pub fn reproduce(
     let sigma = sim.reading_sigma_um();
     let model = MeasurementModel::new(JointTable::paper_cubic());
     let home = model.nominal.home;
-    let validation = random_poses(&home, options.validation_poses, 60.0, 8.0, options.seed + 7);
+    let validation = random_poses(
+        &home,
+        options.validation_poses,
+        60.0,
+        8.0,
+        options.seed.wrapping_add(7),
+    );
 
     progress("paper design: the circle, one sensor");
     let paper_plan = Plan {
@@ -584,7 +593,7 @@ pub fn reproduce(
         options.design_candidates,
         options.designed_range_mm,
         options.designed_range_deg,
-        options.seed + 1,
+        options.seed.wrapping_add(1),
     );
     let design_options = DesignOptions {
         sigma_um: sigma,
@@ -610,7 +619,7 @@ pub fn reproduce(
                 options.designed_range_mm,
                 options.designed_range_deg,
                 3.0,
-                options.seed + 1,
+                options.seed.wrapping_add(1),
             ),
             sensors: (0..hand.nominal.sensors.len()).collect(),
         };
@@ -638,7 +647,7 @@ pub fn reproduce(
             &dident,
             &MonteCarloOptions {
                 runs: options.monte_carlo_runs,
-                seed: options.seed + 1000,
+                seed: options.seed.wrapping_add(1000),
                 noise: options.noise,
             },
             &|_, _| {},
@@ -674,4 +683,30 @@ pub fn reproduce(
         monte_carlo,
         limited,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn random_workspace_poses_take_every_seed() {
+        // The batches are seeded `seed, seed + 1, ...`: near u64::MAX they wrap around
+        // instead of ending at once (found 0 of 5 before) or overflowing.
+        let t = JointTable::paper_cubic();
+        for seed in [0, 1, u64::MAX - 1, u64::MAX] {
+            let poses = random_workspace_poses(&t, 5, 50.0, 10.0, 3.0, seed);
+            assert_eq!(poses.len(), 5, "seed {seed}");
+        }
+        // Seeds far from the wrap are unchanged: the same poses as before the fix.
+        let a = random_workspace_poses(&t, 5, 50.0, 10.0, 3.0, 7);
+        let b = random_poses(&t.home, 5, 50.0, 10.0, 7u64.wrapping_mul(7919));
+        let kept: Vec<Pose> = b
+            .into_iter()
+            .filter(|p| {
+                cpm_kinematics::reachable_at(&t, p, 3.0 * j1_condition(&t, &t.home)).is_ok()
+            })
+            .collect();
+        assert_eq!(a[..kept.len()], kept[..]);
+    }
 }

@@ -84,6 +84,33 @@ pub struct DesignOptions {
     /// Sensor noise standard deviation for the reported bounds, um. Default the paper's
     /// uniform +-10 um: 10 / sqrt(3).
     pub sigma_um: f64,
+    /// Limits every chosen pose with every chosen sensor must honour (joint cones, link-link
+    /// and gauge-link clearance). Default `None`: none beyond the candidates' own.
+    pub limits: Option<DesignLimits>,
+}
+
+/// The machine's limits a [`design`] honours (see [`limits`]): at every chosen pose the joint
+/// cones and, when set, the link-link clearance; with every chosen sensor at every chosen
+/// pose the gauge-link clearance. The link length limits of the joint table apply to the
+/// candidates already ([`candidates::Workspace`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct DesignLimits {
+    /// Joint cone limits.
+    pub joints: JointLimits,
+    /// Gauge-link (and link-link) clearance.
+    pub clearance: Clearance,
+}
+
+impl DesignLimits {
+    /// As [`Constraints`] (with the default gauge, which a design without limits does not
+    /// use).
+    pub fn constraints(&self) -> Constraints {
+        Constraints {
+            joints: self.joints,
+            clearance: self.clearance,
+            ..Constraints::default()
+        }
+    }
 }
 
 impl Default for DesignOptions {
@@ -96,6 +123,7 @@ impl Default for DesignOptions {
             select: SelectOptions::default(),
             socket_rounds: 4,
             sigma_um: 10.0 / 3f64.sqrt(),
+            limits: None,
         }
     }
 }
@@ -123,6 +151,13 @@ pub struct Design {
     /// Gauge freedoms with growing socket layouts on the chosen poses: one socket pair first,
     /// then 2 x 2, 3 x 3, ... sockets, the design's own layout last.
     pub gauge: Vec<GaugeReport>,
+    /// The limits the design honours ([`DesignOptions::limits`]).
+    pub limits: Option<DesignLimits>,
+    /// Largest base and platform joint cone angles over the chosen poses, deg.
+    pub max_cone_deg: (f64, f64),
+    /// Smallest distance between a sensor's axis and a link axis over the chosen poses and
+    /// sensors, mm.
+    pub min_clearance_mm: f64,
     /// What each stage achieved, in words.
     pub log: Vec<String>,
 }
@@ -271,7 +306,9 @@ fn pair_rows(base: &[usize], platform: &[usize], np: usize) -> Vec<usize> {
 const EXHAUSTIVE_SOCKETS: usize = 20_000;
 
 /// Chooses sockets for fixed poses: the subsets maximising the criterion of the summed
-/// per-pair information matrices.
+/// per-pair information matrices, among those `feasible` allows (`start` must be feasible;
+/// the result is, when any subset is).
+#[allow(clippy::too_many_arguments)]
 fn choose_sockets(
     pair_info: &[DMatrix<f64>],
     nb_all: usize,
@@ -280,8 +317,12 @@ fn choose_sockets(
     np: usize,
     start: (&[usize], &[usize]),
     criterion: Criterion,
+    feasible: &(dyn Fn(&[usize], &[usize]) -> bool + Sync),
 ) -> (Vec<usize>, Vec<usize>, f64) {
     let eval = |b: &[usize], p: &[usize]| {
+        if !feasible(b, p) {
+            return f64::NEG_INFINITY;
+        }
         let n = pair_info[0].nrows();
         let mut m = DMatrix::zeros(n, n);
         for r in pair_rows(b, p, np_all) {
@@ -296,14 +337,18 @@ fn choose_sockets(
         let best = bs
             .par_iter()
             .flat_map(|b| ps.par_iter().map(move |p| (b, p)))
-            .map(|(b, p)| (eval(b, p), b.clone(), p.clone()))
+            .map(|(b, p)| (feasible(b, p), eval(b, p), b.clone(), p.clone()))
             .reduce_with(|x, y| {
-                if y.0 > x.0 || (y.0 == x.0 && (&y.1, &y.2) < (&x.1, &x.2)) {
+                // Feasible first, then the larger criterion, then the first subsets.
+                let better = (y.0, y.1) > (x.0, x.1)
+                    || ((y.0, y.1) == (x.0, x.1) && (&y.2, &y.3) < (&x.2, &x.3));
+                if better {
                     y
                 } else {
                     x
                 }
-            });
+            })
+            .map(|(_, v, b, p)| (v, b, p));
         if let Some((v, b, p)) = best {
             return (b, p, v);
         }
@@ -395,13 +440,36 @@ pub fn design(
         return Err(CalibError::invalid("sigma_um", "must be finite and > 0"));
     }
     let mut log = Vec::new();
+    // The joint limits: candidates beyond them are dropped.
+    let constraints = options.limits.map(|l| l.constraints());
+    if let Some(c) = &constraints {
+        c.validate()?;
+    }
+    let table = &model.nominal;
+    let candidates: Vec<Pose> = match &constraints {
+        None => candidates.to_vec(),
+        Some(c) => {
+            let within = within_joint_limits(c, table, candidates, n_poses)?;
+            log.push(format!(
+                "{} of {} candidate poses within the joint limits (cones <= {} / {} deg{})",
+                within.len(),
+                candidates.len(),
+                c.joints.base_cone_deg,
+                c.joints.platform_cone_deg,
+                c.clearance
+                    .link_link_mm
+                    .map_or(String::new(), |d| format!(", links >= {d} mm apart"))
+            ));
+            within
+        }
+    };
     progress(&format!(
         "design: Jacobian blocks of {} candidate poses x {} socket pairs",
         candidates.len(),
         nb_all * np_all
     ));
     let all_pairs = sockets.all_pairs();
-    let raw = sockets::pose_blocks(model, candidates, &all_pairs);
+    let raw = sockets::pose_blocks(model, &candidates, &all_pairs);
     let mut poses = Vec::with_capacity(candidates.len());
     let mut blocks = Vec::with_capacity(candidates.len());
     for (p, b) in candidates.iter().zip(raw) {
@@ -425,24 +493,82 @@ pub fn design(
         nb_all,
         np_all
     ));
+    // The gauge-link clearance: per socket pair, the candidates at which its axis clears
+    // every link axis (bit sets); a layout may use only the poses all its pairs clear.
+    let min_clear = constraints.as_ref().map(|c| c.clearance.gauge_link_mm);
+    let clear_sets: Option<Vec<Vec<u64>>> = min_clear.map(|min| {
+        use rayon::prelude::*;
+        all_pairs
+            .par_iter()
+            .map(|s| {
+                let mut bits = vec![0u64; poses.len().div_ceil(64)];
+                for (c, p) in poses.iter().enumerate() {
+                    if limits::gauge_clearance_mm(table, s, p) >= min {
+                        bits[c / 64] |= 1 << (c % 64);
+                    }
+                }
+                bits
+            })
+            .collect()
+    });
+    let clear = |r: usize, c: usize| {
+        clear_sets
+            .as_ref()
+            .is_none_or(|sets| sets[r][c / 64] >> (c % 64) & 1 == 1)
+    };
+    // Candidates every pair of a layout clears.
+    let eligible = |b: &[usize], p: &[usize]| -> Vec<usize> {
+        let rows = pair_rows(b, p, np_all);
+        (0..blocks.len())
+            .filter(|&c| rows.iter().all(|&r| clear(r, c)))
+            .collect()
+    };
+    let eligible_count = |b: &[usize], p: &[usize]| -> usize {
+        match &clear_sets {
+            None => blocks.len(),
+            Some(sets) => {
+                let rows = pair_rows(b, p, np_all);
+                (0..sets[0].len())
+                    .map(|w| {
+                        rows.iter()
+                            .fold(u64::MAX, |acc, &r| acc & sets[r][w])
+                            .count_ones() as usize
+                    })
+                    .sum()
+            }
+        }
+    };
     let criterion = options.select.criterion;
     let info_per_pair = |chosen: Option<&[usize]>| -> Vec<DMatrix<f64>> {
         let n = blocks[0].ncols();
-        let idx: Vec<usize> = match chosen {
-            Some(c) => c.to_vec(),
-            None => (0..blocks.len()).collect(),
-        };
         use rayon::prelude::*;
         (0..nb_all * np_all)
             .into_par_iter()
             .map(|r| {
+                // All candidates: those the pair clears; chosen poses: all of them (the
+                // layouts that do not clear them are not feasible).
+                let idx: Vec<usize> = match chosen {
+                    Some(c) => c.to_vec(),
+                    None => (0..blocks.len()).filter(|&c| clear(r, c)).collect(),
+                };
                 let a = DMatrix::from_fn(idx.len(), n, |i, c| blocks[idx[i]][(r, c)]);
                 a.tr_mul(&a)
             })
             .collect()
     };
+    let no_layout = || {
+        CalibError::invalid(
+            "limits.gauge_link_mm",
+            format!(
+                "no layout of {nb} base and {np} platform sockets keeps every gauge axis {} mm from the link axes at {n_poses} poses (of {} candidates)",
+                min_clear.unwrap_or(0.0),
+                blocks.len()
+            ),
+        )
+    };
     let first: Vec<usize> = (0..nb).collect();
     let firstp: Vec<usize> = (0..np).collect();
+    let enough = |b: &[usize], p: &[usize]| eligible_count(b, p) >= n_poses;
     let (mut sb, mut sp, _) = choose_sockets(
         &info_per_pair(None),
         nb_all,
@@ -451,11 +577,29 @@ pub fn design(
         np,
         (&first, &firstp),
         criterion,
+        &enough,
     );
+    if !enough(&sb, &sp) {
+        return Err(no_layout());
+    }
+    // Poses for sockets `b / p`: among the candidates they clear, from `start` when given
+    // (candidate indices); the chosen candidate indices and the selection.
+    let select_for = |b: &[usize], p: &[usize], start: Option<&[usize]>| {
+        let rows = pair_rows(b, p, np_all);
+        let el = eligible(b, p);
+        if el.len() < n_poses {
+            return Err(no_layout());
+        }
+        let sub: Vec<DMatrix<f64>> = el.iter().map(|&c| blocks[c].select_rows(&rows)).collect();
+        let start: Option<Vec<usize>> =
+            start.and_then(|s| s.iter().map(|c| el.binary_search(c).ok()).collect());
+        let sel = select_blocks(&sub, n_poses, None, start.as_deref(), &options.select)?;
+        let info = select::information(&sub, &sel.chosen);
+        let chosen: Vec<usize> = sel.chosen.iter().map(|&i| el[i]).collect();
+        Ok::<_, CalibError>((chosen, sel, info))
+    };
     let mut chosen: Option<Vec<usize>> = None;
     for round in 0..options.socket_rounds.max(1) {
-        let rows = pair_rows(&sb, &sp, np_all);
-        let sub: Vec<DMatrix<f64>> = blocks.iter().map(|b| b.select_rows(&rows)).collect();
         progress(&format!(
             "design round {}: {}-optimal selection of {n_poses} poses for sockets {} / {}",
             round + 1,
@@ -463,8 +607,7 @@ pub fn design(
             names(&sockets.base, &sb),
             names(&sockets.platform, &sp)
         ));
-        let sel = select_blocks(&sub, n_poses, None, chosen.as_deref(), &options.select)?;
-        let info = select::information(&sub, &sel.chosen);
+        let (now, sel, info) = select_for(&sb, &sp, chosen.as_deref())?;
         let ix = indices::indices_from_information(&info, n_poses * pairs, options.sigma_um);
         log.push(format!(
             "round {}: sockets {} / {}; {n_poses} poses, {}-criterion {:.4} after greedy, {:.4} after {} exchanges: Cramér-Rao RMS {:.3} um, max {:.3} um",
@@ -478,16 +621,22 @@ pub fn design(
             ix.crlb_rms_um,
             ix.crlb_max_um
         ));
+        // Layouts whose pairs all clear the chosen poses.
+        let clears_chosen = |b: &[usize], p: &[usize]| {
+            let rows = pair_rows(b, p, np_all);
+            now.iter().all(|&c| rows.iter().all(|&r| clear(r, c)))
+        };
         let (nb2, np2, _) = choose_sockets(
-            &info_per_pair(Some(&sel.chosen)),
+            &info_per_pair(Some(&now)),
             nb_all,
             np_all,
             nb,
             np,
             (&sb, &sp),
             criterion,
+            &clears_chosen,
         );
-        chosen = Some(sel.chosen);
+        chosen = Some(now);
         if nb2 == sb && np2 == sp {
             break;
         }
@@ -495,9 +644,7 @@ pub fn design(
         sp = np2;
         if round + 1 == options.socket_rounds.max(1) {
             // Sockets changed on the last round: choose the poses for them once more.
-            let rows = pair_rows(&sb, &sp, np_all);
-            let sub: Vec<DMatrix<f64>> = blocks.iter().map(|b| b.select_rows(&rows)).collect();
-            let sel = select_blocks(&sub, n_poses, None, chosen.as_deref(), &options.select)?;
+            let (now, sel, _) = select_for(&sb, &sp, chosen.as_deref())?;
             log.push(format!(
                 "final: sockets {} / {}; poses re-chosen for them, {}-criterion {:.4} after {} exchanges",
                 names(&sockets.base, &sb),
@@ -506,7 +653,7 @@ pub fn design(
                 sel.value,
                 sel.exchanges
             ));
-            chosen = Some(sel.chosen);
+            chosen = Some(now);
         }
     }
     let chosen = chosen.unwrap_or_default();
@@ -533,7 +680,20 @@ pub fn design(
         sensor_lengths_mm: Vec::new(),
         gauge: Vec::new(),
         log,
+        limits: options.limits,
+        max_cone_deg: (0.0, 0.0),
+        min_clearance_mm: f64::INFINITY,
     };
+    for p in &d.poses {
+        for (b, q) in limits::cone_angles_deg(table, p) {
+            d.max_cone_deg = (d.max_cone_deg.0.max(b), d.max_cone_deg.1.max(q));
+        }
+        for s in &d.sensors {
+            d.min_clearance_mm = d
+                .min_clearance_mm
+                .min(limits::gauge_clearance_mm(table, s, p));
+        }
+    }
     d.sensor_lengths_mm = d
         .sensors
         .iter()
@@ -560,6 +720,76 @@ pub fn design(
     Ok(d)
 }
 
+/// The candidates within the joint limits of `c` (cones, link-link clearance); `Err` naming
+/// the limits that rejected them when fewer than `needed` are.
+fn within_joint_limits(
+    c: &Constraints,
+    table: &cpm_geometry::JointTable,
+    candidates: &[Pose],
+    needed: usize,
+) -> Result<Vec<Pose>, CalibError> {
+    use rayon::prelude::*;
+    // Per candidate: beyond the base cone, the platform cone, the link-link clearance.
+    let verdicts: Vec<(bool, bool, bool)> = candidates
+        .par_iter()
+        .map(|p| {
+            let cones = limits::cone_angles_deg(table, p);
+            let base = cones.iter().any(|(b, _)| !(*b <= c.joints.base_cone_deg));
+            let plat = cones
+                .iter()
+                .any(|(_, q)| !(*q <= c.joints.platform_cone_deg));
+            let links = c.clearance.link_link_mm.is_some_and(|min| {
+                let axes = limits::link_axes(table, p);
+                (0..axes.len()).any(|i| {
+                    (i + 1..axes.len()).any(|j| {
+                        !(limits::segment_distance_mm(
+                            &axes[i].0, &axes[i].1, &axes[j].0, &axes[j].1,
+                        ) >= min)
+                    })
+                })
+            });
+            (base, plat, links)
+        })
+        .collect();
+    let within: Vec<Pose> = candidates
+        .iter()
+        .zip(&verdicts)
+        .filter(|(_, v)| !(v.0 || v.1 || v.2))
+        .map(|(p, _)| *p)
+        .collect();
+    if within.len() >= needed {
+        return Ok(within);
+    }
+    let count = |f: fn(&(bool, bool, bool)) -> bool| verdicts.iter().filter(|v| f(v)).count();
+    let mut why = vec![
+        format!(
+            "{} beyond the base joint cone of {} deg",
+            count(|v| v.0),
+            c.joints.base_cone_deg
+        ),
+        format!(
+            "{} beyond the platform joint cone of {} deg",
+            count(|v| v.1),
+            c.joints.platform_cone_deg
+        ),
+    ];
+    if let Some(d) = c.clearance.link_link_mm {
+        why.push(format!(
+            "{} with two link axes closer than {d} mm",
+            count(|v| v.2)
+        ));
+    }
+    Err(CalibError::invalid(
+        "limits",
+        format!(
+            "{} of {} candidate poses within the joint limits ({}), {needed} needed",
+            within.len(),
+            candidates.len(),
+            why.join(", ")
+        ),
+    ))
+}
+
 fn names(all: &[Socket], idx: &[usize]) -> String {
     idx.iter()
         .map(|&i| all[i].name.as_str())
@@ -570,6 +800,84 @@ fn names(all: &[Socket], idx: &[usize]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_design_under_limits_keeps_them_at_every_pose_and_sensor() {
+        let model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
+        let ws = candidates::Workspace::default();
+        let (cands, _) = candidates::default_candidates(&model.nominal, &ws, 300, 100.0, 25.0, 1);
+        let sockets = SocketCandidates::paper_cubic();
+        let free = DesignOptions {
+            max_readings: 180,
+            base_sockets: 3,
+            platform_sockets: 3,
+            ..DesignOptions::default()
+        };
+        let d = design(&model, &sockets, &cands, &free, &|_| {}).unwrap();
+        assert!(d.limits.is_none());
+        // The free design goes beyond the limits below (else the test proves nothing).
+        assert!(
+            d.max_cone_deg.0 > 20.0 && d.max_cone_deg.1 > 25.0 && d.min_clearance_mm < 25.0,
+            "{:?}",
+            (d.max_cone_deg, d.min_clearance_mm)
+        );
+        let limits = DesignLimits {
+            joints: JointLimits {
+                base_cone_deg: 20.0,
+                platform_cone_deg: 25.0,
+            },
+            clearance: Clearance {
+                gauge_link_mm: 25.0,
+                link_link_mm: Some(10.0),
+            },
+        };
+        let bounded = DesignOptions {
+            limits: Some(limits),
+            ..free
+        };
+        let d = design(&model, &sockets, &cands, &bounded, &|_| {}).unwrap();
+        assert_eq!(d.poses.len(), 20);
+        let t = &model.nominal;
+        for p in &d.poses {
+            assert!(limits.constraints().check_pose(t, p).is_ok());
+            for s in &d.sensors {
+                assert!(limits::gauge_clearance_mm(t, s, p) >= 25.0);
+            }
+        }
+        assert!(d.max_cone_deg.0 <= 20.0 && d.max_cone_deg.1 <= 25.0);
+        assert!(d.min_clearance_mm >= 25.0);
+        // Limits nothing keeps: errors naming them.
+        let impossible = |l: DesignLimits| {
+            let o = DesignOptions {
+                limits: Some(l),
+                ..free
+            };
+            match design(&model, &sockets, &cands, &o, &|_| {}) {
+                Err(CalibError::Invalid { field, why }) => format!("{field}: {why}"),
+                other => panic!("{:?}", other.map(|d| d.poses.len())),
+            }
+        };
+        let far_links = DesignLimits {
+            clearance: Clearance {
+                gauge_link_mm: 0.0,
+                link_link_mm: Some(5000.0),
+            },
+            ..limits
+        };
+        let e = impossible(far_links);
+        assert!(
+            e.starts_with("limits: 0 of") && e.contains("closer than 5000 mm"),
+            "{e}"
+        );
+        let far_gauge = DesignLimits {
+            clearance: Clearance {
+                gauge_link_mm: 5000.0,
+                link_link_mm: None,
+            },
+            ..limits
+        };
+        assert!(impossible(far_gauge).starts_with("limits.gauge_link_mm: no layout"));
+    }
 
     #[test]
     fn subsets_enumerate_all_combinations() {
