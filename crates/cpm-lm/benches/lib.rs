@@ -70,7 +70,7 @@ mod nist_vs_lm {
 
     pub fn bench(c: &mut Criterion) {
         let no_stats = Options {
-            compute_statistics: false,
+            statistics: cpm_lm::StatisticsMode::Off,
             ..Options::default()
         };
         let nielsen = Options {

@@ -145,8 +145,7 @@ fn run_all(options: &Options) -> Vec<Row> {
             let params = min_lre(&x, &d.certified);
             let rss = lre(2.0 * report.final_cost, d.certified_rss);
             let sd = report
-                .statistics
-                .as_ref()
+                .statistics()
                 .map(|st| {
                     st.std_dev
                         .iter()
