@@ -496,3 +496,51 @@ fn mgh_reach_known_minima() {
     }
     assert!(failures.is_empty(), "{failures:#?}");
 }
+
+/// Regression: the checker once flagged a correct Watson Jacobian (relative error 2.3e-5) at
+/// the minimum, where some parameters are small but not zero (a step of 1e-6 |x_j| is then
+/// tiny) and every residual is a small difference of large terms (a rounding allowance
+/// scaled by the residual is then far too small). The minima from MINPACK's starts, the
+/// starts 10x and 100x away, and a Jacobian with one entry wrong by 1e-4 (which must be
+/// flagged).
+#[test]
+fn watson_jacobian_is_not_a_false_alarm() {
+    for n in [6usize, 9, 12] {
+        for offset in [0.0, 10.0, 100.0] {
+            let mut p = Mgh::new(Kind::Watson, n, 31);
+            let mut x: Vec<f64> = p.start(1.0).iter().map(|v| v + offset).collect();
+            let _ = minimize(&mut p, &mut x, &Options::default()).unwrap();
+            let c = check_jacobian(&mut p, &x, 1e-6).unwrap();
+            println!("Watson n={n} from +{offset}: {c}");
+            assert!(c.is_consistent(1e-6), "Watson n={n} from +{offset}: {c}");
+            // One entry of the small parameter's column wrong by 1e-4 relative is flagged.
+            let mut wrong = Wrong(Mgh::new(Kind::Watson, n, 31));
+            let c = check_jacobian(&mut wrong, &x, 1e-6).unwrap();
+            assert!(!c.is_consistent(1e-6), "Watson n={n} from +{offset}: {c}");
+            assert_eq!(c.max_rel_entry, (3, 0), "{c}");
+        }
+    }
+}
+
+/// A problem whose Jacobian entry (3, 0) is wrong by a factor 1 + 1e-4.
+struct Wrong(Mgh);
+
+impl Problem for Wrong {
+    fn num_params(&self) -> usize {
+        self.0.num_params()
+    }
+    fn num_residuals(&self) -> usize {
+        self.0.num_residuals()
+    }
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+        self.0.residuals(x, r)
+    }
+}
+
+impl DenseJacobian for Wrong {
+    fn jacobian(&mut self, x: &[f64], mut jac: MatMut<'_, f64>) -> Result<(), ModelError> {
+        self.0.jacobian(x, jac.as_mut())?;
+        jac[(3, 0)] *= 1.0 + 1e-4;
+        Ok(())
+    }
+}
