@@ -3,10 +3,12 @@
 //! **Step.** Column `j` is differenced with `h_j = step * max(|x_j|, s_j)`:
 //! `(r(x + h_j e_j) - r(x - h_j e_j)) / (2 h_j)`, whose error is `O(h^2)` from truncation
 //! plus `O(eps T / h)` from rounding, `T` the size of the terms of the residuals. The floor
-//! `s_j = T_max / c_j` is the change of `x_j` that moves the residuals' terms by their own
-//! size: `T_max = max_i t_i` with `t_i = |r_i(x)| + sum_k |J_ik x_k|` (the magnitude of the
-//! terms that make up residual `i`, to first order) and `c_j = max_i |J_ij|` (1 when the
-//! column or the terms are zero). A parameter that is small but not zero (the Watson
+//! `s_j = min(1, T_max / c_j)` is the change of `x_j` that moves the residuals' terms by
+//! their own size, capped at 1 (the scale the checker uses at `x_j = 0`, so that a column
+//! of tiny derivatives, an exponential far in its tail, is not differenced with a huge
+//! step): `T_max = max_i t_i` with `t_i = |r_i(x)| + sum_k |J_ik x_k|` (the magnitude of
+//! the terms that make up residual `i`, to first order) and `c_j = max_i |J_ij|` (the floor
+//! is 1 when the column or the terms are zero). A parameter that is small but not zero (the Watson
 //! function's first one at its minimum, about 1.5e-5 beside others near 1) is thus not
 //! differenced with a step of `1e-6 |x_j|`, lost in rounding; a parameter in small units
 //! has a large column and keeps a small step. `step = 1e-6` is a good default.
@@ -108,7 +110,7 @@ fn finite_differences<P: Problem + ?Sized>(
         let c = (0..m).fold(0.0f64, |a, i| a.max(analytic[(i, j)].abs()));
         let floor = t_max / c;
         let floor = if floor.is_finite() && floor > 0.0 {
-            floor
+            floor.min(1.0)
         } else {
             1.0
         };

@@ -81,8 +81,10 @@
 //! schedule ([`Damping::TrustRegion`], [`Damping::Nielsen`], [`Damping::Marquardt`],
 //! [`Damping::CubicInterpolation`]),
 //! the scaling ([`Scaling`]) and the linear solver ([`LinearSolver`]). `Options::acceleration`
-//! adds Transtrum and Sethna's geodesic acceleration ([`GeodesicAcceleration`]), which
-//! reaches NIST's BoxBOD from its first start where the plain method stops on a plateau:
+//! adds Transtrum and Sethna's geodesic acceleration ([`GeodesicAcceleration`]) to every
+//! step; by default it is used only to run again a solve in which a parameter *evaporated*
+//! ([`Evaporation`]: the plain method carried it where the model no longer depends on it, as
+//! from NIST's BoxBOD first start, and stopped on a plateau):
 //!
 //! ```
 //! # use cpm_lm::{minimize, DenseJacobian, ModelError, Problem};
@@ -360,7 +362,9 @@ pub use damping::Damping;
 pub use error::{EvalStage, LmError};
 pub use loss::Loss;
 pub use numeric::{Difference, NumericJacobian};
-pub use options::{GeodesicAcceleration, Options, ScaleUpdate, Scaling, StatisticsMode};
+pub use options::{
+    Evaporation, GeodesicAcceleration, Options, ScaleUpdate, Scaling, StatisticsMode,
+};
 pub use problem::{
     DampedStep, DenseJacobian, Linearization, ModelError, NormalEquations, Problem, SparseJacobian,
 };

@@ -73,7 +73,8 @@ impl ScaleUpdate {
 /// costs one more residual evaluation and one more solve per trial and more trials (over
 /// the 46 vendored NIST runs about 2.4 times the residual evaluations), and from MGH09's
 /// first start the ratio test rejects most trials along the valley until the iteration
-/// limit: hence an option, not the default.
+/// limit: hence not on by default, but the restart of the default solve when a parameter
+/// evaporated ([`Evaporation`]).
 /// Not combined with a robust loss or [`Damping::CubicInterpolation`] (rejected by
 /// [`Options::validate`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -118,6 +119,41 @@ pub enum StatisticsMode {
     /// Computed at the end of the solve (timed in
     /// [`Timings::statistics`](crate::Timings::statistics)).
     AtEnd,
+}
+
+/// The globalisation of the default solve: a restart when a parameter *evaporates*.
+///
+/// Transtrum, Machta and Sethna ("Geometry of nonlinear least squares with applications to
+/// sloppy models and optimization", Phys. Rev. E 83, 036701, 2011) call it parameter
+/// evaporation when a step carries a parameter to where the model no longer depends on it
+/// (an exponential rate to infinity, a saturating term switched off): the iteration then
+/// stops on a plateau of the cost, at the boundary of the model manifold, with a
+/// numerically zero gradient. Their remedy is the geodesic acceleration
+/// ([`GeodesicAcceleration`]), whose ratio test keeps each step within the region where the
+/// curvature of the model is known. Acceleration from the start costs one more residual
+/// evaluation and one more solve per trial and stalls along some valleys (NIST's MGH09 from
+/// its first start), so the default solve is plain and only a solve that ended with an
+/// evaporated parameter is run again, from the same start, with acceleration; the better of
+/// the two ends (lower cost) is returned, the report counting the work of both
+/// ([`Report::restarts`](crate::Report::restarts)). NIST's BoxBOD from its first start is
+/// the case in point: the plain method jumps to `b2 = 44.9`, where `exp(-b2 x)` vanishes, and
+/// stops with a residual sum of squares of 9771.5; the restart reaches the certified minimum.
+///
+/// A parameter `j` counts as evaporated when the squared norm of its Jacobian column at the
+/// last linearisation is below `threshold` times the largest it has been during the solve.
+/// Not applied with a robust loss, the cubic-interpolation damping, geodesic acceleration
+/// already on, bounds, or to [`NormalEquations`](crate::NormalEquations) problems.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Evaporation {
+    /// Relative squared column norm below which a parameter has evaporated. Default:
+    /// `1e-20` (a column 10^10 times shorter than it was).
+    pub threshold: f64,
+}
+
+impl Default for Evaporation {
+    fn default() -> Self {
+        Self { threshold: 1e-20 }
+    }
 }
 
 /// Options of a solve. All fields are public; [`Options::default()`] gives the values
@@ -176,6 +212,9 @@ pub struct Options {
     /// keeps no Jacobian in its report and gets none (and [`StatisticsMode::AtEnd`] is
     /// skipped). Default: `1000`.
     pub statistics_max_params: usize,
+    /// Restart once with geodesic acceleration when a parameter evaporated (see
+    /// [`Evaporation`]). Default: `Some(Evaporation::default())`.
+    pub evaporation_restart: Option<Evaporation>,
     /// Geodesic acceleration of each step (see [`GeodesicAcceleration`]). Default: `None`
     /// (plain steps).
     pub acceleration: Option<GeodesicAcceleration>,
@@ -199,6 +238,7 @@ impl Default for Options {
             rank_tol: None,
             statistics: StatisticsMode::OnDemand,
             statistics_max_params: 1000,
+            evaporation_restart: Some(Evaporation::default()),
             acceleration: None,
         }
     }
@@ -249,6 +289,14 @@ impl Options {
         }
         self.loss.validate()?;
         self.linear_solver.validate()?;
+        if let Some(e) = &self.evaporation_restart {
+            if !(e.threshold.is_finite() && e.threshold >= 0.0 && e.threshold < 1.0) {
+                return Err(LmError::InvalidOptions(format!(
+                    "evaporation_restart.threshold must be in [0, 1), got {}",
+                    e.threshold
+                )));
+            }
+        }
         if let Some(a) = &self.acceleration {
             if !(a.max_ratio.is_finite() && a.max_ratio > 0.0) {
                 return Err(LmError::InvalidOptions(format!(
@@ -313,8 +361,8 @@ impl Options {
 
     /// The defaults for a [`NormalEquations`](crate::NormalEquations) problem: the options
     /// of [`Options::default`] with [`Damping::GaussNewtonThenNielsen`],
-    /// [`LinearSolver::Supplied`] (named "normal equations of the problem") and
-    /// [`StatisticsMode::Off`].
+    /// [`LinearSolver::Supplied`] (named "normal equations of the problem"),
+    /// [`StatisticsMode::Off`] and no evaporation restart.
     pub fn normal_equations() -> Self {
         Self {
             damping: Damping::GaussNewtonThenNielsen,
@@ -322,6 +370,7 @@ impl Options {
                 name: "normal equations of the problem",
             },
             statistics: StatisticsMode::Off,
+            evaporation_restart: None,
             ..Self::default()
         }
     }
@@ -333,6 +382,8 @@ impl Options {
     /// system, the cubic control products with `J`), [`LinearSolver::Supplied`], plain least
     /// squares, no bounds, no geodesic acceleration, and [`StatisticsMode::Off`] (there is no
     /// Jacobian to keep). Anything else is [`LmError::InvalidOptions`], never ignored.
+    ///
+    /// (No evaporation restart either: it would run the whole solve again.)
     pub fn validate_normal(&self) -> Result<(), LmError> {
         self.validate()?;
         let refuse = |what: &str| {
@@ -363,6 +414,9 @@ impl Options {
         }
         if self.acceleration.is_some() {
             return refuse("geodesic acceleration");
+        }
+        if self.evaporation_restart.is_some() {
+            return refuse("an evaporation restart (set evaporation_restart: None)");
         }
         if self.statistics != StatisticsMode::Off {
             return refuse("statistics (set StatisticsMode::Off)");

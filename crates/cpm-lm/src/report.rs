@@ -132,6 +132,14 @@ pub struct Report {
     pub damping: &'static str,
     /// Name of the linear solver used.
     pub linear_solver: &'static str,
+    /// Parameters that evaporated: their Jacobian column ended below
+    /// [`Evaporation::threshold`](crate::Evaporation::threshold) of its largest (empty when
+    /// not checked).
+    pub evaporated: Vec<usize>,
+    /// Number of restarts (see [`Evaporation`](crate::Evaporation)): the counts of steps and
+    /// evaluations and the timings include every run; the termination, the costs, the
+    /// iteration records and the statistics are those of the run returned.
+    pub restarts: usize,
     /// Rank, covariance and standard deviations at the solution: computed at the end or on
     /// the first call of [`Report::statistics`].
     pub(crate) statistics: OnceLock<Statistics>,

@@ -510,6 +510,57 @@ fn record_failed_trial(
     }
 }
 
+/// [`run`] for a stored problem, with the restart of [`Evaporation`](crate::Evaporation):
+/// when a parameter evaporated, the solve runs again from the same start with geodesic
+/// acceleration and the lower final cost wins.
+pub(crate) fn run_stored<M: Model>(
+    model: &mut M,
+    x: &mut [f64],
+    options: &Options,
+    mut callback: Callback<'_, '_>,
+) -> Result<Report, LmError> {
+    let restart = options.evaporation_restart.is_some()
+        && options.acceleration.is_none()
+        && options.loss.is_squared()
+        && options.damping != Damping::CubicInterpolation
+        && options.lower.is_none()
+        && options.upper.is_none();
+    let x0 = if restart { x.to_vec() } else { Vec::new() };
+    let first = run(
+        Backend::stored(&mut *model),
+        x,
+        options,
+        callback.as_deref_mut(),
+    )?;
+    if !restart || first.evaporated.is_empty() || first.termination == TerminationReason::UserStop {
+        return Ok(first);
+    }
+    let accelerated = Options {
+        acceleration: Some(crate::GeodesicAcceleration::default()),
+        evaporation_restart: None,
+        ..options.clone()
+    };
+    let mut x1 = x0;
+    let second = run(Backend::stored(model), &mut x1, &accelerated, callback)?;
+    let (mut keep, other) = if second.final_cost < first.final_cost {
+        x.copy_from_slice(&x1);
+        (second, first)
+    } else {
+        (first, second)
+    };
+    keep.restarts = 1;
+    keep.residual_evaluations += other.residual_evaluations;
+    keep.jacobian_evaluations += other.jacobian_evaluations;
+    keep.accepted_steps += other.accepted_steps;
+    keep.rejected_steps += other.rejected_steps;
+    keep.elapsed += other.elapsed;
+    keep.timings.residuals += other.timings.residuals;
+    keep.timings.jacobian += other.timings.jacobian;
+    keep.timings.linear_solver += other.timings.linear_solver;
+    keep.timings.statistics += other.timings.statistics;
+    Ok(keep)
+}
+
 pub(crate) fn run<M: Model>(
     mut backend: Backend<'_, M>,
     x: &mut [f64],
@@ -552,8 +603,10 @@ pub(crate) fn run<M: Model>(
     let accel = options.acceleration;
     // The parameter-sized vectors share one allocation (small problems spend a fair part
     // of their time in the allocator).
-    let mut nbuf = vec![0.0; 7 * n];
-    let (wa, rest) = nbuf.split_at_mut(n);
+    let watch = options.evaporation_restart;
+    let mut nbuf = vec![0.0; if watch.is_some() { 8 * n } else { 7 * n }];
+    let (peak2, nbuf7) = nbuf.split_at_mut(if watch.is_some() { n } else { 0 });
+    let (wa, rest) = nbuf7.split_at_mut(n);
     let (x_trial, rest) = rest.split_at_mut(n);
     let (h, rest) = rest.split_at_mut(n);
     let (step, rest) = rest.split_at_mut(n);
@@ -615,6 +668,9 @@ pub(crate) fn run<M: Model>(
                 termination = Some(TerminationReason::NonFinite);
                 break;
             };
+            for (p, &c) in peak2.iter_mut().zip(norms2.iter()) {
+                *p = p.max(c);
+            }
             if first {
                 let mut mu0 = 0.0f64;
                 for j in 0..n {
@@ -863,6 +919,14 @@ pub(crate) fn run<M: Model>(
         }
     }
     let termination = termination.unwrap_or(TerminationReason::MaxIterations);
+    let evaporated: Vec<usize> = match watch {
+        Some(e) if jacobian_evaluations > 0 => (0..peak2.len())
+            .filter(|&j| {
+                norms2[j] < e.threshold * peak2[j] && !frozen.get(j).copied().unwrap_or(false)
+            })
+            .collect(),
+        _ => Vec::new(),
+    };
 
     let keep = options.statistics != StatisticsMode::Off
         && n <= options.statistics_max_params
@@ -910,6 +974,8 @@ pub(crate) fn run<M: Model>(
         num_residuals: m,
         damping: options.damping.name(),
         linear_solver: options.linear_solver.name(),
+        evaporated,
+        restarts: 0,
         statistics,
         fit,
     })

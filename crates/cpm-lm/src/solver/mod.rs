@@ -223,7 +223,7 @@ impl<'a> Solver<'a> {
     ) -> Result<Report, LmError> {
         let mut model = DenseModel::new(problem);
         let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
-        engine::run(engine::Backend::stored(&mut model), x, &self.options, cb)
+        engine::run_stored(&mut model, x, &self.options, cb)
     }
 
     /// Minimises a problem that forms its own normal equations. See [`minimize_normal`].
@@ -244,7 +244,7 @@ impl<'a> Solver<'a> {
     ) -> Result<Report, LmError> {
         let mut model = SparseModel::new(problem);
         let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
-        engine::run(engine::Backend::stored(&mut model), x, &self.options, cb)
+        engine::run_stored(&mut model, x, &self.options, cb)
     }
 }
 
@@ -261,7 +261,7 @@ pub fn minimize<P: DenseJacobian + ?Sized>(
     options: &Options,
 ) -> Result<Report, LmError> {
     let mut model = DenseModel::new(problem);
-    engine::run(engine::Backend::stored(&mut model), x, options, None)
+    engine::run_stored(&mut model, x, options, None)
 }
 
 /// Minimises `0.5 * sum_i rho(r_i(x)^2)` for a problem with a sparse Jacobian.
@@ -274,7 +274,7 @@ pub fn minimize_sparse<P: SparseJacobian + ?Sized>(
     options: &Options,
 ) -> Result<Report, LmError> {
     let mut model = SparseModel::new(problem);
-    engine::run(engine::Backend::stored(&mut model), x, options, None)
+    engine::run_stored(&mut model, x, options, None)
 }
 
 /// Minimises `0.5 * sum_i r_i(x)^2` for a problem that forms and solves its own damped
