@@ -30,15 +30,21 @@ pub struct ImplicitOptions {
     pub encoder_sigma_um: f64,
     /// Standard deviation of a sensor reading, um. Default 10/sqrt(3) (the paper's noise).
     pub sensor_sigma_um: f64,
-    /// Solver options; the linear solver is set to the Schur complement. Default: cpm-lm's
-    /// defaults with `ftol = xtol = 1e-10` and `gtol = 1e-10` (large problems need no more).
+    /// Solver options. Default: cpm-lm's options for a problem that forms its own normal
+    /// equations ([`cpm_lm::Options::normal_equations`]: Gauss-Newton steps while they gain
+    /// well, then Nielsen's rule; no statistics) with `ftol = xtol = gtol = 1e-10` (large
+    /// problems need no more) and the linear solver named "Schur complement (streamed)".
+    /// Streamed, an option the streamed system cannot serve (the trust-region or cubic
+    /// damping, bounds, a robust loss, geodesic acceleration, statistics, another linear
+    /// solver) is an error; with the stored Jacobian the linear solver is set to `cpm-lm`'s
+    /// Schur complement.
     pub lm: cpm_lm::Options,
     /// Rank thresholds for the globals.
     pub rank: RankOptions,
     /// Accumulate the reduced (Schur) normal equations pose by pose, with no stored
-    /// Jacobian (memory linear in the poses only, parallel over the poses; Nielsen damping,
-    /// `lm.damping`, `lm.acceleration` and `lm.linear_solver` are not used). `false` runs
-    /// `cpm-lm`'s general solver on the stored sparse Jacobian. Default `true`.
+    /// Jacobian (memory linear in the poses only, parallel over the poses), solved by
+    /// `cpm-lm`'s engine as a [`cpm_lm::NormalEquations`] problem. `false` stores the sparse
+    /// Jacobian and runs `cpm-lm`'s Schur-complement solver on it. Default `true`.
     pub streamed: bool,
 }
 
@@ -51,8 +57,10 @@ impl Default for ImplicitOptions {
                 ftol: 1e-10,
                 xtol: 1e-10,
                 gtol: 1e-10,
-                compute_statistics: false,
-                ..cpm_lm::Options::default()
+                linear_solver: LinearSolver::Supplied {
+                    name: "Schur complement (streamed)",
+                },
+                ..cpm_lm::Options::normal_equations()
             },
             rank: RankOptions::default(),
             streamed: true,
@@ -530,7 +538,7 @@ pub fn identify_implicit(
     let (_, initial_ss) = problem.summary(&x, None)?;
     let initial_reading_rms_um = (initial_ss / campaign.readings.len().max(1) as f64).sqrt();
     let solver = if options.streamed {
-        stream::minimize(&problem, &mut x, &options.lm)?
+        cpm_lm::minimize_normal(&mut stream::Streamed::new(&problem), &mut x, &options.lm)?
     } else {
         let mut lm = options.lm.clone();
         lm.linear_solver = LinearSolver::Schur {
@@ -543,7 +551,7 @@ pub fn identify_implicit(
     // of the elimination).
     let table = model.table_with(&x[g0..])?;
     let mut no_scale = vec![0.0; g0];
-    let red = stream::reduce(&problem, &x, &table, 0.0, &mut no_scale, false, true);
+    let red = stream::reduce(&problem, &x, &table, 0.0, &mut no_scale, None, true);
     drop(no_scale);
     let s = DMatrix::<f64>::from_fn(ng, ng, |r, c| red.s[c * ng + r]);
     let eig = nalgebra::SymmetricEigen::new(s);

@@ -7,6 +7,11 @@
 //! * `nist/BoxBOD-start1`: BoxBOD from its first start, cpm-lm plain (stops on the plateau)
 //!   and with geodesic acceleration (reaches the certified minimum), and the
 //!   levenberg-marquardt crate.
+//! * `minpack/<case>`: the 35 runs of MINPACK's reference set (`tests/common/mgh.rs`, MINPACK's
+//!   results vendored in `tests/data/minpack`), cpm-lm with default options next to the
+//!   `levenberg-marquardt` crate with default options, on the same problem code (the crate
+//!   through a dynamic-size adapter). `benches/ratios.py` reads criterion's estimates and
+//!   prints the time ratio per case and their geometric mean.
 //! * `bundle/<solver>/<N>`: a bundle-shaped sparse problem, N blocks of 6 local parameters
 //!   sharing 40 global ones, 12 residuals per block, solved with the Schur complement and
 //!   with the sparse Cholesky solver.
@@ -20,13 +25,16 @@
 
 use std::hint::black_box;
 
-use criterion::{criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 
 #[path = "../tests/common/nist.rs"]
 mod nist;
 
 #[path = "../tests/common/loops.rs"]
 mod loops;
+
+#[path = "../tests/common/mgh.rs"]
+mod mgh;
 
 /// NIST problems: cpm-lm against the `levenberg-marquardt` crate.
 mod nist_vs_lm {
@@ -70,7 +78,7 @@ mod nist_vs_lm {
 
     pub fn bench(c: &mut Criterion) {
         let no_stats = Options {
-            compute_statistics: false,
+            statistics: cpm_lm::StatisticsMode::Off,
             ..Options::default()
         };
         let nielsen = Options {
@@ -206,6 +214,86 @@ mod nist_vs_lm {
                 lm.x
             })
         });
+        group.finish();
+    }
+}
+
+/// MINPACK's reference set: cpm-lm against the `levenberg-marquardt` crate.
+mod minpack_vs_lm {
+    use super::*;
+    use cpm_lm::{minimize, Options};
+    use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+    use mgh::{minpack_reference, Mgh};
+    use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
+
+    /// A test problem in the `levenberg-marquardt` crate's interface (the same `eval`).
+    pub struct LmMgh {
+        pub p: Mgh,
+        pub x: DVector<f64>,
+    }
+
+    impl LeastSquaresProblem<f64, Dyn, Dyn> for LmMgh {
+        type ResidualStorage = Owned<f64, Dyn>;
+        type JacobianStorage = Owned<f64, Dyn, Dyn>;
+        type ParameterStorage = Owned<f64, Dyn>;
+
+        fn set_params(&mut self, x: &DVector<f64>) {
+            self.x.copy_from(x);
+        }
+        fn params(&self) -> DVector<f64> {
+            self.x.clone()
+        }
+        fn residuals(&self) -> Option<DVector<f64>> {
+            let mut r = DVector::zeros(self.p.m);
+            self.p.eval(self.x.as_slice(), r.as_mut_slice(), None);
+            Some(r)
+        }
+        fn jacobian(&self) -> Option<DMatrix<f64>> {
+            let mut r = vec![0.0; self.p.m];
+            let mut j = faer::Mat::<f64>::zeros(self.p.m, self.p.n);
+            self.p.eval(self.x.as_slice(), &mut r, Some(j.as_mut()));
+            Some(DMatrix::from_fn(self.p.m, self.p.n, |i, k| j[(i, k)]))
+        }
+    }
+
+    pub fn bench(c: &mut Criterion) {
+        let mut group = c.benchmark_group("minpack");
+        for case in minpack_reference() {
+            let mut x = case.start.clone();
+            let r = minimize(&mut case.problem.clone(), &mut x, &Options::default()).unwrap();
+            let (_, rep) = LevenbergMarquardt::new().minimize(LmMgh {
+                p: case.problem.clone(),
+                x: DVector::from_vec(case.start.clone()),
+            });
+            println!(
+                "{:<34} cost cpm-lm {:.8e} ({} evaluations), levenberg-marquardt {:.8e} ({}), MINPACK {:.8e} ({})",
+                case.label,
+                r.final_cost,
+                r.residual_evaluations,
+                rep.objective_function,
+                rep.number_of_evaluations,
+                case.cost,
+                case.evaluations
+            );
+            group.bench_function(BenchmarkId::new("cpm-lm", &case.label), |b| {
+                b.iter(|| {
+                    let mut p = case.problem.clone();
+                    let mut x = case.start.clone();
+                    black_box(minimize(&mut p, &mut x, &Options::default()).unwrap());
+                    x
+                })
+            });
+            group.bench_function(BenchmarkId::new("levenberg-marquardt", &case.label), |b| {
+                b.iter(|| {
+                    let (lm, rep) = LevenbergMarquardt::new().minimize(LmMgh {
+                        p: case.problem.clone(),
+                        x: DVector::from_vec(case.start.clone()),
+                    });
+                    black_box(rep);
+                    lm.x
+                })
+            });
+        }
         group.finish();
     }
 }
@@ -407,6 +495,7 @@ mod calibration_shape {
 
 criterion_group!(
     benches,
+    minpack_vs_lm::bench,
     nist_vs_lm::bench,
     nist_vs_lm::boxbod,
     bundle::bench,

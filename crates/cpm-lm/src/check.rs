@@ -1,19 +1,30 @@
 //! A Jacobian checker: compares an analytic Jacobian with central finite differences.
 //!
-//! Column `j` is differenced with `h_j = step * |x_j|` (or `step` when `x_j = 0`):
+//! **Step.** Column `j` is differenced with `h_j = step * max(|x_j|, s_j)`:
 //! `(r(x + h_j e_j) - r(x - h_j e_j)) / (2 h_j)`, whose error is `O(h^2)` from truncation
-//! plus `O(eps |r| / h)` from rounding; `step = 1e-6` is a good default. The relative error
-//! of an entry is
+//! plus `O(eps T / h)` from rounding, `T` the size of the terms of the residuals. The floor
+//! `s_j = min(1, T_max / c_j)` is the change of `x_j` that moves the residuals' terms by
+//! their own size, capped at 1 (the scale the checker uses at `x_j = 0`, so that a column
+//! of tiny derivatives, an exponential far in its tail, is not differenced with a huge
+//! step): `T_max = max_i t_i` with `t_i = |r_i(x)| + sum_k |J_ik x_k|` (the magnitude of
+//! the terms that make up residual `i`, to first order) and `c_j = max_i |J_ij|` (the floor
+//! is 1 when the column or the terms are zero). A parameter that is small but not zero (the Watson
+//! function's first one at its minimum, about 1.5e-5 beside others near 1) is thus not
+//! differenced with a step of `1e-6 |x_j|`, lost in rounding; a parameter in small units
+//! has a large column and keeps a small step. `step = 1e-6` is a good default.
+//!
+//! **Allowance.** The relative error of an entry is
 //!
 //! ```text
 //! max(0, |analytic - numeric| - noise) / max(|analytic|, |numeric|, 1e-3 * c_j)
 //! ```
 //!
 //! where `c_j` is the largest magnitude in column `j` (entries tiny compared with their
-//! column are judged against the column's scale) and `noise = 16 eps max(|r_i(x + h_j e_j)|,
-//! |r_i(x - h_j e_j)|) / (2 h_j)` estimates the rounding error of the difference (so a
-//! column that is numerically negligible does not raise a false alarm). The absolute error
-//! is reported as is.
+//! column are judged against the column's scale) and `noise = 16 eps max(t_i, |r_i(x +
+//! h_j e_j)|, |r_i(x - h_j e_j)|) / (2 h_j)` estimates the rounding error of the difference
+//! from the magnitude of the terms that cancel inside the residual, not from the residual
+//! itself (a residual near zero at a minimum is a difference of terms of order one, each
+//! rounded at `eps` of its own size). The absolute error is reported as is.
 
 use std::fmt;
 
@@ -37,7 +48,7 @@ pub struct JacobianCheck {
     pub max_rel_error: f64,
     /// `(row, col)` of the largest relative error.
     pub max_rel_entry: (usize, usize),
-    /// The relative step used.
+    /// The relative step given (each column's step is this times `max(|x_j|, s_j)`).
     pub step: f64,
 }
 
@@ -78,16 +89,32 @@ fn model_err(stage: EvalStage) -> impl FnOnce(crate::ModelError) -> LmError {
 fn finite_differences<P: Problem + ?Sized>(
     problem: &mut P,
     x: &[f64],
+    analytic: &Mat<f64>,
     step: f64,
 ) -> Result<(Mat<f64>, Mat<f64>), LmError> {
     let (m, n) = (problem.num_residuals(), problem.num_params());
     let mut xp = x.to_vec();
     let mut rp = vec![0.0; m];
     let mut rm = vec![0.0; m];
+    problem
+        .residuals(x, &mut rp)
+        .map_err(model_err(EvalStage::Residuals))?;
+    // Magnitude of the terms of each residual, to first order.
+    let terms: Vec<f64> = (0..m)
+        .map(|i| rp[i].abs() + (0..n).map(|k| (analytic[(i, k)] * x[k]).abs()).sum::<f64>())
+        .collect();
+    let t_max = terms.iter().fold(0.0f64, |a, &t| a.max(t));
     let mut num = Mat::<f64>::zeros(m, n);
     let mut noise = Mat::<f64>::zeros(m, n);
     for j in 0..n {
-        let h = step * if x[j] != 0.0 { x[j].abs() } else { 1.0 };
+        let c = (0..m).fold(0.0f64, |a, i| a.max(analytic[(i, j)].abs()));
+        let floor = t_max / c;
+        let floor = if floor.is_finite() && floor > 0.0 {
+            floor.min(1.0)
+        } else {
+            1.0
+        };
+        let h = step * x[j].abs().max(floor);
         xp[j] = x[j] + h;
         let hp = xp[j] - x[j];
         problem
@@ -101,7 +128,8 @@ fn finite_differences<P: Problem + ?Sized>(
         xp[j] = x[j];
         for i in 0..m {
             num[(i, j)] = (rp[i] - rm[i]) / (hp + hm);
-            noise[(i, j)] = 16.0 * f64::EPSILON * rp[i].abs().max(rm[i].abs()) / (hp + hm);
+            let size = terms[i].max(rp[i].abs()).max(rm[i].abs());
+            noise[(i, j)] = 16.0 * f64::EPSILON * size / (hp + hm);
         }
     }
     Ok((num, noise))
@@ -183,7 +211,8 @@ fn check_args<P: Problem + ?Sized>(problem: &P, x: &[f64], step: f64) -> Result<
 }
 
 /// Compares the analytic Jacobian of `problem` at `x` with central finite differences
-/// (relative step `step`, e.g. `1e-6`).
+/// (relative step `step`, e.g. `1e-6`, applied to `max(|x_j|, s_j)`; see the
+/// [module documentation](self) for the floor `s_j` and the rounding allowance).
 ///
 /// ```
 /// use cpm_lm::{check_jacobian, DenseJacobian, ModelError, Problem};
@@ -213,7 +242,7 @@ pub fn check_jacobian<P: DenseJacobian + ?Sized>(
     problem
         .jacobian(x, analytic.as_mut())
         .map_err(model_err(EvalStage::Jacobian))?;
-    let numeric = finite_differences(problem, x, step)?;
+    let numeric = finite_differences(problem, x, &analytic, step)?;
     compare(analytic, numeric, step)
 }
 
@@ -247,6 +276,6 @@ pub fn check_sparse_jacobian<P: SparseJacobian + ?Sized>(
     for (&(r, c), v) in pattern.iter().zip(values) {
         analytic[(r, c)] += v;
     }
-    let numeric = finite_differences(problem, x, step)?;
+    let numeric = finite_differences(problem, x, &analytic, step)?;
     compare(analytic, numeric, step)
 }

@@ -37,6 +37,14 @@
 //!   `mu <- mu * nu`, `nu <- 2 nu`. A step is accepted when `rho > 0`. One solve of the
 //!   damped system per trial; it keeps `mu` nearly constant while `rho` stays near 1/2,
 //!   which can make it crawl along curved valleys.
+//! * [`Damping::GaussNewtonThenNielsen`]: Gauss-Newton steps (`mu = 0`) while each is
+//!   accepted with a gain ratio of at least 1/4; the first that is not (rejected, accepted
+//!   with `rho < 1/4`, or a singular undamped system) hands over to Nielsen's rule from
+//!   `mu_0`. A nearly linear problem (the usual calibration) then converges in a few
+//!   Gauss-Newton steps where Nielsen's rule, lowering `mu` by at most 3 per step, would
+//!   crawl, and it needs one solve per trial (no trust-region search): the schedule of
+//!   problems that form their own normal equations
+//!   ([`NormalEquations`](crate::NormalEquations)), where each solve is a pass over the data.
 //! * [`Damping::Marquardt`] (Marquardt 1963): `mu <- mu / 10` on acceptance,
 //!   `mu <- mu * 10` on rejection.
 //! * [`Damping::CubicInterpolation`]: the control of MATLAB's former `lsqnonlin`
@@ -68,6 +76,8 @@ pub enum Damping {
     Nielsen,
     /// Marquardt's classic divide / multiply by 10.
     Marquardt,
+    /// Gauss-Newton steps while they gain well (`rho >= 1/4`), then Nielsen's rule.
+    GaussNewtonThenNielsen,
     /// Cubic-interpolation control of MATLAB's former `lsqnonlin` LM (step length and
     /// damping adapted from a cubic model of the sum of squares along the step).
     CubicInterpolation,
@@ -80,6 +90,7 @@ impl Damping {
             Damping::TrustRegion => "trust region",
             Damping::Nielsen => "Nielsen",
             Damping::Marquardt => "Marquardt",
+            Damping::GaussNewtonThenNielsen => "Gauss-Newton, then Nielsen",
             Damping::CubicInterpolation => "cubic interpolation",
         }
     }
@@ -128,13 +139,17 @@ pub(crate) struct DampingState {
     gn_scale: f64,
     /// Scaled length of the last rejected step, while no step that long has succeeded.
     failed: f64,
+    /// Initial damping (where Nielsen's rule starts after the Gauss-Newton phase).
+    mu0: f64,
+    /// Whether the Gauss-Newton phase of [`Damping::GaussNewtonThenNielsen`] lasts.
+    gauss_newton: bool,
 }
 
 impl DampingState {
     pub(crate) fn new(kind: Damping, mu0: f64) -> Self {
         Self {
             kind,
-            mu: if kind == Damping::TrustRegion {
+            mu: if matches!(kind, Damping::TrustRegion | Damping::GaussNewtonThenNielsen) {
                 0.0
             } else {
                 mu0.max(MU_MIN)
@@ -147,7 +162,16 @@ impl DampingState {
             tr_first: true,
             gn_scale: 1.0,
             failed: f64::INFINITY,
+            mu0: mu0.max(MU_MIN),
+            gauss_newton: kind == Damping::GaussNewtonThenNielsen,
         }
+    }
+
+    /// Ends the Gauss-Newton phase: Nielsen's rule from `mu_0`.
+    fn leave_gauss_newton(&mut self) {
+        self.gauss_newton = false;
+        self.mu = self.mu0;
+        self.nu = 2.0;
     }
 
     /// Whether `mu` follows a trust-region radius (see [`Self::radius`]).
@@ -264,7 +288,9 @@ impl DampingState {
         match self.kind {
             Damping::CubicInterpolation => decreased,
             Damping::TrustRegion => decreased && rho >= 1e-4,
-            _ => decreased && rho > 0.0,
+            Damping::Nielsen | Damping::Marquardt | Damping::GaussNewtonThenNielsen => {
+                decreased && rho > 0.0
+            }
         }
     }
 
@@ -275,7 +301,13 @@ impl DampingState {
                 self.update_radius(rho, &line);
                 return;
             }
-            Damping::Nielsen => {
+            Damping::GaussNewtonThenNielsen if self.gauss_newton => {
+                if !(rho >= 0.25) {
+                    self.leave_gauss_newton();
+                }
+                return;
+            }
+            Damping::Nielsen | Damping::GaussNewtonThenNielsen => {
                 let t = 2.0 * rho - 1.0;
                 self.mu *= (1.0 / 3.0f64).max(1.0 - t * t * t);
                 self.nu = 2.0;
@@ -325,7 +357,8 @@ impl DampingState {
     pub(crate) fn rejected(&mut self, rho: f64, line: LineInfo) {
         match self.kind {
             Damping::TrustRegion => self.update_radius(rho, &line),
-            Damping::Nielsen => {
+            Damping::GaussNewtonThenNielsen if self.gauss_newton => self.leave_gauss_newton(),
+            Damping::Nielsen | Damping::GaussNewtonThenNielsen => {
                 self.mu *= self.nu;
                 self.nu *= 2.0;
             }
@@ -347,7 +380,11 @@ impl DampingState {
                 self.mu = (10.0 * self.mu).max(MU_MIN);
                 return;
             }
-            Damping::Nielsen => {
+            Damping::GaussNewtonThenNielsen if self.gauss_newton => {
+                self.leave_gauss_newton();
+                return;
+            }
+            Damping::Nielsen | Damping::GaussNewtonThenNielsen => {
                 self.mu *= self.nu;
                 self.nu *= 2.0;
             }
@@ -456,6 +493,34 @@ mod tests {
         assert!((d.mu() - 8.0 / 3.0 * 0.875).abs() < 1e-14);
         d.rejected(-1.0, line(2.0));
         assert!((d.mu() - 8.0 / 3.0 * 0.875 * 2.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn gauss_newton_then_nielsen() {
+        let mut d = DampingState::new(Damping::GaussNewtonThenNielsen, 1e-3);
+        assert_eq!(d.mu(), 0.0);
+        // Good steps keep mu = 0.
+        d.accepted(0.9, line(0.5));
+        d.accepted(0.25, line(0.5));
+        assert_eq!(d.mu(), 0.0);
+        assert!(d.accepts(0.1, true) && !d.accepts(0.0, true) && !d.accepts(0.5, false));
+        // A poor accepted step hands over to Nielsen from mu0 (no Nielsen update on it).
+        d.accepted(0.2, line(0.5));
+        assert_eq!(d.mu(), 1e-3);
+        d.rejected(-1.0, line(2.0));
+        assert_eq!(d.mu(), 2e-3);
+        d.accepted(1.0, line(0.5));
+        assert!((d.mu() - 2e-3 / 3.0).abs() < 1e-18);
+        // A rejected or singular Gauss-Newton step hands over too.
+        let mut r = DampingState::new(Damping::GaussNewtonThenNielsen, 0.5);
+        r.rejected(-1.0, line(2.0));
+        assert_eq!(r.mu(), 0.5);
+        let mut s = DampingState::new(Damping::GaussNewtonThenNielsen, 0.5);
+        s.singular();
+        assert_eq!(s.mu(), 0.5);
+        s.singular();
+        assert_eq!(s.mu(), 1.0);
+        assert!(!s.exhausted());
     }
 
     #[test]

@@ -81,8 +81,10 @@
 //! schedule ([`Damping::TrustRegion`], [`Damping::Nielsen`], [`Damping::Marquardt`],
 //! [`Damping::CubicInterpolation`]),
 //! the scaling ([`Scaling`]) and the linear solver ([`LinearSolver`]). `Options::acceleration`
-//! adds Transtrum and Sethna's geodesic acceleration ([`GeodesicAcceleration`]), which
-//! reaches NIST's BoxBOD from its first start where the plain method stops on a plateau:
+//! adds Transtrum and Sethna's geodesic acceleration ([`GeodesicAcceleration`]) to every
+//! step; by default it is used only to run again a solve in which a parameter *evaporated*
+//! ([`Evaporation`]: the plain method carried it where the model no longer depends on it, as
+//! from NIST's BoxBOD first start, and stopped on a plateau):
 //!
 //! ```
 //! # use cpm_lm::{minimize, DenseJacobian, ModelError, Problem};
@@ -133,8 +135,9 @@
 //! [`Report::was_successful`]), the initial and final cost, every iteration
 //! ([`IterationRecord`]: cost, damping, step norm, gain ratio, accepted), the counts of
 //! accepted and rejected steps and of evaluations, and timings. [`Report::brief`] is one
-//! line, [`Report::full`] a table. Unless disabled, it also carries the
-//! [`stats::Statistics`] of the fit at the solution: numerical rank of `J` (SVD), the
+//! line, [`Report::full`] a table. Unless disabled ([`StatisticsMode`]), it keeps the
+//! Jacobian at the solution, and [`Report::statistics`] computes (on the first call) the
+//! [`stats::Statistics`] of the fit there: numerical rank of `J` (SVD), the
 //! covariance `sigma^2 (J^T J)^+` with `sigma^2 = 2 cost / (m - rank)`, standard deviations
 //! and correlations. An unidentifiable parameter (one that moves along the numerical null
 //! space) gets `None` rather than an invented number. [`stats::Statistics::from_jacobian`]
@@ -166,7 +169,7 @@
 //! # let mut problem = ExpDecay { t, y };
 //! let mut x = [1.0, 0.1];
 //! let report = minimize(&mut problem, &mut x, &cpm_lm::Options::default())?;
-//! let st = report.statistics.as_ref().expect("statistics are on by default");
+//! let st = report.statistics().expect("computed on demand by default");
 //! assert_eq!(st.rank, 2);
 //! let sd_a = st.std_dev[0].expect("a is identifiable");
 //! assert!(sd_a > 0.0 && sd_a < 1e-2);
@@ -359,10 +362,16 @@ pub use damping::Damping;
 pub use error::{EvalStage, LmError};
 pub use loss::Loss;
 pub use numeric::{Difference, NumericJacobian};
-pub use options::{GeodesicAcceleration, Options, Scaling};
-pub use problem::{DenseJacobian, ModelError, Problem, SparseJacobian};
+pub use options::{
+    Evaporation, GeodesicAcceleration, Options, ScaleUpdate, Scaling, StatisticsMode,
+};
+pub use problem::{
+    DampedStep, DenseJacobian, Linearization, ModelError, NormalEquations, Problem, SparseJacobian,
+};
 pub use report::{IterationRecord, Report, TerminationReason, Timings};
-pub use solver::{minimize, minimize_sparse, IterationCallback, LinearSolver, Solver};
+pub use solver::{
+    minimize, minimize_normal, minimize_sparse, IterationCallback, LinearSolver, Solver,
+};
 pub use stats::Statistics;
 
 /// The faer version this crate is built on, re-exported so that a user's

@@ -18,6 +18,38 @@ pub enum Scaling {
     Identity,
 }
 
+/// The update of the scale `D_j` of a parameter from the squared norm of its Jacobian column
+/// at a new point, under the solve's [`Scaling`]: the running maximum of the column norms
+/// (a column that has always been zero gets 1) or the identity. The engine applies it to
+/// stored Jacobians; a [`NormalEquations`](crate::NormalEquations) problem applies it
+/// itself while it forms its system.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScaleUpdate {
+    scaling: Scaling,
+    first: bool,
+}
+
+impl ScaleUpdate {
+    pub(crate) fn new(scaling: Scaling, first: bool) -> Self {
+        Self { scaling, first }
+    }
+
+    /// Updates the scale `d` of a column whose squared norm is `col_norm2`.
+    #[inline]
+    pub fn apply(&self, d: &mut f64, col_norm2: f64) {
+        match self.scaling {
+            Scaling::Marquardt => {
+                let c = col_norm2.sqrt();
+                *d = if self.first { c } else { d.max(c) };
+                if *d == 0.0 {
+                    *d = 1.0;
+                }
+            }
+            Scaling::Identity => *d = 1.0,
+        }
+    }
+}
+
 /// Geodesic acceleration of the Levenberg-Marquardt step (Transtrum & Sethna 2012,
 /// "Improvements to the Levenberg-Marquardt algorithm for nonlinear least-squares
 /// minimization", arXiv:1201.5885; the form of GSL's `multifit_nlinear`).
@@ -41,7 +73,8 @@ pub enum Scaling {
 /// costs one more residual evaluation and one more solve per trial and more trials (over
 /// the 46 vendored NIST runs about 2.4 times the residual evaluations), and from MGH09's
 /// first start the ratio test rejects most trials along the valley until the iteration
-/// limit: hence an option, not the default.
+/// limit: hence not on by default, but the restart of the default solve when a parameter
+/// evaporated ([`Evaporation`]).
 /// Not combined with a robust loss or [`Damping::CubicInterpolation`] (rejected by
 /// [`Options::validate`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -60,6 +93,66 @@ impl Default for GeodesicAcceleration {
             max_ratio: 0.75,
             fd_step: 0.1,
         }
+    }
+}
+
+/// When the statistics of the fit ([`Statistics`](crate::stats::Statistics): numerical rank,
+/// covariance, standard deviations) are computed.
+///
+/// They need the Jacobian at the solution and a dense SVD of it: on small problems the SVD
+/// costs as much as the whole solve, so by default the report only keeps the Jacobian (one
+/// more Jacobian evaluation when the last accepted step left it stale, see below) and the
+/// SVD runs when [`Report::statistics`](crate::Report::statistics) is first called.
+///
+/// The Jacobian kept is the one at the returned point: when the last accepted step was
+/// longer than `sqrt(eps)` of the scaled parameters (or a bound froze a parameter) it is
+/// evaluated once more at the end.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StatisticsMode {
+    /// No statistics: the report keeps no Jacobian and
+    /// [`Report::statistics`](crate::Report::statistics) returns `None`.
+    Off,
+    /// The report keeps the Jacobian at the solution; the SVD runs on the first call of
+    /// [`Report::statistics`](crate::Report::statistics) (default).
+    #[default]
+    OnDemand,
+    /// Computed at the end of the solve (timed in
+    /// [`Timings::statistics`](crate::Timings::statistics)).
+    AtEnd,
+}
+
+/// The globalisation of the default solve: a restart when a parameter *evaporates*.
+///
+/// Transtrum, Machta and Sethna ("Geometry of nonlinear least squares with applications to
+/// sloppy models and optimization", Phys. Rev. E 83, 036701, 2011) call it parameter
+/// evaporation when a step carries a parameter to where the model no longer depends on it
+/// (an exponential rate to infinity, a saturating term switched off): the iteration then
+/// stops on a plateau of the cost, at the boundary of the model manifold, with a
+/// numerically zero gradient. Their remedy is the geodesic acceleration
+/// ([`GeodesicAcceleration`]), whose ratio test keeps each step within the region where the
+/// curvature of the model is known. Acceleration from the start costs one more residual
+/// evaluation and one more solve per trial and stalls along some valleys (NIST's MGH09 from
+/// its first start), so the default solve is plain and only a solve that ended with an
+/// evaporated parameter is run again, from the same start, with acceleration; the better of
+/// the two ends (lower cost) is returned, the report counting the work of both
+/// ([`Report::restarts`](crate::Report::restarts)). NIST's BoxBOD from its first start is
+/// the case in point: the plain method jumps to `b2 = 44.9`, where `exp(-b2 x)` vanishes, and
+/// stops with a residual sum of squares of 9771.5; the restart reaches the certified minimum.
+///
+/// A parameter `j` counts as evaporated when the squared norm of its Jacobian column at the
+/// last linearisation is below `threshold` times the largest it has been during the solve.
+/// Not applied with a robust loss, the cubic-interpolation damping, geodesic acceleration
+/// already on, bounds, or to [`NormalEquations`](crate::NormalEquations) problems.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Evaporation {
+    /// Relative squared column norm below which a parameter has evaporated. Default:
+    /// `1e-20` (a column 10^10 times shorter than it was).
+    pub threshold: f64,
+}
+
+impl Default for Evaporation {
+    fn default() -> Self {
+        Self { threshold: 1e-20 }
     }
 }
 
@@ -109,16 +202,19 @@ pub struct Options {
     /// Absolute threshold on the singular values of `J` for the numerical rank used by the
     /// statistics. Default: `None`, meaning `max(m, n) * f64::EPSILON * s_max`.
     pub rank_tol: Option<f64>,
-    /// Compute [`Statistics`](crate::stats::Statistics) (rank, covariance, standard
-    /// deviations) at the solution. With a robust loss they use the reweighted Jacobian and
-    /// residuals the last step saw. Costs one extra Jacobian evaluation when the last
-    /// accepted step left the Jacobian stale (a step below `sqrt(eps)` of the scaled
-    /// parameters changes it only at the 1e-8 level and, with the plain loss, the Jacobian
-    /// before the step is used). Default: `true`.
-    pub compute_statistics: bool,
-    /// Statistics use a dense SVD of the Jacobian and are skipped (left `None`) when the
-    /// problem has more parameters than this. Default: `1000`.
+    /// When the [`Statistics`](crate::stats::Statistics) (rank, covariance, standard
+    /// deviations) at the solution are computed; see [`StatisticsMode`]. With a robust loss
+    /// they use the reweighted Jacobian and residuals the last step saw. Default:
+    /// [`StatisticsMode::OnDemand`] (the report keeps the Jacobian at the solution and
+    /// computes them on the first call of [`Report::statistics`](crate::Report::statistics)).
+    pub statistics: StatisticsMode,
+    /// Statistics use a dense SVD of the Jacobian; a problem with more parameters than this
+    /// keeps no Jacobian in its report and gets none (and [`StatisticsMode::AtEnd`] is
+    /// skipped). Default: `1000`.
     pub statistics_max_params: usize,
+    /// Restart once with geodesic acceleration when a parameter evaporated (see
+    /// [`Evaporation`]). Default: `Some(Evaporation::default())`.
+    pub evaporation_restart: Option<Evaporation>,
     /// Geodesic acceleration of each step (see [`GeodesicAcceleration`]). Default: `None`
     /// (plain steps).
     pub acceleration: Option<GeodesicAcceleration>,
@@ -140,8 +236,9 @@ impl Default for Options {
             upper: None,
             tau: 1e-3,
             rank_tol: None,
-            compute_statistics: true,
+            statistics: StatisticsMode::OnDemand,
             statistics_max_params: 1000,
+            evaporation_restart: Some(Evaporation::default()),
             acceleration: None,
         }
     }
@@ -192,6 +289,14 @@ impl Options {
         }
         self.loss.validate()?;
         self.linear_solver.validate()?;
+        if let Some(e) = &self.evaporation_restart {
+            if !(e.threshold.is_finite() && e.threshold >= 0.0 && e.threshold < 1.0) {
+                return Err(LmError::InvalidOptions(format!(
+                    "evaporation_restart.threshold must be in [0, 1), got {}",
+                    e.threshold
+                )));
+            }
+        }
         if let Some(a) = &self.acceleration {
             if !(a.max_ratio.is_finite() && a.max_ratio > 0.0) {
                 return Err(LmError::InvalidOptions(format!(
@@ -254,9 +359,81 @@ impl Options {
         Ok(())
     }
 
+    /// The defaults for a [`NormalEquations`](crate::NormalEquations) problem: the options
+    /// of [`Options::default`] with [`Damping::GaussNewtonThenNielsen`],
+    /// [`LinearSolver::Supplied`] (named "normal equations of the problem"),
+    /// [`StatisticsMode::Off`] and no evaporation restart.
+    pub fn normal_equations() -> Self {
+        Self {
+            damping: Damping::GaussNewtonThenNielsen,
+            linear_solver: LinearSolver::Supplied {
+                name: "normal equations of the problem",
+            },
+            statistics: StatisticsMode::Off,
+            evaporation_restart: None,
+            ..Self::default()
+        }
+    }
+
+    /// [`validate`](Options::validate) plus what a problem that forms its own normal
+    /// equations ([`NormalEquations`](crate::NormalEquations)) can serve: a damping schedule
+    /// with one solve per trial ([`Damping::GaussNewtonThenNielsen`], [`Damping::Nielsen`]
+    /// or [`Damping::Marquardt`]; the trust region needs products with the inverse of the
+    /// system, the cubic control products with `J`), [`LinearSolver::Supplied`], plain least
+    /// squares, no bounds, no geodesic acceleration, and [`StatisticsMode::Off`] (there is no
+    /// Jacobian to keep). Anything else is [`LmError::InvalidOptions`], never ignored.
+    ///
+    /// (No evaporation restart either: it would run the whole solve again.)
+    pub fn validate_normal(&self) -> Result<(), LmError> {
+        self.validate()?;
+        let refuse = |what: &str| {
+            Err(LmError::InvalidOptions(format!(
+                "a problem that forms its own normal equations cannot serve {what}"
+            )))
+        };
+        if matches!(
+            self.damping,
+            Damping::TrustRegion | Damping::CubicInterpolation
+        ) {
+            return refuse(&format!(
+                "the {} damping (use Gauss-Newton-then-Nielsen, Nielsen or Marquardt)",
+                self.damping.name()
+            ));
+        }
+        if !matches!(self.linear_solver, LinearSolver::Supplied { .. }) {
+            return refuse(&format!(
+                "the {} linear solver (use LinearSolver::Supplied)",
+                self.linear_solver.name()
+            ));
+        }
+        if !self.loss.is_squared() {
+            return refuse("a robust loss");
+        }
+        if self.lower.is_some() || self.upper.is_some() {
+            return refuse("bounds");
+        }
+        if self.acceleration.is_some() {
+            return refuse("geodesic acceleration");
+        }
+        if self.evaporation_restart.is_some() {
+            return refuse("an evaporation restart (set evaporation_restart: None)");
+        }
+        if self.statistics != StatisticsMode::Off {
+            return refuse("statistics (set StatisticsMode::Off)");
+        }
+        Ok(())
+    }
+
     /// [`validate`](Options::validate) plus the checks that need the problem size.
     pub(crate) fn validate_for(&self, num_params: usize) -> Result<(), LmError> {
         self.validate()?;
+        if matches!(self.linear_solver, LinearSolver::Supplied { .. }) {
+            return Err(LmError::InvalidOptions(
+                "LinearSolver::Supplied is for problems that form their own normal equations \
+                 (minimize_normal); choose a linear solver for a stored Jacobian"
+                    .into(),
+            ));
+        }
         if let Some(lo) = &self.lower {
             if lo.len() != num_params {
                 return Err(LmError::DimensionMismatch {
@@ -311,6 +488,57 @@ mod tests {
         };
         let e = o.validate().unwrap_err().to_string();
         assert!(e.contains("lower[1] = 2 exceeds upper[1] = 1"), "{e}");
+    }
+
+    #[test]
+    fn normal_equations_options_are_checked() {
+        Options::normal_equations().validate_normal().unwrap();
+        for (bad, word) in [
+            (Options::default(), "trust region"),
+            (
+                Options {
+                    damping: Damping::Nielsen,
+                    ..Options::default()
+                },
+                "dense QR",
+            ),
+            (
+                Options {
+                    loss: Loss::Huber(1.0),
+                    ..Options::normal_equations()
+                },
+                "robust loss",
+            ),
+            (
+                Options {
+                    upper: Some(vec![1.0]),
+                    ..Options::normal_equations()
+                },
+                "bounds",
+            ),
+            (
+                Options {
+                    acceleration: Some(GeodesicAcceleration::default()),
+                    ..Options::normal_equations()
+                },
+                "acceleration",
+            ),
+            (
+                Options {
+                    statistics: StatisticsMode::OnDemand,
+                    ..Options::normal_equations()
+                },
+                "statistics",
+            ),
+        ] {
+            let e = bad.validate_normal().unwrap_err().to_string();
+            assert!(e.contains(word), "{e}");
+        }
+        let e = Options::normal_equations()
+            .validate_for(3)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("Supplied"), "{e}");
     }
 
     #[test]

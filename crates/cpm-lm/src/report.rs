@@ -2,8 +2,10 @@
 
 use std::fmt;
 use std::fmt::Write as _;
+use std::sync::OnceLock;
 use std::time::Duration;
 
+use crate::solver::jacobian::Jacobian;
 use crate::stats::Statistics;
 
 /// How a solve ended.
@@ -93,7 +95,9 @@ pub struct Timings {
     pub jacobian: Duration,
     /// Factorising and solving the damped systems.
     pub linear_solver: Duration,
-    /// Computing the statistics at the end.
+    /// Keeping the Jacobian at the solution (re-evaluated when stale) and, with
+    /// [`StatisticsMode::AtEnd`](crate::StatisticsMode::AtEnd), computing the statistics;
+    /// statistics computed on demand are not timed here.
     pub statistics: Duration,
 }
 
@@ -128,15 +132,68 @@ pub struct Report {
     pub damping: &'static str,
     /// Name of the linear solver used.
     pub linear_solver: &'static str,
-    /// Rank, covariance and standard deviations at the solution, when computed (see
-    /// [`Options::compute_statistics`](crate::Options::compute_statistics)).
-    pub statistics: Option<Statistics>,
+    /// Parameters that evaporated: their Jacobian column ended below
+    /// [`Evaporation::threshold`](crate::Evaporation::threshold) of its largest (empty when
+    /// not checked).
+    pub evaporated: Vec<usize>,
+    /// Number of restarts (see [`Evaporation`](crate::Evaporation)): the counts of steps and
+    /// evaluations and the timings include every run; the termination, the costs, the
+    /// iteration records and the statistics are those of the run returned.
+    pub restarts: usize,
+    /// Rank, covariance and standard deviations at the solution: computed at the end or on
+    /// the first call of [`Report::statistics`].
+    pub(crate) statistics: OnceLock<Statistics>,
+    /// What the statistics are computed from, when kept.
+    pub(crate) fit: Option<Box<FitAtSolution>>,
+}
+
+/// The (reweighted) Jacobian and residuals at the solution, kept for the statistics.
+#[derive(Clone, Debug)]
+pub(crate) struct FitAtSolution {
+    pub(crate) jacobian: Jacobian,
+    pub(crate) residuals: Vec<f64>,
+    pub(crate) rank_tol: Option<f64>,
+}
+
+impl FitAtSolution {
+    pub(crate) fn statistics(&self) -> Statistics {
+        match &self.jacobian {
+            Jacobian::Dense(j) => {
+                Statistics::from_jacobian(j.as_ref(), &self.residuals, self.rank_tol)
+            }
+            Jacobian::Sparse(_) => {
+                let dense = self.jacobian.to_dense();
+                Statistics::from_jacobian(dense.as_ref(), &self.residuals, self.rank_tol)
+            }
+        }
+    }
 }
 
 impl Report {
     /// Whether the solve converged (see [`TerminationReason::was_successful`]).
     pub fn was_successful(&self) -> bool {
         self.termination.was_successful()
+    }
+
+    /// Rank, covariance and standard deviations at the solution (see
+    /// [`Options::statistics`](crate::Options::statistics)): computed on the first call from
+    /// the Jacobian the report kept, then cached. `None` with
+    /// [`StatisticsMode::Off`](crate::StatisticsMode::Off), for a problem with more than
+    /// [`Options::statistics_max_params`](crate::Options::statistics_max_params) parameters,
+    /// for a solve that ended on non-finite values, and for problems that supply their
+    /// normal equations (no Jacobian exists to keep).
+    pub fn statistics(&self) -> Option<&Statistics> {
+        if let Some(st) = self.statistics.get() {
+            return Some(st);
+        }
+        let fit = self.fit.as_ref()?;
+        Some(self.statistics.get_or_init(|| fit.statistics()))
+    }
+
+    /// The Jacobian at the solution (reweighted rows with a robust loss, zero columns for
+    /// parameters a bound froze), when the report kept one; dense.
+    pub fn jacobian(&self) -> Option<faer::Mat<f64>> {
+        self.fit.as_ref().map(|f| f.jacobian.to_dense())
     }
 
     /// Number of iterations (trial steps).
@@ -209,7 +266,7 @@ impl Report {
             "time: {:.3?} total ({:.3?} residuals, {:.3?} Jacobian, {:.3?} linear solver, {:.3?} statistics)",
             self.elapsed, t.residuals, t.jacobian, t.linear_solver, t.statistics
         );
-        if let Some(st) = &self.statistics {
+        if let Some(st) = self.statistics() {
             let _ = write!(s, "{st}");
         }
         s

@@ -84,7 +84,7 @@ fn dense_iterations_do_not_allocate() {
             let base = Options {
                 linear_solver: solver.clone(),
                 damping,
-                compute_statistics: false,
+                statistics: cpm_lm::StatisticsMode::Off,
                 ftol: 1e-15,
                 xtol: 1e-15,
                 gtol: 1e-15,

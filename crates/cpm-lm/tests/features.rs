@@ -406,7 +406,7 @@ fn rank_deficient_problem_reports_unidentifiable_parameters() {
     let report = minimize(&mut Collinear, &mut x, &Options::default()).unwrap();
     assert!(report.was_successful(), "{report:#}");
     assert!((x[0] + x[1] - 1.5).abs() < 1e-2);
-    let st = report.statistics.as_ref().unwrap();
+    let st = report.statistics().unwrap();
     assert_eq!(st.rank, 2);
     assert!(st.is_rank_deficient());
     assert_eq!(st.null_space.ncols(), 1);
@@ -701,15 +701,28 @@ fn report_counts_and_text() {
     assert_eq!(r.termination, TerminationReason::ZeroResidual);
     assert!(r.was_successful());
     assert_eq!(r.iterations.len(), 0);
-    let st = r.statistics.unwrap();
+    let st = r.statistics().unwrap();
     assert_eq!(st.std_dev, vec![Some(0.0); 3]);
     // Statistics can be switched off.
     let o = Options {
-        compute_statistics: false,
+        statistics: cpm_lm::StatisticsMode::Off,
         ..Options::default()
     };
-    assert!(minimize(&mut p, &mut [1.0, 1.0, 0.0], &o)
-        .unwrap()
-        .statistics
-        .is_none());
+    let off = minimize(&mut p, &mut [1.0, 1.0, 0.0], &o).unwrap();
+    assert!(off.statistics().is_none() && off.jacobian().is_none());
+    // On demand (the default) and at the end give the same numbers; only the eager one
+    // spends time on them inside the solve.
+    let mut xa = [1.0, 1.0, 0.0];
+    let lazy = minimize(&mut p, &mut xa, &Options::default()).unwrap();
+    let eager = Options {
+        statistics: cpm_lm::StatisticsMode::AtEnd,
+        ..Options::default()
+    };
+    let mut xb = [1.0, 1.0, 0.0];
+    let at_end = minimize(&mut p, &mut xb, &eager).unwrap();
+    assert_eq!(xa, xb);
+    let (a, b) = (lazy.statistics().unwrap(), at_end.statistics().unwrap());
+    assert_eq!(a.rank, b.rank);
+    assert_eq!(a.std_dev, b.std_dev);
+    assert_eq!(a.singular_values, b.singular_values);
 }

@@ -13,13 +13,12 @@
 //!    reduction, and the residuals at the trial point.
 //!
 //! Memory is the parameters, their scales and one `ng x ng` matrix per chunk of poses;
-//! time is linear in the readings. Gauss-Newton steps are taken while they gain well, then
-//! Nielsen's damping rule (one solve per trial) with Marquardt scaling; the stopping tests
-//! are those of `cpm-lm`.
-use std::time::{Duration, Instant};
-
+//! time is linear in the readings. [`Streamed`] hands these passes to `cpm-lm`'s engine as
+//! a [`NormalEquations`] problem: the iteration, the damping schedule (by default
+//! Gauss-Newton steps while they gain well, then Nielsen's rule), the stopping tests and the
+//! report are the engine's.
 use cpm_geometry::JointTable;
-use cpm_lm::{IterationRecord, Report, TerminationReason, Timings};
+use cpm_lm::{DampedStep, Linearization, ModelError, NormalEquations, ScaleUpdate};
 use nalgebra::{DMatrix, Matrix6, Vector6};
 use rayon::prelude::*;
 
@@ -179,8 +178,6 @@ pub(super) struct Reduced {
     norms_g: Vec<f64>,
     /// Sum of squared residuals.
     ss: f64,
-    /// Largest `|g_k| / ||J_k||` over the local parameters.
-    gmax_local: f64,
     /// Whether some `U_j + mu D_j^2` was not positive definite.
     failed: bool,
 }
@@ -193,7 +190,6 @@ impl Reduced {
             gg: vec![0.0; ng],
             norms_g: vec![0.0; ng],
             ss: 0.0,
-            gmax_local: 0.0,
             failed: false,
         }
     }
@@ -212,15 +208,22 @@ impl Reduced {
             *a += b;
         }
         self.ss += o.ss;
-        self.gmax_local = self.gmax_local.max(o.gmax_local);
         self.failed |= o.failed;
     }
 }
 
-/// The reduce pass at `x` and damping `mu`. With `update_scales` the local scales `d`
-/// (`6 * num_poses`) grow to the column norms first; with `skip_singular` a pose whose
-/// block is singular keeps its `G_j^T G_j` and is left out of the elimination (the
-/// identifiability pass), otherwise it marks the result failed.
+/// The local part of a linearisation: the gradient and squared column norms of the pose
+/// parameters (`6 * num_poses` each) and the rule their scales follow.
+pub(super) struct LocalLinearization<'a> {
+    gradient: &'a mut [f64],
+    col_norms2: &'a mut [f64],
+    scale: ScaleUpdate,
+}
+
+/// The reduce pass at `x` and damping `mu`. With `lin` the local gradient and column norms
+/// are written and the local scales `d` (`6 * num_poses`) follow the column norms first;
+/// with `skip_singular` a pose whose block is singular keeps its `G_j^T G_j` and is left out
+/// of the elimination (the identifiability pass), otherwise it marks the result failed.
 ///
 /// Per pose, with rows `k` of local part `l_k` and global part `g_k` and
 /// `U_j + mu D_j^2 = C C^T`: `G^T G - Z^T Z = sum_{k,k'} (delta_kk' - y_k . y_k') g_k g_k'^T`
@@ -232,16 +235,32 @@ pub(super) fn reduce(
     table: &JointTable,
     mu: f64,
     d: &mut [f64],
-    update_scales: bool,
+    lin: Option<LocalLinearization<'_>>,
     skip_singular: bool,
 ) -> Reduced {
     let ng = p.num_globals;
     let g0 = 6 * p.num_poses;
     let globals = &x[g0..];
-    let parts: Vec<Reduced> = d
-        .par_chunks_mut(6 * POSES_PER_CHUNK)
+    let chunk = 6 * POSES_PER_CHUNK;
+    let scale = lin.as_ref().map(|l| l.scale);
+    // Per chunk of poses: its scales and, when linearising, its gradient and column norms.
+    type Chunk<'c> = (&'c mut [f64], Option<(&'c mut [f64], &'c mut [f64])>);
+    let chunks: Vec<Chunk<'_>> = match lin {
+        Some(l) => d
+            .chunks_mut(chunk)
+            .zip(
+                l.gradient
+                    .chunks_mut(chunk)
+                    .zip(l.col_norms2.chunks_mut(chunk)),
+            )
+            .map(|(dc, (gc, nc))| (dc, Some((gc, nc))))
+            .collect(),
+        None => d.chunks_mut(chunk).map(|dc| (dc, None)).collect(),
+    };
+    let parts: Vec<Reduced> = chunks
+        .into_par_iter()
         .enumerate()
-        .map(|(c, dc)| {
+        .map(|(c, (dc, mut lc))| {
             let j0 = c * POSES_PER_CHUNK;
             let mut acc = Reduced::zeros(ng);
             let mut b = Block::default();
@@ -252,16 +271,11 @@ pub(super) fn reduce(
                 p.fill_block(&x[6 * j..6 * j + 6], globals, table, j, &mut b);
                 let (u, gl) = b.local_normal();
                 acc.ss += b.r.iter().map(|v| v * v).sum::<f64>();
-                for a in 0..6 {
-                    let cn = u[(a, a)].sqrt();
-                    if update_scales {
-                        dj[a] = dj[a].max(cn);
-                        if dj[a] == 0.0 {
-                            dj[a] = 1.0;
-                        }
-                    }
-                    if cn > 0.0 {
-                        acc.gmax_local = acc.gmax_local.max(gl[a].abs() / cn);
+                if let (Some(rule), Some((gc, nc))) = (scale, lc.as_mut()) {
+                    for a in 0..6 {
+                        gc[6 * t + a] = gl[a];
+                        nc[6 * t + a] = u[(a, a)];
+                        rule.apply(&mut dj[a], u[(a, a)]);
                     }
                 }
                 rows.clear();
@@ -337,11 +351,9 @@ pub(super) fn reduce(
 /// Partial sums of the step pass.
 #[derive(Default, Clone, Copy)]
 struct StepSums {
+    /// `||J h||^2`.
     jh2: f64,
-    gh: f64,
-    dx2: f64,
-    xn2: f64,
-    s2: f64,
+    /// Sum of squared residuals at the trial point.
     trial_ss: f64,
     failed: bool,
 }
@@ -400,14 +412,10 @@ fn step(
                 for (l, &gdk) in b.local.iter().zip(&gd) {
                     s.jh2 += (l.dot(&hl) + gdk).powi(2);
                 }
-                s.gh += gl.dot(&hl);
                 let xj = &x[6 * j..6 * j + 6];
                 let mut pt = [0.0; 6];
                 for a in 0..6 {
                     hj[a] = hl[a];
-                    s.dx2 += (dj[a] * hl[a]).powi(2);
-                    s.xn2 += (dj[a] * xj[a]).powi(2);
-                    s.s2 += hl[a] * hl[a];
                     pt[a] = xj[a] + hl[a];
                 }
                 rt.clear();
@@ -421,95 +429,105 @@ fn step(
     let mut t = StepSums::default();
     for s in parts {
         t.jh2 += s.jh2;
-        t.gh += s.gh;
-        t.dx2 += s.dx2;
-        t.xn2 += s.xn2;
-        t.s2 += s.s2;
         t.trial_ss += s.trial_ss;
         t.failed |= s.failed;
     }
     t
 }
 
-/// Minimises the implicit formulation's cost from `x` (pose corrections, then globals)
-/// with the streamed Schur complement; `x` holds the solution on return.
-pub(super) fn minimize(
-    p: &Implicit<'_>,
-    x: &mut [f64],
-    options: &cpm_lm::Options,
-) -> Result<Report, crate::CalibError> {
-    let start = Instant::now();
-    let np = p.num_poses;
-    let ng = p.num_globals;
-    let nl = 6 * np;
-    let n = nl + ng;
-    let mut timings = Timings::default();
-    let mut d = vec![0.0; n];
-    let mut h = vec![0.0; nl];
-    let mut records: Vec<IterationRecord> = Vec::new();
-    let (mut residual_evaluations, mut jacobian_evaluations) = (1usize, 0usize);
-    let (mut accepted_steps, mut rejected_steps) = (0usize, 0usize);
-    // Gauss-Newton steps (mu = 0) while they are accepted with a gain ratio of at least
-    // 1/4: a nearly linear problem (the usual calibration) then converges in a few passes
-    // where Nielsen's rule, lowering mu by at most 3 per step, would crawl. The first
-    // failure (singular system, or a poor or rejected step) switches to Nielsen's rule from
-    // mu0 = tau * max(||J_k||^2 / d_k^2) = tau (d_k = ||J_k|| at the start).
-    let mut gauss_newton = true;
-    let mut mu = 0.0;
-    let mut nu = 2.0;
-    let mut new_jac = true;
-    let mut cost = f64::NAN;
-    let mut initial_cost = f64::NAN;
-    let mut grad_inf = 0.0;
-    let m = p.rows;
-    let noise = 32.0 * f64::EPSILON * (m as f64).sqrt();
-    let elapsed = |t: Instant| -> Duration { t.elapsed() };
-    let termination = loop {
-        let t0 = Instant::now();
+/// The implicit formulation as a [`NormalEquations`] problem for `cpm-lm`'s engine: each
+/// assembly is a reduce pass, each solve the dense solve of the reduced system plus a step
+/// pass (which evaluates the cost at the trial point on the way).
+pub(super) struct Streamed<'p, 'a> {
+    p: &'p Implicit<'a>,
+    /// The joint table of the globals assembled at.
+    table: Option<JointTable>,
+    /// The reduced system last assembled, and its damping.
+    reduced: Option<Reduced>,
+    mu: f64,
+}
+
+impl<'p, 'a> Streamed<'p, 'a> {
+    pub(super) fn new(p: &'p Implicit<'a>) -> Self {
+        Self {
+            p,
+            table: None,
+            reduced: None,
+            mu: 0.0,
+        }
+    }
+}
+
+impl NormalEquations for Streamed<'_, '_> {
+    fn num_params(&self) -> usize {
+        6 * self.p.num_poses + self.p.num_globals
+    }
+
+    fn num_residuals(&self) -> usize {
+        self.p.rows
+    }
+
+    fn cost(&mut self, x: &[f64]) -> Result<f64, ModelError> {
+        let (sc, sr) = self.p.summary(x, None)?;
+        // `summary` gives the closures unweighted.
+        Ok(0.5 * (sc * self.p.w_enc * self.p.w_enc + sr))
+    }
+
+    fn assemble(
+        &mut self,
+        x: &[f64],
+        mu: f64,
+        d: &mut [f64],
+        lin: Option<Linearization<'_>>,
+    ) -> Result<f64, ModelError> {
+        let p = self.p;
+        let nl = 6 * p.num_poses;
         let table = p.model.table_with(&x[nl..])?;
-        let red = reduce(p, x, &table, mu, &mut d[..nl], new_jac, false);
-        timings.jacobian += elapsed(t0);
-        if new_jac {
-            jacobian_evaluations += 1;
-            cost = 0.5 * red.ss;
-            if initial_cost.is_nan() {
-                initial_cost = cost;
-            }
-            if !cost.is_finite() {
-                break TerminationReason::NonFinite;
-            }
-            if cost == 0.0 {
-                break TerminationReason::ZeroResidual;
-            }
-            let rnorm = red.ss.sqrt();
-            let mut gmax = red.gmax_local;
-            for b in 0..ng {
-                let cn = red.norms_g[b].sqrt();
-                d[nl + b] = d[nl + b].max(cn);
-                if d[nl + b] == 0.0 {
-                    d[nl + b] = 1.0;
+        let (dl, dg) = d.split_at_mut(nl);
+        let red = match lin {
+            Some(l) => {
+                let (gl, gg) = l.gradient.split_at_mut(nl);
+                let (nrl, nrg) = l.col_norms2.split_at_mut(nl);
+                let local = LocalLinearization {
+                    gradient: gl,
+                    col_norms2: nrl,
+                    scale: l.scale,
+                };
+                let red = reduce(p, x, &table, mu, dl, Some(local), false);
+                gg.copy_from_slice(&red.gg);
+                nrg.copy_from_slice(&red.norms_g);
+                for (db, &nb) in dg.iter_mut().zip(&red.norms_g) {
+                    l.scale.apply(db, nb);
                 }
-                if cn > 0.0 {
-                    gmax = gmax.max(red.gg[b].abs() / cn);
-                }
+                red
             }
-            grad_inf = red.gg.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-            new_jac = false;
-            if gmax / rnorm <= options.gtol {
-                break TerminationReason::ConvergedGtol;
-            }
+            None => reduce(p, x, &table, mu, dl, None, false),
+        };
+        let cost = 0.5 * red.ss;
+        self.table = Some(table);
+        self.reduced = Some(red);
+        self.mu = mu;
+        Ok(cost)
+    }
+
+    fn solve(
+        &mut self,
+        x: &[f64],
+        d: &[f64],
+        h: &mut [f64],
+    ) -> Result<Option<DampedStep>, ModelError> {
+        let p = self.p;
+        let (nl, ng) = (6 * p.num_poses, p.num_globals);
+        let (Some(red), Some(table)) = (&self.reduced, &self.table) else {
+            return Err("internal: the streamed system was not assembled".into());
+        };
+        let mu = self.mu;
+        if red.failed {
+            return Ok(None);
         }
-        if records.len() >= options.max_iterations {
-            break TerminationReason::MaxIterations;
-        }
-        if residual_evaluations >= options.max_evaluations {
-            break TerminationReason::MaxEvaluations;
-        }
-        let iteration = records.len() + 1;
-        let t1 = Instant::now();
-        let mut dg = vec![0.0; ng];
-        let mut solved = !red.failed;
-        if solved && ng > 0 {
+        let (hl, dg) = h.split_at_mut(nl);
+        dg.fill(0.0);
+        if ng > 0 {
             let s = DMatrix::from_fn(ng, ng, |r, c| {
                 red.s[c * ng + r]
                     + if r == c {
@@ -519,167 +537,43 @@ pub(super) fn minimize(
                     }
             });
             let diag: Vec<f64> = (0..ng).map(|b| s[(b, b)]).collect();
-            match s.cholesky() {
-                // Undamped, a pivot below 1e-10 of its diagonal entry is a direction the
-                // data do not determine (a blind combination): its Gauss-Newton step would
-                // be noise of any size, so the damped steps take over.
-                Some(ch)
-                    if mu == 0.0
-                        && (0..ng).any(|b| ch.l_dirty()[(b, b)].powi(2) < 1e-10 * diag[b]) =>
-                {
-                    solved = false;
-                }
-                Some(ch) => {
-                    let rhs = nalgebra::DVector::from_fn(ng, |b, _| red.rhs[b] - red.gg[b]);
-                    let sol = ch.solve(&rhs);
-                    dg.copy_from_slice(sol.as_slice());
-                    solved = dg.iter().all(|v| v.is_finite());
-                }
-                None => solved = false,
+            let Some(ch) = s.cholesky() else {
+                return Ok(None);
+            };
+            // Undamped, a pivot below 1e-10 of its diagonal entry is a direction the data do
+            // not determine (a blind combination): its Gauss-Newton step would be noise of
+            // any size, so the damped steps take over.
+            if mu == 0.0 && (0..ng).any(|b| ch.l_dirty()[(b, b)].powi(2) < 1e-10 * diag[b]) {
+                return Ok(None);
+            }
+            let rhs = nalgebra::DVector::from_fn(ng, |b, _| red.rhs[b] - red.gg[b]);
+            let sol = ch.solve(&rhs);
+            dg.copy_from_slice(sol.as_slice());
+            if !dg.iter().all(|v| v.is_finite()) {
+                return Ok(None);
             }
         }
-        timings.linear_solver += elapsed(t1);
-        let mut rec = IterationRecord {
-            iteration,
-            cost,
-            trial_cost: f64::NAN,
-            damping: mu,
-            step_length: 0.0,
-            step_norm: 0.0,
-            gain_ratio: f64::NAN,
-            accepted: false,
-            gradient_norm: grad_inf,
-            elapsed: Duration::ZERO,
-        };
-        let mut sums = StepSums::default();
-        if solved {
-            let t2 = Instant::now();
-            let trial_globals: Vec<f64> = x[nl..].iter().zip(&dg).map(|(a, b)| a + b).collect();
-            let trial_table = p.model.table_with(&trial_globals)?;
-            sums = step(
-                p,
-                x,
-                &table,
-                &trial_globals,
-                &trial_table,
-                mu,
-                &d[..nl],
-                &dg,
-                &mut h,
-            );
-            residual_evaluations += 1;
-            timings.residuals += elapsed(t2);
-            solved = !sums.failed;
+        let trial_globals: Vec<f64> = x[nl..].iter().zip(dg.iter()).map(|(a, b)| a + b).collect();
+        let trial_table = p.model.table_with(&trial_globals)?;
+        let sums = step(
+            p,
+            x,
+            table,
+            &trial_globals,
+            &trial_table,
+            mu,
+            &d[..nl],
+            dg,
+            hl,
+        );
+        if sums.failed {
+            return Ok(None);
         }
-        if !solved {
-            rejected_steps += 1;
-            if gauss_newton {
-                gauss_newton = false;
-                mu = options.tau;
-            } else {
-                mu *= nu;
-                nu *= 2.0;
-            }
-            rec.elapsed = start.elapsed();
-            records.push(rec);
-            if mu.is_nan() || mu >= 1e300 {
-                break TerminationReason::SingularSystem;
-            }
-            continue;
-        }
-        for b in 0..ng {
-            sums.gh += red.gg[b] * dg[b];
-            sums.dx2 += (d[nl + b] * dg[b]).powi(2);
-            sums.xn2 += (d[nl + b] * x[nl + b]).powi(2);
-            sums.s2 += dg[b] * dg[b];
-        }
-        if sums.dx2.sqrt() <= options.xtol * (sums.xn2.sqrt() + options.xtol) {
-            break TerminationReason::ConvergedXtol;
-        }
-        let pred = -sums.gh - 0.5 * sums.jh2;
-        let mut cost_trial = 0.5 * sums.trial_ss;
-        if !cost_trial.is_finite() {
-            cost_trial = f64::INFINITY;
-        }
-        let actred = cost - cost_trial;
-        let rho = if pred > 0.0 {
-            actred / pred
-        } else if actred > 0.0 {
-            1.0
-        } else {
-            -1.0
-        };
-        let accept = cost_trial < cost && rho > 0.0;
-        // A Gauss-Newton step that gains poorly hands over to the damped steps.
-        let leave_gauss_newton = gauss_newton && !(accept && rho >= 0.25);
-        let cost_before = cost;
-        if accept {
-            for (xv, hv) in x[..nl].iter_mut().zip(&h) {
-                *xv += hv;
-            }
-            for (xv, hv) in x[nl..].iter_mut().zip(&dg) {
-                *xv += hv;
-            }
-            cost = cost_trial;
-            new_jac = true;
-            accepted_steps += 1;
-            if leave_gauss_newton {
-                gauss_newton = false;
-                mu = options.tau;
-            } else if !gauss_newton {
-                let t = 2.0 * rho - 1.0;
-                mu = (mu * (1.0 / 3.0f64).max(1.0 - t * t * t)).max(1e-300);
-                nu = 2.0;
-            }
-        } else {
-            rejected_steps += 1;
-            if gauss_newton {
-                gauss_newton = false;
-                mu = options.tau;
-            } else {
-                mu *= nu;
-                nu *= 2.0;
-            }
-        }
-        rec.cost = cost;
-        rec.trial_cost = cost_trial;
-        rec.step_length = 1.0;
-        rec.step_norm = sums.s2.sqrt();
-        rec.gain_ratio = rho;
-        rec.accepted = accept;
-        rec.elapsed = start.elapsed();
-        records.push(rec);
-        if cost == 0.0 {
-            break TerminationReason::ZeroResidual;
-        }
-        if pred <= options.ftol * cost_before
-            && ((actred.abs() <= options.ftol * cost_before && rho <= 2.0)
-                || actred.abs() <= noise * cost_before
-                || actred <= 0.0)
-        {
-            break TerminationReason::ConvergedFtol;
-        }
-        if mu.is_nan() || mu >= 1e300 {
-            break TerminationReason::SingularSystem;
-        }
-    };
-    Ok(Report {
-        termination,
-        initial_cost,
-        final_cost: cost,
-        iterations: records,
-        accepted_steps,
-        rejected_steps,
-        residual_evaluations,
-        jacobian_evaluations,
-        elapsed: start.elapsed(),
-        timings,
-        num_params: n,
-        num_residuals: m,
-        damping: "Gauss-Newton, then Nielsen",
-        linear_solver: "Schur complement (streamed)",
-        statistics: None,
-    })
+        Ok(Some(DampedStep {
+            jh_norm2: sums.jh2,
+            trial_cost: Some(0.5 * sums.trial_ss),
+        }))
+    }
 }
 
 #[cfg(test)]

@@ -1,24 +1,32 @@
 //! The Levenberg-Marquardt iteration shared by every problem kind and linear solver.
 //!
-//! Per Jacobian: robust reweighting of the rows, gradient `g = J^T r`, freezing of
+//! Two kinds of problem run through the same loop ([`run`]): one with a stored Jacobian
+//! ([`Model`], dense or sparse, any [`LinearSystem`](crate::solver::LinearSystem)), and one
+//! that forms and solves its own damped normal equations
+//! ([`NormalEquations`](crate::NormalEquations)). [`Backend`] holds what differs; the
+//! damping schedule, the stopping tests, the records and the report are the loop's.
+//!
+//! Per linearisation: robust reweighting of the rows, gradient `g = J^T r`, freezing of
 //! parameters held at a bound, update of the scaling `D`, the damping-independent part of
 //! the linear solve, and the gradient test. Per trial step: solve the damped system, project
 //! onto the bounds, step test, evaluate, gain ratio, accept or reject, cost test.
 
 use std::ops::ControlFlow;
-use std::time::Instant;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
 
 use crate::bounds::Bounds;
 use crate::damping::{Damping, DampingState, LineInfo};
 use crate::error::{EvalStage, LmError};
-use crate::options::{Options, Scaling};
-use crate::report::{IterationRecord, Report, TerminationReason, Timings};
+use crate::options::{Options, ScaleUpdate, StatisticsMode};
+use crate::problem::{Linearization, NormalEquations};
+use crate::report::{FitAtSolution, IterationRecord, Report, TerminationReason, Timings};
 use crate::solver::build_linear;
 use crate::solver::jacobian::Jacobian;
 use crate::solver::model::Model;
 use crate::solver::small::{dot, norm2};
 use crate::solver::trust_region::lmpar;
-use crate::stats::Statistics;
+use crate::solver::LinearSystem;
 
 /// Robust reweighting of the residuals at the current point (non-square losses only):
 /// fills `rw` and scales the Jacobian rows.
@@ -43,15 +51,524 @@ fn weigh(
 pub(crate) type Callback<'a, 'b> =
     Option<&'a mut (dyn FnMut(&IterationRecord) -> ControlFlow<()> + 'b)>;
 
-pub(crate) fn run<M: Model>(
+/// Chained timestamps (one clock read per phase boundary: on small problems the clock
+/// costs as much as the arithmetic).
+struct Clock(Instant);
+
+impl Clock {
+    /// Time since the last lap.
+    fn lap(&mut self) -> Duration {
+        let now = Instant::now();
+        let d = now - self.0;
+        self.0 = now;
+        d
+    }
+}
+
+fn model_error(iteration: usize, stage: EvalStage) -> impl FnOnce(crate::ModelError) -> LmError {
+    move |source| LmError::Model {
+        iteration,
+        stage,
+        source,
+    }
+}
+
+/// A problem with a stored Jacobian: the Jacobian, the linear solver and the residual
+/// vectors.
+pub(crate) struct Stored<'p, M> {
+    model: &'p mut M,
+    jac: Jacobian,
+    linear: Box<dyn LinearSystem>,
+    robust: bool,
+    r: Vec<f64>,
+    r_trial: Vec<f64>,
+    rw: Vec<f64>,
+    row_scale: Vec<f64>,
+    jstep: Vec<f64>,
+    jdir: Vec<f64>,
+    /// Geodesic acceleration: residuals at x + h v, the acceleration and its right-hand side.
+    r_probe: Vec<f64>,
+    acc: Vec<f64>,
+    /// Whether `jac` is the Jacobian at the current point.
+    jac_current: bool,
+}
+
+/// A problem that forms its own normal equations.
+pub(crate) struct Normal<'p> {
+    problem: &'p mut dyn NormalEquations,
+    /// Whether the current point is linearised (gradient and scales up to date).
+    linearised: bool,
+    /// Cost the last assembly reported.
+    assembled_cost: f64,
+    /// Damping of the system last assembled at the current point.
+    assembled_mu: Option<f64>,
+    /// What the last solve reported.
+    jh_norm2: f64,
+    trial_cost: Option<f64>,
+}
+
+/// What differs between the problem kinds.
+pub(crate) enum Backend<'p, M> {
+    /// A stored Jacobian.
+    Stored(Box<Stored<'p, M>>),
+    /// Normal equations formed by the problem.
+    Normal(Normal<'p>),
+}
+
+/// No stored problem (the type parameter of a [`Backend::Normal`]).
+pub(crate) enum NoModel {}
+
+impl Model for NoModel {
+    fn num_params(&self) -> usize {
+        match *self {}
+    }
+    fn num_residuals(&self) -> usize {
+        match *self {}
+    }
+    fn residuals(&mut self, _: &[f64], _: &mut [f64]) -> Result<(), crate::ModelError> {
+        match *self {}
+    }
+    fn jacobian(&mut self, _: &[f64], _: &mut Jacobian) -> Result<(), crate::ModelError> {
+        match *self {}
+    }
+    fn new_jacobian(&mut self, _: bool) -> Result<Jacobian, LmError> {
+        match *self {}
+    }
+}
+
+impl<'p> Backend<'p, NoModel> {
+    pub(crate) fn normal(problem: &'p mut dyn NormalEquations) -> Self {
+        Backend::Normal(Normal {
+            problem,
+            linearised: false,
+            assembled_cost: f64::NAN,
+            assembled_mu: None,
+            jh_norm2: 0.0,
+            trial_cost: None,
+        })
+    }
+}
+
+impl<'p, M: Model> Backend<'p, M> {
+    pub(crate) fn stored(model: &'p mut M) -> Self {
+        Backend::Stored(Box::new(Stored {
+            model,
+            jac: Jacobian::Dense(faer::Mat::zeros(0, 0)),
+            linear: Box::new(NoSystem),
+            robust: false,
+            r: Vec::new(),
+            r_trial: Vec::new(),
+            rw: Vec::new(),
+            row_scale: Vec::new(),
+            jstep: Vec::new(),
+            jdir: Vec::new(),
+            r_probe: Vec::new(),
+            acc: Vec::new(),
+            jac_current: false,
+        }))
+    }
+
+    fn dims(&self) -> (usize, usize) {
+        match self {
+            Backend::Stored(s) => (s.model.num_params(), s.model.num_residuals()),
+            Backend::Normal(p) => (p.problem.num_params(), p.problem.num_residuals()),
+        }
+    }
+
+    /// Storage for a solve of `n` parameters and `m` residuals.
+    fn setup(&mut self, options: &Options, m: usize, n: usize) -> Result<(), LmError> {
+        let Backend::Stored(s) = self else {
+            return Ok(());
+        };
+        s.jac = s.model.new_jacobian(options.linear_solver.is_sparse())?;
+        s.linear = build_linear(&options.linear_solver, &s.jac)?;
+        // Residual-sized buffers: the robust-loss ones only with a robust loss, the
+        // products with J only for a dense Jacobian or the cubic control (a sparse product
+        // is reduced row by row).
+        let robust = !options.loss.is_squared();
+        let cubic = options.damping == Damping::CubicInterpolation;
+        let dense_jac = matches!(s.jac, Jacobian::Dense(_));
+        let accel = options.acceleration.is_some();
+        let buffer = |needed: bool, v: f64| if needed { vec![v; m] } else { Vec::new() };
+        s.robust = robust;
+        s.r = vec![0.0; m];
+        s.r_trial = vec![0.0; m];
+        s.rw = buffer(robust, 0.0);
+        s.row_scale = buffer(robust, 1.0);
+        s.jstep = buffer(dense_jac || cubic, 0.0);
+        s.jdir = buffer(cubic || accel, 0.0);
+        s.r_probe = buffer(accel, 0.0);
+        s.acc = if accel { vec![0.0; 2 * n] } else { Vec::new() };
+        Ok(())
+    }
+
+    /// The cost at the start (a normal-equations problem linearises there at once).
+    fn start(
+        &mut self,
+        options: &Options,
+        x: &[f64],
+        mu: f64,
+        g: &mut [f64],
+        norms2: &mut [f64],
+        d: &mut [f64],
+    ) -> Result<f64, LmError> {
+        match self {
+            Backend::Stored(s) => {
+                s.model
+                    .residuals(x, &mut s.r)
+                    .map_err(model_error(0, EvalStage::Residuals))?;
+                Ok(options.loss.cost(&s.r))
+            }
+            Backend::Normal(p) => {
+                let lin = Linearization {
+                    gradient: g,
+                    col_norms2: norms2,
+                    scale: ScaleUpdate::new(options.scaling, true),
+                };
+                let cost = p
+                    .problem
+                    .assemble(x, mu, d, Some(lin))
+                    .map_err(model_error(0, EvalStage::Jacobian))?;
+                p.linearised = true;
+                p.assembled_mu = Some(mu);
+                p.assembled_cost = cost;
+                Ok(cost)
+            }
+        }
+    }
+
+    /// Linearises at the current point `x`: gradient, column norms, scales. Returns the
+    /// norm of the (reweighted) residuals, or `None` when the Jacobian is not finite.
+    #[allow(clippy::too_many_arguments)]
+    fn linearise(
+        &mut self,
+        options: &Options,
+        x: &[f64],
+        iteration: usize,
+        first: bool,
+        mu: f64,
+        bounds: Option<&Bounds>,
+        frozen: &mut [bool],
+        any_frozen: &mut bool,
+        g: &mut [f64],
+        norms2: &mut [f64],
+        d: &mut [f64],
+        timings: &mut Timings,
+        clock: &mut Clock,
+    ) -> Result<Option<f64>, LmError> {
+        let rule = ScaleUpdate::new(options.scaling, first);
+        match self {
+            Backend::Stored(s) => {
+                let n = g.len();
+                s.model
+                    .jacobian(x, &mut s.jac)
+                    .map_err(model_error(iteration, EvalStage::Jacobian))?;
+                if !s.jac.is_finite() {
+                    return Ok(None);
+                }
+                if s.robust {
+                    weigh(options, &s.r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+                }
+                let rw: &[f64] = if s.robust { &s.rw } else { &s.r };
+                s.jac.gradient_and_norms(rw, g, norms2);
+                *any_frozen = match bounds {
+                    Some(b) => b.freeze(x, g, frozen),
+                    None => false,
+                };
+                if *any_frozen {
+                    s.jac.zero_cols(frozen);
+                    for j in 0..n {
+                        if frozen[j] {
+                            g[j] = 0.0;
+                            norms2[j] = 0.0;
+                        }
+                    }
+                }
+                for j in 0..n {
+                    rule.apply(&mut d[j], norms2[j]);
+                }
+                // The Jacobian's time includes the reweighting and the gradient.
+                timings.jacobian += clock.lap();
+                s.linear.prepare(&s.jac, rw).map_err(LmError::Numerical)?;
+                timings.linear_solver += clock.lap();
+                s.jac_current = true;
+                Ok(Some(norm2(rw).sqrt()))
+            }
+            Backend::Normal(p) => {
+                if !p.linearised {
+                    let lin = Linearization {
+                        gradient: g,
+                        col_norms2: norms2,
+                        scale: rule,
+                    };
+                    p.assembled_cost = p
+                        .problem
+                        .assemble(x, mu, d, Some(lin))
+                        .map_err(model_error(iteration, EvalStage::Jacobian))?;
+                    p.assembled_mu = Some(mu);
+                    p.linearised = true;
+                }
+                timings.jacobian += clock.lap();
+                if !(g.iter().all(|v| v.is_finite()) && p.assembled_cost.is_finite()) {
+                    return Ok(None);
+                }
+                Ok(Some((2.0 * p.assembled_cost).sqrt()))
+            }
+        }
+    }
+
+    /// Solves the damped system for `h` (the trust region searches its damping). Returns
+    /// whether it was solved and the damping used.
+    #[allow(clippy::too_many_arguments)]
+    fn solve(
+        &mut self,
+        x: &[f64],
+        iteration: usize,
+        damping: &mut DampingState,
+        d: &mut [f64],
+        g: &[f64],
+        h: &mut [f64],
+        wa: &mut [f64],
+        timings: &mut Timings,
+        clock: &mut Clock,
+    ) -> Result<(bool, f64), LmError> {
+        match self {
+            Backend::Stored(s) => Ok(if damping.is_trust_region() {
+                match lmpar(
+                    s.linear.as_mut(),
+                    &s.jac,
+                    damping.radius(),
+                    damping.gn_scale(),
+                    damping.mu(),
+                    d,
+                    g,
+                    h,
+                    wa,
+                ) {
+                    Some(mu) => {
+                        damping.set_mu(mu);
+                        (true, mu)
+                    }
+                    None => (false, damping.mu()),
+                }
+            } else {
+                let mu = damping.mu();
+                (s.linear.solve(&s.jac, mu, d, g, h), mu)
+            }),
+            Backend::Normal(p) => {
+                let mu = damping.mu();
+                if p.assembled_mu != Some(mu) {
+                    p.assembled_cost = p
+                        .problem
+                        .assemble(x, mu, d, None)
+                        .map_err(model_error(iteration, EvalStage::Jacobian))?;
+                    p.assembled_mu = Some(mu);
+                    timings.jacobian += clock.lap();
+                }
+                let step = p
+                    .problem
+                    .solve(x, d, h)
+                    .map_err(model_error(iteration, EvalStage::Jacobian))?;
+                Ok(match step {
+                    Some(st) if st.jh_norm2.is_finite() && h.iter().all(|v| v.is_finite()) => {
+                        p.jh_norm2 = st.jh_norm2;
+                        p.trial_cost = st.trial_cost;
+                        (true, mu)
+                    }
+                    _ => (false, mu),
+                })
+            }
+        }
+    }
+
+    /// `||J s||^2` for the step `s = alpha h` taken along the solved direction `h`
+    /// (`scratch`: length `n`).
+    fn step_norm2(&mut self, step: &[f64], alpha: f64) -> f64 {
+        match self {
+            Backend::Stored(s) => s.jac.product_norm2(step, &mut s.jstep),
+            Backend::Normal(p) => alpha * alpha * p.jh_norm2,
+        }
+    }
+
+    /// The cost at the trial point `x_trial = x + h` (`unmodified`: no step length or
+    /// projection changed it).
+    fn trial_cost(
+        &mut self,
+        options: &Options,
+        x_trial: &[f64],
+        unmodified: bool,
+        iteration: usize,
+    ) -> Result<f64, LmError> {
+        match self {
+            Backend::Stored(s) => {
+                s.model
+                    .residuals(x_trial, &mut s.r_trial)
+                    .map_err(model_error(iteration, EvalStage::Residuals))?;
+                Ok(options.loss.cost(&s.r_trial))
+            }
+            Backend::Normal(p) => match p.trial_cost.take() {
+                Some(c) if unmodified => Ok(c),
+                _ => p
+                    .problem
+                    .cost(x_trial)
+                    .map_err(model_error(iteration, EvalStage::Residuals)),
+            },
+        }
+    }
+
+    /// The trial point became the current point.
+    fn accept(&mut self, jacobian_still_good: bool) {
+        match self {
+            Backend::Stored(s) => {
+                std::mem::swap(&mut s.r, &mut s.r_trial);
+                s.jac_current = !s.robust && jacobian_still_good;
+            }
+            Backend::Normal(p) => {
+                p.linearised = false;
+                p.assembled_mu = None;
+            }
+        }
+    }
+}
+
+impl<M: Model> Stored<'_, M> {
+    /// Geodesic acceleration: `a = -(J^T J + mu D^2)^-1 J^T r_vv` into `acc[..n]`, from the
+    /// residuals at `x + fd h`. Returns `2 ||D a|| / ||D h||` (0 when no acceleration could
+    /// be solved for: the plain step).
+    #[allow(clippy::too_many_arguments)]
+    fn accelerate(
+        &mut self,
+        x: &[f64],
+        x_probe: &mut [f64],
+        h: &[f64],
+        fd: f64,
+        mu: f64,
+        d: &[f64],
+        iteration: usize,
+    ) -> Result<f64, LmError> {
+        let n = x.len();
+        for j in 0..n {
+            x_probe[j] = x[j] + fd * h[j];
+        }
+        self.model
+            .residuals(x_probe, &mut self.r_probe)
+            .map_err(model_error(iteration, EvalStage::Residuals))?;
+        self.jac.mul(h, &mut self.jdir);
+        for i in 0..self.r.len() {
+            self.r_probe[i] = (2.0 / fd) * ((self.r_probe[i] - self.r[i]) / fd - self.jdir[i]);
+        }
+        let (a, rhs) = self.acc.split_at_mut(n);
+        self.jac.transpose_mul(&self.r_probe, rhs);
+        Ok(if self.linear.resolve(&self.jac, mu, d, rhs, a) {
+            let (mut da2, mut dv2) = (0.0, 0.0);
+            for j in 0..n {
+                da2 += (d[j] * a[j]).powi(2);
+                dv2 += (d[j] * h[j]).powi(2);
+            }
+            if dv2 > 0.0 {
+                2.0 * (da2 / dv2).sqrt()
+            } else {
+                0.0
+            }
+        } else {
+            a.fill(0.0);
+            0.0
+        })
+    }
+}
+
+/// A placeholder linear system before [`Backend::setup`].
+struct NoSystem;
+
+impl LinearSystem for NoSystem {
+    fn prepare(&mut self, _: &Jacobian, _: &[f64]) -> Result<(), String> {
+        Err("internal: linear system used before setup".into())
+    }
+    fn solve(&mut self, _: &Jacobian, _: f64, _: &[f64], _: &[f64], _: &mut [f64]) -> bool {
+        false
+    }
+    fn inverse_quadratic(&mut self, _: &Jacobian, _: &[f64]) -> Option<f64> {
+        None
+    }
+}
+
+/// Records a trial that produced no evaluated point (singular system, or an acceleration
+/// too large) and asks the callback; returns the termination, if any.
+fn record_failed_trial(
+    records: &mut Vec<IterationRecord>,
+    rec: IterationRecord,
+    damping: &DampingState,
+    callback: &mut Callback<'_, '_>,
+) -> Option<TerminationReason> {
+    records.push(rec);
+    if damping.exhausted() {
+        Some(TerminationReason::SingularSystem)
+    } else if let Some(cb) = callback.as_mut() {
+        cb(&rec).is_break().then_some(TerminationReason::UserStop)
+    } else {
+        None
+    }
+}
+
+/// [`run`] for a stored problem, with the restart of [`Evaporation`](crate::Evaporation):
+/// when a parameter evaporated, the solve runs again from the same start with geodesic
+/// acceleration and the lower final cost wins.
+pub(crate) fn run_stored<M: Model>(
     model: &mut M,
     x: &mut [f64],
     options: &Options,
     mut callback: Callback<'_, '_>,
 ) -> Result<Report, LmError> {
+    let restart = options.evaporation_restart.is_some()
+        && options.acceleration.is_none()
+        && options.loss.is_squared()
+        && options.damping != Damping::CubicInterpolation
+        && options.lower.is_none()
+        && options.upper.is_none();
+    let x0 = if restart { x.to_vec() } else { Vec::new() };
+    let first = run(
+        Backend::stored(&mut *model),
+        x,
+        options,
+        callback.as_deref_mut(),
+    )?;
+    if !restart || first.evaporated.is_empty() || first.termination == TerminationReason::UserStop {
+        return Ok(first);
+    }
+    let accelerated = Options {
+        acceleration: Some(crate::GeodesicAcceleration::default()),
+        evaporation_restart: None,
+        ..options.clone()
+    };
+    let mut x1 = x0;
+    let second = run(Backend::stored(model), &mut x1, &accelerated, callback)?;
+    let (mut keep, other) = if second.final_cost < first.final_cost {
+        x.copy_from_slice(&x1);
+        (second, first)
+    } else {
+        (first, second)
+    };
+    keep.restarts = 1;
+    keep.residual_evaluations += other.residual_evaluations;
+    keep.jacobian_evaluations += other.jacobian_evaluations;
+    keep.accepted_steps += other.accepted_steps;
+    keep.rejected_steps += other.rejected_steps;
+    keep.elapsed += other.elapsed;
+    keep.timings.residuals += other.timings.residuals;
+    keep.timings.jacobian += other.timings.jacobian;
+    keep.timings.linear_solver += other.timings.linear_solver;
+    keep.timings.statistics += other.timings.statistics;
+    Ok(keep)
+}
+
+pub(crate) fn run<M: Model>(
+    mut backend: Backend<'_, M>,
+    x: &mut [f64],
+    options: &Options,
+    mut callback: Callback<'_, '_>,
+) -> Result<Report, LmError> {
     let start = Instant::now();
-    let n = model.num_params();
-    let m = model.num_residuals();
+    let (n, m) = backend.dims();
     if n == 0 || m == 0 {
         return Err(LmError::EmptyProblem {
             num_params: n,
@@ -65,7 +582,10 @@ pub(crate) fn run<M: Model>(
             found: x.len(),
         });
     }
-    options.validate_for(n)?;
+    match backend {
+        Backend::Stored(_) => options.validate_for(n)?,
+        Backend::Normal(_) => options.validate_normal()?,
+    }
     if let Some(index) = x.iter().position(|v| !v.is_finite()) {
         return Err(LmError::NonFiniteStart {
             index,
@@ -76,35 +596,17 @@ pub(crate) fn run<M: Model>(
     if let Some(b) = &bounds {
         b.project(x);
     }
-    let mut jac = model.new_jacobian(options.linear_solver.is_sparse())?;
-    let mut linear = build_linear(&options.linear_solver, &jac)?;
+    backend.setup(options, m, n)?;
 
     let mut timings = Timings::default();
-    // Residual-sized buffers: the robust-loss ones only with a robust loss, the products
-    // with J only for a dense Jacobian or the cubic control (a sparse product is reduced
-    // row by row).
-    let robust = !options.loss.is_squared();
     let cubic = options.damping == Damping::CubicInterpolation;
-    let dense_jac = matches!(jac, Jacobian::Dense(_));
-    let buffer = |needed: bool, v: f64| if needed { vec![v; m] } else { Vec::new() };
-    let mut r = vec![0.0; m];
-    let mut r_trial = vec![0.0; m];
-    let mut rw = buffer(robust, 0.0);
-    let mut row_scale = buffer(robust, 1.0);
     let accel = options.acceleration;
-    let mut jstep = buffer(dense_jac || cubic, 0.0);
-    let mut jdir = buffer(cubic || accel.is_some(), 0.0);
-    // Geodesic acceleration: residuals at x + h v, the acceleration and its right-hand side.
-    let mut r_probe = buffer(accel.is_some(), 0.0);
-    let mut acc = if accel.is_some() {
-        vec![0.0; 2 * n]
-    } else {
-        Vec::new()
-    };
     // The parameter-sized vectors share one allocation (small problems spend a fair part
     // of their time in the allocator).
-    let mut nbuf = vec![0.0; 7 * n];
-    let (wa, rest) = nbuf.split_at_mut(n);
+    let watch = options.evaporation_restart;
+    let mut nbuf = vec![0.0; if watch.is_some() { 8 * n } else { 7 * n }];
+    let (peak2, nbuf7) = nbuf.split_at_mut(if watch.is_some() { n } else { 0 });
+    let (wa, rest) = nbuf7.split_at_mut(n);
     let (x_trial, rest) = rest.split_at_mut(n);
     let (h, rest) = rest.split_at_mut(n);
     let (step, rest) = rest.split_at_mut(n);
@@ -120,21 +622,14 @@ pub(crate) fn run<M: Model>(
     let (mut residual_evaluations, mut jacobian_evaluations) = (0usize, 0usize);
     let (mut accepted_steps, mut rejected_steps) = (0usize, 0usize);
 
-    // Timestamps are chained (one clock read per phase boundary): on small problems the
-    // clock costs as much as the arithmetic.
-    let mut clock = Instant::now();
-    model
-        .residuals(x, &mut r)
-        .map_err(|source| LmError::Model {
-            iteration: 0,
-            stage: EvalStage::Residuals,
-            source,
-        })?;
-    let now = Instant::now();
-    timings.residuals += now - clock;
-    clock = now;
+    let mut damping = DampingState::new(options.damping, 1.0);
+    let mut clock = Clock(Instant::now());
+    let mut cost = backend.start(options, x, damping.mu(), g, norms2, d)?;
+    match backend {
+        Backend::Stored(_) => timings.residuals += clock.lap(),
+        Backend::Normal(_) => timings.jacobian += clock.lap(),
+    }
     residual_evaluations += 1;
-    let mut cost = options.loss.cost(&r);
     let initial_cost = cost;
 
     let mut termination = if !cost.is_finite() {
@@ -144,10 +639,8 @@ pub(crate) fn run<M: Model>(
     } else {
         None
     };
-    let mut damping = DampingState::new(options.damping, 1.0);
     let mut first = true;
     let mut need_jac = true;
-    let mut jac_current = false;
     let mut grad_inf = 0.0;
     // Relative rounding level of a computed cost (sum of m squares, each residual usually a
     // difference of larger numbers, hence the margin over eps).
@@ -155,57 +648,29 @@ pub(crate) fn run<M: Model>(
 
     while termination.is_none() {
         if need_jac {
-            model
-                .jacobian(x, &mut jac)
-                .map_err(|source| LmError::Model {
-                    iteration: records.len(),
-                    stage: EvalStage::Jacobian,
-                    source,
-                })?;
+            let rnorm = backend.linearise(
+                options,
+                x,
+                records.len(),
+                first,
+                damping.mu(),
+                bounds.as_ref(),
+                &mut frozen,
+                &mut any_frozen,
+                g,
+                norms2,
+                d,
+                &mut timings,
+                &mut clock,
+            )?;
             jacobian_evaluations += 1;
-            if !jac.is_finite() {
+            let Some(rnorm) = rnorm else {
                 termination = Some(TerminationReason::NonFinite);
                 break;
-            }
-            if robust {
-                weigh(options, &r, &mut rw, &mut row_scale, Some(&mut jac));
-            }
-            let rw: &[f64] = if robust { &rw } else { &r };
-            jac.gradient_and_norms(rw, g, norms2);
-            any_frozen = match &bounds {
-                Some(b) => b.freeze(x, g, &mut frozen),
-                None => false,
             };
-            if any_frozen {
-                jac.zero_cols(&frozen);
-                for j in 0..n {
-                    if frozen[j] {
-                        g[j] = 0.0;
-                        norms2[j] = 0.0;
-                    }
-                }
+            for (p, &c) in peak2.iter_mut().zip(norms2.iter()) {
+                *p = p.max(c);
             }
-            match options.scaling {
-                Scaling::Marquardt => {
-                    for j in 0..n {
-                        let c = norms2[j].sqrt();
-                        d[j] = if first { c } else { d[j].max(c) };
-                        if d[j] == 0.0 {
-                            d[j] = 1.0;
-                        }
-                    }
-                }
-                Scaling::Identity => d.fill(1.0),
-            }
-            // The Jacobian's time includes the reweighting and the gradient.
-            let now = Instant::now();
-            timings.jacobian += now - clock;
-            clock = now;
-            linear.prepare(&jac, rw).map_err(LmError::Numerical)?;
-            let now = Instant::now();
-            timings.linear_solver += now - clock;
-            clock = now;
-
             if first {
                 let mut mu0 = 0.0f64;
                 for j in 0..n {
@@ -237,7 +702,6 @@ pub(crate) fn run<M: Model>(
                 damping.new_slope(2.0 * dot(g, h));
             }
             // Gradient test (cosine between the residual and each column).
-            let rnorm = norm2(rw).sqrt();
             let mut gnorm = 0.0f64;
             grad_inf = 0.0f64;
             for j in 0..n {
@@ -247,7 +711,6 @@ pub(crate) fn run<M: Model>(
                 }
             }
             need_jac = false;
-            jac_current = true;
             if gnorm <= options.gtol {
                 termination = Some(TerminationReason::ConvergedGtol);
                 break;
@@ -262,106 +725,51 @@ pub(crate) fn run<M: Model>(
             break;
         }
         let iteration = records.len() + 1;
-        let (solved, mu) = if damping.is_trust_region() {
-            match lmpar(
-                linear.as_mut(),
-                &jac,
-                damping.radius(),
-                damping.gn_scale(),
-                damping.mu(),
-                d,
-                g,
-                h,
-                wa,
-            ) {
-                Some(mu) => {
-                    damping.set_mu(mu);
-                    (true, mu)
-                }
-                None => (false, damping.mu()),
-            }
-        } else {
-            let mu = damping.mu();
-            (linear.solve(&jac, mu, d, g, h), mu)
+        let (solved, mu) = backend.solve(
+            x,
+            iteration,
+            &mut damping,
+            d,
+            g,
+            h,
+            wa,
+            &mut timings,
+            &mut clock,
+        )?;
+        let failed_record = |step_length: f64, step_norm: f64, clock: &Clock| IterationRecord {
+            iteration,
+            cost,
+            trial_cost: f64::NAN,
+            damping: mu,
+            step_length,
+            step_norm,
+            gain_ratio: f64::NAN,
+            accepted: false,
+            gradient_norm: grad_inf,
+            elapsed: clock.0 - start,
         };
         if !solved {
-            let now = Instant::now();
-            timings.linear_solver += now - clock;
-            clock = now;
+            timings.linear_solver += clock.lap();
             rejected_steps += 1;
             damping.singular();
-            let rec = IterationRecord {
-                iteration,
-                cost,
-                trial_cost: f64::NAN,
-                damping: mu,
-                step_length: 0.0,
-                step_norm: 0.0,
-                gain_ratio: f64::NAN,
-                accepted: false,
-                gradient_norm: grad_inf,
-                elapsed: clock - start,
-            };
-            records.push(rec);
-            if damping.exhausted() {
-                termination = Some(TerminationReason::SingularSystem);
-            } else if let Some(cb) = callback.as_mut() {
-                if cb(&rec).is_break() {
-                    termination = Some(TerminationReason::UserStop);
-                }
-            }
+            let rec = failed_record(0.0, 0.0, &clock);
+            termination = record_failed_trial(&mut records, rec, &damping, &mut callback);
             continue;
         }
         let alpha = damping.step_length();
         // Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
         // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial.
-        let mut accel_ratio = None;
-        if let Some(ga) = accel {
-            let fd = ga.fd_step;
-            for j in 0..n {
-                x_trial[j] = x[j] + fd * h[j];
-            }
-            let now = Instant::now();
-            timings.linear_solver += now - clock;
-            model
-                .residuals(x_trial, &mut r_probe)
-                .map_err(|source| LmError::Model {
-                    iteration,
-                    stage: EvalStage::Residuals,
-                    source,
-                })?;
-            clock = Instant::now();
-            timings.residuals += clock - now;
+        let mut accelerated = false;
+        if let (Some(ga), Backend::Stored(s)) = (accel, &mut backend) {
+            timings.linear_solver += clock.lap();
+            let ratio = s.accelerate(x, x_trial, h, ga.fd_step, mu, d, iteration)?;
+            timings.residuals += clock.lap();
             residual_evaluations += 1;
-            jac.mul(h, &mut jdir);
-            for i in 0..m {
-                r_probe[i] = (2.0 / fd) * ((r_probe[i] - r[i]) / fd - jdir[i]);
-            }
-            let (a, rhs) = acc.split_at_mut(n);
-            jac.transpose_mul(&r_probe, rhs);
-            // An acceleration that cannot be solved for leaves the plain step (ratio 0).
-            let ratio = if linear.resolve(&jac, mu, d, rhs, a) {
-                let (mut da2, mut dv2) = (0.0, 0.0);
-                for j in 0..n {
-                    da2 += (d[j] * a[j]).powi(2);
-                    dv2 += (d[j] * h[j]).powi(2);
-                }
-                if dv2 > 0.0 {
-                    2.0 * (da2 / dv2).sqrt()
-                } else {
-                    0.0
-                }
-            } else {
-                a.fill(0.0);
-                0.0
-            };
-            accel_ratio = Some(ratio);
+            accelerated = true;
             if !(ratio <= ga.max_ratio) {
                 // The velocity is not to be trusted this far: a rejected trial (the cost at
                 // the step is not evaluated; the damping grows as after a failed step).
-                let now = Instant::now();
-                timings.linear_solver += now - clock;
-                clock = now;
+                timings.linear_solver += clock.lap();
                 rejected_steps += 1;
                 let dv = d
                     .iter()
@@ -381,30 +789,12 @@ pub(crate) fn run<M: Model>(
                         gs: dot(g, h),
                     },
                 );
-                let rec = IterationRecord {
-                    iteration,
-                    cost,
-                    trial_cost: f64::NAN,
-                    damping: mu,
-                    step_length: alpha,
-                    step_norm: norm2(h).sqrt(),
-                    gain_ratio: f64::NAN,
-                    accepted: false,
-                    gradient_norm: grad_inf,
-                    elapsed: clock - start,
-                };
-                records.push(rec);
-                if damping.exhausted() {
-                    termination = Some(TerminationReason::SingularSystem);
-                } else if let Some(cb) = callback.as_mut() {
-                    if cb(&rec).is_break() {
-                        termination = Some(TerminationReason::UserStop);
-                    }
-                }
+                let rec = failed_record(alpha, norm2(h).sqrt(), &clock);
+                termination = record_failed_trial(&mut records, rec, &damping, &mut callback);
                 continue;
             }
             for j in 0..n {
-                h[j] += 0.5 * a[j];
+                h[j] += 0.5 * s.acc[j];
             }
         }
         for j in 0..n {
@@ -428,31 +818,23 @@ pub(crate) fn run<M: Model>(
         }
         // With acceleration the prediction is the linear model's for the velocity (GSL's
         // convention): the acceleration is a correction the model does not see.
-        let (js2, gs) = if accel_ratio.is_some() {
-            let a = &acc[..n];
-            for j in 0..n {
-                wa[j] = step[j] - 0.5 * alpha * a[j];
+        let (js2, gs) = match (&mut backend, accelerated) {
+            (Backend::Stored(s), true) => {
+                for j in 0..n {
+                    wa[j] = step[j] - 0.5 * alpha * s.acc[j];
+                }
+                (s.jac.product_norm2(wa, &mut s.jstep), dot(g, wa))
             }
-            (jac.product_norm2(wa, &mut jstep), dot(g, wa))
-        } else {
-            (jac.product_norm2(step, &mut jstep), dot(g, step))
+            _ => (backend.step_norm2(step, alpha), dot(g, step)),
         };
         let pred = -gs - 0.5 * js2;
 
         // The linear solver's time includes forming the step and its predicted reduction.
-        let now = Instant::now();
-        timings.linear_solver += now - clock;
-        model
-            .residuals(x_trial, &mut r_trial)
-            .map_err(|source| LmError::Model {
-                iteration,
-                stage: EvalStage::Residuals,
-                source,
-            })?;
-        clock = Instant::now();
-        timings.residuals += clock - now;
+        timings.linear_solver += clock.lap();
+        let unmodified = alpha == 1.0 && !clipped && !accelerated;
+        let mut cost_trial = backend.trial_cost(options, x_trial, unmodified, iteration)?;
+        timings.residuals += clock.lap();
         residual_evaluations += 1;
-        let mut cost_trial = options.loss.cost(&r_trial);
         if !cost_trial.is_finite() {
             cost_trial = f64::INFINITY;
         }
@@ -464,25 +846,26 @@ pub(crate) fn run<M: Model>(
         } else {
             -1.0
         };
-        let line = if cubic {
-            let jh2 = if alpha == 1.0 && !clipped {
-                js2
-            } else {
-                jac.mul(h, &mut jdir);
-                norm2(&jdir)
-            };
-            let gh = dot(g, h);
-            LineInfo {
-                f0: 2.0 * cost,
-                slope0: 2.0 * gh,
-                alpha,
-                f_trial: 2.0 * cost_trial,
-                est_sum: 2.0 * cost + 2.0 * gh + jh2,
-                scaled_step: dx2.sqrt(),
-                gs,
+        let line = match (&mut backend, cubic) {
+            (Backend::Stored(s), true) => {
+                let jh2 = if alpha == 1.0 && !clipped {
+                    js2
+                } else {
+                    s.jac.mul(h, &mut s.jdir);
+                    norm2(&s.jdir)
+                };
+                let gh = dot(g, h);
+                LineInfo {
+                    f0: 2.0 * cost,
+                    slope0: 2.0 * gh,
+                    alpha,
+                    f_trial: 2.0 * cost_trial,
+                    est_sum: 2.0 * cost + 2.0 * gh + jh2,
+                    scaled_step: dx2.sqrt(),
+                    gs,
+                }
             }
-        } else {
-            LineInfo {
+            _ => LineInfo {
                 f0: 2.0 * cost,
                 slope0: 0.0,
                 alpha,
@@ -490,19 +873,18 @@ pub(crate) fn run<M: Model>(
                 est_sum: 0.0,
                 scaled_step: dx2.sqrt(),
                 gs,
-            }
+            },
         };
         let cost_before = cost;
         let accept = damping.accepts(rho, cost_trial < cost);
         if accept {
             x.copy_from_slice(x_trial);
-            std::mem::swap(&mut r, &mut r_trial);
             cost = cost_trial;
             need_jac = true;
             // A step below sqrt(eps) of the scaled parameters leaves the Jacobian as it was
             // to about 1e-8: good enough for the statistics (with the plain loss, whose
             // Jacobian is not reweighted).
-            jac_current = !robust && dx2 <= f64::EPSILON * xn2;
+            backend.accept(dx2 <= f64::EPSILON * xn2);
             accepted_steps += 1;
             damping.accepted(rho, line);
         } else {
@@ -519,7 +901,7 @@ pub(crate) fn run<M: Model>(
             gain_ratio: rho,
             accepted: accept,
             gradient_norm: grad_inf,
-            elapsed: clock - start,
+            elapsed: clock.0 - start,
         };
         records.push(rec);
         if cost == 0.0 {
@@ -537,37 +919,44 @@ pub(crate) fn run<M: Model>(
         }
     }
     let termination = termination.unwrap_or(TerminationReason::MaxIterations);
+    let evaporated: Vec<usize> = match watch {
+        Some(e) if jacobian_evaluations > 0 => (0..peak2.len())
+            .filter(|&j| {
+                norms2[j] < e.threshold * peak2[j] && !frozen.get(j).copied().unwrap_or(false)
+            })
+            .collect(),
+        _ => Vec::new(),
+    };
 
-    let statistics = if options.compute_statistics
+    let keep = options.statistics != StatisticsMode::Off
         && n <= options.statistics_max_params
-        && termination != TerminationReason::NonFinite
-    {
-        let t = Instant::now();
-        if !jac_current || any_frozen {
-            model
-                .jacobian(x, &mut jac)
-                .map_err(|source| LmError::Model {
-                    iteration: records.len(),
-                    stage: EvalStage::Jacobian,
-                    source,
-                })?;
-            jacobian_evaluations += 1;
-            if robust {
-                weigh(options, &r, &mut rw, &mut row_scale, Some(&mut jac));
+        && termination != TerminationReason::NonFinite;
+    let statistics = OnceLock::new();
+    let fit = match backend {
+        Backend::Stored(mut s) if keep => {
+            let t = Instant::now();
+            if !s.jac_current || any_frozen {
+                s.model
+                    .jacobian(x, &mut s.jac)
+                    .map_err(model_error(records.len(), EvalStage::Jacobian))?;
+                jacobian_evaluations += 1;
+                if s.robust {
+                    weigh(options, &s.r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+                }
             }
+            let s = *s;
+            let fit = FitAtSolution {
+                jacobian: s.jac,
+                residuals: if s.robust { s.rw } else { s.r },
+                rank_tol: options.rank_tol,
+            };
+            if options.statistics == StatisticsMode::AtEnd {
+                let _ = statistics.set(fit.statistics());
+            }
+            timings.statistics = t.elapsed();
+            Some(Box::new(fit))
         }
-        let rw: &[f64] = if robust { &rw } else { &r };
-        let st = match &jac {
-            Jacobian::Dense(j) => Statistics::from_jacobian(j.as_ref(), rw, options.rank_tol),
-            Jacobian::Sparse(_) => {
-                let dense = jac.to_dense();
-                Statistics::from_jacobian(dense.as_ref(), rw, options.rank_tol)
-            }
-        };
-        timings.statistics = t.elapsed();
-        Some(st)
-    } else {
-        None
+        _ => None,
     };
 
     Ok(Report {
@@ -585,6 +974,9 @@ pub(crate) fn run<M: Model>(
         num_residuals: m,
         damping: options.damping.name(),
         linear_solver: options.linear_solver.name(),
+        evaporated,
+        restarts: 0,
         statistics,
+        fit,
     })
 }

@@ -7,7 +7,7 @@ use std::ops::ControlFlow;
 
 use crate::error::LmError;
 use crate::options::Options;
-use crate::problem::{DenseJacobian, SparseJacobian};
+use crate::problem::{DenseJacobian, NormalEquations, SparseJacobian};
 use crate::report::{IterationRecord, Report};
 
 mod dense_cholesky;
@@ -44,6 +44,12 @@ pub enum LinearSolver {
         /// `sizes[1]` block 1, and so on; parameters after `sum(sizes)` are global.
         local_block_sizes: Vec<usize>,
     },
+    /// The problem solves its own damped normal equations: required by, and only by,
+    /// [`NormalEquations`](crate::NormalEquations) problems ([`minimize_normal`]).
+    Supplied {
+        /// What the problem's solver is, for reports.
+        name: &'static str,
+    },
 }
 
 impl LinearSolver {
@@ -54,6 +60,7 @@ impl LinearSolver {
             LinearSolver::DenseCholesky => "dense Cholesky",
             LinearSolver::SparseCholesky => "sparse Cholesky",
             LinearSolver::Schur { .. } => "Schur complement",
+            LinearSolver::Supplied { name } => name,
         }
     }
 
@@ -216,7 +223,17 @@ impl<'a> Solver<'a> {
     ) -> Result<Report, LmError> {
         let mut model = DenseModel::new(problem);
         let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
-        engine::run(&mut model, x, &self.options, cb)
+        engine::run_stored(&mut model, x, &self.options, cb)
+    }
+
+    /// Minimises a problem that forms its own normal equations. See [`minimize_normal`].
+    pub fn minimize_normal<P: NormalEquations>(
+        &mut self,
+        problem: &mut P,
+        x: &mut [f64],
+    ) -> Result<Report, LmError> {
+        let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
+        engine::run(engine::Backend::normal(problem), x, &self.options, cb)
     }
 
     /// Minimises a problem with a sparse Jacobian. See [`minimize_sparse`].
@@ -227,7 +244,7 @@ impl<'a> Solver<'a> {
     ) -> Result<Report, LmError> {
         let mut model = SparseModel::new(problem);
         let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
-        engine::run(&mut model, x, &self.options, cb)
+        engine::run_stored(&mut model, x, &self.options, cb)
     }
 }
 
@@ -244,7 +261,7 @@ pub fn minimize<P: DenseJacobian + ?Sized>(
     options: &Options,
 ) -> Result<Report, LmError> {
     let mut model = DenseModel::new(problem);
-    engine::run(&mut model, x, options, None)
+    engine::run_stored(&mut model, x, options, None)
 }
 
 /// Minimises `0.5 * sum_i rho(r_i(x)^2)` for a problem with a sparse Jacobian.
@@ -257,7 +274,74 @@ pub fn minimize_sparse<P: SparseJacobian + ?Sized>(
     options: &Options,
 ) -> Result<Report, LmError> {
     let mut model = SparseModel::new(problem);
-    engine::run(&mut model, x, options, None)
+    engine::run_stored(&mut model, x, options, None)
+}
+
+/// Minimises `0.5 * sum_i r_i(x)^2` for a problem that forms and solves its own damped
+/// normal equations ([`NormalEquations`]): the same iteration, stopping tests and report as
+/// [`minimize`], with the options [`Options::validate_normal`] accepts (start from
+/// [`Options::normal_equations`]). The report keeps no Jacobian (no statistics).
+///
+/// ```
+/// use cpm_lm::{minimize_normal, DampedStep, Linearization, ModelError, NormalEquations, Options};
+///
+/// /// r = A x - b with A = [[2, 0], [1, 1], [0, 3]], solved from its normal equations.
+/// struct Small { mu: f64 }
+/// const A: [[f64; 2]; 3] = [[2.0, 0.0], [1.0, 1.0], [0.0, 3.0]];
+/// const B: [f64; 3] = [2.0, 3.0, 6.0];
+/// fn residuals(x: &[f64]) -> [f64; 3] {
+///     std::array::from_fn(|i| A[i][0] * x[0] + A[i][1] * x[1] - B[i])
+/// }
+/// impl NormalEquations for Small {
+///     fn num_params(&self) -> usize { 2 }
+///     fn num_residuals(&self) -> usize { 3 }
+///     fn cost(&mut self, x: &[f64]) -> Result<f64, ModelError> {
+///         Ok(0.5 * residuals(x).iter().map(|r| r * r).sum::<f64>())
+///     }
+///     fn assemble(&mut self, x: &[f64], mu: f64, d: &mut [f64], lin: Option<Linearization<'_>>)
+///         -> Result<f64, ModelError> {
+///         if let Some(lin) = lin {
+///             let r = residuals(x);
+///             for j in 0..2 {
+///                 lin.gradient[j] = (0..3).map(|i| A[i][j] * r[i]).sum();
+///                 lin.col_norms2[j] = (0..3).map(|i| A[i][j] * A[i][j]).sum();
+///                 lin.scale.apply(&mut d[j], lin.col_norms2[j]);
+///             }
+///         }
+///         self.mu = mu;
+///         self.cost(x)
+///     }
+///     fn solve(&mut self, x: &[f64], d: &[f64], h: &mut [f64])
+///         -> Result<Option<DampedStep>, ModelError> {
+///         let r = residuals(x);
+///         let n = |a: usize, b: usize| (0..3).map(|i| A[i][a] * A[i][b]).sum::<f64>();
+///         let (a, b, c) = (n(0, 0) + self.mu * d[0] * d[0], n(0, 1), n(1, 1) + self.mu * d[1] * d[1]);
+///         let g: Vec<f64> = (0..2).map(|j| (0..3).map(|i| A[i][j] * r[i]).sum()).collect();
+///         let det = a * c - b * b;
+///         h[0] = -(c * g[0] - b * g[1]) / det;
+///         h[1] = -(a * g[1] - b * g[0]) / det;
+///         let jh2 = (0..3).map(|i| (A[i][0] * h[0] + A[i][1] * h[1]).powi(2)).sum();
+///         Ok(Some(DampedStep { jh_norm2: jh2, trial_cost: None }))
+///     }
+/// }
+///
+/// let mut x = [0.0, 0.0];
+/// let report = minimize_normal(&mut Small { mu: 0.0 }, &mut x, &Options::normal_equations())?;
+/// assert!(report.was_successful(), "{report:#}");
+/// assert_eq!(report.damping, "Gauss-Newton, then Nielsen");
+/// // The least-squares solution of A x = b.
+/// assert!((x[0] - 1.0).abs() < 1e-12 && (x[1] - 2.0).abs() < 1e-12, "{x:?}");
+/// assert!(report.statistics().is_none());
+/// // Options such a problem cannot serve are refused.
+/// assert!(minimize_normal(&mut Small { mu: 0.0 }, &mut x, &Options::default()).is_err());
+/// # Ok::<(), cpm_lm::LmError>(())
+/// ```
+pub fn minimize_normal<P: NormalEquations>(
+    problem: &mut P,
+    x: &mut [f64],
+    options: &Options,
+) -> Result<Report, LmError> {
+    engine::run(engine::Backend::normal(problem), x, options, None)
 }
 
 #[cfg(test)]

@@ -19,7 +19,7 @@ pub fn schur_options(blocks: usize, damping: Damping) -> Options {
         linear_solver: LinearSolver::Schur {
             local_block_sizes: vec![LOCAL; blocks],
         },
-        compute_statistics: false,
+        statistics: cpm_lm::StatisticsMode::Off,
         ..Options::default()
     }
 }
