@@ -29,7 +29,7 @@ print("outputs in", OUT)
 
 # %%
 paper = cpm.identifiability(EXAMPLES / "paper_cubic.toml", circle=True)
-print(f"the paper's circle: rank {paper['rank']} of {paper['num_params']}")
+print(f"the paper's circle: rank {paper['rank']} of {paper['parameters']}")
 for b in paper["blind_directions"][:3]:
     print("  blind:", b)
 
@@ -93,4 +93,4 @@ commands = cpm.compensate(OUT / "refined" / "calibrated.toml", EXAMPLES / "targe
 print(commands, commands.readings[:2])
 hal = cpm.export(OUT / "refined" / "calibrated.toml", format="linuxcnc",
                  ini=OUT / "joints.ini")
-print(hal.splitlines()[0])
+print(next(line for line in hal.splitlines() if line.startswith("setp")))

@@ -65,7 +65,12 @@ def _argv(command: str, scratch: Scratch, options: Dict[str, Any]) -> List[str]:
             value = [f"{k}=" + ",".join(repr(float(v)) for v in np.atleast_1d(vs))
                      for k, vs in value.items()]
         if isinstance(value, (list, tuple, np.ndarray)):
-            items = [_text(v) for v in value]
+            items = []
+            for v in value:
+                if isinstance(v, Measurements):
+                    items += v._cli_paths(scratch)
+                else:
+                    items.append(_text(v))
             if key in _JOINED:
                 argv += [flag, ",".join(items) if items else "none"]
             else:
@@ -82,6 +87,18 @@ def _text(v: Any) -> str:
     if isinstance(v, os.PathLike):
         return os.fspath(v)
     return str(v)
+
+
+def _data(data: Any, robot: Robot) -> Any:
+    """Measurements for ``--data``: paths go to the command as they are (it reads them, with
+    its checks and errors); arrays and tables were read into :class:`Measurements`."""
+    if isinstance(data, (str, os.PathLike, Measurements)):
+        return [data]
+    if isinstance(data, (list, tuple)):
+        if not data:
+            raise UsageError("data: no measurements")
+        return list(data)
+    return [as_measurements(data, robot)]
 
 
 def _run(argv: List[str], scratch: Scratch) -> Tuple[str, Optional[str]]:
@@ -289,10 +306,7 @@ def calibrate(
     and a :class:`cpm.CpmWarning` (the command's exit code 1)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        m = as_measurements(data, r)
-        if not m.sources:
-            raise UsageError("data: no measurements")
-        opts: Dict[str, Any] = dict(robot=r, data=m, effects=effects, sigma_um=sigma_um,
+        opts: Dict[str, Any] = dict(robot=r, data=_data(data, r), effects=effects, sigma_um=sigma_um,
                                     robust=robust)
         opts.update(options)
         commit = out is not None
@@ -345,9 +359,8 @@ def refine(robot: Union[Robot, PathLike], data: Any, *, out: Optional[PathLike] 
     ``pose_map_degree``, ``sigma_um``, ``robust``, ...)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        m = as_measurements(data, r)
         d = _out_dir(out, scratch, "refined")
-        _, trouble = _run(_argv("refine", scratch, dict(robot=r, data=m, out=d, json=True,
+        _, trouble = _run(_argv("refine", scratch, dict(robot=r, data=_data(data, r), out=d, json=True,
                                                          **options)), scratch)
         files = _read_dir(d)
     return RefineResult(files, trouble)
@@ -398,7 +411,7 @@ def validate(robot: Optional[Union[Robot, PathLike]], reference: Union[Robot, Pa
     ref = _robot(reference)
     rob = None if robot is None else _robot(robot)
     with Scratch() as scratch:
-        m = None if data is None else as_measurements(data, rob if rob is not None else ref)
+        m = None if data is None else _data(data, rob if rob is not None else ref)
         d = _out_dir(out, scratch, "validation")
         opts: Dict[str, Any] = dict(robot=rob, reference=ref, data=m, out=d, json=True)
         opts.update(options)
@@ -519,7 +532,7 @@ def identifiability(robot: Union[Robot, PathLike], data: Any = None,
     ``random``)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        m = None if data is None else as_measurements(data, r)
+        m = None if data is None else _data(data, r)
         if options.get("plan") is not None:
             options["plan"] = _poses_file(options["plan"], scratch)
         text, _ = _run(_argv("identifiability", scratch, dict(robot=r, data=m, json=True,

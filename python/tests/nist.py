@@ -212,10 +212,12 @@ def problem(d: Dataset) -> Tuple[Callable, Callable]:
     y = np.log(d.y) if d.name == "Nelson" else d.y
 
     def fun(b):
-        return model(np.asarray(b), d.x)[0] - y
+        with np.errstate(all="ignore"):  # solvers try wild steps; inf/nan are their business
+            return model(np.asarray(b), d.x)[0] - y
 
     def jac(b):
-        return model(np.asarray(b), d.x)[1]
+        with np.errstate(all="ignore"):
+            return model(np.asarray(b), d.x)[1]
 
     return fun, jac
 

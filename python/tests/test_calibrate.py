@@ -1,6 +1,7 @@
 """cpm.calibrate: the same numbers as `cpm calibrate`, the result's fields, the report in
 HTML, the GIL released during the fit."""
 import json
+import re
 import math
 import subprocess
 import threading
@@ -31,8 +32,16 @@ def _numbers(a, b, path=""):
             yield from _numbers(x, y, f"{path}[{i}]")
     elif isinstance(a, (int, float)) and not isinstance(a, bool):
         yield path, float(a), float(b)
+    elif isinstance(a, str) and isinstance(b, str):
+        assert _untimed(a) == _untimed(b), f"{path}: {a!r} != {b!r}"
     else:
         assert a == b, f"{path}: {a!r} != {b!r}"
+
+
+def _untimed(text):
+    """Text with the solver's wall-clock times (``5.46ms``) left out: they differ run to
+    run."""
+    return re.sub(r"\d+(\.\d+)?\s?(ms|µs|us|ns|s)\b", "<time>", text)
 
 
 CASES = [
@@ -71,11 +80,10 @@ def test_python_calibrate_equals_cpm_calibrate(in_root, tmp_path, cpm_bin, name,
     assert count > 50, count  # the comparison saw the estimates, not an empty document
     # The calibrated description and the report are the command's, byte for byte.
     assert res.text("calibrated.toml") == (out / "calibrated.toml").read_text()
-    assert res.markdown == (out / "report.md").read_text()
-    # The arrays are calibration.json's numbers.
-    det = res.determined
-    ests = [v for v in res.estimates_um[det]]
-    assert len(ests) == int(det.sum()) > 0
+    assert _untimed(res.markdown) == _untimed((out / "report.md").read_text())
+    # The arrays say what calibration.json says: the parameters not determined.
+    assert len(cli["not_determined"]) == int((~res.determined).sum())
+    assert np.all(np.isnan(res.estimates_um[~res.determined]))
 
 
 @pytest.fixture(scope="module")
@@ -159,7 +167,7 @@ def test_sigma_and_robust_reach_the_fit(in_root):
 
 def test_gil_is_released_during_the_fit(in_root, tmp_path):
     # A campaign big enough that the fit takes a while (simulated).
-    data = cpm.simulate("examples/hexapod_66.toml", random=400, truth=
+    data = cpm.simulate("examples/hexapod_66.toml", random=1000, truth=
                         "examples/hexapod_66_truth.toml", noise="gaussian:1", seed=5)
     stamps = []
     stop = threading.Event()

@@ -41,14 +41,14 @@ def test_design_then_identify(in_root, tmp_path):
     assert len(r.sensor_names) >= 1 and d.poses.shape[1] == 6 and len(d.poses) >= 1
     assert "<svg" in d.html or "<table>" in d.html
     ident = cpm.identifiability(r, plan=d.poses)
-    assert ident["num_params"] == 36
+    assert ident["parameters"] == 36
     mem = cpm.design(HEX, readings=120)
     assert mem.directory is None and mem.robot.sensor_names == r.sensor_names
 
 
 def test_identifiability_of_the_paper_circle(in_root):
     j = cpm.identifiability(CUBE, circle=True)
-    assert j["rank"] < j["num_params"] == 36
+    assert j["rank"] < j["parameters"] == 36
     assert j["blind_directions"]
 
 

@@ -20,7 +20,7 @@ def test_hexapod_properties():
     assert r.home.shape == (6,) and r.home[2] > 0
     assert r.file == str(HEXAPOD) and r.path == HEXAPOD
     d = r.description
-    assert len(d["links"]) == 6 and d["links"][0]["base_mm"] == list(r.links[0]["base_mm"])
+    assert len(d["link"]) == 6 and d["link"][0]["base_mm"] == list(r.links[0]["base_mm"])
 
 
 def test_round_trip_through_text():

@@ -115,8 +115,7 @@ fn options(
     x_scale: &str,
     acceleration: bool,
 ) -> PyResult<Options> {
-    let mut o = Options::default();
-    o.loss = match loss {
+    let loss = match loss {
         "linear" => Loss::Squared,
         "huber" => Loss::Huber(f_scale),
         "cauchy" => Loss::Cauchy(f_scale),
@@ -128,7 +127,7 @@ fn options(
             ))
         }
     };
-    o.damping = match damping {
+    let damping = match damping {
         "trust-region" => Damping::TrustRegion,
         "nielsen" => Damping::Nielsen,
         "marquardt" => Damping::Marquardt,
@@ -142,7 +141,7 @@ fn options(
             ))
         }
     };
-    o.scaling = match x_scale {
+    let scaling = match x_scale {
         "jac" => Scaling::Marquardt,
         "identity" => Scaling::Identity,
         other => {
@@ -152,26 +151,21 @@ fn options(
             ))
         }
     };
-    if let Some(v) = ftol {
-        o.ftol = v;
-    }
-    if let Some(v) = xtol {
-        o.xtol = v;
-    }
-    if let Some(v) = gtol {
-        o.gtol = v;
-    }
-    if let Some(v) = max_nfev {
-        o.max_evaluations = v;
-    }
-    if let Some(v) = max_iterations {
-        o.max_iterations = v;
-    }
-    o.lower = lower;
-    o.upper = upper;
-    if acceleration {
-        o.acceleration = Some(GeodesicAcceleration::default());
-    }
+    let d = Options::default();
+    let o = Options {
+        loss,
+        damping,
+        scaling,
+        ftol: ftol.unwrap_or(d.ftol),
+        xtol: xtol.unwrap_or(d.xtol),
+        gtol: gtol.unwrap_or(d.gtol),
+        max_evaluations: max_nfev.unwrap_or(d.max_evaluations),
+        max_iterations: max_iterations.unwrap_or(d.max_iterations),
+        lower,
+        upper,
+        acceleration: acceleration.then(GeodesicAcceleration::default),
+        ..d
+    };
     o.validate()
         .map_err(|e| crate::errors::usage(py, e.to_string()))?;
     Ok(o)
