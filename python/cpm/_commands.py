@@ -1,5 +1,10 @@
 """The commands of ``cpm`` (``docs/cli.md``) as functions.
 
+Interrupting (Ctrl-C) raises ``KeyboardInterrupt`` at once, but the command's work cannot be
+stopped from outside: it finishes in the background, and a command given ``out=`` still
+commits its outputs there when it finishes (all or nothing), as the command would have;
+:func:`calibrate` is the exception and writes nothing once interrupted.
+
 Keyword arguments are the command's options with ``_`` for ``-`` (``sigma_um=1`` is
 ``--sigma-um 1``, ``from_home=True`` is ``--from-home``, a list repeats an option); the
 command's own parser reads them, so names, defaults and errors are the command's. Robots and
@@ -299,8 +304,9 @@ def calibrate(
     ``robust="huber:K"`` (``cauchy:K``, ``tukey:K``), ``sigma_um`` (the sensor noise), and the
     other options of the command by name (``pose_sigma_um``, ``orientation_sigma_urad``,
     ``minimum_norm``, ``max_iterations``, ``formulation``). With ``out`` the outputs are written
-    there as the command writes them. The GIL is released during the fit; Ctrl-C interrupts
-    the wait (the fit finishes in the background; nothing is written).
+    there as the command writes them. The GIL is released during the fit; Ctrl-C raises
+    ``KeyboardInterrupt`` at once (the fit itself finishes in the background and is dropped;
+    nothing is written).
 
     A fit that did not converge (or a robust fit that failed) is returned with ``trouble`` set
     and a :class:`cpm.CpmWarning` (the command's exit code 1)."""

@@ -193,3 +193,30 @@ def test_gil_is_released_during_the_fit(in_root, tmp_path):
     # Held, the GIL would stop the counting thread for the whole fit; released, it counts on.
     assert gaps.max() < 0.5 * (t1 - t0), (gaps.max(), t1 - t0)
     assert len(inside) > 10
+
+
+def test_ctrl_c_interrupts_a_long_command(in_root, tmp_path):
+    import signal
+
+    data = cpm.simulate("examples/hexapod_66.toml", random=1000,
+                        truth="examples/hexapod_66_truth.toml", noise="gaussian:1", seed=5)
+    t0 = time.perf_counter()
+    cpm.refine("examples/hexapod_66.toml", data)
+    whole = time.perf_counter() - t0
+    assert whole > 0.4, f"refine took only {whole:.2f} s: too short to tell"
+    out = tmp_path / "refined"
+    timer = threading.Timer(0.1, lambda: signal.raise_signal(signal.SIGINT))
+    timer.start()
+    t0 = time.perf_counter()
+    with pytest.raises(KeyboardInterrupt):
+        cpm.refine("examples/hexapod_66.toml", data, out=out)
+    interrupted = time.perf_counter() - t0
+    timer.cancel()
+    # Back at once, long before the command would have finished.
+    assert interrupted < 0.1 + 0.5 * (whole - 0.1), (interrupted, whole)
+    # The command itself cannot be stopped from outside: it finishes in the background and
+    # commits its outputs as it would have (all or nothing), as documented.
+    deadline = time.perf_counter() + 10 * whole + 5
+    while not (out / "refine.json").exists() and time.perf_counter() < deadline:
+        time.sleep(0.05)
+    assert json.loads((out / "refine.json").read_text())

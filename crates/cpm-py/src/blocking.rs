@@ -5,9 +5,12 @@
 //! and checks for signals every 50 ms. On Ctrl-C (or any signal handler that raises) the
 //! exception is raised at once; the worker cannot be stopped from outside (the fits of
 //! cpm-calib take no cancellation callback), so it finishes in the background and its result
-//! is dropped. Nothing is written by an interrupted command: outputs are committed by the
-//! worker only after its work succeeded, all or nothing, as the command does.
-use std::sync::mpsc;
+//! is dropped. The work is told (the flag it gets turns true) and may skip what is left: the
+//! binding's `calibrate` then writes nothing. A command run whole (`run_command`: refine,
+//! design, ...) still commits its outputs to its `--out` when it finishes, all or nothing, as
+//! the command does.
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use pyo3::prelude::*;
@@ -17,12 +20,16 @@ const POLL: Duration = Duration::from_millis(50);
 
 /// Runs `work` on a worker thread with the GIL released; returns its result, raises
 /// `KeyboardInterrupt` (or what a signal handler raised) when interrupted, and a
-/// `cpm.CpmError` when the work panicked.
+/// `cpm.CpmError` when the work panicked. `work` gets a flag that turns true when the caller
+/// was interrupted and no longer waits.
 pub fn run<T, F>(py: Python<'_>, work: F) -> PyResult<T>
 where
     T: Send + 'static,
-    F: FnOnce() -> T + Send + 'static,
+    F: FnOnce(&AtomicBool) -> T + Send + 'static,
 {
+    let abandoned = Arc::new(AtomicBool::new(false));
+    let flag = abandoned.clone();
+    let work = move || work(&flag);
     let (tx, rx) = mpsc::channel();
     std::thread::Builder::new()
         .name("cpm-work".into())
@@ -49,7 +56,12 @@ where
                     format!("internal error in cpm (a bug, please report it): {what}"),
                 ));
             }
-            Err(mpsc::RecvTimeoutError::Timeout) => py.check_signals()?,
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                if let Err(e) = py.check_signals() {
+                    abandoned.store(true, Ordering::SeqCst);
+                    return Err(e);
+                }
+            }
             Err(mpsc::RecvTimeoutError::Disconnected) => {
                 return Err(crate::errors::internal(
                     py,

@@ -39,7 +39,7 @@ type Ran = (String, Option<String>);
 #[pyfunction]
 pub fn run_command(py: Python<'_>, argv: Vec<String>) -> PyResult<Ran> {
     let cli = parse(py, &argv)?;
-    let r = crate::blocking::run(py, move || -> anyhow::Result<Ran> {
+    let r = crate::blocking::run(py, move |_| -> anyhow::Result<Ran> {
         let mut out: Vec<u8> = Vec::new();
         let outcome = {
             let mut ctx = Ctx::new(&mut out, true);
@@ -90,7 +90,7 @@ pub fn calibrate<'py>(
             "cpm._cpm.calibrate runs `calibrate` only",
         ));
     };
-    let r = crate::blocking::run(py, move || -> anyhow::Result<Fit> {
+    let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Fit> {
         let mut sink: Vec<u8> = Vec::new();
         let ctx = Ctx::new(&mut sink, true);
         let inputs = args.fit.load(&ctx)?;
@@ -119,6 +119,10 @@ pub fn calibrate<'py>(
                 fitted.set.contents(p).map(|b| (name, b.to_vec()))
             })
             .collect();
+        // Interrupted (the caller raised KeyboardInterrupt and left): write nothing.
+        if abandoned.load(std::sync::atomic::Ordering::SeqCst) {
+            anyhow::bail!("interrupted");
+        }
         let written = if commit {
             let inputs_paths: Vec<&Path> = std::iter::once(args.fit.robot.robot.as_path())
                 .chain(args.fit.data.iter().map(|p| p.as_path()))
