@@ -158,11 +158,10 @@ def least_squares(
         raise UsageError("x_scale: 'jac' (Marquardt's scaling) or 1.0 (none); cpm-lm has no "
                          "per-parameter scale")
     lower, upper = _bounds(bounds, n)
-    d = _cpm.least_squares(
-        f, x.tolist(), m, jac=jac_fn, diff=diff, diff_step=diff_step, lower=lower,
-        upper=upper, loss=loss, f_scale=float(f_scale), ftol=ftol, xtol=xtol, gtol=gtol,
-        max_nfev=max_nfev, max_iterations=max_iterations, damping=damping, x_scale=scale,
-        acceleration=bool(acceleration))
+    settings = dict(lower=lower, upper=upper, loss=loss, f_scale=float(f_scale), ftol=ftol,
+                    xtol=xtol, gtol=gtol, max_nfev=max_nfev, max_iterations=max_iterations,
+                    damping=damping, x_scale=scale, acceleration=bool(acceleration))
+    d = _cpm.least_squares(f, x.tolist(), m, jac_fn, diff, diff_step, settings)
     res = LeastSquaresResult(d)
     xs = np.asarray(res["x"], dtype=np.float64)
     res["x"] = xs

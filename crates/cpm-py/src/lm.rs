@@ -98,24 +98,39 @@ impl DenseJacobian for PyProblem {
     }
 }
 
-/// The solver options from the Python layer's normalised arguments.
-#[allow(clippy::too_many_arguments)]
-fn options(
-    py: Python<'_>,
+/// The solver settings, normalised by the Python layer (`cpm/lm.py`), as a dict.
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+pub struct Settings {
     lower: Option<Vec<f64>>,
     upper: Option<Vec<f64>>,
-    loss: &str,
+    loss: String,
     f_scale: f64,
     ftol: Option<f64>,
     xtol: Option<f64>,
     gtol: Option<f64>,
     max_nfev: Option<usize>,
     max_iterations: Option<usize>,
-    damping: &str,
-    x_scale: &str,
+    damping: String,
+    x_scale: String,
     acceleration: bool,
-) -> PyResult<Options> {
-    let loss = match loss {
+}
+
+/// The solver options of the settings.
+fn options(py: Python<'_>, s: Settings) -> PyResult<Options> {
+    let Settings {
+        lower,
+        upper,
+        f_scale,
+        ftol,
+        xtol,
+        gtol,
+        max_nfev,
+        max_iterations,
+        acceleration,
+        ..
+    } = s;
+    let loss = match s.loss.as_str() {
         "linear" => Loss::Squared,
         "huber" => Loss::Huber(f_scale),
         "cauchy" => Loss::Cauchy(f_scale),
@@ -127,7 +142,7 @@ fn options(
             ))
         }
     };
-    let damping = match damping {
+    let damping = match s.damping.as_str() {
         "trust-region" => Damping::TrustRegion,
         "nielsen" => Damping::Nielsen,
         "marquardt" => Damping::Marquardt,
@@ -141,7 +156,7 @@ fn options(
             ))
         }
     };
-    let scaling = match x_scale {
+    let scaling = match s.x_scale.as_str() {
         "jac" => Scaling::Marquardt,
         "identity" => Scaling::Identity,
         other => {
@@ -173,13 +188,10 @@ fn options(
 
 /// Solves `min 0.5 sum rho(f(x)^2)` with cpm-lm. `fun(x) -> (m,)` and `jac(x) -> (m, n)`
 /// must return float64 arrays (the Python layer wraps the user's callables); `jac=None` uses
-/// finite differences (`diff` `"2-point"` forward, `"3-point"` central). Returns a dict of
-/// the solution and the solver's report.
+/// finite differences (`diff` `"2-point"` forward, `"3-point"` central). `settings` is a dict
+/// of the fields of [`Settings`]. Returns a dict of the solution and the solver's report.
 #[pyfunction]
-#[pyo3(signature = (fun, x0, m, jac=None, diff="3-point", diff_step=None, lower=None, upper=None,
-    loss="linear", f_scale=1.0, ftol=None, xtol=None, gtol=None, max_nfev=None,
-    max_iterations=None, damping="trust-region", x_scale="jac", acceleration=false))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (fun, x0, m, jac, diff, diff_step, settings))]
 pub fn least_squares<'py>(
     py: Python<'py>,
     fun: Py<PyAny>,
@@ -188,34 +200,9 @@ pub fn least_squares<'py>(
     jac: Option<Py<PyAny>>,
     diff: &str,
     diff_step: Option<f64>,
-    lower: Option<Vec<f64>>,
-    upper: Option<Vec<f64>>,
-    loss: &str,
-    f_scale: f64,
-    ftol: Option<f64>,
-    xtol: Option<f64>,
-    gtol: Option<f64>,
-    max_nfev: Option<usize>,
-    max_iterations: Option<usize>,
-    damping: &str,
-    x_scale: &str,
-    acceleration: bool,
+    settings: Settings,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let options = options(
-        py,
-        lower,
-        upper,
-        loss,
-        f_scale,
-        ftol,
-        xtol,
-        gtol,
-        max_nfev,
-        max_iterations,
-        damping,
-        x_scale,
-        acceleration,
-    )?;
+    let options = options(py, settings)?;
     let scheme = match diff {
         "2-point" => Difference::Forward,
         "3-point" => Difference::Central,

@@ -43,8 +43,12 @@ pub fn robot_from_text(py: Python<'_>, text: String, name: String) -> PyResult<P
     })
 }
 
-fn rows3<'py>(py: Python<'py>, rows: Vec<[f64; 3]>) -> Bound<'py, PyArray2<f64>> {
-    let v: Vec<Vec<f64>> = rows.into_iter().map(|r| r.to_vec()).collect();
+/// Points as an `(n, 3)` array.
+fn rows3<'py>(py: Python<'py>, rows: impl Iterator<Item = [f64; 3]>) -> Bound<'py, PyArray2<f64>> {
+    let v: Vec<Vec<f64>> = rows.map(|r| r.to_vec()).collect();
+    if v.is_empty() {
+        return PyArray2::zeros(py, [0, 3], false);
+    }
     // Every row has three entries: the conversion cannot fail.
     PyArray2::from_vec2(py, &v).unwrap_or_else(|_| PyArray2::zeros(py, [0, 3], false))
 }
@@ -79,27 +83,14 @@ impl PyRobot {
     /// Base joints in {B}, mm, `(links, 3)` (with `[installation_errors_um]` applied).
     #[getter]
     fn base_joints_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        rows3(
-            py,
-            self.robot
-                .table
-                .links
-                .iter()
-                .map(|l| l.base_mm.into())
-                .collect(),
-        )
+        rows3(py, self.robot.table.links.iter().map(|l| l.base_mm.into()))
     }
     /// Platform joints in {P}, mm, `(links, 3)`.
     #[getter]
     fn platform_joints_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         rows3(
             py,
-            self.robot
-                .table
-                .links
-                .iter()
-                .map(|l| l.platform_mm.into())
-                .collect(),
+            self.robot.table.links.iter().map(|l| l.platform_mm.into()),
         )
     }
     /// Each link's length at reading 0, mm.
@@ -137,12 +128,7 @@ impl PyRobot {
     fn sensor_base_mm<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
         rows3(
             py,
-            self.robot
-                .table
-                .sensors
-                .iter()
-                .map(|s| s.base_mm.into())
-                .collect(),
+            self.robot.table.sensors.iter().map(|s| s.base_mm.into()),
         )
     }
     /// Sensor sockets on the platform, {P}, mm, `(sensors, 3)`.
@@ -154,8 +140,7 @@ impl PyRobot {
                 .table
                 .sensors
                 .iter()
-                .map(|s| s.platform_mm.into())
-                .collect(),
+                .map(|s| s.platform_mm.into()),
         )
     }
     /// The home pose: x, y, z (mm), roll, pitch, yaw (deg).
