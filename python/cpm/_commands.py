@@ -321,7 +321,7 @@ def calibrate(
             opts["effects"] = "none"
         argv = _argv("calibrate", scratch, opts)
         try:
-            d = _cpm.calibrate(argv, commit)
+            d = _cpm.calibrate(argv, commit, dict(scratch.names))
         except CpmError as e:
             raise scratch.fix(e) from None
     result = CalibrationResult(dict(d))

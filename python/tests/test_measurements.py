@@ -176,6 +176,10 @@ def test_tracker_arrays(hexapod, tmp_path):
     np.testing.assert_allclose(m.measured_poses[:, :3], sim.measured_poses[:, :3], atol=1e-9)
     a = cpm.calibrate(hexapod, sim)
     b = cpm.calibrate(hexapod, m)
+    # Tracker files are registered (a frame per file): the result says how.
+    assert a.registration is not None and len(a.registration["sessions"]) == 1
+    assert b.registration is not None and b.registration["sessions"][0]["file"] == \
+        "tracker measurements"
     np.testing.assert_allclose(b.estimates_um, a.estimates_um, atol=1e-6, equal_nan=True)
     with pytest.raises(cpm.UsageError, match=r"poses has shape \(12, 6\), expected \(n, 7\)"):
         cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q[:, :3]]))

@@ -11,6 +11,7 @@
 //! [`cpm::cli::calibrate::fit_with`]) and also hands back the calibration itself: estimates,
 //! standard deviations, the Cramér-Rao covariance, identifiability, residuals, and every staged
 //! output file (`calibration.json`, `report.md`, `report.html`, `calibrated.toml`, figures).
+use std::collections::HashMap;
 use std::path::Path;
 
 use clap::Parser;
@@ -73,15 +74,37 @@ struct Fit {
     origins: Vec<Option<(String, usize, String)>>,
 }
 
+/// Puts back the names that scratch files stand for (measurements made from arrays, a robot
+/// made from text) wherever the inputs name their files, so that the outputs say
+/// `tracker measurements`, not a temporary path.
+fn rename(inputs: &mut cal_cli::Inputs, names: &HashMap<String, String>) {
+    let name = |f: &mut String| {
+        if let Some(n) = names.get(f.as_str()) {
+            *f = n.clone();
+        }
+    };
+    name(&mut inputs.provenance.robot);
+    name(&mut inputs.robot.file);
+    inputs.provenance.data.iter_mut().for_each(name);
+    let m = &mut inputs.merged;
+    m.pose_origin.iter_mut().for_each(|o| name(&mut o.0));
+    m.reading_origin.iter_mut().for_each(|o| name(&mut o.0));
+    if let Some(r) = m.registration.as_mut() {
+        r.sessions.iter_mut().for_each(|s| name(&mut s.file));
+    }
+}
+
 /// Runs `cpm calibrate` from an argument vector (`["calibrate", "--robot", ...]`); when
 /// `commit` is true the outputs are written to `--out` as the command writes them (all or
-/// nothing), otherwise only staged in memory. Returns a dict: the calibration's numbers as
-/// numpy arrays, `files` (name -> bytes of every output), `warnings`, `trouble`.
+/// nothing), otherwise only staged in memory. `names` maps scratch files to the names they
+/// stand for (see [`rename`]). Returns a dict: the calibration's numbers as numpy arrays,
+/// `files` (name -> bytes of every output), `warnings`, `trouble`.
 #[pyfunction]
 pub fn calibrate<'py>(
     py: Python<'py>,
     argv: Vec<String>,
     commit: bool,
+    names: HashMap<String, String>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let cli = parse(py, &argv)?;
     let Command::Calibrate(args) = cli.command else {
@@ -93,7 +116,8 @@ pub fn calibrate<'py>(
     let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Fit> {
         let mut sink: Vec<u8> = Vec::new();
         let ctx = Ctx::new(&mut sink, true);
-        let inputs = args.fit.load(&ctx)?;
+        let mut inputs = args.fit.load(&ctx)?;
+        rename(&mut inputs, &names);
         let dir = &args.fit.out;
         let fitted = cal_cli::fit_with(&inputs, dir, args.minimum_norm, args.formulation)?;
         let cal = fitted.cal;
