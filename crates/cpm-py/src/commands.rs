@@ -1,0 +1,277 @@
+//! The commands of `cpm` for Python.
+//!
+//! Every command's arguments are parsed from an argument vector by the command's own parser
+//! ([`cpm::cli::Cli`]): the Python layer turns keyword arguments into `--option value`, so the
+//! options, their defaults and their usage errors are exactly the command's, and an option
+//! added to the command is there in Python too.
+//!
+//! [`run_command`] runs any command as `cpm` does (its outputs go where `--out` says; the
+//! Python layer gives a scratch directory when the caller gave none and reads them back).
+//! [`calibrate`] runs the fit of `cpm calibrate` ([`cpm::cli::calibrate::FitArgs::load`] and
+//! [`cpm::cli::calibrate::fit_with`]) and also hands back the calibration itself: estimates,
+//! standard deviations, the Cramér-Rao covariance, identifiability, residuals, and every staged
+//! output file (`calibration.json`, `report.md`, `report.html`, `calibrated.toml`, figures).
+use std::collections::HashMap;
+use std::path::Path;
+
+use clap::Parser;
+use cpm::cli::{self, calibrate as cal_cli, common, Cli, Command, Ctx, Outcome};
+use numpy::{PyArray1, PyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Parses an argument vector (without the program name) with the command's parser.
+fn parse(py: Python<'_>, argv: &[String]) -> PyResult<Cli> {
+    let args = std::iter::once("cpm".to_string()).chain(argv.iter().cloned());
+    Cli::try_parse_from(args).map_err(|e| {
+        let text = e.render().to_string();
+        crate::errors::usage(py, text.trim_end().trim_start_matches("error: "))
+    })
+}
+
+/// What a command gave back: what it printed, and its trouble (exit code 1 with outputs
+/// written) if any.
+type Ran = (String, Option<String>);
+
+/// Runs a `cpm` command given as an argument vector (`["simulate", "--robot", ...]`),
+/// exactly as the command line does, with the GIL released. Returns what it printed on
+/// standard output and, when it finished but reports trouble (the command's exit code 1, its
+/// outputs written), the message. `--quiet` is implied (no progress display, no notes).
+#[pyfunction]
+pub fn run_command(py: Python<'_>, argv: Vec<String>) -> PyResult<Ran> {
+    let cli = parse(py, &argv)?;
+    let r = crate::blocking::run(py, move |_| -> anyhow::Result<Ran> {
+        let mut out: Vec<u8> = Vec::new();
+        let outcome = {
+            let mut ctx = Ctx::new(&mut out, true);
+            let r = cli::execute(&cli, &mut ctx);
+            ctx.finish();
+            r
+        }?;
+        let text = String::from_utf8_lossy(&out).to_string();
+        Ok(match outcome {
+            Outcome::Done => (text, None),
+            Outcome::Trouble(m) => (text, Some(m)),
+        })
+    })?;
+    r.map_err(|e| crate::errors::to_py(py, &e))
+}
+
+/// The names of the effects `--effects` knows (the library's, without pose map terms).
+#[pyfunction]
+pub fn effect_names() -> Vec<&'static str> {
+    cpm_calib::Effect::ALL.iter().map(|e| e.name()).collect()
+}
+
+/// Everything a fit gives, plain data (built on the worker thread).
+struct Fit {
+    cal: cpm_calib::Calibration,
+    names: Vec<String>,
+    warnings: Vec<String>,
+    trouble: Option<String>,
+    files: Vec<(String, Vec<u8>)>,
+    written: Vec<String>,
+    origins: Vec<Option<(String, usize, String)>>,
+}
+
+/// Puts back the names that scratch files stand for (measurements made from arrays, a robot
+/// made from text) wherever the inputs name their files, so that the outputs say
+/// `tracker measurements`, not a temporary path.
+fn rename(inputs: &mut cal_cli::Inputs, names: &HashMap<String, String>) {
+    let name = |f: &mut String| {
+        if let Some(n) = names.get(f.as_str()) {
+            *f = n.clone();
+        }
+    };
+    name(&mut inputs.provenance.robot);
+    name(&mut inputs.robot.file);
+    inputs.provenance.data.iter_mut().for_each(name);
+    let m = &mut inputs.merged;
+    m.pose_origin.iter_mut().for_each(|o| name(&mut o.0));
+    m.reading_origin.iter_mut().for_each(|o| name(&mut o.0));
+    if let Some(r) = m.registration.as_mut() {
+        r.sessions.iter_mut().for_each(|s| name(&mut s.file));
+    }
+}
+
+/// Runs `cpm calibrate` from an argument vector (`["calibrate", "--robot", ...]`); when
+/// `commit` is true the outputs are written to `--out` as the command writes them (all or
+/// nothing), otherwise only staged in memory. `names` maps scratch files to the names they
+/// stand for (see [`rename`]). Returns a dict: the calibration's numbers as numpy arrays,
+/// `files` (name -> bytes of every output), `warnings`, `trouble`.
+#[pyfunction]
+pub fn calibrate<'py>(
+    py: Python<'py>,
+    argv: Vec<String>,
+    commit: bool,
+    names: HashMap<String, String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let cli = parse(py, &argv)?;
+    let Command::Calibrate(args) = cli.command else {
+        return Err(crate::errors::usage(
+            py,
+            "cpm._cpm.calibrate runs `calibrate` only",
+        ));
+    };
+    let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Fit> {
+        let mut sink: Vec<u8> = Vec::new();
+        let ctx = Ctx::new(&mut sink, true);
+        let mut inputs = args.fit.load(&ctx)?;
+        rename(&mut inputs, &names);
+        let dir = &args.fit.out;
+        let fitted = cal_cli::fit_with(&inputs, dir, args.minimum_norm, args.formulation)?;
+        let cal = fitted.cal;
+        let warnings = cal_cli::warnings(&inputs.model, &cal)
+            .into_iter()
+            .map(|w| w.replace("**", ""))
+            .collect();
+        let trouble = if let Some(why) = cal.robust_failure() {
+            Some(format!("the fit failed: {why}"))
+        } else if !cal.solver.was_successful() {
+            Some(format!(
+                "the solver did not converge ({})",
+                cal.solver.termination
+            ))
+        } else {
+            None
+        };
+        let files: Vec<(String, Vec<u8>)> = fitted
+            .set
+            .paths()
+            .filter_map(|p| {
+                let name = p.strip_prefix(dir).unwrap_or(p).display().to_string();
+                fitted.set.contents(p).map(|b| (name, b.to_vec()))
+            })
+            .collect();
+        // Interrupted (the caller raised KeyboardInterrupt and left): write nothing.
+        if abandoned.load(std::sync::atomic::Ordering::SeqCst) {
+            anyhow::bail!("interrupted");
+        }
+        let written = if commit {
+            let inputs_paths: Vec<&Path> = std::iter::once(args.fit.robot.robot.as_path())
+                .chain(args.fit.data.iter().map(|p| p.as_path()))
+                .collect();
+            common::commit_dir(fitted.set, dir, &inputs_paths, "calibrate", &ctx)?
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let origins = (0..cal.residuals_um.len())
+            .map(|k| {
+                cal_cli::observation_origin(&inputs.robot, &inputs.merged, k)
+                    .map(|o| (o.file, o.line, o.what))
+            })
+            .collect();
+        Ok(Fit {
+            names: inputs.model.parameter_names(),
+            cal,
+            warnings,
+            trouble,
+            files,
+            written,
+            origins,
+        })
+    })?;
+    let fit = r.map_err(|e| crate::errors::to_py(py, &e))?;
+    fit_dict(py, fit)
+}
+
+fn opt_array<'py>(py: Python<'py>, v: &[Option<f64>]) -> Bound<'py, PyArray1<f64>> {
+    PyArray1::from_iter(py, v.iter().map(|x| x.unwrap_or(f64::NAN)))
+}
+
+/// The fit as a dict for the Python layer.
+fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
+    let cal = &fit.cal;
+    let id = &cal.identifiability;
+    let d = PyDict::new(py);
+    let np = id.num_params;
+    d.set_item("parameter_names", fit.names)?;
+    d.set_item("estimates_um", opt_array(py, &cal.estimate_um))?;
+    d.set_item("std_um", opt_array(py, &cal.std_um))?;
+    d.set_item(
+        "minimum_norm_um",
+        PyArray1::from_slice(py, &cal.minimum_norm_um),
+    )?;
+    // The Cramér-Rao covariance the standard deviations come from:
+    // sigma^2 V_r S_r^-2 V_r^T over the identifiable subspace (um^2); its diagonal is
+    // std_um^2 for the determined parameters. Rows and columns of parameters the data do
+    // not determine on their own are NaN (their variance is not defined).
+    let mut cov = vec![vec![0.0; np]; np];
+    for (i, row) in cov.iter_mut().enumerate() {
+        for (j, c) in row.iter_mut().enumerate() {
+            *c = if id.determined[i] && id.determined[j] {
+                (0..id.rank)
+                    .map(|k| id.v[(i, k)] * id.v[(j, k)] / (id.singular_values[k].powi(2)))
+                    .sum::<f64>()
+                    * cal.sigma_um.powi(2)
+            } else {
+                f64::NAN
+            };
+        }
+    }
+    d.set_item(
+        "covariance",
+        if np == 0 {
+            PyArray2::zeros(py, [0, 0], false)
+        } else {
+            PyArray2::from_vec2(py, &cov).map_err(|e| crate::errors::internal(py, e.to_string()))?
+        },
+    )?;
+    d.set_item("determined", id.determined.clone())?;
+    d.set_item("rank", id.rank)?;
+    d.set_item("num_params", np)?;
+    d.set_item("rank_rtol", id.rank_rtol)?;
+    d.set_item(
+        "singular_values",
+        PyArray1::from_slice(py, &id.singular_values),
+    )?;
+    d.set_item(
+        "blind_directions",
+        id.blind_directions
+            .iter()
+            .map(|b| (b.description.clone(), b.dimensions))
+            .collect::<Vec<_>>(),
+    )?;
+    d.set_item(
+        "unexplained_null_dimensions",
+        id.unexplained_null_dimensions,
+    )?;
+    d.set_item("identifiability_summary", id.summary())?;
+    d.set_item("residuals_um", PyArray1::from_slice(py, &cal.residuals_um))?;
+    d.set_item("observation_origin", fit.origins)?;
+    d.set_item("outliers", cal.outliers.clone())?;
+    d.set_item("sigma_um", cal.sigma_um)?;
+    d.set_item("sigma_estimated", cal.sigma_estimated)?;
+    d.set_item("residual_rms_um", cal.residual_rms_um)?;
+    d.set_item("initial_rms_um", cal.initial_rms_um)?;
+    d.set_item("simulated", cal.simulated)?;
+    d.set_item("converged", cal.solver.was_successful())?;
+    d.set_item("termination", cal.solver.termination.to_string())?;
+    d.set_item("solver", cal.solver.brief())?;
+    d.set_item("iterations", cal.solver.num_iterations())?;
+    d.set_item("downweighted_share", cal.downweighted_share)?;
+    d.set_item("robust_failed", cal.robust_failed)?;
+    d.set_item("warnings", fit.warnings)?;
+    d.set_item("trouble", fit.trouble)?;
+    let files = PyDict::new(py);
+    for (name, bytes) in fit.files {
+        files.set_item(name, pyo3::types::PyBytes::new(py, &bytes))?;
+    }
+    d.set_item("files", files)?;
+    d.set_item("written", fit.written)?;
+    Ok(d)
+}
+
+/// Renders Markdown as the self-contained HTML page of `report.html` ([`cpm::html::render`]),
+/// inlining the SVG figures of `svgs` (image name -> SVG text).
+#[pyfunction]
+pub fn render_html(
+    title: &str,
+    markdown: &str,
+    svgs: std::collections::HashMap<String, String>,
+) -> String {
+    cpm::html::render(title, markdown, |name| svgs.get(name).cloned())
+}

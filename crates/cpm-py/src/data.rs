@@ -1,0 +1,297 @@
+//! Measurements for Python: files read by the readers of `cpm` (same checks, same
+//! `file:line: field` errors), and numpy arrays written as the same CSV formats so that they
+//! pass through the very same readers.
+//!
+//! Numbers are written with Rust's shortest round-trip formatting, so the reader gets back
+//! every `f64` exactly.
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use cpm_io::{DataFile, FileKind, ReadOptions};
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::robot::PyRobot;
+
+/// The read options of `cpm calibrate` for a robot and its declared effects.
+fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<ReadOptions> {
+    let effects = robot
+        .robot
+        .declared_effects()
+        .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
+    Ok(cpm::cli::common::read_options(&robot.robot.model(&effects)))
+}
+
+/// What a measurement file holds, as a dict of plain values and numpy arrays.
+fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let c = &f.campaign;
+    d.set_item("file", &f.file)?;
+    d.set_item(
+        "kind",
+        match f.kind {
+            FileKind::Readings => "gauge",
+            FileKind::PoseMeasurements => "tracker",
+            FileKind::Poses => "poses",
+        },
+    )?;
+    d.set_item("simulated", c.simulated)?;
+    let pose_row = |p: &cpm::geometry::Pose| {
+        let r = p.rpy_deg();
+        vec![
+            p.position_mm.x,
+            p.position_mm.y,
+            p.position_mm.z,
+            r[0],
+            r[1],
+            r[2],
+        ]
+    };
+    let poses: Vec<Vec<f64>> = c.poses.iter().map(pose_row).collect();
+    d.set_item("poses", array2(py, &poses, 6)?)?;
+    d.set_item("pose_labels", f.pose_labels.clone())?;
+    d.set_item("pose_lines", f.pose_lines.clone())?;
+    let names = &robot.robot.table.sensors;
+    d.set_item(
+        "reading_pose",
+        PyArray1::from_iter(py, c.readings.iter().map(|r| r.pose as i64)),
+    )?;
+    d.set_item(
+        "reading_sensor",
+        c.readings
+            .iter()
+            .map(|r| names.get(r.sensor).map_or("?", |s| s.name.as_str()))
+            .collect::<Vec<_>>(),
+    )?;
+    d.set_item(
+        "lengths_mm",
+        PyArray1::from_iter(py, c.readings.iter().map(|r| r.length_mm)),
+    )?;
+    d.set_item("reading_lines", f.reading_lines.clone())?;
+    d.set_item(
+        "time_s",
+        PyArray1::from_iter(py, c.readings.iter().map(|r| r.time_s.unwrap_or(f64::NAN))),
+    )?;
+    d.set_item(
+        "temperature_c",
+        PyArray1::from_iter(
+            py,
+            c.readings
+                .iter()
+                .map(|r| r.temperature_c.unwrap_or(f64::NAN)),
+        ),
+    )?;
+    match &c.commanded_lengths_mm {
+        Some(l) => d.set_item(
+            "commanded_lengths_mm",
+            array2(py, l, robot.robot.num_links())?,
+        )?,
+        None => d.set_item("commanded_lengths_mm", py.None())?,
+    }
+    let measured: Vec<Vec<f64>> = c
+        .pose_measurements
+        .iter()
+        .map(|m| {
+            let q = m.measured.quaternion();
+            let p = m.measured.position_mm;
+            vec![p.x, p.y, p.z, q[0], q[1], q[2], q[3]]
+        })
+        .collect();
+    d.set_item("measured_poses", array2(py, &measured, 7)?)?;
+    d.set_item(
+        "measured_pose_index",
+        PyArray1::from_iter(py, c.pose_measurements.iter().map(|m| m.pose as i64)),
+    )?;
+    d.set_item(
+        "registration_failure",
+        f.registration.as_ref().and_then(|r| r.failure.clone()),
+    )?;
+    Ok(d)
+}
+
+/// Rows of `width` numbers as an `(n, width)` array (`(0, width)` when empty).
+fn array2<'py>(
+    py: Python<'py>,
+    rows: &[Vec<f64>],
+    width: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    if rows.is_empty() {
+        return Ok(PyArray2::zeros(py, [0, width], false));
+    }
+    PyArray2::from_vec2(py, rows).map_err(|e| crate::errors::internal(py, e.to_string()))
+}
+
+/// Reads a measurement file (gauge readings or tracker poses) against a robot, with the
+/// checks of `cpm calibrate --data` for the robot's declared effects.
+#[pyfunction]
+pub fn read_file<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    robot: &PyRobot,
+) -> PyResult<Bound<'py, PyDict>> {
+    let options = options(py, robot)?;
+    let f = cpm_io::read_data_file(&path, &robot.robot, &options)
+        .map_err(|e| crate::errors::read_to_py(py, e))?;
+    if f.kind == FileKind::Poses {
+        return Err(crate::errors::input(
+            py,
+            format!("{}: a pose list has no measurements", f.file),
+            None,
+        ));
+    }
+    summary(py, &f, robot)
+}
+
+/// Reads measurements from CSV text; `name` stands for the file in messages.
+#[pyfunction]
+pub fn read_text<'py>(
+    py: Python<'py>,
+    text: &str,
+    name: &str,
+    robot: &PyRobot,
+) -> PyResult<Bound<'py, PyDict>> {
+    let options = options(py, robot)?;
+    let f = cpm_io::read_data(text, name, &robot.robot, &options)
+        .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
+    summary(py, &f, robot)
+}
+
+/// Checks that an array has `n` rows (and `cols` columns); a usage error naming it otherwise.
+fn check_shape(
+    py: Python<'_>,
+    what: &str,
+    shape: &[usize],
+    n: usize,
+    cols: Option<usize>,
+) -> PyResult<()> {
+    let ok = shape[0] == n && cols.is_none_or(|c| shape.get(1) == Some(&c));
+    if ok {
+        return Ok(());
+    }
+    let want = match cols {
+        Some(c) => format!("({n}, {c})"),
+        None => format!("({n},)"),
+    };
+    Err(crate::errors::usage(
+        py,
+        format!("{what} has shape {shape:?}, expected {want}"),
+    ))
+}
+
+/// A CSV field: quoted when it holds a comma, a quote or leading/trailing blanks.
+fn field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) || s.trim() != s {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// Optional labels and times, checked against `n` rows.
+fn labels_and_times(
+    py: Python<'_>,
+    n: usize,
+    labels: Option<Vec<String>>,
+    time_s: Option<PyReadonlyArray1<'_, f64>>,
+) -> PyResult<(Vec<String>, Option<Vec<f64>>)> {
+    let labels = match labels {
+        Some(l) => {
+            check_shape(py, "pose_labels", &[l.len()], n, None)?;
+            l
+        }
+        None => (1..=n).map(|k| k.to_string()).collect(),
+    };
+    let times = match time_s {
+        Some(t) => {
+            check_shape(py, "time_s", t.shape(), n, None)?;
+            Some(t.as_array().iter().copied().collect())
+        }
+        None => None,
+    };
+    Ok((labels, times))
+}
+
+/// Gauge readings as the CSV of docs/formats.md ("Length-sensor readings"): one row per
+/// reading, `poses` `(n, 6)` (x, y, z mm; roll, pitch, yaw deg), `sensors` `n` names,
+/// `lengths_mm` `(n,)`; rows with the same label share a pose.
+#[pyfunction]
+#[pyo3(signature = (poses, sensors, lengths_mm, pose_labels=None, time_s=None, simulated=false))]
+pub fn gauge_csv(
+    py: Python<'_>,
+    poses: PyReadonlyArray2<'_, f64>,
+    sensors: Vec<String>,
+    lengths_mm: PyReadonlyArray1<'_, f64>,
+    pose_labels: Option<Vec<String>>,
+    time_s: Option<PyReadonlyArray1<'_, f64>>,
+    simulated: bool,
+) -> PyResult<String> {
+    let poses = poses.as_array();
+    let n = poses.shape()[0];
+    check_shape(py, "poses", poses.shape(), n, Some(6))?;
+    check_shape(py, "sensors", &[sensors.len()], n, None)?;
+    check_shape(py, "lengths_mm", lengths_mm.shape(), n, None)?;
+    let lengths = lengths_mm.as_array();
+    let (labels, times) = labels_and_times(py, n, pose_labels, time_s)?;
+    let mut s = String::from("pose,sensor,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,length_mm");
+    if times.is_some() {
+        s.push_str(",time_s");
+    }
+    s.push_str(",simulated\n");
+    for k in 0..n {
+        let _ = write!(s, "{},{}", field(&labels[k]), field(&sensors[k]));
+        for c in 0..6 {
+            let _ = write!(s, ",{}", poses[(k, c)]);
+        }
+        let _ = write!(s, ",{}", lengths[k]);
+        if let Some(t) = &times {
+            let _ = write!(s, ",{}", t[k]);
+        }
+        let _ = writeln!(s, ",{simulated}");
+    }
+    Ok(s)
+}
+
+/// Tracker measurements as the CSV of docs/formats.md ("Tracker pose measurements"): one row
+/// per pose, `readings` `(n, links)` (commanded link readings, the links' units), `poses`
+/// `(n, 7)` (measured x, y, z mm; quaternion qw, qx, qy, qz).
+#[pyfunction]
+#[pyo3(signature = (readings, poses, pose_labels=None, time_s=None, simulated=false))]
+pub fn tracker_csv(
+    py: Python<'_>,
+    readings: PyReadonlyArray2<'_, f64>,
+    poses: PyReadonlyArray2<'_, f64>,
+    pose_labels: Option<Vec<String>>,
+    time_s: Option<PyReadonlyArray1<'_, f64>>,
+    simulated: bool,
+) -> PyResult<String> {
+    let readings = readings.as_array();
+    let poses = poses.as_array();
+    let n = readings.shape()[0];
+    let links = readings.shape()[1];
+    check_shape(py, "poses", poses.shape(), n, Some(7))?;
+    let (labels, times) = labels_and_times(py, n, pose_labels, time_s)?;
+    let mut s = String::from("pose");
+    for k in 1..=links {
+        let _ = write!(s, ",reading_{k}");
+    }
+    s.push_str(",x_mm,y_mm,z_mm,qw,qx,qy,qz");
+    if times.is_some() {
+        s.push_str(",time_s");
+    }
+    s.push_str(",simulated\n");
+    for k in 0..n {
+        s.push_str(&field(&labels[k]));
+        for c in 0..links {
+            let _ = write!(s, ",{}", readings[(k, c)]);
+        }
+        for c in 0..7 {
+            let _ = write!(s, ",{}", poses[(k, c)]);
+        }
+        if let Some(t) = &times {
+            let _ = write!(s, ",{}", t[k]);
+        }
+        let _ = writeln!(s, ",{simulated}");
+    }
+    Ok(s)
+}

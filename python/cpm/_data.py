@@ -1,0 +1,239 @@
+"""Measurements: files read by the readers of ``cpm`` (``docs/formats.md``), or numpy arrays
+and pandas tables written as the same formats and read by the same readers, so that they get
+the same checks (units, reachability, consistency) and the same errors."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Union
+
+import numpy as np
+
+from . import _cpm
+from ._robot import PathLike, Robot, Scratch
+from .errors import InputError, UsageError
+
+__all__ = [
+    "Measurements",
+    "read_measurements",
+    "gauge_readings",
+    "tracker_measurements",
+    "measurements_from_frame",
+]
+
+
+@dataclass
+class _Source:
+    name: str
+    path: Optional[str]
+    text: Optional[str]
+    info: Dict[str, Any]
+    arrays: bool = False
+
+
+@dataclass
+class Measurements:
+    """One or more measurement files (gauge readings, tracker poses) for one robot.
+
+    Add two with ``+`` to fit them together (``cpm calibrate --data a.csv --data b.csv``).
+    The arrays give what was read: per reading (``reading_pose``, ``reading_sensor``,
+    ``lengths_mm``), per pose (``poses``: x, y, z mm, roll, pitch, yaw deg) and per tracker
+    measurement (``measured_poses``: x, y, z mm, qw, qx, qy, qz).
+    """
+
+    sources: List[_Source] = field(default_factory=list)
+
+    def __add__(self, other: "Measurements") -> "Measurements":
+        if not isinstance(other, Measurements):
+            return NotImplemented
+        return Measurements(self.sources + other.sources)
+
+    @property
+    def files(self) -> List[str]:
+        """The files (or array sources) by name."""
+        return [s.name for s in self.sources]
+
+    @property
+    def simulated(self) -> bool:
+        """True when any source is simulated (labelled so in the file)."""
+        return any(bool(s.info["simulated"]) for s in self.sources)
+
+    @property
+    def kinds(self) -> List[str]:
+        """``"gauge"`` or ``"tracker"`` per source."""
+        return [s.info["kind"] for s in self.sources]
+
+    def _cat(self, key: str) -> np.ndarray:
+        parts = [np.asarray(s.info[key]) for s in self.sources]
+        return np.concatenate(parts) if parts else np.zeros(0)
+
+    @property
+    def poses(self) -> np.ndarray:
+        """Commanded (gauge) or measured (tracker) poses, ``(poses, 6)``: x, y, z mm; roll,
+        pitch, yaw deg (all sources one after the other)."""
+        return np.concatenate([s.info["poses"] for s in self.sources]) if self.sources \
+            else np.zeros((0, 6))
+
+    @property
+    def lengths_mm(self) -> np.ndarray:
+        """The gauge readings, mm."""
+        return self._cat("lengths_mm")
+
+    @property
+    def reading_sensor(self) -> List[str]:
+        """The sensor of each gauge reading."""
+        return [n for s in self.sources for n in s.info["reading_sensor"]]
+
+    @property
+    def measured_poses(self) -> np.ndarray:
+        """Tracker measurements, ``(n, 7)``: x, y, z mm; qw, qx, qy, qz."""
+        return np.concatenate([s.info["measured_poses"] for s in self.sources]) \
+            if self.sources else np.zeros((0, 7))
+
+    @property
+    def num_readings(self) -> int:
+        return int(sum(len(s.info["lengths_mm"]) for s in self.sources))
+
+    @property
+    def num_poses(self) -> int:
+        return int(sum(len(s.info["poses"]) for s in self.sources))
+
+    def to_pandas(self) -> Any:
+        """The gauge readings as a pandas DataFrame (one row per reading: file, line, pose,
+        sensor, x_mm .. yaw_deg, length_mm)."""
+        import pandas as pd
+
+        frames = []
+        for s in self.sources:
+            i = s.info
+            k = np.asarray(i["reading_pose"], dtype=int)
+            p = np.asarray(i["poses"])[k] if len(k) else np.zeros((0, 6))
+            labels = [i["pose_labels"][j] for j in k]
+            frames.append(pd.DataFrame({
+                "file": s.name, "line": i["reading_lines"], "pose": labels,
+                "sensor": i["reading_sensor"], "x_mm": p[:, 0], "y_mm": p[:, 1],
+                "z_mm": p[:, 2], "roll_deg": p[:, 3], "pitch_deg": p[:, 4],
+                "yaw_deg": p[:, 5], "length_mm": i["lengths_mm"]}))
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+    def _cli_paths(self, scratch: Scratch) -> List[str]:
+        out = []
+        for s in self.sources:
+            if s.path is not None:
+                out.append(s.path)
+            else:
+                base = s.name if s.name.endswith(".csv") else s.name + ".csv"
+                out.append(scratch.write(base, s.text or "", s.name, arrays=s.arrays))
+        return out
+
+    def __repr__(self) -> str:
+        sim = ", SIMULATED" if self.simulated else ""
+        return (f"Measurements({self.files}, {self.num_readings} gauge readings, "
+                f"{len(self.measured_poses)} tracker poses{sim})")
+
+
+def read_measurements(path: PathLike, robot: Robot) -> Measurements:
+    """Reads a measurement file (gauge readings or tracker poses, told from its header)
+    against ``robot``, with the checks of ``cpm calibrate --data``; errors are
+    :class:`cpm.InputError` naming the file, line and field."""
+    p = os.fspath(path)
+    info = _cpm.read_file(p, robot._h)
+    return Measurements([_Source(p, p, None, dict(info))])
+
+
+def _from_text(text: str, name: str, robot: Robot, arrays: bool) -> Measurements:
+    try:
+        info = _cpm.read_text(text, name, robot._h)
+    except InputError as e:
+        if arrays and e.line is not None and e.line >= 2:
+            row = e.line - 2
+            raise InputError(f"{e} (row {row} of the arrays)", e.file, e.line, e.field,
+                             row) from None
+        raise
+    return Measurements([_Source(name, None, text, dict(info), arrays)])
+
+
+def _float_array(x: Any, name: str, ndim: int, cols: Optional[int] = None) -> np.ndarray:
+    """``x`` as float64 (float32, integers and non-contiguous arrays are converted), checked
+    for its number of dimensions and columns."""
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise UsageError(f"{name}: not an array of numbers ({e})") from None
+    if a.ndim != ndim or (cols is not None and a.shape[1] != cols):
+        want = f"(n, {cols})" if cols is not None else ("(n,)" if ndim == 1 else f"{ndim}-D")
+        raise UsageError(f"{name} has shape {a.shape}, expected {want}")
+    return a
+
+
+def _labels(labels: Optional[Sequence[Any]]) -> Optional[List[str]]:
+    return None if labels is None else [str(v) for v in labels]
+
+
+def gauge_readings(
+    robot: Robot,
+    poses: Any,
+    sensors: Union[Sequence[str], str],
+    lengths_mm: Any,
+    *,
+    pose_labels: Optional[Sequence[Any]] = None,
+    time_s: Any = None,
+    simulated: bool = False,
+    name: str = "gauge readings",
+) -> Measurements:
+    """Gauge readings from arrays: commanded ``poses`` ``(n, 6)`` (x, y, z mm; roll, pitch,
+    yaw deg), the ``sensors`` read (``n`` names, or one name for all), ``lengths_mm``
+    ``(n,)``. Rows with the same ``pose_labels`` share a pose (default: every row its own
+    pose). ``simulated=True`` labels simulated data (every result then says so).
+
+    Read by the reader of ``cpm`` (the same checks); an error's ``row`` is the row of the
+    arrays."""
+    p = _float_array(poses, "poses", 2, 6)
+    n = p.shape[0]
+    lengths = _float_array(lengths_mm, "lengths_mm", 1)
+    names = [sensors] * n if isinstance(sensors, str) else [str(s) for s in sensors]
+    t = None if time_s is None else _float_array(time_s, "time_s", 1)
+    text = _cpm.gauge_csv(p, names, lengths, _labels(pose_labels), t, bool(simulated))
+    return _from_text(text, name, robot, arrays=True)
+
+
+def tracker_measurements(
+    robot: Robot,
+    readings: Any,
+    poses: Any,
+    *,
+    pose_labels: Optional[Sequence[Any]] = None,
+    time_s: Any = None,
+    simulated: bool = False,
+    name: str = "tracker measurements",
+) -> Measurements:
+    """Tracker measurements from arrays: the commanded link ``readings`` ``(n, links)`` (in
+    the links' units) and the measured ``poses`` ``(n, 7)`` (x, y, z mm in the tracker's
+    frame; unit quaternion qw, qx, qy, qz). Registered and checked as ``cpm`` does."""
+    r = _float_array(readings, "readings", 2, robot.num_links)
+    p = _float_array(poses, "poses", 2, 7)
+    t = None if time_s is None else _float_array(time_s, "time_s", 1)
+    text = _cpm.tracker_csv(r, p, _labels(pose_labels), t, bool(simulated))
+    return _from_text(text, name, robot, arrays=True)
+
+
+def measurements_from_frame(frame: Any, robot: Robot, name: str = "DataFrame") -> Measurements:
+    """Measurements from a pandas DataFrame whose columns are those of a measurement file
+    (``docs/formats.md``: e.g. ``pose, sensor, x_mm, .., yaw_deg, length_mm``)."""
+    text = frame.to_csv(index=False)
+    return _from_text(text, name, robot, arrays=True)
+
+
+def as_measurements(data: Any, robot: Robot) -> Measurements:
+    """``data`` as measurements: :class:`Measurements`, a path, or a list of either."""
+    if isinstance(data, Measurements):
+        return data
+    if isinstance(data, (str, os.PathLike)):
+        return read_measurements(data, robot)
+    if isinstance(data, Iterable):
+        out = Measurements()
+        for d in data:
+            out = out + as_measurements(d, robot)
+        return out
+    raise UsageError(f"data: expected Measurements, a path or a list of them, got {type(data)}")

@@ -1,0 +1,195 @@
+"""Measurements from files, numpy arrays and pandas tables: the same reader, the same checks;
+dtype and shape handling."""
+import numpy as np
+import pytest
+
+import cpm
+from conftest import CUBE, HEXAPOD, HEXAPOD_READINGS, MALFORMED
+
+
+@pytest.fixture(scope="module")
+def hexapod():
+    return cpm.Robot.from_toml(HEXAPOD)
+
+
+@pytest.fixture(scope="module")
+def readings(hexapod):
+    return cpm.read_measurements(HEXAPOD_READINGS, hexapod)
+
+
+def _rows(path):
+    lines = [ln for ln in path.read_text().splitlines() if ln and not ln.startswith("#")]
+    return lines[0].split(","), [ln.split(",") for ln in lines[1:]]
+
+
+def test_read_file_gives_what_the_file_holds(readings):
+    header, rows = _rows(HEXAPOD_READINGS)
+    assert readings.num_readings == len(rows)
+    assert readings.simulated  # the example file is labelled simulated
+    assert readings.kinds == ["gauge"]
+    i = header.index("length_mm")
+    np.testing.assert_array_equal(readings.lengths_mm, [float(r[i]) for r in rows])
+    assert readings.reading_sensor == [r[header.index("sensor")] for r in rows]
+    assert readings.num_poses == len({r[0] for r in rows})
+
+
+def _arrays(m):
+    """The file's own columns as arrays: poses (x..yaw), sensors, lengths, pose labels."""
+    header, rows = _rows(HEXAPOD_READINGS)
+    col = {c: header.index(c) for c in header}
+    poses = np.array([[float(r[col[c]]) for c in ("x_mm", "y_mm", "z_mm", "roll_deg",
+                                                   "pitch_deg", "yaw_deg")] for r in rows])
+    return (poses, [r[col["sensor"]] for r in rows],
+            np.array([float(r[col["length_mm"]]) for r in rows]), [r[col["pose"]] for r in rows])
+
+
+def test_arrays_go_through_the_same_reader(hexapod, readings):
+    poses, sensors, lengths, labels = _arrays(readings)
+    m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels,
+                           simulated=True)
+    np.testing.assert_array_equal(m.lengths_mm, readings.lengths_mm)
+    np.testing.assert_array_equal(m.poses, readings.poses)
+    assert m.simulated and m.num_poses == readings.num_poses
+    a = cpm.calibrate(hexapod, readings)
+    b = cpm.calibrate(hexapod, m)
+    np.testing.assert_array_equal(a.estimates_um, b.estimates_um)
+    np.testing.assert_array_equal(a.std_um, b.std_um)
+
+
+def test_unlabelled_arrays_are_not_marked_simulated(hexapod, readings):
+    poses, sensors, lengths, labels = _arrays(readings)
+    m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels)
+    assert not m.simulated
+
+
+def test_float32_and_non_contiguous_input(hexapod, readings):
+    poses, sensors, lengths, labels = _arrays(readings)
+    p32 = poses.astype(np.float32)
+    m = cpm.gauge_readings(hexapod, p32, sensors, lengths.astype(np.float32),
+                           pose_labels=labels)
+    # float32 values are converted to float64 exactly as numpy converts them.
+    np.testing.assert_array_equal(m.lengths_mm, lengths.astype(np.float32).astype(np.float64))
+    assert m.lengths_mm.dtype == np.float64
+    # A strided view (every other column of a wider array) and a Fortran-ordered copy give
+    # the same measurements as the contiguous array.
+    wide = np.zeros((poses.shape[0], 12))
+    wide[:, ::2] = poses
+    view = wide[:, ::2]
+    assert not view.flags["C_CONTIGUOUS"]
+    m1 = cpm.gauge_readings(hexapod, view, sensors, lengths[::1], pose_labels=labels)
+    m2 = cpm.gauge_readings(hexapod, np.asfortranarray(poses), sensors, lengths,
+                            pose_labels=labels)
+    m3 = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels)
+    np.testing.assert_array_equal(m1.poses, m3.poses)
+    np.testing.assert_array_equal(m2.poses, m3.poses)
+    # Reversed (negative strides) lengths.
+    rev = lengths[::-1]
+    m4 = cpm.gauge_readings(hexapod, poses[::-1], sensors[::-1], rev, pose_labels=labels[::-1])
+    np.testing.assert_array_equal(m4.lengths_mm, rev)
+
+
+@pytest.mark.parametrize("bad,match", [
+    ("poses5", r"poses has shape \(\d+, 5\), expected \(n, 6\)"),
+    ("poses1d", r"poses has shape \(\d+,\), expected \(n, 6\)"),
+    ("lengths", r"lengths_mm has shape"),
+    ("sensors", r"sensors has shape"),
+    ("text", r"poses: not an array of numbers"),
+])
+def test_wrong_shapes_are_usage_errors(hexapod, readings, bad, match):
+    poses, sensors, lengths, _ = _arrays(readings)
+    args = dict(poses=poses, sensors=sensors, lengths_mm=lengths)
+    if bad == "poses5":
+        args["poses"] = poses[:, :5]
+    elif bad == "poses1d":
+        args["poses"] = poses[:, 0]
+    elif bad == "lengths":
+        args["lengths_mm"] = lengths[:-1]
+    elif bad == "sensors":
+        args["sensors"] = sensors[:-1]
+    elif bad == "text":
+        args["poses"] = [["a"] * 6] * len(lengths)
+    with pytest.raises(cpm.UsageError, match=match) as e:
+        cpm.gauge_readings(hexapod, **args)
+    assert isinstance(e.value, ValueError)
+
+
+def test_a_bad_row_names_its_row(hexapod, readings):
+    poses, sensors, lengths, labels = _arrays(readings)
+    lengths = lengths.copy()
+    lengths[7] /= 1000.0  # metres, not millimetres
+    with pytest.raises(cpm.InputError) as e:
+        cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels)
+    assert e.value.row == 7 and e.value.field == "length_mm"
+    assert e.value.file == "gauge readings" and "row 7" in str(e.value)
+    sensors = list(sensors)
+    sensors[3] = "nosuch"
+    with pytest.raises(cpm.InputError) as e:
+        cpm.gauge_readings(hexapod, poses, sensors, readings.lengths_mm, pose_labels=labels)
+    assert e.value.row == 3 and e.value.field == "sensor"
+
+
+def test_pandas_frame(hexapod, readings):
+    pd = pytest.importorskip("pandas")
+    import warnings
+
+    with warnings.catch_warnings():
+        # pandas 3 deprecates the option (its default parser is exact there); older pandas
+        # need it to read every number back exactly.
+        warnings.simplefilter("ignore")
+        df = pd.read_csv(HEXAPOD_READINGS, comment="#", float_precision="round_trip")
+    m = cpm.measurements_from_frame(df, hexapod)
+    np.testing.assert_array_equal(m.lengths_mm, readings.lengths_mm)
+    np.testing.assert_array_equal(m.poses, readings.poses)
+    t = readings.to_pandas()
+    assert list(t["sensor"]) == list(df["sensor"])
+    np.testing.assert_array_equal(t["length_mm"].to_numpy(), df["length_mm"].to_numpy())
+    assert t["line"].iloc[0] == 3  # after the simulated-by comment and the header
+
+
+def _quat(rpy_deg):
+    """Quaternion (w, x, y, z) of R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    r, p, y = np.radians(rpy_deg).T
+    cr, sr, cp, sp, cy, sy = (np.cos(r / 2), np.sin(r / 2), np.cos(p / 2), np.sin(p / 2),
+                              np.cos(y / 2), np.sin(y / 2))
+    return np.stack([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
+                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy], 1)
+
+
+def test_tracker_arrays(hexapod, tmp_path):
+    f = tmp_path / "tracker.csv"
+    sim = cpm.simulate(hexapod, random=12, truth=str(HEXAPOD.parent / "hexapod_66_truth.toml"),
+                       measure="poses", noise="gaussian:1", seed=3, out=f)
+    assert sim.kinds == ["tracker"] and sim.simulated
+    header, rows = _rows(f)
+    readings = np.array([[float(r[header.index(f"reading_{k}")]) for k in range(1, 7)]
+                         for r in rows])
+    if "qw" in header:
+        q = np.array([[float(r[header.index(c)]) for c in ("qw", "qx", "qy", "qz")]
+                      for r in rows])
+    else:
+        q = _quat(np.array([[float(r[header.index(c)]) for c in
+                             ("roll_deg", "pitch_deg", "yaw_deg")] for r in rows]))
+    xyz = np.array([[float(r[header.index(c)]) for c in ("x_mm", "y_mm", "z_mm")]
+                    for r in rows])
+    m = cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q]), simulated=True)
+    assert m.kinds == ["tracker"] and len(m.measured_poses) == len(rows)
+    np.testing.assert_allclose(m.measured_poses[:, :3], sim.measured_poses[:, :3], atol=1e-9)
+    a = cpm.calibrate(hexapod, sim)
+    b = cpm.calibrate(hexapod, m)
+    # Tracker files are registered (a frame per file): the result says how.
+    assert a.registration is not None and len(a.registration["sessions"]) == 1
+    assert b.registration is not None and b.registration["sessions"][0]["file"] == \
+        "tracker measurements"
+    np.testing.assert_allclose(b.estimates_um, a.estimates_um, atol=1e-6, equal_nan=True)
+    with pytest.raises(cpm.UsageError, match=r"poses has shape \(12, 6\), expected \(n, 7\)"):
+        cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q[:, :3]]))
+    with pytest.raises(cpm.UsageError, match=r"readings has shape \(12, 5\)"):
+        cpm.tracker_measurements(hexapod, readings[:, :5], np.hstack([xyz, q]))
+
+
+def test_measurements_add_and_read_errors(hexapod, readings):
+    both = readings + readings
+    assert both.num_readings == 2 * readings.num_readings and len(both.files) == 2
+    with pytest.raises(cpm.InputError) as e:
+        cpm.read_measurements(MALFORMED / "not_a_number.csv", cpm.Robot.from_toml(CUBE))
+    assert e.value.line is not None and e.value.field is not None
