@@ -269,7 +269,7 @@ pub fn least_squares<'py>(
     d.set_item("nit", report.num_iterations())?;
     d.set_item("report", report.brief())?;
     d.set_item("report_full", report.full())?;
-    if let Some(st) = &report.statistics {
+    if let Some(st) = report.statistics() {
         let n = st.num_params;
         d.set_item("rank", st.rank)?;
         d.set_item(
