@@ -360,3 +360,188 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     assert!(get("calibrated", "link_rms_mm") < 0.5 * get("reference", "link_rms_mm"));
     assert_eq!(held["calibrated"]["sessions"].as_array().unwrap().len(), 1);
 }
+
+/// Tracker poses in the tracker's own frame (100 mm and a few degrees away), simulated with
+/// link offsets: the fit registers the frame and refines it (`tracker_frame`), the file
+/// reproduces the fit once `validate` has re-registered the session, and the held-out session
+/// in another frame is predicted to the noise.
+#[test]
+fn tracker_sessions_in_their_own_frames_round_trip() {
+    let robot = example("hexapod_66.toml");
+    let truth = example("hexapod_66_truth.toml");
+    let dir = scratch("roundtrip", "tracker-frame");
+    let sim = |file: &str, seed: &str, frame: &str| {
+        let path = dir.join(file);
+        ok(&[
+            "simulate",
+            "--robot",
+            &robot,
+            "--random",
+            "40",
+            "--truth",
+            &truth,
+            "--truth-effect",
+            "link_offset=20,-15,10,25,-20,15",
+            "--measure",
+            "poses",
+            "--tracker-frame",
+            frame,
+            "--noise",
+            "gaussian:2",
+            "--orientation-noise-urad",
+            "20",
+            "--seed",
+            seed,
+            "--out",
+            &p(&path),
+        ]);
+        path
+    };
+    let data = sim("train.csv", "1", "100,-40,20,1,-2,3");
+    let held = sim("held.csv", "2", "-60,30,10,-2,1,-4");
+    let cal = dir.join("cal");
+    ok(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "link_offset,tracker_frame",
+        "--pose-sigma-um",
+        "10",
+        "--orientation-sigma-urad",
+        "20",
+        "--out",
+        &p(&cal),
+    ]);
+    let fit = read_json(&cal.join("calibration.json"))["residual_rms_um"]
+        .as_f64()
+        .unwrap();
+    let combined = |v: &serde_json::Value| {
+        let (pos, rot) = (
+            v["calibrated"]["rms_um"].as_f64().unwrap(),
+            v["calibrated"]["orientation_rms_urad"].as_f64().unwrap(),
+        );
+        ((pos * pos + (0.5 * rot).powi(2)) / 2.0).sqrt()
+    };
+    let back = json(&ok(&[
+        "validate",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+        "--data",
+        &p(&data),
+        "--json",
+    ]));
+    let file = combined(&back);
+    assert!(
+        (file - fit).abs() <= 1e-9 * fit,
+        "fit {fit} um, calibrated.toml {file} um"
+    );
+    let v = json(&ok(&[
+        "validate",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+        "--data",
+        &p(&held),
+        "--json",
+    ]));
+    let (c, r) = (
+        v["calibrated"]["rms_um"].as_f64().unwrap(),
+        v["reference"]["rms_um"].as_f64().unwrap(),
+    );
+    println!("tracker: fit {fit:.3} um, file {file:.3} um; held-out session calibrated {c:.2} um, nominal {r:.2} um");
+    assert!(c < 4.0, "held-out position error {c} um on 2 um noise");
+    assert!(c < 0.2 * r);
+    let s = &v["calibrated"]["sessions"][0];
+    assert!(s["rms_after_um"].as_f64().unwrap() <= s["rms_before_um"].as_f64().unwrap());
+}
+
+/// `compensate --from-home` then `validate --commands --from-home` against the simulated
+/// truth: a machine with backlash reaches its targets when the first target's approach from
+/// home is known.
+#[test]
+fn compensation_with_backlash_from_home_reaches_the_targets() {
+    let robot = example("hexapod_66.toml");
+    let dir = scratch("roundtrip", "compensate-from-home");
+    let truth_text = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap();
+    let truth = dir.join("truth.toml");
+    std::fs::write(
+        &truth,
+        format!("{truth_text}\n[calibration.known_effects]\nbacklash = [-8.0, 6.0, -10.0, 5.0, -7.0, 9.0]\n"),
+    )
+    .unwrap();
+    let data = dir.join("data.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "80",
+        "--truth",
+        &p(&truth),
+        "--noise",
+        "gaussian:0.5",
+        "--seed",
+        "4",
+        "--out",
+        &p(&data),
+    ]);
+    let cal = dir.join("cal");
+    ok(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "backlash",
+        "--out",
+        &p(&cal),
+    ]);
+    let commands = dir.join("commands.csv");
+    ok(&[
+        "compensate",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+        "--poses",
+        &example("targets.csv"),
+        "--from-home",
+        "--out",
+        &p(&commands),
+    ]);
+    assert!(std::fs::read_to_string(&commands)
+        .unwrap()
+        .contains("SIMULATED"));
+    let check = |from_home: bool| {
+        let mut args = vec![
+            "validate".to_string(),
+            "--reference".into(),
+            robot.clone(),
+            "--commands".into(),
+            p(&commands),
+            "--truth".into(),
+            p(&truth),
+            "--json".into(),
+        ];
+        if from_home {
+            args.push("--from-home".into());
+        }
+        let a: Vec<&str> = args.iter().map(String::as_str).collect();
+        json(&ok(&a))
+    };
+    let v = check(true);
+    let (c, u) = (
+        v["compensated"]["position_max_um"].as_f64().unwrap(),
+        v["reference"]["position_rms_um"].as_f64().unwrap(),
+    );
+    println!("compensate --from-home: worst target {c:.2} um, uncompensated RMS {u:.1} um");
+    assert!(c < 5.0, "a compensated target missed by {c} um");
+    assert!(c < 0.1 * u);
+    // Checked as if the machine did not come from home, the first target's backlash is off.
+    let w = check(false);
+    assert!(
+        w["per_target"][0]["position_um"].as_f64().unwrap()
+            > v["per_target"][0]["position_um"].as_f64().unwrap()
+    );
+}

@@ -58,6 +58,12 @@ pub struct SimulateArgs {
     /// Orientation noise of simulated tracker poses, urad (standard deviation per axis).
     #[arg(long, value_name = "URAD", default_value_t = 0.0)]
     pub orientation_noise_urad: f64,
+    /// With `--measure poses`: the tracker's own frame, `x,y,z,roll,pitch,yaw` (mm, deg): the
+    /// base frame's pose in the tracker's coordinates (`p_tracker = R p_base + t`, R = Rz Ry
+    /// Rx). A motion-capture system set up anywhere; `cpm calibrate` registers it. Default:
+    /// the base frame.
+    #[arg(long, value_name = "X,Y,Z,ROLL,PITCH,YAW", allow_hyphen_values = true)]
+    pub tracker_frame: Option<String>,
     /// What to measure.
     #[arg(long, value_enum, default_value_t = Measure::Lengths)]
     pub measure: Measure,
@@ -334,6 +340,7 @@ fn simulate_poses(
     noise: &Noise,
     orientation_urad: f64,
     seed: u64,
+    frame: Option<Pose>,
 ) -> anyhow::Result<Campaign> {
     let model = robot.model(&truth.effects);
     let n = robot.num_links();
@@ -399,6 +406,13 @@ fn simulate_poses(
             measured.position_mm = r * measured.position_mm + t;
             measured.rotation = r * measured.rotation;
         }
+        // The tracker's own frame.
+        if let Some(f) = &frame {
+            measured = Pose::new(
+                f.rotation * measured.position_mm + f.position_mm,
+                f.rotation * measured.rotation,
+            );
+        }
         c.poses.push(measured);
         c.pose_measurements.push(PoseMeasurement {
             pose: j,
@@ -440,6 +454,33 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             "--orientation-noise-urad must be between 0 and 100000 (0.1 rad)",
         ));
     }
+    let tracker_frame = match &args.tracker_frame {
+        None => None,
+        Some(spec) => {
+            if args.measure != Measure::Poses {
+                return Err(usage_error("--tracker-frame needs --measure poses"));
+            }
+            let v: Vec<f64> = spec
+                .split(',')
+                .map(|x| x.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+                .collect::<Option<Vec<f64>>>()
+                .filter(|v| v.len() == 6)
+                .ok_or_else(|| {
+                    usage_error(format!(
+                        "--tracker-frame {spec:?}: expected six numbers x,y,z,roll,pitch,yaw (mm, deg)"
+                    ))
+                })?;
+            if v[..3].iter().any(|x| x.abs() > 1e5) || v[3..].iter().any(|x| x.abs() > 360.0) {
+                return Err(usage_error(format!(
+                    "--tracker-frame {spec:?}: at most 100 m and 360 deg"
+                )));
+            }
+            Some(Pose::from_xyz_rpy_deg(
+                [v[0], v[1], v[2]],
+                [v[3], v[4], v[5]],
+            ))
+        }
+    };
     let truth = truth(args, &robot, declared)?;
     ctx.stage("building the plan");
     let spec = common::build_plan(&args.plan, &robot, args.measure == Measure::Lengths)?;
@@ -473,6 +514,7 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 &noise,
                 args.orientation_noise_urad,
                 args.plan.seed,
+                tracker_frame,
             )
             .map_err(|e| blame_truth(args, e))?;
             for (m, (t, _)) in c.pose_measurements.iter_mut().zip(&spec.conditions) {

@@ -138,10 +138,16 @@ pub struct SessionCheck {
     pub frame: [f64; 6],
     /// Standard deviations of `frame`.
     pub frame_sd: [f64; 6],
-    /// Position error RMS (um, per coordinate) with the rough registration only.
+    /// RMS of the weighted residual (positions um, orientations at the tracker's position
+    /// over orientation noise, um per urad), the quantity the frame fit minimises, with the
+    /// rough registration only.
     pub rms_before_um: f64,
-    /// Position error RMS (um, per coordinate) with the session frame fitted.
+    /// The same with the session frame fitted.
     pub rms_after_um: f64,
+    /// Position error RMS (um, per coordinate) with the rough registration only.
+    pub position_rms_before_um: f64,
+    /// Position error RMS (um, per coordinate) with the session frame fitted.
+    pub position_rms_after_um: f64,
 }
 
 /// What one robot predicts on the held-out files.
@@ -267,8 +273,10 @@ fn errors_of(robot: &Robot, controller: &Robot, paths: &[PathBuf]) -> anyhow::Re
                 rough_rotation_deg: rough.map_or(0.0, |x| x.frame.rotation_angle_deg()),
                 frame: s.frame,
                 frame_sd: s.frame_sd,
-                rms_before_um: rms(&positions(&before)),
-                rms_after_um: rms(&positions(&s.predicted)),
+                rms_before_um: s.rms_before_um,
+                rms_after_um: s.rms_after_um,
+                position_rms_before_um: rms(&positions(&before)),
+                position_rms_after_um: rms(&positions(&s.predicted)),
             });
             (s.predicted, Some(s.frame))
         };
@@ -523,14 +531,14 @@ fn session_markdown(md: &mut String, cal: &RobotErrors, reference: &RobotErrors)
     if cal.sessions.is_empty() {
         return;
     }
-    md.push_str("\n## Sessions\n\nEach held-out tracker file is a session: its frame is registered afresh against each robot (held fixed), the rough registration of the reader first, then the six frame parameters through the prediction model. Frame: translation um, rotation urad, +- one standard deviation.\n\n| file | robot | rough frame (mm, deg) | fitted frame t (um) | fitted frame r (urad) | position RMS before (um) | after (um) |\n|---|---|---|---|---|---|---|\n");
+    md.push_str("\n## Sessions\n\nEach held-out tracker file is a session: its frame is registered afresh against each robot (held fixed), the rough registration of the reader first, then the six frame parameters through the prediction model. Frame: translation um, rotation urad, +- one standard deviation.\n\n| file | robot | rough frame (mm, deg) | fitted frame t (um) | fitted frame r (urad) | weighted RMS before (um) | after (um) | position RMS after (um) |\n|---|---|---|---|---|---|---|---|\n");
     for (label, e) in [("calibrated", cal), ("reference", reference)] {
         for s in &e.sessions {
             let t = s.rough_translation_mm;
             let f = |a: usize| format!("{:.1}+-{:.1}", s.frame[a], s.frame_sd[a]);
             md.push_str(&format!(
-                "| {} | {label} | ({:.3}, {:.3}, {:.3}), {:.4} | {}, {}, {} | {}, {}, {} | {:.3} | {:.3} |\n",
-                s.file, t[0], t[1], t[2], s.rough_rotation_deg, f(0), f(1), f(2), f(3), f(4), f(5), s.rms_before_um, s.rms_after_um
+                "| {} | {label} | ({:.3}, {:.3}, {:.3}), {:.4} | {}, {}, {} | {}, {}, {} | {:.3} | {:.3} | {:.3} |\n",
+                s.file, t[0], t[1], t[2], s.rough_rotation_deg, f(0), f(1), f(2), f(3), f(4), f(5), s.rms_before_um, s.rms_after_um, s.position_rms_after_um
             ));
         }
     }

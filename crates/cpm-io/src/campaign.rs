@@ -1243,7 +1243,16 @@ pub fn register_tracker_files(
             }
         }
     }
-    // The checks, after registration.
+    // The checks, after registration. A measured pose is where the real machine went: the
+    // nominal inverse kinematics of it misses the true link lengths by the machine's errors,
+    // so its link limits are checked widened by the consistency tolerance
+    // ([`CONSISTENCY_MM`]), which only catches gross errors (units, frames, link mapping).
+    let mut measured_table = robot.table.clone();
+    for l in measured_table.links.iter_mut() {
+        if let Some((lo, hi)) = l.length_limits_mm {
+            l.length_limits_mm = Some((lo - CONSISTENCY_MM, hi + CONSISTENCY_MM));
+        }
+    }
     for &k in &idx {
         let f = &mut files[k];
         let note = registration_note(f);
@@ -1256,7 +1265,7 @@ pub fn register_tracker_files(
             let pose = f.campaign.poses[f.campaign.pose_measurements[q].pose];
             if options.max_condition_ratio.is_finite() {
                 check_reachable(
-                    &robot.table,
+                    &measured_table,
                     &pose,
                     options.max_condition_ratio,
                     &f.file,
