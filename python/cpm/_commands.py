@@ -5,6 +5,10 @@ stopped from outside: it finishes in the background, and a command given ``out=`
 commits its outputs there when it finishes (all or nothing), as the command would have;
 :func:`calibrate` is the exception and writes nothing once interrupted.
 
+Measurements made from arrays or tables (and robots made from text) reach a command as files
+in a scratch directory; errors name them by their names (and rows), and so do the outputs of
+:func:`calibrate`; the outputs of the other commands name the scratch file.
+
 Keyword arguments are the command's options with ``_`` for ``-`` (``sigma_um=1`` is
 ``--sigma-um 1``, ``from_home=True`` is ``--from-home``, a list repeats an option); the
 command's own parser reads them, so names, defaults and errors are the command's. Robots and
