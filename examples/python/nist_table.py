@@ -73,6 +73,12 @@ def main():
           f"scipy-lm {(arr[:, 2] >= 6).sum()}, scipy-trf {(arr[:, 4] >= 6).sum()} of {len(rows)}")
     print(f"total time: cpm {1e3 * arr[:, 1].sum():.1f} ms, scipy-lm {1e3 * arr[:, 3].sum():.1f}"
           f" ms, scipy-trf {1e3 * arr[:, 5].sum():.1f} ms")
+    d = nist.load("BoxBOD")
+    f, j = nist.problem(d)
+    r, t = timed(lambda: cpm.lm.least_squares(f, d.start1, jac=j, acceleration=True), a.repeat)
+    print(f"BoxBOD start 1 with cpm's geodesic acceleration (acceleration=True): LRE "
+          f"{nist.min_lre(r.x, d.certified):.2f}, {1e3 * t:.2f} ms (the plain method stops on "
+          "the plateau b2 -> infinity, as MINPACK does)")
 
 
 if __name__ == "__main__":

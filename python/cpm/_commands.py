@@ -1,15 +1,19 @@
 """The commands of ``cpm`` (``docs/cli.md``) as functions.
 
-Interrupting (Ctrl-C) raises ``KeyboardInterrupt`` at once, but the command's work cannot be
-stopped from outside: it finishes in the background, and a command given ``out=`` still
-commits its outputs there when it finishes (all or nothing), as the command would have;
-:func:`calibrate` is the exception and writes nothing once interrupted.
-
 Keyword arguments are the command's options with ``_`` for ``-`` (``sigma_um=1`` is
 ``--sigma-um 1``, ``from_home=True`` is ``--from-home``, a list repeats an option); the
 command's own parser reads them, so names, defaults and errors are the command's. Robots and
 measurements may be objects or paths. ``out=`` writes the command's outputs where the command
 would (all or nothing); without it they are made in a scratch directory and kept in memory.
+
+Interrupting (Ctrl-C) raises ``KeyboardInterrupt`` at once, but the command's work cannot be
+stopped from outside: it finishes in the background, and a command given ``out=`` still
+commits its outputs there when it finishes (all or nothing), as the command would have;
+:func:`calibrate` is the exception and writes nothing once interrupted.
+
+Measurements made from arrays or tables (and robots made from text) reach a command as files
+in a scratch directory; errors name them by their names (and rows), and so do the outputs of
+:func:`calibrate`; the outputs of the other commands name the scratch file.
 """
 from __future__ import annotations
 

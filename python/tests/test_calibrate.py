@@ -167,7 +167,7 @@ def test_sigma_and_robust_reach_the_fit(in_root):
 
 def test_gil_is_released_during_the_fit(in_root, tmp_path):
     # A campaign big enough that the fit takes a while (simulated).
-    data = cpm.simulate("examples/hexapod_66.toml", random=1000, truth=
+    data = cpm.simulate("examples/hexapod_66.toml", random=3000, truth=
                         "examples/hexapod_66_truth.toml", noise="gaussian:1", seed=5)
     stamps = []
     stop = threading.Event()

@@ -97,7 +97,7 @@ fn rename(inputs: &mut cal_cli::Inputs, names: &HashMap<String, String>) {
 /// Runs `cpm calibrate` from an argument vector (`["calibrate", "--robot", ...]`); when
 /// `commit` is true the outputs are written to `--out` as the command writes them (all or
 /// nothing), otherwise only staged in memory. `names` maps scratch files to the names they
-/// stand for (see [`rename`]). Returns a dict: the calibration's numbers as numpy arrays,
+/// stand for (measurements made from arrays, a robot made from text). Returns a dict: the calibration's numbers as numpy arrays,
 /// `files` (name -> bytes of every output), `warnings`, `trouble`.
 #[pyfunction]
 pub fn calibrate<'py>(
