@@ -406,6 +406,9 @@ pub fn register_with_corrections(
     })
 }
 
+/// Forward-kinematics poses per session and pose (`None` where not yet solved).
+type FkPoses = Vec<Vec<Option<Pose>>>;
+
 /// The registration's least-squares problem for cpm-lm (see `register_with_corrections`):
 /// corrections `d` to the start frames and offsets.
 struct Frames<'a> {
@@ -415,14 +418,15 @@ struct Frames<'a> {
     correction_mm: &'a dyn Fn(&Pose) -> Vec<f64>,
     start: (Vec<RigidFrame>, Vec<f64>),
     with_offsets: bool,
-    fk: Vec<Vec<Option<Pose>>>,
+    fk: FkPoses,
 }
 impl Frames<'_> {
     fn at(&self, d: &[f64]) -> (Vec<RigidFrame>, Vec<f64>) {
         let n = self.table.num_links();
         apply_step(&self.start.0, &self.start.1, d, 1.0, self.with_offsets, n)
     }
-    fn linearise(&self, d: &[f64]) -> Result<(Linearised, Vec<Vec<Option<Pose>>>), CalibError> {
+    /// The linearisation at `d`, and the poses forward kinematics found there.
+    fn linearise(&self, d: &[f64]) -> Result<(Linearised, FkPoses), CalibError> {
         let (f, o) = self.at(d);
         let mut fk = self.fk.clone();
         let lin = linearise(
