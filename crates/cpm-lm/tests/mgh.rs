@@ -188,8 +188,8 @@ fn minpack_set_matches_or_beats_minpack() {
     assert_eq!(cases.len(), 35);
     let mut worse = Vec::new();
     println!(
-        "{:<34} {:>14} {:>14} {:>6} {:>6}  termination",
-        "case", "cpm-lm cost", "MINPACK cost", "evals", "MINPACK"
+        "{:<34} {:>14} {:>14} {:>6} {:>6} {:>8}  termination",
+        "case", "cpm-lm cost", "MINPACK cost", "evals", "MINPACK", "restarts"
     );
     for c in cases {
         let mut p = c.problem.clone();
@@ -197,12 +197,13 @@ fn minpack_set_matches_or_beats_minpack() {
         let r = minimize(&mut p, &mut x, &Options::default()).unwrap();
         let ok = r.final_cost <= c.cost * (1.0 + 1e-9) || r.final_cost <= 1e-30;
         println!(
-            "{:<34} {:>14.8e} {:>14.8e} {:>6} {:>6}  {}{}",
+            "{:<34} {:>14.8e} {:>14.8e} {:>6} {:>6} {:>8}  {}{}",
             c.label,
             r.final_cost,
             c.cost,
             r.residual_evaluations,
             c.evaluations,
+            r.restarts,
             r.termination,
             if ok { "" } else { "   <-- WORSE" }
         );

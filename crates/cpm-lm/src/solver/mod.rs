@@ -45,7 +45,7 @@ pub enum LinearSolver {
         local_block_sizes: Vec<usize>,
     },
     /// The problem solves its own damped normal equations: required by, and only by,
-    /// [`NormalEquations`](crate::NormalEquations) problems ([`minimize_normal`]).
+    /// [`NormalEquations`] problems ([`minimize_normal`]).
     Supplied {
         /// What the problem's solver is, for reports.
         name: &'static str,
