@@ -3,13 +3,17 @@
 //!
 //! Each round tries every candidate [`Effect`] not yet in the model:
 //! 1. **confounding**: the part of its Jacobian outside the column space of the current model
-//!    (`novelty`, 0 = entirely explained by what is there, 1 = new); below
-//!    [`RefineOptions::min_novelty`] the effect is skipped as confounded;
+//!    (`novelty`, 0 = entirely explained by what is there, 1 = new); a pose map term below
+//!    [`RefineOptions::min_novelty`] is skipped as confounded, a physical effect only below
+//!    [`PHYSICAL_NOVELTY_FRACTION`] of it (a small novelty is a reason for care, not to skip);
+//!    an effect that would leave fewer present parameters determined is refused;
 //! 2. the augmented model is fitted, and scored by an F-test on the drop of the residual sum of
 //!    squares per added identifiable dimension, and by the change of BIC
 //!    (`m ln(RSS/m) + k ln m`);
 //! 3. among those significant at `alpha / candidates` (Bonferroni) with negative delta BIC,
-//!    in order of BIC, the first whose cross-validated RMS is lower than the current model's
+//!    physical effects first and pose map terms last, each in order of BIC, the first whose
+//!    blocked cross-validated RMS ([`cross_validated_rms`]: leave one session out, or
+//!    contiguous blocks in acquisition order) is lower than the current model's
 //!    is added: an effect that fits the campaign better but predicts unseen poses worse (a
 //!    spike it bends to) is never added. A candidate whose robust fit failed is not added.
 //!
@@ -97,6 +101,10 @@ pub struct CandidateScore {
     /// tests, in order of BIC, until one improved on the current model).
     #[serde(default)]
     pub cv_rms_um: Option<f64>,
+    /// How many of the present parameters the data would no longer determine with the effect
+    /// (`Some` only when it loses some: the effect is then refused).
+    #[serde(default)]
+    pub determined_lost: Option<usize>,
 }
 
 /// One accepted refinement step.
@@ -209,6 +217,10 @@ impl PoseRange {
     }
 }
 
+/// A physical (library or user) effect is skipped as confounded only when its novelty is below
+/// this fraction of [`RefineOptions::min_novelty`] (pose map terms: below `min_novelty`).
+pub const PHYSICAL_NOVELTY_FRACTION: f64 = 0.05;
+
 fn rss(r: &[f64]) -> f64 {
     r.iter().map(|x| x * x).sum()
 }
@@ -218,8 +230,12 @@ fn bic(rss: f64, m: usize, k: usize) -> f64 {
     m * (rss / m).max(1e-300).ln() + k as f64 * m.ln()
 }
 
-/// Cross-validated RMS (um): k folds over poses (pose j in fold j mod k); each fold is fitted on
-/// the other poses and predicts its own readings.
+/// Cross-validated RMS (um) over folds that respect the order the data were taken in: with
+/// two or more sessions ([`Campaign::session_starts`], a file each), one fold per session
+/// (leave one session out); within one session, `folds` contiguous blocks of poses in
+/// acquisition order. Each fold is fitted on the other poses and predicts its own
+/// observations. Random or interleaved folds inside one sitting flatter effects that real
+/// drift and frames defeat; blocked folds make a model predict poses it did not see, later.
 pub fn cross_validated_rms(
     model: &MeasurementModel,
     campaign: &Campaign,
@@ -227,12 +243,23 @@ pub fn cross_validated_rms(
     folds: usize,
     start: &[f64],
 ) -> Result<f64, CalibError> {
-    let folds = folds.max(2);
+    let n = campaign.poses.len().max(1);
+    let (folds, fold_of): (usize, Box<dyn Fn(usize) -> usize>) =
+        if campaign.session_starts.is_empty() {
+            let folds = folds.max(2);
+            (folds, Box::new(move |p: usize| p * folds / n))
+        } else {
+            let starts = campaign.session_starts.clone();
+            (
+                starts.len() + 1,
+                Box::new(move |p: usize| starts.partition_point(|s| *s <= p)),
+            )
+        };
     let mut sq = 0.0;
     let mut count = 0usize;
     for f in 0..folds {
-        let train = campaign.filter_poses(|p| p % folds != f);
-        let test = campaign.filter_poses(|p| p % folds == f);
+        let train = campaign.filter_poses(|p| fold_of(p) != f);
+        let test = campaign.filter_poses(|p| fold_of(p) == f);
         if test.is_empty() || train.is_empty() {
             continue;
         }
@@ -429,8 +456,16 @@ pub fn refine(
                 delta_bic: None,
                 rms_um: None,
                 cv_rms_um: None,
+                determined_lost: None,
             };
-            if nov < options.min_novelty {
+            // A physical effect with a small novelty is tried with care (only a numerically
+            // confounded one is skipped); a pose map term must be clearly new.
+            let threshold = if matches!(e, Effect::PoseMap(_)) {
+                options.min_novelty
+            } else {
+                options.min_novelty * PHYSICAL_NOVELTY_FRACTION
+            };
+            if nov < threshold {
                 scores.push(score);
                 continue;
             }
@@ -454,15 +489,36 @@ pub fn refine(
                 let db = bic(rss1, m, k1) - bic0;
                 score.p_value = Some(p);
                 score.delta_bic = Some(db);
-                if p < level && db < 0.0 && !c1.robust_failed {
+                // An effect that leaves fewer of the present parameters determined than
+                // before makes the model less useful, whatever its fit: refused.
+                let np0 = current.num_params();
+                let determined = |c: &Calibration| {
+                    c.identifiability.determined[..np0.min(c.identifiability.determined.len())]
+                        .iter()
+                        .filter(|d| **d)
+                        .count()
+                };
+                let loses = determined(&c1) < determined(&cal);
+                if loses {
+                    score.determined_lost = Some(determined(&cal) - determined(&c1));
+                }
+                if p < level && db < 0.0 && !c1.robust_failed && !loses {
                     eligible.push((scores.len(), aug, c1));
                 }
             }
             scores.push(score);
         }
+        // Physics first: every physical effect (in order of BIC) before any pose map term,
+        // which fits anything smooth and extrapolates nothing.
         eligible.sort_by(|a, b| {
-            let key = |i: usize| scores[i].delta_bic.unwrap_or(f64::INFINITY);
-            key(a.0).total_cmp(&key(b.0))
+            let key = |i: usize| {
+                (
+                    matches!(scores[i].effect, Effect::PoseMap(_)),
+                    scores[i].delta_bic.unwrap_or(f64::INFINITY),
+                )
+            };
+            let (ka, kb) = (key(a.0), key(b.0));
+            ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
         });
         let mut best = None;
         for (i, aug, c1) in eligible {
