@@ -545,3 +545,70 @@ fn compensation_with_backlash_from_home_reaches_the_targets() {
             > v["per_target"][0]["position_um"].as_f64().unwrap()
     );
 }
+
+/// `refine` too writes the model it ended with: an undeclared backlash is found, and its
+/// calibrated.toml reproduces the final fit on the training data.
+#[test]
+fn refine_writes_the_model_it_fitted() {
+    let robot = example("hexapod_66.toml");
+    let dir = scratch("roundtrip", "refine");
+    let data = dir.join("data.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "80",
+        "--truth",
+        &example("hexapod_66_truth.toml"),
+        "--truth-effect",
+        "backlash=-8,6,-10,5,-7,9",
+        "--noise",
+        "gaussian:1",
+        "--seed",
+        "5",
+        "--out",
+        &p(&data),
+    ]);
+    let out = dir.join("refined");
+    ok(&[
+        "refine",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--effects",
+        "none",
+        "--sigma-um",
+        "1",
+        "--out",
+        &p(&out),
+    ]);
+    let r = read_json(&out.join("refine.json"));
+    let effects: Vec<&str> = r["final"]["effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_str().unwrap())
+        .collect();
+    assert!(effects.contains(&"backlash"), "{effects:?}");
+    assert!(
+        !effects.iter().any(|e| e.starts_with("pose_map")),
+        "{effects:?}"
+    );
+    let fit = r["final"]["rms_um"].as_f64().unwrap();
+    let v = json(&ok(&[
+        "validate",
+        "--robot",
+        &p(&out.join("calibrated.toml")),
+        "--data",
+        &p(&data),
+        "--json",
+    ]));
+    let file = v["calibrated"]["rms_um"].as_f64().unwrap();
+    println!("refine: {effects:?}, fit {fit:.4} um, file {file:.4} um");
+    assert!(
+        (fit - file).abs() <= 1e-9 * fit,
+        "refine fit {fit} um, calibrated.toml {file} um"
+    );
+}

@@ -48,8 +48,10 @@ pub struct CandidateReport {
     pub delta_bic: Option<f64>,
     /// Residual RMS with it, um.
     pub rms_um: Option<f64>,
-    /// Cross-validated RMS with it, um.
+    /// Cross-validated RMS with it (blocked folds), um.
     pub cv_rms_um: Option<f64>,
+    /// Present parameters the data would no longer determine with it (it is then refused).
+    pub determined_lost: Option<usize>,
 }
 
 /// One added effect.
@@ -84,6 +86,8 @@ pub struct LastRoundCandidate {
     pub novelty: f64,
     /// Left out as confounded with the model (novelty below `min_novelty`).
     pub confounded: bool,
+    /// Present parameters the data would no longer determine with it (refused).
+    pub determined_lost: Option<usize>,
     /// F-test p-value.
     pub p_value: Option<f64>,
     /// BIC change.
@@ -222,6 +226,7 @@ impl RefineDoc {
                             delta_bic: c.delta_bic,
                             rms_um: c.rms_um,
                             cv_rms_um: c.cv_rms_um,
+                            determined_lost: c.determined_lost,
                         })
                         .collect(),
                 })
@@ -232,10 +237,13 @@ impl RefineDoc {
                 .map(|c| LastRoundCandidate {
                     effect: c.effect.name().to_string(),
                     novelty: c.novelty,
-                    confounded: c.novelty < min_novelty,
+                    // Skipped before any fit (pose map terms below min_novelty, physical
+                    // effects below a fraction of it).
+                    confounded: c.rms_um.is_none() && c.novelty < min_novelty,
                     p_value: c.p_value,
                     delta_bic: c.delta_bic,
                     rms_um: c.rms_um,
+                    determined_lost: c.determined_lost,
                 })
                 .collect(),
             min_novelty,
@@ -303,10 +311,18 @@ impl RefineDoc {
             .filter(|c| c.confounded)
             .map(|c| format!("`{}` (novelty {})", c.effect, fixed(c.novelty, 4)))
             .collect();
+        let losing: Vec<String> = self
+            .last_round
+            .iter()
+            .filter_map(|c| {
+                c.determined_lost
+                    .map(|n| format!("`{}` ({n} fewer determined)", c.effect))
+            })
+            .collect();
         let weak: Vec<String> = self
             .last_round
             .iter()
-            .filter(|c| !c.confounded)
+            .filter(|c| !c.confounded && c.determined_lost.is_none())
             .map(|c| match c.p_value {
                 Some(p) => format!("`{}` (p {})", c.effect, p_value(p)),
                 None => format!("`{}` (no fit)", c.effect),
@@ -318,6 +334,12 @@ impl RefineDoc {
                 "Left out as barely separable from the installation errors and effects already in the model on this design (novelty, the fraction of the effect's signature the model cannot already explain, below {}): {}; the data cannot tell such an effect apart, so the residual says nothing about it: a design with more varied poses (`cpm design`) can. ",
                 short(self.min_novelty),
                 confounded.join(", ")
+            ));
+        }
+        if !losing.is_empty() {
+            s.push_str(&format!(
+                "Refused because the data would no longer determine parameters they determine now: {}. ",
+                losing.join(", ")
             ));
         }
         if !weak.is_empty() {
