@@ -217,6 +217,11 @@ impl PoseRange {
     }
 }
 
+/// Campaigns of at most this many observations get the blocked cross-validated error of every
+/// fitted candidate in the report (larger ones: of the eligible candidates up to the one
+/// added).
+pub const CV_EVERY_CANDIDATE_MAX_OBSERVATIONS: usize = 20_000;
+
 /// A physical (library or user) effect is skipped as confounded only when its novelty is below
 /// this fraction of [`RefineOptions::min_novelty`] (pose map terms: below `min_novelty`).
 pub const PHYSICAL_NOVELTY_FRACTION: f64 = 0.05;
@@ -504,6 +509,17 @@ pub fn refine(
                 }
                 if p < level && db < 0.0 && !c1.robust_failed && !loses {
                     eligible.push((scores.len(), aug, c1));
+                } else if m <= CV_EVERY_CANDIDATE_MAX_OBSERVATIONS {
+                    // Its blocked cross-validated error, for the report only.
+                    let cv1 = cross_validated_rms(
+                        &aug,
+                        campaign,
+                        &options.identify,
+                        options.folds,
+                        &c1.minimum_norm_um,
+                    )
+                    .ok();
+                    score.cv_rms_um = cv1;
                 }
             }
             scores.push(score);
@@ -521,7 +537,21 @@ pub fn refine(
             ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
         });
         let mut best = None;
+        let every = m <= CV_EVERY_CANDIDATE_MAX_OBSERVATIONS;
         for (i, aug, c1) in eligible {
+            if best.is_some() {
+                if every {
+                    scores[i].cv_rms_um = cross_validated_rms(
+                        &aug,
+                        campaign,
+                        &options.identify,
+                        options.folds,
+                        &c1.minimum_norm_um,
+                    )
+                    .ok();
+                }
+                continue;
+            }
             let cv1 = cross_validated_rms(
                 &aug,
                 campaign,
@@ -532,7 +562,7 @@ pub fn refine(
             scores[i].cv_rms_um = Some(cv1);
             if cv1 < cv {
                 best = Some((i, aug, c1, cv1));
-                break;
+                continue;
             }
             rejected_by_cv.push((scores[i].effect, cv, cv1));
         }
