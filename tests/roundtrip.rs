@@ -359,6 +359,40 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     assert!(get("calibrated", "rms_um") < 0.5 * get("reference", "rms_um"));
     assert!(get("calibrated", "link_rms_mm") < 0.5 * get("reference", "link_rms_mm"));
     assert_eq!(held["calibrated"]["sessions"].as_array().unwrap().len(), 1);
+    // Force- and pose-dependent effects too (compliance reads the link forces at the
+    // commanded pose, a pose map the commanded pose itself): the file still reproduces the fit.
+    let cal2 = dir.join("cal2");
+    ok(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&first),
+        "--effects",
+        "link_offset,link_scale,tracker_frame,compliance,pose_map_z_roll",
+        "--out",
+        &p(&cal2),
+    ]);
+    let fit2 = read_json(&cal2.join("calibration.json"))["residual_rms_um"]
+        .as_f64()
+        .unwrap();
+    let back2 = json(&ok(&[
+        "validate",
+        "--robot",
+        &p(&cal2.join("calibrated.toml")),
+        "--data",
+        &p(&first),
+        "--json",
+    ]));
+    let (pos2, rot2) = (
+        back2["calibrated"]["rms_um"].as_f64().unwrap(),
+        back2["calibrated"]["orientation_rms_urad"].as_f64().unwrap(),
+    );
+    let combined2 = ((pos2 * pos2 + (0.5 * rot2).powi(2)) / 2.0).sqrt();
+    assert!(
+        (combined2 - fit2).abs() <= 1e-9 * fit2,
+        "with compliance and a pose map: fit {fit2} um, calibrated.toml {combined2} um"
+    );
 }
 
 /// Tracker poses in the tracker's own frame (100 mm and a few degrees away), simulated with

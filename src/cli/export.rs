@@ -132,7 +132,7 @@ pub fn linuxcnc_in(robot: &Robot, units: Units) -> String {
     let other: Vec<&str> = known
         .iter()
         .map(|e| e.effect.name())
-        .filter(|n| *n != "backlash")
+        .filter(|n| !matches!(*n, "backlash" | "link_offset" | "link_scale"))
         .collect();
     if !other.is_empty() {
         s.push_str(&format!(
@@ -222,13 +222,15 @@ pub fn linuxcnc_ini(robot: &Robot, units: Units) -> String {
     if simulated(robot) {
         s.push_str("; SIMULATED: this robot was calibrated from simulated data; these are not a real machine's settings.\n");
     }
-    for (i, l) in robot.description.links.iter().enumerate() {
+    for i in 0..robot.description.links.len() {
+        // The calibrated link_offset and link_scale folded into the reading model.
+        let (length_at_zero_mm, mm_per_unit) = crate::io::robot::folded_reading_model(robot, i);
         s.push_str(&format!("\n[JOINT_{i}]\n; cpm link {}\n", i + 1));
         s.push_str(&format!(
             "HOME_OFFSET = {}\n",
-            num(l.length_at_zero_mm / k, 6)
+            num(length_at_zero_mm / k, 6)
         ));
-        s.push_str(&format!("SCALE = {}\n", num(k / l.mm_per_unit, 9)));
+        s.push_str(&format!("SCALE = {}\n", num(k / mm_per_unit, 9)));
         if let Some(b) = backlash.as_ref().and_then(|b| b.get(i)) {
             let lash_mm = -2.0 * b * 1e-3;
             if lash_mm >= 0.0 {

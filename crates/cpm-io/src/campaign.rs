@@ -1243,6 +1243,34 @@ pub fn register_tracker_files(
             }
         }
     }
+    // The commanded pose of a tracker row (what the link effects and a pose map read, where
+    // the link forces are computed): the forward kinematics of its commanded lengths on the
+    // design geometry, started from the registered measured pose. It depends on the logged
+    // readings and the design only, never on the robot that registers the session, so that
+    // every command that reads the file sees the same poses as the fit did.
+    {
+        let model = robot.model(&[]);
+        let design = model.statics_table();
+        let fk = cpm_kinematics::ForwardOptions::default();
+        for &k in &idx {
+            let f = &mut files[k];
+            let Some(commanded) = f.campaign.commanded_lengths_mm.clone() else {
+                continue;
+            };
+            for q in 0..f.campaign.pose_measurements.len() {
+                let j = f.campaign.pose_measurements[q].pose;
+                if let Ok((p, _)) =
+                    cpm_kinematics::forward(design, &commanded[j], &f.campaign.poses[j], &fk)
+                {
+                    if p.is_finite()
+                        && (p.position_mm - f.campaign.poses[j].position_mm).norm() < 1e3
+                    {
+                        f.campaign.poses[j] = p;
+                    }
+                }
+            }
+        }
+    }
     // The checks, after registration. A measured pose is where the real machine went: the
     // nominal inverse kinematics of it misses the true link lengths by the machine's errors,
     // so its link limits are checked widened by the consistency tolerance

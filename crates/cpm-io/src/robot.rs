@@ -6,11 +6,11 @@
 //! [`calibrated_description`] keeps the design joints in its `[[link]]` tables and carries the
 //! calibrated installation errors in `[installation_errors_um]`, so that every reader sees the
 //! calibrated machine and computes the link forces on the same design geometry as the fit.
-//! `link_offset` and `link_scale` are folded into each link's reading model exactly:
-//! with `L = length_at_zero_mm + mm_per_unit * u` the commanded length and the effective
-//! length `L (1 + 1e-6 s) + 1e-3 o`, the calibrated link has
-//! `length_at_zero_mm' = (1 + 1e-6 s) length_at_zero_mm + 1e-3 o` and
-//! `mm_per_unit' = (1 + 1e-6 s) mm_per_unit`.
+//! `link_offset` and `link_scale` are written as known effects (the reading models stay the
+//! description's); [`folded_reading_model`] gives the equivalent reading model of a link for a
+//! controller that knows only `length = length_at_zero_mm + mm_per_unit * reading`: with the
+//! effective length `L (1 + 1e-6 s) + 1e-3 o`, `length_at_zero_mm' = (1 + 1e-6 s)
+//! length_at_zero_mm + 1e-3 o` and `mm_per_unit' = (1 + 1e-6 s) mm_per_unit`.
 use std::path::Path;
 
 use cpm_calib::{Effect, EffectSettings, KnownEffect, MeasurementModel};
@@ -394,11 +394,13 @@ pub struct CalibratedNotes {
 ///   `[installation_errors_um]` holds its own installation errors (if any) plus the fitted
 ///   ones: the link forces (joint clearance, compliance) are computed on the design joints by
 ///   every reader ([`MeasurementModel::design`]), as in the fit;
-/// - `link_offset` / `link_scale` are folded into the link reading models (see the module
-///   doc), `socket_error` moves the sensor sockets;
-/// - every other effect's values are added to `[calibration.known_effects]` (on top of the
-///   values the description already knew), except `tracker_frame`, which belongs to the
-///   measurement session (listed in [`CalibratedNotes::session_effects`]);
+/// - `socket_error` moves the sensor sockets;
+/// - every other effect's values, `link_offset` and `link_scale` included, are added to
+///   `[calibration.known_effects]` (on top of the values the description already knew): the
+///   link reading models stay the description's, so every reader derives the same commanded
+///   lengths (and commanded poses) from the logged readings as the fit did; `tracker_frame`
+///   belongs to the measurement session and is not written (listed in
+///   [`CalibratedNotes::session_effects`]);
 /// - `[calibration] effects` is set to `declare` when given.
 ///
 /// `determined[k]` says whether the data determine parameter `k` on their own; those that
@@ -433,7 +435,6 @@ pub fn calibrated_description(
         d.installation_errors_um =
             Some(cpm_geometry::description::InstallationErrorsSpec::from_errors(&e));
     }
-    let mut folded: Vec<(Effect, Vec<f64>)> = Vec::new();
     for b in model.blocks() {
         let Some(effect) = b.effect else { continue };
         let values = &params[b.offset..b.offset + b.len];
@@ -448,7 +449,6 @@ pub fn calibrated_description(
             }
         }
         match effect {
-            Effect::LinkOffset | Effect::LinkScale => folded.push((effect, values.to_vec())),
             Effect::SocketError => {
                 for (k, v) in values.iter().enumerate() {
                     let s = &mut d.sensors[k / 6];
@@ -475,19 +475,6 @@ pub fn calibrated_description(
             }
         }
     }
-    // link_offset and link_scale: folded into the reading model (see the module doc).
-    let block = |which: Effect| folded.iter().find(|(e, _)| *e == which).map(|(_, v)| v);
-    let (offset, scale) = (block(Effect::LinkOffset), block(Effect::LinkScale));
-    if offset.is_some() || scale.is_some() {
-        for (i, spec) in d.links.iter_mut().enumerate() {
-            let orig = &robot.description.links[i];
-            let s = scale.map_or(0.0, |v| v[i]);
-            let o = offset.map_or(0.0, |v| v[i]);
-            let f = 1.0 + s * 1e-6;
-            spec.length_at_zero_mm = orig.length_at_zero_mm * f + o * 1e-3;
-            spec.mm_per_unit = orig.mm_per_unit * f;
-        }
-    }
     if let Some(effects) = declare {
         let names: Vec<String> = effects
             .iter()
@@ -506,6 +493,25 @@ pub fn calibrated_description(
         }
     }
     (d, notes)
+}
+
+/// The reading model `(length_at_zero_mm, mm_per_unit)` of link `i` with the robot's known
+/// `link_offset` (o, um) and `link_scale` (s, ppm) folded in: `(1 + 1e-6 s) length_at_zero_mm
+/// + 1e-3 o` and `(1 + 1e-6 s) mm_per_unit` (see the module doc), for controllers that take a
+/// reading model only.
+pub fn folded_reading_model(robot: &Robot, i: usize) -> (f64, f64) {
+    let link = &robot.description.links[i];
+    let known = robot.known_effects().unwrap_or_default();
+    let value = |e: Effect| {
+        known
+            .iter()
+            .find(|k| k.effect == e)
+            .and_then(|k| k.values.get(i).copied())
+            .unwrap_or(0.0)
+    };
+    let (o, s) = (value(Effect::LinkOffset), value(Effect::LinkScale));
+    let f = 1.0 + s * 1e-6;
+    (link.length_at_zero_mm * f + o * 1e-3, link.mm_per_unit * f)
 }
 
 /// The calibrated description as TOML text, with a comment header that says where it came
