@@ -165,7 +165,8 @@ fn hexapod_66_pose_measurements_with_offset_and_scale_unknowns() {
             "scale {i}: {v} +- {s}"
         );
     }
-    // The calibrated description carries the offsets and scales in its link reading models.
+    // The calibrated description carries the offsets and scales as known effects; folded into
+    // a reading model (what a controller takes) they act exactly.
     let cal = Robot::load(&out.join("calibrated.toml")).unwrap();
     for i in 0..6 {
         let (o, s) = (
@@ -173,7 +174,8 @@ fn hexapod_66_pose_measurements_with_offset_and_scale_unknowns() {
             scales[i]["value"].as_f64().unwrap(),
         );
         let u = 300.0;
-        assert!((cal.length_mm(i, u) - (u * (1.0 + s * 1e-6) + o * 1e-3)).abs() < 1e-9);
+        let (l0, k) = cpm::io::robot::folded_reading_model(&cal, i);
+        assert!((l0 + k * u - (u * (1.0 + s * 1e-6) + o * 1e-3)).abs() < 1e-9);
     }
 }
 

@@ -386,7 +386,9 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     ]));
     let (pos2, rot2) = (
         back2["calibrated"]["rms_um"].as_f64().unwrap(),
-        back2["calibrated"]["orientation_rms_urad"].as_f64().unwrap(),
+        back2["calibrated"]["orientation_rms_urad"]
+            .as_f64()
+            .unwrap(),
     );
     let combined2 = ((pos2 * pos2 + (0.5 * rot2).powi(2)) / 2.0).sqrt();
     assert!(

@@ -255,6 +255,7 @@ pub fn stage_calibrated(
     minimum_norm: bool,
     declare: Option<&[crate::calib::Effect]>,
     command: &str,
+    check: bool,
 ) -> anyhow::Result<io::robot::CalibratedNotes> {
     // The point the fit ended at, complete: a rank-deficient fit writes its point of the
     // solution set (the minimum-norm one), never a mix of fitted and nominal components.
@@ -325,6 +326,26 @@ pub fn stage_calibrated(
             "the calibrated description does not load back: {e}"
         ))
     })?;
+    // What every reader of the file will predict is what the fit predicted: checked on the
+    // fit's own data before anything is written.
+    if check {
+        let data: Vec<PathBuf> = inputs.provenance.data.iter().map(PathBuf::from).collect();
+        if let Some((fit, file)) = super::validate::file_reproduces_fit(
+            &text,
+            &inputs.robot,
+            &data,
+            model,
+            &inputs.merged.campaign,
+            cal,
+            inputs.identify.sigma_um,
+        )? {
+            if (fit - file).abs() > 1e-7 * fit.max(1e-3) {
+                return Err(super::trouble(format!(
+                    "the calibrated description does not reproduce the fit: residual RMS {fit:.6} um fitted, {file:.6} um read back from calibrated.toml; nothing was written (please report this)"
+                )));
+            }
+        }
+    }
     set.add(dir.join("calibrated.toml"), text);
     Ok(notes)
 }
@@ -515,6 +536,7 @@ pub fn fit_with(
         minimum_norm,
         None,
         "Calibrated",
+        formulation == super::formulation::Formulation::Nested,
     )?;
     let report = CalibrateReport {
         provenance: provenance_lines(&inputs.provenance, cal.simulated, "Calibrated"),

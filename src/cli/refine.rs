@@ -123,6 +123,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         false,
         Some(&r.model.effects),
         "Refined",
+        true,
     )?;
     let last = doc.last_round_message();
     let report = RefineReport {

@@ -777,3 +777,50 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     }
     Ok(Outcome::Done)
 }
+
+/// The check every fitting command makes before it writes: the calibrated description it
+/// staged (`text`), read back and predicted on the fit's own data files as `cpm validate`
+/// predicts them (tracker sessions re-registered), gives the fit's residual RMS.
+///
+/// Returns `(fit RMS, file RMS)` in um (the fit's weighting: positions at
+/// `sigma_ref / pose_sigma`, orientations at `sigma_ref / orientation_sigma`), or `None` when
+/// the check does not apply: tracker data fitted without `tracker_frame` (the fit keeps the
+/// rough registration, which a later reading improves on).
+pub fn file_reproduces_fit(
+    text: &str,
+    reference: &Robot,
+    data: &[PathBuf],
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    cal: &crate::calib::Calibration,
+    sigma_um: Option<f64>,
+) -> anyhow::Result<Option<(f64, f64)>> {
+    if !campaign.pose_measurements.is_empty()
+        && !model.effects.contains(&crate::calib::Effect::TrackerFrame)
+    {
+        return Ok(None);
+    }
+    let robot = Robot::from_toml(text, "calibrated.toml").map_err(|e| {
+        super::trouble(format!(
+            "the calibrated description does not load back: {e}"
+        ))
+    })?;
+    let e = errors_of(&robot, reference, data)?;
+    let sigma_ref = sigma_um.unwrap_or(campaign.pose_sigma());
+    let (wp, wr) = (
+        sigma_ref / campaign.pose_sigma(),
+        sigma_ref / campaign.orientation_sigma(),
+    );
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (name, g) in e.names.iter().zip(&e.groups) {
+        let w = if name.ends_with("(tracker)") { wp } else { 1.0 };
+        sum += g.values_um.iter().map(|v| (w * v).powi(2)).sum::<f64>();
+        sum += g
+            .orientation_urad
+            .iter()
+            .map(|v| (wr * v).powi(2))
+            .sum::<f64>();
+        n += g.values_um.len() + g.orientation_urad.len();
+    }
+    Ok(Some((cal.residual_rms_um, (sum / n.max(1) as f64).sqrt())))
+}
