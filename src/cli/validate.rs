@@ -192,11 +192,24 @@ fn commanded_lengths(
 /// A file without logged link readings was driven by the controller's inverse kinematics of
 /// the commanded poses: that of `controller` (the reference robot), whichever robot predicts.
 /// Each tracker file is a session: its frame is fitted afresh with the robot held fixed.
-fn errors_of(robot: &Robot, controller: &Robot, paths: &[PathBuf]) -> anyhow::Result<RobotErrors> {
+fn errors_of(
+    robot: &Robot,
+    controller: &Robot,
+    paths: &[PathBuf],
+    strict: bool,
+) -> anyhow::Result<RobotErrors> {
     let model: MeasurementModel = robot.model(&[]);
-    // The machine is held fixed: the readers register the frame, never the link zeros.
+    // The machine is held fixed: the readers register the frame, never the link zeros. Not
+    // strict (the fit's own data read back): no reachability or sensor-length checks, which
+    // the data passed when they were fitted.
     let options = ReadOptions {
         register_link_offsets: false,
+        max_condition_ratio: if strict {
+            ReadOptions::default().max_condition_ratio
+        } else {
+            f64::INFINITY
+        },
+        check_sensor_lengths: strict,
         ..ReadOptions::default()
     };
     let mut out = RobotErrors::default();
@@ -622,8 +635,8 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         )));
     }
     ctx.stage("predicting the held-out measurements");
-    let cal_errors = errors_of(&robot, &reference, &args.data)?;
-    let ref_errors = errors_of(&reference, &reference, &args.data).map_err(|e| {
+    let cal_errors = errors_of(&robot, &reference, &args.data, true)?;
+    let ref_errors = errors_of(&reference, &reference, &args.data, true).map_err(|e| {
         e.context(format!(
             "reading the held-out data against the reference {} (its sensors: {})",
             reference.file,
@@ -805,7 +818,7 @@ pub fn file_reproduces_fit(
             "the calibrated description does not load back: {e}"
         ))
     })?;
-    let e = errors_of(&robot, reference, data)?;
+    let e = errors_of(&robot, reference, data, false)?;
     let sigma_ref = sigma_um.unwrap_or(campaign.pose_sigma());
     let (wp, wr) = (
         sigma_ref / campaign.pose_sigma(),
