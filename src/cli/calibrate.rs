@@ -111,6 +111,7 @@ pub struct Inputs {
 /// Loads robot, effects and data for `calibrate` and `refine`.
 fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     let (data, effects) = (&args.data, &args.effects);
+    let effects_arg = effects;
     let (pose_sigma_um, orientation_sigma_urad) = (args.pose_sigma_um, args.orientation_sigma_urad);
     ctx.stage("reading the robot description");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
@@ -138,6 +139,19 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     }
     if merged.campaign.simulated {
         ctx.note("the measurements are SIMULATED; every output says so");
+    }
+    // Tracker data: the session frame is refined in the fit by default (registered before it,
+    // then held fixed, it would make the installation errors look better known than they
+    // are); an explicit --effects list is taken as it is.
+    let mut model = model;
+    if !merged.campaign.pose_measurements.is_empty()
+        && effects_arg.effects.is_none()
+        && !model.effects.contains(&crate::calib::Effect::TrackerFrame)
+    {
+        let mut e = model.effects.clone();
+        e.push(crate::calib::Effect::TrackerFrame);
+        model = robot.model(&e);
+        ctx.note("tracker data: the tracker frame is refined in the fit (tracker_frame added; its gauge freedoms with the base joints are reported); give --effects to choose the effects yourself");
     }
     Ok(Inputs {
         provenance: Provenance {
