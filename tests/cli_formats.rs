@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use cpm::calib::campaign::{circle, PoseMeasurement};
 use cpm::calib::{simulate_campaign, Campaign, Effect, Noise, Plan, SimulationOptions};
 use cpm::geometry::{Pose, RobotDescription};
-use cpm::io::robot::{calibrated_description, truth_from_description};
+use cpm::io::robot::calibrated_description;
 use cpm::io::{
     read_data, read_pose_list, write_pose_list, write_pose_measurements, write_readings, FileKind,
     ReadOptions, Robot,

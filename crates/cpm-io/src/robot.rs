@@ -496,9 +496,10 @@ pub fn calibrated_description(
 }
 
 /// The reading model `(length_at_zero_mm, mm_per_unit)` of link `i` with the robot's known
-/// `link_offset` (o, um) and `link_scale` (s, ppm) folded in: `(1 + 1e-6 s) length_at_zero_mm
-/// + 1e-3 o` and `(1 + 1e-6 s) mm_per_unit` (see the module doc), for controllers that take a
-/// reading model only.
+/// `link_offset` (o, um) and `link_scale` (s, ppm) folded in (see the module doc), for
+/// controllers that take a reading model only: `length_at_zero_mm` becomes
+/// `(1 + 1e-6 s) length_at_zero_mm + 1e-3 o` and `mm_per_unit` becomes
+/// `(1 + 1e-6 s) mm_per_unit`.
 pub fn folded_reading_model(robot: &Robot, i: usize) -> (f64, f64) {
     let link = &robot.description.links[i];
     let known = robot.known_effects().unwrap_or_default();
