@@ -359,6 +359,33 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     assert!(get("calibrated", "rms_um") < 0.5 * get("reference", "rms_um"));
     assert!(get("calibrated", "link_rms_mm") < 0.5 * get("reference", "link_rms_mm"));
     assert_eq!(held["calibrated"]["sessions"].as_array().unwrap().len(), 1);
+    // Link offsets and scales fitted with the frame held at its rough registration: the file
+    // (offsets and scales as known effects) still registers the held-out session and beats the
+    // nominal robot there.
+    let cal3 = dir.join("cal3");
+    ok(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&first),
+        "--effects",
+        "link_offset,link_scale",
+        "--out",
+        &p(&cal3),
+    ]);
+    let held3 = json(&ok(&[
+        "validate",
+        "--robot",
+        &p(&cal3.join("calibrated.toml")),
+        "--data",
+        &p(&last),
+        "--json",
+    ]));
+    assert!(
+        held3["calibrated"]["rms_um"].as_f64().unwrap()
+            < 0.5 * held3["reference"]["rms_um"].as_f64().unwrap()
+    );
     // Force- and pose-dependent effects too (compliance reads the link forces at the
     // commanded pose, a pose map the commanded pose itself): the file still reproduces the fit.
     let cal2 = dir.join("cal2");

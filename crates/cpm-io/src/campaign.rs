@@ -1122,14 +1122,48 @@ pub fn register_tracker_files(
         Some((t, r)) => Pose::new(r * p.position_mm + t, r * p.rotation),
         None => *p,
     };
-    let raw_lengths = |f: &DataFile| -> Vec<Vec<f64>> {
+    // The lengths the registration works with: the readings through the reading models,
+    // plus the robot's known link effects (a calibrated description's link offsets and
+    // scales, backlash, ...), evaluated in the file's order with the link forces of the home
+    // pose (the registration is rough; the fit and `cpm validate` refine the frame through
+    // the full model).
+    let known_model = robot.model(&[]);
+    let known_shifts = |f: &DataFile| -> Vec<Vec<f64>> {
+        if known_model.known_effects.is_empty() {
+            return Vec::new();
+        }
+        let home = robot.table.home;
+        let mut previous: Option<cpm_calib::effects::PoseContext> = None;
         f.tracker_rows
             .iter()
             .map(|r| {
-                r.readings
+                let l: Vec<f64> = r
+                    .readings
                     .iter()
                     .enumerate()
                     .map(|(i, v)| robot.length_mm(i, *v))
+                    .collect();
+                match known_model.pose_context(&home, l, previous.as_ref(), None, None) {
+                    Ok(ctx) => {
+                        let d = known_model.known_link_shift_at(&ctx, &home, 0.0);
+                        previous = Some(ctx);
+                        d
+                    }
+                    Err(_) => vec![0.0; robot.num_links()],
+                }
+            })
+            .collect()
+    };
+    let raw_lengths = |f: &DataFile| -> Vec<Vec<f64>> {
+        let known = known_shifts(f);
+        f.tracker_rows
+            .iter()
+            .enumerate()
+            .map(|(q, r)| {
+                r.readings
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| robot.length_mm(i, *v) + known.get(q).map_or(0.0, |k| k[i]))
                     .collect()
             })
             .collect()
@@ -1243,6 +1277,63 @@ pub fn register_tracker_files(
             }
         }
     }
+    // The checks, after registration. A measured pose is where the real machine went: the
+    // nominal inverse kinematics of it misses the true link lengths by the machine's errors,
+    // so its link limits are checked widened by the consistency tolerance
+    // ([`CONSISTENCY_MM`]), which only catches gross errors (units, frames, link mapping).
+    let mut measured_table = robot.table.clone();
+    for l in measured_table.links.iter_mut() {
+        if let Some((lo, hi)) = l.length_limits_mm {
+            l.length_limits_mm = Some((lo - CONSISTENCY_MM, hi + CONSISTENCY_MM));
+        }
+    }
+    for &k in &idx {
+        let f = &mut files[k];
+        let note = registration_note(f);
+        let offsets = f
+            .registration
+            .as_ref()
+            .filter(|r| r.offsets_applied)
+            .map(|r| r.link_offset_mm.clone());
+        let known = known_shifts(f);
+        for (q, row) in f.tracker_rows.iter().enumerate() {
+            let pose = f.campaign.poses[f.campaign.pose_measurements[q].pose];
+            // The registration's reading offsets and the robot's known link effects.
+            let row_offsets: Option<Vec<f64>> = match (&offsets, known.get(q)) {
+                (None, None) => None,
+                (o, k) => Some(
+                    (0..robot.num_links())
+                        .map(|i| o.as_ref().map_or(0.0, |o| o[i]) + k.map_or(0.0, |k| k[i]))
+                        .collect(),
+                ),
+            };
+            if options.max_condition_ratio.is_finite() {
+                check_reachable(
+                    &measured_table,
+                    &pose,
+                    options.max_condition_ratio,
+                    &f.file,
+                    row.line,
+                    &row.label,
+                )
+                .map_err(|mut e| {
+                    e.message.push_str(&note);
+                    e
+                })?;
+            }
+            check_link_readings(
+                &f.file,
+                row.line,
+                robot,
+                &pose,
+                &row.readings,
+                row_offsets.as_deref(),
+                "measured pose",
+                &note,
+            )?;
+        }
+        f.checked = true;
+    }
     // The commanded pose of a tracker row (what the link effects and a pose map read, where
     // the link forces are computed): the forward kinematics of its commanded lengths on the
     // design geometry, started from the registered measured pose. It depends on the logged
@@ -1270,53 +1361,6 @@ pub fn register_tracker_files(
                 }
             }
         }
-    }
-    // The checks, after registration. A measured pose is where the real machine went: the
-    // nominal inverse kinematics of it misses the true link lengths by the machine's errors,
-    // so its link limits are checked widened by the consistency tolerance
-    // ([`CONSISTENCY_MM`]), which only catches gross errors (units, frames, link mapping).
-    let mut measured_table = robot.table.clone();
-    for l in measured_table.links.iter_mut() {
-        if let Some((lo, hi)) = l.length_limits_mm {
-            l.length_limits_mm = Some((lo - CONSISTENCY_MM, hi + CONSISTENCY_MM));
-        }
-    }
-    for &k in &idx {
-        let f = &mut files[k];
-        let note = registration_note(f);
-        let offsets = f
-            .registration
-            .as_ref()
-            .filter(|r| r.offsets_applied)
-            .map(|r| r.link_offset_mm.clone());
-        for (q, row) in f.tracker_rows.iter().enumerate() {
-            let pose = f.campaign.poses[f.campaign.pose_measurements[q].pose];
-            if options.max_condition_ratio.is_finite() {
-                check_reachable(
-                    &measured_table,
-                    &pose,
-                    options.max_condition_ratio,
-                    &f.file,
-                    row.line,
-                    &row.label,
-                )
-                .map_err(|mut e| {
-                    e.message.push_str(&note);
-                    e
-                })?;
-            }
-            check_link_readings(
-                &f.file,
-                row.line,
-                robot,
-                &pose,
-                &row.readings,
-                offsets.as_deref(),
-                "measured pose",
-                &note,
-            )?;
-        }
-        f.checked = true;
     }
     Ok(())
 }
