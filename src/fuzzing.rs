@@ -144,6 +144,8 @@ pub fn calibrate(data: &[u8]) {
             data: vec![FILE.into()],
         },
         robot: robot.clone(),
+        // In memory: no file to read the calibrated description back on.
+        data_paths: Vec::new(),
     };
     match fit(&inputs, Path::new("out"), false) {
         Err(e) => {

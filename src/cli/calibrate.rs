@@ -106,6 +106,9 @@ pub struct Inputs {
     pub identify: IdentifyOptions,
     /// Where it all came from.
     pub provenance: Provenance,
+    /// The measurement files as read (the provenance may name them otherwise); empty for
+    /// measurements read from memory.
+    pub data_paths: Vec<PathBuf>,
 }
 
 /// Loads robot, effects and data for `calibrate` and `refine`.
@@ -154,6 +157,7 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         ctx.note("tracker data: the tracker frame is refined in the fit (tracker_frame added; its gauge freedoms with the base joints are reported); give --effects to choose the effects yourself");
     }
     Ok(Inputs {
+        data_paths: data.clone(),
         provenance: Provenance {
             robot: robot.file.clone(),
             data: data.iter().map(|p| p.display().to_string()).collect(),
@@ -342,12 +346,14 @@ pub fn stage_calibrated(
     })?;
     // What every reader of the file will predict is what the fit predicted: checked on the
     // fit's own data before anything is written.
-    if check {
-        let data: Vec<PathBuf> = inputs.provenance.data.iter().map(PathBuf::from).collect();
+    // (Inputs read from memory have no files to read back; nor has a caller that removed
+    // its scratch files, as Python's binding does when it is interrupted.)
+    if check && !inputs.data_paths.is_empty() && inputs.data_paths.iter().all(|p| p.exists()) {
+        let data = &inputs.data_paths;
         if let Some((fit, file)) = super::validate::file_reproduces_fit(
             &text,
             &inputs.robot,
-            &data,
+            data,
             model,
             &inputs.merged.campaign,
             cal,
