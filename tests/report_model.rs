@@ -420,6 +420,7 @@ fn typed_fit_report_agrees_with_the_untyped_builder() {
             merged,
             identify: identify_options,
             provenance,
+            data_paths: vec![data.clone()],
         };
         let typed = serde_json::to_value(cpm::report::fit::FitReport::new(
             &inputs, &model, &cal, None,
