@@ -675,3 +675,58 @@ fn refine_writes_the_model_it_fitted() {
         "refine fit {fit} um, calibrated.toml {file} um"
     );
 }
+
+/// `simulate --truth` measures with the truth's own sensor sockets (its `[[sensor]]` tables),
+/// as `validate` predicts with them: the truth reproduces its noise-free simulation, and the
+/// robot with the nominal sockets does not.
+#[test]
+fn the_truths_sensor_sockets_are_the_ones_simulated() {
+    let robot = example("hexapod_66.toml");
+    let dir = scratch("roundtrip", "truth-sockets");
+    let text = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap();
+    let moved = text.replace(
+        "base_mm = [375.877048314, 136.80805733, 100.0]",
+        "base_mm = [375.917048314, 136.77805733, 100.02]",
+    );
+    assert_ne!(moved, text);
+    let truth = dir.join("truth.toml");
+    std::fs::write(&truth, moved).unwrap();
+    let data = dir.join("exact.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "30",
+        "--truth",
+        &p(&truth),
+        "--noise",
+        "none",
+        "--seed",
+        "2",
+        "--out",
+        &p(&data),
+    ]);
+    let v = json(&ok(&[
+        "validate",
+        "--robot",
+        &p(&truth),
+        "--reference",
+        &robot,
+        "--data",
+        &p(&data),
+        "--json",
+    ]));
+    let exact = v["calibrated"]["max_um"].as_f64().unwrap();
+    assert!(
+        exact < 1e-6,
+        "the truth misses its own simulation by {exact} um"
+    );
+    let s1 = v["groups"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|g| g["name"] == "s1")
+        .unwrap();
+    assert!(s1["reference"]["rms_um"].as_f64().unwrap() > 5.0, "{s1}");
+}
