@@ -145,6 +145,44 @@ fn pearson(a: &[f64], b: &[f64]) -> f64 {
     }
 }
 
+/// The fewest observations of one kind whose own robust spread [`outliers_by_kind`] trusts;
+/// smaller kinds are judged against the pooled spread of all observations.
+pub const MIN_KIND_OBSERVATIONS: usize = 8;
+
+/// [`outliers`] judged per kind of observation: each sensor's readings, the tracker's
+/// positions and its orientations have their own noise, so each kind gets its own median and
+/// robust spread (never pooled: noise-free orientations pooled with noisy positions would
+/// make every position an "outlier"). A kind with fewer than [`MIN_KIND_OBSERVATIONS`]
+/// observations is judged against the pooled spread.
+pub fn outliers_by_kind(residuals_um: &[f64], campaign: &Campaign) -> Vec<usize> {
+    let m = campaign.readings.len();
+    let kind = |k: usize| -> usize {
+        if k < m {
+            campaign.readings[k].sensor
+        } else if (k - m) % 6 < 3 {
+            usize::MAX - 1
+        } else {
+            usize::MAX
+        }
+    };
+    let mut kinds: Vec<usize> = (0..residuals_um.len()).map(kind).collect();
+    kinds.sort_unstable();
+    kinds.dedup();
+    let pooled = outliers(residuals_um);
+    let mut out = Vec::new();
+    for g in kinds {
+        let idx: Vec<usize> = (0..residuals_um.len()).filter(|&k| kind(k) == g).collect();
+        if idx.len() < MIN_KIND_OBSERVATIONS {
+            out.extend(idx.iter().filter(|k| pooled.binary_search(k).is_ok()));
+        } else {
+            let r: Vec<f64> = idx.iter().map(|&k| residuals_um[k]).collect();
+            out.extend(outliers(&r).into_iter().map(|i| idx[i]));
+        }
+    }
+    out.sort_unstable();
+    out
+}
+
 /// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
 /// deviation) from the median.
 pub fn outliers(residuals_um: &[f64]) -> Vec<usize> {
