@@ -222,6 +222,9 @@ impl PoseRange {
 /// added).
 pub const CV_EVERY_CANDIDATE_MAX_OBSERVATIONS: usize = 20_000;
 
+/// A residual RMS below this (um) is rounding, not a signal: no effect is added to explain it.
+pub const RESIDUAL_FLOOR_UM: f64 = 1e-6;
+
 /// A physical (library or user) effect is skipped as confounded only when its novelty is below
 /// this fraction of [`RefineOptions::min_novelty`] (pose map terms: below `min_novelty`).
 pub const PHYSICAL_NOVELTY_FRACTION: f64 = 0.05;
@@ -507,7 +510,10 @@ pub fn refine(
                 if loses {
                     score.determined_lost = Some(determined(&cal) - determined(&c1));
                 }
-                if p < level && db < 0.0 && !c1.robust_failed && !loses {
+                // A residual at rounding level has nothing left to explain: the F-test on it
+                // measures floating-point noise.
+                let explainable = cal.residual_rms_um > RESIDUAL_FLOOR_UM;
+                if p < level && db < 0.0 && !c1.robust_failed && !loses && explainable {
                     eligible.push((scores.len(), aug, c1));
                 } else if m <= CV_EVERY_CANDIDATE_MAX_OBSERVATIONS {
                     // Its blocked cross-validated error, for the report only.
