@@ -46,32 +46,59 @@ fn truth_values(effect: Effect, links: usize, sensors: usize) -> Vec<f64> {
         .collect()
 }
 
-/// `calibrate` with `effects` on `data`, then `validate` of its calibrated.toml on the same
-/// data (reference from the file): the file reproduces the fit. Returns (fit, file) RMS.
-fn fit_and_read_back(dir: &Path, robot: &str, data: &Path, effects: &str) -> (f64, f64) {
-    let cal = dir.join("cal");
-    ok(&[
+/// `cpm calibrate --robot robot --data data --effects effects --out cal` plus `extra`
+/// options; its calibration.json.
+fn calibrate(
+    cal: &Path,
+    robot: &str,
+    data: &Path,
+    effects: &str,
+    extra: &[&str],
+) -> serde_json::Value {
+    let (data, out) = (p(data), p(cal));
+    let mut args = vec![
         "calibrate",
         "--robot",
         robot,
         "--data",
-        &p(data),
+        &data,
         "--effects",
         effects,
-        "--out",
-        &p(&cal),
-    ]);
-    let fit = read_json(&cal.join("calibration.json"))["residual_rms_um"]
-        .as_f64()
-        .unwrap();
-    let v = json(&ok(&[
+    ];
+    args.extend_from_slice(extra);
+    args.extend(["--out", &out]);
+    ok(&args);
+    read_json(&cal.join("calibration.json"))
+}
+
+/// `cpm validate --robot calibrated --data data --json` (reference from the file).
+fn validate(calibrated: &Path, data: &Path) -> serde_json::Value {
+    json(&ok(&[
         "validate",
         "--robot",
-        &p(&cal.join("calibrated.toml")),
+        &p(calibrated),
         "--data",
         &p(data),
         "--json",
-    ]));
+    ]))
+}
+
+/// A validation's calibrated error weighted as the fit weighs tracker observations: positions
+/// at 1, orientations at pose sigma / orientation sigma (10 um / 20 urad).
+fn weighted_rms_um(v: &serde_json::Value) -> f64 {
+    let pos = v["calibrated"]["rms_um"].as_f64().unwrap();
+    let rot = v["calibrated"]["orientation_rms_urad"].as_f64().unwrap();
+    ((pos * pos + (0.5 * rot).powi(2)) / 2.0).sqrt()
+}
+
+/// `calibrate` with `effects` on `data`, then `validate` of its calibrated.toml on the same
+/// data (reference from the file): the file reproduces the fit. Returns (fit, file) RMS.
+fn fit_and_read_back(dir: &Path, robot: &str, data: &Path, effects: &str) -> (f64, f64) {
+    let cal = dir.join("cal");
+    let fit = calibrate(&cal, robot, data, effects, &[])["residual_rms_um"]
+        .as_f64()
+        .unwrap();
+    let v = validate(&cal.join("calibrated.toml"), data);
     (fit, v["calibrated"]["rms_um"].as_f64().unwrap())
 }
 
@@ -308,46 +335,21 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     );
     let robot = p(&src.join("robot.toml"));
     let cal = dir.join("cal");
-    ok(&[
-        "calibrate",
-        "--robot",
+    let fit = calibrate(
+        &cal,
         &robot,
-        "--data",
-        &p(&first),
-        "--effects",
+        &first,
         "link_offset,link_scale,tracker_frame",
-        "--out",
-        &p(&cal),
-    ]);
-    let fit = read_json(&cal.join("calibration.json"));
+        &[],
+    );
     assert_eq!(fit["simulated"], false);
     let fit_rms = fit["residual_rms_um"].as_f64().unwrap();
-    let back = json(&ok(&[
-        "validate",
-        "--robot",
-        &p(&cal.join("calibrated.toml")),
-        "--data",
-        &p(&first),
-        "--json",
-    ]));
-    // The fit weighs orientations by pose sigma / orientation sigma (10 um / 20 urad).
-    let (pos, rot) = (
-        back["calibrated"]["rms_um"].as_f64().unwrap(),
-        back["calibrated"]["orientation_rms_urad"].as_f64().unwrap(),
-    );
-    let combined = ((pos * pos + (0.5 * rot).powi(2)) / 2.0).sqrt();
+    let combined = weighted_rms_um(&validate(&cal.join("calibrated.toml"), &first));
     assert!(
         (combined - fit_rms).abs() <= 1e-9 * fit_rms,
         "fit {fit_rms} um, calibrated.toml {combined} um"
     );
-    let held = json(&ok(&[
-        "validate",
-        "--robot",
-        &p(&cal.join("calibrated.toml")),
-        "--data",
-        &p(&last),
-        "--json",
-    ]));
+    let held = validate(&cal.join("calibrated.toml"), &last);
     let get = |who: &str, key: &str| held[who][key].as_f64().unwrap();
     println!(
         "held-out last third: calibrated {:.1} um / link {:.3} mm, nominal {:.1} um / link {:.3} mm",
@@ -363,25 +365,8 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     // (offsets and scales as known effects) still registers the held-out session and beats the
     // nominal robot there.
     let cal3 = dir.join("cal3");
-    ok(&[
-        "calibrate",
-        "--robot",
-        &robot,
-        "--data",
-        &p(&first),
-        "--effects",
-        "link_offset,link_scale",
-        "--out",
-        &p(&cal3),
-    ]);
-    let held3 = json(&ok(&[
-        "validate",
-        "--robot",
-        &p(&cal3.join("calibrated.toml")),
-        "--data",
-        &p(&last),
-        "--json",
-    ]));
+    calibrate(&cal3, &robot, &first, "link_offset,link_scale", &[]);
+    let held3 = validate(&cal3.join("calibrated.toml"), &last);
     assert!(
         held3["calibrated"]["rms_um"].as_f64().unwrap()
             < 0.5 * held3["reference"]["rms_um"].as_f64().unwrap()
@@ -389,35 +374,11 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     // Force- and pose-dependent effects too (compliance reads the link forces at the
     // commanded pose, a pose map the commanded pose itself): the file still reproduces the fit.
     let cal2 = dir.join("cal2");
-    ok(&[
-        "calibrate",
-        "--robot",
-        &robot,
-        "--data",
-        &p(&first),
-        "--effects",
-        "link_offset,link_scale,tracker_frame,compliance,pose_map_z_roll",
-        "--out",
-        &p(&cal2),
-    ]);
-    let fit2 = read_json(&cal2.join("calibration.json"))["residual_rms_um"]
+    let effects = "link_offset,link_scale,tracker_frame,compliance,pose_map_z_roll";
+    let fit2 = calibrate(&cal2, &robot, &first, effects, &[])["residual_rms_um"]
         .as_f64()
         .unwrap();
-    let back2 = json(&ok(&[
-        "validate",
-        "--robot",
-        &p(&cal2.join("calibrated.toml")),
-        "--data",
-        &p(&first),
-        "--json",
-    ]));
-    let (pos2, rot2) = (
-        back2["calibrated"]["rms_um"].as_f64().unwrap(),
-        back2["calibrated"]["orientation_rms_urad"]
-            .as_f64()
-            .unwrap(),
-    );
-    let combined2 = ((pos2 * pos2 + (0.5 * rot2).powi(2)) / 2.0).sqrt();
+    let combined2 = weighted_rms_um(&validate(&cal2.join("calibrated.toml"), &first));
     assert!(
         (combined2 - fit2).abs() <= 1e-9 * fit2,
         "with compliance and a pose map: fit {fit2} um, calibrated.toml {combined2} um"
@@ -463,52 +424,17 @@ fn tracker_sessions_in_their_own_frames_round_trip() {
     let data = sim("train.csv", "1", "100,-40,20,1,-2,3");
     let held = sim("held.csv", "2", "-60,30,10,-2,1,-4");
     let cal = dir.join("cal");
-    ok(&[
-        "calibrate",
-        "--robot",
-        &robot,
-        "--data",
-        &p(&data),
-        "--effects",
-        "link_offset,tracker_frame",
-        "--pose-sigma-um",
-        "10",
-        "--orientation-sigma-urad",
-        "20",
-        "--out",
-        &p(&cal),
-    ]);
-    let fit = read_json(&cal.join("calibration.json"))["residual_rms_um"]
+    let sigmas = ["--pose-sigma-um", "10", "--orientation-sigma-urad", "20"];
+    let fit = calibrate(&cal, &robot, &data, "link_offset,tracker_frame", &sigmas)
+        ["residual_rms_um"]
         .as_f64()
         .unwrap();
-    let combined = |v: &serde_json::Value| {
-        let (pos, rot) = (
-            v["calibrated"]["rms_um"].as_f64().unwrap(),
-            v["calibrated"]["orientation_rms_urad"].as_f64().unwrap(),
-        );
-        ((pos * pos + (0.5 * rot).powi(2)) / 2.0).sqrt()
-    };
-    let back = json(&ok(&[
-        "validate",
-        "--robot",
-        &p(&cal.join("calibrated.toml")),
-        "--data",
-        &p(&data),
-        "--json",
-    ]));
-    let file = combined(&back);
+    let file = weighted_rms_um(&validate(&cal.join("calibrated.toml"), &data));
     assert!(
         (file - fit).abs() <= 1e-9 * fit,
         "fit {fit} um, calibrated.toml {file} um"
     );
-    let v = json(&ok(&[
-        "validate",
-        "--robot",
-        &p(&cal.join("calibrated.toml")),
-        "--data",
-        &p(&held),
-        "--json",
-    ]));
+    let v = validate(&cal.join("calibrated.toml"), &held);
     let (c, r) = (
         v["calibrated"]["rms_um"].as_f64().unwrap(),
         v["reference"]["rms_um"].as_f64().unwrap(),
@@ -551,17 +477,7 @@ fn compensation_with_backlash_from_home_reaches_the_targets() {
         &p(&data),
     ]);
     let cal = dir.join("cal");
-    ok(&[
-        "calibrate",
-        "--robot",
-        &robot,
-        "--data",
-        &p(&data),
-        "--effects",
-        "backlash",
-        "--out",
-        &p(&cal),
-    ]);
+    calibrate(&cal, &robot, &data, "backlash", &[]);
     let commands = dir.join("commands.csv");
     ok(&[
         "compensate",
@@ -660,15 +576,9 @@ fn refine_writes_the_model_it_fitted() {
         "{effects:?}"
     );
     let fit = r["final"]["rms_um"].as_f64().unwrap();
-    let v = json(&ok(&[
-        "validate",
-        "--robot",
-        &p(&out.join("calibrated.toml")),
-        "--data",
-        &p(&data),
-        "--json",
-    ]));
-    let file = v["calibrated"]["rms_um"].as_f64().unwrap();
+    let file = validate(&out.join("calibrated.toml"), &data)["calibrated"]["rms_um"]
+        .as_f64()
+        .unwrap();
     println!("refine: {effects:?}, fit {fit:.4} um, file {file:.4} um");
     assert!(
         (fit - file).abs() <= 1e-9 * fit,
