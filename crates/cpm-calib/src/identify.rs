@@ -191,7 +191,8 @@ impl DenseJacobian for Subspace<'_> {
     }
 }
 
-fn rms(v: &[f64]) -> f64 {
+/// Root mean square (0 for no values).
+pub(crate) fn rms(v: &[f64]) -> f64 {
     if v.is_empty() {
         0.0
     } else {

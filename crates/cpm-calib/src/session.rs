@@ -36,6 +36,7 @@
 use cpm_lm::{DenseJacobian, ModelError, Problem};
 use nalgebra::DMatrix;
 
+use crate::identify::rms;
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, Effect, MeasurementModel};
 
@@ -120,14 +121,6 @@ impl DenseJacobian for FrameProblem<'_> {
             }
         }
         Ok(())
-    }
-}
-
-fn rms(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        0.0
-    } else {
-        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
     }
 }
 
