@@ -102,83 +102,389 @@ fn fit_and_read_back(dir: &Path, robot: &str, data: &Path, effects: &str) -> (f6
     (fit, v["calibrated"]["rms_um"].as_f64().unwrap())
 }
 
-/// Every built-in effect that a gauge campaign can carry: simulated from the truth with the
-/// effect, fitted with it, written, read back; the file reproduces the fit to 1e-9 mm (the
-/// RMS to a relative 1e-9), and the truth itself (the effect in its known values) reproduces
-/// its own noise-free simulation.
-#[test]
-fn every_effect_round_trips_through_calibrated_toml() {
+/// The data kinds of the round-trip matrix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Kind {
+    /// Gauge readings driven by the controller's inverse kinematics (no `reading_k`).
+    Gauge,
+    /// The same gauge readings with the commanded link readings logged (`reading_k`).
+    GaugeReadings,
+    /// Tracker poses in the tracker's own frame (100 mm, a few degrees away).
+    Tracker,
+    /// A gauge file and a tracker file in one fit (two sessions).
+    Mixed,
+}
+
+impl Kind {
+    fn name(self) -> &'static str {
+        match self {
+            Kind::Gauge => "gauge",
+            Kind::GaugeReadings => "gauge+reading_k",
+            Kind::Tracker => "tracker (own frame)",
+            Kind::Mixed => "gauge + tracker files",
+        }
+    }
+    fn tracker(self) -> bool {
+        matches!(self, Kind::Tracker | Kind::Mixed)
+    }
+    fn gauge(self) -> bool {
+        self != Kind::Tracker
+    }
+    /// Noise weights of the fit: (sigma options, position weight, orientation weight) with
+    /// which a validation's groups combine into the fit's weighted RMS.
+    fn sigmas(self) -> (Vec<&'static str>, f64, f64) {
+        let (gauge_um, pose_um, rot_urad) = (1.0, 2.0, 20.0);
+        let mut args = vec!["--pose-sigma-um", "2", "--orientation-sigma-urad", "20"];
+        if self.gauge() {
+            args.extend(["--sigma-um", "1"]);
+            (args, gauge_um / pose_um, gauge_um / rot_urad)
+        } else {
+            (args, 1.0, pose_um / rot_urad)
+        }
+    }
+}
+
+/// The weighted RMS of a validation over all its groups, as the fit weighs them: gauge
+/// readings at 1, tracker positions at `wp`, orientations (urad) at `wr`.
+fn combined_rms_um(v: &serde_json::Value, wp: f64, wr: f64) -> f64 {
+    let (mut sum, mut n) = (0.0, 0.0);
+    for g in v["groups"].as_array().unwrap() {
+        let count = g["count"].as_f64().unwrap();
+        let c = &g["calibrated"];
+        let rms = c["rms_um"].as_f64().unwrap();
+        if g["name"].as_str().unwrap().ends_with("(tracker)") {
+            let rot = c["orientation_rms_urad"].as_f64().unwrap();
+            sum += count * ((wp * rms).powi(2) + (wr * rot).powi(2));
+            n += 2.0 * count;
+        } else {
+            sum += count * rms * rms;
+            n += count;
+        }
+    }
+    (sum / n).sqrt()
+}
+
+/// `cpm validate` of `robot` on `files` (reference from the file unless given).
+fn validate_files(
+    robot: &Path,
+    files: &[std::path::PathBuf],
+    reference: Option<&str>,
+) -> serde_json::Value {
+    let mut args = vec!["validate".to_string(), "--robot".into(), p(robot)];
+    for f in files {
+        args.extend(["--data".into(), p(f)]);
+    }
+    if let Some(r) = reference {
+        args.extend(["--reference".into(), r.into()]);
+    }
+    args.push("--json".into());
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    json(&ok(&args))
+}
+
+/// A plan of 60 random poses about home (from `cpm simulate --random`), with a time every two
+/// minutes and a temperature that wanders by a few degrees, so that drift is observable.
+fn matrix_plan(dir: &Path) -> std::path::PathBuf {
+    let robot = example("hexapod_66.toml");
+    let sim = dir.join("poses.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "60",
+        "--noise",
+        "none",
+        "--seed",
+        "3",
+        "--out",
+        &p(&sim),
+    ]);
+    let text = std::fs::read_to_string(&sim).unwrap();
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let cols = ["x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg"].map(col);
+    let mut plan = String::from("x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,time_s,temperature_c\n");
+    let mut last = String::new();
+    let mut j = 0;
+    for l in lines {
+        let f: Vec<&str> = l.split(',').collect();
+        if f[col("pose")] == last {
+            continue;
+        }
+        last = f[col("pose")].to_string();
+        let pose: Vec<&str> = cols.iter().map(|&c| f[c]).collect();
+        let t = 120.0 * j as f64;
+        let temp = 20.0 + 2.5 * (0.37 * j as f64).sin() + 0.03 * j as f64;
+        plan.push_str(&format!("{},{t},{temp}\n", pose.join(",")));
+        j += 1;
+    }
+    assert_eq!(j, 60);
+    let path = dir.join("plan.csv");
+    std::fs::write(&path, plan).unwrap();
+    path
+}
+
+/// A gauge file with the commanded link readings of a tracker file of the same plan joined
+/// in as `reading_k` columns (the controller's log).
+fn with_readings(gauge: &Path, tracker: &Path, out: &Path) {
+    let t = std::fs::read_to_string(tracker).unwrap();
+    let mut t_lines = t.lines().filter(|l| !l.starts_with('#'));
+    let t_header: Vec<&str> = t_lines.next().unwrap().split(',').collect();
+    let reading_cols: Vec<usize> = (1..=6)
+        .map(|k| {
+            t_header
+                .iter()
+                .position(|h| *h == format!("reading_{k}"))
+                .unwrap()
+        })
+        .collect();
+    let readings: std::collections::HashMap<String, String> = t_lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let r: Vec<&str> = reading_cols.iter().map(|&c| f[c]).collect();
+            (f[0].to_string(), r.join(","))
+        })
+        .collect();
+    let g = std::fs::read_to_string(gauge).unwrap();
+    let mut out_text = String::new();
+    let mut header_done = false;
+    for l in g.lines() {
+        if l.starts_with('#') {
+            out_text.push_str(l);
+        } else if !header_done {
+            header_done = true;
+            out_text.push_str(&format!(
+                "{l},reading_1,reading_2,reading_3,reading_4,reading_5,reading_6"
+            ));
+        } else {
+            let label = l.split(',').next().unwrap();
+            out_text.push_str(&format!("{l},{}", readings[label]));
+        }
+        out_text.push('\n');
+    }
+    std::fs::write(out, out_text).unwrap();
+}
+
+/// The round-trip matrix of one data kind: for every built-in effect it can carry, a pose-map
+/// term, times `calibrate` and `refine`: the truth (the example's truth plus the effect's
+/// values) reproduces its own noise-free simulation at every pose (to 1e-6 um), and the
+/// `calibrated.toml` each command writes, read back by `validate`, reproduces the command's
+/// fit (weighted RMS to a relative 1e-9). Returns the table rows.
+fn round_trip_matrix(kind: Kind) -> Vec<String> {
     let robot = example("hexapod_66.toml");
     let truth_text = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap();
-    let mut table = Vec::new();
-    for effect in [
+    let tag = kind.name().replace([' ', '+', '(', ')'], "_");
+    let top = scratch("matrix", &tag);
+    let plan = matrix_plan(&top);
+    let (sigmas, wp, wr) = kind.sigmas();
+    let mut rows = Vec::new();
+    let effects = [
         Effect::LinkOffset,
         Effect::LinkScale,
         Effect::SensorOffset,
         Effect::SensorScale,
+        Effect::SocketError,
+        Effect::Clearance,
         Effect::Backlash,
         Effect::Compliance,
+        Effect::ThermalDrift,
         Effect::ScrewPeriodic,
         Effect::LinkNonlinearity,
-        Effect::Clearance,
-        Effect::SocketError,
-    ] {
+        Effect::parse("pose_map_z").unwrap(),
+    ];
+    for effect in effects {
         let name = effect.name();
-        let dir = scratch("roundtrip", name);
-        let values = truth_values(effect, 6, 3);
-        let list = values
+        let gauge_only = matches!(
+            effect,
+            Effect::SensorOffset | Effect::SensorScale | Effect::SocketError
+        );
+        if gauge_only && kind == Kind::Tracker {
+            continue;
+        }
+        let dir = top.join(name);
+        std::fs::create_dir_all(&dir).unwrap();
+        let list = truth_values(effect, 6, 3)
             .iter()
             .map(|v| v.to_string())
             .collect::<Vec<_>>()
             .join(", ");
-        // The truth as a description: the example's truth plus the effect's known values.
         let truth = dir.join("truth.toml");
         std::fs::write(
             &truth,
             format!("{truth_text}\n[calibration.known_effects]\n{name} = [{list}]\n"),
         )
         .unwrap();
-        for (noise, file) in [("gaussian:1", "data.csv"), ("none", "exact.csv")] {
-            ok(&[
+        let sim = |file: &str, tracker: bool, noisy: bool| {
+            let path = dir.join(file);
+            let mut args = vec![
                 "simulate",
                 "--robot",
                 &robot,
-                "--random",
-                "70",
+                "--plan",
+                p(&plan).leak(),
                 "--truth",
-                &p(&truth),
-                "--noise",
-                noise,
-                "--seed",
-                "3",
+                p(&truth).leak(),
                 "--out",
-                &p(&dir.join(file)),
-            ]);
+                p(&path).leak(),
+            ];
+            if tracker {
+                args.extend([
+                    "--measure",
+                    "poses",
+                    "--tracker-frame",
+                    "100,-40,20,1,-2,3",
+                    "--seed",
+                    "4",
+                ]);
+                args.extend(if noisy {
+                    ["--noise", "gaussian:2", "--orientation-noise-urad", "20"]
+                } else {
+                    ["--noise", "none", "--orientation-noise-urad", "0"]
+                });
+            } else {
+                args.extend([
+                    "--seed",
+                    "3",
+                    "--noise",
+                    if noisy { "gaussian:1" } else { "none" },
+                ]);
+            }
+            ok(&args);
+            path
+        };
+        let mut files = Vec::new();
+        let mut exact = Vec::new();
+        if kind.gauge() {
+            files.push(sim("gauge.csv", false, true));
+            exact.push(sim("gauge_exact.csv", false, false));
+        }
+        if kind.tracker() || kind == Kind::GaugeReadings {
+            let (t, te) = (
+                sim("tracker.csv", true, true),
+                sim("tracker_exact.csv", true, false),
+            );
+            if kind == Kind::GaugeReadings {
+                with_readings(&files[0], &t, &dir.join("gauge_k.csv"));
+                with_readings(&exact[0], &te, &dir.join("gauge_k_exact.csv"));
+                files = vec![dir.join("gauge_k.csv")];
+                exact = vec![dir.join("gauge_k_exact.csv")];
+            } else {
+                files.push(t);
+                exact.push(te);
+            }
         }
         // The exact truth reproduces its own noise-free simulation at every pose.
-        let v = json(&ok(&[
-            "validate",
-            "--robot",
-            &p(&truth),
-            "--reference",
-            &robot,
-            "--data",
-            &p(&dir.join("exact.csv")),
-            "--json",
-        ]));
-        let exact = v["calibrated"]["max_um"].as_f64().unwrap();
+        let v = validate_files(&truth, &exact, Some(&robot));
+        let worst = v["calibrated"]["max_um"].as_f64().unwrap();
+        let worst_rot = v["calibrated"]["orientation_rms_urad"]
+            .as_f64()
+            .unwrap_or(0.0);
         assert!(
-            exact < 1e-6,
-            "{name}: the truth misses its own simulation by {exact} um"
+            worst < 1e-6 && worst_rot < 1e-6,
+            "{} / {name}: the truth misses its own simulation by {worst} um, {worst_rot} urad",
+            kind.name()
         );
-        let (fit, file) = fit_and_read_back(&dir, &robot, &dir.join("data.csv"), name);
-        table.push(format!("{name}: fit {fit:.4} um, file {file:.4} um"));
-        assert!(
-            (fit - file).abs() <= 1e-9 * fit.max(1.0),
-            "{name}: fit {fit} um, calibrated.toml {file} um"
-        );
+        let base = if kind.tracker() {
+            "tracker_frame"
+        } else {
+            "none"
+        };
+        let fitted = if kind.tracker() {
+            format!("{name},tracker_frame")
+        } else {
+            name.to_string()
+        };
+        let data_args: Vec<String> = files
+            .iter()
+            .flat_map(|f| ["--data".to_string(), p(f)])
+            .collect();
+        let run = |command: &str, out: &Path| -> (f64, String) {
+            let mut args: Vec<String> = vec![command.into(), "--robot".into(), robot.clone()];
+            args.extend(data_args.iter().cloned());
+            if command == "calibrate" {
+                args.extend(["--effects".into(), fitted.clone()]);
+            } else {
+                args.extend(
+                    [
+                        "--effects",
+                        base,
+                        "--candidates",
+                        name,
+                        "--max-steps",
+                        "1",
+                        "--pose-map-degree",
+                        "0",
+                    ]
+                    .map(String::from),
+                );
+            }
+            args.extend(sigmas.iter().map(|s| s.to_string()));
+            args.extend(["--out".into(), p(out)]);
+            let args: Vec<&str> = args.iter().map(String::as_str).collect();
+            ok(&args);
+            if command == "calibrate" {
+                let j = read_json(&out.join("calibration.json"));
+                (j["residual_rms_um"].as_f64().unwrap(), fitted.clone())
+            } else {
+                let j = read_json(&out.join("refine.json"));
+                let chosen: Vec<&str> = j["final"]["effects"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|e| e.as_str().unwrap())
+                    .collect();
+                (j["final"]["rms_um"].as_f64().unwrap(), chosen.join(","))
+            }
+        };
+        for command in ["calibrate", "refine"] {
+            let out = dir.join(command);
+            let (fit, model) = run(command, &out);
+            let file = combined_rms_um(
+                &validate_files(&out.join("calibrated.toml"), &files, None),
+                wp,
+                wr,
+            );
+            rows.push(format!(
+                "| {} | {name} | {command} | {model} | {fit:.4} | {file:.4} | {:.1e} |",
+                kind.name(),
+                (fit - file).abs()
+            ));
+            assert!(
+                (fit - file).abs() <= 1e-9 * fit.max(1.0),
+                "{} / {name} / {command}: fit {fit} um, calibrated.toml {file} um",
+                kind.name()
+            );
+        }
     }
-    println!("{}", table.join("\n"));
+    rows
+}
+
+fn print_matrix(rows: &[String]) {
+    println!("| data | effect | command | model fitted | fit RMS um | file RMS um | difference |");
+    println!("|---|---|---|---|---|---|---|");
+    println!("{}", rows.join("\n"));
+}
+
+#[test]
+fn round_trip_matrix_gauge() {
+    print_matrix(&round_trip_matrix(Kind::Gauge));
+}
+
+#[test]
+fn round_trip_matrix_gauge_with_readings() {
+    print_matrix(&round_trip_matrix(Kind::GaugeReadings));
+}
+
+#[test]
+fn round_trip_matrix_tracker_in_its_own_frame() {
+    print_matrix(&round_trip_matrix(Kind::Tracker));
+}
+
+#[test]
+fn round_trip_matrix_gauge_and_tracker_files() {
+    print_matrix(&round_trip_matrix(Kind::Mixed));
 }
 
 /// A rank-deficient fit (socket errors beside the installation errors) writes its own point
@@ -713,4 +1019,230 @@ fn outliers_are_judged_per_kind_of_observation() {
         })
         .unwrap();
     assert_eq!(worst["line"].as_u64(), Some(row as u64 + 1), "{o:?}");
+}
+
+/// Links that grow with the platform height, `dL_i = theta_i (z - z_home) / 100 mm` (um): a
+/// user effect, registered by the program that uses cpm.
+#[derive(Debug)]
+struct HeightGrowth;
+
+impl cpm::calib::effects::EffectModel for HeightGrowth {
+    fn name(&self) -> &str {
+        "height_growth"
+    }
+    fn num_params(&self, links: usize, _sensors: usize) -> usize {
+        links
+    }
+    fn param_name(&self, k: usize, _: &[String]) -> String {
+        format!("link {}", k + 1)
+    }
+    fn unit(&self) -> &str {
+        "um"
+    }
+    fn channels(&self) -> &[cpm::calib::effects::Channel] {
+        &[cpm::calib::effects::Channel::LinkLength]
+    }
+    fn link_coefficient(
+        &self,
+        k: usize,
+        link: usize,
+        input: &cpm::calib::effects::EffectInput,
+    ) -> f64 {
+        let dz = input.commanded.position_mm.z - input.home.position_mm.z;
+        if k == link {
+            1e-3 * dz / 100.0
+        } else {
+            0.0
+        }
+    }
+}
+
+/// A user effect round-trips too: fitted through the library, written by cpm-io as a known
+/// effect of `calibrated.toml`, read back (by name, in the program that registered it): the
+/// file predicts every reading the fit predicted, to 1e-9 mm.
+#[test]
+fn a_user_effect_round_trips_through_calibrated_toml() {
+    use cpm::calib::model::{predict, Prepared};
+    use cpm::calib::{simulate_campaign, IdentifyOptions, Noise, Plan, SimulationOptions};
+    let user = Effect::register(std::sync::Arc::new(HeightGrowth)).unwrap();
+    let robot = cpm::io::Robot::load(Path::new(&example("hexapod_66.toml"))).unwrap();
+    let truth = cpm::io::Robot::load(Path::new(&example("hexapod_66_truth.toml"))).unwrap();
+    let mut model = robot.model(&[user]);
+    let diff = cpm::io::robot::truth_from_description(&robot, &truth).unwrap();
+    let mut params = diff.installation_um.clone();
+    params.extend([30.0, -20.0, 10.0, 25.0, -15.0, 20.0]);
+    let poses = cpm::calib::paper::random_workspace_poses(&robot.table, 60, 40.0, 30.0, 8.0, 11);
+    let skeleton = Plan {
+        poses,
+        sensors: (0..robot.table.sensors.len()).collect(),
+    }
+    .skeleton();
+    let options = SimulationOptions {
+        noise: Noise::Gaussian { sigma_um: 1.0 },
+        repeats: 1,
+        seed: 2,
+    };
+    let mut data = simulate_campaign(&model, &params, &skeleton, &options).unwrap();
+    // The controller's commands (nominal inverse kinematics), logged: the calibrated
+    // description has other joints, so its own inverse kinematics would be other commands.
+    data.commanded_lengths_mm = Some(
+        data.poses
+            .iter()
+            .map(|p| cpm::kinematics::inverse_lengths(&robot.table, p))
+            .collect(),
+    );
+    let cal = cpm::calib::identify(&model, &data, &IdentifyOptions::default()).unwrap();
+    let fitted = predict(
+        &model,
+        &Prepared::new(&model, &data).unwrap(),
+        &data,
+        &cal.minimum_norm_um,
+        None,
+    )
+    .unwrap();
+    let (desc, _) = cpm::io::calibrated_description(
+        &robot,
+        &model,
+        &cal.minimum_norm_um,
+        &cal.identifiability.determined,
+        None,
+    );
+    let text = desc.to_toml_string().unwrap();
+    assert!(text.contains("height_growth"), "{text}");
+    let back = cpm::io::Robot::from_toml(&text, "calibrated.toml").unwrap();
+    model = back.model(&[]);
+    assert!(model.known(user).is_some());
+    let zeros = vec![0.0; model.num_params()];
+    let read = predict(
+        &model,
+        &Prepared::new(&model, &data).unwrap(),
+        &data,
+        &zeros,
+        None,
+    )
+    .unwrap();
+    let worst = fitted
+        .iter()
+        .zip(&read)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "user effect height_growth: fit {:.4} um, file predictions within {worst:.1e} mm of the fit's",
+        cal.residual_rms_um
+    );
+    assert!(
+        worst < 1e-9,
+        "calibrated.toml predicts {worst} mm off the fit"
+    );
+    // Without the effect the same data fit clearly worse: the effect was really carried.
+    let plain =
+        cpm::calib::identify(&robot.model(&[]), &data, &IdentifyOptions::default()).unwrap();
+    assert!(plain.residual_rms_um > 1.5 * cal.residual_rms_um);
+}
+
+/// A pose where a link carries almost no force (|t| < 0.002 N, where the hard clearance
+/// rule flips the link's shift by twice the clearance): the truth still reproduces its own
+/// noise-free gauge and tracker simulations there, since `simulate` and `validate` decide
+/// the sign with one code on the same commanded pose.
+#[test]
+fn a_pose_with_a_zero_link_force_reproduces_its_simulation() {
+    use cpm::geometry::Pose;
+    let robot_path = example("hexapod_66.toml");
+    let robot = cpm::io::Robot::load(Path::new(&robot_path)).unwrap();
+    let model = robot.model(&[]);
+    let forces =
+        |p: &Pose| cpm::clearance::link_forces_n(model.statics_table(), p, &model.load).unwrap();
+    let poses = cpm::calib::paper::random_workspace_poses(&robot.table, 40, 40.0, 30.0, 10.0, 5);
+    // Two poses between which a link force changes sign; bisect along the straight path.
+    let (a, b, link) = poses
+        .windows(2)
+        .find_map(|w| {
+            let (fa, fb) = (forces(&w[0]), forces(&w[1]));
+            (0..6)
+                .find(|&i| fa[i] * fb[i] < 0.0)
+                .map(|i| (w[0], w[1], i))
+        })
+        .expect("a link force changes sign between two of 40 random poses");
+    let at = |s: f64| {
+        let (ra, rb) = (a.rpy_deg(), b.rpy_deg());
+        let x = a.position_mm + (b.position_mm - a.position_mm) * s;
+        Pose::from_xyz_rpy_deg(
+            [x.x, x.y, x.z],
+            [0, 1, 2].map(|k| ra[k] + (rb[k] - ra[k]) * s),
+        )
+    };
+    let (mut lo, mut hi) = (0.0, 1.0);
+    let sign = forces(&at(lo))[link].signum();
+    let mut zero = at(0.5);
+    for _ in 0..80 {
+        let mid = 0.5 * (lo + hi);
+        zero = at(mid);
+        let t = forces(&zero)[link];
+        if t.abs() < 0.002 {
+            break;
+        }
+        if t.signum() == sign {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let t = forces(&zero)[link];
+    assert!(t.abs() < 0.002, "bisection ended at {t} N");
+    let dir = scratch("roundtrip", "zero-force");
+    let mut plan = String::from("x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n");
+    for p in poses
+        .iter()
+        .take(10)
+        .chain([&zero])
+        .chain(poses.iter().skip(30))
+    {
+        let r = p.rpy_deg();
+        plan.push_str(&format!(
+            "{},{},{},{},{},{}\n",
+            p.position_mm.x, p.position_mm.y, p.position_mm.z, r[0], r[1], r[2]
+        ));
+    }
+    let plan_path = dir.join("plan.csv");
+    std::fs::write(&plan_path, plan).unwrap();
+    let truth = example("hexapod_66_truth.toml");
+    for (file, extra) in [
+        ("gauge.csv", vec![]),
+        (
+            "tracker.csv",
+            vec![
+                "--measure",
+                "poses",
+                "--tracker-frame",
+                "200,-100,50,3,-2,30",
+            ],
+        ),
+    ] {
+        let out = dir.join(file);
+        let mut args = vec![
+            "simulate",
+            "--robot",
+            &robot_path,
+            "--plan",
+            p(&plan_path).leak(),
+            "--truth",
+            &truth,
+            "--noise",
+            "none",
+            "--out",
+            p(&out).leak(),
+        ];
+        args.extend(extra);
+        ok(&args);
+        let v = validate_files(Path::new(&truth), &[out], Some(&robot_path));
+        let worst = v["calibrated"]["max_um"].as_f64().unwrap();
+        println!(
+            "{file}: link {} force {t:.2e} N; the truth's worst error {worst:.1e} um",
+            link + 1
+        );
+        assert!(
+            worst < 1e-6,
+            "{file}: the truth misses its own simulation by {worst} um"
+        );
+    }
 }

@@ -115,9 +115,14 @@ pub struct Inputs {
 fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     let (data, effects) = (&args.data, &args.effects);
     let effects_arg = effects;
-    let (pose_sigma_um, orientation_sigma_urad) = (args.pose_sigma_um, args.orientation_sigma_urad);
     ctx.stage("reading the robot description");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
+    // The tracker's noise: the options, else the description's `[calibration]`.
+    let declared = robot.tracker_sigmas();
+    let (pose_sigma_um, orientation_sigma_urad) = (
+        args.pose_sigma_um.or(declared.0),
+        args.orientation_sigma_urad.or(declared.1),
+    );
     common::require_six_links(&robot)?;
     let effects = effects.resolve(&robot)?;
     let model = robot.model(&effects);
@@ -296,6 +301,12 @@ pub fn stage_calibrated(
                 .to_string(),
         );
         c.simulated = cal.simulated;
+        // The tracker noise the fit weighed its sessions with: held-out sessions are
+        // registered with the same weights.
+        if !inputs.merged.campaign.pose_measurements.is_empty() {
+            c.tracker_position_sigma_um = Some(inputs.merged.campaign.pose_sigma());
+            c.tracker_orientation_sigma_urad = Some(inputs.merged.campaign.orientation_sigma());
+        }
     }
     // Reading offsets the registration applied to the data belong to the link reading models.
     if let Some(r) = inputs

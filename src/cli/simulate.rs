@@ -3,13 +3,14 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use rand::{Rng, SeedableRng};
 use serde_json::json;
 
 use super::common::{self, EffectsArg, PlanArgs, RobotArg};
 use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::campaign::PoseMeasurement;
-use crate::calib::{simulate_campaign, Campaign, Effect, Noise, SimulationOptions};
+use crate::calib::{
+    simulate_campaign, simulate_pose_measurements, Campaign, Effect, Noise, SimulationOptions,
+};
 use crate::geometry::{InstallationErrors, Pose};
 use crate::io::{self, Robot};
 use crate::output::Target;
@@ -163,24 +164,6 @@ fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
     Ok((effect, values))
 }
 
-fn draw(noise: &Noise, rng: &mut rand::rngs::StdRng) -> f64 {
-    match *noise {
-        Noise::None => 0.0,
-        Noise::Uniform { half_width_um } if half_width_um > 0.0 => {
-            rng.random_range(-half_width_um..=half_width_um)
-        }
-        Noise::Uniform { .. } => 0.0,
-        Noise::Gaussian { sigma_um } => gaussian(rng) * sigma_um,
-    }
-}
-
-fn gaussian(rng: &mut rand::rngs::StdRng) -> f64 {
-    // Box-Muller.
-    let u1: f64 = rng.random_range(f64::MIN_POSITIVE..1.0);
-    let u2: f64 = rng.random_range(0.0..1.0);
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
-
 /// The truth: model effects and the full true parameter vector.
 struct Truth {
     effects: Vec<Effect>,
@@ -328,101 +311,60 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
     })
 }
 
-/// Tracker pose measurements of `skeleton`'s poses on the true machine: the controller
-/// commands the nominal inverse kinematics; the machine's lengths are those plus the joint
-/// clearance shift, the robot's known link effects and the link offsets and scales of the
-/// truth; the tracker sees the pose forward kinematics gives, plus noise, in its frame (a
-/// known `tracker_frame` registration).
+/// Tracker pose measurements of the plan's poses on the true machine, through the prediction
+/// path the fit uses ([`simulate_pose_measurements`]): the controller commands the nominal
+/// inverse kinematics (logged as the file's readings); every effect of the truth acts as
+/// `calibrate` and `validate` model it; the tracker sees the pose plus noise, in its own
+/// frame (`--tracker-frame`, after a known `tracker_frame` registration of the truth).
 fn simulate_poses(
     robot: &Robot,
     truth: &Truth,
-    poses: &[Pose],
+    spec: &common::PlanSpec,
     noise: &Noise,
     orientation_urad: f64,
     seed: u64,
     frame: Option<Pose>,
 ) -> anyhow::Result<Campaign> {
-    let model = robot.model(&truth.effects);
-    let n = robot.num_links();
-    for b in model.blocks() {
-        if let Some(e) = b.effect {
-            let nonzero = truth.params[b.offset..b.offset + b.len]
+    let poses = &spec.plan.poses;
+    let skeleton = Campaign {
+        poses: poses.clone(),
+        commanded_lengths_mm: Some(
+            poses
                 .iter()
-                .any(|v| *v != 0.0);
-            if nonzero && !matches!(e, Effect::LinkOffset | Effect::LinkScale) {
-                return Err(usage_error(format!(
-                    "--measure poses simulates installation errors, link_offset and link_scale; the truth has {} values",
-                    e.name()
-                )));
-            }
-        }
-    }
-    let block = |which: Effect| {
-        model
-            .blocks()
-            .into_iter()
-            .find(|b| b.effect == Some(which))
-            .map(|b| truth.params[b.offset..b.offset + b.len].to_vec())
-    };
-    let offset = block(Effect::LinkOffset).unwrap_or_else(|| vec![0.0; n]);
-    let scale = block(Effect::LinkScale).unwrap_or_else(|| vec![0.0; n]);
-    let true_table = model.table_with(&truth.params[..6 * n])?;
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let mut c = Campaign {
+                .map(|p| cpm_kinematics::inverse_lengths(&robot.table, p))
+                .collect(),
+        ),
+        pose_measurements: poses
+            .iter()
+            .enumerate()
+            .map(|(j, p)| PoseMeasurement {
+                pose: j,
+                measured: *p,
+                time_s: spec.conditions[j].0,
+                temperature_c: spec.conditions[j].1,
+            })
+            .collect(),
         simulated: true,
         ..Campaign::default()
     };
-    let mut commanded = Vec::new();
-    let mut previous: Option<crate::calib::effects::PoseContext> = None;
-    for (j, p) in poses.iter().enumerate() {
-        let cmd = cpm_kinematics::inverse_lengths(&robot.table, p);
-        let shift = model
-            .clearance
-            .link_corrections_mm(model.statics_table(), p, &model.load)
-            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
-        // The robot's known link effects (a calibrated description's) act on the machine too.
-        let ctx = model
-            .pose_context(p, cmd.clone(), previous.as_ref(), None, None)
-            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
-        let known = model.known_link_shift_mm(&ctx, 0.0);
-        let pose_map = model.known_pose_twist(&ctx, p, 0.0);
-        previous = Some(ctx);
-        let eff: Vec<f64> = (0..n)
-            .map(|i| cmd[i] + shift[i] + known[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
-            .collect();
-        let (reached, _) = cpm_kinematics::forward(&true_table, &eff, p, &model.fk)
-            .map_err(|source| crate::calib::CalibError::Kinematics { pose: j, source })?;
-        // A known pose error map moves the platform from where the lengths put it.
-        let reached = reached.perturbed(&pose_map);
-        let mut twist = nalgebra::Vector6::zeros();
-        for a in 0..3 {
-            twist[a] = draw(noise, &mut rng) * 1e-3;
-            twist[3 + a] = gaussian(&mut rng) * orientation_urad * 1e-6;
-        }
-        let mut measured = reached.perturbed(&twist);
-        // A known tracker registration: the tracker reports in its own frame.
-        if let Some(q) = model.known(Effect::TrackerFrame) {
-            let (t, r) = crate::calib::effects::tracker_registration(q);
-            measured.position_mm = r * measured.position_mm + t;
-            measured.rotation = r * measured.rotation;
-        }
-        // The tracker's own frame.
-        if let Some(f) = &frame {
-            measured = Pose::new(
-                f.rotation * measured.position_mm + f.position_mm,
-                f.rotation * measured.rotation,
+    let model = robot.model(&truth.effects);
+    let mut c = simulate_pose_measurements(
+        &model,
+        &truth.params,
+        &skeleton,
+        *noise,
+        orientation_urad,
+        seed,
+    )?;
+    // The tracker's own frame.
+    if let Some(f) = &frame {
+        for m in c.pose_measurements.iter_mut() {
+            m.measured = Pose::new(
+                f.rotation * m.measured.position_mm + f.position_mm,
+                f.rotation * m.measured.rotation,
             );
         }
-        c.poses.push(measured);
-        c.pose_measurements.push(PoseMeasurement {
-            pose: j,
-            measured,
-            time_s: None,
-            temperature_c: None,
-        });
-        commanded.push(cmd);
     }
-    c.commanded_lengths_mm = Some(commanded);
     Ok(c)
 }
 
@@ -507,19 +449,16 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             (c, text)
         }
         Measure::Poses => {
-            let mut c = simulate_poses(
+            let c = simulate_poses(
                 &robot,
                 &truth,
-                &spec.plan.poses,
+                &spec,
                 &noise,
                 args.orientation_noise_urad,
                 args.plan.seed,
                 tracker_frame,
             )
             .map_err(|e| blame_truth(args, e))?;
-            for (m, (t, _)) in c.pose_measurements.iter_mut().zip(&spec.conditions) {
-                m.time_s = *t;
-            }
             let text = io::write_pose_measurements(&c, &robot, &note);
             (c, text)
         }

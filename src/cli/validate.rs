@@ -64,6 +64,15 @@ pub struct ValidateArgs {
     /// `cpm compensate --temperature-c`; a known `thermal_drift` acts at it).
     #[arg(long, value_name = "DEG_C", requires = "commands")]
     pub temperature_c: Option<f64>,
+    /// Tracker position noise, um: the weight of positions when each held-out tracker session
+    /// is registered (default: `[calibration] tracker_position_sigma_um` of `--robot`, which
+    /// `cpm calibrate` writes, else cpm-calib's 10 um). The reference is registered alike.
+    #[arg(long, value_name = "UM")]
+    pub pose_sigma_um: Option<f64>,
+    /// Tracker orientation noise, urad (default: `[calibration]
+    /// tracker_orientation_sigma_urad` of `--robot`, else cpm-calib's 20 urad).
+    #[arg(long, value_name = "URAD")]
+    pub orientation_sigma_urad: Option<f64>,
     /// Also write validation.json, validation.md and validation.svg into this directory.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
@@ -192,11 +201,14 @@ fn commanded_lengths(
 /// A file without logged link readings was driven by the controller's inverse kinematics of
 /// the commanded poses: that of `controller` (the reference robot), whichever robot predicts.
 /// Each tracker file is a session: its frame is fitted afresh with the robot held fixed.
+/// `tracker` is the tracker's noise (position um, orientation urad; 0: cpm-calib's default),
+/// the weights with which each tracker session is registered.
 fn errors_of(
     robot: &Robot,
     controller: &Robot,
     paths: &[PathBuf],
     strict: bool,
+    tracker: (f64, f64),
 ) -> anyhow::Result<RobotErrors> {
     let model: MeasurementModel = robot.model(&[]);
     // The machine is held fixed: the readers register the frame, never the link zeros. Not
@@ -242,6 +254,10 @@ fn errors_of(
             file.campaign.commanded_lengths_mm =
                 Some(commanded_lengths(robot, controller, &file.campaign.poses));
         }
+        (
+            file.campaign.pose_sigma_um,
+            file.campaign.orientation_sigma_urad,
+        ) = tracker;
         let campaign: &Campaign = &file.campaign;
         out.simulated |= campaign.simulated;
         let fail = |e: crate::calib::CalibError| {
@@ -634,9 +650,24 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             reference.num_links()
         )));
     }
+    // The tracker's noise: the options, else what the calibrated description declares (the
+    // weights its fit used), else cpm-calib's defaults; both robots are registered alike.
+    let declared = robot.tracker_sigmas();
+    let tracker = (
+        args.pose_sigma_um.or(declared.0).unwrap_or(0.0),
+        args.orientation_sigma_urad.or(declared.1).unwrap_or(0.0),
+    );
+    for (v, name) in [
+        (args.pose_sigma_um, "--pose-sigma-um"),
+        (args.orientation_sigma_urad, "--orientation-sigma-urad"),
+    ] {
+        if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+            return Err(super::usage_error(format!("{name} must be > 0")));
+        }
+    }
     ctx.stage("predicting the held-out measurements");
-    let cal_errors = errors_of(&robot, &reference, &args.data, true)?;
-    let ref_errors = errors_of(&reference, &reference, &args.data, true).map_err(|e| {
+    let cal_errors = errors_of(&robot, &reference, &args.data, true, tracker)?;
+    let ref_errors = errors_of(&reference, &reference, &args.data, true, tracker).map_err(|e| {
         e.context(format!(
             "reading the held-out data against the reference {} (its sensors: {})",
             reference.file,
@@ -818,7 +849,8 @@ pub fn file_reproduces_fit(
             "the calibrated description does not load back: {e}"
         ))
     })?;
-    let e = errors_of(&robot, reference, data, false)?;
+    let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
+    let e = errors_of(&robot, reference, data, false, tracker)?;
     let sigma_ref = sigma_um.unwrap_or(campaign.pose_sigma());
     let (wp, wr) = (
         sigma_ref / campaign.pose_sigma(),

@@ -90,7 +90,9 @@ pub use identify::{
 };
 pub use model::{MeasurementModel, ModelKind};
 pub use refine::{refine, RefineOptions, Refinement};
-pub use simulate::{simulate, simulate_campaign, Noise, SimulationOptions};
+pub use simulate::{
+    simulate, simulate_campaign, simulate_pose_measurements, Noise, SimulationOptions,
+};
 
 /// The examples of the crate's README.md, run as doctests.
 #[cfg(doctest)]

@@ -137,3 +137,81 @@ pub fn simulate_campaign(
     campaign.simulated = true;
     Ok(campaign)
 }
+
+/// Simulates the tracker pose measurements of `skeleton` (its commanded poses, logged
+/// commands, times and temperatures are kept; the measured poses are replaced) on the machine
+/// whose true parameters are `truth_um`, through the prediction path the fit uses: every
+/// effect of `model` (clearance, backlash, compliance, drift, pose maps, a known
+/// `tracker_frame`, ...) acts as it does in [`predict`]. Each measured pose gets independent
+/// noise: `position` per coordinate (um) and a Gaussian rotation of
+/// `orientation_sigma_urad` per axis, both in the tracker's frame. Skeleton readings, if any,
+/// are simulated as [`simulate_campaign`] does, with `position` as their noise.
+///
+/// ```
+/// use cpm_calib::campaign::PoseMeasurement;
+/// use cpm_calib::{simulate_pose_measurements, Campaign, MeasurementModel, Noise};
+/// let model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
+/// let home = model.nominal.home;
+/// let skeleton = Campaign {
+///     poses: vec![home],
+///     pose_measurements: vec![PoseMeasurement { pose: 0, measured: home, time_s: None, temperature_c: None }],
+///     ..Campaign::default()
+/// };
+/// let truth = vec![0.0; 36];
+/// let c = simulate_pose_measurements(&model, &truth, &skeleton, Noise::None, 0.0, 1).unwrap();
+/// assert!(c.simulated);
+/// // The nominal machine at home, with only its joint clearance: within microns of home.
+/// let d = (c.pose_measurements[0].measured.position_mm - home.position_mm).norm();
+/// assert!(d < 0.05, "{d} mm");
+/// ```
+pub fn simulate_pose_measurements(
+    model: &MeasurementModel,
+    truth_um: &[f64],
+    skeleton: &Campaign,
+    position: Noise,
+    orientation_sigma_urad: f64,
+    seed: u64,
+) -> Result<Campaign, CalibError> {
+    if !(orientation_sigma_urad.is_finite() && orientation_sigma_urad >= 0.0) {
+        return Err(CalibError::invalid(
+            "orientation_sigma_urad",
+            format!("{orientation_sigma_urad}: must be finite and non-negative"),
+        ));
+    }
+    let options = SimulationOptions {
+        noise: position,
+        repeats: 1,
+        seed,
+    };
+    // The readings (if any) as simulate_campaign makes them; the orientation residuals below
+    // are taken against the identity, so that they are the predicted rotation itself.
+    let mut campaign = simulate_campaign(model, truth_um, skeleton, &options)?;
+    for m in campaign.pose_measurements.iter_mut() {
+        m.measured = cpm_geometry::Pose::identity();
+    }
+    let prepared = Prepared::new(model, &campaign)?;
+    let exact = MeasurementModel {
+        kind: crate::ModelKind::Exact,
+        ..model.clone()
+    };
+    let y = predict(&exact, &prepared, &campaign, truth_um, None)?;
+    let m0 = campaign.readings.len();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed ^ 0x0074_7261_636b_6572);
+    let orientation = Normal::new(0.0, orientation_sigma_urad).ok();
+    for (q, m) in campaign.pose_measurements.iter_mut().enumerate() {
+        let o = m0 + 6 * q;
+        let position_mm = nalgebra::Vector3::new(y[o], y[o + 1], y[o + 2]);
+        let w = nalgebra::Vector3::new(y[o + 3], y[o + 4], y[o + 5]) * 1e-3;
+        let mut twist = nalgebra::Vector6::zeros();
+        for a in 0..3 {
+            twist[a] = position.draw_um(&mut rng) * 1e-3;
+        }
+        for a in 0..3 {
+            twist[3 + a] = orientation.map_or(0.0, |d| d.sample(&mut rng)) * 1e-6;
+        }
+        m.measured =
+            cpm_geometry::Pose::new(position_mm, cpm_geometry::rotation::exp(&w)).perturbed(&twist);
+    }
+    campaign.simulated = true;
+    Ok(campaign)
+}

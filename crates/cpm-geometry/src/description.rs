@@ -328,6 +328,16 @@ pub struct CalibrationSpec {
     /// Standard deviation of the sensor noise, um. Optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sensor_noise_um: Option<f64>,
+    /// Standard deviation of a tracker position coordinate, um: the weight of tracker
+    /// positions in a fit and in the registration of every session. `cpm calibrate` and
+    /// `cpm refine` write the value they fitted with, so that `cpm validate` registers held-out
+    /// sessions with the same weights. Default (when absent) cpm-calib's 10 um.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracker_position_sigma_um: Option<f64>,
+    /// Standard deviation of a tracker orientation component, urad (as
+    /// `tracker_position_sigma_um`). Default (when absent) cpm-calib's 20 urad.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tracker_orientation_sigma_urad: Option<f64>,
     /// Screw lead of the actuators, mm (the period of `screw_periodic`). Default 5.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub screw_lead_mm: Option<f64>,
@@ -926,6 +936,22 @@ impl RobotDescription {
             }
         }
         if let Some(c) = &self.calibration {
+            for (v, key) in [
+                (c.tracker_position_sigma_um, "tracker_position_sigma_um"),
+                (
+                    c.tracker_orientation_sigma_urad,
+                    "tracker_orientation_sigma_urad",
+                ),
+            ] {
+                if let Some(v) = v {
+                    if !(v.is_finite() && v > 0.0) {
+                        return Err(Problem::new(
+                            &[Key("calibration"), Key(key)],
+                            format!("must be > 0, got {v} (leave it out for the default)"),
+                        ));
+                    }
+                }
+            }
             if let Some(v) = c.sensor_noise_um {
                 // Like `--sigma-um`: a declared noise must be > 0 (leave the key out to have
                 // the noise estimated from the residual).

@@ -95,6 +95,8 @@ fn round_trip_with_every_section() {
     d.calibration = Some(CalibrationSpec {
         effects: vec!["link_offset".into(), "link_scale".into()],
         sensor_noise_um: Some(5.0),
+        tracker_position_sigma_um: Some(12.5),
+        tracker_orientation_sigma_urad: None,
         screw_lead_mm: Some(4.0),
         reference_temperature_c: Some(21.5),
         nonlinearity_scale_mm: None,

@@ -955,7 +955,7 @@ fn read_pose_measurements_table<R: Read>(
     let o = orientation(t)?;
     t.check_columns(
         &["pose", "x_mm", "y_mm", "z_mm"],
-        &["time_s", "simulated"],
+        &["time_s", "temperature_c", "simulated"],
         |h| {
             RPY_COLUMNS.contains(&h)
                 || QUATERNION_COLUMNS.contains(&h)
@@ -999,6 +999,7 @@ fn read_pose_measurements_table<R: Read>(
         }
         let u = link_readings(t, &row, n)?;
         let time_s = t.optional_number(&row, "time_s")?;
+        let temperature_c = t.optional_number(&row, "temperature_c")?;
         if t.optional_bool(&row, "simulated")? == Some(true) {
             campaign.simulated = true;
         }
@@ -1015,7 +1016,7 @@ fn read_pose_measurements_table<R: Read>(
             pose: j,
             measured,
             time_s,
-            temperature_c: None,
+            temperature_c,
         });
         rows.push(TrackerRow {
             line: row.line,
@@ -1583,6 +1584,10 @@ pub fn write_pose_measurements(campaign: &Campaign, robot: &Robot, note: &str) -
         .pose_measurements
         .iter()
         .any(|m| m.time_s.is_some());
+    let has_temp = campaign
+        .pose_measurements
+        .iter()
+        .any(|m| m.temperature_c.is_some());
     let mut s = String::new();
     if campaign.simulated {
         s.push_str(&simulated_header(note));
@@ -1594,6 +1599,9 @@ pub fn write_pose_measurements(campaign: &Campaign, robot: &Robot, note: &str) -
     s.push_str(",x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg");
     if has_time {
         s.push_str(",time_s");
+    }
+    if has_temp {
+        s.push_str(",temperature_c");
     }
     if campaign.simulated {
         s.push_str(",simulated");
@@ -1611,6 +1619,9 @@ pub fn write_pose_measurements(campaign: &Campaign, robot: &Robot, note: &str) -
         s.push_str(&format!(",{}", pose_fields(&m.measured)));
         if has_time {
             s.push_str(&format!(",{}", opt(m.time_s)));
+        }
+        if has_temp {
+            s.push_str(&format!(",{}", opt(m.temperature_c)));
         }
         if campaign.simulated {
             s.push_str(",true");

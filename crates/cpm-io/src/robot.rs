@@ -174,6 +174,20 @@ impl Robot {
         s
     }
 
+    /// `[calibration] tracker_position_sigma_um` and `tracker_orientation_sigma_urad` (um,
+    /// urad) when declared: the tracker's noise, the weights of its positions and orientations.
+    pub fn tracker_sigmas(&self) -> (Option<f64>, Option<f64>) {
+        self.description
+            .calibration
+            .as_ref()
+            .map_or((None, None), |c| {
+                (
+                    c.tracker_position_sigma_um,
+                    c.tracker_orientation_sigma_urad,
+                )
+            })
+    }
+
     /// `[calibration] sensor_noise_um` when declared and positive.
     pub fn sensor_noise_um(&self) -> Option<f64> {
         self.description
