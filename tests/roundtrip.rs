@@ -1246,3 +1246,78 @@ fn a_pose_with_a_zero_link_force_reproduces_its_simulation() {
         );
     }
 }
+
+/// Thermal compensation checked end to end: a machine whose links grow with temperature is
+/// calibrated on a campaign with logged temperatures, `compensate --temperature-c 28` then
+/// `validate --commands --temperature-c 28` against the simulated truth reaches the targets,
+/// and the same commands checked at the reference temperature are off.
+#[test]
+fn thermal_compensation_reaches_the_targets_at_its_temperature() {
+    let robot = example("hexapod_66.toml");
+    let dir = scratch("roundtrip", "compensate-thermal");
+    let plan = matrix_plan(&dir);
+    let truth_text = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap();
+    let truth = dir.join("truth.toml");
+    std::fs::write(
+        &truth,
+        format!("{truth_text}\n[calibration.known_effects]\nthermal_drift = [6.0, -4.0, 5.0, 7.0, -3.0, 4.0]\n"),
+    )
+    .unwrap();
+    let data = dir.join("data.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--plan",
+        &p(&plan),
+        "--truth",
+        &p(&truth),
+        "--noise",
+        "gaussian:0.5",
+        "--seed",
+        "6",
+        "--out",
+        &p(&data),
+    ]);
+    let cal = dir.join("cal");
+    calibrate(&cal, &robot, &data, "thermal_drift", &[]);
+    let commands = dir.join("commands.csv");
+    ok(&[
+        "compensate",
+        "--robot",
+        &p(&cal.join("calibrated.toml")),
+        "--poses",
+        &example("targets.csv"),
+        "--temperature-c",
+        "28",
+        "--out",
+        &p(&commands),
+    ]);
+    let check = |temperature: &str| {
+        json(&ok(&[
+            "validate",
+            "--reference",
+            &robot,
+            "--commands",
+            &p(&commands),
+            "--truth",
+            &p(&truth),
+            "--temperature-c",
+            temperature,
+            "--json",
+        ]))
+    };
+    let v = check("28");
+    let (c, u) = (
+        v["compensated"]["position_max_um"].as_f64().unwrap(),
+        v["reference"]["position_rms_um"].as_f64().unwrap(),
+    );
+    println!("compensate --temperature-c 28: worst target {c:.2} um, uncompensated RMS {u:.1} um");
+    assert!(c < 8.0, "a compensated target missed by {c} um");
+    assert!(c < 0.1 * u);
+    // The same commands on the machine at 20 deg C: the drift compensated for is not there.
+    let cold = check("20")["compensated"]["position_max_um"]
+        .as_f64()
+        .unwrap();
+    assert!(cold > 2.0 * c, "at 20 deg C {cold} um, at 28 deg C {c} um");
+}
