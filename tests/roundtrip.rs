@@ -102,6 +102,16 @@ fn fit_and_read_back(dir: &Path, robot: &str, data: &Path, effects: &str) -> (f6
     (fit, v["calibrated"]["rms_um"].as_f64().unwrap())
 }
 
+/// A copy of `source` in `dir` (as `name`) with `from` replaced by `to`, which must occur.
+fn edited_copy(dir: &Path, name: &str, source: &str, from: &str, to: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(source).unwrap();
+    let edited = text.replace(from, to);
+    assert_ne!(edited, text, "{from:?} not in {source}");
+    let path = dir.join(name);
+    std::fs::write(&path, edited).unwrap();
+    path
+}
+
 /// The data kinds of the round-trip matrix.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Kind {
@@ -899,14 +909,13 @@ fn refine_writes_the_model_it_fitted() {
 fn the_truths_sensor_sockets_are_the_ones_simulated() {
     let robot = example("hexapod_66.toml");
     let dir = scratch("roundtrip", "truth-sockets");
-    let text = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap();
-    let moved = text.replace(
+    let truth = edited_copy(
+        &dir,
+        "truth.toml",
+        &example("hexapod_66_truth.toml"),
         "base_mm = [375.877048314, 136.80805733, 100.0]",
         "base_mm = [375.917048314, 136.77805733, 100.02]",
     );
-    assert_ne!(moved, text);
-    let truth = dir.join("truth.toml");
-    std::fs::write(&truth, moved).unwrap();
     let data = dir.join("exact.csv");
     ok(&[
         "simulate",
@@ -1320,4 +1329,175 @@ fn thermal_compensation_reaches_the_targets_at_its_temperature() {
         .as_f64()
         .unwrap();
     assert!(cold > 2.0 * c, "at 20 deg C {cold} um, at 28 deg C {c} um");
+}
+
+/// `simulate --measure poses` honours the link limits `calibrate` checks: with limits tight
+/// around the random poses, the true machine's measured poses (microns past a limit, where
+/// the commanded ones are inside) are accepted by `calibrate`; a plan pose outside the limits
+/// is refused by `simulate`, naming the link and its limits.
+#[test]
+fn simulated_tracker_poses_near_a_link_limit_are_accepted() {
+    let dir = scratch("roundtrip", "near-limits");
+    let robot = edited_copy(
+        &dir,
+        "tight.toml",
+        &example("hexapod_66.toml"),
+        "length_limits_mm = [250.0, 400.0]",
+        "length_limits_mm = [320.0, 360.0]",
+    );
+    let data = dir.join("poses.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &p(&robot),
+        "--random",
+        "40",
+        "--truth",
+        &example("hexapod_66_truth.toml"),
+        "--measure",
+        "poses",
+        "--noise",
+        "gaussian:2",
+        "--out",
+        &p(&data),
+    ]);
+    let fit = calibrate(&dir.join("cal"), &p(&robot), &data, "tracker_frame", &[]);
+    assert_eq!(fit["solver"]["converged"], true);
+    let plan = dir.join("plan.csv");
+    std::fs::write(
+        &plan,
+        "x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n0,0,300,0,0,0\n0,0,420,0,0,0\n",
+    )
+    .unwrap();
+    let out = cpm(&[
+        "simulate",
+        "--robot",
+        &p(&robot),
+        "--plan",
+        &p(&plan),
+        "--measure",
+        "poses",
+        "--out",
+        &p(&dir.join("x.csv")),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("plan.csv:3") && err.contains("outside its limits [320, 360] mm"),
+        "{err}"
+    );
+    assert!(!dir.join("x.csv").exists());
+}
+
+/// Adds a slow drift to the measured positions of a tracker file: `rate_um` (x, y, z) per
+/// row, as a tracker stand warming up does (the machine does not drift).
+fn drift_positions(path: &Path, rate_um: [f64; 3]) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut out = String::new();
+    let mut header: Option<Vec<String>> = None;
+    let mut row = 0.0;
+    for l in text.lines() {
+        if l.starts_with('#') {
+            out.push_str(l);
+        } else if let Some(h) = &header {
+            let mut f: Vec<String> = l.split(',').map(String::from).collect();
+            for (a, c) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
+                let k = h.iter().position(|x| x == c).unwrap();
+                let v: f64 = f[k].parse().unwrap();
+                f[k] = (v + rate_um[a] * 1e-3 * row).to_string();
+            }
+            out.push_str(&f.join(","));
+            row += 1.0;
+        } else {
+            header = Some(l.split(',').map(String::from).collect());
+            out.push_str(l);
+        }
+        out.push('\n');
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+/// Two simulated tracker sessions, each in its own frame and each with a slow drift of the
+/// tracker (opposite in the two): `refine` on the first session adds nothing that the second
+/// rejects (its model predicts the second session, re-registered, no worse than plain
+/// `calibrate`'s), and `refine` on both (leave one session out) only adds an effect whose
+/// out-of-session error falls.
+#[test]
+fn refine_adds_nothing_the_next_session_rejects() {
+    let robot = example("hexapod_66.toml");
+    let truth = example("hexapod_66_truth.toml");
+    let dir = scratch("roundtrip", "two-sessions");
+    let plan = matrix_plan(&dir);
+    let sim = |file: &str, seed: &str, frame: &str, drift: [f64; 3]| {
+        let path = dir.join(file);
+        ok(&[
+            "simulate",
+            "--robot",
+            &robot,
+            "--plan",
+            &p(&plan),
+            "--truth",
+            &truth,
+            "--measure",
+            "poses",
+            "--tracker-frame",
+            frame,
+            "--noise",
+            "gaussian:2",
+            "--orientation-noise-urad",
+            "20",
+            "--seed",
+            seed,
+            "--out",
+            &p(&path),
+        ]);
+        drift_positions(&path, drift);
+        path
+    };
+    let a = sim("a.csv", "1", "100,-40,20,1,-2,3", [0.3, -0.2, 0.25]);
+    let b = sim("b.csv", "2", "-60,30,10,-2,1,-4", [-0.25, 0.3, -0.2]);
+    let sig = ["--pose-sigma-um", "2", "--orientation-sigma-urad", "20"];
+    calibrate(&dir.join("cal"), &robot, &a, "tracker_frame", &sig);
+    let mut args = vec!["refine", "--robot", &robot, "--data"];
+    let (pa, pb, out) = (p(&a), p(&b), p(&dir.join("ref")));
+    args.extend([pa.as_str(), "--out", out.as_str()]);
+    args.extend(sig);
+    ok(&args);
+    let r = read_json(&dir.join("ref/refine.json"));
+    let chosen = r["final"]["effects"].clone();
+    let held = |cal: &str| {
+        validate_files(
+            &dir.join(cal).join("calibrated.toml"),
+            std::slice::from_ref(&b),
+            None,
+        )["calibrated"]["rms_um"]
+            .as_f64()
+            .unwrap()
+    };
+    let (plain, refined) = (held("cal"), held("ref"));
+    println!("two sessions: refine on the first chose {chosen}; second session {refined:.3} um (calibrate {plain:.3} um)");
+    assert!(
+        refined <= 1.02 * plain,
+        "refine {refined} um, calibrate {plain} um on the next session"
+    );
+    // Both sessions, leave one session out: every step lowers the out-of-session error.
+    let out2 = p(&dir.join("ref2"));
+    let mut args = vec![
+        "refine", "--robot", &robot, "--data", &pa, "--data", &pb, "--out", &out2,
+    ];
+    args.extend(sig);
+    ok(&args);
+    let r2 = read_json(&dir.join("ref2/refine.json"));
+    for s in r2["steps"].as_array().unwrap() {
+        let (before, after) = (
+            s["cv_rms_before_um"].as_f64().unwrap(),
+            s["cv_rms_after_um"].as_f64().unwrap(),
+        );
+        println!(
+            "both sessions: {} out-of-session {before:.3} -> {after:.3} um",
+            s["effect"]
+        );
+        assert!(after < before);
+    }
+    println!("both sessions: chose {}", r2["final"]["effects"]);
 }

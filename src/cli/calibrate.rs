@@ -161,6 +161,8 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         model = robot.model(&e);
         ctx.note("tracker data: the tracker frame is refined in the fit (tracker_frame added; its gauge freedoms with the base joints are reported); give --effects to choose the effects yourself");
     }
+    // Every tracker file is a session with its own set-up: one frame each.
+    model.tracker_frame_sessions = tracker_sessions(&merged.campaign);
     Ok(Inputs {
         data_paths: data.clone(),
         provenance: Provenance {
@@ -175,6 +177,24 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         model,
         merged,
     })
+}
+
+/// The sessions of a campaign that hold tracker pose measurements, when there are two or more
+/// (each gets its own `tracker_frame`); none for one (the one shared frame).
+pub fn tracker_sessions(campaign: &Campaign) -> Vec<usize> {
+    let mut s: Vec<usize> = campaign
+        .pose_measurements
+        .iter()
+        .map(|m| campaign.session_of(m.pose))
+        .collect();
+    s.dedup();
+    s.sort_unstable();
+    s.dedup();
+    if s.len() > 1 {
+        s
+    } else {
+        Vec::new()
+    }
 }
 
 /// A header for generated files.

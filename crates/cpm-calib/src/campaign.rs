@@ -68,6 +68,12 @@ impl Campaign {
         j == 0 || self.session_starts.binary_search(&j).is_ok()
     }
 
+    /// The session (0 for the first; one more at each of
+    /// [`session_starts`](Self::session_starts)) that pose `j` belongs to.
+    pub fn session_of(&self, j: usize) -> usize {
+        self.session_starts.partition_point(|s| *s <= j)
+    }
+
     /// Number of observations: length readings plus six per pose measurement.
     pub fn len(&self) -> usize {
         self.readings.len() + 6 * self.pose_measurements.len()

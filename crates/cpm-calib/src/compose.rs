@@ -26,7 +26,8 @@ pub(crate) struct Channels<'a> {
     pose: Vec<Active<'a>>,
     known_pose: Vec<Active<'a>>,
     tracker: Option<Active<'a>>,
-    reg: (Vector3<f64>, Rotation3<f64>),
+    /// The estimated tracker frames (one per session with a frame of its own, else one).
+    regs: Vec<(Vector3<f64>, Rotation3<f64>)>,
     known_reg: (Vector3<f64>, Rotation3<f64>),
     sensor_gain: Vec<f64>,
     sensor_offset_mm: Vec<f64>,
@@ -141,7 +142,12 @@ impl<'a> Channels<'a> {
         let tracker = active(model, params, Channel::TrackerFrame)
             .first()
             .copied();
-        let reg = tracker.map_or(identity, |a| a.model.tracker_registration(a.values));
+        let regs = tracker.map_or(vec![identity], |a| {
+            a.values
+                .chunks(6)
+                .map(|q| a.model.tracker_registration(q))
+                .collect()
+        });
         let known_reg = known(Channel::TrackerFrame)
             .first()
             .map_or(identity, |a| a.model.tracker_registration(a.values));
@@ -165,7 +171,7 @@ impl<'a> Channels<'a> {
             pose: active(model, params, Channel::PlatformPose),
             known_pose: known(Channel::PlatformPose),
             tracker,
-            reg,
+            regs,
             known_reg,
             sensor_gain,
             sensor_offset_mm,
@@ -218,9 +224,9 @@ impl<'a> Channels<'a> {
         y
     }
 
-    /// The pose in the tracker's frame: position (mm) and rotation.
-    pub fn tracked(&self, pose: &Pose) -> (Vector3<f64>, Rotation3<f64>) {
-        let ((kt, kr), (rt, rr)) = (self.known_reg, self.reg);
+    /// The pose in the frame of tracker frame `frame`: position (mm) and rotation.
+    pub fn tracked(&self, pose: &Pose, frame: usize) -> (Vector3<f64>, Rotation3<f64>) {
+        let ((kt, kr), (rt, rr)) = (self.known_reg, self.regs[frame.min(self.regs.len() - 1)]);
         (
             rr * (kr * pose.position_mm + kt) + rt,
             rr * kr * pose.rotation,
@@ -357,12 +363,14 @@ impl<'a> Channels<'a> {
     pub fn tracker_rows(
         &self,
         jac: &mut DMatrixViewMut<f64>,
+        frame: usize,
         row0: usize,
         w: &Vector3<f64>,
         dx: &DMatrix<f64>,
         tracker_position: &Vector3<f64>,
     ) {
-        let rr = (self.reg.1 * self.known_reg.1).into_inner();
+        let reg = self.regs[frame.min(self.regs.len() - 1)];
+        let rr = (reg.1 * self.known_reg.1).into_inner();
         let jl_inv = left_jacobian_inverse(w);
         let top = rr * dx.rows(0, 3);
         let bottom = jl_inv * rr * dx.rows(3, 3) * 1e3;
@@ -373,17 +381,18 @@ impl<'a> Channels<'a> {
             }
         }
         if let Some(b) = self.tracker {
-            let skew = tracker_position - self.reg.0;
+            let skew = tracker_position - reg.0;
+            let offset = b.offset + 6 * frame;
             for a in 0..3 {
-                jac[(row0 + a, b.offset + a)] = 1e-3;
+                jac[(row0 + a, offset + a)] = 1e-3;
             }
             // d(exp(d) R t)/dd = -[R t]x, per urad.
             let sk = skew.cross_matrix() * -1e-6;
             let jr = jl_inv * 1e-3;
             for a in 0..3 {
                 for c in 0..3 {
-                    jac[(row0 + a, b.offset + 3 + c)] = sk[(a, c)];
-                    jac[(row0 + 3 + a, b.offset + 3 + c)] = jr[(a, c)];
+                    jac[(row0 + a, offset + 3 + c)] = sk[(a, c)];
+                    jac[(row0 + 3 + a, offset + 3 + c)] = jr[(a, c)];
                 }
             }
         }

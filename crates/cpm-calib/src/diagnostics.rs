@@ -149,12 +149,44 @@ fn pearson(a: &[f64], b: &[f64]) -> f64 {
 /// smaller kinds are judged against the pooled spread of all observations.
 pub const MIN_KIND_OBSERVATIONS: usize = 8;
 
+/// An outlier of its kind must also be this many noise standard deviations off (the declared
+/// noise, else the robust spread of all observations): a kind far more precise than the rest
+/// (noise-free orientations beside 2 um positions) has a robust spread of almost nothing, and
+/// the small residuals the fit leaves there are not outliers of the measurement.
+pub const OUTLIER_FLOOR_SIGMAS: f64 = 3.0;
+
 /// [`outliers`] judged per kind of observation: each sensor's readings, the tracker's
 /// positions and its orientations have their own noise, so each kind gets its own median and
 /// robust spread (never pooled: noise-free orientations pooled with noisy positions would
 /// make every position an "outlier"). A kind with fewer than [`MIN_KIND_OBSERVATIONS`]
-/// observations is judged against the pooled spread.
-pub fn outliers_by_kind(residuals_um: &[f64], campaign: &Campaign) -> Vec<usize> {
+/// observations is judged against the pooled spread. Every outlier is also more than
+/// [`OUTLIER_FLOOR_SIGMAS`] times the noise (`sigma_um`, the declared noise of a weighted
+/// residual, else the robust spread of all residuals) from its kind's median.
+///
+/// ```
+/// use cpm_calib::{campaign::PoseMeasurement, diagnostics::outliers_by_kind, Campaign};
+/// use cpm_geometry::Pose;
+/// let c = Campaign {
+///     poses: vec![Pose::identity(); 20],
+///     pose_measurements: (0..20)
+///         .map(|j| PoseMeasurement { pose: j, measured: Pose::identity(), time_s: None, temperature_c: None })
+///         .collect(),
+///     ..Campaign::default()
+/// };
+/// // Positions with 2 um noise; orientations almost noise-free, one a little larger.
+/// let mut r: Vec<f64> = (0..120)
+///     .map(|k| if k % 6 < 3 { 2.0 * ((k * 37 % 11) as f64 - 5.0) / 3.0 } else { 0.01 * ((k % 5) as f64 - 2.0) })
+///     .collect();
+/// r[10] = 0.8; // an orientation residual 40 of its kind's spreads off, but well within the noise
+/// assert!(outliers_by_kind(&r, &c, Some(2.0)).is_empty());
+/// r[6] = 200.0; // a position slip of 0.2 mm
+/// assert_eq!(outliers_by_kind(&r, &c, Some(2.0)), vec![6]);
+/// ```
+pub fn outliers_by_kind(
+    residuals_um: &[f64],
+    campaign: &Campaign,
+    sigma_um: Option<f64>,
+) -> Vec<usize> {
     let m = campaign.readings.len();
     let kind = |k: usize| -> usize {
         if k < m {
@@ -169,33 +201,51 @@ pub fn outliers_by_kind(residuals_um: &[f64], campaign: &Campaign) -> Vec<usize>
     kinds.sort_unstable();
     kinds.dedup();
     let pooled = outliers(residuals_um);
+    let floor = OUTLIER_FLOOR_SIGMAS
+        * sigma_um
+            .filter(|s| *s > 0.0)
+            .unwrap_or_else(|| robust_spread(residuals_um).1);
     let mut out = Vec::new();
     for g in kinds {
         let idx: Vec<usize> = (0..residuals_um.len()).filter(|&k| kind(k) == g).collect();
-        if idx.len() < MIN_KIND_OBSERVATIONS {
-            out.extend(idx.iter().filter(|k| pooled.binary_search(k).is_ok()));
+        let r: Vec<f64> = idx.iter().map(|&k| residuals_um[k]).collect();
+        let (median, _) = robust_spread(&r);
+        let flagged: Vec<usize> = if idx.len() < MIN_KIND_OBSERVATIONS {
+            idx.iter()
+                .copied()
+                .filter(|k| pooled.binary_search(k).is_ok())
+                .collect()
         } else {
-            let r: Vec<f64> = idx.iter().map(|&k| residuals_um[k]).collect();
-            out.extend(outliers(&r).into_iter().map(|i| idx[i]));
-        }
+            outliers(&r).into_iter().map(|i| idx[i]).collect()
+        };
+        out.extend(
+            flagged
+                .into_iter()
+                .filter(|&k| (residuals_um[k] - median).abs() > floor),
+        );
     }
     out.sort_unstable();
     out
 }
 
-/// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
-/// deviation) from the median.
-pub fn outliers(residuals_um: &[f64]) -> Vec<usize> {
+/// Median and robust standard deviation (1.4826 x the median absolute deviation).
+fn robust_spread(residuals_um: &[f64]) -> (f64, f64) {
     let n = residuals_um.len();
     if n == 0 {
-        return Vec::new();
+        return (0.0, 0.0);
     }
     let mut sorted = residuals_um.to_vec();
     sorted.sort_by(f64::total_cmp);
     let median = sorted[n / 2];
     let mut dev: Vec<f64> = residuals_um.iter().map(|r| (r - median).abs()).collect();
     dev.sort_by(f64::total_cmp);
-    let mad = dev[n / 2] * 1.4826;
+    (median, dev[n / 2] * 1.4826)
+}
+
+/// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
+/// deviation) from the median.
+pub fn outliers(residuals_um: &[f64]) -> Vec<usize> {
+    let (median, mad) = robust_spread(residuals_um);
     residuals_um
         .iter()
         .enumerate()

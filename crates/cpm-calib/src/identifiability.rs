@@ -254,7 +254,9 @@ pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<P
                 for i in 0..n {
                     v[6 * i + a] = 1.0;
                 }
-                v[b.offset + a] = -1.0;
+                for f in 0..b.len / 6 {
+                    v[b.offset + 6 * f + a] = -1.0;
+                }
                 v
             })
             .collect();
@@ -273,7 +275,9 @@ pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<P
                         v[6 * i + c] = d[c];
                     }
                 }
-                v[b.offset + 3 + a] = -1.0;
+                for f in 0..b.len / 6 {
+                    v[b.offset + 6 * f + 3 + a] = -1.0;
+                }
                 v
             })
             .collect();

@@ -343,7 +343,7 @@ pub fn identify(
         .map(|((a, b), w)| (a - b) * 1e3 * w)
         .collect();
     let jf = weigh(jf);
-    let outliers = crate::diagnostics::outliers_by_kind(&residuals_um, campaign);
+    let outliers = crate::diagnostics::outliers_by_kind(&residuals_um, campaign, options.sigma_um);
     let downweighted_share = if robust && !residuals_um.is_empty() {
         residuals_um
             .iter()

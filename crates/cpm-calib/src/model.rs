@@ -55,6 +55,11 @@ pub struct MeasurementModel {
     /// that a calibrated description (the design plus the fitted installation errors) predicts
     /// exactly what the fit predicted. Default `None`: [`nominal`](Self::nominal).
     pub design: Option<JointTable>,
+    /// The sessions ([`Campaign::session_starts`], a file each) whose tracker frames
+    /// `tracker_frame` estimates, one frame (6 parameters) each, in this order: every session
+    /// brings its own tracker set-up. Empty (the default): one frame shared by every pose
+    /// measurement.
+    pub tracker_frame_sessions: Vec<usize>,
 }
 
 /// Where a block of parameters sits in the parameter vector.
@@ -103,6 +108,7 @@ impl MeasurementModel {
             effect_settings: EffectSettings::default(),
             known_effects: Vec::new(),
             design: None,
+            tracker_frame_sessions: Vec::new(),
         }
     }
 
@@ -361,7 +367,10 @@ impl MeasurementModel {
         }];
         let mut o = 6 * n;
         for &e in &self.effects {
-            let len = e.num_params(n, s);
+            let len = match e {
+                Effect::TrackerFrame => 6 * self.tracker_frames(),
+                _ => e.num_params(n, s),
+            };
             out.push(Block {
                 effect: Some(e),
                 offset: o,
@@ -387,12 +396,16 @@ impl MeasurementModel {
         for b in self.blocks().iter().skip(1) {
             let e = b.effect.expect("effect block");
             for k in 0..b.len {
-                out.push(format!(
-                    "{} {} [{}]",
-                    e.name(),
-                    e.param_name(k, &sensors),
-                    e.unit()
-                ));
+                let name = if e == Effect::TrackerFrame && self.tracker_frames() > 1 {
+                    format!(
+                        "{} (session {})",
+                        e.param_name(k % 6, &sensors),
+                        self.tracker_frame_sessions[k / 6] + 1
+                    )
+                } else {
+                    e.param_name(k, &sensors)
+                };
+                out.push(format!("{} {} [{}]", e.name(), name, e.unit()));
             }
         }
         out
@@ -437,6 +450,127 @@ impl MeasurementModel {
             }
         }
         Ok(table)
+    }
+
+    /// Number of tracker frames `tracker_frame` estimates: one per
+    /// [`tracker_frame_sessions`](Self::tracker_frame_sessions), at least one.
+    pub fn tracker_frames(&self) -> usize {
+        self.tracker_frame_sessions.len().max(1)
+    }
+
+    /// The frame (index into the `tracker_frame` block, 6 parameters each) of a pose
+    /// measurement at pose `pose` of `campaign`: its session's, or the one shared frame.
+    ///
+    /// Errors: a session with no frame of its own in
+    /// [`tracker_frame_sessions`](Self::tracker_frame_sessions).
+    pub fn tracker_frame_of(&self, campaign: &Campaign, pose: usize) -> Result<usize, CalibError> {
+        if self.tracker_frame_sessions.is_empty() {
+            return Ok(0);
+        }
+        let s = campaign.session_of(pose);
+        self.tracker_frame_sessions
+            .iter()
+            .position(|x| *x == s)
+            .ok_or_else(|| {
+                CalibError::invalid(
+                    "tracker_frame_sessions",
+                    format!(
+                        "pose {pose} is in session {} which has no tracker frame ({:?})",
+                        s + 1,
+                        self.tracker_frame_sessions
+                    ),
+                )
+            })
+    }
+
+    /// The machine this model describes at `params`, held fixed: the installation errors
+    /// applied to the joints (link forces and home lengths still on the design geometry,
+    /// [`statics_table`](Self::statics_table)), every estimated effect's values made known
+    /// (added to known values of the same effect; a `tracker_frame` composed with a known
+    /// one), nothing left to estimate. What [`crate::session::register_session`] and a held-out
+    /// prediction need. A campaign without logged commands must have them logged first
+    /// ([`log_commands`](Self::log_commands)): the held machine's own inverse kinematics
+    /// would be other commands.
+    ///
+    /// ```
+    /// use cpm_calib::{model::{predict, Prepared}, Effect, MeasurementModel, Plan};
+    /// let mut m = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
+    /// m.nominal.sensors = cpm_calib::paper::designed_sensors();
+    /// m.effects = vec![Effect::LinkOffset];
+    /// let poses = cpm_calib::paper::random_workspace_poses(&m.nominal, 5, 50.0, 5.0, 3.0, 1);
+    /// let mut c = Plan { poses, sensors: vec![0, 1, 2] }.skeleton();
+    /// m.log_commands(&mut c);
+    /// let params: Vec<f64> = (0..m.num_params()).map(|k| (k as f64 * 0.7).sin() * 20.0).collect();
+    /// let fixed = m.held_fixed(&params).unwrap();
+    /// assert_eq!(fixed.num_params(), 36);
+    /// let a = predict(&m, &Prepared::new(&m, &c).unwrap(), &c, &params, None).unwrap();
+    /// let b = predict(&fixed, &Prepared::new(&fixed, &c).unwrap(), &c, &[0.0; 36], None).unwrap();
+    /// assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-9));
+    /// ```
+    pub fn held_fixed(&self, params: &[f64]) -> Result<MeasurementModel, CalibError> {
+        let np = self.num_params();
+        if params.len() != np {
+            return Err(CalibError::invalid(
+                "parameters",
+                format!("{} values, expected {np}", params.len()),
+            ));
+        }
+        let ni = self.num_installation_params();
+        let mut fixed = self.clone();
+        fixed.nominal = InstallationErrors::try_from_vec_um(&params[..ni])?.apply(&self.nominal)?;
+        fixed.design = Some(self.statics_table().clone());
+        fixed.effects.clear();
+        fixed.tracker_frame_sessions.clear();
+        for b in self.blocks() {
+            let Some(e) = b.effect else { continue };
+            if e == Effect::TrackerFrame && self.tracker_frames() > 1 {
+                // Frames of several sessions describe those sessions, not the machine.
+                continue;
+            }
+            let v = &params[b.offset..b.offset + b.len];
+            match fixed.known_effects.iter_mut().find(|k| k.effect == e) {
+                None => fixed.known_effects.push(KnownEffect {
+                    effect: e,
+                    values: v.to_vec(),
+                }),
+                Some(k) if e == Effect::TrackerFrame => {
+                    // p -> R_e (R_k p + t_k) + t_e.
+                    let (tk, rk) = crate::effects::tracker_registration(&k.values);
+                    let (te, re) = crate::effects::tracker_registration(v);
+                    let (t, r) = (re * tk + te, re * rk);
+                    let w = r.scaled_axis();
+                    k.values = vec![
+                        t.x * 1e3,
+                        t.y * 1e3,
+                        t.z * 1e3,
+                        w.x * 1e6,
+                        w.y * 1e6,
+                        w.z * 1e6,
+                    ];
+                }
+                Some(k) => {
+                    for (a, b) in k.values.iter_mut().zip(v) {
+                        *a += b;
+                    }
+                }
+            }
+        }
+        Ok(fixed)
+    }
+
+    /// Logs the commands this model assumes for a campaign that has none: the nominal inverse
+    /// kinematics of each commanded pose (what the controller sent), so that another model
+    /// of the machine (say [`held_fixed`](Self::held_fixed)) sees the same commands.
+    pub fn log_commands(&self, campaign: &mut Campaign) {
+        if campaign.commanded_lengths_mm.is_none() {
+            campaign.commanded_lengths_mm = Some(
+                campaign
+                    .poses
+                    .iter()
+                    .map(|p| cpm_kinematics::inverse_lengths(&self.nominal, p))
+                    .collect(),
+            );
+        }
     }
 
     /// Effective link lengths (mm) the machine has at each commanded pose: the commanded
@@ -765,7 +899,12 @@ fn predict_exact(
         }
         // Tracker observations: position in the tracker frame (mm) and the rotation from the
         // measured to the predicted orientation (mrad).
-        let (tracked_mm, tracked_rotation) = channels.tracked(&pose);
+        let frame = if measurements.is_empty() {
+            0
+        } else {
+            model.tracker_frame_of(campaign, j)?
+        };
+        let (tracked_mm, tracked_rotation) = channels.tracked(&pose, frame);
         let mut omegas = Vec::with_capacity(measurements.len());
         for &q in measurements {
             let w = cpm_geometry::rotation::log(
@@ -787,6 +926,7 @@ fn predict_exact(
                 for (&q, w) in measurements.iter().zip(&omegas) {
                     channels.tracker_rows(
                         &mut jac.as_view_mut(),
+                        frame,
                         m_readings + 6 * q,
                         w,
                         &dx,

@@ -18,7 +18,9 @@
 //!    spike it bends to) is never added. A candidate whose robust fit failed is not added.
 //!
 //! The observations the first fit flags as outliers ([`Refinement::outliers_before`]) are set
-//! aside before any effect is chosen: the rounds (fits, tests, cross-validation) run on the
+//! aside before any effect is chosen, unless they follow a physical candidate's signature
+//! (its fit leaves them within the noise: [`Refinement::outliers_explained`]; clearance
+//! flipping a link's shift looks like spikes to a model without it): the rounds (fits, tests, cross-validation) run on the
 //! campaign without them, so no effect is bent to a spike. The final model is then fitted to
 //! the whole campaign ([`Refinement::calibration`], which flags them again).
 //!
@@ -155,8 +157,12 @@ pub struct Refinement {
     /// [`RefineOptions::min_novelty`]) and which were not significant.
     pub last_round: Vec<CandidateScore>,
     /// Observations the first fit flagged as outliers (more than 5 robust standard deviations
-    /// off), before any effect was chosen; the rounds ran without them.
+    /// off) and no physical candidate explained, before any effect was chosen; the rounds ran
+    /// without them.
     pub outliers_before: Vec<usize>,
+    /// First-fit outliers that followed a candidate's signature and were kept as signal:
+    /// the physical effect whose fit left them within the noise, and how many it explained.
+    pub outliers_explained: Option<(Effect, usize)>,
     /// Candidates that passed the F-test and BIC but were not added because the
     /// cross-validated RMS did not improve: (effect, CV RMS before, with it), um.
     pub rejected_by_cv: Vec<(Effect, f64, f64)>,
@@ -244,6 +250,9 @@ fn bic(rss: f64, m: usize, k: usize) -> f64 {
 /// acquisition order. Each fold is fitted on the other poses and predicts its own
 /// observations. Random or interleaved folds inside one sitting flatter effects that real
 /// drift and frames defeat; blocked folds make a model predict poses it did not see, later.
+/// A held-out tracker session is re-registered first (its six frame parameters fitted with
+/// the machine held fixed, [`MeasurementModel::held_fixed`]) when the model estimates a
+/// `tracker_frame`: a new session brings a new frame, as in `cpm validate`.
 pub fn cross_validated_rms(
     model: &MeasurementModel,
     campaign: &Campaign,
@@ -276,8 +285,21 @@ pub fn cross_validated_rms(
             ..options.clone()
         };
         let cal = identify(model, &train, &opts)?;
-        let prepared = Prepared::new(model, &test)?;
-        let y = predict(model, &prepared, &test, &cal.minimum_norm_um, None)?;
+        // A held-out session of a tracker whose frame the model estimates is registered
+        // afresh against the machine held fixed, as `validate` does: its frame is the
+        // session's, not the machine's.
+        let reregister = !campaign.session_starts.is_empty()
+            && !test.pose_measurements.is_empty()
+            && model.effects.contains(&Effect::TrackerFrame);
+        let y = if reregister {
+            let mut test = test.clone();
+            model.log_commands(&mut test);
+            let machine = model.held_fixed(&cal.minimum_norm_um)?;
+            crate::session::register_session(&machine, &test)?.predicted
+        } else {
+            let prepared = Prepared::new(model, &test)?;
+            predict(model, &prepared, &test, &cal.minimum_norm_um, None)?
+        };
         let w = test.observation_weights(options.sigma_um.unwrap_or(test.pose_sigma()));
         for ((yk, mk), wk) in y.iter().zip(test.observations()).zip(w) {
             sq += ((yk - mk) * 1e3 * wk).powi(2);
@@ -349,6 +371,60 @@ fn novelty(
     Ok(outside.norm() / norm)
 }
 
+/// Observations set aside, and the effect that explained the others (with their count).
+type SetAside = (Vec<usize>, Option<(Effect, usize)>);
+
+/// The first fit's outliers, less those that follow a physical candidate's signature.
+///
+/// Residuals the first model cannot follow (joint clearance flipping a link's shift where its
+/// force changes sign, a backlash step) look like outliers of that model; setting them aside
+/// would remove the very signal `refine` is looking for. Each physical candidate is fitted to
+/// the whole campaign; the one whose own fit leaves the fewest of the flagged observations
+/// outlying explains the others, which are kept. Returns the observations to set aside and
+/// the explaining effect with the count it explained.
+fn outliers_or_signal(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &RefineOptions,
+    first: &Calibration,
+) -> Result<SetAside, CalibError> {
+    let flagged = &first.outliers;
+    if flagged.is_empty() {
+        return Ok((Vec::new(), None));
+    }
+    let mut best: Option<(Effect, Vec<usize>)> = None;
+    for &e in options
+        .candidates
+        .iter()
+        .filter(|e| !matches!(e, Effect::PoseMap(_)) && !model.effects.contains(e))
+    {
+        let aug = with_effect(model, e);
+        let opts = IdentifyOptions {
+            start_um: Some(extend_start(&first.minimum_norm_um, &aug)),
+            ..options.identify.clone()
+        };
+        // A candidate the data cannot fit (no readings for a sensor effect) explains nothing.
+        let Ok(cal) = identify(&aug, campaign, &opts) else {
+            continue;
+        };
+        let left: Vec<usize> = flagged
+            .iter()
+            .copied()
+            .filter(|k| cal.outliers.binary_search(k).is_ok())
+            .collect();
+        if best.as_ref().is_none_or(|(_, b)| left.len() < b.len()) {
+            best = Some((e, left));
+        }
+    }
+    Ok(match best {
+        Some((e, left)) if left.len() < flagged.len() => {
+            let explained = flagged.len() - left.len();
+            (left, Some((e, explained)))
+        }
+        _ => (flagged.clone(), None),
+    })
+}
+
 /// Runs the refinement loop on a campaign, starting from `model` (its declared effects).
 pub fn refine(
     model: &MeasurementModel,
@@ -362,7 +438,8 @@ pub fn refine(
         ));
     }
     let first = identify(model, campaign, &options.identify)?;
-    let outliers_before = first.outliers.clone();
+    let (outliers_before, outliers_explained) =
+        outliers_or_signal(model, campaign, options, &first)?;
     let full = campaign;
     let reduced = without_observations(campaign, &outliers_before);
     let campaign = &reduced;
@@ -637,6 +714,7 @@ pub fn refine(
         initial_residuals_um,
         last_round,
         outliers_before,
+        outliers_explained,
         rejected_by_cv,
         initial_pose_structure,
         pose_range: PoseRange::of(full),

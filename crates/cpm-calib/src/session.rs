@@ -139,6 +139,7 @@ pub fn register_session(
     }
     let mut model = machine.clone();
     model.effects = vec![Effect::TrackerFrame];
+    model.tracker_frame_sessions.clear();
     let offset = model.num_installation_params();
     let prepared = Prepared::new(&model, campaign)?;
     let weights = campaign.observation_weights(campaign.pose_sigma());

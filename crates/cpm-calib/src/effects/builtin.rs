@@ -283,13 +283,14 @@ impl EffectModel for TrackerFrame {
         6
     }
     fn param_name(&self, k: usize, _: &[String]) -> String {
-        ["tx", "ty", "tz", "rx", "ry", "rz"][k].to_string()
+        // Six per frame (one frame per session when the model has several).
+        ["tx", "ty", "tz", "rx", "ry", "rz"][k % 6].to_string()
     }
     fn unit(&self) -> &str {
         "um (translation), urad (rotation)"
     }
     fn param_unit(&self, k: usize) -> &str {
-        if k >= 3 {
+        if k % 6 >= 3 {
             "urad"
         } else {
             "um"
