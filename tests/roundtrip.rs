@@ -1501,3 +1501,72 @@ fn refine_adds_nothing_the_next_session_rejects() {
     }
     println!("both sessions: chose {}", r2["final"]["effects"]);
 }
+
+/// Two sessions of one machine agree; a machine whose base joint moved by 0.1 mm between
+/// sessions does not, and `calibrate` on both says so (each session fitted on its own).
+#[test]
+fn estimates_that_move_between_sessions_are_reported() {
+    let robot = example("hexapod_66.toml");
+    let truth = example("hexapod_66_truth.toml");
+    let dir = scratch("roundtrip", "moving-sessions");
+    let moved = edited_copy(
+        &dir,
+        "moved.toml",
+        &truth,
+        "base_mm = [193.185165258, -51.763809021, 0.0]",
+        "base_mm = [193.285165258, -51.763809021, 0.0]",
+    );
+    let sim = |file: &str, truth: &str, seed: &str| {
+        let path = dir.join(file);
+        ok(&[
+            "simulate",
+            "--robot",
+            &robot,
+            "--random",
+            "60",
+            "--truth",
+            truth,
+            "--noise",
+            "gaussian:1",
+            "--seed",
+            seed,
+            "--out",
+            &p(&path),
+        ]);
+        path
+    };
+    let (a, b, c) = (
+        sim("a.csv", &truth, "1"),
+        sim("b.csv", &truth, "2"),
+        sim("c.csv", &p(&moved), "3"),
+    );
+    let warned = |second: &Path, out: &str| {
+        let (pa, pb, o) = (p(&a), p(second), p(&dir.join(out)));
+        ok(&[
+            "calibrate",
+            "--robot",
+            &robot,
+            "--data",
+            &pa,
+            "--data",
+            &pb,
+            "--out",
+            &o,
+        ]);
+        let j = read_json(&dir.join(out).join("calibration.json"));
+        j["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|w| {
+                w.as_str()
+                    .unwrap()
+                    .starts_with("Estimates move between sessions")
+            })
+            .map(|w| w.as_str().unwrap().to_string())
+    };
+    assert_eq!(warned(&b, "same"), None);
+    let w = warned(&c, "moved").expect("a warning for the moved joint");
+    println!("{w}");
+    assert!(w.contains("link 1 base"), "{w}");
+}

@@ -197,6 +197,42 @@ pub fn tracker_sessions(campaign: &Campaign) -> Vec<usize> {
     }
 }
 
+/// A warning when the sessions (files) of the campaign, each fitted on its own, estimate the
+/// machine differently by more than their standard deviations allow.
+pub fn session_warning(inputs: &Inputs) -> anyhow::Result<Option<String>> {
+    let c = crate::calib::session::consistency(
+        &inputs.model,
+        &inputs.merged.campaign,
+        &inputs.identify,
+    )
+    .map_err(|e| common::locate(e, &inputs.merged))?;
+    let Some(c) = c.filter(|c| !c.consistent) else {
+        return Ok(None);
+    };
+    let file = |s: usize| {
+        inputs
+            .provenance
+            .data
+            .get(s)
+            .cloned()
+            .unwrap_or_else(|| format!("session {}", s + 1))
+    };
+    let worst = c
+        .pairs
+        .iter()
+        .max_by(|a, b| a.worst_z.abs().total_cmp(&b.worst_z.abs()))
+        .expect("an inconsistent result has a pair");
+    Ok(Some(format!(
+        "**Estimates move between sessions**: fitted on its own, {} and {} differ in `{}` by {:.1} standard deviations of the difference ({} of {} parameters by more than 3). The machine or its set-up changed between the sessions, or the model lacks an effect they see differently: compare them with `cpm validate`, session by session.",
+        file(worst.sessions[0]),
+        file(worst.sessions[1]),
+        worst.worst_parameter,
+        worst.worst_z.abs(),
+        worst.beyond_3sd,
+        worst.compared
+    )))
+}
+
 /// A header for generated files.
 pub fn provenance_lines(p: &Provenance, simulated: bool, command: &str) -> Vec<String> {
     let mut v = vec![format!(
@@ -575,7 +611,11 @@ pub fn fit_with(
     let cal = super::formulation::identify_with(formulation, model, campaign, &inputs.identify)
         .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
-    let fit = FitReport::new(inputs, model, &cal, Some(formulation));
+    let mut fit = FitReport::new(inputs, model, &cal, Some(formulation));
+    if let Some(w) = session_warning(inputs)? {
+        fit.warnings.push(w.replace("**", ""));
+        fit.text.warnings.push(w);
+    }
     set.add(dir.join("calibration.json"), fit.to_json()?);
     let figures = stage_figures(&mut set, dir, &inputs.robot, model, campaign, &cal)?;
     let notes = stage_calibrated(
@@ -627,6 +667,14 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         .skip(usize::from(!cal.succeeded()))
     {
         ctx.note(w.replace("**", ""));
+    }
+    if let Some(w) = report
+        .fit
+        .warnings
+        .iter()
+        .find(|w| w.starts_with("Estimates move between sessions"))
+    {
+        ctx.note(w);
     }
     if args.fit.json {
         let v = json!({

@@ -200,3 +200,107 @@ pub fn register_session(
         solver,
     })
 }
+
+/// How far apart two sessions' own estimates of a machine parameter may be, in standard
+/// deviations of their difference, before [`consistency`] calls the sessions inconsistent
+/// (4: a chance of about 6e-5 per parameter for Gaussian estimates).
+pub const SESSION_Z_LIMIT: f64 = 4.0;
+
+/// Two sessions fitted on their own, compared parameter by parameter.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SessionPair {
+    /// The sessions (0 for the first).
+    pub sessions: [usize; 2],
+    /// Machine parameters determined in both (a session's tracker frame is not compared).
+    pub compared: usize,
+    /// The parameter whose estimates differ most, in standard deviations of the difference.
+    pub worst_parameter: String,
+    /// Its difference over the standard deviation of the difference (signed: first - second).
+    pub worst_z: f64,
+    /// Parameters whose estimates differ by more than 3 standard deviations.
+    pub beyond_3sd: usize,
+}
+
+/// Whether the estimates of each session, fitted on its own, agree within their deviations.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SessionConsistency {
+    /// Every pair of sessions that both could be fitted.
+    pub pairs: Vec<SessionPair>,
+    /// False when some pair differs by more than [`SESSION_Z_LIMIT`] in some parameter.
+    pub consistent: bool,
+}
+
+/// Fits each session of `campaign` ([`Campaign::session_starts`]) on its own with `model` and
+/// compares the machine parameters each determines: a machine that moved between sessions, or
+/// a model that lacks an effect the sessions see differently, shows estimates that move more
+/// than their standard deviations allow. `None` with fewer than two sessions that can be
+/// fitted on their own.
+///
+/// Errors: none from a session that cannot be fitted (it is left out); an invalid model.
+pub fn consistency(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &crate::IdentifyOptions,
+) -> Result<Option<SessionConsistency>, CalibError> {
+    let sessions = campaign.session_starts.len() + 1;
+    if sessions < 2 {
+        return Ok(None);
+    }
+    let mut single = model.clone();
+    single.tracker_frame_sessions.clear();
+    let names = single.parameter_names();
+    // Parameters that describe a session rather than the machine.
+    let session_block: Vec<bool> = {
+        let mut v = vec![false; single.num_params()];
+        for b in single.blocks() {
+            if b.effect == Some(Effect::TrackerFrame) {
+                v[b.offset..b.offset + b.len].fill(true);
+            }
+        }
+        v
+    };
+    let mut fits = Vec::new();
+    for s in 0..sessions {
+        let part = campaign.filter_poses(|p| campaign.session_of(p) == s);
+        if part.is_empty() {
+            continue;
+        }
+        if let Ok(cal) = crate::identify(&single, &part, options) {
+            fits.push((s, cal));
+        }
+    }
+    if fits.len() < 2 {
+        return Ok(None);
+    }
+    let mut pairs = Vec::new();
+    for a in 0..fits.len() {
+        for b in a + 1..fits.len() {
+            let (ca, cb) = (&fits[a].1, &fits[b].1);
+            let mut z: Vec<(usize, f64)> = (0..names.len())
+                .filter(|&k| !session_block[k])
+                .filter_map(|k| {
+                    let (ea, eb) = (ca.estimate_um[k]?, cb.estimate_um[k]?);
+                    let (sa, sb) = (ca.std_um[k]?, cb.std_um[k]?);
+                    let sd = (sa * sa + sb * sb).sqrt();
+                    (sd > 0.0).then(|| (k, (ea - eb) / sd))
+                })
+                .collect();
+            if z.is_empty() {
+                continue;
+            }
+            z.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
+            pairs.push(SessionPair {
+                sessions: [fits[a].0, fits[b].0],
+                compared: z.len(),
+                worst_parameter: names[z[0].0].clone(),
+                worst_z: z[0].1,
+                beyond_3sd: z.iter().filter(|(_, v)| v.abs() > 3.0).count(),
+            });
+        }
+    }
+    if pairs.is_empty() {
+        return Ok(None);
+    }
+    let consistent = pairs.iter().all(|p| p.worst_z.abs() <= SESSION_Z_LIMIT);
+    Ok(Some(SessionConsistency { pairs, consistent }))
+}
