@@ -197,6 +197,9 @@ pub fn tracker_sessions(campaign: &Campaign) -> Vec<usize> {
     }
 }
 
+/// The warning of a tracker fit whose frame was not estimated.
+pub const FRAME_HELD_FIXED: &str = "**Tracker frame held fixed**: the tracker frame was registered before the fit and held fixed (`tracker_frame` is not among the effects), so the standard deviations leave out its uncertainty and understate the errors' own; add `tracker_frame` to refine the frame in the fit.";
+
 /// A warning when the sessions (files) of the campaign, each fitted on its own, estimate the
 /// machine differently by more than their standard deviations allow.
 pub fn session_warning(inputs: &Inputs) -> anyhow::Result<Option<String>> {
@@ -612,7 +615,10 @@ pub fn fit_with(
         .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
     let mut fit = FitReport::new(inputs, model, &cal, Some(formulation));
-    if let Some(w) = session_warning(inputs)? {
+    let held = (!campaign.pose_measurements.is_empty()
+        && !model.effects.contains(&crate::calib::Effect::TrackerFrame))
+    .then(|| FRAME_HELD_FIXED.to_string());
+    for w in held.into_iter().chain(session_warning(inputs)?) {
         fit.warnings.push(w.replace("**", ""));
         fit.text.warnings.push(w);
     }
@@ -668,12 +674,10 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     {
         ctx.note(w.replace("**", ""));
     }
-    if let Some(w) = report
-        .fit
-        .warnings
-        .iter()
-        .find(|w| w.starts_with("Estimates move between sessions"))
-    {
+    for w in report.fit.warnings.iter().filter(|w| {
+        w.starts_with("Estimates move between sessions")
+            || w.starts_with("Tracker frame held fixed")
+    }) {
         ctx.note(w);
     }
     if args.fit.json {
