@@ -56,6 +56,12 @@ pub struct ReadOptions {
     /// Let the registration of tracker files estimate one reading offset per link (applied
     /// when large). Default true; `cpm validate` holds the machine fixed (false).
     pub register_link_offsets: bool,
+    /// Widens every link's length limits by this much (mm) when checking that a commanded
+    /// pose is reachable. Default 0 (the limits as declared); `cpm validate` reads held-out
+    /// data, commanded by another model of the machine (the reference's inverse kinematics),
+    /// with [`CONSISTENCY_MM`]: a pose the controller reached is not refused because the
+    /// calibrated joints would need a link a few microns past its limit there.
+    pub link_limit_margin_mm: f64,
 }
 
 /// The most data rows of a measurement file or pose list by default: ten million.
@@ -70,8 +76,20 @@ impl Default for ReadOptions {
             register_tracker: true,
             known_tracker_frame: None,
             register_link_offsets: true,
+            link_limit_margin_mm: 0.0,
         }
     }
+}
+
+/// `table` with every link's length limits widened by `margin_mm`.
+fn widened(table: &JointTable, margin_mm: f64) -> JointTable {
+    let mut t = table.clone();
+    for l in t.links.iter_mut() {
+        if let Some((lo, hi)) = l.length_limits_mm {
+            l.length_limits_mm = Some((lo - margin_mm, hi + margin_mm));
+        }
+    }
+    t
 }
 
 /// A measurement file read into a campaign, with where everything came from.
@@ -739,6 +757,7 @@ fn read_readings_table<R: Read>(
     let mut angles: AngleCells = Vec::new();
     // J1's condition number at home, computed at the first pose.
     let mut bound = None;
+    let mut limits_table: Option<JointTable> = None;
     // The pose of the previous row (rows of one pose usually follow each other).
     let mut previous: Option<usize> = None;
     // One row after the other, its strings reused.
@@ -861,7 +880,9 @@ fn read_readings_table<R: Read>(
                             row.line,
                         )?),
                     };
-                    check_reachable_within(&robot.table, &pose, b, &t.file, row.line, label)?;
+                    let table = limits_table
+                        .get_or_insert_with(|| widened(&robot.table, options.link_limit_margin_mm));
+                    check_reachable_within(table, &pose, b, &t.file, row.line, label)?;
                 }
                 if let Some(u) = &link {
                     commanded.push(check_link_readings(
@@ -1282,12 +1303,7 @@ pub fn register_tracker_files(
     // nominal inverse kinematics of it misses the true link lengths by the machine's errors,
     // so its link limits are checked widened by the consistency tolerance
     // ([`CONSISTENCY_MM`]), which only catches gross errors (units, frames, link mapping).
-    let mut measured_table = robot.table.clone();
-    for l in measured_table.links.iter_mut() {
-        if let Some((lo, hi)) = l.length_limits_mm {
-            l.length_limits_mm = Some((lo - CONSISTENCY_MM, hi + CONSISTENCY_MM));
-        }
-    }
+    let measured_table = widened(&robot.table, CONSISTENCY_MM);
     for &k in &idx {
         let f = &mut files[k];
         let note = registration_note(f);
