@@ -764,6 +764,32 @@ fn tracker_sessions_in_their_own_frames_round_trip() {
         (file - fit).abs() <= 1e-9 * fit,
         "fit {fit} um, calibrated.toml {file} um"
     );
+    // Tracker poses cannot see the base frame: the fit states it as the base joints' own
+    // (their errors have no common translation or rotation; the frame takes the rest).
+    let j = read_json(&cal.join("calibration.json"));
+    let base: Vec<[f64; 3]> = j["minimum_norm_um"]["base"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| [0, 1, 2].map(|a| r[a].as_f64().unwrap()))
+        .collect();
+    let robot_desc = cpm::io::Robot::load(Path::new(&robot)).unwrap();
+    let (mut mean, mut turn, mut inertia) = ([0.0; 3], nalgebra::Vector3::zeros(), 0.0);
+    for (l, d) in robot_desc.table.links.iter().zip(&base) {
+        for a in 0..3 {
+            mean[a] += d[a] / 6.0;
+        }
+        turn += l.base_mm.cross(&nalgebra::Vector3::from(*d));
+        inertia += l.base_mm.norm_squared();
+    }
+    // The common rotation, urad (to first order: what is left is second order in the
+    // rotation removed, well under a microradian).
+    let rotation_urad = turn.norm() / inertia * 1e3;
+    println!("tracker base frame: mean {mean:?} um, common rotation {rotation_urad:.3} urad");
+    assert!(
+        mean.iter().all(|m| m.abs() < 1e-6) && rotation_urad < 1.0,
+        "base joints moved together: mean {mean:?} um, rotation {rotation_urad} urad"
+    );
     let v = validate(&cal.join("calibrated.toml"), &held);
     let (c, r) = (
         v["calibrated"]["rms_um"].as_f64().unwrap(),

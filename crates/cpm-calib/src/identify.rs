@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::identifiability::{physical_patterns, try_analyze, Identifiability, RankOptions};
 use crate::model::{predict, Prepared};
-use crate::{CalibError, Campaign, MeasurementModel};
+use crate::{CalibError, Campaign, Effect, MeasurementModel};
 
 /// Options of [`identify`]. The default: cpm-lm's defaults, default rank thresholds, noise
 /// estimated from the residual, start at the nominal geometry.
@@ -334,8 +334,20 @@ pub fn identify(
     };
     let e_hat = problem.errors(&theta);
     problem.evaluate(&theta)?;
-    let y = std::mem::take(&mut problem.cached_y);
-    let jf = std::mem::replace(&mut problem.full_jac, DMatrix::zeros(0, 0));
+    let (e_hat, y, jf) = match base_frame_gauge(model, campaign, &e_hat)? {
+        // The same fit, told in the base joints' own frame: predicted again there (equal to
+        // rounding, the move being a symmetry of the data).
+        Some(e) => {
+            let mut j = DMatrix::zeros(m, np);
+            let y = predict(model, &prepared, campaign, &e, Some(&mut j))?;
+            (e, y, j)
+        }
+        None => (
+            e_hat,
+            std::mem::take(&mut problem.cached_y),
+            std::mem::replace(&mut problem.full_jac, DMatrix::zeros(0, 0)),
+        ),
+    };
     let residuals_um: Vec<f64> = y
         .iter()
         .zip(&problem.measured_mm)
@@ -408,4 +420,98 @@ pub fn identify(
         downweighted_share,
         robust_failed: downweighted_share > MAX_DOWNWEIGHTED_SHARE,
     })
+}
+
+/// The base frame of a fit to tracker poses alone, made the base joints' own.
+///
+/// Tracker poses cannot tell the machine's base frame from the tracker's: moving every base
+/// joint rigidly and the tracker frames with them predicts the same data (the six gauge
+/// freedoms the identifiability analysis names). A solver leaves that motion wherever its
+/// parameterization puts it, up to a milliradian in practice, which `calibrated.toml` would
+/// carry into every compensated target. The convention here: the base joints' installation
+/// errors have no common rigid motion (their least-squares translation and rotation about
+/// the base origin are zero), the tracker frames (`tracker_frame`) take the rest. The move is
+/// exact (rigid, the frames composed), so the predictions do not change.
+///
+/// Applies to a model that estimates `tracker_frame` on a campaign without length readings
+/// (a gauge's base sockets fix the base frame), without pose maps (which act in the base
+/// frame) and without a known tracker frame; `None` otherwise, or when the errors have no
+/// rigid part to remove.
+fn base_frame_gauge(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    e: &[f64],
+) -> Result<Option<Vec<f64>>, CalibError> {
+    let frame = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(Effect::TrackerFrame));
+    let pose_maps = model
+        .effects
+        .iter()
+        .chain(model.known_effects.iter().map(|k| &k.effect))
+        .any(|e| matches!(e, Effect::PoseMap(_)));
+    let Some(frame) = frame else { return Ok(None) };
+    if !campaign.readings.is_empty()
+        || campaign.pose_measurements.is_empty()
+        || pose_maps
+        || model.known(Effect::TrackerFrame).is_some()
+    {
+        return Ok(None);
+    }
+    let n = model.nominal.num_links();
+    // Base joints with their errors (mm), and the least-squares rigid motion (translation
+    // mm, small rotation rad) from the nominal ones.
+    let base: Vec<nalgebra::Vector3<f64>> =
+        (0..n).map(|i| model.nominal.links[i].base_mm).collect();
+    let mut a = nalgebra::DMatrix::zeros(3 * n, 6);
+    let mut y = nalgebra::DVector::zeros(3 * n);
+    for (i, b) in base.iter().enumerate() {
+        for ax in 0..3 {
+            let mut unit = nalgebra::Vector3::zeros();
+            unit[ax] = 1.0;
+            a[(3 * i + ax, ax)] = 1.0;
+            let c = b.cross(&unit);
+            for k in 0..3 {
+                a[(3 * i + ax, 3 + k)] = c[k];
+            }
+            y[3 * i + ax] = e[6 * i + ax] * 1e-3;
+        }
+    }
+    let Some(c) = a.clone().svd(true, true).solve(&y, 1e-12).ok() else {
+        return Ok(None);
+    };
+    let (t, w) = (
+        nalgebra::Vector3::new(c[0], c[1], c[2]),
+        nalgebra::Vector3::new(c[3], c[4], c[5]),
+    );
+    if t.norm() < 1e-9 && w.norm() < 1e-12 {
+        return Ok(None);
+    }
+    // Undo that motion exactly: every base joint b' = R^T (b - t), every tracker frame
+    // (p_tracker = R_f p + t_f) composed with it: R_f' = R_f R, t_f' = t_f + R_f t.
+    let r = cpm_geometry::rotation::exp(&w);
+    let mut out = e.to_vec();
+    for (i, b) in base.iter().enumerate() {
+        let moved = b + nalgebra::Vector3::new(e[6 * i], e[6 * i + 1], e[6 * i + 2]) * 1e-3;
+        let back = r.inverse() * (moved - t) - b;
+        for ax in 0..3 {
+            out[6 * i + ax] = back[ax] * 1e3;
+        }
+    }
+    for f in 0..frame.len / 6 {
+        let o = frame.offset + 6 * f;
+        let (tf, rf) = crate::effects::tracker_registration(&e[o..o + 6]);
+        let (tn, rn) = (tf + rf * t, rf * r);
+        let wn = rn.scaled_axis();
+        out[o..o + 6].copy_from_slice(&[
+            tn.x * 1e3,
+            tn.y * 1e3,
+            tn.z * 1e3,
+            wn.x * 1e6,
+            wn.y * 1e6,
+            wn.z * 1e6,
+        ]);
+    }
+    Ok(Some(out))
 }
