@@ -3,6 +3,7 @@
 //! closes on, the platform pose channel moves the pose forward kinematics found, the socket
 //! channel moves the sensors (applied to the joint table), the sensor channel maps the geometric
 //! length to the reading, and the tracker frame channel maps the pose into the tracker's frame.
+use cpm_geometry::rotation::{left_jacobian, left_jacobian_inverse};
 use cpm_geometry::{JointTable, Pose, Sensor};
 use cpm_kinematics::{KinematicsError, LinkState};
 use nalgebra::{DMatrix, DMatrixViewMut, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
@@ -399,25 +400,4 @@ impl<'a> Channels<'a> {
     }
 }
 
-/// Left Jacobian of SO(3) at rotation vector `w`: `exp(w + d) = exp(J_l d) exp(w)`.
-fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
-    let th = w.norm();
-    let k = w.cross_matrix();
-    let i = Matrix3::identity();
-    if th < 1e-8 {
-        return i + k * 0.5 + k * k / 6.0;
-    }
-    i + k * ((1.0 - th.cos()) / (th * th)) + k * k * ((th - th.sin()) / (th * th * th))
-}
 
-/// Inverse of the left Jacobian of SO(3) at rotation vector `w`: `d log(exp(d) exp(w)) / dd`.
-fn left_jacobian_inverse(w: &Vector3<f64>) -> Matrix3<f64> {
-    let th = w.norm();
-    let k = w.cross_matrix();
-    let i = Matrix3::identity();
-    if th < 1e-8 {
-        return i - k * 0.5 + k * k / 12.0;
-    }
-    let c = 1.0 / (th * th) - (1.0 + th.cos()) / (2.0 * th * th.sin());
-    i - k * 0.5 + k * k * c
-}

@@ -503,7 +503,7 @@ fn base_frame_gauge(
         let o = frame.offset + 6 * f;
         let (tf, rf) = crate::effects::tracker_registration(&e[o..o + 6]);
         let (tn, rn) = (tf + rf * t, rf * r);
-        let wn = rn.scaled_axis();
+        let wn = cpm_geometry::rotation::log(&rn);
         out[o..o + 6].copy_from_slice(&[
             tn.x * 1e3,
             tn.y * 1e3,

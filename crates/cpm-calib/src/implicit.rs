@@ -12,9 +12,10 @@
 //!
 //! As the encoder noise goes to zero the closures become hard constraints and the estimate
 //! approaches the nested (forward kinematics in the loop) formulation of [`crate::identify()`].
+use cpm_geometry::rotation::left_jacobian;
 use cpm_geometry::Pose;
 use cpm_lm::{LinearSolver, ModelError, Problem, SparseJacobian};
-use nalgebra::{DMatrix, Matrix3, Vector3};
+use nalgebra::{DMatrix, Vector3};
 
 use crate::effects::{is_link_effect, link_coefficient, sensor_coefficient, Effect};
 use crate::identifiability::{analyze, Identifiability, RankOptions};
@@ -94,17 +95,6 @@ pub struct ImplicitCalibration {
     pub solver: cpm_lm::Report,
 }
 
-/// Left Jacobian of SO(3): `exp(w + d) = exp(J_l(w) d) exp(w)` to first order.
-fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
-    let th = w.norm();
-    let k = w.cross_matrix();
-    if th < 1e-8 {
-        return Matrix3::identity() + k * 0.5 + k * k / 6.0;
-    }
-    Matrix3::identity()
-        + k * ((1.0 - th.cos()) / (th * th))
-        + k * k * ((th - th.sin()) / (th * th * th))
-}
 
 struct Implicit<'a> {
     model: &'a MeasurementModel,

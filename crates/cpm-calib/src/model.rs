@@ -538,7 +538,7 @@ impl MeasurementModel {
                     let (tk, rk) = crate::effects::tracker_registration(&k.values);
                     let (te, re) = crate::effects::tracker_registration(v);
                     let (t, r) = (re * tk + te, re * rk);
-                    let w = r.scaled_axis();
+                    let w = cpm_geometry::rotation::log(&r);
                     k.values = vec![
                         t.x * 1e3,
                         t.y * 1e3,

@@ -47,6 +47,7 @@
 //! assert!((r.frames[0].translation_mm - frame.position_mm).norm() < 1e-6);
 //! assert!(r.frames[0].rms_after_mm < 1e-6);
 //! ```
+use cpm_geometry::rotation::left_jacobian_inverse;
 use cpm_geometry::{JointTable, Pose};
 use cpm_kinematics::{forward, ForwardOptions};
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
@@ -706,17 +707,6 @@ fn linearise(
     Ok(Linearised { residual, jacobian })
 }
 
-/// Inverse of the left Jacobian of SO(3) at rotation vector `w`.
-fn left_jacobian_inverse(w: &Vector3<f64>) -> Matrix3<f64> {
-    let th = w.norm();
-    let k = w.cross_matrix();
-    let i = Matrix3::identity();
-    if th < 1e-8 {
-        return i - k * 0.5 + k * k / 12.0;
-    }
-    let c = 1.0 / (th * th) - (1.0 + th.cos()) / (2.0 * th * th.sin());
-    i - k * 0.5 + k * k * c
-}
 
 #[cfg(test)]
 mod tests {

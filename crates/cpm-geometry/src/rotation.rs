@@ -4,7 +4,7 @@
 //! alpha (roll), then the fixed y axis by beta (pitch), then the fixed z axis by gamma (yaw),
 //! i.e. `R = Rz(gamma) Ry(beta) Rx(alpha)`. The printed matrix of eq. 1 has typos (alpha where
 //! gamma belongs); this module follows the text, which is also what the paper's numbers need.
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 
 use crate::GeometryError;
 
@@ -116,6 +116,48 @@ pub fn quaternion(r: &Rotation3<f64>) -> [f64; 4] {
 /// Exponential map: the rotation by angle |w| about axis w/|w| (radians).
 pub fn exp(w: &nalgebra::Vector3<f64>) -> Rotation3<f64> {
     Rotation3::new(*w)
+}
+
+/// Left Jacobian of SO(3) at rotation vector `w` (radians): `exp(w + d) = exp(J_l d) exp(w)`
+/// to first order in `d`.
+///
+/// ```
+/// use cpm_geometry::rotation::{exp, left_jacobian, log};
+/// use nalgebra::Vector3;
+/// let (w, d) = (Vector3::new(0.3, -0.2, 0.5), Vector3::new(1e-7, 2e-7, -1e-7));
+/// let by_map = log(&(exp(&(w + d)) * exp(&w).inverse()));
+/// assert!((by_map - left_jacobian(&w) * d).norm() < 1e-13);
+/// ```
+pub fn left_jacobian(w: &Vector3<f64>) -> Matrix3<f64> {
+    let th = w.norm();
+    let k = w.cross_matrix();
+    let i = Matrix3::identity();
+    if th < 1e-8 {
+        return i + k * 0.5 + k * k / 6.0;
+    }
+    i + k * ((1.0 - th.cos()) / (th * th)) + k * k * ((th - th.sin()) / (th * th * th))
+}
+
+/// Inverse of the left Jacobian of SO(3) at rotation vector `w`:
+/// `d log(exp(d) exp(w)) / dd` at `d = 0`.
+///
+/// ```
+/// use cpm_geometry::rotation::{left_jacobian, left_jacobian_inverse};
+/// use nalgebra::{Matrix3, Vector3};
+/// let w = Vector3::new(0.3, -0.2, 0.5);
+/// assert!((left_jacobian_inverse(&w) * left_jacobian(&w) - Matrix3::identity()).norm() < 1e-14);
+/// let tiny = Vector3::new(1e-10, 0.0, -2e-10);
+/// assert!((left_jacobian_inverse(&tiny) * left_jacobian(&tiny) - Matrix3::identity()).norm() < 1e-15);
+/// ```
+pub fn left_jacobian_inverse(w: &Vector3<f64>) -> Matrix3<f64> {
+    let th = w.norm();
+    let k = w.cross_matrix();
+    let i = Matrix3::identity();
+    if th < 1e-8 {
+        return i - k * 0.5 + k * k / 12.0;
+    }
+    let c = 1.0 / (th * th) - (1.0 + th.cos()) / (2.0 * th * th.sin());
+    i - k * 0.5 + k * k * c
 }
 
 /// Logarithm map: the rotation vector `w` (axis times angle, radians, `|w| <= pi`) with
