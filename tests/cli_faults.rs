@@ -722,6 +722,14 @@ fn refine_adds_no_effect_for_a_spike_and_flags_it() {
     for rej in r["rejected_by_cross_validation"].as_array().unwrap() {
         assert!(rej["cv_rms_with_um"].as_f64() >= rej["cv_rms_before_um"].as_f64());
     }
+    // Judged against plain calibration on the whole file, the spike included: nothing added,
+    // so the same blocked error.
+    let against = &r["against_calibrate"];
+    let (calibrate, refined) = (
+        against["calibrate_cv_rms_um"].as_f64().unwrap(),
+        against["refined_cv_rms_um"].as_f64().unwrap(),
+    );
+    assert!(calibrate > 0.0 && refined == calibrate, "{against}");
     let cal = read_json(&out.join("calibration.json"));
     let flagged = cal["outliers"].to_string();
     assert!(

@@ -50,10 +50,12 @@ pub struct FitArgs {
     /// description, else estimated from the residual).
     #[arg(long, value_name = "UM")]
     pub sigma_um: Option<f64>,
-    /// Tracker position noise, um (standard deviation per coordinate; default cpm-calib's).
+    /// Tracker position noise, um (standard deviation per coordinate, of pose measurements and
+    /// of point targets; default cpm-calib's).
     #[arg(long, value_name = "UM")]
     pub pose_sigma_um: Option<f64>,
-    /// Tracker orientation noise, urad (default cpm-calib's).
+    /// Tracker orientation noise, urad, and the noise of an inclinometer angle (default
+    /// cpm-calib's).
     #[arg(long, value_name = "URAD")]
     pub orientation_sigma_urad: Option<f64>,
     /// Robust loss against outlier readings: huber:K, cauchy:K or tukey:K with K in um of
@@ -141,9 +143,11 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     let mut merged = common::load_data(data, &robot, &common::read_options(&model))?;
     if let Some(v) = pose_sigma_um {
         merged.campaign.pose_sigma_um = v;
+        merged.campaign.point_sigma_um = v;
     }
     if let Some(v) = orientation_sigma_urad {
         merged.campaign.orientation_sigma_urad = v;
+        merged.campaign.tilt_sigma_urad = v;
     }
     if merged.campaign.simulated {
         ctx.note("the measurements are SIMULATED; every output says so");
@@ -163,6 +167,12 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     }
     // Every tracker file is a session with its own set-up: one frame each.
     model.tracker_frame_sessions = tracker_sessions(&merged.campaign);
+    // Point targets and inclinometers: their own unknowns (targets, mounts) and each
+    // session's frame or levelling are always estimated with the machine.
+    if let Some(m) = common::with_instruments(&robot, &model, &merged.campaign) {
+        model = m;
+        ctx.note(common::instruments_note(&model));
+    }
     Ok(Inputs {
         data_paths: data.clone(),
         provenance: Provenance {
@@ -199,6 +209,23 @@ pub fn tracker_sessions(campaign: &Campaign) -> Vec<usize> {
 
 /// The warning of a tracker fit whose frame was not estimated.
 pub const FRAME_HELD_FIXED: &str = "**Tracker frame held fixed**: the tracker frame was registered before the fit and held fixed (`tracker_frame` is not among the effects), so the standard deviations leave out its uncertainty and understate the errors' own; add `tracker_frame` to refine the frame in the fit.";
+
+/// Adds to a fit's report what its sessions say: a tracker frame held fixed
+/// ([`FRAME_HELD_FIXED`]) and estimates that move between sessions ([`session_warning`]).
+pub fn add_session_warnings(
+    fit: &mut FitReport,
+    inputs: &Inputs,
+    model: &MeasurementModel,
+) -> anyhow::Result<()> {
+    let held = (!inputs.merged.campaign.pose_measurements.is_empty()
+        && !model.effects.contains(&crate::calib::Effect::TrackerFrame))
+    .then(|| FRAME_HELD_FIXED.to_string());
+    for w in held.into_iter().chain(session_warning(inputs)?) {
+        fit.warnings.push(w.replace("**", ""));
+        fit.text.warnings.push(w);
+    }
+    Ok(())
+}
 
 /// A warning when the sessions (files) of the campaign, each fitted on its own, estimate the
 /// machine differently by more than their standard deviations allow.
@@ -568,10 +595,49 @@ pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<Ob
             line,
             what: format!("sensor {sensor} at pose {label:?}"),
         })
-    } else {
-        let pm = c.pose_measurements.get((k - m) / 6)?;
+    } else if k >= c.first_tilt_observation() {
+        let q = k - c.first_tilt_observation();
+        let t = c.tilt_measurements.get(q)?;
+        let (file, line, label) = merged.pose_origin.get(t.pose)?.clone();
+        let line = merged.tilt_origin.get(q).map_or(line, |o| o.1);
+        let name = robot
+            .description
+            .inclinometers
+            .get(t.inclinometer)
+            .map_or("?", |c| c.name.as_str());
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!(
+                "inclinometer {name} angle_{}_deg at pose {label:?}",
+                t.axis + 1
+            ),
+        })
+    } else if k >= c.first_point_observation() {
+        let q = (k - c.first_point_observation()) / 3;
+        let pm = c.point_measurements.get(q)?;
         let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
-        let comp = ["x", "y", "z", "rotation x", "rotation y", "rotation z"][(k - m) % 6];
+        let line = merged.point_origin.get(q).map_or(line, |o| o.1);
+        let target = robot
+            .description
+            .targets
+            .get(pm.target)
+            .map_or("?", |t| t.name.as_str());
+        let comp = ["x", "y", "z"][(k - c.first_point_observation()) % 3];
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!("target {target} {comp} at pose {label:?}"),
+        })
+    } else {
+        let (q, a) = match c.observation_kind(k) {
+            crate::calib::ObservationKind::TrackerPosition(q, a) => (q, a),
+            crate::calib::ObservationKind::TrackerOrientation(q, a) => (q, 3 + a),
+            _ => return None,
+        };
+        let pm = c.pose_measurements.get(q)?;
+        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
+        let comp = ["x", "y", "z", "rotation x", "rotation y", "rotation z"][a];
         Some(ObservationOrigin {
             file,
             line,
@@ -615,13 +681,7 @@ pub fn fit_with(
         .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
     let mut fit = FitReport::new(inputs, model, &cal, Some(formulation));
-    let held = (!campaign.pose_measurements.is_empty()
-        && !model.effects.contains(&crate::calib::Effect::TrackerFrame))
-    .then(|| FRAME_HELD_FIXED.to_string());
-    for w in held.into_iter().chain(session_warning(inputs)?) {
-        fit.warnings.push(w.replace("**", ""));
-        fit.text.warnings.push(w);
-    }
+    add_session_warnings(&mut fit, inputs, model)?;
     set.add(dir.join("calibration.json"), fit.to_json()?);
     let figures = stage_figures(&mut set, dir, &inputs.robot, model, campaign, &cal)?;
     let notes = stage_calibrated(

@@ -434,3 +434,59 @@ pub fn describe_model(model: &MeasurementModel) -> String {
         }
     )
 }
+
+/// The model for a campaign with point target or inclinometer measurements: `model` with the
+/// instruments' own unknowns estimated (each target's platform position and a tracker frame
+/// per point session: `target_position`, `point_frame`; each inclinometer's mount and the
+/// base's tilt per inclinometer session: `inclinometer_mount`, `base_tilt`), sized for
+/// `campaign`. `None` when the campaign has neither.
+pub fn with_instruments(
+    robot: &Robot,
+    model: &MeasurementModel,
+    campaign: &crate::calib::Campaign,
+) -> Option<MeasurementModel> {
+    let points = !campaign.point_measurements.is_empty();
+    let tilts = !campaign.tilt_measurements.is_empty();
+    if !points && !tilts {
+        return None;
+    }
+    let mut e = model.effects.clone();
+    let wanted = [
+        (Effect::TargetPosition, points),
+        (Effect::PointFrame, points),
+        (Effect::InclinometerMount, tilts),
+        (Effect::BaseTilt, tilts),
+    ];
+    for (x, want) in wanted {
+        if want && !e.contains(&x) {
+            e.push(x);
+        }
+    }
+    let mut m = robot.model(&e);
+    m.point_sessions = campaign.point_sessions();
+    m.tilt_sessions = campaign.tilt_sessions();
+    Some(m)
+}
+
+/// What [`with_instruments`] estimates, for a note.
+pub fn instruments_note(m: &MeasurementModel) -> String {
+    let mut v = Vec::new();
+    if m.point_sessions > 0 {
+        v.push(format!(
+            "the {} targets' platform positions and a tracker frame per point session ({} sessions; target_position, point_frame)",
+            m.targets.len(),
+            m.point_sessions
+        ));
+    }
+    if m.tilt_sessions > 0 {
+        v.push(format!(
+            "the {} inclinometers' mount rotations and the base's tilt per inclinometer session ({} sessions; inclinometer_mount, base_tilt)",
+            m.inclinometers.len(),
+            m.tilt_sessions
+        ));
+    }
+    format!(
+        "instruments: {} are estimated with the machine",
+        v.join("; ")
+    )
+}

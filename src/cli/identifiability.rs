@@ -72,6 +72,13 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
             "give the measurements (--data FILE) or a plan (--plan FILE, --circle or --random N)",
         )),
     };
+    let model = match common::with_instruments(&robot, &model, &campaign) {
+        Some(m) => {
+            ctx.note(common::instruments_note(&m));
+            m
+        }
+        None => model,
+    };
     let sigma = match args.sigma_um {
         Some(s) => common::sigma(Some(s), &robot)?.unwrap_or(1.0),
         None => robot.sensor_noise_um().unwrap_or(1.0),

@@ -19,6 +19,7 @@ fn residual_series(
     residuals_um: &[f64],
     x: impl Fn(usize) -> Option<f64>,
     x_tracker: impl Fn(usize) -> Option<f64>,
+    x_point: impl Fn(usize) -> Option<f64>,
 ) -> Vec<(String, Vec<(f64, f64)>)> {
     let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     // Series index per sensor index (series in the order sensors first appear).
@@ -46,15 +47,23 @@ fn residual_series(
         });
         series[i].1.push((xv, *res));
     }
-    let m = campaign.readings.len();
-    if residuals_um.len() == m + 6 * campaign.pose_measurements.len()
-        && !campaign.pose_measurements.is_empty()
-    {
-        let mut pos = Vec::new();
-        for (q, _) in campaign.pose_measurements.iter().enumerate() {
-            let Some(xv) = x_tracker(q) else { continue };
+    if residuals_um.len() == campaign.len() && !campaign.point_measurements.is_empty() {
+        let p0 = campaign.first_point_observation();
+        let mut pts = Vec::new();
+        for q in 0..campaign.point_measurements.len() {
+            let Some(xv) = x_point(q) else { continue };
             for a in 0..3 {
-                pos.push((xv, residuals_um[m + 6 * q + a]));
+                pts.push((xv, residuals_um[p0 + 3 * q + a]));
+            }
+        }
+        series.push(("point targets".to_string(), pts));
+    }
+    if residuals_um.len() == campaign.len() && !campaign.pose_measurements.is_empty() {
+        let mut pos = Vec::new();
+        for (q, rows) in campaign.pose_observation_rows().iter().enumerate() {
+            let Some(xv) = x_tracker(q) else { continue };
+            for r in rows[..3].iter().flatten() {
+                pos.push((xv, residuals_um[*r]));
             }
         }
         series.push(("tracker position".to_string(), pos));
@@ -75,6 +84,7 @@ pub fn residuals_vs_pose(
         residuals_um,
         |k| Some(campaign.readings[k].pose as f64 + 1.0),
         |q| Some(campaign.pose_measurements[q].pose as f64 + 1.0),
+        |q| Some(campaign.point_measurements[q].pose as f64 + 1.0),
     );
     scatter(title, "pose", "residual (um)", &series)
 }
@@ -91,6 +101,10 @@ pub fn residuals_vs_time(
             .pose_measurements
             .iter()
             .all(|m| m.time_s.is_some())
+        && campaign
+            .point_measurements
+            .iter()
+            .all(|m| m.time_s.is_some())
         && !campaign.is_empty();
     if !all_timed {
         return None;
@@ -101,6 +115,7 @@ pub fn residuals_vs_time(
         residuals_um,
         |k| campaign.readings[k].time_s,
         |q| campaign.pose_measurements[q].time_s,
+        |q| campaign.point_measurements[q].time_s,
     );
     Some(scatter(title, "time (s)", "residual (um)", &series))
 }
@@ -113,14 +128,10 @@ pub fn residuals_before_after(
     after_um: &[f64],
 ) -> Result<String, PlotError> {
     let at = |k: usize| -> f64 {
-        if k < campaign.readings.len() {
-            campaign.readings[k].pose as f64 + 1.0
+        if k < campaign.len() {
+            campaign.observation_pose(k) as f64 + 1.0
         } else {
-            let q = (k - campaign.readings.len()) / 6;
-            campaign
-                .pose_measurements
-                .get(q)
-                .map_or(f64::NAN, |m| m.pose as f64 + 1.0)
+            f64::NAN
         }
     };
     let pts =

@@ -88,13 +88,19 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     };
     let r =
         refine(&inputs.model, campaign, &options).map_err(|e| common::locate(e, &inputs.merged))?;
+    // Never worse than plain calibration on data the fits did not see: otherwise an error,
+    // and nothing written.
+    if let Some(why) = r.against_calibrate.refusal() {
+        return Err(super::trouble(format!("{why}; nothing was written")));
+    }
     ctx.stage("writing the results");
     let dir = &args.fit.out;
     let cal = &r.calibration;
     let mut set = OutputSet::new();
     let doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
     set.add(dir.join("refine.json"), doc.to_json()?);
-    let fit = FitReport::new(&inputs, &r.model, cal, None);
+    let mut fit = FitReport::new(&inputs, &r.model, cal, None);
+    calibrate::add_session_warnings(&mut fit, &inputs, &r.model)?;
     set.add(dir.join("calibration.json"), fit.to_json()?);
     let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;
     set.add(

@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
+use rand::SeedableRng;
 use serde_json::json;
 
 use super::common::{self, EffectsArg, PlanArgs, RobotArg};
@@ -22,6 +23,12 @@ pub enum Measure {
     Lengths,
     /// Tracker pose measurements with the commanded link readings.
     Poses,
+    /// Laser-tracker points of the description's `[[target]]`s (reflectors on the platform),
+    /// every target at every pose, with the commanded link readings and pose.
+    Points,
+    /// Inclinometer angles of the description's `[[inclinometer]]`s (every axis of every
+    /// instrument at every pose), with the commanded link readings and pose.
+    Tilts,
 }
 
 /// Arguments of `cpm simulate`.
@@ -52,19 +59,24 @@ pub struct SimulateArgs {
     #[command(flatten)]
     pub effects: EffectsArg,
     /// Noise: none, uniform:HALF_WIDTH_UM or gaussian:SIGMA_UM (default: gaussian with the
-    /// description's `[calibration] sensor_noise_um`, else none). For --measure poses it is the
-    /// noise of each position coordinate.
+    /// description's `[calibration] sensor_noise_um`, else none). For --measure poses and
+    /// --measure points it is the noise of each position coordinate; for --measure tilts that
+    /// of each angle, in urad.
     #[arg(long, value_name = "SPEC")]
     pub noise: Option<String>,
     /// Orientation noise of simulated tracker poses, urad (standard deviation per axis).
     #[arg(long, value_name = "URAD", default_value_t = 0.0)]
     pub orientation_noise_urad: f64,
-    /// With `--measure poses`: the tracker's own frame, `x,y,z,roll,pitch,yaw` (mm, deg): the
+    /// With `--measure poses` or `points`: the tracker's own frame, `x,y,z,roll,pitch,yaw` (mm, deg): the
     /// base frame's pose in the tracker's coordinates (`p_tracker = R p_base + t`, R = Rz Ry
     /// Rx). A motion-capture system set up anywhere; `cpm calibrate` registers it. Default:
     /// the base frame.
     #[arg(long, value_name = "X,Y,Z,ROLL,PITCH,YAW", allow_hyphen_values = true)]
     pub tracker_frame: Option<String>,
+    /// With `--measure tilts`: the base's tilt against gravity in this session, rotations about
+    /// x and y in degrees (`up = R up_0`). Default level.
+    #[arg(long, value_name = "RX,RY", allow_hyphen_values = true)]
+    pub base_tilt_deg: Option<String>,
     /// What to measure.
     #[arg(long, value_enum, default_value_t = Measure::Lengths)]
     pub measure: Measure,
@@ -169,6 +181,12 @@ struct Truth {
     effects: Vec<Effect>,
     params: Vec<f64>,
     what: String,
+    /// The true platform position of each of the robot's `[[target]]`s, mm (the truth's
+    /// target of the same name, else the robot's).
+    targets: Vec<nalgebra::Vector3<f64>>,
+    /// Each of the robot's `[[inclinometer]]`s as it really is (the truth's of the same name,
+    /// its axes and mount, else the robot's).
+    inclinometers: Vec<crate::calib::tilts::Inclinometer>,
 }
 
 fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::Result<Truth> {
@@ -177,6 +195,18 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
     let mut installation = vec![0.0; 6 * n];
     let mut values: Vec<(Effect, Vec<f64>)> = Vec::new();
     let mut what = "zero installation errors (nominal machine)".to_string();
+    let mut targets: Vec<nalgebra::Vector3<f64>> = robot
+        .description
+        .targets
+        .iter()
+        .map(|t| t.platform_mm.into())
+        .collect();
+    let mut inclinometers: Vec<crate::calib::tilts::Inclinometer> = robot
+        .description
+        .inclinometers
+        .iter()
+        .map(crate::calib::tilts::Inclinometer::from_spec)
+        .collect();
     if args.paper_table2 {
         if n != 6 {
             return Err(usage_error(format!(
@@ -189,6 +219,21 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
     }
     if let Some(path) = &args.truth {
         let t = Robot::load(path)?;
+        for (k, spec) in robot.description.inclinometers.iter().enumerate() {
+            if let Some(tc) = t
+                .description
+                .inclinometers
+                .iter()
+                .find(|x| x.name == spec.name)
+            {
+                inclinometers[k] = crate::calib::tilts::Inclinometer::from_spec(tc);
+            }
+        }
+        for (k, spec) in robot.description.targets.iter().enumerate() {
+            if let Some(tt) = t.description.targets.iter().find(|x| x.name == spec.name) {
+                targets[k] = tt.platform_mm.into();
+            }
+        }
         let diff = io::robot::truth_from_description(robot, &t)
             .map_err(|m| input_error(format!("{}: {m}", t.file)))?;
         installation = diff.installation_um.clone();
@@ -308,6 +353,8 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
         effects,
         params,
         what,
+        targets,
+        inclinometers,
     })
 }
 
@@ -368,6 +415,164 @@ fn simulate_poses(
     Ok(c)
 }
 
+/// The poses the true machine reaches at `poses`: the controller commands the nominal inverse
+/// kinematics; the machine's lengths are those plus the joint clearance shift, the robot's
+/// known link effects and the link offsets and scales of the truth; forward kinematics on the
+/// true joints gives the pose (moved by a known pose map). Returns the reached poses and the
+/// commanded lengths.
+fn reached_poses(
+    robot: &Robot,
+    truth: &Truth,
+    poses: &[Pose],
+    what: &str,
+) -> anyhow::Result<(Vec<Pose>, Vec<Vec<f64>>)> {
+    let model = robot.model(&truth.effects);
+    let n = robot.num_links();
+    for b in model.blocks() {
+        if let Some(e) = b.effect {
+            let nonzero = truth.params[b.offset..b.offset + b.len]
+                .iter()
+                .any(|v| *v != 0.0);
+            if nonzero && !matches!(e, Effect::LinkOffset | Effect::LinkScale) {
+                return Err(usage_error(format!(
+                    "--measure {what} simulates installation errors, link_offset and link_scale; the truth has {} values",
+                    e.name()
+                )));
+            }
+        }
+    }
+    let block = |which: Effect| {
+        model
+            .blocks()
+            .into_iter()
+            .find(|b| b.effect == Some(which))
+            .map(|b| truth.params[b.offset..b.offset + b.len].to_vec())
+    };
+    let offset = block(Effect::LinkOffset).unwrap_or_else(|| vec![0.0; n]);
+    let scale = block(Effect::LinkScale).unwrap_or_else(|| vec![0.0; n]);
+    let true_table = model.table_with(&truth.params[..6 * n])?;
+    let mut reached_all = Vec::with_capacity(poses.len());
+    let mut commanded = Vec::new();
+    let mut previous: Option<crate::calib::effects::PoseContext> = None;
+    for (j, p) in poses.iter().enumerate() {
+        let cmd = cpm_kinematics::inverse_lengths(&robot.table, p);
+        let shift = model
+            .clearance
+            .link_corrections_mm(model.statics_table(), p, &model.load)
+            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
+        // The robot's known link effects (a calibrated description's) act on the machine too.
+        let ctx = model
+            .pose_context(p, cmd.clone(), previous.as_ref(), None, None)
+            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
+        let known = model.known_link_shift_mm(&ctx, 0.0);
+        let pose_map = model.known_pose_twist(&ctx, p, 0.0);
+        previous = Some(ctx);
+        let eff: Vec<f64> = (0..n)
+            .map(|i| cmd[i] + shift[i] + known[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
+            .collect();
+        let (reached, _) = cpm_kinematics::forward(&true_table, &eff, p, &model.fk)
+            .map_err(|source| crate::calib::CalibError::Kinematics { pose: j, source })?;
+        // A known pose error map moves the platform from where the lengths put it.
+        reached_all.push(reached.perturbed(&pose_map));
+        commanded.push(cmd);
+    }
+    Ok((reached_all, commanded))
+}
+
+/// Laser-tracker points of every `[[target]]` at each of `poses` on the true machine
+/// ([`reached_poses`]): the target at its true platform position on the reached pose, plus
+/// noise on each coordinate, in the tracker's frame `frame` (default: the base frame).
+fn simulate_points(
+    robot: &Robot,
+    truth: &Truth,
+    poses: &[Pose],
+    noise: &Noise,
+    seed: u64,
+    frame: Option<Pose>,
+) -> anyhow::Result<Campaign> {
+    if truth.targets.is_empty() {
+        return Err(usage_error(format!(
+            "--measure points needs [[target]] tables (name, platform_mm) in {}",
+            robot.file
+        )));
+    }
+    let (reached, commanded) = reached_poses(robot, truth, poses, "points")?;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut c = Campaign {
+        simulated: true,
+        poses: poses.to_vec(),
+        ..Campaign::default()
+    };
+    for (j, reached) in reached.iter().enumerate() {
+        for (k, t) in truth.targets.iter().enumerate() {
+            let mut p = reached.transform_point(t);
+            for a in 0..3 {
+                p[a] += noise.draw_um(&mut rng) * 1e-3;
+            }
+            if let Some(f) = &frame {
+                p = f.rotation * p + f.position_mm;
+            }
+            c.point_measurements.push(crate::calib::PointMeasurement {
+                pose: j,
+                target: k,
+                session: 0,
+                measured_mm: p,
+                time_s: None,
+            });
+        }
+    }
+    c.commanded_lengths_mm = Some(commanded);
+    Ok(c)
+}
+
+/// Inclinometer angles of every `[[inclinometer]]` axis at each of `poses` on the true machine
+/// ([`reached_poses`]): `asin(up . a)` with the instrument's true axes and mount on the reached
+/// orientation and gravity's up tilted by `base_tilt` (rad about x and y), plus noise
+/// (`noise` in urad).
+fn simulate_tilts(
+    robot: &Robot,
+    truth: &Truth,
+    poses: &[Pose],
+    noise: &Noise,
+    seed: u64,
+    base_tilt: [f64; 2],
+) -> anyhow::Result<Campaign> {
+    if truth.inclinometers.is_empty() {
+        return Err(usage_error(format!(
+            "--measure tilts needs [[inclinometer]] tables (name, axes) in {}",
+            robot.file
+        )));
+    }
+    let model = robot.model(&truth.effects);
+    let (reached, commanded) = reached_poses(robot, truth, poses, "tilts")?;
+    let up = nalgebra::Rotation3::new(nalgebra::Vector3::new(base_tilt[0], base_tilt[1], 0.0))
+        * crate::calib::tilts::nominal_up(&model);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut c = Campaign {
+        simulated: true,
+        poses: poses.to_vec(),
+        ..Campaign::default()
+    };
+    for (j, reached) in reached.iter().enumerate() {
+        for (i, inc) in truth.inclinometers.iter().enumerate() {
+            for (axis, n) in inc.axes.iter().enumerate() {
+                let a = reached.rotation * (inc.mount * n);
+                let angle = up.dot(&a).clamp(-1.0, 1.0).asin() + noise.draw_um(&mut rng) * 1e-6;
+                c.tilt_measurements.push(crate::calib::TiltMeasurement {
+                    pose: j,
+                    inclinometer: i,
+                    axis,
+                    session: 0,
+                    angle_mrad: angle * 1e3,
+                    time_s: None,
+                });
+            }
+        }
+    }
+    c.commanded_lengths_mm = Some(commanded);
+    Ok(c)
+}
+
 /// Runs `cpm simulate`.
 pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let inputs: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
@@ -399,8 +604,10 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let tracker_frame = match &args.tracker_frame {
         None => None,
         Some(spec) => {
-            if args.measure != Measure::Poses {
-                return Err(usage_error("--tracker-frame needs --measure poses"));
+            if args.measure == Measure::Lengths {
+                return Err(usage_error(
+                    "--tracker-frame needs --measure poses or --measure points",
+                ));
             }
             let v: Vec<f64> = spec
                 .split(',')
@@ -423,16 +630,37 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             ))
         }
     };
+    let base_tilt = match &args.base_tilt_deg {
+        None => [0.0; 2],
+        Some(spec) => {
+            if args.measure != Measure::Tilts {
+                return Err(usage_error("--base-tilt-deg needs --measure tilts"));
+            }
+            let v: Vec<f64> = spec
+                .split(',')
+                .map(|x| x.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+                .collect::<Option<Vec<f64>>>()
+                .filter(|v| v.len() == 2 && v.iter().all(|a| a.abs() <= 10.0))
+                .ok_or_else(|| {
+                    usage_error(format!(
+                        "--base-tilt-deg {spec:?}: expected two angles RX,RY in degrees, each within 10"
+                    ))
+                })?;
+            [v[0].to_radians(), v[1].to_radians()]
+        }
+    };
     let truth = truth(args, &robot, declared)?;
     ctx.stage("building the plan");
     let spec = common::build_plan(&args.plan, &robot, args.measure == Measure::Lengths)?;
     ctx.stage(format!("simulating {} poses", spec.plan.poses.len()));
+    // Inclinometer noise is in urad.
+    let noise_words = match args.measure {
+        Measure::Tilts => describe_noise(&noise).replace(" um", " urad"),
+        _ => describe_noise(&noise),
+    };
     let note = format!(
         "robot {}, truth {}, noise {}, seed {}",
-        robot.file,
-        truth.what,
-        describe_noise(&noise),
-        args.plan.seed
+        robot.file, truth.what, noise_words, args.plan.seed
     );
     let (campaign, text) = match args.measure {
         Measure::Lengths => {
@@ -462,14 +690,63 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             let text = io::write_pose_measurements(&c, &robot, &note);
             (c, text)
         }
+        Measure::Points => {
+            let mut c = simulate_points(
+                &robot,
+                &truth,
+                &spec.plan.poses,
+                &noise,
+                args.plan.seed,
+                tracker_frame,
+            )
+            .map_err(|e| blame_truth(args, e))?;
+            for m in c.point_measurements.iter_mut() {
+                m.time_s = spec.conditions.get(m.pose).and_then(|(t, _)| *t);
+            }
+            let text = io::points::write_point_measurements(&c, &robot, &note);
+            (c, text)
+        }
+        Measure::Tilts => {
+            let mut c = simulate_tilts(
+                &robot,
+                &truth,
+                &spec.plan.poses,
+                &noise,
+                args.plan.seed,
+                base_tilt,
+            )
+            .map_err(|e| blame_truth(args, e))?;
+            for m in c.tilt_measurements.iter_mut() {
+                m.time_s = spec.conditions.get(m.pose).and_then(|(t, _)| *t);
+            }
+            let text = io::points::write_tilt_measurements(&c, &robot, &note);
+            (c, text)
+        }
     };
     ctx.stage("writing");
     ctx.finish();
+    let measured = if !campaign.tilt_measurements.is_empty() {
+        format!(
+            "{} inclinometer angles of {} inclinometers",
+            campaign.tilt_measurements.len(),
+            robot.description.inclinometers.len()
+        )
+    } else if campaign.point_measurements.is_empty() {
+        format!(
+            "{} readings and {} pose measurements",
+            campaign.readings.len(),
+            campaign.pose_measurements.len()
+        )
+    } else {
+        format!(
+            "{} point measurements of {} targets",
+            campaign.point_measurements.len(),
+            robot.description.targets.len()
+        )
+    };
     if common::write_out("--out", &args.out, &inputs, &text, ctx)? == Target::Stdout {
         ctx.note(format!(
-            "SIMULATED: {} readings and {} pose measurements at {} poses written to standard output",
-            campaign.readings.len(),
-            campaign.pose_measurements.len(),
+            "SIMULATED: {measured} at {} poses written to standard output",
             campaign.poses.len()
         ));
         return Ok(Outcome::Done);
@@ -482,21 +759,21 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             "poses": campaign.poses.len(),
             "readings": campaign.readings.len(),
             "pose_measurements": campaign.pose_measurements.len(),
+            "point_measurements": campaign.point_measurements.len(),
+            "tilt_measurements": campaign.tilt_measurements.len(),
             "effects": truth.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
             "truth": truth.what,
-            "noise": describe_noise(&noise),
+            "noise": noise_words,
             "seed": args.plan.seed,
         });
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
     } else {
         writeln!(
             ctx.out,
-            "SIMULATED: {} readings and {} pose measurements at {} poses (truth: {}; noise {}; seed {}) -> {}",
-            campaign.readings.len(),
-            campaign.pose_measurements.len(),
+            "SIMULATED: {measured} at {} poses (truth: {}; noise {}; seed {}) -> {}",
             campaign.poses.len(),
             truth.what,
-            describe_noise(&noise),
+            noise_words,
             args.plan.seed,
             args.out.display()
         )?;

@@ -5,7 +5,9 @@
 //! that robot's reading models), predicted by that robot's measurement model with every known
 //! effect applied and nothing estimated, and compared with what was measured: gauge readings
 //! as reading errors (um), tracker poses as position errors (um) and orientation errors
-//! (urad). The figures are given per sensor (gauge) or per file (tracker), and in all.
+//! (urad), point targets as coordinate errors (um) with each file's session frame fitted
+//! afresh, inclinometer angles as angle errors (urad) with each file's base re-levelled. The
+//! figures are given per sensor (gauge) or per file (tracker, points, tilts), and in all.
 //!
 //! A file without logged link readings (`reading_k`) was driven by the controller's inverse
 //! kinematics of its commanded poses; `cpm validate` takes that controller to be the
@@ -270,7 +272,10 @@ fn errors_of(
             ))
         };
         let prepared = Prepared::new(&model, campaign).map_err(fail)?;
-        let (predicted, frame) = if campaign.pose_measurements.is_empty() {
+        let (predicted, frame) = if campaign.pose_measurements.is_empty()
+            && campaign.point_measurements.is_empty()
+            && campaign.tilt_measurements.is_empty()
+        {
             let zeros = vec![0.0; model.num_params()];
             (
                 predict(&model, &prepared, campaign, &zeros, None).map_err(fail)?,
@@ -287,10 +292,13 @@ fn errors_of(
             )
             .map_err(fail)?;
             let observed = campaign.observations();
-            let nr = campaign.readings.len();
+            let p0 = campaign.first_point_observation();
+            let pose_rows = campaign.pose_observation_rows();
             let positions = |y: &[f64]| -> Vec<f64> {
-                (0..campaign.pose_measurements.len())
-                    .flat_map(|q| (0..3).map(move |a| nr + 6 * q + a))
+                pose_rows
+                    .iter()
+                    .flat_map(|rows| rows[..3].iter().flatten().copied())
+                    .chain(p0..campaign.first_tilt_observation())
                     .map(|k| (observed[k] - y[k]) * 1e3)
                     .collect()
             };
@@ -299,10 +307,16 @@ fn errors_of(
                 .as_ref()
                 .and_then(|r| r.sessions.iter().find(|x| x.file == file.file))
                 .filter(|x| x.applied);
+            // A point file's rough registration: the frame its reader applied.
+            let (rough_translation_mm, rough_rotation_deg) = match (&file.point_frame, rough) {
+                (Some(f), _) => (f.position_mm.into(), f.rotation.angle().to_degrees()),
+                (None, Some(x)) => (x.frame.translation_mm.into(), x.frame.rotation_angle_deg()),
+                (None, None) => ([0.0; 3], 0.0),
+            };
             out.sessions.push(SessionCheck {
                 file: file.file.clone(),
-                rough_translation_mm: rough.map_or([0.0; 3], |x| x.frame.translation_mm.into()),
-                rough_rotation_deg: rough.map_or(0.0, |x| x.frame.rotation_angle_deg()),
+                rough_translation_mm,
+                rough_rotation_deg,
                 frame: s.frame,
                 frame_sd: s.frame_sd,
                 rms_before_um: s.rms_before_um,
@@ -313,7 +327,6 @@ fn errors_of(
             (s.predicted, Some(s.frame))
         };
         let observed = campaign.observations();
-        let nr = campaign.readings.len();
         for (k, r) in campaign.readings.iter().enumerate() {
             let name = robot.table.sensors[r.sensor].name.clone();
             let g = group_of(name, &mut out);
@@ -321,24 +334,51 @@ fn errors_of(
                 .values_um
                 .push((observed[k] - predicted[k]) * 1e3);
         }
-        if let Some(frame) = frame {
+        if !campaign.point_measurements.is_empty() {
+            // Point targets: the error of each measured coordinate with the session's frame
+            // fitted afresh (the targets held at the robot's).
+            let g = group_of(format!("{} (points)", file.file), &mut out);
+            for k in campaign.first_point_observation()..campaign.first_tilt_observation() {
+                out.groups[g]
+                    .values_um
+                    .push((observed[k] - predicted[k]) * 1e3);
+            }
+        }
+        if !campaign.tilt_measurements.is_empty() {
+            // Inclinometers: the error of each angle (urad) with the session re-levelled (its
+            // base tilt fitted afresh, the mounts held at the robot's).
+            let g = group_of(format!("{} (tilts)", file.file), &mut out);
+            for k in campaign.first_tilt_observation()..campaign.len() {
+                out.groups[g]
+                    .orientation_urad
+                    .push((observed[k] - predicted[k]) * 1e3);
+            }
+        }
+        if let Some(frame) = frame.filter(|_| !campaign.pose_measurements.is_empty()) {
             let g = group_of(format!("{} (tracker)", file.file), &mut out);
             let (t, rot) = crate::calib::effects::tracker_registration(&frame);
             let commanded = campaign.commanded_lengths_mm.as_ref();
-            for (q, pm) in campaign.pose_measurements.iter().enumerate() {
-                let d: Vec<f64> = (0..3)
-                    .map(|a| (observed[nr + 6 * q + a] - predicted[nr + 6 * q + a]) * 1e3)
+            let pose_rows = campaign.pose_observation_rows();
+            for (pm, rows) in campaign.pose_measurements.iter().zip(&pose_rows) {
+                // Components not measured are skipped.
+                let d: Vec<f64> = rows[..3]
+                    .iter()
+                    .flatten()
+                    .map(|&k| (observed[k] - predicted[k]) * 1e3)
                     .collect();
                 out.groups[g].values_um.extend(&d);
-                out.position_norm_um
-                    .push((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
-                for a in 3..6 {
-                    let k = nr + 6 * q + a;
+                for &k in rows[3..].iter().flatten() {
                     // Orientation observations are mrad.
                     out.groups[g]
                         .orientation_urad
                         .push((observed[k] - predicted[k]) * 1e3);
                 }
+                if rows.iter().any(Option::is_none) {
+                    // A pose not measured in full: no position norm, no link lengths.
+                    continue;
+                }
+                out.position_norm_um
+                    .push((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
                 // The link lengths the model needs for the measured pose (base frame):
                 // inverse kinematics minus the shifts the model adds to a commanded length.
                 let m = pm.measured;
@@ -808,16 +848,30 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.json {
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&value)?)?;
     } else {
-        writeln!(
-            ctx.out,
-            "{}held-out: calibrated RMS {:.3} um (max {:.3}), reference RMS {:.3} um (max {:.3}) over {} observations",
-            if simulated { "SIMULATED data: " } else { "" },
-            rms(&cal_all),
-            max_abs(&cal_all),
-            rms(&ref_all),
-            max_abs(&ref_all),
-            cal_all.len()
-        )?;
+        if cal_all.is_empty() && !cal_rot.is_empty() {
+            // Angles only (inclinometers, orientations).
+            writeln!(
+                ctx.out,
+                "{}held-out: calibrated RMS {:.3} urad (max {:.3}), reference RMS {:.3} urad (max {:.3}) over {} angles",
+                if simulated { "SIMULATED data: " } else { "" },
+                rms(&cal_rot),
+                max_abs(&cal_rot),
+                rms(&ref_rot),
+                max_abs(&ref_rot),
+                cal_rot.len()
+            )?;
+        } else {
+            writeln!(
+                ctx.out,
+                "{}held-out: calibrated RMS {:.3} um (max {:.3}), reference RMS {:.3} um (max {:.3}) over {} observations",
+                if simulated { "SIMULATED data: " } else { "" },
+                rms(&cal_all),
+                max_abs(&cal_all),
+                rms(&ref_all),
+                max_abs(&ref_all),
+                cal_all.len()
+            )?;
+        }
         for w in &written {
             writeln!(ctx.out, "wrote {}", w.display())?;
         }
@@ -830,7 +884,8 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
 /// predicts them (tracker sessions re-registered), gives the fit's residual RMS.
 ///
 /// Returns `(fit RMS, file RMS)` in um (the fit's weighting: positions at
-/// `sigma_ref / pose_sigma`, orientations at `sigma_ref / orientation_sigma`), or `None` when
+/// `sigma_ref / pose_sigma`, orientations at `sigma_ref / orientation_sigma`, points at
+/// `sigma_ref / point_sigma`), or `None` when
 /// the check does not apply: tracker data fitted without `tracker_frame` (the fit keeps the
 /// rough registration, which a later reading improves on).
 pub fn file_reproduces_fit(
@@ -861,7 +916,13 @@ pub fn file_reproduces_fit(
     );
     let (mut sum, mut n) = (0.0, 0usize);
     for (name, g) in e.names.iter().zip(&e.groups) {
-        let w = if name.ends_with("(tracker)") { wp } else { 1.0 };
+        let w = if name.ends_with("(tracker)") {
+            wp
+        } else if name.ends_with("(points)") {
+            sigma_ref / campaign.point_sigma()
+        } else {
+            1.0
+        };
         sum += g.values_um.iter().map(|v| (w * v).powi(2)).sum::<f64>();
         sum += g
             .orientation_urad

@@ -5,7 +5,7 @@ use serde::Serialize;
 use super::calibrate::CalibratedFile;
 use super::fit::FitReport;
 use super::format::{fixed, opt_with_sd, p_value, short, sig, yes_no};
-use crate::calib::Refinement;
+use crate::calib::{AgainstCalibrate, Refinement};
 
 fn finite(v: f64) -> Option<f64> {
     v.is_finite().then_some(v)
@@ -180,6 +180,8 @@ pub struct RefineDoc {
     pub outliers_before: usize,
     /// Effects rejected by cross-validation.
     pub rejected_by_cross_validation: Vec<RejectedByCv>,
+    /// Plain calibration against the refined model, on data the fits did not see.
+    pub against_calibrate: AgainstCalibrate,
 }
 
 impl RefineDoc {
@@ -290,6 +292,7 @@ impl RefineDoc {
                     cv_rms_with_um: *after,
                 })
                 .collect(),
+            against_calibrate: r.against_calibrate,
         }
     }
 
@@ -459,12 +462,14 @@ impl RefineReport {
             s.push_str(&format!("The last round added nothing. {m}\n\n"));
         }
         s.push_str(&format!(
-            "## Final\n\n- Effects: {}\n- RMS {} um, cross-validated {} um, residual white: {}\n- Unexplained structure: {}\n\n",
+            "## Final\n\n- Effects: {}\n- RMS {} um, cross-validated {} um, residual white: {}\n- Unexplained structure: {}\n- Against plain calibration, on the whole campaign with blocked folds (data each fit did not see): {} um calibrated, {} um refined\n\n",
             self.final_effects,
             sig(d.final_.rms_um, 3),
             sig(d.final_.cv_rms_um, 3),
             yes_no(d.final_.residual_white),
-            if d.final_.unexplained_structure.is_empty() { "none".to_string() } else { d.final_.unexplained_structure.join(", ") }
+            if d.final_.unexplained_structure.is_empty() { "none".to_string() } else { d.final_.unexplained_structure.join(", ") },
+            sig(d.against_calibrate.calibrate_cv_rms_um, 4),
+            sig(d.against_calibrate.refined_cv_rms_um, 4),
         ));
         if d.final_.effects.iter().any(|e| e.starts_with("pose_map")) {
             let (lo, hi) = (

@@ -46,3 +46,54 @@ pub fn ok(args: &[&str]) -> String {
 pub fn p(path: &Path) -> String {
     path.display().to_string()
 }
+
+/// `cpm validate --robot calibrated --data d1 --data d2 .. --json` (reference from the file),
+/// which must succeed: its JSON.
+pub fn validate_json(calibrated: &Path, data: &[&Path]) -> serde_json::Value {
+    let mut args = vec!["validate".to_string(), "--robot".into(), p(calibrated)];
+    for d in data {
+        args.extend(["--data".to_string(), p(d)]);
+    }
+    args.push("--json".into());
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    serde_json::from_str(&ok(&args)).unwrap()
+}
+
+/// `cpm calibrate --robot robot --data data --out DATA.out`, which must fail without a panic
+/// and without writing its output directory: its standard error.
+pub fn calibrate_refused(robot: &Path, data: &Path) -> String {
+    let out = data.with_extension("out");
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &p(robot),
+        "--data",
+        &p(data),
+        "--out",
+        &p(&out),
+    ]);
+    assert!(!o.status.success(), "{} was accepted", data.display());
+    assert!(!out.exists(), "nothing written");
+    let e = String::from_utf8_lossy(&o.stderr).to_string();
+    assert!(!e.contains("panicked"), "{e}");
+    e
+}
+
+/// `cpm calibrate --robot robot --data d1 --data d2 .. <extra> --out out`, which must succeed:
+/// its calibration.json.
+pub fn calibrate_json(
+    robot: &Path,
+    data: &[&Path],
+    extra: &[&str],
+    out: &Path,
+) -> serde_json::Value {
+    let mut args = vec!["calibrate".to_string(), "--robot".into(), p(robot)];
+    for d in data {
+        args.extend(["--data".to_string(), p(d)]);
+    }
+    args.extend(extra.iter().map(|s| s.to_string()));
+    args.extend(["--out".to_string(), p(out)]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    ok(&args);
+    serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap()
+}

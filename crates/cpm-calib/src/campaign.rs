@@ -32,6 +32,57 @@ pub struct PoseMeasurement {
     pub temperature_c: Option<f64>,
 }
 
+/// A point target (a laser tracker's reflector on the platform, `[[target]]`) measured as a
+/// 3-D point in the tracker's frame, for one session.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PointMeasurement {
+    /// Index of the configuration in [`Campaign::poses`].
+    pub pose: usize,
+    /// Index of the target in the model's targets ([`crate::MeasurementModel::targets`]).
+    pub target: usize,
+    /// The session (tracker set-up) it was measured in, from 0: each session has its own
+    /// frame (a file is a session).
+    pub session: usize,
+    /// The measured position, tracker frame, mm.
+    pub measured_mm: nalgebra::Vector3<f64>,
+    /// Acquisition time, s, if logged.
+    pub time_s: Option<f64>,
+}
+
+/// One angle of an inclinometer on the platform (`[[inclinometer]]`): the elevation of one of
+/// its axes above the horizontal, for one session (the base levelled once).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TiltMeasurement {
+    /// Index of the configuration in [`Campaign::poses`].
+    pub pose: usize,
+    /// Index of the inclinometer in the model's
+    /// [`inclinometers`](crate::MeasurementModel::inclinometers).
+    pub inclinometer: usize,
+    /// Index of the instrument's axis (the file's `angle_{axis+1}_deg`).
+    pub axis: usize,
+    /// The session (levelling of the base) it was measured in, from 0 (a file is a session).
+    pub session: usize,
+    /// The measured angle, mrad.
+    pub angle_mrad: f64,
+    /// Acquisition time, s, if logged.
+    pub time_s: Option<f64>,
+}
+
+/// What observation `k` of [`Campaign::observations`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObservationKind {
+    /// Reading `index` of [`Campaign::readings`].
+    Reading(usize),
+    /// Position axis `axis` (0..3) of pose measurement `index`.
+    TrackerPosition(usize, usize),
+    /// Orientation axis `axis` (0..3) of pose measurement `index`.
+    TrackerOrientation(usize, usize),
+    /// Axis `axis` (0..3) of point measurement `index`.
+    Point(usize, usize),
+    /// Tilt measurement `index`.
+    Tilt(usize),
+}
+
 /// A measurement campaign: commanded poses and readings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Campaign {
@@ -59,6 +110,25 @@ pub struct Campaign {
     /// as a campaign of one file does at its first pose. Default none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub session_starts: Vec<usize>,
+    /// Point target measurements (3 observations each, after the pose measurements'), if
+    /// any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub point_measurements: Vec<PointMeasurement>,
+    /// Standard deviation of a point coordinate, um. Default (when 0) 10.
+    #[serde(default)]
+    pub point_sigma_um: f64,
+    /// Components of pose measurements that were not measured (a lost marker, an orientation
+    /// not solved): `(q, a)` = component `a` (0..3 position x y z, 3..6 orientation) of pose
+    /// measurement `q`, sorted. They are not observations: the fit uses the rest. Default
+    /// none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unmeasured: Vec<(usize, usize)>,
+    /// Inclinometer angles (one observation each, after the point measurements'), if any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub tilt_measurements: Vec<TiltMeasurement>,
+    /// Standard deviation of an inclinometer angle, urad. Default (when 0) 20.
+    #[serde(default)]
+    pub tilt_sigma_urad: f64,
 }
 
 impl Campaign {
@@ -74,9 +144,131 @@ impl Campaign {
         self.session_starts.partition_point(|s| *s <= j)
     }
 
-    /// Number of observations: length readings plus six per pose measurement.
+    /// Number of observations: length readings, six per pose measurement (less its
+    /// [`unmeasured`](Self::unmeasured) components), three per point measurement.
     pub fn len(&self) -> usize {
-        self.readings.len() + 6 * self.pose_measurements.len()
+        self.first_tilt_observation() + self.tilt_measurements.len()
+    }
+
+    /// Index of the first inclinometer observation in [`observations`](Self::observations).
+    pub fn first_tilt_observation(&self) -> usize {
+        self.first_point_observation() + 3 * self.point_measurements.len()
+    }
+
+    /// Number of inclinometer sessions (one base levelling each): the largest session index
+    /// plus one, 0 without tilt measurements.
+    pub fn tilt_sessions(&self) -> usize {
+        self.tilt_measurements
+            .iter()
+            .map(|t| t.session + 1)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Inclinometer angle noise, urad (20 when not set).
+    pub fn tilt_sigma(&self) -> f64 {
+        if self.tilt_sigma_urad > 0.0 {
+            self.tilt_sigma_urad
+        } else {
+            20.0
+        }
+    }
+
+    /// Index of the first point observation in [`observations`](Self::observations).
+    pub fn first_point_observation(&self) -> usize {
+        self.readings.len() + 6 * self.pose_measurements.len() - self.unmeasured.len()
+    }
+
+    /// True when component `a` of pose measurement `q` was measured.
+    pub fn is_measured(&self, q: usize, a: usize) -> bool {
+        self.unmeasured.binary_search(&(q, a)).is_err()
+    }
+
+    /// The observation index of each component of each pose measurement (`None`: not
+    /// measured).
+    pub fn pose_observation_rows(&self) -> Vec<[Option<usize>; 6]> {
+        let mut k = self.readings.len();
+        let mut u = self.unmeasured.iter().peekable();
+        (0..self.pose_measurements.len())
+            .map(|q| {
+                let mut rows = [None; 6];
+                for (a, r) in rows.iter_mut().enumerate() {
+                    if u.peek() == Some(&&(q, a)) {
+                        u.next();
+                    } else {
+                        *r = Some(k);
+                        k += 1;
+                    }
+                }
+                rows
+            })
+            .collect()
+    }
+
+    /// What each observation is, in order ([`observation_kind`](Self::observation_kind) of
+    /// every one, in one pass).
+    pub fn observation_kinds(&self) -> Vec<ObservationKind> {
+        let mut out: Vec<ObservationKind> = (0..self.readings.len())
+            .map(ObservationKind::Reading)
+            .collect();
+        for (q, rows) in self.pose_observation_rows().iter().enumerate() {
+            for (a, r) in rows.iter().enumerate() {
+                if r.is_some() {
+                    out.push(if a < 3 {
+                        ObservationKind::TrackerPosition(q, a)
+                    } else {
+                        ObservationKind::TrackerOrientation(q, a - 3)
+                    });
+                }
+            }
+        }
+        for q in 0..self.point_measurements.len() {
+            out.extend((0..3).map(|a| ObservationKind::Point(q, a)));
+        }
+        out.extend((0..self.tilt_measurements.len()).map(ObservationKind::Tilt));
+        out
+    }
+
+    /// Number of point-measurement sessions (one frame each): the largest session index
+    /// plus one, 0 without point measurements.
+    pub fn point_sessions(&self) -> usize {
+        self.point_measurements
+            .iter()
+            .map(|p| p.session + 1)
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// Point position noise, um (10 when not set).
+    pub fn point_sigma(&self) -> f64 {
+        if self.point_sigma_um > 0.0 {
+            self.point_sigma_um
+        } else {
+            10.0
+        }
+    }
+
+    /// What observation `k` is (`k < len()`).
+    pub fn observation_kind(&self, k: usize) -> ObservationKind {
+        let m = self.readings.len();
+        let p = self.first_point_observation();
+        if !self.unmeasured.is_empty() && (m..p).contains(&k) {
+            return self.observation_kinds()[k];
+        }
+        if k < m {
+            ObservationKind::Reading(k)
+        } else if k < p {
+            let (q, a) = ((k - m) / 6, (k - m) % 6);
+            if a < 3 {
+                ObservationKind::TrackerPosition(q, a)
+            } else {
+                ObservationKind::TrackerOrientation(q, a - 3)
+            }
+        } else if k < self.first_tilt_observation() {
+            ObservationKind::Point((k - p) / 3, (k - p) % 3)
+        } else {
+            ObservationKind::Tilt(k - self.first_tilt_observation())
+        }
     }
 
     /// True when there are no observations.
@@ -89,20 +281,33 @@ impl Campaign {
     /// measured to the predicted orientation, in mrad, measured as zero).
     pub fn observations(&self) -> Vec<f64> {
         let mut v: Vec<f64> = self.readings.iter().map(|r| r.length_mm).collect();
-        for pm in &self.pose_measurements {
-            v.extend(pm.measured.position_mm.iter());
-            v.extend([0.0; 3]);
+        for (q, pm) in self.pose_measurements.iter().enumerate() {
+            for a in 0..6 {
+                if self.is_measured(q, a) {
+                    v.push(if a < 3 {
+                        pm.measured.position_mm[a]
+                    } else {
+                        0.0
+                    });
+                }
+            }
         }
+        for pm in &self.point_measurements {
+            v.extend(pm.measured_mm.iter());
+        }
+        v.extend(self.tilt_measurements.iter().map(|t| t.angle_mrad));
         v
     }
 
     /// The configuration (index into `poses`) behind observation `k`.
     pub fn observation_pose(&self, k: usize) -> usize {
-        let m = self.readings.len();
-        if k < m {
-            self.readings[k].pose
-        } else {
-            self.pose_measurements[(k - m) / 6].pose
+        match self.observation_kind(k) {
+            ObservationKind::Reading(i) => self.readings[i].pose,
+            ObservationKind::TrackerPosition(q, _) | ObservationKind::TrackerOrientation(q, _) => {
+                self.pose_measurements[q].pose
+            }
+            ObservationKind::Point(q, _) => self.point_measurements[q].pose,
+            ObservationKind::Tilt(q) => self.tilt_measurements[q].pose,
         }
     }
 
@@ -129,11 +334,49 @@ impl Campaign {
     /// `sigma_ref / orientation_sigma` (um per urad) for tracker orientations.
     pub fn observation_weights(&self, sigma_ref_um: f64) -> Vec<f64> {
         let mut w = vec![1.0; self.readings.len()];
-        for _ in &self.pose_measurements {
-            w.extend([sigma_ref_um / self.pose_sigma(); 3]);
-            w.extend([sigma_ref_um / self.orientation_sigma(); 3]);
+        for q in 0..self.pose_measurements.len() {
+            for a in 0..6 {
+                if self.is_measured(q, a) {
+                    w.push(if a < 3 {
+                        sigma_ref_um / self.pose_sigma()
+                    } else {
+                        sigma_ref_um / self.orientation_sigma()
+                    });
+                }
+            }
         }
+        for _ in &self.point_measurements {
+            w.extend([sigma_ref_um / self.point_sigma(); 3]);
+        }
+        // Angles in mrad, as the tracker orientations: um of the reference per urad.
+        w.extend(
+            self.tilt_measurements
+                .iter()
+                .map(|_| sigma_ref_um / self.tilt_sigma()),
+        );
         w
+    }
+
+    /// Keeps the pose measurements `q` with `kept[q]` (and their unmeasured components,
+    /// renumbered).
+    pub fn retain_pose_measurements(&mut self, kept: &[bool]) {
+        let mut new_index = Vec::with_capacity(kept.len());
+        let mut n = 0;
+        for &k in kept {
+            new_index.push(n);
+            n += usize::from(k);
+        }
+        let mut q = 0;
+        self.pose_measurements.retain(|_| {
+            q += 1;
+            kept[q - 1]
+        });
+        self.unmeasured = self
+            .unmeasured
+            .iter()
+            .filter(|(q, _)| kept[*q])
+            .map(|(q, a)| (new_index[*q], *a))
+            .collect();
     }
 
     /// The campaign restricted to the configurations for which `keep(pose)` holds (readings
@@ -141,7 +384,14 @@ impl Campaign {
     pub fn filter_poses(&self, keep: impl Fn(usize) -> bool) -> Campaign {
         let mut c = self.clone();
         c.readings.retain(|r| keep(r.pose));
-        c.pose_measurements.retain(|p| keep(p.pose));
+        let kept: Vec<bool> = self
+            .pose_measurements
+            .iter()
+            .map(|p| keep(p.pose))
+            .collect();
+        c.retain_pose_measurements(&kept);
+        c.point_measurements.retain(|p| keep(p.pose));
+        c.tilt_measurements.retain(|p| keep(p.pose));
         c
     }
 }

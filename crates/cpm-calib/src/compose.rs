@@ -9,7 +9,7 @@ use cpm_kinematics::{KinematicsError, LinkState};
 use nalgebra::{DMatrix, DMatrixViewMut, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
 use crate::effects::{Channel, EffectInput, EffectModel};
-use crate::{CalibError, MeasurementModel};
+use crate::{CalibError, Effect, MeasurementModel};
 
 /// One block of estimated (or known) values acting through a channel.
 #[derive(Clone, Copy)]
@@ -33,6 +33,16 @@ pub(crate) struct Channels<'a> {
     sensor_gain: Vec<f64>,
     sensor_offset_mm: Vec<f64>,
     sensor_corr: f64,
+    /// Point targets: nominal platform positions (mm), the estimated corrections (offset,
+    /// um) and the per-session frames (offset, um and urad).
+    targets: Vec<Vector3<f64>>,
+    target_block: Option<(usize, &'a [f64])>,
+    frame_block: Option<(usize, &'a [f64])>,
+    /// Inclinometers: the instruments, gravity's up, the estimated mounts and base tilts.
+    inclinometers: &'a [crate::tilts::Inclinometer],
+    up: Vector3<f64>,
+    mount_block: Option<(usize, &'a [f64])>,
+    tilt_block: Option<(usize, &'a [f64])>,
 }
 
 /// What the channels make of one pose: link coefficients and lengths, the pose twist.
@@ -165,7 +175,21 @@ impl<'a> Channels<'a> {
                 }
             }
         }
+        let block = |e: Effect| {
+            model
+                .blocks()
+                .into_iter()
+                .find(|b| b.effect == Some(e) && params.len() >= b.offset + b.len)
+                .map(|b| (b.offset, &params[b.offset..b.offset + b.len]))
+        };
         Self {
+            targets: model.targets.iter().map(|t| t.platform_mm).collect(),
+            target_block: block(Effect::TargetPosition),
+            frame_block: block(Effect::PointFrame),
+            inclinometers: &model.inclinometers,
+            up: crate::tilts::nominal_up(model),
+            mount_block: block(Effect::InclinometerMount),
+            tilt_block: block(Effect::BaseTilt),
             link: active(model, params, Channel::LinkLength),
             sensor: active(model, params, Channel::SensorReading),
             socket: active(model, params, Channel::SensorSocket),
@@ -232,6 +256,118 @@ impl<'a> Channels<'a> {
             rr * (kr * pose.position_mm + kt) + rt,
             rr * kr * pose.rotation,
         )
+    }
+
+    /// Target `k`'s position on the platform, mm (nominal plus the estimated correction).
+    fn target(&self, k: usize) -> Vector3<f64> {
+        let mut t = self.targets[k];
+        if let Some((_, v)) = self.target_block {
+            t += Vector3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2]) * 1e-3;
+        }
+        t
+    }
+
+    /// The frame of point session `s` (`p_tracker = R p + t`, t mm), identity when the
+    /// frames are not estimated.
+    fn point_frame(&self, s: usize) -> (Vector3<f64>, Rotation3<f64>) {
+        match self.frame_block {
+            Some((_, v)) => crate::effects::tracker_registration(&v[6 * s..6 * s + 6]),
+            None => (Vector3::zeros(), Rotation3::identity()),
+        }
+    }
+
+    /// Target `k` at `pose`, as session `s`'s tracker sees it, mm.
+    pub fn point(&self, pose: &Pose, k: usize, s: usize) -> Vector3<f64> {
+        let (t, r) = self.point_frame(s);
+        r * pose.transform_point(&self.target(k)) + t
+    }
+
+    /// The three Jacobian rows (mm per unit) at `row0` of target `k` measured in session `s`
+    /// at `pose`; `dx` from [`twist_columns`](Self::twist_columns).
+    pub fn point_rows(
+        &self,
+        jac: &mut DMatrixViewMut<f64>,
+        row0: usize,
+        dx: &DMatrix<f64>,
+        pose: &Pose,
+        k: usize,
+        s: usize,
+    ) {
+        let (_, rf) = self.point_frame(s);
+        let rf = rf.into_inner();
+        let rt = pose.rotation * self.target(k);
+        // The pose moved by (dp, dtheta) moves the target by dp - [R t]x dtheta.
+        let moved = dx.rows(0, 3) - rt.cross_matrix() * dx.rows(3, 3);
+        let rows = rf * moved;
+        for p in 0..dx.ncols() {
+            for a in 0..3 {
+                jac[(row0 + a, p)] = rows[(a, p)];
+            }
+        }
+        if let Some((o, _)) = self.target_block {
+            let m = rf * pose.rotation.matrix() * 1e-3;
+            for a in 0..3 {
+                for c in 0..3 {
+                    jac[(row0 + a, o + 3 * k + c)] = m[(a, c)];
+                }
+            }
+        }
+        if let Some((o, v)) = self.frame_block {
+            let b = pose.transform_point(&self.target(k));
+            let (_, r) = self.point_frame(s);
+            let w = Vector3::new(v[6 * s + 3], v[6 * s + 4], v[6 * s + 5]) * 1e-6;
+            // d(exp(w + d) b)/dd = -[exp(w) b]x J_l(w), per urad.
+            let m = (r * b).cross_matrix() * left_jacobian(&w) * -1e-6;
+            for a in 0..3 {
+                jac[(row0 + a, o + 6 * s + a)] = 1e-3;
+                for c in 0..3 {
+                    jac[(row0 + a, o + 6 * s + 3 + c)] = m[(a, c)];
+                }
+            }
+        }
+    }
+
+    /// A tilt measurement's prediction at `pose` ([`crate::tilts`]).
+    pub fn tilt(&self, pose: &Pose, t: &crate::TiltMeasurement) -> crate::tilts::TiltAt {
+        let c = &self.inclinometers[t.inclinometer];
+        let m = self.mount_block.map_or(Vector3::zeros(), |(_, v)| {
+            Vector3::new(
+                v[3 * t.inclinometer],
+                v[3 * t.inclinometer + 1],
+                v[3 * t.inclinometer + 2],
+            )
+        });
+        let b = self
+            .tilt_block
+            .map_or([0.0; 2], |(_, v)| [v[2 * t.session], v[2 * t.session + 1]]);
+        crate::tilts::tilt_at(&self.up, &pose.rotation, &c.mount, &m, b, &c.axes[t.axis])
+    }
+
+    /// The Jacobian row (mrad per unit) of a tilt measurement whose prediction is `at`;
+    /// `dx` from [`twist_columns`](Self::twist_columns).
+    pub fn tilt_row(
+        &self,
+        jac: &mut DMatrixViewMut<f64>,
+        row: usize,
+        dx: &DMatrix<f64>,
+        at: &crate::tilts::TiltAt,
+        t: &crate::TiltMeasurement,
+    ) {
+        let k = at.slope * 1e3;
+        let r = at.pose_rot.transpose() * dx.rows(3, 3) * k;
+        for p in 0..dx.ncols() {
+            jac[(row, p)] = r[p];
+        }
+        if let Some((o, _)) = self.mount_block {
+            for a in 0..3 {
+                jac[(row, o + 3 * t.inclinometer + a)] = at.mount[a] * k;
+            }
+        }
+        if let Some((o, _)) = self.tilt_block {
+            for a in 0..2 {
+                jac[(row, o + 2 * t.session + a)] = at.tilt[a] * k;
+            }
+        }
     }
 
     /// The Jacobian row (mm per unit) of a reading of `sensor` (index `si`) at `pose`.
@@ -359,13 +495,14 @@ impl<'a> Channels<'a> {
         Ok(dx)
     }
 
-    /// The six Jacobian rows of a tracker measurement at `row0` whose orientation residual is
-    /// the rotation vector `w`; `dx` from [`twist_columns`](Self::twist_columns).
+    /// The Jacobian rows of a tracker measurement whose orientation residual is the rotation
+    /// vector `w`: component `a` (position x y z, orientation) at row `rows[a]`, none where it
+    /// was not measured; `dx` from [`twist_columns`](Self::twist_columns).
     pub fn tracker_rows(
         &self,
         jac: &mut DMatrixViewMut<f64>,
         frame: usize,
-        row0: usize,
+        rows: &[Option<usize>; 6],
         w: &Vector3<f64>,
         dx: &DMatrix<f64>,
         tracker_position: &Vector3<f64>,
@@ -377,27 +514,33 @@ impl<'a> Channels<'a> {
         let bottom = jl_inv * rr * dx.rows(3, 3) * 1e3;
         for p in 0..dx.ncols() {
             for a in 0..3 {
-                jac[(row0 + a, p)] = top[(a, p)];
-                jac[(row0 + 3 + a, p)] = bottom[(a, p)];
+                if let Some(r) = rows[a] {
+                    jac[(r, p)] = top[(a, p)];
+                }
+                if let Some(r) = rows[3 + a] {
+                    jac[(r, p)] = bottom[(a, p)];
+                }
             }
         }
         if let Some(b) = self.tracker {
             let skew = tracker_position - reg.0;
             let offset = b.offset + 6 * frame;
-            for a in 0..3 {
-                jac[(row0 + a, offset + a)] = 1e-3;
-            }
             // d(exp(d) R t)/dd = -[R t]x, per urad.
             let sk = skew.cross_matrix() * -1e-6;
             let jr = jl_inv * 1e-3;
             for a in 0..3 {
+                if let Some(r) = rows[a] {
+                    jac[(r, offset + a)] = 1e-3;
+                }
                 for c in 0..3 {
-                    jac[(row0 + a, offset + 3 + c)] = sk[(a, c)];
-                    jac[(row0 + 3 + a, offset + 3 + c)] = jr[(a, c)];
+                    if let Some(r) = rows[a] {
+                        jac[(r, offset + 3 + c)] = sk[(a, c)];
+                    }
+                    if let Some(r) = rows[3 + a] {
+                        jac[(r, offset + 3 + c)] = jr[(a, c)];
+                    }
                 }
             }
         }
     }
 }
-
-

@@ -55,7 +55,7 @@ pub fn regressors(
             ctx(k).temperature_c.unwrap_or(0.0)
         });
     }
-    if campaign.pose_measurements.is_empty() {
+    if campaign.readings.len() == campaign.len() {
         push("reading length".into(), &|k| campaign.readings[k].length_mm);
     }
     let n = model.nominal.num_links();
@@ -156,7 +156,7 @@ pub const MIN_KIND_OBSERVATIONS: usize = 8;
 pub const OUTLIER_FLOOR_SIGMAS: f64 = 3.0;
 
 /// [`outliers`] judged per kind of observation: each sensor's readings, the tracker's
-/// positions and its orientations have their own noise, so each kind gets its own median and
+/// positions, its orientations and the point targets' positions have their own noise, so each kind gets its own median and
 /// robust spread (never pooled: noise-free orientations pooled with noisy positions would
 /// make every position an "outlier"). A kind with fewer than [`MIN_KIND_OBSERVATIONS`]
 /// observations is judged against the pooled spread. Every outlier is also more than
@@ -187,14 +187,13 @@ pub fn outliers_by_kind(
     campaign: &Campaign,
     sigma_um: Option<f64>,
 ) -> Vec<usize> {
-    let m = campaign.readings.len();
     let kind = |k: usize| -> usize {
-        if k < m {
-            campaign.readings[k].sensor
-        } else if (k - m) % 6 < 3 {
-            usize::MAX - 1
-        } else {
-            usize::MAX
+        match campaign.observation_kind(k) {
+            crate::ObservationKind::Reading(i) => campaign.readings[i].sensor,
+            crate::ObservationKind::TrackerPosition(..) => usize::MAX - 1,
+            crate::ObservationKind::TrackerOrientation(..) => usize::MAX,
+            crate::ObservationKind::Point(..) => usize::MAX - 2,
+            crate::ObservationKind::Tilt(..) => usize::MAX - 3,
         }
     };
     let mut kinds: Vec<usize> = (0..residuals_um.len()).map(kind).collect();

@@ -207,6 +207,23 @@ pub enum Effect {
     /// Registration of the tracker frame in the base frame: translation (um) and small
     /// rotation (urad); acts on pose measurements only.
     TrackerFrame,
+    /// The platform positions of the model's point targets (3 per target, um), sized by
+    /// [`MeasurementModel::targets`](crate::MeasurementModel::targets); acts on point
+    /// measurements only.
+    TargetPosition,
+    /// One tracker frame per point-measurement session (6 per session: translation um,
+    /// rotation urad), sized by
+    /// [`MeasurementModel::point_sessions`](crate::MeasurementModel::point_sessions); acts on
+    /// point measurements only, and describes the session, not the machine.
+    PointFrame,
+    /// The mount rotation of each inclinometer on the platform (3 per inclinometer, urad),
+    /// sized by [`MeasurementModel::inclinometers`](crate::MeasurementModel::inclinometers).
+    InclinometerMount,
+    /// The base's tilt against gravity per inclinometer session (2 per session: about x and
+    /// y, urad), sized by
+    /// [`MeasurementModel::tilt_sessions`](crate::MeasurementModel::tilt_sessions); describes
+    /// the session (a machine is re-levelled), not the machine.
+    BaseTilt,
     /// One term of the pose error map: a monomial in the commanded pose acting on the
     /// platform pose's six components.
     PoseMap(PoseTerm),
@@ -239,6 +256,21 @@ impl Effect {
         Effect::TrackerFrame,
     ];
 
+    /// The blocks of the instruments' own unknowns (sized by the model, not by the machine's
+    /// links and sensors): point targets ([`Effect::TargetPosition`], [`Effect::PointFrame`])
+    /// and inclinometers ([`Effect::InclinometerMount`], [`Effect::BaseTilt`]).
+    pub const INSTRUMENTS: [Effect; 4] = [
+        Effect::TargetPosition,
+        Effect::PointFrame,
+        Effect::InclinometerMount,
+        Effect::BaseTilt,
+    ];
+
+    /// True for the blocks of an instrument ([`Effect::INSTRUMENTS`]).
+    pub fn is_instrument(&self) -> bool {
+        Effect::INSTRUMENTS.contains(self)
+    }
+
     /// Every pose map term up to `degree` (at most 3), lowest degree first.
     pub fn pose_maps(degree: u8) -> Vec<Effect> {
         PoseTerm::all(degree)
@@ -257,7 +289,12 @@ impl Effect {
                 "effect name `{name}` must be non-empty, without spaces or commas"
             ));
         }
-        if Effect::ALL.iter().any(|e| e.name() == name) || PoseTerm::parse(&name).is_some() {
+        if Effect::ALL
+            .iter()
+            .chain(&Effect::INSTRUMENTS)
+            .any(|e| e.name() == name)
+            || PoseTerm::parse(&name).is_some()
+        {
             return Err(format!(
                 "effect name `{name}` is taken by a built-in effect"
             ));
@@ -289,6 +326,10 @@ impl Effect {
             Effect::ScrewPeriodic => &ScrewPeriodic,
             Effect::SocketError => &SocketError,
             Effect::TrackerFrame => &TrackerFrame,
+            Effect::TargetPosition => &crate::points::TargetPosition,
+            Effect::PointFrame => &crate::points::PointFrame,
+            Effect::InclinometerMount => &crate::tilts::InclinometerMount,
+            Effect::BaseTilt => &crate::tilts::BaseTilt,
             Effect::PoseMap(t) => t.model(),
             Effect::User(i) => {
                 registry()
@@ -320,7 +361,12 @@ impl Effect {
     /// Parses a name (a built-in, a pose map term such as `pose_map_y2` or `pose_map_x_roll`,
     /// or a registered user effect); the error lists the known names.
     pub fn parse(name: &str) -> Result<Effect, String> {
-        if let Some(e) = Effect::ALL.iter().copied().find(|e| e.name() == name) {
+        if let Some(e) = Effect::ALL
+            .iter()
+            .chain(&Effect::INSTRUMENTS)
+            .copied()
+            .find(|e| e.name() == name)
+        {
             return Ok(e);
         }
         if let Some(t) = PoseTerm::parse(name) {

@@ -95,7 +95,6 @@ pub struct ImplicitCalibration {
     pub solver: cpm_lm::Report,
 }
 
-
 struct Implicit<'a> {
     model: &'a MeasurementModel,
     campaign: &'a Campaign,
@@ -367,7 +366,10 @@ pub fn supported(model: &MeasurementModel, campaign: &Campaign) -> Result<(), Ca
             "the implicit formulation needs six links",
         ));
     }
-    if !campaign.pose_measurements.is_empty() {
+    if !campaign.pose_measurements.is_empty()
+        || !campaign.point_measurements.is_empty()
+        || !campaign.tilt_measurements.is_empty()
+    {
         return Err(CalibError::invalid(
             "pose_measurements",
             "the implicit formulation takes length readings only; use identify() for tracker data",
@@ -376,7 +378,14 @@ pub fn supported(model: &MeasurementModel, campaign: &Campaign) -> Result<(), Ca
     if let Some(e) = model.effects.iter().find(|e| {
         matches!(
             e,
-            Effect::SocketError | Effect::TrackerFrame | Effect::PoseMap(_) | Effect::User(_)
+            Effect::SocketError
+                | Effect::TrackerFrame
+                | Effect::TargetPosition
+                | Effect::PointFrame
+                | Effect::InclinometerMount
+                | Effect::BaseTilt
+                | Effect::PoseMap(_)
+                | Effect::User(_)
         )
     }) {
         return Err(CalibError::invalid(

@@ -74,13 +74,15 @@ pub mod linalg;
 pub mod misfit;
 pub mod model;
 pub mod paper;
+pub mod points;
 pub mod refine;
 pub mod registration;
 pub mod session;
 pub mod simulate;
+pub mod tilts;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
-pub use campaign::{Campaign, Plan, Reading};
+pub use campaign::{Campaign, ObservationKind, Plan, PointMeasurement, Reading, TiltMeasurement};
 pub use effects::{Channel, Effect, EffectInput, EffectModel, EffectSettings, KnownEffect};
 pub use error::CalibError;
 pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
@@ -89,7 +91,7 @@ pub use identify::{
     DOWNWEIGHT_LEVEL, MAX_DOWNWEIGHTED_SHARE,
 };
 pub use model::{MeasurementModel, ModelKind};
-pub use refine::{refine, RefineOptions, Refinement};
+pub use refine::{refine, AgainstCalibrate, RefineOptions, Refinement};
 pub use simulate::{
     simulate, simulate_campaign, simulate_pose_measurements, Noise, SimulationOptions,
 };

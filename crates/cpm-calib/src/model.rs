@@ -60,6 +60,20 @@ pub struct MeasurementModel {
     /// brings its own tracker set-up. Empty (the default): one frame shared by every pose
     /// measurement.
     pub tracker_frame_sessions: Vec<usize>,
+    /// Point targets on the platform (`[[target]]`), in the order point measurements index
+    /// them; [`Effect::TargetPosition`] estimates corrections of their positions. Default
+    /// none.
+    pub targets: Vec<crate::points::PointTarget>,
+    /// Number of point-measurement sessions whose tracker frames [`Effect::PointFrame`]
+    /// estimates (6 parameters each). Default 0.
+    pub point_sessions: usize,
+    /// Inclinometers on the platform (`[[inclinometer]]`), in the order tilt measurements
+    /// index them; [`Effect::InclinometerMount`] estimates corrections of their mounts.
+    /// Default none.
+    pub inclinometers: Vec<crate::tilts::Inclinometer>,
+    /// Number of inclinometer sessions whose base tilts [`Effect::BaseTilt`] estimates (2
+    /// parameters each). Default 0.
+    pub tilt_sessions: usize,
 }
 
 /// Where a block of parameters sits in the parameter vector.
@@ -109,6 +123,10 @@ impl MeasurementModel {
             known_effects: Vec::new(),
             design: None,
             tracker_frame_sessions: Vec::new(),
+            targets: Vec::new(),
+            point_sessions: 0,
+            inclinometers: Vec::new(),
+            tilt_sessions: 0,
         }
     }
 
@@ -146,6 +164,19 @@ impl MeasurementModel {
         };
         let mut m = Self::with_paper_clearance(table);
         m.design = design;
+        m.targets = description
+            .targets
+            .iter()
+            .map(|t| crate::points::PointTarget {
+                name: t.name.clone(),
+                platform_mm: t.platform_mm.into(),
+            })
+            .collect();
+        m.inclinometers = description
+            .inclinometers
+            .iter()
+            .map(crate::tilts::Inclinometer::from_spec)
+            .collect();
         m.clearance = description
             .clearance
             .as_ref()
@@ -369,6 +400,10 @@ impl MeasurementModel {
         for &e in &self.effects {
             let len = match e {
                 Effect::TrackerFrame => 6 * self.tracker_frames(),
+                Effect::TargetPosition => 3 * self.targets.len(),
+                Effect::PointFrame => 6 * self.point_sessions,
+                Effect::InclinometerMount => 3 * self.inclinometers.len(),
+                Effect::BaseTilt => 2 * self.tilt_sessions,
                 _ => e.num_params(n, s),
             };
             out.push(Block {
@@ -396,6 +431,19 @@ impl MeasurementModel {
         for b in self.blocks().iter().skip(1) {
             let e = b.effect.expect("effect block");
             for k in 0..b.len {
+                if e.is_instrument() {
+                    out.push(format!(
+                        "{} {} [{}]",
+                        e.name(),
+                        if matches!(e, Effect::InclinometerMount) {
+                            crate::tilts::param_name(self, e, k)
+                        } else {
+                            crate::points::param_name(self, e, k)
+                        },
+                        e.param_unit(k)
+                    ));
+                    continue;
+                }
                 let name = if e == Effect::TrackerFrame && self.tracker_frames() > 1 {
                     format!(
                         "{} (session {})",
@@ -523,11 +571,24 @@ impl MeasurementModel {
         fixed.tracker_frame_sessions.clear();
         for b in self.blocks() {
             let Some(e) = b.effect else { continue };
-            if e == Effect::TrackerFrame && self.tracker_frames() > 1 {
-                // Frames of several sessions describe those sessions, not the machine.
-                continue;
-            }
             let v = &params[b.offset..b.offset + b.len];
+            match e {
+                // Frames and levelling of several sessions describe those sessions, not the
+                // machine.
+                Effect::TrackerFrame if self.tracker_frames() > 1 => continue,
+                Effect::PointFrame | Effect::BaseTilt => continue,
+                // Not carried (the mount's convention lives with the tilt model): a held
+                // machine predicts tilts with the declared mounts.
+                Effect::InclinometerMount => continue,
+                // The instruments' own unknowns go into their descriptions.
+                Effect::TargetPosition => {
+                    for (t, d) in fixed.targets.iter_mut().zip(v.chunks(3)) {
+                        t.platform_mm += nalgebra::Vector3::new(d[0], d[1], d[2]) * 1e-3;
+                    }
+                    continue;
+                }
+                _ => {}
+            }
             match fixed.known_effects.iter_mut().find(|k| k.effect == e) {
                 None => fixed.known_effects.push(KnownEffect {
                     effect: e,
@@ -642,6 +703,101 @@ impl MeasurementModel {
                 ));
             }
         }
+        let levels = self.effects.contains(&Effect::BaseTilt);
+        for (q, t) in campaign.tilt_measurements.iter().enumerate() {
+            let field = |f: &str| format!("tilt measurement {q}.{f}");
+            if t.pose >= campaign.poses.len() {
+                return Err(CalibError::invalid(
+                    field("pose"),
+                    format!(
+                        "{} but the campaign has {} poses",
+                        t.pose,
+                        campaign.poses.len()
+                    ),
+                ));
+            }
+            let Some(c) = self.inclinometers.get(t.inclinometer) else {
+                return Err(CalibError::invalid(
+                    field("inclinometer"),
+                    format!(
+                        "{} but the robot has {} [[inclinometer]] tables",
+                        t.inclinometer,
+                        self.inclinometers.len()
+                    ),
+                ));
+            };
+            if t.axis >= c.axes.len() {
+                return Err(CalibError::invalid(
+                    field("axis"),
+                    format!("{} but `{}` has {} axes", t.axis, c.name, c.axes.len()),
+                ));
+            }
+            if levels && t.session >= self.tilt_sessions {
+                return Err(CalibError::invalid(
+                    field("session"),
+                    format!(
+                        "{} but the model has {} tilt sessions (MeasurementModel::tilt_sessions)",
+                        t.session, self.tilt_sessions
+                    ),
+                ));
+            }
+            if !t.angle_mrad.is_finite() {
+                return Err(CalibError::invalid(field("angle_mrad"), "not finite"));
+            }
+        }
+        for (i, &(q, a)) in campaign.unmeasured.iter().enumerate() {
+            if q >= campaign.pose_measurements.len() || a >= 6 {
+                return Err(CalibError::invalid(
+                    format!("unmeasured {i}"),
+                    format!(
+                        "({q}, {a}): no such component (pose measurements {}, components 0..6)",
+                        campaign.pose_measurements.len()
+                    ),
+                ));
+            }
+            if i > 0 && campaign.unmeasured[i - 1] >= (q, a) {
+                return Err(CalibError::invalid(
+                    format!("unmeasured {i}"),
+                    "not sorted, or given twice",
+                ));
+            }
+        }
+        let frames = self.effects.contains(&Effect::PointFrame);
+        for (q, pm) in campaign.point_measurements.iter().enumerate() {
+            let field = |f: &str| format!("point measurement {q}.{f}");
+            if pm.pose >= campaign.poses.len() {
+                return Err(CalibError::invalid(
+                    field("pose"),
+                    format!(
+                        "{} but the campaign has {} poses",
+                        pm.pose,
+                        campaign.poses.len()
+                    ),
+                ));
+            }
+            if pm.target >= self.targets.len() {
+                return Err(CalibError::invalid(
+                    field("target"),
+                    format!(
+                        "{} but the robot has {} [[target]] tables",
+                        pm.target,
+                        self.targets.len()
+                    ),
+                ));
+            }
+            if frames && pm.session >= self.point_sessions {
+                return Err(CalibError::invalid(
+                    field("session"),
+                    format!(
+                        "{} but the model has {} point sessions (MeasurementModel::point_sessions)",
+                        pm.session, self.point_sessions
+                    ),
+                ));
+            }
+            if !pm.measured_mm.iter().all(|v| v.is_finite()) {
+                return Err(CalibError::invalid(field("measured_mm"), "not finite"));
+            }
+        }
         for (k, r) in campaign.readings.iter().enumerate() {
             if r.pose >= campaign.poses.len() {
                 return Err(CalibError::invalid(
@@ -693,6 +849,13 @@ pub struct Prepared {
     pub by_pose: Vec<Vec<usize>>,
     /// Pose measurements grouped by pose.
     pub measurements_by_pose: Vec<Vec<usize>>,
+    /// Point measurements grouped by pose.
+    pub points_by_pose: Vec<Vec<usize>>,
+    /// Tilt measurements grouped by pose.
+    pub tilts_by_pose: Vec<Vec<usize>>,
+    /// The observation index of each component of each pose measurement (`None`: not
+    /// measured; [`Campaign::pose_observation_rows`]).
+    pub pose_rows: Vec<[Option<usize>; 6]>,
     /// First-order model only: nominal reading and its gradient per reading.
     first_order: Option<(Vec<f64>, DMatrix<f64>)>,
 }
@@ -709,6 +872,14 @@ impl Prepared {
         let mut measurements_by_pose = vec![Vec::new(); campaign.poses.len()];
         for (q, pm) in campaign.pose_measurements.iter().enumerate() {
             measurements_by_pose[pm.pose].push(q);
+        }
+        let mut points_by_pose = vec![Vec::new(); campaign.poses.len()];
+        for (q, pm) in campaign.point_measurements.iter().enumerate() {
+            points_by_pose[pm.pose].push(q);
+        }
+        let mut tilts_by_pose = vec![Vec::new(); campaign.poses.len()];
+        for (q, t) in campaign.tilt_measurements.iter().enumerate() {
+            tilts_by_pose[t.pose].push(q);
         }
         let contexts = contexts(model, campaign, &lengths_mm, &by_pose)?;
         // The known link effects depend on the pose context only: applied here, once.
@@ -727,6 +898,9 @@ impl Prepared {
             t0_s: campaign_t0_s(campaign),
             by_pose,
             measurements_by_pose,
+            points_by_pose,
+            tilts_by_pose,
+            pose_rows: campaign.pose_observation_rows(),
             first_order: None,
         };
         if model.kind == ModelKind::FirstOrder {
@@ -870,12 +1044,13 @@ fn predict_exact(
         ));
     }
     let channels = Channels::new(model, params);
-    let m_readings = campaign.readings.len();
     let mut y = vec![0.0; campaign.len()];
     let mut at = AtPose::new(n);
     for (j, readings) in prepared.by_pose.iter().enumerate() {
         let measurements = &prepared.measurements_by_pose[j];
-        if readings.is_empty() && measurements.is_empty() {
+        let points = &prepared.points_by_pose[j];
+        let tilts = &prepared.tilts_by_pose[j];
+        if readings.is_empty() && measurements.is_empty() && points.is_empty() && tilts.is_empty() {
             continue;
         }
         let input = EffectInput {
@@ -910,10 +1085,29 @@ fn predict_exact(
             let w = cpm_geometry::rotation::log(
                 &(tracked_rotation * campaign.pose_measurements[q].measured.rotation.inverse()),
             );
-            let o = m_readings + 6 * q;
-            y[o..o + 3].copy_from_slice(tracked_mm.as_slice());
-            y[o + 3..o + 6].copy_from_slice((w * 1e3).as_slice());
+            let values = [tracked_mm, w * 1e3];
+            for (a, row) in prepared.pose_rows[q].iter().enumerate() {
+                if let Some(o) = row {
+                    y[*o] = values[a / 3][a % 3];
+                }
+            }
             omegas.push(w);
+        }
+        // Point targets: the target's position in its session's tracker frame (mm).
+        let p0 = campaign.first_point_observation();
+        for &q in points {
+            let pm = &campaign.point_measurements[q];
+            let o = p0 + 3 * q;
+            y[o..o + 3].copy_from_slice(channels.point(&pose, pm.target, pm.session).as_slice());
+        }
+        // Inclinometers: the elevation of each axis above the horizontal (mrad).
+        let t0 = campaign.first_tilt_observation();
+        let tilt_at: Vec<crate::tilts::TiltAt> = tilts
+            .iter()
+            .map(|&q| channels.tilt(&pose, &campaign.tilt_measurements[q]))
+            .collect();
+        for (&q, t) in tilts.iter().zip(&tilt_at) {
+            y[t0 + q] = t.angle * 1e3;
         }
         if let Some(jac) = jacobian.as_deref_mut() {
             let kin = Kin::new(&table, &fk, &at, j);
@@ -921,13 +1115,33 @@ fn predict_exact(
                 let si = campaign.readings[k].sensor;
                 channels.reading_row(&kin, &at, &table.sensors[si], si, &pose, jac.row_mut(k))?;
             }
-            if !measurements.is_empty() {
+            if !measurements.is_empty() || !points.is_empty() || !tilts.is_empty() {
                 let dx = channels.twist_columns(&kin, &at, np)?;
+                for (&q, t) in tilts.iter().zip(&tilt_at) {
+                    channels.tilt_row(
+                        &mut jac.as_view_mut(),
+                        t0 + q,
+                        &dx,
+                        t,
+                        &campaign.tilt_measurements[q],
+                    );
+                }
+                for &q in points {
+                    let pm = &campaign.point_measurements[q];
+                    channels.point_rows(
+                        &mut jac.as_view_mut(),
+                        p0 + 3 * q,
+                        &dx,
+                        &pose,
+                        pm.target,
+                        pm.session,
+                    );
+                }
                 for (&q, w) in measurements.iter().zip(&omegas) {
                     channels.tracker_rows(
                         &mut jac.as_view_mut(),
                         frame,
-                        m_readings + 6 * q,
+                        &prepared.pose_rows[q],
                         w,
                         &dx,
                         &tracked_mm,

@@ -172,6 +172,42 @@ pub struct Refinement {
     /// The range of the commanded poses the final model was fitted on; a pose map term
     /// describes these poses only and does not extrapolate.
     pub pose_range: PoseRange,
+    /// Plain calibration against refinement, judged on data the fits did not see.
+    pub against_calibrate: AgainstCalibrate,
+}
+
+/// Plain calibration (the starting model, as `cpm calibrate` fits it) against the refined
+/// model, both scored by the same blocked cross-validation ([`cross_validated_rms`]: leave
+/// one session out, or contiguous blocks in acquisition order) on the whole campaign, first-fit
+/// outliers included. Refinement is only worth writing when it is not worse.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AgainstCalibrate {
+    /// The starting model's cross-validated RMS, um.
+    pub calibrate_cv_rms_um: f64,
+    /// The refined model's cross-validated RMS, um.
+    pub refined_cv_rms_um: f64,
+}
+
+impl AgainstCalibrate {
+    /// Relative margin within which the refined model counts as not worse (rounding of two
+    /// fits of the same model).
+    pub const TOLERANCE: f64 = 1e-9;
+
+    /// Whether the refined model predicts held-out data at least as well as plain
+    /// calibration.
+    pub fn not_worse(&self) -> bool {
+        self.refined_cv_rms_um <= self.calibrate_cv_rms_um * (1.0 + Self::TOLERANCE)
+    }
+
+    /// The refusal to state when the refined model is worse (`None` when it is not).
+    pub fn refusal(&self) -> Option<String> {
+        (!self.not_worse()).then(|| {
+            format!(
+                "the refined model predicts held-out data worse than plain calibration (blocked cross-validated RMS {:.4} um against {:.4} um): use `cpm calibrate`",
+                self.refined_cv_rms_um, self.calibrate_cv_rms_um
+            )
+        })
+    }
 }
 
 /// The range of a campaign's commanded poses: x, y, z (mm) and roll, pitch, yaw (deg).
@@ -310,23 +346,36 @@ pub fn cross_validated_rms(
 }
 
 /// The campaign without the observations `drop` (indices of [`Campaign::observations`]): a
-/// reading is left out, a tracker pose measurement when any of its six observations is.
+/// reading is left out, a tracker pose measurement when any of its six observations is, a
+/// point measurement when any of its three is.
 fn without_observations(campaign: &Campaign, drop: &[usize]) -> Campaign {
     if drop.is_empty() {
         return campaign.clone();
     }
-    let m = campaign.readings.len();
     let mut c = campaign.clone();
     let mut k = 0;
     c.readings.retain(|_| {
         k += 1;
         drop.binary_search(&(k - 1)).is_err()
     });
-    let mut j = 0;
-    c.pose_measurements.retain(|_| {
-        j += 1;
-        let first = m + 6 * (j - 1);
-        !(first..first + 6).any(|o| drop.binary_search(&o).is_ok())
+    let kept: Vec<bool> = campaign
+        .pose_observation_rows()
+        .iter()
+        .map(|rows| !rows.iter().flatten().any(|o| drop.binary_search(o).is_ok()))
+        .collect();
+    c.retain_pose_measurements(&kept);
+    let p0 = campaign.first_point_observation();
+    let mut q = 0;
+    c.point_measurements.retain(|_| {
+        q += 1;
+        let first = p0 + 3 * (q - 1);
+        !(first..first + 3).any(|o| drop.binary_search(&o).is_ok())
+    });
+    let t0 = campaign.first_tilt_observation();
+    let mut q = 0;
+    c.tilt_measurements.retain(|_| {
+        q += 1;
+        drop.binary_search(&(t0 + q - 1)).is_err()
     });
     c
 }
@@ -473,6 +522,7 @@ pub fn refine(
         options.folds,
         &cal.minimum_norm_um,
     )?;
+    let initial_cv = cv;
     let mut rejected_by_cv = Vec::new();
     let scan = |mdl: &MeasurementModel, cal: &Calibration| {
         if options.pose_map_degree == 0 {
@@ -703,6 +753,36 @@ pub fn refine(
         };
         identify(&current, full, &opts)?
     };
+    // Plain calibration against the refined model on the whole campaign, as a user's next
+    // session would judge them (the rounds above scored the campaign without its outliers).
+    let against_calibrate = if outliers_before.is_empty() {
+        AgainstCalibrate {
+            calibrate_cv_rms_um: initial_cv,
+            refined_cv_rms_um: cv,
+        }
+    } else {
+        let calibrate_cv_rms_um = cross_validated_rms(
+            model,
+            full,
+            &options.identify,
+            options.folds,
+            &first.minimum_norm_um,
+        )?;
+        AgainstCalibrate {
+            calibrate_cv_rms_um,
+            refined_cv_rms_um: if steps.is_empty() {
+                calibrate_cv_rms_um
+            } else {
+                cross_validated_rms(
+                    &current,
+                    full,
+                    &options.identify,
+                    options.folds,
+                    &cal.minimum_norm_um,
+                )?
+            },
+        }
+    };
     Ok(Refinement {
         steps,
         model: current,
@@ -718,5 +798,33 @@ pub fn refine(
         rejected_by_cv,
         initial_pose_structure,
         pose_range: PoseRange::of(full),
+        against_calibrate,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::AgainstCalibrate;
+
+    #[test]
+    fn a_refined_model_worse_than_calibration_is_refused() {
+        let worse = AgainstCalibrate {
+            calibrate_cv_rms_um: 378.0,
+            refined_cv_rms_um: 3330.0,
+        };
+        assert!(!worse.not_worse());
+        let why = worse.refusal().unwrap();
+        assert!(why.contains("3330.0000 um against 378.0000 um"), "{why}");
+        let better = AgainstCalibrate {
+            calibrate_cv_rms_um: 378.0,
+            refined_cv_rms_um: 377.0,
+        };
+        assert!(better.not_worse() && better.refusal().is_none());
+        // Rounding between two fits of the same model is not "worse".
+        let same = AgainstCalibrate {
+            calibrate_cv_rms_um: 1.0,
+            refined_cv_rms_um: 1.0 + 1e-12,
+        };
+        assert!(same.not_worse());
+    }
 }

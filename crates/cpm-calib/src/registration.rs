@@ -707,7 +707,6 @@ fn linearise(
     Ok(Linearised { residual, jacobian })
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,5 +1,5 @@
 //! A measurement session re-registered against a machine held fixed: the session's own
-//! nuisance parameters (the tracker frame) fitted through the one prediction path.
+//! nuisance parameters (the tracker frame, or the point targets' session frames) fitted through the one prediction path.
 //!
 //! A tracker or motion-capture system is set up afresh for every session, so a model judged on
 //! a later session (or read back on its own training data) must first find that session's
@@ -48,6 +48,10 @@ pub struct SessionFit {
     pub frame: [f64; 6],
     /// Standard deviations of [`frame`](Self::frame), same units.
     pub frame_sd: [f64; 6],
+    /// Every frame fitted (six values per point session; the one frame of tracker poses).
+    pub frames: Vec<f64>,
+    /// Their standard deviations.
+    pub frames_sd: Vec<f64>,
     /// Weighted RMS residual (um of a length reading's noise) before the fit.
     pub rms_before_um: f64,
     /// Weighted RMS residual after.
@@ -71,6 +75,7 @@ struct FrameProblem<'a> {
     measured: Vec<f64>,
     weights: Vec<f64>,
     offset: usize,
+    nf: usize,
     full: Vec<f64>,
     jac: DMatrix<f64>,
 }
@@ -78,14 +83,14 @@ struct FrameProblem<'a> {
 impl FrameProblem<'_> {
     fn params(&self, x: &[f64]) -> Vec<f64> {
         let mut p = self.full.clone();
-        p[self.offset..self.offset + 6].copy_from_slice(x);
+        p[self.offset..self.offset + self.nf].copy_from_slice(x);
         p
     }
 }
 
 impl Problem for FrameProblem<'_> {
     fn num_params(&self) -> usize {
-        6
+        self.nf
     }
     fn num_residuals(&self) -> usize {
         self.measured.len()
@@ -115,7 +120,7 @@ impl DenseJacobian for FrameProblem<'_> {
             &p,
             Some(&mut self.jac),
         )?;
-        for c in 0..6 {
+        for c in 0..self.nf {
             for r in 0..self.measured.len() {
                 jac[(r, c)] = self.jac[(r, self.offset + c)] * 1e3 * self.weights[r];
             }
@@ -125,21 +130,36 @@ impl DenseJacobian for FrameProblem<'_> {
 }
 
 /// Fits the frame of one tracker session (`campaign`'s pose measurements) with the machine
-/// of `machine` held fixed (every known effect applied, nothing else estimated).
+/// of `machine` held fixed (every known effect applied, nothing else estimated). A campaign
+/// of point measurements gets its `point_frame` (six parameters per point session, the
+/// targets held at the machine's) instead, and a campaign of inclinometer angles its
+/// `base_tilt` (two parameters per session: the session is re-levelled; the first two entries
+/// of [`SessionFit::frame`]); [`SessionFit::frame`] is then the first session's frame and
+/// [`SessionFit::frames`] all of them.
 ///
-/// Errors: a campaign without pose measurements, or a model that cannot predict it.
+/// Errors: a campaign without pose or point measurements, or a model that cannot predict it.
 pub fn register_session(
     machine: &MeasurementModel,
     campaign: &Campaign,
 ) -> Result<SessionFit, CalibError> {
-    if campaign.pose_measurements.is_empty() {
-        return Err(CalibError::NoInformation(
-            "a session frame needs tracker pose measurements".into(),
-        ));
-    }
     let mut model = machine.clone();
-    model.effects = vec![Effect::TrackerFrame];
     model.tracker_frame_sessions.clear();
+    let nf = if !campaign.pose_measurements.is_empty() {
+        model.effects = vec![Effect::TrackerFrame];
+        6
+    } else if !campaign.point_measurements.is_empty() {
+        model.point_sessions = campaign.point_sessions();
+        model.effects = vec![Effect::PointFrame];
+        6 * model.point_sessions
+    } else if !campaign.tilt_measurements.is_empty() {
+        model.tilt_sessions = campaign.tilt_sessions();
+        model.effects = vec![Effect::BaseTilt];
+        2 * model.tilt_sessions
+    } else {
+        return Err(CalibError::NoInformation(
+            "a session frame needs tracker pose, point or inclinometer measurements".into(),
+        ));
+    };
     let offset = model.num_installation_params();
     let prepared = Prepared::new(&model, campaign)?;
     let weights = campaign.observation_weights(campaign.pose_sigma());
@@ -151,10 +171,11 @@ pub fn register_session(
         measured: campaign.observations(),
         weights,
         offset,
+        nf,
         full: vec![0.0; model.num_params()],
         jac: DMatrix::zeros(m, model.num_params()),
     };
-    let mut x = vec![0.0; 6];
+    let mut x = vec![0.0; nf];
     let mut r = vec![0.0; m];
     problem
         .residuals(&x, &mut r)
@@ -172,26 +193,31 @@ pub fn register_session(
         .map_err(|e| CalibError::invalid("session model", e.to_string()))?;
     let rms_after_um = rms(&r);
     // Covariance: s^2 (J^T J)^-1 with s^2 the weighted residual variance.
-    let mut j = faer::Mat::<f64>::zeros(m, 6);
+    let mut j = faer::Mat::<f64>::zeros(m, nf);
     problem
         .jacobian(&x, j.as_mut())
         .map_err(|e| CalibError::invalid("session model", e.to_string()))?;
-    let jn = DMatrix::from_fn(m, 6, |a, b| j[(a, b)]);
-    let s2 = r.iter().map(|v| v * v).sum::<f64>() / (m.saturating_sub(6).max(1)) as f64;
-    let mut frame_sd = [f64::NAN; 6];
+    let jn = DMatrix::from_fn(m, nf, |a, b| j[(a, b)]);
+    let s2 = r.iter().map(|v| v * v).sum::<f64>() / (m.saturating_sub(nf).max(1)) as f64;
+    let mut frames_sd = vec![f64::NAN; nf];
     if let Some(ch) = (jn.transpose() * &jn).cholesky() {
         let inv = ch.inverse();
-        for (k, sd) in frame_sd.iter_mut().enumerate() {
+        for (k, sd) in frames_sd.iter_mut().enumerate() {
             *sd = (s2 * inv[(k, k)]).sqrt();
         }
     }
+    let mut frame_sd = [f64::NAN; 6];
+    let k = nf.min(6);
+    frame_sd[..k].copy_from_slice(&frames_sd[..k]);
     let params = problem.params(&x);
     let predicted = predict(&model, &prepared, campaign, &params, None)?;
     let mut frame = [0.0; 6];
-    frame.copy_from_slice(&x);
+    frame[..k].copy_from_slice(&x[..k]);
     Ok(SessionFit {
         frame,
         frame_sd,
+        frames: x,
+        frames_sd,
         rms_before_um,
         rms_after_um,
         predicted,
@@ -253,7 +279,10 @@ pub fn consistency(
     let session_block: Vec<bool> = {
         let mut v = vec![false; single.num_params()];
         for b in single.blocks() {
-            if b.effect == Some(Effect::TrackerFrame) {
+            if matches!(
+                b.effect,
+                Some(Effect::TrackerFrame | Effect::PointFrame | Effect::BaseTilt)
+            ) {
                 v[b.offset..b.offset + b.len].fill(true);
             }
         }

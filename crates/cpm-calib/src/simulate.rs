@@ -46,7 +46,8 @@ impl Noise {
         }
     }
 
-    fn draw_um<R: Rng>(&self, rng: &mut R) -> f64 {
+    /// One draw of this noise, um.
+    pub fn draw_um<R: Rng>(&self, rng: &mut R) -> f64 {
         match *self {
             Noise::None => 0.0,
             Noise::Uniform { half_width_um } => {
@@ -189,19 +190,20 @@ pub fn simulate_pose_measurements(
     for m in campaign.pose_measurements.iter_mut() {
         m.measured = cpm_geometry::Pose::identity();
     }
-    let prepared = Prepared::new(model, &campaign)?;
     let exact = MeasurementModel {
         kind: crate::ModelKind::Exact,
         ..model.clone()
     };
+    // Every component predicted: the skeleton's unmeasured components are measured here.
+    campaign.unmeasured.clear();
+    let prepared = Prepared::new(model, &campaign)?;
     let y = predict(&exact, &prepared, &campaign, truth_um, None)?;
-    let m0 = campaign.readings.len();
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed ^ 0x0074_7261_636b_6572);
     let orientation = Normal::new(0.0, orientation_sigma_urad).ok();
     for (q, m) in campaign.pose_measurements.iter_mut().enumerate() {
-        let o = m0 + 6 * q;
-        let position_mm = nalgebra::Vector3::new(y[o], y[o + 1], y[o + 2]);
-        let w = nalgebra::Vector3::new(y[o + 3], y[o + 4], y[o + 5]) * 1e-3;
+        let at = |a: usize| prepared.pose_rows[q][a].map_or(0.0, |o| y[o]);
+        let position_mm = nalgebra::Vector3::new(at(0), at(1), at(2));
+        let w = nalgebra::Vector3::new(at(3), at(4), at(5)) * 1e-3;
         let mut twist = nalgebra::Vector6::zeros();
         for a in 0..3 {
             twist[a] = position.draw_um(&mut rng) * 1e-3;

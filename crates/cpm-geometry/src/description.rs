@@ -103,6 +103,54 @@ pub struct RobotDescription {
     /// clearance. Optional (defaults stated in [`LimitsSpec`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub limits: Option<LimitsSpec>,
+    /// Point targets on the platform (`[[target]]`: laser-tracker reflectors in their nests),
+    /// possibly none.
+    #[serde(rename = "target", default, skip_serializing_if = "Vec::is_empty")]
+    pub targets: Vec<TargetSpec>,
+    /// Inclinometers on the platform (`[[inclinometer]]`), possibly none.
+    #[serde(
+        rename = "inclinometer",
+        default,
+        skip_serializing_if = "Vec::is_empty"
+    )]
+    pub inclinometers: Vec<InclinometerSpec>,
+}
+
+/// `[[inclinometer]]`: an inclinometer on the platform. Each measured angle is the elevation
+/// above the horizontal of one instrument axis, `asin(up . a_k)` (what MEMS inclinometers such
+/// as the SCL3300 report), with `a_k` the platform direction the axis nominally points along,
+/// turned by the instrument's mount rotation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InclinometerSpec {
+    /// Name used in the `inclinometer` column of tilt files; unique.
+    pub name: String,
+    /// The platform direction of each measured axis, in the order of the file's
+    /// `angle_1_deg`, `angle_2_deg`, ... (e.g. `[[0, 1, 0], [-1, 0, 0]]`: the first angle along
+    /// +y of the platform, the second along -x); non-zero, normalised when read; one to three.
+    pub axes: Vec<[f64; 3]>,
+    /// The mount rotation of the instrument on the platform, roll pitch yaw deg
+    /// (`R = Rz Ry Rx`, applied to the axes in {P}): nominally zero; a calibrated
+    /// description writes the fitted one.
+    #[serde(default, skip_serializing_if = "is_zero3")]
+    pub mount_rpy_deg: [f64; 3],
+}
+
+fn is_zero3(v: &[f64; 3]) -> bool {
+    v.iter().all(|x| *x == 0.0)
+}
+
+/// `[[target]]`: a point target on the platform (a laser tracker's reflector, SMR, in its
+/// nest), whose position a tracker measures as a 3-D point. Its platform position is known only
+/// from a drawing: a calibration from point measurements estimates it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetSpec {
+    /// Name used in the `target` column of point measurement files; unique.
+    pub name: String,
+    /// The target's centre in {P}, mm (nominal, or calibrated in a calibrated description).
+    #[serde(deserialize_with = "exact")]
+    pub platform_mm: [f64; 3],
 }
 
 /// `[home]`: the home pose.
@@ -620,6 +668,51 @@ fn position3(v: &[f64; 3], path: &[Seg]) -> Result<(), Problem> {
     }
 }
 
+/// A name that can be a CSV value: not empty, no spaces at its ends, no comma, quote or
+/// control character, not starting with '#'; `what` names its kind in the message (a
+/// sensor's, a target's: a column value of the measurement files).
+fn plain_name_of(name: &str, what: Option<&str>, path: &[Seg]) -> Result<(), Problem> {
+    if name.trim().is_empty() {
+        return Err(Problem::new(path, "must not be empty"));
+    }
+    if name.trim() != name
+        || name.starts_with('#')
+        || name.chars().any(|c| c.is_control() || c == ',' || c == '"')
+    {
+        let (kind, why) = match what {
+            Some(w) => (
+                format!("{w} "),
+                " (it is a column value of the measurement files)",
+            ),
+            None => (String::new(), ""),
+        };
+        return Err(Problem::new(
+            path,
+            format!(
+                "{name:?}: a {kind}name must not start with '#', have spaces at its ends or contain a comma, a quote or a control character{why}"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A sensor's or target's name ([`plain_name_of`]), unique among `seen`.
+fn column_name<'a>(
+    name: &'a str,
+    what: &str,
+    seen: &mut HashSet<&'a str>,
+    path: &[Seg],
+) -> Result<(), Problem> {
+    plain_name_of(name, Some(what), path)?;
+    if !seen.insert(name) {
+        return Err(Problem::new(
+            path,
+            format!("duplicate {what} name `{name}`"),
+        ));
+    }
+    Ok(())
+}
+
 fn non_negative(v: f64, path: &[Seg]) -> Result<(), Problem> {
     if v.is_finite() && v >= 0.0 {
         Ok(())
@@ -747,6 +840,8 @@ impl RobotDescription {
             sockets: Vec::new(),
             socket_regions: Vec::new(),
             limits: None,
+            targets: Vec::new(),
+            inclinometers: Vec::new(),
         }
     }
 
@@ -869,31 +964,40 @@ impl RobotDescription {
         let mut names = HashSet::new();
         for (i, s) in self.sensors.iter().enumerate() {
             let at = |k: &'static str| [Key("sensor"), Index(i), Key(k)];
-            if s.name.trim().is_empty() {
-                return Err(Problem::new(&at("name"), "must not be empty"));
-            }
-            if s.name.trim() != s.name
-                || s.name.starts_with('#')
-                || s.name
-                    .chars()
-                    .any(|c| c.is_control() || c == ',' || c == '"')
-            {
-                return Err(Problem::new(
-                    &at("name"),
-                    format!(
-                        "{:?}: a sensor name must not start with '#', have spaces at its ends or contain a comma, a quote or a control character (it is a column value of the measurement files)",
-                        s.name
-                    ),
-                ));
-            }
-            if !names.insert(s.name.as_str()) {
-                return Err(Problem::new(
-                    &at("name"),
-                    format!("duplicate sensor name `{}`", s.name),
-                ));
-            }
+            column_name(&s.name, "sensor", &mut names, &at("name"))?;
             position3(&s.base_mm, &at("base_mm"))?;
             position3(&s.platform_mm, &at("platform_mm"))?;
+        }
+        let mut target_names = HashSet::new();
+        for (i, t) in self.targets.iter().enumerate() {
+            let at = |k: &'static str| [Key("target"), Index(i), Key(k)];
+            column_name(&t.name, "target", &mut target_names, &at("name"))?;
+            position3(&t.platform_mm, &at("platform_mm"))?;
+        }
+        let mut inclinometer_names = HashSet::new();
+        for (i, c) in self.inclinometers.iter().enumerate() {
+            let at = |k: &'static str| [Key("inclinometer"), Index(i), Key(k)];
+            column_name(
+                &c.name,
+                "inclinometer",
+                &mut inclinometer_names,
+                &at("name"),
+            )?;
+            if c.axes.is_empty() || c.axes.len() > 3 {
+                return Err(Problem::new(
+                    &at("axes"),
+                    format!("needs one to three axes, got {}", c.axes.len()),
+                ));
+            }
+            for (k, a) in c.axes.iter().enumerate() {
+                let path = [Key("inclinometer"), Index(i), Key("axes"), Index(k)];
+                finite3(a, &path)?;
+                let norm = a.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if !(norm > 1e-9) {
+                    return Err(Problem::new(&path, "a zero vector is no direction"));
+                }
+            }
+            finite3(&c.mount_rpy_deg, &at("mount_rpy_deg"))?;
         }
         if let Some(c) = &self.clearance {
             non_negative(c.radius_um, &[Key("clearance"), Key("radius_um")])?;

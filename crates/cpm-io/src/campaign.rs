@@ -9,7 +9,7 @@ use std::collections::HashMap;
 use std::io::Read;
 use std::path::Path;
 
-use cpm_calib::campaign::PoseMeasurement;
+use cpm_calib::campaign::{PointMeasurement, PoseMeasurement, TiltMeasurement};
 use cpm_calib::{Campaign, Reading};
 use cpm_geometry::{JointTable, Pose, Vector3};
 use cpm_kinematics::workspace::{reachable_at, Unreachable};
@@ -115,6 +115,12 @@ pub struct DataFile {
     /// Tracker files: whether the rows passed the consistency checks (they are checked after
     /// registration, which may involve several files).
     pub checked: bool,
+    /// Point files: the line of each point measurement; inclinometer files: of each tilt
+    /// measurement.
+    pub point_lines: Vec<usize>,
+    /// Point files: the rough registration the reader applied to the measured points (the
+    /// base frame's pose in the tracker's coordinates, `p_tracker = R p_base + t`).
+    pub point_frame: Option<Pose>,
 }
 
 /// One row of a tracker file as logged.
@@ -128,6 +134,76 @@ pub struct TrackerRow {
     pub measured: Pose,
     /// The link readings (`reading_k`), in the link's units.
     pub readings: Vec<f64>,
+    /// Which components were measured (position x y z, orientation as three): an empty cell
+    /// is a component not measured; `measured` holds a placeholder there.
+    pub mask: [bool; 6],
+}
+
+impl TrackerRow {
+    /// True when every component was measured.
+    pub fn complete(&self) -> bool {
+        self.mask.iter().all(|m| *m)
+    }
+}
+
+/// The pose of a tracker row whose cells may be empty (not measured): `None` when every cell
+/// is given (parse it as usual), else the placeholder pose (0 or identity where not measured)
+/// and the mask. The orientation is measured or not as a whole: its cells are all given or all
+/// empty.
+fn partial_pose(
+    t: &Header,
+    row: &Row,
+    o: Orientation,
+) -> Result<Option<(Pose, [bool; 6], RawPose)>, InputError> {
+    let empty = |c: &str| t.text(row, c).is_some_and(|v| v.trim().is_empty());
+    let ocols = orientation_columns(o);
+    let position_empty: Vec<bool> = ["x_mm", "y_mm", "z_mm"].iter().map(|c| empty(c)).collect();
+    let orientation_empty = ocols.iter().filter(|c| empty(c)).count();
+    if !position_empty.iter().any(|e| *e) && orientation_empty == 0 {
+        return Ok(None);
+    }
+    if orientation_empty != 0 && orientation_empty != ocols.len() {
+        let c = ocols.iter().find(|c| empty(c)).expect("an empty cell");
+        return Err(t.err(
+            row,
+            c,
+            format!(
+                "missing value: the orientation ({}) is measured as a whole: give every cell or leave them all empty (not measured)",
+                ocols.join(", ")
+            ),
+        ));
+    }
+    let mut raw = RawPose {
+        cells: [("", 0.0); 7],
+        len: 0,
+    };
+    let mut mask = [true; 6];
+    let mut p = Vector3::zeros();
+    for (a, c) in ["x_mm", "y_mm", "z_mm"].iter().enumerate() {
+        if position_empty[a] {
+            mask[a] = false;
+            continue;
+        }
+        p[a] = t.number(row, c)?;
+        check_pose_cell(t, row, c, p[a])?;
+    }
+    let rotation = if orientation_empty == 0 {
+        for c in ["x_mm", "y_mm", "z_mm"] {
+            raw.cells[raw.len] = (c, 0.0);
+            raw.len += 1;
+        }
+        for c in ocols {
+            let v = t.number(row, c)?;
+            check_pose_cell(t, row, c, v)?;
+            raw.cells[raw.len] = (c, v);
+            raw.len += 1;
+        }
+        pose_of(t, row, o, &raw)?.rotation
+    } else {
+        mask[3..].fill(false);
+        cpm_geometry::Rotation3::identity()
+    };
+    Ok(Some((Pose::new(p, rotation), mask, raw)))
 }
 
 /// A measured position is moved by more than this (mm) by a session's registration, or a
@@ -294,7 +370,7 @@ fn raw_pose_at(
 }
 
 /// Positions within 1 km, angles within [-360, 360] degrees.
-fn check_pose_cell(t: &Header, row: &Row, c: &str, v: f64) -> Result<(), InputError> {
+pub(crate) fn check_pose_cell(t: &Header, row: &Row, c: &str, v: f64) -> Result<(), InputError> {
     if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
         return Err(t.err(
             row,
@@ -574,6 +650,12 @@ pub fn read_data_from<R: Read>(
     let r = match t.kind() {
         Ok(FileKind::Readings) => read_readings_table(&mut t, robot, options),
         Ok(FileKind::PoseMeasurements) => read_pose_measurements_table(&mut t, robot, options),
+        Ok(FileKind::PointMeasurements) => {
+            crate::points::read_point_measurements_table(&mut t, robot, options)
+        }
+        Ok(FileKind::TiltMeasurements) => {
+            crate::points::read_tilt_measurements_table(&mut t, robot, options)
+        }
         Ok(FileKind::Poses) => Err(InputError::line(
             file,
             t.header_line,
@@ -613,7 +695,7 @@ pub fn read_data_files(
 }
 
 /// Checks the `reading_k` columns: none, or exactly `reading_1..reading_n`.
-fn link_reading_columns(t: &Header, n: usize) -> Result<bool, InputError> {
+pub(crate) fn link_reading_columns(t: &Header, n: usize) -> Result<bool, InputError> {
     let ks = t.reading_columns()?;
     if ks.is_empty() {
         return Ok(false);
@@ -655,7 +737,7 @@ const READING_NAMES: [&str; 12] = [
     "reading_12",
 ];
 
-fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>, InputError> {
+pub(crate) fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>, InputError> {
     (1..=n)
         .map(|k| match READING_NAMES.get(k - 1) {
             Some(name) => t.number(row, name),
@@ -704,7 +786,7 @@ fn check_link_readings(
 }
 
 /// The error of a file with more rows than allowed.
-fn too_many_rows(t: &Header, row: &Row, max: usize) -> InputError {
+pub(crate) fn too_many_rows(t: &Header, row: &Row, max: usize) -> InputError {
     InputError::line(
         &t.file,
         row.line,
@@ -951,6 +1033,8 @@ fn read_readings_table<R: Read>(
         registration: None,
         tracker_rows: Vec::new(),
         checked: true,
+        point_lines: Vec::new(),
+        point_frame: None,
     })
 }
 
@@ -1014,11 +1098,23 @@ fn read_pose_measurements_table<R: Read>(
                 format!("pose {:?} appears again (first on line {first}): a tracker file has one row per pose", shorten(&label)),
             ));
         }
-        let (measured, raw) = parse_pose(t, &row, o)?;
+        let (measured, raw, mask) = match partial_pose(t, &row, o)? {
+            None => {
+                let (m, raw) = parse_pose(t, &row, o)?;
+                (m, raw, [true; 6])
+            }
+            Some((m, mask, raw)) => (m, raw, mask),
+        };
         for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
             angles.push((row.line, *name, *v));
         }
         let u = link_readings(t, &row, n)?;
+        let q = campaign.pose_measurements.len();
+        for (a, m) in mask.iter().enumerate() {
+            if !m {
+                campaign.unmeasured.push((q, a));
+            }
+        }
         let time_s = t.optional_number(&row, "time_s")?;
         let temperature_c = t.optional_number(&row, "temperature_c")?;
         if t.optional_bool(&row, "simulated")? == Some(true) {
@@ -1044,6 +1140,7 @@ fn read_pose_measurements_table<R: Read>(
             label: label.clone(),
             measured,
             readings: u,
+            mask,
         });
         labels.push(label);
         lines.push(row.line);
@@ -1056,6 +1153,25 @@ fn read_pose_measurements_table<R: Read>(
     }
     check_angle_units(&t.file, &angles)?;
     check_tracker_position_units(&t.file, &rows, &commanded)?;
+    // A row not measured in full: its pose (the start of forward kinematics) is the nominal
+    // forward kinematics of its commanded lengths.
+    for (q, r) in rows.iter().enumerate().filter(|(_, r)| !r.complete()) {
+        let (p, _) = cpm_kinematics::forward(
+            &robot.table,
+            &commanded[q],
+            &robot.table.home,
+            &cpm_kinematics::ForwardOptions::default(),
+        )
+        .map_err(|e| {
+            InputError::field(
+                &t.file,
+                r.line,
+                "reading_1",
+                format!("the link readings give no pose (forward kinematics: {e}): wrong units or link mapping?"),
+            )
+        })?;
+        campaign.poses[q] = p;
+    }
     campaign.commanded_lengths_mm = Some(commanded);
     Ok(DataFile {
         file: t.file.clone(),
@@ -1067,6 +1183,8 @@ fn read_pose_measurements_table<R: Read>(
         registration: None,
         tracker_rows: rows,
         checked: false,
+        point_lines: Vec::new(),
+        point_frame: None,
     })
 }
 
@@ -1090,13 +1208,23 @@ fn check_tracker_position_units(
         .map(|i| spread(&mut lengths_mm.iter().map(|l| l[i])))
         .fold(0.0_f64, f64::max);
     let moved = (0..3)
-        .map(|a| spread(&mut rows.iter().map(|r| r.measured.position_mm[a])))
+        .map(|a| {
+            spread(
+                &mut rows
+                    .iter()
+                    .filter(|r| r.mask[a])
+                    .map(|r| r.measured.position_mm[a]),
+            )
+        })
         .fold(0.0_f64, f64::max);
     if !(travel > 1.0 && moved * 100.0 < travel) {
         return Ok(());
     }
-    let first = rows[0].measured.position_mm;
-    let row = rows
+    let full: Vec<&TrackerRow> = rows.iter().filter(|r| r.mask[..3] == [true; 3]).collect();
+    let Some(first) = full.first().map(|r| r.measured.position_mm) else {
+        return Ok(());
+    };
+    let row = full
         .iter()
         .max_by(|a, b| {
             (a.measured.position_mm - first)
@@ -1193,13 +1321,24 @@ pub fn register_tracker_files(
     if options.register_tracker {
         let sessions: Vec<cpm_calib::registration::Session> = idx
             .iter()
-            .map(|&k| cpm_calib::registration::Session {
-                lengths_mm: raw_lengths(&files[k]),
-                measured: files[k]
-                    .tracker_rows
-                    .iter()
-                    .map(|r| unknown(&r.measured))
-                    .collect(),
+            .map(|&k| {
+                // Rows measured in full register the session.
+                let f = &files[k];
+                let full: Vec<bool> = f.tracker_rows.iter().map(TrackerRow::complete).collect();
+                cpm_calib::registration::Session {
+                    lengths_mm: raw_lengths(f)
+                        .into_iter()
+                        .zip(&full)
+                        .filter(|(_, c)| **c)
+                        .map(|(l, _)| l)
+                        .collect(),
+                    measured: f
+                        .tracker_rows
+                        .iter()
+                        .filter(|r| r.complete())
+                        .map(|r| unknown(&r.measured))
+                        .collect(),
+                }
             })
             .collect();
         let finite = sessions
@@ -1263,11 +1402,23 @@ pub fn register_tracker_files(
                 for (s, &k) in report.sessions.iter().zip(&idx) {
                     let f = &mut files[k];
                     if s.applied {
+                        let mut unmeasured = f.campaign.unmeasured.clone();
                         for (q, row) in f.tracker_rows.iter().enumerate() {
                             let base = s.frame.to_base(&unknown(&row.measured));
                             f.campaign.pose_measurements[q].measured = known_applied(&base);
-                            f.campaign.poses[f.campaign.pose_measurements[q].pose] = base;
+                            if row.complete() {
+                                f.campaign.poses[f.campaign.pose_measurements[q].pose] = base;
+                            } else if row.mask[..3].contains(&true)
+                                && row.mask[..3].contains(&false)
+                            {
+                                // The frame's rotation mixes the coordinates: a position
+                                // measured in part is not known in the base frame.
+                                unmeasured.extend((0..3).map(|a| (q, a)));
+                            }
                         }
+                        unmeasured.sort_unstable();
+                        unmeasured.dedup();
+                        f.campaign.unmeasured = unmeasured;
                     }
                     if offsets_applied {
                         if let Some(c) = &mut f.campaign.commanded_lengths_mm {
@@ -1425,6 +1576,10 @@ pub struct Merged {
     pub pose_origin: Vec<(String, usize, String)>,
     /// Per reading: (file, line).
     pub reading_origin: Vec<(String, usize)>,
+    /// Per point measurement: (file, line).
+    pub point_origin: Vec<(String, usize)>,
+    /// Per tilt measurement: (file, line).
+    pub tilt_origin: Vec<(String, usize)>,
     /// The automatic registration of the tracker files, if any.
     pub registration: Option<RegistrationReport>,
 }
@@ -1449,7 +1604,12 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
     let mut commanded = Vec::new();
     let mut pose_origin = Vec::new();
     let mut reading_origin = Vec::new();
+    let mut point_origin = Vec::new();
+    let mut tilt_origin = Vec::new();
+    let mut tilt_sessions = 0;
     let mut registration: Option<RegistrationReport> = None;
+    // Each point file is a session with its own frame.
+    let mut point_sessions = 0;
     for f in files {
         if let Some(r) = &f.registration {
             match &mut registration {
@@ -1487,11 +1647,38 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
             pose: r.pose + base,
             ..*r
         }));
+        let q0 = out.pose_measurements.len();
+        out.unmeasured
+            .extend(c.unmeasured.iter().map(|(q, a)| (q + q0, *a)));
         out.pose_measurements
             .extend(c.pose_measurements.iter().map(|m| PoseMeasurement {
                 pose: m.pose + base,
                 ..*m
             }));
+        let sessions = c.point_sessions();
+        out.point_measurements
+            .extend(c.point_measurements.iter().map(|m| PointMeasurement {
+                pose: m.pose + base,
+                session: m.session + point_sessions,
+                ..*m
+            }));
+        point_sessions += sessions;
+        if c.point_sigma_um > 0.0 {
+            out.point_sigma_um = c.point_sigma_um;
+        }
+        if f.kind == FileKind::TiltMeasurements {
+            tilt_origin.extend(f.point_lines.iter().map(|l| (f.file.clone(), *l)));
+        } else {
+            point_origin.extend(f.point_lines.iter().map(|l| (f.file.clone(), *l)));
+        }
+        let sessions = c.tilt_sessions();
+        out.tilt_measurements
+            .extend(c.tilt_measurements.iter().map(|m| TiltMeasurement {
+                pose: m.pose + base,
+                session: m.session + tilt_sessions,
+                ..*m
+            }));
+        tilt_sessions += sessions;
         for (line, label) in f.pose_lines.iter().zip(&f.pose_labels) {
             pose_origin.push((f.file.clone(), *line, label.clone()));
         }
@@ -1504,11 +1691,13 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
         campaign: out,
         pose_origin,
         reading_origin,
+        point_origin,
+        tilt_origin,
         registration,
     }
 }
 
-fn simulated_header(note: &str) -> String {
+pub(crate) fn simulated_header(note: &str) -> String {
     format!(
         "{SIMULATED_MARK} {}{}{}\n",
         env!("CARGO_PKG_VERSION"),
@@ -1517,7 +1706,7 @@ fn simulated_header(note: &str) -> String {
     )
 }
 
-fn pose_fields(p: &Pose) -> String {
+pub(crate) fn pose_fields(p: &Pose) -> String {
     let [r, pi, y] = p.rpy_deg();
     format!(
         "{},{},{},{},{},{}",
@@ -1530,7 +1719,7 @@ fn pose_fields(p: &Pose) -> String {
     )
 }
 
-fn opt(v: Option<f64>) -> String {
+pub(crate) fn opt(v: Option<f64>) -> String {
     v.map(num).unwrap_or_default()
 }
 
@@ -1623,7 +1812,7 @@ pub fn write_pose_measurements(campaign: &Campaign, robot: &Robot, note: &str) -
         s.push_str(",simulated");
     }
     s.push('\n');
-    for m in &campaign.pose_measurements {
+    for (q, m) in campaign.pose_measurements.iter().enumerate() {
         let lengths = match &campaign.commanded_lengths_mm {
             Some(l) => l[m.pose].clone(),
             None => cpm_kinematics::inverse_lengths(&robot.table, &campaign.poses[m.pose]),
@@ -1632,7 +1821,19 @@ pub fn write_pose_measurements(campaign: &Campaign, robot: &Robot, note: &str) -
         for (i, len) in lengths.iter().enumerate() {
             s.push_str(&format!(",{}", num(robot.reading(i, *len))));
         }
-        s.push_str(&format!(",{}", pose_fields(&m.measured)));
+        let fields = pose_fields(&m.measured);
+        if campaign.unmeasured.is_empty() {
+            s.push_str(&format!(",{fields}"));
+        } else {
+            // Components not measured are empty cells (the orientation as a whole).
+            for (c, v) in fields.split(',').enumerate() {
+                let measured = campaign.is_measured(q, c.min(3));
+                s.push(',');
+                if measured {
+                    s.push_str(v);
+                }
+            }
+        }
         if has_time {
             s.push_str(&format!(",{}", opt(m.time_s)));
         }

@@ -51,6 +51,7 @@
 pub mod calibration;
 pub mod campaign;
 pub mod error;
+pub mod points;
 pub mod robot;
 pub mod table;
 

@@ -227,6 +227,21 @@ impl Robot {
         m.effect_settings = self.effect_settings();
         // Checked when the robot was made (from_description).
         m.known_effects = self.known_effects().unwrap_or_default();
+        m.targets = self
+            .description
+            .targets
+            .iter()
+            .map(|t| cpm_calib::points::PointTarget {
+                name: t.name.clone(),
+                platform_mm: t.platform_mm.into(),
+            })
+            .collect();
+        m.inclinometers = self
+            .description
+            .inclinometers
+            .iter()
+            .map(cpm_calib::tilts::Inclinometer::from_spec)
+            .collect();
         m
     }
 
@@ -408,12 +423,13 @@ pub struct CalibratedNotes {
 ///   `[installation_errors_um]` holds its own installation errors (if any) plus the fitted
 ///   ones: the link forces (joint clearance, compliance) are computed on the design joints by
 ///   every reader ([`MeasurementModel::design`]), as in the fit;
-/// - `socket_error` moves the sensor sockets;
+/// - `socket_error` moves the sensor sockets, `target_position` the `[[target]]`s,
+///   `inclinometer_mount` the `[[inclinometer]]`s' `mount_rpy_deg`;
 /// - every other effect's values, `link_offset` and `link_scale` included, are added to
 ///   `[calibration.known_effects]` (on top of the values the description already knew): the
 ///   link reading models stay the description's, so every reader derives the same commanded
 ///   lengths (and commanded poses) from the logged readings as the fit did; `tracker_frame`
-///   belongs to the measurement session and is not written (listed in
+///   `point_frame` and `base_tilt` belong to the measurement session and are not written (listed in
 ///   [`CalibratedNotes::session_effects`]);
 /// - `[calibration] effects` is set to `declare` when given.
 ///
@@ -474,7 +490,30 @@ pub fn calibrated_description(
                     side[k % 3] += v * 1e-3;
                 }
             }
-            Effect::TrackerFrame => notes.session_effects.push(effect.name().to_string()),
+            Effect::TrackerFrame | Effect::PointFrame | Effect::BaseTilt => {
+                notes.session_effects.push(effect.name().to_string())
+            }
+            Effect::InclinometerMount => {
+                for (i, c) in d.inclinometers.iter_mut().enumerate() {
+                    let Some(m) = values.get(3 * i..3 * i + 3) else {
+                        continue;
+                    };
+                    let [r, p, y] = c.mount_rpy_deg.map(f64::to_radians);
+                    let mount = cpm_geometry::rotation::from_rpy(r, p, y)
+                        * cpm_geometry::Rotation3::new(
+                            cpm_geometry::Vector3::new(m[0], m[1], m[2]) * 1e-6,
+                        );
+                    let (r, p, y) = cpm_geometry::rotation::rpy(&mount);
+                    c.mount_rpy_deg = [r, p, y].map(f64::to_degrees);
+                }
+            }
+            Effect::TargetPosition => {
+                for (k, v) in values.iter().enumerate() {
+                    if let Some(t) = d.targets.get_mut(k / 3) {
+                        t.platform_mm[k % 3] += v * 1e-3;
+                    }
+                }
+            }
             _ => {
                 let known = d
                     .calibration
@@ -492,7 +531,7 @@ pub fn calibrated_description(
     if let Some(effects) = declare {
         let names: Vec<String> = effects
             .iter()
-            .filter(|e| **e != Effect::TrackerFrame)
+            .filter(|e| **e != Effect::TrackerFrame && !e.is_instrument())
             .map(|e| e.name().to_string())
             .collect();
         match &mut d.calibration {

@@ -27,6 +27,12 @@ pub enum FileKind {
     PoseMeasurements,
     /// A list of poses (a plan or compensation targets).
     Poses,
+    /// Point target measurements (`target`, a measured point, the commanded pose or link
+    /// readings).
+    PointMeasurements,
+    /// Inclinometer angles (`inclinometer`, `angle_1_deg`, ..., the commanded pose or link
+    /// readings).
+    TiltMeasurements,
 }
 
 impl FileKind {
@@ -36,6 +42,8 @@ impl FileKind {
             FileKind::Readings => "length-sensor readings",
             FileKind::PoseMeasurements => "tracker pose measurements",
             FileKind::Poses => "a list of poses",
+            FileKind::PointMeasurements => "point target measurements",
+            FileKind::TiltMeasurements => "inclinometer angles",
         }
     }
 }
@@ -347,7 +355,11 @@ fn split_fields(
 impl Header {
     /// What the header says the file holds.
     pub fn kind(&self) -> Result<FileKind, InputError> {
-        if self.has("sensor") || self.has("length_mm") {
+        if self.has("target") {
+            Ok(FileKind::PointMeasurements)
+        } else if self.has("inclinometer") {
+            Ok(FileKind::TiltMeasurements)
+        } else if self.has("sensor") || self.has("length_mm") {
             Ok(FileKind::Readings)
         } else if self.headers.iter().any(|h| reading_index(h).is_some()) {
             Ok(FileKind::PoseMeasurements)
@@ -358,7 +370,7 @@ impl Header {
                 &self.file,
                 self.header_line,
                 format!(
-                    "cannot tell what this file holds from its header ({}): expected length-sensor readings (pose,sensor,x_mm,...,length_mm), tracker pose measurements (pose,reading_1..,x_mm,...) or a list of poses (x_mm,y_mm,z_mm,...)",
+                    "cannot tell what this file holds from its header ({}): expected length-sensor readings (pose,sensor,x_mm,...,length_mm), tracker pose measurements (pose,reading_1..,x_mm,...), point target measurements (pose,target,x_mm,y_mm,z_mm,...), inclinometer angles (pose,inclinometer,angle_1_deg,...) or a list of poses (x_mm,y_mm,z_mm,...)",
                     shorten(&self.headers.join(","))
                 ),
             ))

@@ -34,6 +34,8 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
             FileKind::Readings => "gauge",
             FileKind::PoseMeasurements => "tracker",
             FileKind::Poses => "poses",
+            FileKind::PointMeasurements => "points",
+            FileKind::TiltMeasurements => "tilts",
         },
     )?;
     d.set_item("simulated", c.simulated)?;

@@ -508,21 +508,7 @@ fn side_name(s: SocketSide) -> &'static str {
 /// A name that can be a CSV value: not empty, no spaces at its ends, no comma, quote or
 /// control character, not starting with '#'.
 fn plain_name(name: &str, path: &[Seg]) -> Result<(), Problem> {
-    if name.trim().is_empty() {
-        return Err(Problem::new(path, "must not be empty"));
-    }
-    if name.trim() != name
-        || name.starts_with('#')
-        || name.chars().any(|c| c.is_control() || c == ',' || c == '"')
-    {
-        return Err(Problem::new(
-            path,
-            format!(
-                "{name:?}: a name must not start with '#', have spaces at its ends or contain a comma, a quote or a control character"
-            ),
-        ));
-    }
-    Ok(())
+    super::plain_name_of(name, None, path)
 }
 
 #[cfg(test)]

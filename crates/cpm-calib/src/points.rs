@@ -1,0 +1,247 @@
+//! Point targets: laser-tracker reflectors (SMRs) in nests on the platform, each measured as a
+//! 3-D point in the tracker's frame, with no orientation.
+//!
+//! A point measurement of target `k` at a pose is predicted through the same forward
+//! kinematics as every other observation ([`crate::model::predict`]): the platform reaches
+//! pose `(R, p)`, the target sits at `b = R (t_k + dt_k) + p` in the base frame (`t_k` its
+//! platform position from the description's `[[target]]`, `dt_k` the estimated correction of
+//! [`Effect::TargetPosition`], um), and the tracker of session
+//! `s` reports `y = R_s b + T_s` ([`Effect::PointFrame`]: 6
+//! parameters per session, translation um and rotation vector urad, in the convention of
+//! `tracker_frame`). A file is a session: the readers register each file roughly
+//! ([`rough_frame`]) and apply that registration to its points; the fit refines the rest.
+//!
+//! What point targets see: the targets' platform positions and the session frames come with
+//! the gauge freedoms of the machine: the base joints moved or rotated together with every
+//! session frame (6), the platform joints and every target moved or rotated together in the
+//! platform (6), whatever the number of targets. One target does not see the platform's
+//! orientation at a pose, yet the 36 joint errors move position and orientation together, so
+//! one target leaves no further blind direction: it only knows them less well than three (see
+//! the Cramér-Rao bounds of `tests/points.rs`). `patterns` names these directions for the
+//! identifiability analysis.
+use nalgebra::{DVector, Matrix3, Rotation3, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::effects::{Channel, EffectModel};
+use crate::identifiability::Pattern;
+use crate::{Effect, MeasurementModel};
+
+/// A point target on the platform (`[[target]]`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PointTarget {
+    /// Name in the `target` column of point measurement files.
+    pub name: String,
+    /// Position in the platform frame {P}, mm.
+    pub platform_mm: Vector3<f64>,
+}
+
+const AXES: [&str; 3] = ["x", "y", "z"];
+const FRAME: [&str; 6] = ["tx", "ty", "tz", "rx", "ry", "rz"];
+
+/// `target_position`: each target's platform position, x y z um per target (sized by the
+/// model's [`targets`](MeasurementModel::targets)).
+#[derive(Debug, Clone, Copy)]
+pub struct TargetPosition;
+impl EffectModel for TargetPosition {
+    fn name(&self) -> &str {
+        "target_position"
+    }
+    /// Sized by the model ([`MeasurementModel::blocks`]), not by links and sensors.
+    fn num_params(&self, _: usize, _: usize) -> usize {
+        0
+    }
+    fn param_name(&self, k: usize, _: &[String]) -> String {
+        format!("target {} {}", k / 3 + 1, AXES[k % 3])
+    }
+    fn unit(&self) -> &str {
+        "um"
+    }
+    fn channels(&self) -> &[Channel] {
+        &[]
+    }
+}
+
+/// `point_frame`: the tracker frame of each point-measurement session, tx ty tz um, rx ry rz
+/// urad per session (sized by the model's [`point_sessions`](MeasurementModel::point_sessions)).
+#[derive(Debug, Clone, Copy)]
+pub struct PointFrame;
+impl EffectModel for PointFrame {
+    fn name(&self) -> &str {
+        "point_frame"
+    }
+    /// Sized by the model ([`MeasurementModel::blocks`]), not by links and sensors.
+    fn num_params(&self, _: usize, _: usize) -> usize {
+        0
+    }
+    fn param_name(&self, k: usize, _: &[String]) -> String {
+        format!("session {} {}", k / 6 + 1, FRAME[k % 6])
+    }
+    fn unit(&self) -> &str {
+        "um (translation), urad (rotation)"
+    }
+    fn param_unit(&self, k: usize) -> &str {
+        if k % 6 >= 3 {
+            "urad"
+        } else {
+            "um"
+        }
+    }
+    fn channels(&self) -> &[Channel] {
+        &[]
+    }
+}
+
+/// The name of parameter `k` of an instrument block, with the model's target names.
+pub(crate) fn param_name(model: &MeasurementModel, effect: Effect, k: usize) -> String {
+    match effect {
+        Effect::TargetPosition => match model.targets.get(k / 3) {
+            Some(t) => format!("target `{}` {}", t.name, AXES[k % 3]),
+            None => TargetPosition.param_name(k, &[]),
+        },
+        _ => effect.param_name(k, &[]),
+    }
+}
+
+/// The rigid frame that takes `base` points onto `tracker` points in the least-squares sense
+/// (`tracker ~ R base + t`; Kabsch), or `None` when the points do not fix it (fewer than three,
+/// or all on a line).
+///
+/// ```
+/// use cpm_calib::points::rough_frame;
+/// use nalgebra::{Rotation3, Vector3};
+/// let r = Rotation3::from_euler_angles(0.3, -0.2, 2.0);
+/// let t = Vector3::new(1500.0, -300.0, 80.0);
+/// let base: Vec<_> = [[0.0, 0.0, 0.0], [100.0, 0.0, 5.0], [0.0, 80.0, -3.0], [40.0, 30.0, 90.0]]
+///     .iter().map(|p| Vector3::from(*p)).collect();
+/// let tracker: Vec<_> = base.iter().map(|p| r * p + t).collect();
+/// let (t2, r2) = rough_frame(&base, &tracker).unwrap();
+/// assert!((t2 - t).norm() < 1e-9 && r2.angle_to(&r) < 1e-12);
+/// assert!(rough_frame(&base[..2], &tracker[..2]).is_none());
+/// ```
+pub fn rough_frame(
+    base: &[Vector3<f64>],
+    tracker: &[Vector3<f64>],
+) -> Option<(Vector3<f64>, Rotation3<f64>)> {
+    if base.len() != tracker.len() || base.len() < 3 {
+        return None;
+    }
+    let n = base.len() as f64;
+    let cb = base.iter().sum::<Vector3<f64>>() / n;
+    let ct = tracker.iter().sum::<Vector3<f64>>() / n;
+    let mut h = Matrix3::zeros();
+    for (b, t) in base.iter().zip(tracker) {
+        h += (b - cb) * (t - ct).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    let s = svd.singular_values;
+    let mut order = [s[0], s[1], s[2]];
+    order.sort_by(|a, b| b.total_cmp(a));
+    if !(order[0] > 0.0 && order[1] > 1e-9 * order[0]) {
+        return None;
+    }
+    let v = vt.transpose();
+    let d = (v * u.transpose()).determinant().signum();
+    let r = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    let r = Rotation3::from_matrix_unchecked(r);
+    Some((ct - r * cb, r))
+}
+
+/// The blind directions point targets bring, for [`crate::identifiability`]'s words: the
+/// base joints moved (rotated) together with every session frame, and the platform joints
+/// moved (rotated) together with every target.
+pub(crate) fn patterns(model: &MeasurementModel) -> Vec<Pattern> {
+    let np = model.num_params();
+    let n = model.nominal.num_links();
+    let blocks = model.blocks();
+    let find = |e: Effect| blocks.iter().find(|b| b.effect == Some(e)).copied();
+    let mut out = Vec::new();
+    if let Some(b) = find(Effect::PointFrame) {
+        let sessions = b.len / 6;
+        let trans = (0..3)
+            .map(|a| {
+                let mut v = DVector::zeros(np);
+                for i in 0..n {
+                    v[6 * i + a] = 1.0;
+                }
+                for s in 0..sessions {
+                    v[b.offset + 6 * s + a] = -1.0;
+                }
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description: "all base joints and every session's point frame translated together"
+                .into(),
+            vectors: trans,
+        });
+        let rot = (0..3)
+            .map(|a| {
+                let mut w = Vector3::zeros();
+                w[a] = 1.0;
+                let mut v = DVector::zeros(np);
+                for (i, l) in model.nominal.links.iter().enumerate() {
+                    let d = w.cross(&l.base_mm) * 1e-3;
+                    for c in 0..3 {
+                        v[6 * i + c] = d[c];
+                    }
+                }
+                for s in 0..sessions {
+                    v[b.offset + 6 * s + 3 + a] = -1.0;
+                }
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description:
+                "all base joints and every session's point frame rotated together about the base origin"
+                    .into(),
+            vectors: rot,
+        });
+    }
+    if let Some(b) = find(Effect::TargetPosition) {
+        let trans = (0..3)
+            .map(|a| {
+                let mut v = DVector::zeros(np);
+                for i in 0..n {
+                    v[6 * i + 3 + a] = 1.0;
+                }
+                for k in 0..b.len / 3 {
+                    v[b.offset + 3 * k + a] = 1.0;
+                }
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description: "all platform joints and every target translated together".into(),
+            vectors: trans,
+        });
+        let rot = (0..3)
+            .map(|a| {
+                let mut w = Vector3::zeros();
+                w[a] = 1.0;
+                let mut v = DVector::zeros(np);
+                for (i, l) in model.nominal.links.iter().enumerate() {
+                    let d = w.cross(&l.platform_mm);
+                    for c in 0..3 {
+                        v[6 * i + 3 + c] = d[c];
+                    }
+                }
+                for (k, t) in model.targets.iter().enumerate().take(b.len / 3) {
+                    let d = w.cross(&t.platform_mm);
+                    for c in 0..3 {
+                        v[b.offset + 3 * k + c] = d[c];
+                    }
+                }
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description:
+                "all platform joints and every target rotated together about the platform origin"
+                    .into(),
+            vectors: rot,
+        });
+    }
+    out
+}

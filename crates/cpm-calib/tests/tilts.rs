@@ -1,0 +1,155 @@
+//! Inclinometers: the analytic Jacobian of `asin(up . a_k)` against finite differences, a fit
+//! whose identifiable combinations hold the truth within their deviations, and what tilts
+//! cannot see, named.
+use cpm_calib::model::{predict, Predictions, Prepared};
+use cpm_calib::paper::random_workspace_poses;
+use cpm_calib::tilts::Inclinometer;
+use cpm_calib::*;
+use cpm_geometry::JointTable;
+use nalgebra::{Rotation3, Vector3};
+use rand::{Rng, SeedableRng};
+
+const SIGMA_URAD: f64 = 20.0;
+
+/// The 6-6 hexapod with a two-axis inclinometer (first angle along +y, second along -x),
+/// mounted 2 mrad off its drawing, two sessions, and `effects` plus the instrument's blocks.
+fn model(effects: &[Effect]) -> MeasurementModel {
+    let mut m = MeasurementModel::new(JointTable::hexapod_66());
+    m.inclinometers = vec![Inclinometer {
+        name: "scl3300".into(),
+        axes: vec![Vector3::y(), -Vector3::x()],
+        mount: Rotation3::new(Vector3::new(0.002, -0.001, 0.003)),
+    }];
+    m.tilt_sessions = 2;
+    m.effects = effects.to_vec();
+    m.effects
+        .extend([Effect::InclinometerMount, Effect::BaseTilt]);
+    m
+}
+
+fn skeleton(m: &MeasurementModel, poses: usize) -> Campaign {
+    let mut c = Campaign {
+        poses: random_workspace_poses(&m.nominal, poses, 40.0, 8.0, 4.0, 21),
+        tilt_sigma_urad: SIGMA_URAD,
+        simulated: true,
+        ..Campaign::default()
+    };
+    for j in 0..poses {
+        for axis in 0..2 {
+            c.tilt_measurements.push(TiltMeasurement {
+                pose: j,
+                inclinometer: 0,
+                axis,
+                session: usize::from(j >= poses / 2),
+                angle_mrad: 0.0,
+                time_s: None,
+            });
+        }
+    }
+    c.session_starts = vec![poses / 2];
+    c
+}
+
+fn truth(m: &MeasurementModel) -> Vec<f64> {
+    let mut v: Vec<f64> = (0..m.num_params())
+        .map(|k| 30.0 * ((k as f64) * 0.83).sin())
+        .collect();
+    for b in m.blocks() {
+        if matches!(
+            b.effect,
+            Some(Effect::InclinometerMount) | Some(Effect::BaseTilt)
+        ) {
+            for k in 0..b.len {
+                v[b.offset + k] = 800.0 * ((k as f64) * 1.1 + 0.4).cos();
+            }
+        }
+    }
+    v
+}
+
+#[test]
+fn tilt_jacobian_matches_finite_differences() {
+    let m = model(&[Effect::LinkOffset]);
+    let c = skeleton(&m, 12);
+    let mut problem = Predictions::new(&m, &c).unwrap();
+    // Central differences (cpm-lm's checker), relative step 0.025.
+    let check = cpm_lm::check_jacobian(&mut problem, &truth(&m), 0.025).unwrap();
+    assert!(check.is_consistent(1e-5), "{check}");
+    // The angle is the elevation of the axis: at the home pose, level, zero mount and tilt,
+    // nothing to see; tilted by 10 mrad about x, the +y axis rises by asin(sin 10 mrad).
+    let mut level = m.clone();
+    level.inclinometers[0].mount = Rotation3::identity();
+    level.clearance = cpm_clearance::ClearanceModel::none();
+    let mut c1 = skeleton(&level, 2);
+    c1.poses = vec![level.nominal.home, level.nominal.home];
+    c1.poses[1].rotation = Rotation3::new(Vector3::new(0.01, 0.0, 0.0));
+    let zeros = vec![0.0; level.num_params()];
+    let prepared = Prepared::new(&level, &c1).unwrap();
+    let y = predict(&level, &prepared, &c1, &zeros, None).unwrap();
+    assert!(y[0].abs() < 1e-9 && y[1].abs() < 1e-9, "{y:?}");
+    // Forward kinematics closes on the nominal lengths of the commanded pose (no clearance).
+    assert!((y[2] - 10.0).abs() < 1e-6, "{}", y[2]);
+    assert!(y[3].abs() < 1e-6, "{}", y[3]);
+}
+
+#[test]
+fn tilt_fit_holds_the_truth_within_its_deviations_and_names_the_blind() {
+    let m = model(&[]);
+    let x = truth(&m);
+    let mut c = skeleton(&m, 60);
+    let prepared = Prepared::new(&m, &c).unwrap();
+    let y = predict(&m, &prepared, &c, &x, None).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(4);
+    for (t, y) in c.tilt_measurements.iter_mut().zip(&y) {
+        let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random_range(0.0..1.0));
+        let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+        t.angle_mrad = y + g * SIGMA_URAD * 1e-3;
+    }
+    let options = IdentifyOptions {
+        // The reference noise of the weighting: one tracker position's default (10 um).
+        sigma_um: Some(10.0),
+        ..IdentifyOptions::default()
+    };
+    let cal = identify(&m, &c, &options).unwrap();
+    // Weighted residual: 10 um of reference per 20 urad of tilt noise.
+    assert!(
+        (cal.residual_rms_um - 10.0).abs() < 2.0,
+        "{}",
+        cal.residual_rms_um
+    );
+    let id = &cal.identifiability;
+    // Tilts see orientation only: of 36 + 3 + 4 parameters at most the platform's two tilt
+    // directions' worth of joint combinations, plus the instrument's.
+    assert!(id.rank < 36, "rank {}", id.rank);
+    let mut worst: f64 = 0.0;
+    for (k, comb) in cal.combinations.iter().enumerate() {
+        let v = id.v.column(k);
+        let est: f64 = v.iter().zip(&cal.minimum_norm_um).map(|(a, b)| a * b).sum();
+        let t: f64 = v.iter().zip(&x).map(|(a, b)| a * b).sum();
+        worst = worst.max(((est - t) / comb.std_um).abs());
+    }
+    assert!(
+        worst < 4.5,
+        "worst {worst} sd over {} combinations",
+        id.rank
+    );
+    let words: Vec<&str> = id
+        .blind_directions
+        .iter()
+        .map(|b| b.description.as_str())
+        .collect();
+    let all = words.join("; ");
+    eprintln!(
+        "tilts: rank {} of {}, {} blind named ({all}), {} unexplained",
+        id.rank,
+        m.num_params(),
+        words.len(),
+        id.unexplained_null_dimensions
+    );
+    // Positions are invisible to tilts: every joint translation is blind.
+    assert!(all.contains("all base joints translated together"), "{all}");
+    assert!(
+        all.contains("all platform joints translated together"),
+        "{all}"
+    );
+}
