@@ -1782,3 +1782,86 @@ fn refine_cases_judged_on_the_next_session_and_by_compensation() {
     println!("{}", rows.join("\n"));
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
+
+/// `refine` on the real session, judged as a user would: fitted on its first two thirds
+/// (blocked folds in acquisition order choose the effects), it is not worse than plain
+/// calibration on blocks it did not see, its file reproduces its fit, and on the last third
+/// (held out, the session re-registered) it does not lose to `calibrate`.
+#[test]
+fn refine_on_the_real_session_is_judged_on_data_it_did_not_see() {
+    let dir = scratch("roundtrip", "jugglebot-refine");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot");
+    let text = std::fs::read_to_string(src.join("session_108.csv")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let (header, rows) = (lines[0], &lines[1..]);
+    let write = |name: &str, part: &[&str]| {
+        let path = dir.join(name);
+        std::fs::write(&path, format!("{header}\n{}\n", part.join("\n"))).unwrap();
+        path
+    };
+    let (first, last) = (
+        write("first.csv", &rows[..72]),
+        write("last.csv", &rows[72..]),
+    );
+    let robot = p(&src.join("robot.toml"));
+    let base = "link_offset,link_scale,tracker_frame";
+    let cal = dir.join("cal");
+    calibrate(&cal, &robot, &first, base, &[]);
+    let out = dir.join("refined");
+    ok(&[
+        "refine",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&first),
+        "--effects",
+        base,
+        "--out",
+        &p(&out),
+    ]);
+    let r = read_json(&out.join("refine.json"));
+    let steps: Vec<String> = r["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| {
+            format!(
+                "{} ({:.1} -> {:.1} um)",
+                s["effect"].as_str().unwrap(),
+                s["cv_rms_before_um"].as_f64().unwrap(),
+                s["cv_rms_after_um"].as_f64().unwrap()
+            )
+        })
+        .collect();
+    let against = &r["against_calibrate"];
+    let (cv_cal, cv_ref) = (
+        against["calibrate_cv_rms_um"].as_f64().unwrap(),
+        against["refined_cv_rms_um"].as_f64().unwrap(),
+    );
+    assert!(cv_ref <= cv_cal, "{against}");
+    // The file is the fit.
+    let fit = r["final"]["rms_um"].as_f64().unwrap();
+    let file = weighted_rms_um(&validate(&out.join("calibrated.toml"), &first));
+    assert!(
+        (fit - file).abs() <= 1e-9 * fit,
+        "refine fit {fit} um, calibrated.toml {file} um"
+    );
+    // The last third, which neither fit saw.
+    let held_ref = validate(&out.join("calibrated.toml"), &last);
+    let held_cal = validate(&cal.join("calibrated.toml"), &last);
+    let get = |v: &serde_json::Value, who: &str, key: &str| v[who][key].as_f64().unwrap();
+    println!(
+        "real session, rows 1-72: refine steps {steps:?}; blocked CV {cv_cal:.1} um (calibrate) -> {cv_ref:.1} um (refine); fit {fit:.1} um = file {file:.1} um\nrows 73-108 held out: nominal {:.1} um / link {:.3} mm, calibrate {:.1} um / link {:.3} mm, refine {:.1} um / link {:.3} mm",
+        get(&held_ref, "reference", "rms_um"),
+        get(&held_ref, "reference", "link_rms_mm"),
+        get(&held_cal, "calibrated", "rms_um"),
+        get(&held_cal, "calibrated", "link_rms_mm"),
+        get(&held_ref, "calibrated", "rms_um"),
+        get(&held_ref, "calibrated", "link_rms_mm"),
+    );
+    assert!(get(&held_ref, "calibrated", "rms_um") < 0.5 * get(&held_ref, "reference", "rms_um"));
+    assert!(
+        get(&held_ref, "calibrated", "rms_um") <= 1.05 * get(&held_cal, "calibrated", "rms_um"),
+        "refine loses to calibrate on the held-out third"
+    );
+}
