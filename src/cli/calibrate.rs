@@ -74,6 +74,13 @@ pub struct FitArgs {
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Weigh each kind of observation whose noise is not declared (the gauges, tracker
+    /// positions, tracker orientations, point targets, inclinometer angles) by the noise its
+    /// own residual shows, estimated per kind and never pooled (variance components,
+    /// iterated; cpm_calib::noise). The estimates are written to calibrated.toml's
+    /// `[calibration]` for the tracker kinds.
+    #[arg(long)]
+    pub noise_per_kind: bool,
 }
 
 impl FitArgs {
@@ -92,6 +99,37 @@ impl FitArgs {
             self.robust.as_deref(),
             self.max_iterations,
         )?;
+        if self.noise_per_kind {
+            ctx.stage("estimating the noise of each kind of observation");
+            let campaign = &inputs.merged.campaign;
+            let declared = crate::calib::noise::Declared::of(campaign, &inputs.identify);
+            let r =
+                crate::calib::noise::reweigh(&inputs.model, campaign, &inputs.identify, declared)
+                    .map_err(|e| common::locate(e, &inputs.merged))?;
+            let list: Vec<String> = r
+                .kinds
+                .iter()
+                .map(|k| {
+                    format!(
+                        "{} {:.3} {}",
+                        k.name,
+                        k.estimated.unwrap_or(k.assumed),
+                        k.unit
+                    )
+                })
+                .collect();
+            ctx.note(format!(
+                "noise per kind of observation ({} fits): {}",
+                r.fits,
+                list.join(", ")
+            ));
+            let c = &mut inputs.merged.campaign;
+            c.pose_sigma_um = r.campaign.pose_sigma_um;
+            c.orientation_sigma_urad = r.campaign.orientation_sigma_urad;
+            c.point_sigma_um = r.campaign.point_sigma_um;
+            c.tilt_sigma_urad = r.campaign.tilt_sigma_urad;
+            inputs.identify.sigma_um = r.options.sigma_um;
+        }
         Ok(inputs)
     }
 }

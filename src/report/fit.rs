@@ -310,6 +310,50 @@ pub struct FitText {
     pub sigma_excludes_outliers_note: bool,
 }
 
+/// The noise of one kind of observation (`calibration.json` `noise_by_kind`).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct NoiseKindReport {
+    /// The kind, in words: `gauge s1`, `tracker positions`, `tracker orientations`, `point
+    /// targets`, `inclinometer angles`.
+    pub kind: String,
+    /// The unit of the noise (`um` or `urad`).
+    pub unit: String,
+    /// Number of observations.
+    pub observations: usize,
+    /// Its share of the residual degrees of freedom (the sum of its redundancy numbers).
+    pub degrees_of_freedom: f64,
+    /// The noise the fit weighed it with.
+    pub assumed: f64,
+    /// The noise its residual says (`null` below one degree of freedom).
+    pub estimated: Option<f64>,
+}
+
+/// The warning when a kind of observation's residual says a noise more than 3 times above or
+/// below the one the fit weighed it with (at least 10 degrees of freedom).
+pub fn noise_warning(kinds: &[crate::calib::noise::KindNoise]) -> Option<String> {
+    let off = crate::calib::noise::mismatched(kinds, 3.0);
+    if off.is_empty() || kinds.len() < 2 {
+        return None;
+    }
+    let list: Vec<String> = off
+        .iter()
+        .map(|k| {
+            format!(
+                "{} {} {} (weighed as {} {})",
+                k.name,
+                sig(k.estimated.unwrap_or(f64::NAN), 3),
+                k.unit,
+                sig(k.assumed, 3),
+                k.unit
+            )
+        })
+        .collect();
+    Some(format!(
+        "**Noise not as weighed**: the residual of each kind of observation says {}; the kinds are weighed against each other wrongly, and the standard deviations with them. Declare the noise (`--sigma-um`, `--pose-sigma-um`, `--orientation-sigma-urad`, or `[calibration]` of the description) or let `--noise-per-kind` estimate it.",
+        list.join(", ")
+    ))
+}
+
 /// The report of one fit: `calibration.json` when serialised, the fit sections of report.md
 /// through [`FitReport::markdown_sections`].
 #[derive(Debug, Clone, Serialize, PartialEq, Default)]
@@ -368,6 +412,9 @@ pub struct FitReport {
     pub registration: Option<RegistrationSummary>,
     /// The chi-square test against the declared noise (`null` when estimated).
     pub misfit: Option<MisfitReport>,
+    /// The noise of each kind of observation: assumed by the fit, and what its own residual
+    /// says (cpm_calib::noise).
+    pub noise_by_kind: Vec<NoiseKindReport>,
     /// The warnings, plain text.
     pub warnings: Vec<String>,
     /// What only the text says.
@@ -547,7 +594,9 @@ impl FitReport {
                 .inconsistent()
                 .then(|| misfit_message(&m).replace("**", "")),
         });
-        let warnings_md = warnings(model, cal);
+        let kinds = crate::calib::noise::by_kind(model, campaign, cal);
+        let mut warnings_md = warnings(model, cal);
+        warnings_md.extend(noise_warning(&kinds));
         let calibrate = formulation.is_some();
         Self {
             cpm_version: env!("CARGO_PKG_VERSION").to_string(),
@@ -599,6 +648,17 @@ impl FitReport {
             outliers,
             registration,
             misfit,
+            noise_by_kind: kinds
+                .iter()
+                .map(|k| NoiseKindReport {
+                    kind: k.name.clone(),
+                    unit: k.unit.clone(),
+                    observations: k.observations,
+                    degrees_of_freedom: k.redundancy,
+                    assumed: k.assumed,
+                    estimated: k.estimated,
+                })
+                .collect(),
             warnings: warnings_md.iter().map(|w| w.replace("**", "")).collect(),
             text: FitText {
                 robot_file: inputs.robot.file.clone(),
@@ -678,6 +738,26 @@ impl FitReport {
                 short(self.sigma_um)
             }
         ));
+        if self.noise_by_kind.len() > 1 {
+            let list: Vec<String> = self
+                .noise_by_kind
+                .iter()
+                .map(|k| {
+                    format!(
+                        "{} {} -> {} {} ({} degrees of freedom)",
+                        k.kind,
+                        sig(k.assumed, 3),
+                        k.estimated.map_or("n/a".to_string(), |e| sig(e, 3)),
+                        k.unit,
+                        fixed(k.degrees_of_freedom, 1)
+                    )
+                })
+                .collect();
+            s.push_str(&format!(
+                "- Noise per kind of observation, weighed as -> from its own residual: {}.\n",
+                list.join("; ")
+            ));
+        }
         s.push_str(&format!(
             "- Solver: {}{}.\n\n",
             self.solver.summary,

@@ -83,6 +83,12 @@ pub struct Calibration {
     /// [`MAX_DOWNWEIGHTED_SHARE`] of the observations down-weighted): the fit has failed
     /// whatever the solver says; [`Calibration::robust_failure`] says why.
     pub robust_failed: bool,
+    /// The noise, um, that every residual is weighted to (tracker and instrument residuals
+    /// are scaled by `sigma_ref_um` over their own noise; readings by 1).
+    pub sigma_ref_um: f64,
+    /// The leverage of each observation (diagonal of the hat matrix of the weighted
+    /// Jacobian in the identifiable subspace, [`crate::noise`]); empty when not computed.
+    pub leverages: Vec<f64>,
 }
 
 /// The weight `rho'(r^2)` below which a robust loss is said to down-weight an observation.
@@ -380,6 +386,7 @@ pub fn identify(
         }
     };
     let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
+    let leverages = crate::noise::leverages(&jf, &ident);
     // Blind directions are named at the start (the nominal geometry, where the physical
     // patterns are exact); at the solution the errors tilt them by a few microradians.
     ident.blind_directions = first.blind_directions.clone();
@@ -419,6 +426,8 @@ pub fn identify(
         solver,
         downweighted_share,
         robust_failed: downweighted_share > MAX_DOWNWEIGHTED_SHARE,
+        sigma_ref_um: sigma_ref,
+        leverages,
     })
 }
 

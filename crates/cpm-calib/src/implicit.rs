@@ -697,5 +697,8 @@ pub fn identify_implicit_calibration(
         residual_rms_um: imp.reading_rms_um,
         residuals_um: imp.reading_residuals_um,
         solver: imp.solver,
+        // Readings only, weighted by 1: their own noise.
+        sigma_ref_um: sigma_um,
+        leverages: Vec::new(),
     })
 }

@@ -73,6 +73,7 @@ pub mod implicit;
 pub mod linalg;
 pub mod misfit;
 pub mod model;
+pub mod noise;
 pub mod paper;
 pub mod points;
 pub mod refine;

@@ -344,3 +344,86 @@ fn a_far_tracker_frame_refined_in_the_fit_keeps_the_deviations_honest() {
     // What `cpm calibrate` warns of when the frame is held (FRAME_HELD_FIXED).
     assert!(rms(&held) > 3.0, "held z RMS {}", rms(&held));
 }
+
+/// Noise estimated per kind of observation, never pooled: tracker positions at 2 um and
+/// orientations at 300 urad, neither declared (the defaults weigh them as 10 um and 20 urad).
+/// `noise::reweigh` finds each within 15 % on every seed, the deviations of the errors it
+/// determines are honest (pooled z-scores of RMS about 1), and the errors are nearer the truth
+/// than weighed by the defaults, where the orientations swamp the positions.
+#[test]
+fn noise_is_estimated_per_kind_and_makes_the_deviations_honest() {
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let m = model();
+    let (mut z_default, mut z_per_kind) = (Vec::new(), Vec::new());
+    let (mut off_default, mut off_per_kind) = (Vec::new(), Vec::new());
+    let mut worst_ratio = 1.0_f64;
+    let mut ratios = [Vec::new(), Vec::new()];
+    for seed in 0..20 {
+        let mut c = tracker_campaign(&Truth::default(), 60, 900 + seed, 300.0);
+        c.pose_sigma_um = 0.0;
+        c.orientation_sigma_urad = 0.0;
+        let options = IdentifyOptions::default();
+        let z = |cal: &Calibration, out: &mut Vec<f64>, off: &mut Vec<f64>| {
+            for k in 0..36 {
+                if let (Some(e), Some(sd)) = (cal.estimate_um[k], cal.std_um[k]) {
+                    out.push((e - truth[k]) / sd);
+                    off.push(e - truth[k]);
+                }
+            }
+        };
+        let plain = identify(&m, &c, &options).unwrap();
+        z(&plain, &mut z_default, &mut off_default);
+        let declared = noise::Declared::of(&c, &options);
+        let r = noise::reweigh(&m, &c, &options, declared).unwrap();
+        z(&r.calibration, &mut z_per_kind, &mut off_per_kind);
+        let get = |kind: noise::Kind| {
+            r.kinds
+                .iter()
+                .find(|k| k.kind == kind)
+                .and_then(|k| k.estimated)
+                .unwrap()
+        };
+        for (i, (estimate, true_sigma)) in [
+            (get(noise::Kind::TrackerPositions), POSE_SIGMA_UM),
+            (get(noise::Kind::TrackerOrientations), 300.0),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let ratio = estimate / true_sigma;
+            ratios[i].push(ratio);
+            worst_ratio = if (ratio - 1.0).abs() > (worst_ratio - 1.0).abs() {
+                ratio
+            } else {
+                worst_ratio
+            };
+        }
+        assert!(
+            r.fits > 1 && r.fits < noise::MAX_REWEIGH_FITS,
+            "{} fits",
+            r.fits
+        );
+        assert_eq!(r.campaign.pose_sigma_um, r.calibration.sigma_ref_um);
+    }
+    let rms = |z: &[f64]| (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let (mean_positions, mean_orientations) = (mean(&ratios[0]), mean(&ratios[1]));
+    eprintln!(
+        "noise per kind, 20 seeds: estimate/true mean {mean_positions:.3} (positions), {mean_orientations:.3} (orientations), worst {worst_ratio:.3}; weighed by the defaults: errors {:.2} um RMS off the truth, z RMS {:.2}; per kind: {:.2} um, z RMS {:.2}",
+        rms(&off_default),
+        rms(&z_default),
+        rms(&off_per_kind),
+        rms(&z_per_kind)
+    );
+    assert!(rms(&off_per_kind) < rms(&off_default));
+    assert!(
+        (worst_ratio - 1.0).abs() < 0.15,
+        "worst ratio {worst_ratio}"
+    );
+    assert!((mean_positions - 1.0).abs() < 0.05 && (mean_orientations - 1.0).abs() < 0.05);
+    assert!(
+        (0.75..1.3).contains(&rms(&z_per_kind)),
+        "{}",
+        rms(&z_per_kind)
+    );
+}

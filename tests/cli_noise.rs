@@ -1,0 +1,139 @@
+//! Noise per kind of observation, end to end: a simulated tracker whose orientations are 250
+//! times noisier than its positions (neither declared) makes `cpm calibrate` warn that the
+//! kinds are weighed wrongly; `--noise-per-kind` estimates each kind's noise from its own
+//! residual, writes it to calibrated.toml, and `validate` of that file reproduces the fit. A
+//! gauge file beside the tracker file gets its own noise too. All data simulated.
+#[path = "common/cli.rs"]
+mod cli;
+
+use std::path::Path;
+
+use cli::{calibrate_json, example, ok, p, scratch, validate_json};
+
+fn simulate(out: &Path, measure: &str, noise_um: f64, extra: &[&str]) {
+    let mut args = vec![
+        "simulate".to_string(),
+        "--robot".into(),
+        example("hexapod_66.toml"),
+        "--random".into(),
+        "80".into(),
+        "--truth".into(),
+        example("hexapod_66_truth.toml"),
+        "--measure".into(),
+        measure.into(),
+        "--noise".into(),
+        format!("gaussian:{noise_um}"),
+        "--seed".into(),
+        "3".into(),
+        "--out".into(),
+        p(out),
+    ];
+    args.extend(extra.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    ok(&args);
+}
+
+fn kind<'a>(cal: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    cal["noise_by_kind"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|k| k["kind"] == name)
+        .unwrap_or_else(|| panic!("no {name} in {}", cal["noise_by_kind"]))
+}
+
+fn warned(cal: &serde_json::Value) -> bool {
+    cal["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().starts_with("Noise not as weighed"))
+}
+
+#[test]
+fn noise_per_kind_is_estimated_written_and_read_back() {
+    let dir = scratch("noise", "tracker");
+    let tracker = dir.join("tracker.csv");
+    simulate(&tracker, "poses", 2.0, &["--orientation-noise-urad", "500"]);
+    let robot = Path::new(&example("hexapod_66.toml")).to_path_buf();
+    // Weighed by the defaults (10 um, 20 urad): said, and the positions' residual is far
+    // above their noise.
+    let plain = calibrate_json(&robot, &[&tracker], &[], &dir.join("plain"));
+    assert!(warned(&plain), "{}", plain["warnings"]);
+    let pos_plain = kind(&plain, "tracker positions")["estimated"]
+        .as_f64()
+        .unwrap();
+    // Estimated per kind.
+    let cal = calibrate_json(
+        &robot,
+        &[&tracker],
+        &["--noise-per-kind"],
+        &dir.join("per-kind"),
+    );
+    assert!(!warned(&cal), "{}", cal["warnings"]);
+    let pos = kind(&cal, "tracker positions")["estimated"]
+        .as_f64()
+        .unwrap();
+    let rot = kind(&cal, "tracker orientations")["estimated"]
+        .as_f64()
+        .unwrap();
+    println!(
+        "tracker 2 um / 500 urad simulated: positions {pos_plain:.2} um from the residual weighed by the defaults; per kind {pos:.3} um and {rot:.1} urad"
+    );
+    assert!((pos / 2.0 - 1.0).abs() < 0.15, "{pos}");
+    assert!((rot / 500.0 - 1.0).abs() < 0.15, "{rot}");
+    assert!(pos_plain > 5.0, "{pos_plain}");
+    // The file carries the weights, and validate reproduces the fit with them.
+    let desc = cpm::geometry::RobotDescription::load(dir.join("per-kind/calibrated.toml")).unwrap();
+    let c = desc.calibration.unwrap();
+    let (ws, wr) = (
+        c.tracker_position_sigma_um.unwrap(),
+        c.tracker_orientation_sigma_urad.unwrap(),
+    );
+    let same = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b;
+    let assumed = |name: &str| kind(&cal, name)["assumed"].as_f64().unwrap();
+    assert!(same(ws, assumed("tracker positions")), "{ws}");
+    assert!(same(wr, assumed("tracker orientations")), "{wr}");
+    let v = validate_json(&dir.join("per-kind/calibrated.toml"), &[&tracker]);
+    let (vp, vr) = (
+        v["calibrated"]["rms_um"].as_f64().unwrap(),
+        v["calibrated"]["orientation_rms_urad"].as_f64().unwrap(),
+    );
+    let file = ((vp * vp + (ws / wr * vr).powi(2)) / 2.0).sqrt();
+    let fit = cal["residual_rms_um"].as_f64().unwrap();
+    assert!(
+        (file - fit).abs() <= 1e-9 * fit,
+        "fit {fit} um, file {file} um"
+    );
+}
+
+#[test]
+fn a_gauge_beside_a_tracker_gets_its_own_noise() {
+    let dir = scratch("noise", "mixed");
+    let (tracker, gauge) = (dir.join("tracker.csv"), dir.join("gauge.csv"));
+    simulate(&tracker, "poses", 20.0, &["--orientation-noise-urad", "40"]);
+    simulate(&gauge, "lengths", 1.0, &[]);
+    let robot = Path::new(&example("hexapod_66.toml")).to_path_buf();
+    let cal = calibrate_json(
+        &robot,
+        &[&gauge, &tracker],
+        &["--noise-per-kind"],
+        &dir.join("cal"),
+    );
+    let kinds = cal["noise_by_kind"].as_array().unwrap();
+    let gauges: Vec<f64> = kinds
+        .iter()
+        .filter(|k| k["kind"].as_str().unwrap().starts_with("gauge"))
+        .map(|k| k["estimated"].as_f64().unwrap())
+        .collect();
+    let pos = kind(&cal, "tracker positions")["estimated"]
+        .as_f64()
+        .unwrap();
+    println!("gauge 1 um beside a tracker at 20 um: gauges {gauges:.3?} um, tracker positions {pos:.2} um");
+    assert_eq!(gauges.len(), 3);
+    for g in &gauges {
+        assert!((g - 1.0).abs() < 0.25, "{gauges:?}");
+    }
+    assert!((pos / 20.0 - 1.0).abs() < 0.15, "{pos}");
+    assert!(!warned(&cal), "{}", cal["warnings"]);
+}
