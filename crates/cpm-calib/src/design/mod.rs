@@ -16,6 +16,8 @@
 //!   clearance, joint cone angles) and the exact distance between axes;
 //! - [`setups`]: design under those limits: setups (socket pair + bar), the poses each drives,
 //!   a setup sheet ([`design_setups`]);
+//! - [`instruments`]: campaigns for a 6-D tracker, point targets, inclinometers or a mix: their
+//!   bounds at each instrument's noise and the poses that identify most;
 //! - [`design()`]: all of it together: sockets and poses jointly, for a reading budget, with the
 //!   files a user drives the machine with ([`Design::poses_csv`], [`Design::sockets_csv`],
 //!   [`Design::sensors_toml`]).
@@ -46,6 +48,7 @@
 //! ```
 pub mod candidates;
 pub mod indices;
+pub mod instruments;
 pub mod limits;
 pub mod monte_carlo;
 pub mod select;
