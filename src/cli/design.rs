@@ -129,6 +129,13 @@ pub struct DesignArgs {
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
+    /// Choose the poses for these instruments instead of designing gauge sockets: a
+    /// comma-separated mix of `gauges` (the description's [[sensor]]s), `tracker` (6-D poses),
+    /// `points` (every [[target]]) and `tilts` (every [[inclinometer]]). --readings is then
+    /// the budget of scalar observations; writes poses.csv, design.json and report.md with the
+    /// Cramér-Rao bounds of the mix and of each instrument alone.
+    #[arg(long, value_name = "LIST")]
+    pub instruments: Option<String>,
 }
 
 /// The most candidate sockets a `--sockets` file may list.
@@ -316,6 +323,13 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     ctx.stage("reading the robot description");
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     common::require_six_links(&robot)?;
+    if let Some(list) = &args.instruments {
+        let sigma = match args.sigma_um {
+            Some(s) => common::sigma(Some(s), &robot)?.unwrap_or(1.0),
+            None => robot.sensor_noise_um().unwrap_or(1.0),
+        };
+        return super::design_instruments::run(args, list, &robot, sigma, ctx);
+    }
     let sockets = match &args.sockets {
         Some(p) => read_sockets_from(io::campaign::open(p)?, &p.display().to_string())?,
         None => sockets_of(&robot),
