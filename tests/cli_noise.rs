@@ -137,3 +137,54 @@ fn a_gauge_beside_a_tracker_gets_its_own_noise() {
     assert!((pos / 20.0 - 1.0).abs() < 0.15, "{pos}");
     assert!(!warned(&cal), "{}", cal["warnings"]);
 }
+
+/// Reflectors and an inclinometer (points at 10 um, angles at 50 urad, neither declared: the
+/// defaults weigh the angles as 20 urad): each kind's noise is found, and the file written
+/// with those weights passes calibrate's own read-back check (the angles weighed as angles,
+/// not as tracker orientations).
+#[test]
+fn points_and_tilts_get_their_own_noise() {
+    let dir = scratch("noise", "points-tilts");
+    let mut robot = std::fs::read_to_string(example("hexapod_66.toml")).unwrap();
+    let instruments = "\n[[target]]\nname = \"smr1\"\nplatform_mm = [90.0, 10.0, 30.0]\n\n[[target]]\nname = \"smr2\"\nplatform_mm = [-50.0, 80.0, 30.0]\n\n[[inclinometer]]\nname = \"scl3300\"\naxes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]\n";
+    robot.push_str(instruments);
+    let truth = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap() + instruments;
+    let (r, t) = (dir.join("robot.toml"), dir.join("truth.toml"));
+    std::fs::write(&r, robot).unwrap();
+    std::fs::write(&t, truth).unwrap();
+    let (points, tilts) = (dir.join("points.csv"), dir.join("tilts.csv"));
+    for (file, measure, noise, seed) in [(&points, "points", 10, "1"), (&tilts, "tilts", 50, "2")] {
+        ok(&[
+            "simulate",
+            "--robot",
+            &p(&r),
+            "--truth",
+            &p(&t),
+            "--random",
+            "60",
+            "--measure",
+            measure,
+            "--noise",
+            &format!("gaussian:{noise}"),
+            "--seed",
+            seed,
+            "--out",
+            &p(file),
+        ]);
+    }
+    let cal = calibrate_json(
+        &r,
+        &[&points, &tilts],
+        &["--effects", "none", "--noise-per-kind"],
+        &dir.join("cal"),
+    );
+    let (pt, an) = (
+        kind(&cal, "point targets")["estimated"].as_f64().unwrap(),
+        kind(&cal, "inclinometer angles")["estimated"]
+            .as_f64()
+            .unwrap(),
+    );
+    println!("points 10 um, angles 50 urad simulated: estimated {pt:.2} um, {an:.1} urad");
+    assert!((pt / 10.0 - 1.0).abs() < 0.15, "{pt}");
+    assert!((an / 50.0 - 1.0).abs() < 0.15, "{an}");
+}

@@ -924,10 +924,16 @@ pub fn file_reproduces_fit(
             1.0
         };
         sum += g.values_um.iter().map(|v| (w * v).powi(2)).sum::<f64>();
+        // Orientations are a tracker's or, in a tilt file, an inclinometer's angles.
+        let wo = if name.ends_with("(tilts)") {
+            sigma_ref / campaign.tilt_sigma()
+        } else {
+            wr
+        };
         sum += g
             .orientation_urad
             .iter()
-            .map(|v| (wr * v).powi(2))
+            .map(|v| (wo * v).powi(2))
             .sum::<f64>();
         n += g.values_um.len() + g.orientation_urad.len();
     }
