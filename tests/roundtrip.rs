@@ -456,8 +456,20 @@ fn round_trip_matrix(kind: Kind) -> Vec<String> {
                 wp,
                 wr,
             );
+            // Every prediction: the fit's residuals against validate's, observation by
+            // observation (file, line, what): a gauge reading to 1e-9 mm (1e-6 um); a tracker
+            // row, whose session frame validate fits afresh (converged to about 1e-11 rad), to
+            // 1e-7 mm or 1e-10 rad (1e-4 um or urad).
+            let (worst, worst_tracker) = worst_residual_difference(
+                &out.join("residuals.csv"),
+                &validate_residuals(
+                    &out.join("calibrated.toml"),
+                    &files,
+                    &dir.join(format!("{command}-validation")),
+                ),
+            );
             rows.push(format!(
-                "| {} | {name} | {command} | {model} | {fit:.4} | {file:.4} | {:.1e} |",
+                "| {} | {name} | {command} | {model} | {fit:.4} | {file:.4} | {:.1e} | {worst:.1e} | {worst_tracker:.1e} |",
                 kind.name(),
                 (fit - file).abs()
             ));
@@ -466,14 +478,66 @@ fn round_trip_matrix(kind: Kind) -> Vec<String> {
                 "{} / {name} / {command}: fit {fit} um, calibrated.toml {file} um",
                 kind.name()
             );
+            assert!(
+                worst <= 1e-6 && worst_tracker <= 1e-4,
+                "{} / {name} / {command}: a prediction of calibrated.toml differs from the fit's by {worst} um (gauge), {worst_tracker} um or urad (tracker)",
+                kind.name()
+            );
         }
     }
     rows
 }
 
+/// `cpm validate --out` of `robot` on `files`: its `residuals.csv`.
+fn validate_residuals(
+    robot: &Path,
+    files: &[std::path::PathBuf],
+    out: &Path,
+) -> std::path::PathBuf {
+    let mut args = vec!["validate".to_string(), "--robot".into(), p(robot)];
+    for f in files {
+        args.extend(["--data".into(), p(f)]);
+    }
+    args.extend(["--out".into(), p(out)]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    ok(&args);
+    out.join("residuals.csv")
+}
+
+/// The largest differences between two `residuals.csv` files observation by observation,
+/// which must name the same observations (file, line, what, unit) in the same order: of the
+/// gauge readings, and of the tracker rows (whose session frame `validate` fits afresh).
+fn worst_residual_difference(a: &Path, b: &Path) -> (f64, f64) {
+    let rows = |path: &Path| -> Vec<(String, f64)> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let (key, value) = l.rsplit_once(',').unwrap();
+                let key = key.split_once(',').unwrap().1.to_string();
+                (key, value.parse::<f64>().unwrap())
+            })
+            .collect()
+    };
+    let (ra, rb) = (rows(a), rows(b));
+    assert_eq!(ra.len(), rb.len(), "{} and {}", a.display(), b.display());
+    let (mut gauge, mut tracker) = (0.0_f64, 0.0_f64);
+    for ((ka, va), (kb, vb)) in ra.iter().zip(&rb) {
+        assert_eq!(ka, kb, "{} and {}", a.display(), b.display());
+        let d = (va - vb).abs();
+        if ka.contains("\"sensor ") {
+            gauge = gauge.max(d);
+        } else {
+            tracker = tracker.max(d);
+        }
+    }
+    (gauge, tracker)
+}
+
 fn print_matrix(rows: &[String]) {
-    println!("| data | effect | command | model fitted | fit RMS um | file RMS um | difference |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| data | effect | command | model fitted | fit RMS um | file RMS um | difference | worst gauge prediction difference um | worst tracker one um/urad |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     println!("{}", rows.join("\n"));
 }
 

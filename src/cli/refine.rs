@@ -102,6 +102,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let mut fit = FitReport::new(&inputs, &r.model, cal, None);
     calibrate::add_session_warnings(&mut fit, &inputs, &r.model)?;
     set.add(dir.join("calibration.json"), fit.to_json()?);
+    calibrate::stage_residuals(&mut set, dir, &inputs, cal);
     let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;
     set.add(
         dir.join("residuals_before_after.svg"),

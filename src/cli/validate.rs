@@ -176,6 +176,9 @@ struct RobotErrors {
     outside_pose_map: usize,
     /// Tracker poses.
     tracker_poses: usize,
+    /// `residuals.csv`: every observation of every file, measured minus predicted in its own
+    /// unit, with its file, line and what it is (as `calibrate` writes it).
+    residuals_csv: String,
 }
 
 /// The readings a controller sent for a file without logged link readings: its own inverse
@@ -247,8 +250,11 @@ fn errors_of(
         }) => Some(crate::calib::refine::PoseRange { min, max }),
         _ => None,
     };
+    let mut residual_rows: Vec<String> = Vec::new();
     for path in paths {
         let mut file = crate::io::read_data_file(path, robot, &options)?;
+        // Where each observation comes from, as the file was read.
+        let origins = crate::io::merge(vec![file.clone()], robot);
         if file.kind == FileKind::Poses {
             return Err(super::usage_error(format!(
                 "{}: a pose list has no measurements to validate against",
@@ -327,6 +333,13 @@ fn errors_of(
             (s.predicted, Some(s.frame))
         };
         let observed = campaign.observations();
+        let native: Vec<f64> = observed
+            .iter()
+            .zip(&predicted)
+            .map(|(o, p)| (o - p) * 1e3)
+            .collect();
+        let csv = super::calibrate::residuals_csv(robot, &origins, &native);
+        residual_rows.extend(csv.lines().skip(1).map(str::to_string));
         for (k, r) in campaign.readings.iter().enumerate() {
             let name = robot.table.sensors[r.sensor].name.clone();
             let g = group_of(name, &mut out);
@@ -403,6 +416,12 @@ fn errors_of(
                 }
             }
         }
+    }
+    // One numbering over the files, in the order given.
+    out.residuals_csv = String::from("observation,file,line,what,unit,residual\n");
+    for (k, row) in residual_rows.iter().enumerate() {
+        let rest = row.split_once(',').map_or("", |(_, r)| r);
+        out.residuals_csv.push_str(&format!("{},{rest}\n", k + 1));
     }
     Ok(out)
 }
@@ -843,6 +862,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         );
         set.add(dir.join("validation.md"), md.clone());
         set.add(dir.join("validation.svg"), svg);
+        set.add(dir.join("residuals.csv"), cal_errors.residuals_csv.clone());
         written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }
     if args.json {

@@ -1582,9 +1582,29 @@ pub struct Merged {
     pub tilt_origin: Vec<(String, usize)>,
     /// The automatic registration of the tracker files, if any.
     pub registration: Option<RegistrationReport>,
+    /// Per point file: (file, the rough frame its reader applied, `p_tracker = R p_base + t`).
+    pub point_frames: Vec<(String, Pose)>,
 }
 
 impl Merged {
+    /// The rotation from the campaign's base axes to the tracker's own axes of the file
+    /// `file` (the rough registration its reader applied to its tracker poses or points), or
+    /// `None` when its measurements were taken as they are.
+    pub fn tracker_axes(&self, file: &str) -> Option<cpm_geometry::Rotation3<f64>> {
+        let tracker = self.registration.as_ref().and_then(|r| {
+            r.sessions
+                .iter()
+                .find(|s| s.file == file && s.applied)
+                .map(|s| s.frame.rotation)
+        });
+        tracker.or_else(|| {
+            self.point_frames
+                .iter()
+                .find(|(f, _)| f == file)
+                .map(|(_, p)| p.rotation)
+        })
+    }
+
     /// `file:line` of a campaign pose, for messages.
     pub fn pose_location(&self, pose: usize) -> Option<String> {
         self.pose_origin
@@ -1608,6 +1628,10 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
     let mut tilt_origin = Vec::new();
     let mut tilt_sessions = 0;
     let mut registration: Option<RegistrationReport> = None;
+    let point_frames: Vec<(String, Pose)> = files
+        .iter()
+        .filter_map(|f| f.point_frame.map(|p| (f.file.clone(), p)))
+        .collect();
     // Each point file is a session with its own frame.
     let mut point_sessions = 0;
     for f in files {
@@ -1694,6 +1718,7 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
         point_origin,
         tilt_origin,
         registration,
+        point_frames,
     }
 }
 
