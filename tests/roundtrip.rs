@@ -396,6 +396,15 @@ fn round_trip_matrix(kind: Kind) -> Vec<String> {
             "{} / {name}: the truth misses its own simulation by {worst} um, {worst_rot} urad",
             kind.name()
         );
+        // And the link lengths it needs for the poses it reached are the ones it was sent
+        // (a pose map's move taken out before inverse kinematics).
+        if let Some(link) = v["calibrated"]["link_rms_mm"].as_f64() {
+            assert!(
+                link < 1e-9,
+                "{} / {name}: the truth's link lengths miss by {link} mm",
+                kind.name()
+            );
+        }
         let base = if kind.tracker() {
             "tracker_frame"
         } else {

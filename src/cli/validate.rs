@@ -401,6 +401,14 @@ fn errors_of(
                 );
                 if let Some(c) = commanded {
                     let j = pm.pose;
+                    // A pose map moves the platform after forward kinematics: the lengths are
+                    // those of the pose before it.
+                    let map = model.known_pose_twist(
+                        &prepared.contexts[j],
+                        &campaign.poses[j],
+                        prepared.t0_s,
+                    );
+                    let base = base.perturbed(&-map);
                     let needed = crate::kinematics::ik::inverse_lengths(&robot.table, &base);
                     for i in 0..needed.len() {
                         let shift = prepared.lengths_mm[j][i] - c[j][i];
