@@ -195,3 +195,46 @@ fn status_lines_go_to_stderr_when_stdout_carries_data() {
     assert_eq!(out, format!("wrote {ini}\nwrote {hal}\n"));
     assert!(err.is_empty(), "{err}");
 }
+
+/// A robot calibrated from simulated data (`calibrate` writes `[calibration] simulated =
+/// true`): the LinuxCNC files it exports say SIMULATED; the same robot from measured data does
+/// not.
+#[test]
+fn exports_of_a_robot_calibrated_from_simulated_data_say_so() {
+    let dir = scratch("simulated");
+    let r = robot(&dir);
+    let text = std::fs::read_to_string(&r).unwrap();
+    let marked = dir.join("simulated.toml");
+    std::fs::write(
+        &marked,
+        if text.contains("[calibration]") {
+            text.replace("[calibration]", "[calibration]\nsimulated = true")
+        } else {
+            format!("{text}\n[calibration]\nsimulated = true\n")
+        },
+    )
+    .unwrap();
+    for (path, simulated) in [(&marked, true), (&r, false)] {
+        let hal = cpm(&[
+            "export",
+            "--format",
+            "linuxcnc",
+            "--robot",
+            &path.display().to_string(),
+        ]);
+        let ini = cpm(&[
+            "export",
+            "--format",
+            "linuxcnc",
+            "--robot",
+            &path.display().to_string(),
+            "--ini",
+            "-",
+            "--out",
+            &dir.join("j.hal").display().to_string(),
+            "--quiet",
+        ]);
+        assert_eq!(hal.contains("SIMULATED"), simulated, "{hal}");
+        assert_eq!(ini.contains("SIMULATED"), simulated, "{ini}");
+    }
+}
