@@ -6,7 +6,7 @@ use clap::Args;
 use super::common::{self, EffectsArg, PlanArgs, RobotArg};
 use super::{usage_error, Ctx, Outcome};
 use crate::calib::RankOptions;
-use crate::io::calibration::identifiability_json;
+use crate::report::fit::{IdentifiabilityDoc, IdentifiabilityReport};
 
 /// Arguments of `cpm identifiability`.
 #[derive(Debug, Clone, Args)]
@@ -96,10 +96,14 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
     ctx.finish();
     let names = model.parameter_names();
     if args.json {
-        let mut v = identifiability_json(&ident, &names);
-        v["source"] = serde_json::json!(source);
-        v["simulated"] = serde_json::json!(campaign.simulated && !args.data.is_empty());
-        v["effects"] = serde_json::json!(effects.iter().map(|e| e.name()).collect::<Vec<_>>());
+        let doc = IdentifiabilityDoc {
+            analysis: IdentifiabilityReport::new(&ident, &names),
+            source: source.clone(),
+            simulated: campaign.simulated && !args.data.is_empty(),
+            effects: effects.iter().map(|e| e.name().to_string()).collect(),
+        };
+        // Keys sorted, as every cpm JSON file.
+        let v = serde_json::to_value(&doc)?;
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
         return Ok(Outcome::Done);
     }

@@ -128,6 +128,57 @@ pub struct IdentifiabilityReport {
     pub per_parameter: Vec<ParameterIdentifiability>,
 }
 
+impl IdentifiabilityReport {
+    /// The report of an analysis whose parameters are named `names`.
+    pub fn new(id: &crate::calib::Identifiability, names: &[String]) -> Self {
+        Self {
+            parameters: id.num_params,
+            observations: id.num_readings,
+            rank: id.rank,
+            rank_rtol: id.rank_rtol,
+            threshold: id.threshold,
+            determined: id.num_determined(),
+            singular_values: id.singular_values.clone(),
+            blind_directions: id
+                .blind_directions
+                .iter()
+                .map(|b| BlindDirection {
+                    description: b.description.clone(),
+                    dimensions: b.dimensions,
+                })
+                .collect(),
+            unexplained_null_dimensions: id.unexplained_null_dimensions,
+            sigma_um: id.sigma_um,
+            crlb_rms_um: finite(id.crlb_rms_um()),
+            crlb_max_um: finite(id.crlb_max_um()),
+            per_parameter: names
+                .iter()
+                .enumerate()
+                .map(|(k, n)| ParameterIdentifiability {
+                    name: n.clone(),
+                    determined: id.determined[k],
+                    null_fraction: id.null_fraction[k],
+                    crlb_std: finite(id.crlb_std_um[k]),
+                })
+                .collect(),
+        }
+    }
+}
+
+/// `cpm identifiability --json`: the analysis with where it came from.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct IdentifiabilityDoc {
+    /// The analysis.
+    #[serde(flatten)]
+    pub analysis: IdentifiabilityReport,
+    /// The measurement files, or `plan`.
+    pub source: String,
+    /// The measurements are simulated (false for a plan).
+    pub simulated: bool,
+    /// The effects modelled.
+    pub effects: Vec<String>,
+}
+
 /// `calibration.json`'s `solver` object.
 #[derive(Debug, Clone, Serialize, PartialEq, Default)]
 pub struct SolverReport {
@@ -481,37 +532,7 @@ impl FitReport {
             .collect();
         let minimum_norm: Vec<Option<f64>> = cal.minimum_norm_um.iter().map(|v| Some(*v)).collect();
         let id = &cal.identifiability;
-        let identifiability = IdentifiabilityReport {
-            parameters: id.num_params,
-            observations: id.num_readings,
-            rank: id.rank,
-            rank_rtol: id.rank_rtol,
-            threshold: id.threshold,
-            determined: id.num_determined(),
-            singular_values: id.singular_values.clone(),
-            blind_directions: id
-                .blind_directions
-                .iter()
-                .map(|b| BlindDirection {
-                    description: b.description.clone(),
-                    dimensions: b.dimensions,
-                })
-                .collect(),
-            unexplained_null_dimensions: id.unexplained_null_dimensions,
-            sigma_um: id.sigma_um,
-            crlb_rms_um: finite(id.crlb_rms_um()),
-            crlb_max_um: finite(id.crlb_max_um()),
-            per_parameter: names
-                .iter()
-                .enumerate()
-                .map(|(k, n)| ParameterIdentifiability {
-                    name: n.clone(),
-                    determined: id.determined[k],
-                    null_fraction: id.null_fraction[k],
-                    crlb_std: finite(id.crlb_std_um[k]),
-                })
-                .collect(),
-        };
+        let identifiability = IdentifiabilityReport::new(&cal.identifiability, &names);
         let outliers = cal
             .outliers
             .iter()

@@ -1,6 +1,7 @@
 //! File formats of `cpm` as a library: robot descriptions (TOML) as calibration models,
-//! measurement CSV files (length-sensor readings, tracker pose measurements, pose lists,
-//! actuator commands) and `calibration.json`. `docs/formats.md` and
+//! measurement CSV files (length-sensor readings, tracker pose measurements, point targets,
+//! inclinometer angles, pose lists, actuator commands). `calibration.json` and the other
+//! reports are the typed reports of the `cpm` crate (`cpm::report`). `docs/formats.md` and
 //! `docs/robot-description.md` document each format.
 //!
 //! A calibration program can depend on this crate alone (with `cpm-calib`) to read what the
@@ -48,14 +49,21 @@
 //! let err = read_data(&bad, "data.csv", &robot, &ReadOptions::default()).unwrap_err();
 //! assert!(err.to_string().starts_with("data.csv:3: field sensor: unknown sensor \"nosuch\""));
 //! ```
-pub mod calibration;
 pub mod campaign;
 pub mod error;
 pub mod points;
 pub mod robot;
 pub mod table;
 
-pub use calibration::{calibration_json, Provenance};
+/// Where the inputs of a fit came from, for the record (`calibration.json` `robot`, `data`;
+/// the headers of generated files).
+#[derive(Debug, Clone, Default)]
+pub struct Provenance {
+    /// The robot description file.
+    pub robot: String,
+    /// The measurement files.
+    pub data: Vec<String>,
+}
 pub use campaign::{
     merge, read_commands_file, read_data, read_data_file, read_data_files, read_data_from,
     read_pose_list, read_pose_list_file, read_pose_list_from, read_pose_measurements,
