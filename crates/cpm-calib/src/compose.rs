@@ -5,13 +5,13 @@
 //! length to the reading, and the tracker frame channel maps the pose into the tracker's frame.
 //! The instruments ([`crate::instruments`]: point targets, inclinometers, one's own) see the
 //! pose forward kinematics reached, bound to their nuisance parameters' blocks.
-use cpm_geometry::rotation::{left_jacobian, left_jacobian_inverse};
+use cpm_geometry::rotation::left_jacobian;
 use cpm_geometry::{JointTable, Pose, Sensor};
 use cpm_kinematics::{KinematicsError, LinkState};
-use nalgebra::{DMatrix, DMatrixViewMut, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
+use nalgebra::{DMatrix, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
 use crate::effects::{Channel, EffectInput, EffectModel};
-use crate::instruments::Bound;
+use crate::instruments::{Bound, TrackerPoses};
 use crate::points::PointTargets;
 use crate::tilts::Inclinometers;
 use crate::{CalibError, Effect, MeasurementModel};
@@ -31,10 +31,10 @@ pub(crate) struct Channels<'a> {
     socket: Vec<Active<'a>>,
     pose: Vec<Active<'a>>,
     known_pose: Vec<Active<'a>>,
-    tracker: Option<Active<'a>>,
-    /// The estimated tracker frames (one per session with a frame of its own, else one).
-    regs: Vec<(Vector3<f64>, Rotation3<f64>)>,
-    known_reg: (Vector3<f64>, Rotation3<f64>),
+    /// Tracker poses (with the known registration) and the block of the estimated frames
+    /// (one per session with a frame of its own, else one).
+    tracker: TrackerPoses,
+    tracker_block: Option<(usize, &'a [f64])>,
     sensor_gain: Vec<f64>,
     sensor_offset_mm: Vec<f64>,
     sensor_corr: f64,
@@ -158,18 +158,18 @@ impl<'a> Channels<'a> {
                 .collect()
         };
         let identity = (Vector3::zeros(), Rotation3::identity());
-        let tracker = active(model, params, Channel::TrackerFrame)
+        let estimated = active(model, params, Channel::TrackerFrame)
             .first()
             .copied();
-        let regs = tracker.map_or(vec![identity], |a| {
-            a.values
-                .chunks(6)
-                .map(|q| a.model.tracker_registration(q))
-                .collect()
-        });
-        let known_reg = known(Channel::TrackerFrame)
-            .first()
-            .map_or(identity, |a| a.model.tracker_registration(a.values));
+        let mut tracker = TrackerPoses {
+            known: known(Channel::TrackerFrame)
+                .first()
+                .map_or(identity, |a| a.model.tracker_registration(a.values)),
+            ..TrackerPoses::default()
+        };
+        if let Some(a) = estimated {
+            tracker.frame = a.model;
+        }
         // Known sensor offsets (mm) and gains per sensor; the estimated ones add on top.
         let s = model.nominal.sensors.len();
         let mut sensor_offset_mm = vec![0.0; s];
@@ -223,8 +223,7 @@ impl<'a> Channels<'a> {
             pose: active(model, params, Channel::PlatformPose),
             known_pose: known(Channel::PlatformPose),
             tracker,
-            regs,
-            known_reg,
+            tracker_block: estimated.map(|a| (a.offset, a.values)),
             sensor_gain,
             sensor_offset_mm,
             sensor_corr: model.sensor_correction_mm(),
@@ -276,13 +275,19 @@ impl<'a> Channels<'a> {
         y
     }
 
-    /// The pose in the frame of tracker frame `frame`: position (mm) and rotation.
-    pub fn tracked(&self, pose: &Pose, frame: usize) -> (Vector3<f64>, Rotation3<f64>) {
-        let ((kt, kr), (rt, rr)) = (self.known_reg, self.regs[frame.min(self.regs.len() - 1)]);
-        (
-            rr * (kr * pose.position_mm + kt) + rt,
-            rr * kr * pose.rotation,
-        )
+    /// The tracker instrument of the model (known registration, frame map), measuring the
+    /// identity orientation.
+    pub fn tracker_poses(&self) -> TrackerPoses {
+        self.tracker
+    }
+
+    /// A tracker instrument bound to the estimated frames (a session each: the frame index).
+    pub fn tracker<'b>(&'b self, instrument: &'b TrackerPoses) -> Bound<'b> {
+        Bound {
+            instrument,
+            own: None,
+            sessions: self.tracker_block,
+        }
     }
 
     /// The point targets bound to their blocks.
@@ -436,54 +441,5 @@ impl<'a> Channels<'a> {
             }
         }
         Ok(dx)
-    }
-
-    /// The Jacobian rows of a tracker measurement whose orientation residual is the rotation
-    /// vector `w`: component `a` (position x y z, orientation) at row `rows[a]`, none where it
-    /// was not measured; `dx` from [`twist_columns`](Self::twist_columns).
-    pub fn tracker_rows(
-        &self,
-        jac: &mut DMatrixViewMut<f64>,
-        frame: usize,
-        rows: &[Option<usize>; 6],
-        w: &Vector3<f64>,
-        dx: &DMatrix<f64>,
-        tracker_position: &Vector3<f64>,
-    ) {
-        let reg = self.regs[frame.min(self.regs.len() - 1)];
-        let rr = (reg.1 * self.known_reg.1).into_inner();
-        let jl_inv = left_jacobian_inverse(w);
-        let top = rr * dx.rows(0, 3);
-        let bottom = jl_inv * rr * dx.rows(3, 3) * 1e3;
-        for p in 0..dx.ncols() {
-            for a in 0..3 {
-                if let Some(r) = rows[a] {
-                    jac[(r, p)] = top[(a, p)];
-                }
-                if let Some(r) = rows[3 + a] {
-                    jac[(r, p)] = bottom[(a, p)];
-                }
-            }
-        }
-        if let Some(b) = self.tracker {
-            let skew = tracker_position - reg.0;
-            let offset = b.offset + 6 * frame;
-            // d(exp(d) R t)/dd = -[R t]x, per urad.
-            let sk = skew.cross_matrix() * -1e-6;
-            let jr = jl_inv * 1e-3;
-            for a in 0..3 {
-                if let Some(r) = rows[a] {
-                    jac[(r, offset + a)] = 1e-3;
-                }
-                for c in 0..3 {
-                    if let Some(r) = rows[a] {
-                        jac[(r, offset + 3 + c)] = sk[(a, c)];
-                    }
-                    if let Some(r) = rows[3 + a] {
-                        jac[(r, offset + 3 + c)] = jr[(a, c)];
-                    }
-                }
-            }
-        }
     }
 }

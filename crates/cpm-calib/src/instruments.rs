@@ -11,15 +11,16 @@
 //! chain rule ([`crate::model::predict`]), so one prediction path serves the fit
 //! ([`crate::identify()`]), the identifiability analysis and cross-validation.
 //!
-//! The built-in point targets ([`PointTargets`](crate::points::PointTargets)) and
-//! inclinometers ([`Inclinometers`](crate::tilts::Inclinometers)) are implementations; the
-//! model binds their nuisance parameters to the effect blocks that estimate them
-//! (`target_position`, `point_frame`, `inclinometer_mount`, `base_tilt`). Two measurement kinds
-//! stay apart: a length-gauge reading depends on the joint errors through its sockets and on
-//! the sensor channel's gain and offset, not through the platform pose alone, so it is not a
-//! function of the reached pose; a 6-D tracker pose observes its orientation as the rotation
-//! from the measured to the predicted orientation (its prediction needs the measured value)
-//! and may lack components in some rows ([`Campaign::unmeasured`]).
+//! The built-in tracker poses ([`TrackerPoses`]), point targets
+//! ([`PointTargets`](crate::points::PointTargets)) and inclinometers
+//! ([`Inclinometers`](crate::tilts::Inclinometers)) are implementations; the model binds their
+//! nuisance parameters to the effect blocks that estimate them (`tracker_frame`,
+//! `target_position`, `point_frame`, `inclinometer_mount`, `base_tilt`). A tracker pose's
+//! orientation is observed as the rotation from the measured to the predicted orientation, so
+//! its instrument holds the measured orientation (one per measurement), and rows lacking
+//! components ([`Campaign::unmeasured`]) keep the rest. The length-gauge reading stays apart: it
+//! is not a function of the reached pose alone (the sensor sockets move it directly, and the
+//! sensor channel's gain and offset act on it), so it keeps its own row in `compose.rs`.
 //!
 //! One's own instrument goes into [`MeasurementModel::instruments`]; its measurements into
 //! [`Campaign::instrument_measurements`]. Its nuisance parameters are estimated (one block per
@@ -94,6 +95,10 @@ use rand::SeedableRng;
 use crate::effects::EffectInput;
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, MeasurementModel, SimulationOptions};
+
+mod tracker;
+
+pub use tracker::TrackerPoses;
 
 /// What an instrument may know about a pose.
 #[derive(Debug, Clone, Copy)]
@@ -231,6 +236,22 @@ impl Bound<'_> {
         jac: &mut nalgebra::DMatrixViewMut<f64>,
         row0: usize,
     ) {
+        let rows: Vec<Option<usize>> = (row0..row0 + self.instrument.num_values())
+            .map(Some)
+            .collect();
+        self.rows_at(input, channel, session, dx, jac, &rows);
+    }
+
+    /// [`rows`](Self::rows) with value `a` at row `rows[a]`, none where it was not measured.
+    pub fn rows_at(
+        &self,
+        input: &InstrumentInput,
+        channel: usize,
+        session: usize,
+        dx: &DMatrix<f64>,
+        jac: &mut nalgebra::DMatrixViewMut<f64>,
+        at: &[Option<usize>],
+    ) {
         let m = self.instrument.num_values();
         let (p, q) = (
             self.instrument.num_instrument_params(),
@@ -246,7 +267,11 @@ impl Bound<'_> {
             &mut d_nuisance,
         );
         let rows = &d_pose * dx;
-        jac.rows_mut(row0, m).copy_from(&rows);
+        for (a, r) in at.iter().enumerate() {
+            if let Some(r) = r {
+                jac.row_mut(*r).copy_from(&rows.row(a));
+            }
+        }
         for c in 0..p + q {
             let col = if c < p {
                 self.own.map(|(o, _)| o + c)
@@ -254,8 +279,10 @@ impl Bound<'_> {
                 self.sessions.map(|(o, _)| o + q * session + c - p)
             };
             if let Some(col) = col {
-                for a in 0..m {
-                    jac[(row0 + a, col)] += d_nuisance[(a, c)];
+                for (a, r) in at.iter().enumerate() {
+                    if let Some(r) = r {
+                        jac[(*r, col)] += d_nuisance[(a, c)];
+                    }
                 }
             }
         }

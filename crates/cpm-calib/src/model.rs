@@ -13,6 +13,7 @@ use nalgebra::DMatrix;
 
 use crate::compose::{AtPose, Channels, Kin};
 use crate::effects::{Channel, Effect, EffectInput, EffectSettings, KnownEffect, PoseContext};
+use crate::instruments::TrackerPoses;
 use crate::{CalibError, Campaign};
 
 /// Exact (nested forward kinematics) or the paper's first-order model (eq. 12/15).
@@ -1220,34 +1221,38 @@ fn predict_exact(
             let si = campaign.readings[k].sensor;
             y[k] = channels.reading(si, table.sensors[si].length_mm(&pose));
         }
-        // Tracker observations: position in the tracker frame (mm) and the rotation from the
-        // measured to the predicted orientation (mrad).
-        let frame = if measurements.is_empty() {
-            0
-        } else {
-            model.tracker_frame_of(campaign, j)?
-        };
-        let (tracked_mm, tracked_rotation) = channels.tracked(&pose, frame);
-        let mut omegas = Vec::with_capacity(measurements.len());
-        for &q in measurements {
-            let w = cpm_geometry::rotation::log(
-                &(tracked_rotation * campaign.pose_measurements[q].measured.rotation.inverse()),
-            );
-            let values = [tracked_mm, w * 1e3];
-            for (a, row) in prepared.pose_rows[q].iter().enumerate() {
-                if let Some(o) = row {
-                    y[*o] = values[a / 3][a % 3];
-                }
-            }
-            omegas.push(w);
-        }
-        // The instruments see the pose reached: point targets (the target in its session's
-        // tracker frame, mm), inclinometers (each axis's elevation, mrad), one's own.
+        // The instruments see the pose reached: tracker poses (position in the session's
+        // tracker frame, mm, and the rotation from the measured to the predicted orientation,
+        // mrad), point targets (the target in its session's tracker frame, mm), inclinometers
+        // (each axis's elevation, mrad), one's own.
         let seen = crate::instruments::InstrumentInput {
             pose: &pose,
             effect: input,
             up: channels.up,
         };
+        let frame = if measurements.is_empty() {
+            0
+        } else {
+            model.tracker_frame_of(campaign, j)?
+        };
+        // The tracker instrument of a pose measurement: its orientation residual is taken
+        // against the measured orientation.
+        let tracker_of = |q: usize| TrackerPoses {
+            measured: campaign.pose_measurements[q].measured.rotation,
+            ..channels.tracker_poses()
+        };
+        let mut values = [0.0; 6];
+        for &q in measurements {
+            let instrument = tracker_of(q);
+            channels
+                .tracker(&instrument)
+                .predict(&seen, 0, frame, &mut values);
+            for (a, row) in prepared.pose_rows[q].iter().enumerate() {
+                if let Some(o) = row {
+                    y[*o] = values[a];
+                }
+            }
+        }
         let p0 = campaign.first_point_observation();
         let targets = channels.points();
         for &q in points {
@@ -1297,15 +1302,12 @@ fn predict_exact(
                     let o = prepared.instrument_rows[q];
                     bound.rows(&seen, m.channel, m.session, &dx, &mut jac, o);
                 }
-                for (&q, w) in measurements.iter().zip(&omegas) {
-                    channels.tracker_rows(
-                        &mut jac,
-                        frame,
-                        &prepared.pose_rows[q],
-                        w,
-                        &dx,
-                        &tracked_mm,
-                    );
+                for &q in measurements {
+                    let instrument = tracker_of(q);
+                    let rows = &prepared.pose_rows[q];
+                    channels
+                        .tracker(&instrument)
+                        .rows_at(&seen, 0, frame, &dx, &mut jac, rows);
                 }
             }
         }
