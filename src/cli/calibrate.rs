@@ -327,9 +327,10 @@ pub fn estimates_figure(model: &MeasurementModel, cal: &Calibration) -> anyhow::
                 continue;
             };
             number += 1;
-            let label = match b.effect {
-                Some(e) => format!("{}, {}", e.name(), e.param_unit(k - b.offset)),
-                None => "installation errors, um".to_string(),
+            let label = match (b.effect, b.instrument) {
+                (Some(e), _) => format!("{}, {}", e.name(), e.param_unit(k - b.offset)),
+                (None, Some(i)) => format!("instrument {}", model.instruments[i].name()),
+                (None, None) => "installation errors, um".to_string(),
             };
             let point = (number, v, cal.std_um[k].unwrap_or(0.0));
             match groups.iter_mut().find(|g| g.label == label) {

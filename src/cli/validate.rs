@@ -361,7 +361,7 @@ fn errors_of(
             // Inclinometers: the error of each angle (urad) with the session re-levelled (its
             // base tilt fitted afresh, the mounts held at the robot's).
             let g = group_of(format!("{} (tilts)", file.file), &mut out);
-            for k in campaign.first_tilt_observation()..campaign.len() {
+            for k in campaign.first_tilt_observation()..campaign.first_instrument_observation() {
                 out.groups[g]
                     .orientation_urad
                     .push((observed[k] - predicted[k]) * 1e3);

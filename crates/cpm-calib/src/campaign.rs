@@ -68,6 +68,26 @@ pub struct TiltMeasurement {
     pub time_s: Option<f64>,
 }
 
+/// A measurement of one's own instrument ([`crate::instruments::Instrument`], in the model's
+/// [`instruments`](crate::MeasurementModel::instruments)): its values at one pose.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InstrumentMeasurement {
+    /// Index of the configuration in [`Campaign::poses`].
+    pub pose: usize,
+    /// Index of the instrument in the model's
+    /// [`instruments`](crate::MeasurementModel::instruments).
+    pub instrument: usize,
+    /// The instrument's channel (target, axis, beam) it is of, from 0.
+    pub channel: usize,
+    /// The session it was measured in, from 0 (each brings the instrument's per-session
+    /// nuisance parameters).
+    pub session: usize,
+    /// The measured values (the instrument's `num_values`), in the instrument's unit.
+    pub values: Vec<f64>,
+    /// Standard deviation of each value, in the instrument's unit (sets its weight).
+    pub sigma: f64,
+}
+
 /// What observation `k` of [`Campaign::observations`] is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ObservationKind {
@@ -81,6 +101,8 @@ pub enum ObservationKind {
     Point(usize, usize),
     /// Tilt measurement `index`.
     Tilt(usize),
+    /// Value `value` of instrument measurement `index`.
+    Instrument(usize, usize),
 }
 
 /// A measurement campaign: commanded poses and readings.
@@ -129,6 +151,10 @@ pub struct Campaign {
     /// Standard deviation of an inclinometer angle, urad. Default (when 0) 20.
     #[serde(default)]
     pub tilt_sigma_urad: f64,
+    /// Measurements of one's own instruments (their values each, after the tilt
+    /// measurements'), if any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub instrument_measurements: Vec<InstrumentMeasurement>,
 }
 
 impl Campaign {
@@ -145,9 +171,42 @@ impl Campaign {
     }
 
     /// Number of observations: length readings, six per pose measurement (less its
-    /// [`unmeasured`](Self::unmeasured) components), three per point measurement.
+    /// [`unmeasured`](Self::unmeasured) components), three per point measurement, one per
+    /// tilt measurement, the values of each instrument measurement.
     pub fn len(&self) -> usize {
+        self.first_instrument_observation()
+            + self
+                .instrument_measurements
+                .iter()
+                .map(|m| m.values.len())
+                .sum::<usize>()
+    }
+
+    /// Index of the first instrument observation in [`observations`](Self::observations).
+    pub fn first_instrument_observation(&self) -> usize {
         self.first_tilt_observation() + self.tilt_measurements.len()
+    }
+
+    /// The observation index of the first value of each instrument measurement.
+    pub fn instrument_observation_rows(&self) -> Vec<usize> {
+        let mut k = self.first_instrument_observation();
+        self.instrument_measurements
+            .iter()
+            .map(|m| {
+                k += m.values.len();
+                k - m.values.len()
+            })
+            .collect()
+    }
+
+    /// Number of sessions of the instrument measurements: the largest session index plus
+    /// one, 0 without instrument measurements.
+    pub fn instrument_sessions(&self) -> usize {
+        self.instrument_measurements
+            .iter()
+            .map(|m| m.session + 1)
+            .max()
+            .unwrap_or(0)
     }
 
     /// Index of the first inclinometer observation in [`observations`](Self::observations).
@@ -226,6 +285,9 @@ impl Campaign {
             out.extend((0..3).map(|a| ObservationKind::Point(q, a)));
         }
         out.extend((0..self.tilt_measurements.len()).map(ObservationKind::Tilt));
+        for (q, m) in self.instrument_measurements.iter().enumerate() {
+            out.extend((0..m.values.len()).map(|a| ObservationKind::Instrument(q, a)));
+        }
         out
     }
 
@@ -266,8 +328,12 @@ impl Campaign {
             }
         } else if k < self.first_tilt_observation() {
             ObservationKind::Point((k - p) / 3, (k - p) % 3)
-        } else {
+        } else if k < self.first_instrument_observation() {
             ObservationKind::Tilt(k - self.first_tilt_observation())
+        } else {
+            let rows = self.instrument_observation_rows();
+            let q = rows.partition_point(|r| *r <= k) - 1;
+            ObservationKind::Instrument(q, k - rows[q])
         }
     }
 
@@ -296,6 +362,9 @@ impl Campaign {
             v.extend(pm.measured_mm.iter());
         }
         v.extend(self.tilt_measurements.iter().map(|t| t.angle_mrad));
+        for m in &self.instrument_measurements {
+            v.extend(&m.values);
+        }
         v
     }
 
@@ -308,6 +377,7 @@ impl Campaign {
             }
             ObservationKind::Point(q, _) => self.point_measurements[q].pose,
             ObservationKind::Tilt(q) => self.tilt_measurements[q].pose,
+            ObservationKind::Instrument(q, _) => self.instrument_measurements[q].pose,
         }
     }
 
@@ -354,6 +424,14 @@ impl Campaign {
                 .iter()
                 .map(|_| sigma_ref_um / self.tilt_sigma()),
         );
+        // Values in their instrument's unit, sigma too: um of the reference per
+        // thousandth of the unit, as for the other kinds.
+        for m in &self.instrument_measurements {
+            w.extend(std::iter::repeat_n(
+                sigma_ref_um * 1e-3 / m.sigma,
+                m.values.len(),
+            ));
+        }
         w
     }
 
@@ -392,6 +470,7 @@ impl Campaign {
         c.retain_pose_measurements(&kept);
         c.point_measurements.retain(|p| keep(p.pose));
         c.tilt_measurements.retain(|p| keep(p.pose));
+        c.instrument_measurements.retain(|p| keep(p.pose));
         c
     }
 }

@@ -3,12 +3,17 @@
 //! closes on, the platform pose channel moves the pose forward kinematics found, the socket
 //! channel moves the sensors (applied to the joint table), the sensor channel maps the geometric
 //! length to the reading, and the tracker frame channel maps the pose into the tracker's frame.
-use cpm_geometry::rotation::{left_jacobian, left_jacobian_inverse};
+//! The instruments ([`crate::instruments`]: point targets, inclinometers, one's own) see the
+//! pose forward kinematics reached, bound to their nuisance parameters' blocks.
+use cpm_geometry::rotation::left_jacobian;
 use cpm_geometry::{JointTable, Pose, Sensor};
 use cpm_kinematics::{KinematicsError, LinkState};
-use nalgebra::{DMatrix, DMatrixViewMut, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
+use nalgebra::{DMatrix, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
 use crate::effects::{Channel, EffectInput, EffectModel};
+use crate::instruments::{Bound, TrackerPoses};
+use crate::points::PointTargets;
+use crate::tilts::Inclinometers;
 use crate::{CalibError, Effect, MeasurementModel};
 
 /// One block of estimated (or known) values acting through a channel.
@@ -26,24 +31,27 @@ pub(crate) struct Channels<'a> {
     socket: Vec<Active<'a>>,
     pose: Vec<Active<'a>>,
     known_pose: Vec<Active<'a>>,
-    tracker: Option<Active<'a>>,
-    /// The estimated tracker frames (one per session with a frame of its own, else one).
-    regs: Vec<(Vector3<f64>, Rotation3<f64>)>,
-    known_reg: (Vector3<f64>, Rotation3<f64>),
+    /// Tracker poses (with the known registration) and the block of the estimated frames
+    /// (one per session with a frame of its own, else one).
+    tracker: TrackerPoses,
+    tracker_block: Option<(usize, &'a [f64])>,
     sensor_gain: Vec<f64>,
     sensor_offset_mm: Vec<f64>,
     sensor_corr: f64,
-    /// Point targets: nominal platform positions (mm), the estimated corrections (offset,
-    /// um) and the per-session frames (offset, um and urad).
-    targets: Vec<Vector3<f64>>,
-    target_block: Option<(usize, &'a [f64])>,
-    frame_block: Option<(usize, &'a [f64])>,
-    /// Inclinometers: the instruments, gravity's up, the estimated mounts and base tilts.
-    inclinometers: &'a [crate::tilts::Inclinometer],
-    up: Vector3<f64>,
-    mount_block: Option<(usize, &'a [f64])>,
-    tilt_block: Option<(usize, &'a [f64])>,
+    /// Point targets and the blocks of their positions and session frames.
+    targets: PointTargets,
+    target_blocks: Blocks<'a>,
+    /// Inclinometers and the blocks of their mounts and base tilts.
+    inclinometers: Inclinometers,
+    inclinometer_blocks: Blocks<'a>,
+    /// One's own instruments, bound to their blocks.
+    instruments: Vec<Bound<'a>>,
+    /// Gravity's up in the base frame.
+    pub up: Vector3<f64>,
 }
+
+/// Where an instrument's per-instrument and per-session parameters sit (offset, values).
+type Blocks<'a> = (Option<(usize, &'a [f64])>, Option<(usize, &'a [f64])>);
 
 /// What the channels make of one pose: link coefficients and lengths, the pose twist.
 pub(crate) struct AtPose {
@@ -150,18 +158,18 @@ impl<'a> Channels<'a> {
                 .collect()
         };
         let identity = (Vector3::zeros(), Rotation3::identity());
-        let tracker = active(model, params, Channel::TrackerFrame)
+        let estimated = active(model, params, Channel::TrackerFrame)
             .first()
             .copied();
-        let regs = tracker.map_or(vec![identity], |a| {
-            a.values
-                .chunks(6)
-                .map(|q| a.model.tracker_registration(q))
-                .collect()
-        });
-        let known_reg = known(Channel::TrackerFrame)
-            .first()
-            .map_or(identity, |a| a.model.tracker_registration(a.values));
+        let mut tracker = TrackerPoses {
+            known: known(Channel::TrackerFrame)
+                .first()
+                .map_or(identity, |a| a.model.tracker_registration(a.values)),
+            ..TrackerPoses::default()
+        };
+        if let Some(a) = estimated {
+            tracker.frame = a.model;
+        }
         // Known sensor offsets (mm) and gains per sensor; the estimated ones add on top.
         let s = model.nominal.sensors.len();
         let mut sensor_offset_mm = vec![0.0; s];
@@ -182,22 +190,40 @@ impl<'a> Channels<'a> {
                 .find(|b| b.effect == Some(e) && params.len() >= b.offset + b.len)
                 .map(|b| (b.offset, &params[b.offset..b.offset + b.len]))
         };
+        let instruments = model
+            .blocks()
+            .into_iter()
+            .filter_map(|b| {
+                let i = b.instrument?;
+                let instrument = &*model.instruments[i];
+                let own = instrument.num_instrument_params();
+                let bound = params.len() >= b.offset + b.len;
+                Some(Bound {
+                    instrument,
+                    own: bound.then(|| (b.offset, &params[b.offset..b.offset + own])),
+                    sessions: bound
+                        .then(|| (b.offset + own, &params[b.offset + own..b.offset + b.len])),
+                })
+            })
+            .collect();
         Self {
-            targets: model.targets.iter().map(|t| t.platform_mm).collect(),
-            target_block: block(Effect::TargetPosition),
-            frame_block: block(Effect::PointFrame),
-            inclinometers: &model.inclinometers,
+            targets: PointTargets {
+                targets: model.targets.clone(),
+            },
+            target_blocks: (block(Effect::TargetPosition), block(Effect::PointFrame)),
+            inclinometers: Inclinometers {
+                inclinometers: model.inclinometers.clone(),
+            },
+            inclinometer_blocks: (block(Effect::InclinometerMount), block(Effect::BaseTilt)),
+            instruments,
             up: crate::tilts::nominal_up(model),
-            mount_block: block(Effect::InclinometerMount),
-            tilt_block: block(Effect::BaseTilt),
             link: active(model, params, Channel::LinkLength),
             sensor: active(model, params, Channel::SensorReading),
             socket: active(model, params, Channel::SensorSocket),
             pose: active(model, params, Channel::PlatformPose),
             known_pose: known(Channel::PlatformPose),
             tracker,
-            regs,
-            known_reg,
+            tracker_block: estimated.map(|a| (a.offset, a.values)),
             sensor_gain,
             sensor_offset_mm,
             sensor_corr: model.sensor_correction_mm(),
@@ -249,125 +275,47 @@ impl<'a> Channels<'a> {
         y
     }
 
-    /// The pose in the frame of tracker frame `frame`: position (mm) and rotation.
-    pub fn tracked(&self, pose: &Pose, frame: usize) -> (Vector3<f64>, Rotation3<f64>) {
-        let ((kt, kr), (rt, rr)) = (self.known_reg, self.regs[frame.min(self.regs.len() - 1)]);
-        (
-            rr * (kr * pose.position_mm + kt) + rt,
-            rr * kr * pose.rotation,
-        )
+    /// The tracker instrument of the model (known registration, frame map), measuring the
+    /// identity orientation.
+    pub fn tracker_poses(&self) -> TrackerPoses {
+        self.tracker
     }
 
-    /// Target `k`'s position on the platform, mm (nominal plus the estimated correction).
-    fn target(&self, k: usize) -> Vector3<f64> {
-        let mut t = self.targets[k];
-        if let Some((_, v)) = self.target_block {
-            t += Vector3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2]) * 1e-3;
-        }
-        t
-    }
-
-    /// The frame of point session `s` (`p_tracker = R p + t`, t mm), identity when the
-    /// frames are not estimated.
-    fn point_frame(&self, s: usize) -> (Vector3<f64>, Rotation3<f64>) {
-        match self.frame_block {
-            Some((_, v)) => crate::effects::tracker_registration(&v[6 * s..6 * s + 6]),
-            None => (Vector3::zeros(), Rotation3::identity()),
+    /// A tracker instrument bound to the estimated frames (a session each: the frame index).
+    pub fn tracker<'b>(&'b self, instrument: &'b TrackerPoses) -> Bound<'b> {
+        Bound {
+            instrument,
+            own: None,
+            sessions: self.tracker_block,
         }
     }
 
-    /// Target `k` at `pose`, as session `s`'s tracker sees it, mm.
-    pub fn point(&self, pose: &Pose, k: usize, s: usize) -> Vector3<f64> {
-        let (t, r) = self.point_frame(s);
-        r * pose.transform_point(&self.target(k)) + t
-    }
-
-    /// The three Jacobian rows (mm per unit) at `row0` of target `k` measured in session `s`
-    /// at `pose`; `dx` from [`twist_columns`](Self::twist_columns).
-    pub fn point_rows(
-        &self,
-        jac: &mut DMatrixViewMut<f64>,
-        row0: usize,
-        dx: &DMatrix<f64>,
-        pose: &Pose,
-        k: usize,
-        s: usize,
-    ) {
-        let (_, rf) = self.point_frame(s);
-        let rf = rf.into_inner();
-        let rt = pose.rotation * self.target(k);
-        // The pose moved by (dp, dtheta) moves the target by dp - [R t]x dtheta.
-        let moved = dx.rows(0, 3) - rt.cross_matrix() * dx.rows(3, 3);
-        let rows = rf * moved;
-        for p in 0..dx.ncols() {
-            for a in 0..3 {
-                jac[(row0 + a, p)] = rows[(a, p)];
-            }
-        }
-        if let Some((o, _)) = self.target_block {
-            let m = rf * pose.rotation.matrix() * 1e-3;
-            for a in 0..3 {
-                for c in 0..3 {
-                    jac[(row0 + a, o + 3 * k + c)] = m[(a, c)];
-                }
-            }
-        }
-        if let Some((o, v)) = self.frame_block {
-            let b = pose.transform_point(&self.target(k));
-            let (_, r) = self.point_frame(s);
-            let w = Vector3::new(v[6 * s + 3], v[6 * s + 4], v[6 * s + 5]) * 1e-6;
-            // d(exp(w + d) b)/dd = -[exp(w) b]x J_l(w), per urad.
-            let m = (r * b).cross_matrix() * left_jacobian(&w) * -1e-6;
-            for a in 0..3 {
-                jac[(row0 + a, o + 6 * s + a)] = 1e-3;
-                for c in 0..3 {
-                    jac[(row0 + a, o + 6 * s + 3 + c)] = m[(a, c)];
-                }
-            }
+    /// The point targets bound to their blocks.
+    pub fn points(&self) -> Bound<'_> {
+        Bound {
+            instrument: &self.targets,
+            own: self.target_blocks.0,
+            sessions: self.target_blocks.1,
         }
     }
 
-    /// A tilt measurement's prediction at `pose` ([`crate::tilts`]).
-    pub fn tilt(&self, pose: &Pose, t: &crate::TiltMeasurement) -> crate::tilts::TiltAt {
-        let c = &self.inclinometers[t.inclinometer];
-        let m = self.mount_block.map_or(Vector3::zeros(), |(_, v)| {
-            Vector3::new(
-                v[3 * t.inclinometer],
-                v[3 * t.inclinometer + 1],
-                v[3 * t.inclinometer + 2],
-            )
-        });
-        let b = self
-            .tilt_block
-            .map_or([0.0; 2], |(_, v)| [v[2 * t.session], v[2 * t.session + 1]]);
-        crate::tilts::tilt_at(&self.up, &pose.rotation, &c.mount, &m, b, &c.axes[t.axis])
+    /// The inclinometers bound to their blocks.
+    pub fn tilts(&self) -> Bound<'_> {
+        Bound {
+            instrument: &self.inclinometers,
+            own: self.inclinometer_blocks.0,
+            sessions: self.inclinometer_blocks.1,
+        }
     }
 
-    /// The Jacobian row (mrad per unit) of a tilt measurement whose prediction is `at`;
-    /// `dx` from [`twist_columns`](Self::twist_columns).
-    pub fn tilt_row(
-        &self,
-        jac: &mut DMatrixViewMut<f64>,
-        row: usize,
-        dx: &DMatrix<f64>,
-        at: &crate::tilts::TiltAt,
-        t: &crate::TiltMeasurement,
-    ) {
-        let k = at.slope * 1e3;
-        let r = at.pose_rot.transpose() * dx.rows(3, 3) * k;
-        for p in 0..dx.ncols() {
-            jac[(row, p)] = r[p];
-        }
-        if let Some((o, _)) = self.mount_block {
-            for a in 0..3 {
-                jac[(row, o + 3 * t.inclinometer + a)] = at.mount[a] * k;
-            }
-        }
-        if let Some((o, _)) = self.tilt_block {
-            for a in 0..2 {
-                jac[(row, o + 2 * t.session + a)] = at.tilt[a] * k;
-            }
-        }
+    /// The inclinometer channel of a tilt measurement.
+    pub fn tilt_channel(&self, t: &crate::TiltMeasurement) -> usize {
+        self.inclinometers.channel(t.inclinometer, t.axis)
+    }
+
+    /// One's own instrument `i` ([`MeasurementModel::instruments`]) bound to its block.
+    pub fn instrument(&self, i: usize) -> &Bound<'a> {
+        &self.instruments[i]
     }
 
     /// The Jacobian row (mm per unit) of a reading of `sensor` (index `si`) at `pose`.
@@ -493,54 +441,5 @@ impl<'a> Channels<'a> {
             }
         }
         Ok(dx)
-    }
-
-    /// The Jacobian rows of a tracker measurement whose orientation residual is the rotation
-    /// vector `w`: component `a` (position x y z, orientation) at row `rows[a]`, none where it
-    /// was not measured; `dx` from [`twist_columns`](Self::twist_columns).
-    pub fn tracker_rows(
-        &self,
-        jac: &mut DMatrixViewMut<f64>,
-        frame: usize,
-        rows: &[Option<usize>; 6],
-        w: &Vector3<f64>,
-        dx: &DMatrix<f64>,
-        tracker_position: &Vector3<f64>,
-    ) {
-        let reg = self.regs[frame.min(self.regs.len() - 1)];
-        let rr = (reg.1 * self.known_reg.1).into_inner();
-        let jl_inv = left_jacobian_inverse(w);
-        let top = rr * dx.rows(0, 3);
-        let bottom = jl_inv * rr * dx.rows(3, 3) * 1e3;
-        for p in 0..dx.ncols() {
-            for a in 0..3 {
-                if let Some(r) = rows[a] {
-                    jac[(r, p)] = top[(a, p)];
-                }
-                if let Some(r) = rows[3 + a] {
-                    jac[(r, p)] = bottom[(a, p)];
-                }
-            }
-        }
-        if let Some(b) = self.tracker {
-            let skew = tracker_position - reg.0;
-            let offset = b.offset + 6 * frame;
-            // d(exp(d) R t)/dd = -[R t]x, per urad.
-            let sk = skew.cross_matrix() * -1e-6;
-            let jr = jl_inv * 1e-3;
-            for a in 0..3 {
-                if let Some(r) = rows[a] {
-                    jac[(r, offset + a)] = 1e-3;
-                }
-                for c in 0..3 {
-                    if let Some(r) = rows[a] {
-                        jac[(r, offset + 3 + c)] = sk[(a, c)];
-                    }
-                    if let Some(r) = rows[3 + a] {
-                        jac[(r, offset + 3 + c)] = jr[(a, c)];
-                    }
-                }
-            }
-        }
     }
 }

@@ -194,6 +194,9 @@ pub fn outliers_by_kind(
             crate::ObservationKind::TrackerOrientation(..) => usize::MAX,
             crate::ObservationKind::Point(..) => usize::MAX - 2,
             crate::ObservationKind::Tilt(..) => usize::MAX - 3,
+            crate::ObservationKind::Instrument(q, _) => {
+                usize::MAX - 4 - campaign.instrument_measurements[q].instrument
+            }
         }
     };
     let mut kinds: Vec<usize> = (0..residuals_um.len()).map(kind).collect();

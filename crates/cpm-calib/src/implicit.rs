@@ -369,6 +369,8 @@ pub fn supported(model: &MeasurementModel, campaign: &Campaign) -> Result<(), Ca
     if !campaign.pose_measurements.is_empty()
         || !campaign.point_measurements.is_empty()
         || !campaign.tilt_measurements.is_empty()
+        || !campaign.instrument_measurements.is_empty()
+        || !model.instruments.is_empty()
     {
         return Err(CalibError::invalid(
             "pose_measurements",

@@ -9,6 +9,10 @@
 //! 4. [`identifiability()`]: rank, singular values, blind directions in words, Cramér-Rao bounds;
 //! 5. [`accuracy()`]: platform pose error over validation poses, nominal against calibrated.
 //!
+//! Beside length readings, a campaign may hold tracker poses, point targets ([`points`]),
+//! inclinometer angles ([`tilts`]) and measurements of one's own [`Instrument`]
+//! ([`instruments`]), all predicted through the one path the fit uses.
+//!
 //! ```
 //! use cpm_calib::{campaign::paper_circle, identify, simulate, IdentifyOptions, MeasurementModel,
 //!                 Plan, SimulationOptions};
@@ -70,6 +74,7 @@ pub mod error;
 pub mod identifiability;
 pub mod identify;
 pub mod implicit;
+pub mod instruments;
 pub mod linalg;
 pub mod misfit;
 pub mod model;
@@ -83,7 +88,10 @@ pub mod simulate;
 pub mod tilts;
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
-pub use campaign::{Campaign, ObservationKind, Plan, PointMeasurement, Reading, TiltMeasurement};
+pub use campaign::{
+    Campaign, InstrumentMeasurement, ObservationKind, Plan, PointMeasurement, Reading,
+    TiltMeasurement,
+};
 pub use effects::{Channel, Effect, EffectInput, EffectModel, EffectSettings, KnownEffect};
 pub use error::CalibError;
 pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
@@ -91,6 +99,7 @@ pub use identify::{
     identifiability, identification_jacobian, identify, Calibration, IdentifyOptions,
     DOWNWEIGHT_LEVEL, MAX_DOWNWEIGHTED_SHARE,
 };
+pub use instruments::{Instrument, InstrumentInput};
 pub use model::{MeasurementModel, ModelKind};
 pub use refine::{refine, AgainstCalibrate, RefineOptions, Refinement};
 pub use simulate::{

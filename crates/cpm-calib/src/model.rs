@@ -13,6 +13,7 @@ use nalgebra::DMatrix;
 
 use crate::compose::{AtPose, Channels, Kin};
 use crate::effects::{Channel, Effect, EffectInput, EffectSettings, KnownEffect, PoseContext};
+use crate::instruments::TrackerPoses;
 use crate::{CalibError, Campaign};
 
 /// Exact (nested forward kinematics) or the paper's first-order model (eq. 12/15).
@@ -74,13 +75,25 @@ pub struct MeasurementModel {
     /// Number of inclinometer sessions whose base tilts [`Effect::BaseTilt`] estimates (2
     /// parameters each). Default 0.
     pub tilt_sessions: usize,
+    /// One's own instruments ([`crate::instruments`]), in the order instrument measurements
+    /// index them. Each brings a block of nuisance parameters after the effects' blocks, always
+    /// estimated: its per-instrument parameters, then its per-session ones for each of
+    /// [`instrument_sessions`](Self::instrument_sessions). Default none.
+    pub instruments: Vec<std::sync::Arc<dyn crate::instruments::Instrument>>,
+    /// Number of sessions of the instrument measurements (their
+    /// [`session`](crate::InstrumentMeasurement::session) is below it), each with the
+    /// instruments' per-session parameters. Default 0.
+    pub instrument_sessions: usize,
 }
 
 /// Where a block of parameters sits in the parameter vector.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Block {
-    /// The effect (`None` for the installation errors).
+    /// The effect (`None` for the installation errors and the instruments' blocks).
     pub effect: Option<Effect>,
+    /// The instrument ([`MeasurementModel::instruments`]) whose nuisance parameters the block
+    /// holds (`None` for the installation errors and the effects).
+    pub instrument: Option<usize>,
     /// First index.
     pub offset: usize,
     /// Number of parameters.
@@ -127,6 +140,8 @@ impl MeasurementModel {
             point_sessions: 0,
             inclinometers: Vec::new(),
             tilt_sessions: 0,
+            instruments: Vec::new(),
+            instrument_sessions: 0,
         }
     }
 
@@ -388,11 +403,13 @@ impl MeasurementModel {
         self.blocks().iter().map(|b| b.len).sum()
     }
 
-    /// The parameter blocks in order: installation errors first, then each effect.
+    /// The parameter blocks in order: installation errors first, then each effect, then each
+    /// of one's own [`instruments`](Self::instruments).
     pub fn blocks(&self) -> Vec<Block> {
         let (n, s) = (self.nominal.num_links(), self.nominal.sensors.len());
         let mut out = vec![Block {
             effect: None,
+            instrument: None,
             offset: 0,
             len: 6 * n,
         }];
@@ -408,6 +425,18 @@ impl MeasurementModel {
             };
             out.push(Block {
                 effect: Some(e),
+                instrument: None,
+                offset: o,
+                len,
+            });
+            o += len;
+        }
+        for (i, instrument) in self.instruments.iter().enumerate() {
+            let len = instrument.num_instrument_params()
+                + self.instrument_sessions * instrument.num_session_params();
+            out.push(Block {
+                effect: None,
+                instrument: Some(i),
                 offset: o,
                 len,
             });
@@ -429,6 +458,32 @@ impl MeasurementModel {
             .map(|k| format!("{} [um]", InstallationErrors::component_name(k)))
             .collect();
         for b in self.blocks().iter().skip(1) {
+            if let Some(i) = b.instrument {
+                let instrument = &self.instruments[i];
+                let own = instrument.num_instrument_params();
+                let per_session = instrument.num_session_params();
+                for k in 0..b.len {
+                    let (name, q) = if k < own {
+                        (instrument.param_name(k), k)
+                    } else {
+                        let q = own + (k - own) % per_session;
+                        (
+                            format!(
+                                "{} (session {})",
+                                instrument.param_name(q),
+                                (k - own) / per_session + 1
+                            ),
+                            q,
+                        )
+                    };
+                    out.push(format!(
+                        "{} {name} [{}]",
+                        instrument.name(),
+                        instrument.param_unit(q)
+                    ));
+                }
+                continue;
+            }
             let e = b.effect.expect("effect block");
             for k in 0..b.len {
                 if e.is_instrument() {
@@ -535,7 +590,8 @@ impl MeasurementModel {
     /// applied to the joints (link forces and home lengths still on the design geometry,
     /// [`statics_table`](Self::statics_table)), every estimated effect's values made known
     /// (added to known values of the same effect; a `tracker_frame` composed with a known
-    /// one), nothing left to estimate. What [`crate::session::register_session`] and a held-out
+    /// one), nothing left to estimate. Errors: one's own instrument with nuisance parameters
+    /// (their values are not carried). What [`crate::session::register_session`] and a held-out
     /// prediction need. A campaign without logged commands must have them logged first
     /// ([`log_commands`](Self::log_commands)): the held machine's own inverse kinematics
     /// would be other commands.
@@ -561,6 +617,19 @@ impl MeasurementModel {
             return Err(CalibError::invalid(
                 "parameters",
                 format!("{} values, expected {np}", params.len()),
+            ));
+        }
+        if let Some(b) = self
+            .blocks()
+            .iter()
+            .find(|b| b.instrument.is_some() && b.len > 0)
+        {
+            return Err(CalibError::invalid(
+                "instruments",
+                format!(
+                    "instrument `{}` has nuisance parameters, which a machine held fixed does not carry",
+                    self.instruments[b.instrument.unwrap_or_default()].name()
+                ),
             ));
         }
         let ni = self.num_installation_params();
@@ -798,6 +867,69 @@ impl MeasurementModel {
                 return Err(CalibError::invalid(field("measured_mm"), "not finite"));
             }
         }
+        for (q, m) in campaign.instrument_measurements.iter().enumerate() {
+            let field = |f: &str| format!("instrument measurement {q}.{f}");
+            if m.pose >= campaign.poses.len() {
+                return Err(CalibError::invalid(
+                    field("pose"),
+                    format!(
+                        "{} but the campaign has {} poses",
+                        m.pose,
+                        campaign.poses.len()
+                    ),
+                ));
+            }
+            let Some(instrument) = self.instruments.get(m.instrument) else {
+                return Err(CalibError::invalid(
+                    field("instrument"),
+                    format!(
+                        "{} but the model has {} instruments",
+                        m.instrument,
+                        self.instruments.len()
+                    ),
+                ));
+            };
+            if m.channel >= instrument.num_channels() {
+                return Err(CalibError::invalid(
+                    field("channel"),
+                    format!(
+                        "{} but `{}` has {} channels",
+                        m.channel,
+                        instrument.name(),
+                        instrument.num_channels()
+                    ),
+                ));
+            }
+            if instrument.num_session_params() > 0 && m.session >= self.instrument_sessions {
+                return Err(CalibError::invalid(
+                    field("session"),
+                    format!(
+                        "{} but the model has {} instrument sessions (MeasurementModel::instrument_sessions)",
+                        m.session, self.instrument_sessions
+                    ),
+                ));
+            }
+            if m.values.len() != instrument.num_values() {
+                return Err(CalibError::invalid(
+                    field("values"),
+                    format!(
+                        "{} values but `{}` gives {}",
+                        m.values.len(),
+                        instrument.name(),
+                        instrument.num_values()
+                    ),
+                ));
+            }
+            if !m.values.iter().all(|v| v.is_finite()) {
+                return Err(CalibError::invalid(field("values"), "not finite"));
+            }
+            if !(m.sigma.is_finite() && m.sigma > 0.0) {
+                return Err(CalibError::invalid(
+                    field("sigma"),
+                    format!("{} must be finite and > 0", m.sigma),
+                ));
+            }
+        }
         for (k, r) in campaign.readings.iter().enumerate() {
             if r.pose >= campaign.poses.len() {
                 return Err(CalibError::invalid(
@@ -853,6 +985,11 @@ pub struct Prepared {
     pub points_by_pose: Vec<Vec<usize>>,
     /// Tilt measurements grouped by pose.
     pub tilts_by_pose: Vec<Vec<usize>>,
+    /// Instrument measurements grouped by pose.
+    pub instruments_by_pose: Vec<Vec<usize>>,
+    /// The observation index of the first value of each instrument measurement
+    /// ([`Campaign::instrument_observation_rows`]).
+    pub instrument_rows: Vec<usize>,
     /// The observation index of each component of each pose measurement (`None`: not
     /// measured; [`Campaign::pose_observation_rows`]).
     pub pose_rows: Vec<[Option<usize>; 6]>,
@@ -881,6 +1018,10 @@ impl Prepared {
         for (q, t) in campaign.tilt_measurements.iter().enumerate() {
             tilts_by_pose[t.pose].push(q);
         }
+        let mut instruments_by_pose = vec![Vec::new(); campaign.poses.len()];
+        for (q, m) in campaign.instrument_measurements.iter().enumerate() {
+            instruments_by_pose[m.pose].push(q);
+        }
         let contexts = contexts(model, campaign, &lengths_mm, &by_pose)?;
         // The known link effects depend on the pose context only: applied here, once.
         let mut lengths_mm = lengths_mm;
@@ -900,6 +1041,8 @@ impl Prepared {
             measurements_by_pose,
             points_by_pose,
             tilts_by_pose,
+            instruments_by_pose,
+            instrument_rows: campaign.instrument_observation_rows(),
             pose_rows: campaign.pose_observation_rows(),
             first_order: None,
         };
@@ -1050,7 +1193,13 @@ fn predict_exact(
         let measurements = &prepared.measurements_by_pose[j];
         let points = &prepared.points_by_pose[j];
         let tilts = &prepared.tilts_by_pose[j];
-        if readings.is_empty() && measurements.is_empty() && points.is_empty() && tilts.is_empty() {
+        let instruments = &prepared.instruments_by_pose[j];
+        if readings.is_empty()
+            && measurements.is_empty()
+            && points.is_empty()
+            && tilts.is_empty()
+            && instruments.is_empty()
+        {
             continue;
         }
         let input = EffectInput {
@@ -1072,42 +1221,58 @@ fn predict_exact(
             let si = campaign.readings[k].sensor;
             y[k] = channels.reading(si, table.sensors[si].length_mm(&pose));
         }
-        // Tracker observations: position in the tracker frame (mm) and the rotation from the
-        // measured to the predicted orientation (mrad).
+        // The instruments see the pose reached: tracker poses (position in the session's
+        // tracker frame, mm, and the rotation from the measured to the predicted orientation,
+        // mrad), point targets (the target in its session's tracker frame, mm), inclinometers
+        // (each axis's elevation, mrad), one's own.
+        let seen = crate::instruments::InstrumentInput {
+            pose: &pose,
+            effect: input,
+            up: channels.up,
+        };
         let frame = if measurements.is_empty() {
             0
         } else {
             model.tracker_frame_of(campaign, j)?
         };
-        let (tracked_mm, tracked_rotation) = channels.tracked(&pose, frame);
-        let mut omegas = Vec::with_capacity(measurements.len());
+        // The tracker instrument of a pose measurement: its orientation residual is taken
+        // against the measured orientation.
+        let tracker_of = |q: usize| TrackerPoses {
+            measured: campaign.pose_measurements[q].measured.rotation,
+            ..channels.tracker_poses()
+        };
+        let mut values = [0.0; 6];
         for &q in measurements {
-            let w = cpm_geometry::rotation::log(
-                &(tracked_rotation * campaign.pose_measurements[q].measured.rotation.inverse()),
-            );
-            let values = [tracked_mm, w * 1e3];
+            let instrument = tracker_of(q);
+            channels
+                .tracker(&instrument)
+                .predict(&seen, 0, frame, &mut values);
             for (a, row) in prepared.pose_rows[q].iter().enumerate() {
                 if let Some(o) = row {
-                    y[*o] = values[a / 3][a % 3];
+                    y[*o] = values[a];
                 }
             }
-            omegas.push(w);
         }
-        // Point targets: the target's position in its session's tracker frame (mm).
         let p0 = campaign.first_point_observation();
+        let targets = channels.points();
         for &q in points {
             let pm = &campaign.point_measurements[q];
             let o = p0 + 3 * q;
-            y[o..o + 3].copy_from_slice(channels.point(&pose, pm.target, pm.session).as_slice());
+            targets.predict(&seen, pm.target, pm.session, &mut y[o..o + 3]);
         }
-        // Inclinometers: the elevation of each axis above the horizontal (mrad).
         let t0 = campaign.first_tilt_observation();
-        let tilt_at: Vec<crate::tilts::TiltAt> = tilts
-            .iter()
-            .map(|&q| channels.tilt(&pose, &campaign.tilt_measurements[q]))
-            .collect();
-        for (&q, t) in tilts.iter().zip(&tilt_at) {
-            y[t0 + q] = t.angle * 1e3;
+        let inclinometers = channels.tilts();
+        for &q in tilts {
+            let t = &campaign.tilt_measurements[q];
+            let c = channels.tilt_channel(t);
+            inclinometers.predict(&seen, c, t.session, &mut y[t0 + q..t0 + q + 1]);
+        }
+        for &q in instruments {
+            let m = &campaign.instrument_measurements[q];
+            let o = prepared.instrument_rows[q];
+            let bound = channels.instrument(m.instrument);
+            let n = bound.instrument.num_values();
+            bound.predict(&seen, m.channel, m.session, &mut y[o..o + n]);
         }
         if let Some(jac) = jacobian.as_deref_mut() {
             let kin = Kin::new(&table, &fk, &at, j);
@@ -1115,37 +1280,34 @@ fn predict_exact(
                 let si = campaign.readings[k].sensor;
                 channels.reading_row(&kin, &at, &table.sensors[si], si, &pose, jac.row_mut(k))?;
             }
-            if !measurements.is_empty() || !points.is_empty() || !tilts.is_empty() {
+            if !measurements.is_empty()
+                || !points.is_empty()
+                || !tilts.is_empty()
+                || !instruments.is_empty()
+            {
                 let dx = channels.twist_columns(&kin, &at, np)?;
-                for (&q, t) in tilts.iter().zip(&tilt_at) {
-                    channels.tilt_row(
-                        &mut jac.as_view_mut(),
-                        t0 + q,
-                        &dx,
-                        t,
-                        &campaign.tilt_measurements[q],
-                    );
+                let mut jac = jac.as_view_mut();
+                for &q in tilts {
+                    let t = &campaign.tilt_measurements[q];
+                    let c = channels.tilt_channel(t);
+                    inclinometers.rows(&seen, c, t.session, &dx, &mut jac, t0 + q);
                 }
                 for &q in points {
                     let pm = &campaign.point_measurements[q];
-                    channels.point_rows(
-                        &mut jac.as_view_mut(),
-                        p0 + 3 * q,
-                        &dx,
-                        &pose,
-                        pm.target,
-                        pm.session,
-                    );
+                    targets.rows(&seen, pm.target, pm.session, &dx, &mut jac, p0 + 3 * q);
                 }
-                for (&q, w) in measurements.iter().zip(&omegas) {
-                    channels.tracker_rows(
-                        &mut jac.as_view_mut(),
-                        frame,
-                        &prepared.pose_rows[q],
-                        w,
-                        &dx,
-                        &tracked_mm,
-                    );
+                for &q in instruments {
+                    let m = &campaign.instrument_measurements[q];
+                    let bound = channels.instrument(m.instrument);
+                    let o = prepared.instrument_rows[q];
+                    bound.rows(&seen, m.channel, m.session, &dx, &mut jac, o);
+                }
+                for &q in measurements {
+                    let instrument = tracker_of(q);
+                    let rows = &prepared.pose_rows[q];
+                    channels
+                        .tracker(&instrument)
+                        .rows_at(&seen, 0, frame, &dx, &mut jac, rows);
                 }
             }
         }

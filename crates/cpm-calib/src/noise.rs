@@ -53,6 +53,8 @@ pub enum Kind {
     TrackerOrientations,
     /// Point-target coordinates.
     Points,
+    /// The values of one's own instrument `i` ([`MeasurementModel::instruments`]).
+    Instrument(usize),
     /// Inclinometer angles.
     Tilts,
 }
@@ -66,14 +68,22 @@ impl Kind {
             ObservationKind::TrackerOrientation(..) => Kind::TrackerOrientations,
             ObservationKind::Point(..) => Kind::Points,
             ObservationKind::Tilt(..) => Kind::Tilts,
+            ObservationKind::Instrument(q, _) => {
+                Kind::Instrument(campaign.instrument_measurements[q].instrument)
+            }
         }
     }
 
-    /// The unit of its noise: um, or urad for orientations and angles.
-    pub fn unit(self) -> &'static str {
+    /// The unit of its noise: um, urad for orientations and angles, the instrument's own
+    /// for one's own instrument.
+    pub fn unit(self, model: &MeasurementModel) -> String {
         match self {
-            Kind::TrackerOrientations | Kind::Tilts => "urad",
-            _ => "um",
+            Kind::TrackerOrientations | Kind::Tilts => "urad".into(),
+            Kind::Instrument(i) => model
+                .instruments
+                .get(i)
+                .map_or("?".into(), |x| x.unit().to_string()),
+            _ => "um".into(),
         }
     }
 }
@@ -140,7 +150,7 @@ pub fn by_kind(model: &MeasurementModel, campaign: &Campaign, cal: &Calibration)
             KindNoise {
                 kind,
                 name: name(model, kind),
-                unit: kind.unit().to_string(),
+                unit: kind.unit(model),
                 observations: n,
                 redundancy: red,
                 assumed,
@@ -308,6 +318,16 @@ fn assumed_sigma(campaign: &Campaign, kind: Kind, sigma_ref: f64) -> f64 {
         Kind::TrackerOrientations => campaign.orientation_sigma(),
         Kind::Points => campaign.point_sigma(),
         Kind::Tilts => campaign.tilt_sigma(),
+        // Each measurement declares its own: their RMS.
+        Kind::Instrument(i) => {
+            let s: Vec<f64> = campaign
+                .instrument_measurements
+                .iter()
+                .filter(|m| m.instrument == i)
+                .map(|m| m.sigma)
+                .collect();
+            (s.iter().map(|v| v * v).sum::<f64>() / s.len().max(1) as f64).sqrt()
+        }
     }
 }
 
@@ -321,6 +341,10 @@ fn name(model: &MeasurementModel, kind: Kind) -> String {
         Kind::TrackerOrientations => "tracker orientations".into(),
         Kind::Points => "point targets".into(),
         Kind::Tilts => "inclinometer angles".into(),
+        Kind::Instrument(i) => match model.instruments.get(i) {
+            Some(x) => format!("instrument {}", x.name()),
+            None => format!("instrument {}", i + 1),
+        },
     }
 }
 

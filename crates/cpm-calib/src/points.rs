@@ -19,11 +19,13 @@
 //! one target leaves no further blind direction: it only knows them less well than three (see
 //! the Cramér-Rao bounds of `tests/points.rs`). `patterns` names these directions for the
 //! identifiability analysis.
-use nalgebra::{DVector, Matrix3, Rotation3, Vector3};
+use cpm_geometry::rotation::left_jacobian;
+use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::effects::{Channel, EffectModel};
 use crate::identifiability::Pattern;
+use crate::instruments::{Instrument, InstrumentInput};
 use crate::{Effect, MeasurementModel};
 
 /// A point target on the platform (`[[target]]`).
@@ -33,6 +35,110 @@ pub struct PointTarget {
     pub name: String,
     /// Position in the platform frame {P}, mm.
     pub platform_mm: Vector3<f64>,
+}
+
+/// The point targets of a model as an [`Instrument`]: a channel per target, three values
+/// (x y z in the session's tracker frame, mm) per measurement; nuisance parameters the
+/// targets' platform positions (x y z um per target, [`TargetPosition`]) and a tracker frame
+/// per session (tx ty tz um, rx ry rz urad, [`PointFrame`]).
+///
+/// ```
+/// use cpm_calib::instruments::Instrument;
+/// use cpm_calib::points::{PointTarget, PointTargets};
+/// let smr = PointTargets { targets: vec![PointTarget { name: "a".into(),
+///                                                      platform_mm: [10.0, 0.0, 0.0].into() }] };
+/// assert_eq!((smr.num_values(), smr.num_instrument_params(), smr.num_session_params()), (3, 3, 6));
+/// assert_eq!(smr.param_name(4), "session ty");
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointTargets {
+    /// The targets, in the order of the channels.
+    pub targets: Vec<PointTarget>,
+}
+
+impl PointTargets {
+    /// Target `k`'s position on the platform, mm: nominal plus the correction in `nuisance`.
+    fn target(&self, k: usize, nuisance: &[f64]) -> Vector3<f64> {
+        self.targets[k].platform_mm
+            + Vector3::new(nuisance[3 * k], nuisance[3 * k + 1], nuisance[3 * k + 2]) * 1e-3
+    }
+
+    /// The session frame (`p_tracker = R p + t`, t mm) in `nuisance`.
+    fn frame<'n>(&self, nuisance: &'n [f64]) -> &'n [f64] {
+        &nuisance[3 * self.targets.len()..]
+    }
+}
+
+impl Instrument for PointTargets {
+    fn name(&self) -> &str {
+        "point_target"
+    }
+    fn num_channels(&self) -> usize {
+        self.targets.len()
+    }
+    fn num_values(&self) -> usize {
+        3
+    }
+    fn unit(&self) -> &str {
+        "mm"
+    }
+    fn num_instrument_params(&self) -> usize {
+        3 * self.targets.len()
+    }
+    fn num_session_params(&self) -> usize {
+        6
+    }
+    fn param_name(&self, k: usize) -> String {
+        let own = self.num_instrument_params();
+        match self.targets.get(k / 3).filter(|_| k < own) {
+            Some(t) => format!("target `{}` {}", t.name, AXES[k % 3]),
+            None => format!("session {}", FRAME[(k - own) % 6]),
+        }
+    }
+    fn param_unit(&self, k: usize) -> &str {
+        let own = self.num_instrument_params();
+        if k >= own + 3 {
+            "urad"
+        } else {
+            "um"
+        }
+    }
+    fn predict(&self, input: &InstrumentInput, k: usize, nuisance: &[f64], values: &mut [f64]) {
+        let (t, r) = crate::effects::tracker_registration(self.frame(nuisance));
+        let y = r * input.pose.transform_point(&self.target(k, nuisance)) + t;
+        values.copy_from_slice(y.as_slice());
+    }
+    fn jacobian(
+        &self,
+        input: &InstrumentInput,
+        k: usize,
+        nuisance: &[f64],
+        d_pose: &mut DMatrix<f64>,
+        d_nuisance: &mut DMatrix<f64>,
+    ) {
+        let pose = input.pose;
+        let frame = self.frame(nuisance);
+        let (_, r) = crate::effects::tracker_registration(frame);
+        let rf = r.into_inner();
+        let target = self.target(k, nuisance);
+        // The pose moved by (dp, dtheta) moves the target by dp - [R t]x dtheta.
+        let rt = pose.rotation * target;
+        d_pose.view_mut((0, 0), (3, 3)).copy_from(&rf);
+        d_pose
+            .view_mut((0, 3), (3, 3))
+            .copy_from(&(-rf * rt.cross_matrix()));
+        let m = rf * pose.rotation.matrix() * 1e-3;
+        d_nuisance.view_mut((0, 3 * k), (3, 3)).copy_from(&m);
+        let o = self.num_instrument_params();
+        let b = pose.transform_point(&target);
+        let w = Vector3::new(frame[3], frame[4], frame[5]) * 1e-6;
+        // d(exp(w + d) b)/dd = -[exp(w) b]x J_l(w), per urad.
+        let m = (r * b).cross_matrix() * left_jacobian(&w) * -1e-6;
+        for a in 0..3 {
+            d_nuisance[(a, o + a)] = 1e-3;
+        }
+        d_nuisance.view_mut((0, o + 3), (3, 3)).copy_from(&m);
+    }
 }
 
 const AXES: [&str; 3] = ["x", "y", "z"];

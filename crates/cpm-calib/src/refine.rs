@@ -347,7 +347,7 @@ pub fn cross_validated_rms(
 
 /// The campaign without the observations `drop` (indices of [`Campaign::observations`]): a
 /// reading is left out, a tracker pose measurement when any of its six observations is, a
-/// point measurement when any of its three is.
+/// point (an instrument) measurement when any of its values is.
 fn without_observations(campaign: &Campaign, drop: &[usize]) -> Campaign {
     if drop.is_empty() {
         return campaign.clone();
@@ -376,6 +376,13 @@ fn without_observations(campaign: &Campaign, drop: &[usize]) -> Campaign {
     c.tilt_measurements.retain(|_| {
         q += 1;
         drop.binary_search(&(t0 + q - 1)).is_err()
+    });
+    let rows = campaign.instrument_observation_rows();
+    let mut q = 0;
+    c.instrument_measurements.retain(|m| {
+        q += 1;
+        let first = rows[q - 1];
+        !(first..first + m.values.len()).any(|o| drop.binary_search(&o).is_ok())
     });
     c
 }

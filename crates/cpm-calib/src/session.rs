@@ -285,6 +285,11 @@ pub fn consistency(
             ) {
                 v[b.offset..b.offset + b.len].fill(true);
             }
+            // One's own instruments: their per-session parameters.
+            if let Some(i) = b.instrument {
+                let own = single.instruments[i].num_instrument_params();
+                v[b.offset + own..b.offset + b.len].fill(true);
+            }
         }
         v
     };

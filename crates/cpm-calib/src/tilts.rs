@@ -20,11 +20,12 @@
 //! mount's rotation about the instrument's normal at level poses; the base tilt of a session
 //! trades against the mount's rotation about x and y wherever the platform keeps its yaw
 //! (that combination is named by `patterns`). The identifiability analysis names the rest.
-use nalgebra::{DVector, Rotation3, Vector3};
+use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::effects::{Channel, EffectModel};
 use crate::identifiability::Pattern;
+use crate::instruments::{Instrument, InstrumentInput};
 use crate::{Effect, MeasurementModel};
 use cpm_geometry::rotation::left_jacobian;
 
@@ -52,6 +53,126 @@ impl Inclinometer {
                 .map(|a| Vector3::from(*a).normalize())
                 .collect(),
             mount: cpm_geometry::rotation::from_rpy(r, p, y),
+        }
+    }
+}
+
+/// The inclinometers of a model as an [`Instrument`]: a channel per axis of each instrument
+/// (the first instrument's axes, then the second's, ...: [`channel`](Self::channel)), one
+/// value (the angle, mrad) per measurement; nuisance parameters the mounts (rx ry rz urad per
+/// instrument, [`InclinometerMount`]) and the base tilt per session (rx ry urad,
+/// [`BaseTilt`]).
+///
+/// ```
+/// use cpm_calib::instruments::Instrument;
+/// use cpm_calib::tilts::{Inclinometer, Inclinometers};
+/// use nalgebra::{Rotation3, Vector3};
+/// let two_axes = Inclinometer { name: "scl".into(), axes: vec![Vector3::y(), -Vector3::x()],
+///                               mount: Rotation3::identity() };
+/// let c = Inclinometers { inclinometers: vec![two_axes.clone(), two_axes] };
+/// assert_eq!((c.num_channels(), c.channel(1, 1)), (4, 3));
+/// assert_eq!((c.num_instrument_params(), c.num_session_params()), (6, 2));
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct Inclinometers {
+    /// The instruments.
+    pub inclinometers: Vec<Inclinometer>,
+}
+
+impl Inclinometers {
+    /// The channel of axis `axis` of inclinometer `i`.
+    pub fn channel(&self, i: usize, axis: usize) -> usize {
+        self.inclinometers[..i]
+            .iter()
+            .map(|c| c.axes.len())
+            .sum::<usize>()
+            + axis
+    }
+
+    /// The inclinometer and axis of a channel.
+    fn unflatten(&self, mut channel: usize) -> (usize, usize) {
+        for (i, c) in self.inclinometers.iter().enumerate() {
+            if channel < c.axes.len() {
+                return (i, channel);
+            }
+            channel -= c.axes.len();
+        }
+        (self.inclinometers.len(), channel)
+    }
+
+    fn at(&self, input: &InstrumentInput, channel: usize, nuisance: &[f64]) -> (usize, TiltAt) {
+        let (i, axis) = self.unflatten(channel);
+        let c = &self.inclinometers[i];
+        let m = Vector3::new(nuisance[3 * i], nuisance[3 * i + 1], nuisance[3 * i + 2]);
+        let o = self.num_instrument_params();
+        let b = [nuisance[o], nuisance[o + 1]];
+        let at = tilt_at(
+            &input.up,
+            &input.pose.rotation,
+            &c.mount,
+            &m,
+            b,
+            &c.axes[axis],
+        );
+        (i, at)
+    }
+}
+
+impl Instrument for Inclinometers {
+    fn name(&self) -> &str {
+        "inclinometer"
+    }
+    fn num_channels(&self) -> usize {
+        self.inclinometers.iter().map(|c| c.axes.len()).sum()
+    }
+    fn num_values(&self) -> usize {
+        1
+    }
+    fn unit(&self) -> &str {
+        "mrad"
+    }
+    fn num_instrument_params(&self) -> usize {
+        3 * self.inclinometers.len()
+    }
+    fn num_session_params(&self) -> usize {
+        2
+    }
+    fn param_name(&self, k: usize) -> String {
+        let own = self.num_instrument_params();
+        match self.inclinometers.get(k / 3).filter(|_| k < own) {
+            Some(c) => format!("inclinometer `{}` {}", c.name, ROT[k % 3]),
+            None => format!("base tilt {}", ROT[(k - own) % 2]),
+        }
+    }
+    fn param_unit(&self, _k: usize) -> &str {
+        "urad"
+    }
+    fn predict(
+        &self,
+        input: &InstrumentInput,
+        channel: usize,
+        nuisance: &[f64],
+        values: &mut [f64],
+    ) {
+        values[0] = self.at(input, channel, nuisance).1.angle * 1e3;
+    }
+    fn jacobian(
+        &self,
+        input: &InstrumentInput,
+        channel: usize,
+        nuisance: &[f64],
+        d_pose: &mut DMatrix<f64>,
+        d_nuisance: &mut DMatrix<f64>,
+    ) {
+        let (i, at) = self.at(input, channel, nuisance);
+        let k = at.slope * 1e3;
+        let o = self.num_instrument_params();
+        for a in 0..3 {
+            d_pose[(0, 3 + a)] = at.pose_rot[a] * k;
+            d_nuisance[(0, 3 * i + a)] = at.mount[a] * k;
+        }
+        for a in 0..2 {
+            d_nuisance[(0, o + a)] = at.tilt[a] * k;
         }
     }
 }
@@ -126,7 +247,7 @@ pub fn nominal_up(model: &MeasurementModel) -> Vector3<f64> {
 }
 
 /// A tilt prediction's pieces at one pose: the angle (rad) and the derivatives of `u . a`.
-pub(crate) struct TiltAt {
+struct TiltAt {
     /// `asin(u . a)`, rad.
     pub angle: f64,
     /// `1 / cos(angle)`: d angle / d(u . a).
@@ -142,7 +263,7 @@ pub(crate) struct TiltAt {
 /// The tilt of axis `n` (platform direction) of an instrument with mount rotation
 /// `known * exp(m)` (m in urad), seen at platform orientation `r` with the base tilted by
 /// `b` (urad, about x and y) from `up`.
-pub(crate) fn tilt_at(
+fn tilt_at(
     up: &Vector3<f64>,
     r: &Rotation3<f64>,
     known: &Rotation3<f64>,

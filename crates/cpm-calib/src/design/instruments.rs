@@ -293,15 +293,8 @@ impl Instruments {
         // then points, then tilts (each kind pose by pose).
         let c = self.skeleton(&m, candidates, noise);
         let mut rows: Vec<Vec<usize>> = vec![Vec::new(); candidates.len()];
-        for (k, kind) in c.observation_kinds().into_iter().enumerate() {
-            let pose = match kind {
-                crate::ObservationKind::Reading(i) => c.readings[i].pose,
-                crate::ObservationKind::TrackerPosition(q, _)
-                | crate::ObservationKind::TrackerOrientation(q, _) => c.pose_measurements[q].pose,
-                crate::ObservationKind::Point(q, _) => c.point_measurements[q].pose,
-                crate::ObservationKind::Tilt(q) => c.tilt_measurements[q].pose,
-            };
-            rows[pose].push(k);
+        for k in 0..c.len() {
+            rows[c.observation_pose(k)].push(k);
         }
         let projected = &j * &basis;
         let blocks: Vec<DMatrix<f64>> = rows
