@@ -130,8 +130,8 @@ pub struct DesignArgs {
     #[arg(long)]
     pub json: bool,
     /// Choose the poses for these instruments instead of designing gauge sockets: a
-    /// comma-separated mix of `gauges` (the description's [[sensor]]s), `tracker` (6-D poses),
-    /// `points` (every [[target]]) and `tilts` (every [[inclinometer]]). --readings is then
+    /// comma-separated mix of `gauges` (the description's `[[sensor]]`s), `tracker` (6-D poses),
+    /// `points` (every `[[target]]`) and `tilts` (every `[[inclinometer]]`). --readings is then
     /// the budget of scalar observations; writes poses.csv, design.json and report.md with the
     /// Cramér-Rao bounds of the mix and of each instrument alone.
     #[arg(long, value_name = "LIST")]
