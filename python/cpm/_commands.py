@@ -263,6 +263,15 @@ class CalibrationResult(_Files):
         return json.loads(self.to_json()).get("registration")
 
     @property
+    def noise_by_kind(self) -> List[Dict[str, Any]]:
+        """The noise of each kind of observation (each gauge, tracker positions and
+        orientations, point targets, inclinometer angles): the one the fit weighed it with
+        (``assumed``) and the one its own residual shows (``estimated``), in ``unit``
+        (``calibration.json`` ``noise_by_kind``; ``noise_per_kind=True`` weighs by the
+        estimates)."""
+        return list(json.loads(self.to_json())["noise_by_kind"])
+
+    @property
     def calibrated_robot(self) -> Robot:
         """``calibrated.toml``: the calibrated machine as a robot description."""
         return Robot.from_text(self.text("calibrated.toml"), "calibrated.toml")
