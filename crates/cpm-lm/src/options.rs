@@ -121,7 +121,8 @@ pub enum StatisticsMode {
     AtEnd,
 }
 
-/// The globalisation of the default solve: a restart when a parameter *evaporates*.
+/// The globalisation of the default solve: a restart when a parameter *evaporates*, and
+/// geodesic acceleration when the plain steps crawl.
 ///
 /// Transtrum, Machta and Sethna ("Geometry of nonlinear least squares with applications to
 /// sloppy models and optimization", Phys. Rev. E 83, 036701, 2011) call it parameter
@@ -139,6 +140,22 @@ pub enum StatisticsMode {
 /// the case in point: the plain method jumps to `b2 = 44.9`, where `exp(-b2 x)` vanishes, and
 /// stops with a residual sum of squares of 9771.5; the restart reaches the certified minimum.
 ///
+/// The restart stops early when it is heading where the plain solve ended: as soon as every
+/// parameter that evaporated in the plain solve has evaporated in the restart too while its
+/// cost is not below the plain solve's final cost, the restart is abandoned and the plain
+/// solve's end returned (what remains of such a restart is a creep along the same plateau
+/// towards the same or a higher cost: Bard's function from 100 times its standard start, where
+/// both solves run to the local minimum at infinity).
+///
+/// The same acceleration is the remedy for a plain solve that crawls along a narrow curved
+/// valley, each step limited by the curvature of the model: after
+/// `crawl_evaluations * (n + 1)` residual evaluations (`n` parameters; MINPACK's default
+/// budget for the whole solve with the default `100`) a solve that has not converged
+/// continues from where it is with geodesic acceleration. Meyer's function from 10 times its
+/// standard start is the case in point: the plain method is still 600 times above the
+/// minimum after 1000 iterations (MINPACK gives up at 400 evaluations); with acceleration
+/// from the 400th evaluation on it reaches the minimum.
+///
 /// A parameter `j` counts as evaporated when the squared norm of its Jacobian column at the
 /// last linearisation is below `threshold` times the largest it has been during the solve.
 /// Not applied with a robust loss, the cubic-interpolation damping, geodesic acceleration
@@ -148,11 +165,17 @@ pub struct Evaporation {
     /// Relative squared column norm below which a parameter has evaporated. Default:
     /// `1e-20` (a column 10^10 times shorter than it was).
     pub threshold: f64,
+    /// Residual evaluations per parameter (plus one) after which a solve that has not
+    /// converged continues with geodesic acceleration (`None`: never). Default: `Some(100)`.
+    pub crawl_evaluations: Option<usize>,
 }
 
 impl Default for Evaporation {
     fn default() -> Self {
-        Self { threshold: 1e-20 }
+        Self {
+            threshold: 1e-20,
+            crawl_evaluations: Some(100),
+        }
     }
 }
 
@@ -295,6 +318,13 @@ impl Options {
                     "evaporation_restart.threshold must be in [0, 1), got {}",
                     e.threshold
                 )));
+            }
+            if e.crawl_evaluations == Some(0) {
+                return Err(LmError::InvalidOptions(
+                    "evaporation_restart.crawl_evaluations must be >= 1 when set, got 0 \
+                     (set GeodesicAcceleration to accelerate from the start)"
+                        .into(),
+                ));
             }
         }
         if let Some(a) = &self.acceleration {
