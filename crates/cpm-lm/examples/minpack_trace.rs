@@ -8,6 +8,10 @@
 #[path = "../tests/common/mgh.rs"]
 mod mgh;
 
+#[path = "../tests/common/nist.rs"]
+#[allow(dead_code)]
+mod nist;
+
 use cpm_lm::{minimize, Options, Solver};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{storage::Owned, DMatrix, DVector, Dyn};
@@ -40,7 +44,7 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for LmMgh {
         self.evals.set(self.evals.get() + 1);
         if self.trace {
             println!(
-                "  lm {:>4} cost {:>14.8e} x {:?}",
+                "  lm {:>4} cost {:>22.15e} x {:?}",
                 self.evals.get(),
                 0.5 * r.norm_squared(),
                 self.x.as_slice()
@@ -58,6 +62,28 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for LmMgh {
 
 fn main() {
     let filter = std::env::args().nth(1);
+    // `NIST=<dataset>`: trace that NIST problem from its first start instead.
+    if let Ok(name) = std::env::var("NIST") {
+        let d = nist::load(&name);
+        let mut p = nist::NistProblem::new(&d);
+        let mut x = d.start1.clone();
+        let mut solver = Solver::new(Options::default()).with_callback(|rec| {
+            println!(
+                "  {:>4} cost {:>22.15e} trial {:>14.8e} mu {:>10.3e} |h| {:>10.3e} rho {:>9.3e} {}",
+                rec.iteration,
+                rec.cost,
+                rec.trial_cost,
+                rec.damping,
+                rec.step_norm,
+                rec.gain_ratio,
+                if rec.accepted { "acc" } else { "rej" }
+            );
+            ControlFlow::Continue(())
+        });
+        let r = solver.minimize(&mut p, &mut x).unwrap();
+        println!("x = {x:?}\n{r:#}");
+        return;
+    }
     // `ACCEL=1`: geodesic acceleration from the start.
     let options = Options {
         acceleration: std::env::var("ACCEL")
@@ -105,7 +131,7 @@ fn main() {
             let mut x = case.start.clone();
             let mut solver = Solver::new(options.clone()).with_callback(|rec| {
                 println!(
-                    "  {:>4} cost {:>14.8e} trial {:>14.8e} mu {:>10.3e} |h| {:>10.3e} rho {:>9.3e} {}",
+                    "  {:>4} cost {:>22.15e} trial {:>14.8e} mu {:>10.3e} |h| {:>10.3e} rho {:>9.3e} {}",
                     rec.iteration,
                     rec.cost,
                     rec.trial_cost,

@@ -140,10 +140,10 @@ pub enum StatisticsMode {
 /// the case in point: the plain method jumps to `b2 = 44.9`, where `exp(-b2 x)` vanishes, and
 /// stops with a residual sum of squares of 9771.5; the restart reaches the certified minimum.
 ///
-/// The restart stops early when it is heading where the plain solve ended: as soon as every
+/// The restart stops early when it has arrived where the plain solve ended: as soon as every
 /// parameter that evaporated in the plain solve has evaporated in the restart too while its
-/// cost is not below the plain solve's final cost, the restart is abandoned and the plain
-/// solve's end returned (what remains of such a restart is a creep along the same plateau
+/// cost is within `1e-6` (relative) above the plain solve's final cost, the restart is
+/// abandoned and the plain solve's end returned (what remains of such a restart is a creep along the same plateau
 /// towards the same or a higher cost: Bard's function from 100 times its standard start, where
 /// both solves run to the local minimum at infinity).
 ///

@@ -610,9 +610,16 @@ fn crawl_limit(options: &Options, n: usize) -> Option<usize> {
         .map(|k| k.saturating_mul(n.saturating_add(1)))
 }
 
+/// How close (relative) to the plain solve's final cost the restart must be to count as on
+/// the same plateau.
+const ABANDON_BAND: f64 = 1e-6;
+
 /// When the accelerated restart of an evaporated solve is abandoned: once every parameter
 /// in `evaporated` has evaporated (squared column norm below `threshold` times its peak)
-/// at a cost not below `cost`, the plain solve's final one.
+/// at a cost not below `cost`, the plain solve's final one, and within [`ABANDON_BAND`] of
+/// it. It is then on the plateau where the plain solve ended and can only approach the same
+/// cost; higher up (NIST's BoxBOD from its first start passes over the plateau 16 times
+/// above its cost) it may still come back.
 #[derive(Clone, Debug)]
 pub(crate) struct Abandon {
     threshold: f64,
@@ -742,6 +749,7 @@ pub(crate) fn run<M: Model>(
             }
             if let Some(a) = &abandon {
                 if cost >= a.cost
+                    && cost <= a.cost * (1.0 + ABANDON_BAND)
                     && a.evaporated
                         .iter()
                         .all(|&j| norms2[j] < a.threshold * peak2[j])
