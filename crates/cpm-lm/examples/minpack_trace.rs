@@ -9,7 +9,6 @@
 mod mgh;
 
 #[path = "../tests/common/nist.rs"]
-#[allow(dead_code)]
 mod nist;
 
 use cpm_lm::{minimize, Options, Solver};
