@@ -851,9 +851,20 @@ pub(crate) fn run<M: Model>(
         }
         let alpha = damping.step_length();
         // Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
-        // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial.
+        // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial. Not for a
+        // velocity below sqrt(eps) of the scaled parameters: there the finite difference
+        // r_vv is rounding noise (its error grows as 1 / ||v||, so each rejection, shortening
+        // v, would make the next ratio larger), and the plain step is taken.
         let mut accelerated = false;
-        if let (Some(ga), Backend::Stored(s)) = (accel, &mut backend) {
+        let resolvable = accel.is_some() && {
+            let (mut dv2, mut dx2) = (0.0, 0.0);
+            for j in 0..n {
+                dv2 += (d[j] * h[j]).powi(2);
+                dx2 += (d[j] * x[j]).powi(2);
+            }
+            dv2 > f64::EPSILON * dx2
+        };
+        if let (Some(ga), Backend::Stored(s), true) = (accel, &mut backend, resolvable) {
             timings.linear_solver += clock.lap();
             let ratio = s.accelerate(x, x_trial, h, ga.fd_step, mu, d, iteration)?;
             timings.residuals += clock.lap();
