@@ -73,7 +73,7 @@ impl ScaleUpdate {
 /// does not know: from NIST's first start of BoxBOD the plain method jumps onto the plateau
 /// (residual sum of squares 9771.5), the accelerated one reaches the certified minimum. It
 /// costs one more residual evaluation and one more solve per trial and more trials (over
-/// the 46 vendored NIST runs about 2.2 times the residual evaluations), and from MGH09's
+/// the 46 vendored NIST runs about 1.9 times the residual evaluations), and from MGH09's
 /// first start the ratio test rejects most trials along the valley until the iteration
 /// limit: hence not on by default, but the restart of the default solve when a parameter
 /// evaporated ([`Evaporation`]).
