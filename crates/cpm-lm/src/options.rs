@@ -157,7 +157,7 @@ pub enum StatisticsMode {
 /// continues from where it is with geodesic acceleration. Meyer's function from 10 times its
 /// standard start is the case in point: the plain method is still 600 times above the
 /// minimum after 1000 iterations (MINPACK gives up at 400 evaluations); with acceleration
-/// from the 400th evaluation on it reaches the minimum (760 evaluations in all). A solve that
+/// from the 400th evaluation on it reaches the minimum (751 evaluations in all). A solve that
 /// switched is not restarted when a parameter evaporated (it already used the remedy).
 /// Acceleration is not applied to a velocity below `sqrt(eps)` of the scaled parameters,
 /// where its finite difference is rounding noise: the plain step is taken there.
