@@ -73,7 +73,7 @@ impl ScaleUpdate {
 /// does not know: from NIST's first start of BoxBOD the plain method jumps onto the plateau
 /// (residual sum of squares 9771.5), the accelerated one reaches the certified minimum. It
 /// costs one more residual evaluation and one more solve per trial and more trials (over
-/// the 46 vendored NIST runs about 1.9 times the residual evaluations), and from MGH09's
+/// the 46 vendored NIST runs about 2.0 times the residual evaluations), and from MGH09's
 /// first start the ratio test rejects most trials along the valley until the iteration
 /// limit: hence not on by default, but the restart of the default solve when a parameter
 /// evaporated ([`Evaporation`]).
@@ -157,7 +157,7 @@ pub enum StatisticsMode {
 /// continues from where it is with geodesic acceleration. Meyer's function from 10 times its
 /// standard start is the case in point: the plain method is still 600 times above the
 /// minimum after 1000 iterations (MINPACK gives up at 400 evaluations); with acceleration
-/// from the 400th evaluation on it reaches the minimum (751 evaluations in all). A solve that
+/// from the 400th evaluation on it reaches the minimum (752 evaluations in all). A solve that
 /// switched is not restarted when a parameter evaporated (it already used the remedy).
 /// Acceleration is not applied to a velocity below `sqrt(eps)` of the scaled parameters,
 /// where its finite difference is rounding noise: the plain step is taken there.
