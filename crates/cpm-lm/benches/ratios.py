@@ -2,25 +2,28 @@
 """Time ratios of a criterion group's cpm-lm runs to the levenberg-marquardt crate's.
 
 Reads criterion's estimates under target/criterion/<group>/<solver>/<case>/new/estimates.json
-(the mean point estimate) and prints, per case, both times and cpm-lm's ratio, then the
-geometric mean of the ratios and the largest one.
+(the mean point estimate, or the median with --median: steadier on a shared machine) and
+prints, per case, both times and cpm-lm's ratio, then the geometric mean of the ratios and
+the largest one.
 
     cargo bench -p cpm-lm --bench lib -- minpack --warm-up-time 1 --measurement-time 3
-    python3 crates/cpm-lm/benches/ratios.py target/criterion/minpack
+    python3 crates/cpm-lm/benches/ratios.py target/criterion/minpack [--median]
 """
 import json
 import math
 import os
 import sys
 
-root = sys.argv[1] if len(sys.argv) > 1 else "target/criterion/minpack"
+args = [a for a in sys.argv[1:] if not a.startswith("--")]
+statistic = "median" if "--median" in sys.argv[1:] else "mean"
+root = args[0] if args else "target/criterion/minpack"
 ours, theirs = "cpm-lm", "levenberg-marquardt"
 rows = []
 for case in sorted(os.listdir(os.path.join(root, ours))):
     paths = [os.path.join(root, s, case, "new", "estimates.json") for s in (ours, theirs)]
     if not all(os.path.exists(p) for p in paths):
         continue
-    a, b = (json.load(open(p))["mean"]["point_estimate"] for p in paths)
+    a, b = (json.load(open(p))[statistic]["point_estimate"] for p in paths)
     rows.append((case, a, b, a / b))
 print(f"{'case':<36} {'cpm-lm':>12} {'lm crate':>12} {'ratio':>7}")
 for case, a, b, r in rows:
@@ -28,4 +31,7 @@ for case, a, b, r in rows:
 if rows:
     g = math.exp(sum(math.log(r[3]) for r in rows) / len(rows))
     worst = max(rows, key=lambda r: r[3])
-    print(f"{len(rows)} cases: geometric mean ratio {g:.3f}, largest {worst[3]:.2f} ({worst[0]})")
+    print(
+        f"{len(rows)} cases ({statistic}s): geometric mean ratio {g:.3f}, "
+        f"largest {worst[3]:.2f} ({worst[0]})"
+    )

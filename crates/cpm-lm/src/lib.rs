@@ -84,7 +84,8 @@
 //! adds Transtrum and Sethna's geodesic acceleration ([`GeodesicAcceleration`]) to every
 //! step; by default it is used only to run again a solve in which a parameter *evaporated*
 //! ([`Evaporation`]: the plain method carried it where the model no longer depends on it, as
-//! from NIST's BoxBOD first start, and stopped on a plateau):
+//! from NIST's BoxBOD first start, and stopped on a plateau) and to continue a solve that
+//! crawls past MINPACK's budget of `100 (n + 1)` evaluations:
 //!
 //! ```
 //! # use cpm_lm::{minimize, DenseJacobian, ModelError, Problem};

@@ -65,13 +65,15 @@ impl ScaleUpdate {
 /// (one extra residual evaluation at `x + h v` and one extra solve with the same damping
 /// per trial). The trial step is `v + a / 2`, tried only when the acceleration is small
 /// beside the velocity, `2 ||D a|| / ||D v|| <= max_ratio`; otherwise the trial counts as
-/// rejected and the damping grows (the trust region shrinks). The predicted reduction of the
-/// gain ratio is the linear model's for `v`, as in GSL. On a curved valley or a plateau the
+/// rejected and the damping grows (the trust region shrinks). A velocity below `sqrt(eps)`
+/// of the scaled parameters (`||D v||^2 <= eps ||D x||^2`) is taken plain: there `r_vv` is
+/// rounding noise, growing as `1 / ||v||`, and the ratio test would reject every shorter
+/// trial. The predicted reduction of the gain ratio is the linear model's for `v`, as in GSL. On a curved valley or a plateau the
 /// ratio test keeps the iteration from stepping far along a direction whose curvature it
 /// does not know: from NIST's first start of BoxBOD the plain method jumps onto the plateau
 /// (residual sum of squares 9771.5), the accelerated one reaches the certified minimum. It
 /// costs one more residual evaluation and one more solve per trial and more trials (over
-/// the 46 vendored NIST runs about 2.4 times the residual evaluations), and from MGH09's
+/// the 46 vendored NIST runs about 2.0 times the residual evaluations), and from MGH09's
 /// first start the ratio test rejects most trials along the valley until the iteration
 /// limit: hence not on by default, but the restart of the default solve when a parameter
 /// evaporated ([`Evaporation`]).
@@ -121,7 +123,8 @@ pub enum StatisticsMode {
     AtEnd,
 }
 
-/// The globalisation of the default solve: a restart when a parameter *evaporates*.
+/// The globalisation of the default solve: a restart when a parameter *evaporates*, and
+/// geodesic acceleration when the plain steps crawl.
 ///
 /// Transtrum, Machta and Sethna ("Geometry of nonlinear least squares with applications to
 /// sloppy models and optimization", Phys. Rev. E 83, 036701, 2011) call it parameter
@@ -139,6 +142,26 @@ pub enum StatisticsMode {
 /// the case in point: the plain method jumps to `b2 = 44.9`, where `exp(-b2 x)` vanishes, and
 /// stops with a residual sum of squares of 9771.5; the restart reaches the certified minimum.
 ///
+/// The restart stops early when it has arrived where the plain solve ended: as soon as every
+/// parameter that evaporated in the plain solve has evaporated in the restart too while its
+/// cost is within `1e-6` (relative) above the plain solve's final cost, the restart is
+/// abandoned and the plain solve's end returned (what remains of such a restart is a creep
+/// along the same plateau towards the same cost: Bard's function from 100 times its standard
+/// start, where both solves run to the local minimum at infinity). Higher up the restart may
+/// still come back (BoxBOD's passes over the plateau at 16 times its cost).
+///
+/// The same acceleration is the remedy for a plain solve that crawls along a narrow curved
+/// valley, each step limited by the curvature of the model: after
+/// `crawl_evaluations * (n + 1)` residual evaluations (`n` parameters; MINPACK's default
+/// budget for the whole solve with the default `100`) a solve that has not converged
+/// continues from where it is with geodesic acceleration. Meyer's function from 10 times its
+/// standard start is the case in point: the plain method is still 600 times above the
+/// minimum after 1000 iterations (MINPACK gives up at 400 evaluations); with acceleration
+/// from the 400th evaluation on it reaches the minimum (752 evaluations in all). A solve that
+/// switched is not restarted when a parameter evaporated (it already used the remedy).
+/// Acceleration is not applied to a velocity below `sqrt(eps)` of the scaled parameters,
+/// where its finite difference is rounding noise: the plain step is taken there.
+///
 /// A parameter `j` counts as evaporated when the squared norm of its Jacobian column at the
 /// last linearisation is below `threshold` times the largest it has been during the solve.
 /// Not applied with a robust loss, the cubic-interpolation damping, geodesic acceleration
@@ -148,11 +171,17 @@ pub struct Evaporation {
     /// Relative squared column norm below which a parameter has evaporated. Default:
     /// `1e-20` (a column 10^10 times shorter than it was).
     pub threshold: f64,
+    /// Residual evaluations per parameter (plus one) after which a solve that has not
+    /// converged continues with geodesic acceleration (`None`: never). Default: `Some(100)`.
+    pub crawl_evaluations: Option<usize>,
 }
 
 impl Default for Evaporation {
     fn default() -> Self {
-        Self { threshold: 1e-20 }
+        Self {
+            threshold: 1e-20,
+            crawl_evaluations: Some(100),
+        }
     }
 }
 
@@ -295,6 +324,13 @@ impl Options {
                     "evaporation_restart.threshold must be in [0, 1), got {}",
                     e.threshold
                 )));
+            }
+            if e.crawl_evaluations == Some(0) {
+                return Err(LmError::InvalidOptions(
+                    "evaporation_restart.crawl_evaluations must be >= 1 when set, got 0 \
+                     (set GeodesicAcceleration to accelerate from the start)"
+                        .into(),
+                ));
             }
         }
         if let Some(a) = &self.acceleration {

@@ -289,8 +289,9 @@ impl<'p, M: Model> Backend<'p, M> {
                 }
                 // The Jacobian's time includes the reweighting and the gradient.
                 timings.jacobian += clock.lap();
+                // The preparation is timed with the solve that follows (one clock read
+                // fewer per iteration: on small problems a read costs as much as a solve).
                 s.linear.prepare(&s.jac, rw).map_err(LmError::Numerical)?;
-                timings.linear_solver += clock.lap();
                 s.jac_current = true;
                 Ok(Some(norm2(rw).sqrt()))
             }
@@ -432,6 +433,16 @@ impl<'p, M: Model> Backend<'p, M> {
 }
 
 impl<M: Model> Stored<'_, M> {
+    /// Storage for geodesic acceleration switched on during a solve (`m` residuals, `n`
+    /// parameters).
+    fn enable_acceleration(&mut self, m: usize, n: usize) {
+        if self.jdir.len() != m {
+            self.jdir = vec![0.0; m];
+        }
+        self.r_probe = vec![0.0; m];
+        self.acc = vec![0.0; 2 * n];
+    }
+
     /// Geodesic acceleration: `a = -(J^T J + mu D^2)^-1 J^T r_vv` into `acc[..n]`, from the
     /// residuals at `x + fd h`. Returns `2 ||D a|| / ||D h||` (0 when no acceleration could
     /// be solved for: the plain step).
@@ -519,20 +530,24 @@ pub(crate) fn run_stored<M: Model>(
     options: &Options,
     mut callback: Callback<'_, '_>,
 ) -> Result<Report, LmError> {
-    let restart = options.evaporation_restart.is_some()
-        && options.acceleration.is_none()
-        && options.loss.is_squared()
-        && options.damping != Damping::CubicInterpolation
-        && options.lower.is_none()
-        && options.upper.is_none();
+    let restart = globalised(options);
     let x0 = if restart { x.to_vec() } else { Vec::new() };
     let first = run(
         Backend::stored(&mut *model),
         x,
         options,
+        None,
         callback.as_deref_mut(),
     )?;
-    if !restart || first.evaporated.is_empty() || first.termination == TerminationReason::UserStop {
+    // A solve that switched to acceleration when it crawled already used the remedy: no
+    // restart (it would repeat the remedy from the start).
+    let crawled =
+        crawl_limit(options, model.num_params()).is_some_and(|k| first.residual_evaluations > k);
+    if !restart
+        || crawled
+        || first.evaporated.is_empty()
+        || first.termination == TerminationReason::UserStop
+    {
         return Ok(first);
     }
     let accelerated = Options {
@@ -540,8 +555,19 @@ pub(crate) fn run_stored<M: Model>(
         evaporation_restart: None,
         ..options.clone()
     };
+    let abandon = options.evaporation_restart.map(|e| Abandon {
+        threshold: e.threshold,
+        cost: first.final_cost,
+        evaporated: first.evaporated.clone(),
+    });
     let mut x1 = x0;
-    let second = run(Backend::stored(model), &mut x1, &accelerated, callback)?;
+    let second = run(
+        Backend::stored(model),
+        &mut x1,
+        &accelerated,
+        abandon,
+        callback,
+    )?;
     let (mut keep, other) = if second.final_cost < first.final_cost {
         x.copy_from_slice(&x1);
         (second, first)
@@ -561,10 +587,54 @@ pub(crate) fn run_stored<M: Model>(
     Ok(keep)
 }
 
+/// Whether the globalisation of [`Evaporation`](crate::Evaporation) applies: a stored
+/// problem solved with plain steps, plain least squares, a damping other than the cubic
+/// control, and no bounds.
+fn globalised(options: &Options) -> bool {
+    options.evaporation_restart.is_some()
+        && options.acceleration.is_none()
+        && options.loss.is_squared()
+        && options.damping != Damping::CubicInterpolation
+        && options.lower.is_none()
+        && options.upper.is_none()
+}
+
+/// Residual evaluations after which a globalised solve of `n` parameters that has not
+/// converged continues with geodesic acceleration (see [`Evaporation`](crate::Evaporation)).
+fn crawl_limit(options: &Options, n: usize) -> Option<usize> {
+    let e = options.evaporation_restart?;
+    if !globalised(options) {
+        return None;
+    }
+    e.crawl_evaluations
+        .map(|k| k.saturating_mul(n.saturating_add(1)))
+}
+
+/// How close (relative) to the plain solve's final cost the restart must be to count as on
+/// the same plateau.
+const ABANDON_BAND: f64 = 1e-6;
+
+/// When the accelerated restart of an evaporated solve is abandoned: once every parameter
+/// in `evaporated` has evaporated (squared column norm below `threshold` times its peak)
+/// at a cost not below `cost`, the plain solve's final one, and within [`ABANDON_BAND`] of
+/// it. It is then on the plateau where the plain solve ended and can only approach the same
+/// cost; higher up (NIST's BoxBOD from its first start passes over the plateau 16 times
+/// above its cost) it may still come back.
+#[derive(Clone, Debug)]
+pub(crate) struct Abandon {
+    threshold: f64,
+    cost: f64,
+    evaporated: Vec<usize>,
+}
+
+/// One solve. `abandon`: the restart's early stop (see [`Abandon`]); an abandoned run ends
+/// with [`TerminationReason::UserStop`], never reported since its cost is not below the
+/// plain run's.
 pub(crate) fn run<M: Model>(
     mut backend: Backend<'_, M>,
     x: &mut [f64],
     options: &Options,
+    abandon: Option<Abandon>,
     mut callback: Callback<'_, '_>,
 ) -> Result<Report, LmError> {
     let start = Instant::now();
@@ -600,12 +670,18 @@ pub(crate) fn run<M: Model>(
 
     let mut timings = Timings::default();
     let cubic = options.damping == Damping::CubicInterpolation;
-    let accel = options.acceleration;
+    let mut accel = options.acceleration;
+    // Residual evaluations after which plain steps switch to geodesic acceleration.
+    let crawl_limit = match backend {
+        Backend::Stored(_) => crawl_limit(options, n),
+        Backend::Normal(_) => None,
+    };
     // The parameter-sized vectors share one allocation (small problems spend a fair part
     // of their time in the allocator).
     let watch = options.evaporation_restart;
-    let mut nbuf = vec![0.0; if watch.is_some() { 8 * n } else { 7 * n }];
-    let (peak2, nbuf7) = nbuf.split_at_mut(if watch.is_some() { n } else { 0 });
+    let track = watch.is_some() || abandon.is_some();
+    let mut nbuf = vec![0.0; if track { 8 * n } else { 7 * n }];
+    let (peak2, nbuf7) = nbuf.split_at_mut(if track { n } else { 0 });
     let (wa, rest) = nbuf7.split_at_mut(n);
     let (x_trial, rest) = rest.split_at_mut(n);
     let (h, rest) = rest.split_at_mut(n);
@@ -671,6 +747,17 @@ pub(crate) fn run<M: Model>(
             for (p, &c) in peak2.iter_mut().zip(norms2.iter()) {
                 *p = p.max(c);
             }
+            if let Some(a) = &abandon {
+                if cost >= a.cost
+                    && cost <= a.cost * (1.0 + ABANDON_BAND)
+                    && a.evaporated
+                        .iter()
+                        .all(|&j| norms2[j] < a.threshold * peak2[j])
+                {
+                    termination = Some(TerminationReason::UserStop);
+                    break;
+                }
+            }
             if first {
                 let mut mu0 = 0.0f64;
                 for j in 0..n {
@@ -724,6 +811,12 @@ pub(crate) fn run<M: Model>(
             termination = Some(TerminationReason::MaxEvaluations);
             break;
         }
+        if accel.is_none() && crawl_limit.is_some_and(|k| residual_evaluations >= k) {
+            if let Backend::Stored(s) = &mut backend {
+                s.enable_acceleration(m, n);
+                accel = Some(crate::GeodesicAcceleration::default());
+            }
+        }
         let iteration = records.len() + 1;
         let (solved, mu) = backend.solve(
             x,
@@ -758,9 +851,20 @@ pub(crate) fn run<M: Model>(
         }
         let alpha = damping.step_length();
         // Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
-        // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial.
+        // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial. Not for a
+        // velocity below sqrt(eps) of the scaled parameters: there the finite difference
+        // r_vv is rounding noise (its error grows as 1 / ||v||, so each rejection, shortening
+        // v, would make the next ratio larger), and the plain step is taken.
         let mut accelerated = false;
-        if let (Some(ga), Backend::Stored(s)) = (accel, &mut backend) {
+        let resolvable = accel.is_some() && {
+            let (mut dv2, mut dx2) = (0.0, 0.0);
+            for j in 0..n {
+                dv2 += (d[j] * h[j]).powi(2);
+                dx2 += (d[j] * x[j]).powi(2);
+            }
+            dv2 > f64::EPSILON * dx2
+        };
+        if let (Some(ga), Backend::Stored(s), true) = (accel, &mut backend, resolvable) {
             timings.linear_solver += clock.lap();
             let ratio = s.accelerate(x, x_trial, h, ga.fd_step, mu, d, iteration)?;
             timings.residuals += clock.lap();
@@ -918,6 +1022,11 @@ pub(crate) fn run<M: Model>(
             }
         }
     }
+    // What the last lap left (a preparation not followed by a solve).
+    match backend {
+        Backend::Stored(_) => timings.linear_solver += clock.lap(),
+        Backend::Normal(_) => timings.jacobian += clock.lap(),
+    }
     let termination = termination.unwrap_or(TerminationReason::MaxIterations);
     let evaporated: Vec<usize> = match watch {
         Some(e) if jacobian_evaluations > 0 => (0..peak2.len())
@@ -934,7 +1043,6 @@ pub(crate) fn run<M: Model>(
     let statistics = OnceLock::new();
     let fit = match backend {
         Backend::Stored(mut s) if keep => {
-            let t = Instant::now();
             if !s.jac_current || any_frozen {
                 s.model
                     .jacobian(x, &mut s.jac)
@@ -953,7 +1061,8 @@ pub(crate) fn run<M: Model>(
             if options.statistics == StatisticsMode::AtEnd {
                 let _ = statistics.set(fit.statistics());
             }
-            timings.statistics = t.elapsed();
+            // The clock was read at the end of the loop.
+            timings.statistics = clock.lap();
             Some(Box::new(fit))
         }
         _ => None,
@@ -968,7 +1077,8 @@ pub(crate) fn run<M: Model>(
         rejected_steps,
         residual_evaluations,
         jacobian_evaluations,
-        elapsed: start.elapsed(),
+        // The last lap ended the solve (the report's assembly is not timed).
+        elapsed: clock.0 - start,
         timings,
         num_params: n,
         num_residuals: m,

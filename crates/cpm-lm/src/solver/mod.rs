@@ -233,7 +233,7 @@ impl<'a> Solver<'a> {
         x: &mut [f64],
     ) -> Result<Report, LmError> {
         let cb = self.callback.as_mut().map(|c| c.as_mut() as _);
-        engine::run(engine::Backend::normal(problem), x, &self.options, cb)
+        engine::run(engine::Backend::normal(problem), x, &self.options, None, cb)
     }
 
     /// Minimises a problem with a sparse Jacobian. See [`minimize_sparse`].
@@ -341,7 +341,7 @@ pub fn minimize_normal<P: NormalEquations>(
     x: &mut [f64],
     options: &Options,
 ) -> Result<Report, LmError> {
-    engine::run(engine::Backend::normal(problem), x, options, None)
+    engine::run(engine::Backend::normal(problem), x, options, None, None)
 }
 
 #[cfg(test)]
