@@ -67,6 +67,19 @@ fn truth(m: &MeasurementModel) -> Vec<f64> {
     v
 }
 
+/// The angles `m` predicts at parameters `x`, plus gaussian noise of `SIGMA_URAD` (SIMULATED
+/// through the fit's own prediction path).
+fn measure(m: &MeasurementModel, x: &[f64], c: &mut Campaign, seed: u64) {
+    let prepared = Prepared::new(m, c).unwrap();
+    let y = predict(m, &prepared, c, x, None).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    for (t, y) in c.tilt_measurements.iter_mut().zip(&y) {
+        let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random_range(0.0..1.0));
+        let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+        t.angle_mrad = y + g * SIGMA_URAD * 1e-3;
+    }
+}
+
 #[test]
 fn tilt_jacobian_matches_finite_differences() {
     let m = model(&[Effect::LinkOffset]);
@@ -97,14 +110,7 @@ fn tilt_fit_holds_the_truth_within_its_deviations_and_names_the_blind() {
     let m = model(&[]);
     let x = truth(&m);
     let mut c = skeleton(&m, 60);
-    let prepared = Prepared::new(&m, &c).unwrap();
-    let y = predict(&m, &prepared, &c, &x, None).unwrap();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(4);
-    for (t, y) in c.tilt_measurements.iter_mut().zip(&y) {
-        let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random_range(0.0..1.0));
-        let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-        t.angle_mrad = y + g * SIGMA_URAD * 1e-3;
-    }
+    measure(&m, &x, &mut c, 4);
     let options = IdentifyOptions {
         // The reference noise of the weighting: one tracker position's default (10 um).
         sigma_um: Some(10.0),
@@ -168,14 +174,7 @@ fn refine_finds_leg_compliance_from_tilts_alone() {
         x[b.offset + k] = 3000.0 + 400.0 * k as f64;
     }
     let mut c = skeleton(&truth_model, 150);
-    let prepared = Prepared::new(&truth_model, &c).unwrap();
-    let y = predict(&truth_model, &prepared, &c, &x, None).unwrap();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(8);
-    for (t, y) in c.tilt_measurements.iter_mut().zip(&y) {
-        let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random_range(0.0..1.0));
-        let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-        t.angle_mrad = y + g * SIGMA_URAD * 1e-3;
-    }
+    measure(&truth_model, &x, &mut c, 8);
     let options = RefineOptions {
         identify: IdentifyOptions {
             sigma_um: Some(10.0),
@@ -204,14 +203,7 @@ fn link_offsets_from_tilts_alone_do_not_run_off() {
     let m = model(&[Effect::LinkOffset, Effect::LinkScale]);
     let x = truth(&m);
     let mut c = skeleton(&m, 150);
-    let prepared = Prepared::new(&m, &c).unwrap();
-    let y = predict(&m, &prepared, &c, &x, None).unwrap();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
-    for (t, y) in c.tilt_measurements.iter_mut().zip(&y) {
-        let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random_range(0.0..1.0));
-        let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-        t.angle_mrad = y + g * SIGMA_URAD * 1e-3;
-    }
+    measure(&m, &x, &mut c, 9);
     let options = IdentifyOptions {
         sigma_um: Some(10.0),
         ..IdentifyOptions::default()
