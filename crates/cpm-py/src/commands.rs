@@ -120,11 +120,9 @@ pub fn calibrate<'py>(
         rename(&mut inputs, &names);
         let dir = &args.fit.out;
         let fitted = cal_cli::fit_with(&inputs, dir, args.minimum_norm, args.formulation)?;
+        // The warnings of calibration.json (the fit's, the sessions', the noise's).
+        let warnings = fitted.report.fit.warnings.clone();
         let cal = fitted.cal;
-        let warnings = cal_cli::warnings(&inputs.model, &cal)
-            .into_iter()
-            .map(|w| w.replace("**", ""))
-            .collect();
         let trouble = if let Some(why) = cal.robust_failure() {
             Some(format!("the fit failed: {why}"))
         } else if !cal.solver.was_successful() {
