@@ -188,3 +188,64 @@ fn points_and_tilts_get_their_own_noise() {
     assert!((pt / 10.0 - 1.0).abs() < 0.15, "{pt}");
     assert!((an / 50.0 - 1.0).abs() < 0.15, "{an}");
 }
+
+/// The noise each instrument table declares (`[[target]] sigma_um`, `[[inclinometer]]
+/// sigma_urad`) weighs its measurements; `calibrated.toml` keeps it; two targets declaring
+/// different noise are refused with the field named.
+#[test]
+fn noise_declared_per_instrument_table_weighs_its_measurements() {
+    let dir = scratch("noise", "declared");
+    let instruments = |second: &str| {
+        format!("\n[[target]]\nname = \"smr1\"\nplatform_mm = [90.0, 10.0, 30.0]\nsigma_um = 10.0\n\n[[target]]\nname = \"smr2\"\nplatform_mm = [-50.0, 80.0, 30.0]\nsigma_um = {second}\n\n[[inclinometer]]\nname = \"scl3300\"\naxes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]\nsigma_urad = 50.0\n")
+    };
+    let base = std::fs::read_to_string(example("hexapod_66.toml")).unwrap();
+    let truth =
+        std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap() + &instruments("10.0");
+    let (r, t) = (dir.join("robot.toml"), dir.join("truth.toml"));
+    std::fs::write(&r, base.clone() + &instruments("10.0")).unwrap();
+    std::fs::write(&t, truth).unwrap();
+    let (points, tilts) = (dir.join("points.csv"), dir.join("tilts.csv"));
+    for (file, measure, noise, seed) in [(&points, "points", 10, "1"), (&tilts, "tilts", 50, "2")] {
+        ok(&[
+            "simulate",
+            "--robot",
+            &p(&r),
+            "--truth",
+            &p(&t),
+            "--random",
+            "60",
+            "--measure",
+            measure,
+            "--noise",
+            &format!("gaussian:{noise}"),
+            "--seed",
+            seed,
+            "--out",
+            &p(file),
+        ]);
+    }
+    let cal = calibrate_json(
+        &r,
+        &[&points, &tilts],
+        &["--effects", "none"],
+        &dir.join("cal"),
+    );
+    assert_eq!(kind(&cal, "point targets")["assumed"].as_f64(), Some(10.0));
+    assert_eq!(
+        kind(&cal, "inclinometer angles")["assumed"].as_f64(),
+        Some(50.0)
+    );
+    assert!(!warned(&cal), "{}", cal["warnings"]);
+    let written = std::fs::read_to_string(dir.join("cal/calibrated.toml")).unwrap();
+    assert!(written.contains("sigma_um = 10.0") && written.contains("sigma_urad = 50.0"));
+    // Two targets, two noises: refused, naming the file and field.
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, base + &instruments("12.0")).unwrap();
+    let o = cli::cpm(&["identifiability", "--robot", &p(&bad), "--random", "10"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("bad.toml") && err.contains("sigma_um") && err.contains("declare one noise"),
+        "{err}"
+    );
+}

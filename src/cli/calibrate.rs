@@ -187,6 +187,14 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         merged.campaign.orientation_sigma_urad = v;
         merged.campaign.tilt_sigma_urad = v;
     }
+    // The instruments' own declared noise, unless an option gave one.
+    let (point, tilt) = robot.instrument_sigmas();
+    if let (Some(v), None) = (point, args.pose_sigma_um) {
+        merged.campaign.point_sigma_um = v;
+    }
+    if let (Some(v), None) = (tilt, args.orientation_sigma_urad) {
+        merged.campaign.tilt_sigma_urad = v;
+    }
     if merged.campaign.simulated {
         ctx.note("the measurements are SIMULATED; every output says so");
     }

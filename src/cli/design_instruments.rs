@@ -167,13 +167,14 @@ pub fn run(
     let (ins, names) = parse(list, robot)?;
     let model = robot.model(&[]);
     let (pos, rot) = robot.tracker_sigmas();
+    let (point, tilt) = robot.instrument_sigmas();
+    let default = InstrumentNoise::default();
     let noise = InstrumentNoise {
         gauge_um: gauge_sigma_um,
-        tracker_position_um: pos.unwrap_or(InstrumentNoise::default().tracker_position_um),
-        tracker_orientation_urad: rot
-            .unwrap_or(InstrumentNoise::default().tracker_orientation_urad),
-        point_um: pos.unwrap_or(InstrumentNoise::default().point_um),
-        tilt_urad: rot.unwrap_or(InstrumentNoise::default().tilt_urad),
+        tracker_position_um: pos.unwrap_or(default.tracker_position_um),
+        tracker_orientation_urad: rot.unwrap_or(default.tracker_orientation_urad),
+        point_um: point.or(pos).unwrap_or(default.point_um),
+        tilt_urad: tilt.or(rot).unwrap_or(default.tilt_urad),
     };
     let per_pose = ins.observations_per_pose(&model);
     let n = args

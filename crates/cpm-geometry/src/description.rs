@@ -134,6 +134,34 @@ pub struct InclinometerSpec {
     /// description writes the fitted one.
     #[serde(default, skip_serializing_if = "is_zero3")]
     pub mount_rpy_deg: [f64; 3],
+    /// Standard deviation of one measured angle, urad (> 0; every `[[inclinometer]]` that
+    /// declares one declares the same). Default: `[calibration]
+    /// tracker_orientation_sigma_urad`, else 20.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_urad: Option<f64>,
+}
+
+/// A declared instrument noise: positive and finite, and the same as the first one declared
+/// (`first`): a fit weighs every point (every angle) of a campaign alike.
+fn same_noise(
+    value: Option<f64>,
+    first: Option<f64>,
+    what: &str,
+    path: &[Seg],
+) -> Result<(), Problem> {
+    let Some(v) = value else { return Ok(()) };
+    if !(v.is_finite() && v > 0.0) {
+        return Err(Problem::new(path, format!("{v}: must be > 0")));
+    }
+    match first {
+        Some(f) if f != v => Err(Problem::new(
+            path,
+            format!(
+                "{v} differs from the {f} declared for {what} before: the fit weighs every one alike, declare one noise"
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 fn is_zero3(v: &[f64; 3]) -> bool {
@@ -151,6 +179,11 @@ pub struct TargetSpec {
     /// The target's centre in {P}, mm (nominal, or calibrated in a calibrated description).
     #[serde(deserialize_with = "exact")]
     pub platform_mm: [f64; 3],
+    /// Standard deviation of one measured coordinate of the target, um (> 0; every
+    /// `[[target]]` that declares one declares the same). Default: `[calibration]
+    /// tracker_position_sigma_um`, else 10.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sigma_um: Option<f64>,
 }
 
 /// `[home]`: the home pose.
@@ -973,6 +1006,12 @@ impl RobotDescription {
             let at = |k: &'static str| [Key("target"), Index(i), Key(k)];
             column_name(&t.name, "target", &mut target_names, &at("name"))?;
             position3(&t.platform_mm, &at("platform_mm"))?;
+            same_noise(
+                t.sigma_um,
+                self.targets.iter().find_map(|t| t.sigma_um),
+                "a target",
+                &at("sigma_um"),
+            )?;
         }
         let mut inclinometer_names = HashSet::new();
         for (i, c) in self.inclinometers.iter().enumerate() {
@@ -998,6 +1037,12 @@ impl RobotDescription {
                 }
             }
             finite3(&c.mount_rpy_deg, &at("mount_rpy_deg"))?;
+            same_noise(
+                c.sigma_urad,
+                self.inclinometers.iter().find_map(|c| c.sigma_urad),
+                "an inclinometer",
+                &at("sigma_urad"),
+            )?;
         }
         if let Some(c) = &self.clearance {
             non_negative(c.radius_um, &[Key("clearance"), Key("radius_um")])?;

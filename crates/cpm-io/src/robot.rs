@@ -188,6 +188,16 @@ impl Robot {
             })
     }
 
+    /// The noise the description's instruments declare: a target's coordinate (`[[target]]
+    /// sigma_um`, um) and an inclinometer's angle (`[[inclinometer]] sigma_urad`, urad).
+    pub fn instrument_sigmas(&self) -> (Option<f64>, Option<f64>) {
+        let d = &self.description;
+        (
+            d.targets.iter().find_map(|t| t.sigma_um),
+            d.inclinometers.iter().find_map(|c| c.sigma_urad),
+        )
+    }
+
     /// `[calibration] sensor_noise_um` when declared and positive.
     pub fn sensor_noise_um(&self) -> Option<f64> {
         self.description
