@@ -6,7 +6,7 @@
 #[path = "common/cli.rs"]
 mod cli;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use cli::{calibrate_json, example, ok, p, scratch, validate_json};
 
@@ -138,16 +138,10 @@ fn a_gauge_beside_a_tracker_gets_its_own_noise() {
     assert!(!warned(&cal), "{}", cal["warnings"]);
 }
 
-/// Reflectors and an inclinometer (points at 10 um, angles at 50 urad, neither declared: the
-/// defaults weigh the angles as 20 urad): each kind's noise is found, and the file written
-/// with those weights passes calibrate's own read-back check (the angles weighed as angles,
-/// not as tracker orientations).
-#[test]
-fn points_and_tilts_get_their_own_noise() {
-    let dir = scratch("noise", "points-tilts");
-    let mut robot = std::fs::read_to_string(example("hexapod_66.toml")).unwrap();
-    let instruments = "\n[[target]]\nname = \"smr1\"\nplatform_mm = [90.0, 10.0, 30.0]\n\n[[target]]\nname = \"smr2\"\nplatform_mm = [-50.0, 80.0, 30.0]\n\n[[inclinometer]]\nname = \"scl3300\"\naxes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]\n";
-    robot.push_str(instruments);
+/// The example hexapod with `instruments` (TOML tables) as robot and truth in `dir`, and
+/// SIMULATED point (10 um) and tilt (50 urad) files of 60 poses: (robot, points, tilts).
+fn points_and_tilts(dir: &Path, instruments: &str) -> (PathBuf, PathBuf, PathBuf) {
+    let robot = std::fs::read_to_string(example("hexapod_66.toml")).unwrap() + instruments;
     let truth = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap() + instruments;
     let (r, t) = (dir.join("robot.toml"), dir.join("truth.toml"));
     std::fs::write(&r, robot).unwrap();
@@ -172,6 +166,18 @@ fn points_and_tilts_get_their_own_noise() {
             &p(file),
         ]);
     }
+    (r, points, tilts)
+}
+
+/// Reflectors and an inclinometer (points at 10 um, angles at 50 urad, neither declared: the
+/// defaults weigh the angles as 20 urad): each kind's noise is found, and the file written
+/// with those weights passes calibrate's own read-back check (the angles weighed as angles,
+/// not as tracker orientations).
+#[test]
+fn points_and_tilts_get_their_own_noise() {
+    let dir = scratch("noise", "points-tilts");
+    let instruments = "\n[[target]]\nname = \"smr1\"\nplatform_mm = [90.0, 10.0, 30.0]\n\n[[target]]\nname = \"smr2\"\nplatform_mm = [-50.0, 80.0, 30.0]\n\n[[inclinometer]]\nname = \"scl3300\"\naxes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]\n";
+    let (r, points, tilts) = points_and_tilts(&dir, instruments);
     let cal = calibrate_json(
         &r,
         &[&points, &tilts],
@@ -198,32 +204,7 @@ fn noise_declared_per_instrument_table_weighs_its_measurements() {
     let instruments = |second: &str| {
         format!("\n[[target]]\nname = \"smr1\"\nplatform_mm = [90.0, 10.0, 30.0]\nsigma_um = 10.0\n\n[[target]]\nname = \"smr2\"\nplatform_mm = [-50.0, 80.0, 30.0]\nsigma_um = {second}\n\n[[inclinometer]]\nname = \"scl3300\"\naxes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]\nsigma_urad = 50.0\n")
     };
-    let base = std::fs::read_to_string(example("hexapod_66.toml")).unwrap();
-    let truth =
-        std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap() + &instruments("10.0");
-    let (r, t) = (dir.join("robot.toml"), dir.join("truth.toml"));
-    std::fs::write(&r, base.clone() + &instruments("10.0")).unwrap();
-    std::fs::write(&t, truth).unwrap();
-    let (points, tilts) = (dir.join("points.csv"), dir.join("tilts.csv"));
-    for (file, measure, noise, seed) in [(&points, "points", 10, "1"), (&tilts, "tilts", 50, "2")] {
-        ok(&[
-            "simulate",
-            "--robot",
-            &p(&r),
-            "--truth",
-            &p(&t),
-            "--random",
-            "60",
-            "--measure",
-            measure,
-            "--noise",
-            &format!("gaussian:{noise}"),
-            "--seed",
-            seed,
-            "--out",
-            &p(file),
-        ]);
-    }
+    let (r, points, tilts) = points_and_tilts(&dir, &instruments("10.0"));
     let cal = calibrate_json(
         &r,
         &[&points, &tilts],
@@ -240,6 +221,7 @@ fn noise_declared_per_instrument_table_weighs_its_measurements() {
     assert!(written.contains("sigma_um = 10.0") && written.contains("sigma_urad = 50.0"));
     // Two targets, two noises: refused, naming the file and field.
     let bad = dir.join("bad.toml");
+    let base = std::fs::read_to_string(example("hexapod_66.toml")).unwrap();
     std::fs::write(&bad, base + &instruments("12.0")).unwrap();
     let o = cli::cpm(&["identifiability", "--robot", &p(&bad), "--random", "10"]);
     let err = String::from_utf8_lossy(&o.stderr);
