@@ -701,13 +701,9 @@ fn link_offsets_and_scales_survive_on_independently_simulated_readings() {
     assert!(out.status.success());
 }
 
-/// The real Jugglebot session (tests/data/jugglebot, measured, not simulated): calibrated on
-/// its first two thirds in acquisition order with its motion-capture frame refined, the file
-/// reproduces the fit on those poses, and on the last third (a held-out block, its frame
-/// re-registered) the calibrated robot beats the nominal one on pose and link length.
-#[test]
-fn the_real_session_round_trips_and_improves_a_held_out_block() {
-    let dir = scratch("roundtrip", "jugglebot");
+/// The real Jugglebot session split in acquisition order into `dir/first.csv` (rows 1-72)
+/// and `dir/last.csv` (rows 73-108): (its robot description, first, last).
+fn jugglebot_thirds(dir: &Path) -> (String, std::path::PathBuf, std::path::PathBuf) {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot");
     let text = std::fs::read_to_string(src.join("session_108.csv")).unwrap();
     let lines: Vec<&str> = text.lines().collect();
@@ -718,11 +714,21 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
         std::fs::write(&path, format!("{header}\n{}\n", part.join("\n"))).unwrap();
         path
     };
-    let (first, last) = (
+    (
+        p(&src.join("robot.toml")),
         write("first.csv", &rows[..72]),
         write("last.csv", &rows[72..]),
-    );
-    let robot = p(&src.join("robot.toml"));
+    )
+}
+
+/// The real Jugglebot session (tests/data/jugglebot, measured, not simulated): calibrated on
+/// its first two thirds in acquisition order with its motion-capture frame refined, the file
+/// reproduces the fit on those poses, and on the last third (a held-out block, its frame
+/// re-registered) the calibrated robot beats the nominal one on pose and link length.
+#[test]
+fn the_real_session_round_trips_and_improves_a_held_out_block() {
+    let dir = scratch("roundtrip", "jugglebot");
+    let (robot, first, last) = jugglebot_thirds(&dir);
     let cal = dir.join("cal");
     let fit = calibrate(
         &cal,
@@ -1863,20 +1869,7 @@ fn refine_cases_judged_on_the_next_session_and_by_compensation() {
 #[test]
 fn refine_on_the_real_session_is_judged_on_data_it_did_not_see() {
     let dir = scratch("roundtrip", "jugglebot-refine");
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot");
-    let text = std::fs::read_to_string(src.join("session_108.csv")).unwrap();
-    let lines: Vec<&str> = text.lines().collect();
-    let (header, rows) = (lines[0], &lines[1..]);
-    let write = |name: &str, part: &[&str]| {
-        let path = dir.join(name);
-        std::fs::write(&path, format!("{header}\n{}\n", part.join("\n"))).unwrap();
-        path
-    };
-    let (first, last) = (
-        write("first.csv", &rows[..72]),
-        write("last.csv", &rows[72..]),
-    );
-    let robot = p(&src.join("robot.toml"));
+    let (robot, first, last) = jugglebot_thirds(&dir);
     let base = "link_offset,link_scale,tracker_frame";
     let cal = dir.join("cal");
     calibrate(&cal, &robot, &first, base, &[]);
