@@ -64,28 +64,21 @@
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 
-pub mod accuracy;
-pub mod campaign;
-mod compose;
+// The crate in rooms by purpose (see README.md's module map).
+pub mod analysis;
+pub mod data;
 pub mod design;
-pub mod diagnostics;
-pub mod effects;
 pub mod error;
-pub mod identifiability;
-pub mod identify;
-pub mod implicit;
-pub mod instruments;
+pub mod fit;
 pub mod linalg;
-pub mod misfit;
 pub mod model;
-pub mod noise;
 pub mod paper;
-pub mod points;
-pub mod refine;
-pub mod registration;
-pub mod session;
-pub mod simulate;
-pub mod tilts;
+
+// Every module's path from before the rooms, kept.
+pub use analysis::{accuracy, diagnostics, identifiability, misfit, noise};
+pub use data::{campaign, simulate};
+pub use fit::{identify, implicit, refine, registration, session};
+pub use model::{effects, instruments, points, tilts};
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
 pub use campaign::{

@@ -5,7 +5,7 @@
 //! - every link length (nominal inverse kinematics) is within its limits, if the table has any;
 //! - the platform's z axis is tilted from its home direction by at most `max_tilt_deg`;
 //! - J1's condition number is at most `max_condition_ratio` times its value at home
-//!   (the rule of [`crate::paper::random_workspace_poses`]);
+//!   (the rule of [`crate::data::poses::random_workspace_poses`]);
 //! - forward kinematics started at home converges to the pose from its nominal link lengths
 //!   (so the controller reaches it in home's assembly mode).
 //!
@@ -24,11 +24,12 @@ use cpm_geometry::rotation::from_rpy;
 use cpm_geometry::{JointTable, Pose};
 use cpm_kinematics::{forward, inverse_lengths, ForwardOptions};
 use nalgebra::{Rotation3, Unit, Vector3};
-use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::paper::j1_condition;
+use crate::data::poses::j1_condition;
+/// The random poses about home ([`crate::data::poses::random_poses`]; its path here is kept).
+pub use crate::data::poses::random_poses;
 
 /// Limits of the poses a design may use.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -155,27 +156,6 @@ impl Workspace {
         }
         (ok, rej)
     }
-}
-
-/// `n` random poses about `home`: position offsets uniform in +-`half_range_mm` per axis,
-/// roll, pitch and yaw offsets uniform in +-`half_range_deg`, seeded. Not filtered.
-pub fn random_poses(
-    home: &Pose,
-    n: usize,
-    half_range_mm: f64,
-    half_range_deg: f64,
-    seed: u64,
-) -> Vec<Pose> {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let a = half_range_deg.to_radians();
-    (0..n)
-        .map(|_| {
-            let mut u = || rng.random_range(-1.0..=1.0);
-            let t = Vector3::new(u(), u(), u()) * half_range_mm;
-            let (r, p, y) = (u() * a, u() * a, u() * a);
-            Pose::new(home.position_mm + t, from_rpy(r, p, y) * home.rotation)
-        })
-        .collect()
 }
 
 /// Evenly spaced values from `-half` to `half` (`steps` of them; one step gives 0).

@@ -27,8 +27,8 @@ use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use super::select::{select_blocks, SelectOptions};
-use crate::campaign::{PointMeasurement, PoseMeasurement, TiltMeasurement};
-use crate::identifiability::{try_analyze, RankOptions};
+use crate::analysis::identifiability::{try_analyze, RankOptions};
+use crate::data::campaign::{PointMeasurement, PoseMeasurement, TiltMeasurement};
 use crate::{identification_jacobian, CalibError, Campaign, Effect, MeasurementModel, Reading};
 
 /// What is measured at every pose of an instrument campaign.
@@ -238,7 +238,7 @@ impl Instruments {
     ) -> Result<InstrumentBounds, CalibError> {
         let (m, j) = self.unit_jacobian(model, poses, noise)?;
         let c = self.skeleton(&m, poses, noise);
-        let patterns = crate::identifiability::physical_patterns(&m, &c);
+        let patterns = crate::analysis::identifiability::physical_patterns(&m, &c);
         let id = try_analyze(&j, 1.0, &RankOptions::default(), &patterns)?;
         let nj = m.num_installation_params();
         let crb: Vec<f64> = id.crlb_std_um[..nj].iter().flatten().copied().collect();

@@ -30,7 +30,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::identifiability::RankOptions;
+use crate::analysis::identifiability::RankOptions;
 use crate::{identify, simulate, CalibError, IdentifyOptions, MeasurementModel, Plan};
 use crate::{Noise, SimulationOptions};
 

@@ -25,7 +25,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::identifiability::{analyze, physical_patterns, BlindDirection, RankOptions};
+use crate::analysis::identifiability::{analyze, physical_patterns, BlindDirection, RankOptions};
 use crate::{identification_jacobian, CalibError, MeasurementModel, Plan};
 
 /// A place to screw a socket: on the base (position in {B}) or the platform (in {P}).
@@ -58,7 +58,7 @@ pub struct SocketCandidates {
 
 impl SocketCandidates {
     /// Candidate sockets for the paper's cubic machine: the paper's pair (`b1`, `p1`), the
-    /// sockets of [`crate::paper::designed_sensors`] (`b1`..`b4`, `p1`..`p4`), and more
+    /// sockets of [`crate::data::sensors::designed_sensors`] (`b1`..`b4`, `p1`..`p4`), and more
     /// places on a frame around the machine (`b5`..`b8`, radius about 500 mm, heights 100 to
     /// 550 mm) and on the platform body (`p5`..`p8`, its upper and lower corners).
     pub fn paper_cubic() -> Self {

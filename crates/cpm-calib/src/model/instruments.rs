@@ -1,5 +1,5 @@
 //! Open instruments: a measurement channel is a type implementing [`Instrument`], as an effect
-//! is a type implementing [`EffectModel`](crate::effects::EffectModel).
+//! is a type implementing [`EffectModel`](crate::model::effects::EffectModel).
 //!
 //! An instrument predicts the values one measurement gives from the platform pose forward
 //! kinematics reached (with the candidate joints and every effect) and its own nuisance
@@ -12,8 +12,8 @@
 //! ([`crate::identify()`]), the identifiability analysis and cross-validation.
 //!
 //! The built-in tracker poses ([`TrackerPoses`]), point targets
-//! ([`PointTargets`](crate::points::PointTargets)) and inclinometers
-//! ([`Inclinometers`](crate::tilts::Inclinometers)) are implementations; the model binds their
+//! ([`PointTargets`](crate::model::points::PointTargets)) and inclinometers
+//! ([`Inclinometers`](crate::model::tilts::Inclinometers)) are implementations; the model binds their
 //! nuisance parameters to the effect blocks that estimate them (`tracker_frame`,
 //! `target_position`, `point_frame`, `inclinometer_mount`, `base_tilt`). A tracker pose's
 //! orientation is observed as the rotation from the measured to the predicted orientation, so
@@ -92,7 +92,7 @@ use cpm_geometry::Pose;
 use nalgebra::{DMatrix, Vector3};
 use rand::SeedableRng;
 
-use crate::effects::EffectInput;
+use crate::model::effects::EffectInput;
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, MeasurementModel, SimulationOptions};
 

@@ -12,8 +12,8 @@
 use cpm_geometry::rotation::{left_jacobian_inverse, log};
 use nalgebra::{DMatrix, Rotation3, Vector3};
 
-use crate::effects::EffectModel;
-use crate::instruments::{Instrument, InstrumentInput};
+use crate::model::effects::EffectModel;
+use crate::model::instruments::{Instrument, InstrumentInput};
 
 const FRAME: [&str; 6] = ["tx", "ty", "tz", "rx", "ry", "rz"];
 
@@ -60,7 +60,7 @@ impl Default for TrackerPoses {
     fn default() -> Self {
         Self {
             known: (Vector3::zeros(), Rotation3::identity()),
-            frame: &crate::effects::TrackerFrame,
+            frame: &crate::model::effects::TrackerFrame,
             measured: Rotation3::identity(),
         }
     }

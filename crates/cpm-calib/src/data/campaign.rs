@@ -68,7 +68,7 @@ pub struct TiltMeasurement {
     pub time_s: Option<f64>,
 }
 
-/// A measurement of one's own instrument ([`crate::instruments::Instrument`], in the model's
+/// A measurement of one's own instrument ([`crate::model::instruments::Instrument`], in the model's
 /// [`instruments`](crate::MeasurementModel::instruments)): its values at one pose.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct InstrumentMeasurement {

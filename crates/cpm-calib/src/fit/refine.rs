@@ -25,7 +25,7 @@
 //! the whole campaign ([`Refinement::calibration`], which flags them again).
 //!
 //! **Pose error maps.** Each round the diagnostics also scan every pose map term up to
-//! [`RefineOptions::pose_map_degree`] ([`crate::diagnostics::pose_map_scan`], a score test on
+//! [`RefineOptions::pose_map_degree`] ([`crate::analysis::diagnostics::pose_map_scan`], a score test on
 //! the residual); the terms significant at `alpha / (terms scanned)` (at most
 //! [`RefineOptions::pose_map_proposals`], most significant first) join the round's candidates
 //! and go through the same confounding check, F-test, BIC and cross-validation. The
@@ -41,7 +41,7 @@
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
-use crate::diagnostics::{diagnose, regressors, ResidualDiagnostics};
+use crate::analysis::diagnostics::{diagnose, regressors, ResidualDiagnostics};
 use crate::model::{predict, Prepared};
 use crate::{
     identify, CalibError, Calibration, Campaign, Effect, IdentifyOptions, MeasurementModel,
@@ -168,7 +168,7 @@ pub struct Refinement {
     pub rejected_by_cv: Vec<(Effect, f64, f64)>,
     /// The pose map scan of the first fit's residual (empty when
     /// [`RefineOptions::pose_map_degree`] is 0), most significant first.
-    pub initial_pose_structure: Vec<crate::diagnostics::PoseStructure>,
+    pub initial_pose_structure: Vec<crate::analysis::diagnostics::PoseStructure>,
     /// The range of the commanded poses the final model was fitted on; a pose map term
     /// describes these poses only and does not extrapolate.
     pub pose_range: PoseRange,
@@ -331,7 +331,7 @@ pub fn cross_validated_rms(
             let mut test = test.clone();
             model.log_commands(&mut test);
             let machine = model.held_fixed(&cal.minimum_norm_um)?;
-            crate::session::register_session(&machine, &test)?.predicted
+            crate::fit::session::register_session(&machine, &test)?.predicted
         } else {
             let prepared = Prepared::new(model, &test)?;
             predict(model, &prepared, &test, &cal.minimum_norm_um, None)?
@@ -535,7 +535,7 @@ pub fn refine(
         if options.pose_map_degree == 0 {
             return Ok(Vec::new());
         }
-        crate::diagnostics::pose_map_scan(
+        crate::analysis::diagnostics::pose_map_scan(
             mdl,
             campaign,
             &cal.minimum_norm_um,

@@ -9,7 +9,9 @@ use cpm_lm::{DenseJacobian, ModelError, Problem};
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use crate::identifiability::{physical_patterns, try_analyze, Identifiability, RankOptions};
+use crate::analysis::identifiability::{
+    physical_patterns, try_analyze, Identifiability, RankOptions,
+};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, Effect, MeasurementModel};
 
@@ -361,7 +363,8 @@ pub fn identify(
         .map(|((a, b), w)| (a - b) * 1e3 * w)
         .collect();
     let jf = weigh(jf);
-    let outliers = crate::diagnostics::outliers_by_kind(&residuals_um, campaign, options.sigma_um);
+    let outliers =
+        crate::analysis::diagnostics::outliers_by_kind(&residuals_um, campaign, options.sigma_um);
     let downweighted_share = if robust && !residuals_um.is_empty() {
         residuals_um
             .iter()
@@ -386,7 +389,7 @@ pub fn identify(
         }
     };
     let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
-    let leverages = crate::noise::leverages(&jf, &ident);
+    let leverages = crate::analysis::noise::leverages(&jf, &ident);
     // Blind directions are named at the start (the nominal geometry, where the physical
     // patterns are exact); at the solution the errors tilt them by a few microradians.
     ident.blind_directions = first.blind_directions.clone();
@@ -510,7 +513,7 @@ fn base_frame_gauge(
     }
     for f in 0..frame.len / 6 {
         let o = frame.offset + 6 * f;
-        let (tf, rf) = crate::effects::tracker_registration(&e[o..o + 6]);
+        let (tf, rf) = crate::model::effects::tracker_registration(&e[o..o + 6]);
         let (tn, rn) = (tf + rf * t, rf * r);
         let wn = cpm_geometry::rotation::log(&rn);
         out[o..o + 6].copy_from_slice(&[

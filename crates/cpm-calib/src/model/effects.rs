@@ -326,10 +326,10 @@ impl Effect {
             Effect::ScrewPeriodic => &ScrewPeriodic,
             Effect::SocketError => &SocketError,
             Effect::TrackerFrame => &TrackerFrame,
-            Effect::TargetPosition => &crate::points::TargetPosition,
-            Effect::PointFrame => &crate::points::PointFrame,
-            Effect::InclinometerMount => &crate::tilts::InclinometerMount,
-            Effect::BaseTilt => &crate::tilts::BaseTilt,
+            Effect::TargetPosition => &crate::model::points::TargetPosition,
+            Effect::PointFrame => &crate::model::points::PointFrame,
+            Effect::InclinometerMount => &crate::model::tilts::InclinometerMount,
+            Effect::BaseTilt => &crate::model::tilts::BaseTilt,
             Effect::PoseMap(t) => t.model(),
             Effect::User(i) => {
                 registry()

@@ -288,8 +288,8 @@ pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<P
             vectors: rot,
         });
     }
-    out.extend(crate::points::patterns(model));
-    out.extend(crate::tilts::patterns(model));
+    out.extend(crate::model::points::patterns(model));
+    out.extend(crate::model::tilts::patterns(model));
     let mut used = Vec::new();
     for s in &campaign.readings {
         if !used.contains(&s.sensor) {

@@ -1,5 +1,5 @@
 //! How the measurement model composes the effects' channels into a prediction and its Jacobian
-//! (see [`crate::effects::Channel`]): the link channel changes the lengths forward kinematics
+//! (see [`crate::model::effects::Channel`]): the link channel changes the lengths forward kinematics
 //! closes on, the platform pose channel moves the pose forward kinematics found, the socket
 //! channel moves the sensors (applied to the joint table), the sensor channel maps the geometric
 //! length to the reading, and the tracker frame channel maps the pose into the tracker's frame.
@@ -10,10 +10,10 @@ use cpm_geometry::{JointTable, Pose, Sensor};
 use cpm_kinematics::{KinematicsError, LinkState};
 use nalgebra::{DMatrix, Matrix3, Matrix6, Rotation3, Vector3, Vector6};
 
-use crate::effects::{Channel, EffectInput, EffectModel};
-use crate::instruments::{Bound, TrackerPoses};
-use crate::points::PointTargets;
-use crate::tilts::Inclinometers;
+use crate::model::effects::{Channel, EffectInput, EffectModel};
+use crate::model::instruments::{Bound, TrackerPoses};
+use crate::model::points::PointTargets;
+use crate::model::tilts::Inclinometers;
 use crate::{CalibError, Effect, MeasurementModel};
 
 /// One block of estimated (or known) values acting through a channel.
@@ -216,7 +216,7 @@ impl<'a> Channels<'a> {
             },
             inclinometer_blocks: (block(Effect::InclinometerMount), block(Effect::BaseTilt)),
             instruments,
-            up: crate::tilts::nominal_up(model),
+            up: crate::model::tilts::nominal_up(model),
             link: active(model, params, Channel::LinkLength),
             sensor: active(model, params, Channel::SensorReading),
             socket: active(model, params, Channel::SensorSocket),

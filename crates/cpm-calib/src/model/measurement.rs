@@ -11,9 +11,11 @@ use cpm_geometry::{InstallationErrors, JointTable, Pose};
 use cpm_kinematics::{forward, ForwardOptions};
 use nalgebra::DMatrix;
 
-use crate::compose::{AtPose, Channels, Kin};
-use crate::effects::{Channel, Effect, EffectInput, EffectSettings, KnownEffect, PoseContext};
-use crate::instruments::TrackerPoses;
+use crate::model::compose::{AtPose, Channels, Kin};
+use crate::model::effects::{
+    Channel, Effect, EffectInput, EffectSettings, KnownEffect, PoseContext,
+};
+use crate::model::instruments::TrackerPoses;
 use crate::{CalibError, Campaign};
 
 /// Exact (nested forward kinematics) or the paper's first-order model (eq. 12/15).
@@ -64,14 +66,14 @@ pub struct MeasurementModel {
     /// Point targets on the platform (`[[target]]`), in the order point measurements index
     /// them; [`Effect::TargetPosition`] estimates corrections of their positions. Default
     /// none.
-    pub targets: Vec<crate::points::PointTarget>,
+    pub targets: Vec<crate::model::points::PointTarget>,
     /// Number of point-measurement sessions whose tracker frames [`Effect::PointFrame`]
     /// estimates (6 parameters each). Default 0.
     pub point_sessions: usize,
     /// Inclinometers on the platform (`[[inclinometer]]`), in the order tilt measurements
     /// index them; [`Effect::InclinometerMount`] estimates corrections of their mounts.
     /// Default none.
-    pub inclinometers: Vec<crate::tilts::Inclinometer>,
+    pub inclinometers: Vec<crate::model::tilts::Inclinometer>,
     /// Number of inclinometer sessions whose base tilts [`Effect::BaseTilt`] estimates (2
     /// parameters each). Default 0.
     pub tilt_sessions: usize,
@@ -79,7 +81,7 @@ pub struct MeasurementModel {
     /// index them. Each brings a block of nuisance parameters after the effects' blocks, always
     /// estimated: its per-instrument parameters, then its per-session ones for each of
     /// [`instrument_sessions`](Self::instrument_sessions). Default none.
-    pub instruments: Vec<std::sync::Arc<dyn crate::instruments::Instrument>>,
+    pub instruments: Vec<std::sync::Arc<dyn crate::model::instruments::Instrument>>,
     /// Number of sessions of the instrument measurements (their
     /// [`session`](crate::InstrumentMeasurement::session) is below it), each with the
     /// instruments' per-session parameters. Default 0.
@@ -182,7 +184,7 @@ impl MeasurementModel {
         m.targets = description
             .targets
             .iter()
-            .map(|t| crate::points::PointTarget {
+            .map(|t| crate::model::points::PointTarget {
                 name: t.name.clone(),
                 platform_mm: t.platform_mm.into(),
             })
@@ -190,7 +192,7 @@ impl MeasurementModel {
         m.inclinometers = description
             .inclinometers
             .iter()
-            .map(crate::tilts::Inclinometer::from_spec)
+            .map(crate::model::tilts::Inclinometer::from_spec)
             .collect();
         m.clearance = description
             .clearance
@@ -491,9 +493,9 @@ impl MeasurementModel {
                         "{} {} [{}]",
                         e.name(),
                         if matches!(e, Effect::InclinometerMount) {
-                            crate::tilts::param_name(self, e, k)
+                            crate::model::tilts::param_name(self, e, k)
                         } else {
-                            crate::points::param_name(self, e, k)
+                            crate::model::points::param_name(self, e, k)
                         },
                         e.param_unit(k)
                     ));
@@ -591,7 +593,7 @@ impl MeasurementModel {
     /// [`statics_table`](Self::statics_table)), every estimated effect's values made known
     /// (added to known values of the same effect; a `tracker_frame` composed with a known
     /// one), nothing left to estimate. Errors: one's own instrument with nuisance parameters
-    /// (their values are not carried). What [`crate::session::register_session`] and a held-out
+    /// (their values are not carried). What [`crate::fit::session::register_session`] and a held-out
     /// prediction need. A campaign without logged commands must have them logged first
     /// ([`log_commands`](Self::log_commands)): the held machine's own inverse kinematics
     /// would be other commands.
@@ -665,8 +667,8 @@ impl MeasurementModel {
                 }),
                 Some(k) if e == Effect::TrackerFrame => {
                     // p -> R_e (R_k p + t_k) + t_e.
-                    let (tk, rk) = crate::effects::tracker_registration(&k.values);
-                    let (te, re) = crate::effects::tracker_registration(v);
+                    let (tk, rk) = crate::model::effects::tracker_registration(&k.values);
+                    let (te, re) = crate::model::effects::tracker_registration(v);
                     let (t, r) = (re * tk + te, re * rk);
                     let w = cpm_geometry::rotation::log(&r);
                     k.values = vec![
@@ -1225,7 +1227,7 @@ fn predict_exact(
         // tracker frame, mm, and the rotation from the measured to the predicted orientation,
         // mrad), point targets (the target in its session's tracker frame, mm), inclinometers
         // (each axis's elevation, mrad), one's own.
-        let seen = crate::instruments::InstrumentInput {
+        let seen = crate::model::instruments::InstrumentInput {
             pose: &pose,
             effect: input,
             up: channels.up,

@@ -15,7 +15,7 @@
 //! not see (a rotation about a gauge's axis) stay undetermined and are reported so.
 //!
 //! **Extrapolation: none.** A polynomial fitted on a pose range says nothing outside it; the
-//! range it was fitted on is reported ([`crate::refine::Refinement::pose_range`]) and a pose
+//! range it was fitted on is reported ([`crate::fit::refine::Refinement::pose_range`]) and a pose
 //! outside it should not be compensated with the map.
 use std::collections::HashMap;
 use std::sync::{OnceLock, RwLock};
@@ -128,7 +128,7 @@ impl PoseTerm {
             .product()
     }
 
-    /// The name of the residual regressor of [`crate::diagnostics::regressors`] this term
+    /// The name of the residual regressor of [`crate::analysis::diagnostics::regressors`] this term
     /// answers, when there is one (`pose y`, `pose x squared`, ...).
     pub fn regressor(&self) -> Option<String> {
         let i = self.0.iter().position(|e| *e > 0)?;

@@ -23,7 +23,7 @@ use nalgebra::{DMatrix, Matrix6, Vector6};
 use rayon::prelude::*;
 
 use super::Implicit;
-use crate::effects::sensor_coefficient;
+use crate::model::effects::sensor_coefficient;
 
 /// Poses per chunk (the unit of parallel work and of the ordered partial sums).
 const POSES_PER_CHUNK: usize = 256;
@@ -579,7 +579,7 @@ impl NormalEquations for Streamed<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::paper::{designed_sensors, random_workspace_poses};
+    use crate::data::{poses::random_workspace_poses, sensors::designed_sensors};
     use crate::{simulate, Effect, MeasurementModel, Plan, SimulationOptions};
 
     /// The fused block evaluation gives the rows of the general pattern / value functions

@@ -36,7 +36,7 @@
 use cpm_lm::{DenseJacobian, ModelError, Problem};
 use nalgebra::DMatrix;
 
-use crate::identify::rms;
+use crate::fit::identify::rms;
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, Effect, MeasurementModel};
 

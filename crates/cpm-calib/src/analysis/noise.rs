@@ -36,9 +36,9 @@
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use crate::campaign::ObservationKind;
-use crate::identifiability::Identifiability;
-use crate::identify::{identify, Calibration, IdentifyOptions};
+use crate::analysis::identifiability::Identifiability;
+use crate::data::campaign::ObservationKind;
+use crate::fit::identify::{identify, Calibration, IdentifyOptions};
 use crate::{CalibError, Campaign, MeasurementModel};
 
 /// A kind of observation that shares one noise level.

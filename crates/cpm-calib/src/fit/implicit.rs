@@ -17,8 +17,8 @@ use cpm_geometry::Pose;
 use cpm_lm::{LinearSolver, ModelError, Problem, SparseJacobian};
 use nalgebra::{DMatrix, Vector3};
 
-use crate::effects::{is_link_effect, link_coefficient, sensor_coefficient, Effect};
-use crate::identifiability::{analyze, Identifiability, RankOptions};
+use crate::analysis::identifiability::{analyze, Identifiability, RankOptions};
+use crate::model::effects::{is_link_effect, link_coefficient, sensor_coefficient, Effect};
 use crate::model::Prepared;
 use crate::{CalibError, Campaign, MeasurementModel};
 
@@ -567,7 +567,7 @@ pub fn identify_implicit(
         &pseudo,
         options.sensor_sigma_um,
         &options.rank,
-        &crate::identifiability::physical_patterns(model, campaign),
+        &crate::analysis::identifiability::physical_patterns(model, campaign),
     );
     ident.num_readings = campaign.readings.len();
     let globals = x[g0..].to_vec();
@@ -672,7 +672,7 @@ pub fn identify_implicit_calibration(
             let mut load: Vec<(usize, f64)> = v.iter().copied().enumerate().collect();
             load.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
             load.truncate(4);
-            crate::identify::Combination {
+            crate::fit::identify::Combination {
                 singular_value: ident.singular_values[c],
                 estimate_um: proj,
                 std_um: ident.combination_std_um[c],
@@ -680,7 +680,7 @@ pub fn identify_implicit_calibration(
             }
         })
         .collect();
-    let outliers = crate::diagnostics::outliers(&imp.reading_residuals_um);
+    let outliers = crate::analysis::diagnostics::outliers(&imp.reading_residuals_um);
     Ok(crate::Calibration {
         simulated: campaign.simulated,
         estimate_um,

@@ -23,9 +23,9 @@ use cpm_geometry::rotation::left_jacobian;
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::effects::{Channel, EffectModel};
-use crate::identifiability::Pattern;
-use crate::instruments::{Instrument, InstrumentInput};
+use crate::analysis::identifiability::Pattern;
+use crate::model::effects::{Channel, EffectModel};
+use crate::model::instruments::{Instrument, InstrumentInput};
 use crate::{Effect, MeasurementModel};
 
 /// A point target on the platform (`[[target]]`).
@@ -104,7 +104,7 @@ impl Instrument for PointTargets {
         }
     }
     fn predict(&self, input: &InstrumentInput, k: usize, nuisance: &[f64], values: &mut [f64]) {
-        let (t, r) = crate::effects::tracker_registration(self.frame(nuisance));
+        let (t, r) = crate::model::effects::tracker_registration(self.frame(nuisance));
         let y = r * input.pose.transform_point(&self.target(k, nuisance)) + t;
         values.copy_from_slice(y.as_slice());
     }
@@ -118,7 +118,7 @@ impl Instrument for PointTargets {
     ) {
         let pose = input.pose;
         let frame = self.frame(nuisance);
-        let (_, r) = crate::effects::tracker_registration(frame);
+        let (_, r) = crate::model::effects::tracker_registration(frame);
         let rf = r.into_inner();
         let target = self.target(k, nuisance);
         // The pose moved by (dp, dtheta) moves the target by dp - [R t]x dtheta.

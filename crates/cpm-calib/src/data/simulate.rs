@@ -5,7 +5,7 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use serde::{Deserialize, Serialize};
 
-use crate::campaign::{Campaign, Plan};
+use crate::data::campaign::{Campaign, Plan};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, MeasurementModel};
 

@@ -1,0 +1,13 @@
+//! The fitting room: estimating parameters from a campaign.
+//!
+//! - [`identify`]: the rank-aware fit of the installation errors and effects (eq. 16, cpm-lm);
+//! - [`registration`]: closed-form registration of tracker frames and rough reading offsets,
+//!   done before any fit;
+//! - [`refine`]: fit, study the residual, add the missing effect, refit;
+//! - [`implicit`]: implicit-loop calibration, the actual poses as unknowns;
+//! - [`session`]: a new measurement session re-registered against a machine held fixed.
+pub mod identify;
+pub mod implicit;
+pub mod refine;
+pub mod registration;
+pub mod session;
