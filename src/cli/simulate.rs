@@ -3,15 +3,15 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use rand::SeedableRng;
 use serde_json::json;
 
 use super::common::{self, EffectsArg, PlanArgs, RobotArg};
 use super::{input_error, usage_error, Ctx, Outcome};
-use crate::calib::campaign::PoseMeasurement;
-use crate::calib::{
-    simulate_campaign, simulate_pose_measurements, Campaign, Effect, Noise, SimulationOptions,
+use crate::calib::simulate::{
+    simulate_inclinometer_angles, simulate_tracker_points, simulate_tracker_poses,
+    unsupported_machine_effect, TrackerSimulation,
 };
+use crate::calib::{simulate_campaign, Campaign, Effect, Noise, SimulationOptions};
 use crate::geometry::{InstallationErrors, Pose};
 use crate::io::{self, Robot};
 use crate::output::Target;
@@ -358,130 +358,37 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
     })
 }
 
-/// Tracker pose measurements of the plan's poses on the true machine, through the prediction
-/// path the fit uses ([`simulate_pose_measurements`]): the controller commands the nominal
-/// inverse kinematics (logged as the file's readings); every effect of the truth acts as
-/// `calibrate` and `validate` model it; the tracker sees the pose plus noise, in its own
-/// frame (`--tracker-frame`, after a known `tracker_frame` registration of the truth).
-fn simulate_poses(
-    robot: &Robot,
-    truth: &Truth,
-    spec: &common::PlanSpec,
+/// The tracker (position noise, orientation noise, seed, frame) of `cpm simulate`.
+fn tracker(
     noise: &Noise,
     orientation_urad: f64,
     seed: u64,
     frame: Option<Pose>,
-) -> anyhow::Result<Campaign> {
-    let poses = &spec.plan.poses;
-    let skeleton = Campaign {
-        poses: poses.clone(),
-        commanded_lengths_mm: Some(
-            poses
-                .iter()
-                .map(|p| cpm_kinematics::inverse_lengths(&robot.table, p))
-                .collect(),
-        ),
-        pose_measurements: poses
-            .iter()
-            .enumerate()
-            .map(|(j, p)| PoseMeasurement {
-                pose: j,
-                measured: *p,
-                time_s: spec.conditions[j].0,
-                temperature_c: spec.conditions[j].1,
-            })
-            .collect(),
-        simulated: true,
-        ..Campaign::default()
-    };
-    let model = robot.model(&truth.effects);
-    let mut c = simulate_pose_measurements(
-        &model,
-        &truth.params,
-        &skeleton,
-        *noise,
-        orientation_urad,
+) -> TrackerSimulation {
+    TrackerSimulation {
+        position: *noise,
+        orientation_sigma_urad: orientation_urad,
         seed,
-    )?;
-    // The tracker's own frame.
-    if let Some(f) = &frame {
-        for m in c.pose_measurements.iter_mut() {
-            m.measured = Pose::new(
-                f.rotation * m.measured.position_mm + f.position_mm,
-                f.rotation * m.measured.rotation,
-            );
-        }
+        frame,
     }
-    Ok(c)
 }
 
-/// The poses the true machine reaches at `poses`: the controller commands the nominal inverse
-/// kinematics; the machine's lengths are those plus the joint clearance shift, the robot's
-/// known link effects and the link offsets and scales of the truth; forward kinematics on the
-/// true joints gives the pose (moved by a known pose map). Returns the reached poses and the
-/// commanded lengths.
-fn reached_poses(
-    robot: &Robot,
-    truth: &Truth,
-    poses: &[Pose],
-    what: &str,
-) -> anyhow::Result<(Vec<Pose>, Vec<Vec<f64>>)> {
+/// Refuses a truth the true machine of [`simulate_tracker_points`] and
+/// [`simulate_inclinometer_angles`] cannot act out (effects other than link offsets and
+/// scales with nonzero values).
+fn machine_truth(robot: &Robot, truth: &Truth, what: &str) -> anyhow::Result<()> {
     let model = robot.model(&truth.effects);
-    let n = robot.num_links();
-    for b in model.blocks() {
-        if let Some(e) = b.effect {
-            let nonzero = truth.params[b.offset..b.offset + b.len]
-                .iter()
-                .any(|v| *v != 0.0);
-            if nonzero && !matches!(e, Effect::LinkOffset | Effect::LinkScale) {
-                return Err(usage_error(format!(
-                    "--measure {what} simulates installation errors, link_offset and link_scale; the truth has {} values",
-                    e.name()
-                )));
-            }
-        }
+    match unsupported_machine_effect(&model, &truth.params) {
+        Some(e) => Err(usage_error(format!(
+            "--measure {what} simulates installation errors, link_offset and link_scale; the truth has {} values",
+            e.name()
+        ))),
+        None => Ok(()),
     }
-    let block = |which: Effect| {
-        model
-            .blocks()
-            .into_iter()
-            .find(|b| b.effect == Some(which))
-            .map(|b| truth.params[b.offset..b.offset + b.len].to_vec())
-    };
-    let offset = block(Effect::LinkOffset).unwrap_or_else(|| vec![0.0; n]);
-    let scale = block(Effect::LinkScale).unwrap_or_else(|| vec![0.0; n]);
-    let true_table = model.table_with(&truth.params[..6 * n])?;
-    let mut reached_all = Vec::with_capacity(poses.len());
-    let mut commanded = Vec::new();
-    let mut previous: Option<crate::calib::effects::PoseContext> = None;
-    for (j, p) in poses.iter().enumerate() {
-        let cmd = cpm_kinematics::inverse_lengths(&robot.table, p);
-        let shift = model
-            .clearance
-            .link_corrections_mm(model.statics_table(), p, &model.load)
-            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
-        // The robot's known link effects (a calibrated description's) act on the machine too.
-        let ctx = model
-            .pose_context(p, cmd.clone(), previous.as_ref(), None, None)
-            .map_err(|source| crate::calib::CalibError::Clearance { pose: j, source })?;
-        let known = model.known_link_shift_mm(&ctx, 0.0);
-        let pose_map = model.known_pose_twist(&ctx, p, 0.0);
-        previous = Some(ctx);
-        let eff: Vec<f64> = (0..n)
-            .map(|i| cmd[i] + shift[i] + known[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
-            .collect();
-        let (reached, _) = cpm_kinematics::forward(&true_table, &eff, p, &model.fk)
-            .map_err(|source| crate::calib::CalibError::Kinematics { pose: j, source })?;
-        // A known pose error map moves the platform from where the lengths put it.
-        reached_all.push(reached.perturbed(&pose_map));
-        commanded.push(cmd);
-    }
-    Ok((reached_all, commanded))
 }
 
 /// Laser-tracker points of every `[[target]]` at each of `poses` on the true machine
-/// ([`reached_poses`]): the target at its true platform position on the reached pose, plus
-/// noise on each coordinate, in the tracker's frame `frame` (default: the base frame).
+/// ([`simulate_tracker_points`]), in the tracker's frame `frame` (default: the base frame).
 fn simulate_points(
     robot: &Robot,
     truth: &Truth,
@@ -496,39 +403,20 @@ fn simulate_points(
             robot.file
         )));
     }
-    let (reached, commanded) = reached_poses(robot, truth, poses, "points")?;
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let mut c = Campaign {
-        simulated: true,
-        poses: poses.to_vec(),
-        ..Campaign::default()
-    };
-    for (j, reached) in reached.iter().enumerate() {
-        for (k, t) in truth.targets.iter().enumerate() {
-            let mut p = reached.transform_point(t);
-            for a in 0..3 {
-                p[a] += noise.draw_um(&mut rng) * 1e-3;
-            }
-            if let Some(f) = &frame {
-                p = f.rotation * p + f.position_mm;
-            }
-            c.point_measurements.push(crate::calib::PointMeasurement {
-                pose: j,
-                target: k,
-                session: 0,
-                measured_mm: p,
-                time_s: None,
-            });
-        }
-    }
-    c.commanded_lengths_mm = Some(commanded);
-    Ok(c)
+    machine_truth(robot, truth, "points")?;
+    let model = robot.model(&truth.effects);
+    let tracker = tracker(noise, 0.0, seed, frame);
+    Ok(simulate_tracker_points(
+        &model,
+        &truth.params,
+        &truth.targets,
+        poses,
+        &tracker,
+    )?)
 }
 
 /// Inclinometer angles of every `[[inclinometer]]` axis at each of `poses` on the true machine
-/// ([`reached_poses`]): `asin(up . a)` with the instrument's true axes and mount on the reached
-/// orientation and gravity's up tilted by `base_tilt` (rad about x and y), plus noise
-/// (`noise` in urad).
+/// ([`simulate_inclinometer_angles`]), gravity's up tilted by `base_tilt` (rad about x and y).
 fn simulate_tilts(
     robot: &Robot,
     truth: &Truth,
@@ -543,34 +431,17 @@ fn simulate_tilts(
             robot.file
         )));
     }
+    machine_truth(robot, truth, "tilts")?;
     let model = robot.model(&truth.effects);
-    let (reached, commanded) = reached_poses(robot, truth, poses, "tilts")?;
-    let up = nalgebra::Rotation3::new(nalgebra::Vector3::new(base_tilt[0], base_tilt[1], 0.0))
-        * crate::calib::tilts::nominal_up(&model);
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let mut c = Campaign {
-        simulated: true,
-        poses: poses.to_vec(),
-        ..Campaign::default()
-    };
-    for (j, reached) in reached.iter().enumerate() {
-        for (i, inc) in truth.inclinometers.iter().enumerate() {
-            for (axis, n) in inc.axes.iter().enumerate() {
-                let a = reached.rotation * (inc.mount * n);
-                let angle = up.dot(&a).clamp(-1.0, 1.0).asin() + noise.draw_um(&mut rng) * 1e-6;
-                c.tilt_measurements.push(crate::calib::TiltMeasurement {
-                    pose: j,
-                    inclinometer: i,
-                    axis,
-                    session: 0,
-                    angle_mrad: angle * 1e3,
-                    time_s: None,
-                });
-            }
-        }
-    }
-    c.commanded_lengths_mm = Some(commanded);
-    Ok(c)
+    Ok(simulate_inclinometer_angles(
+        &model,
+        &truth.params,
+        &truth.inclinometers,
+        poses,
+        *noise,
+        seed,
+        base_tilt,
+    )?)
 }
 
 /// Runs `cpm simulate`.
@@ -677,14 +548,20 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             (c, text)
         }
         Measure::Poses => {
-            let c = simulate_poses(
-                &robot,
-                &truth,
-                &spec,
+            let tracker = tracker(
                 &noise,
                 args.orientation_noise_urad,
                 args.plan.seed,
                 tracker_frame,
+            );
+            // Through the prediction path the fit uses: every effect of the truth acts as
+            // `calibrate` and `validate` model it.
+            let c = simulate_tracker_poses(
+                &robot.model(&truth.effects),
+                &truth.params,
+                &spec.plan.poses,
+                &spec.conditions,
+                &tracker,
             )
             .map_err(|e| blame_truth(args, e))?;
             let text = io::write_pose_measurements(&c, &robot, &note);

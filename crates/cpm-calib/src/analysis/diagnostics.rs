@@ -274,10 +274,10 @@ pub fn diagnose(
     let dofc = dof.max(1);
     let (chi2, chi2_p) = match sigma_um {
         Some(s) if s > 0.0 => {
-            let c = residuals_um.iter().map(|r| (r / s).powi(2)).sum::<f64>();
-            let p = ChiSquared::new(dofc as f64)
-                .map(|d| 1.0 - d.cdf(c))
-                .unwrap_or(f64::NAN);
+            // The crate's one chi-square rule (see `misfit`); the verdict below is the plain
+            // test at `alpha` on every residual.
+            let (c, _) = crate::analysis::misfit::statistic(residuals_um, s, &[]);
+            let p = crate::analysis::misfit::upper_tail(c, dofc).unwrap_or(f64::NAN);
             (Some(c), Some(p))
         }
         _ => (None, None),

@@ -11,6 +11,13 @@
 //! since with thousands of observations the test alone rejects a noise declared a few per
 //! cent too small. Observations flagged as outliers are left out (they are listed apart).
 //!
+//! The statistic and its tail are the crate's one chi-square rule ([`statistic`],
+//! [`upper_tail`]); [`diagnostics`](crate::diagnostics) uses them too. Its verdict
+//! (`consistent_with_noise`) means something else on purpose: the plain test at the
+//! diagnostics' level `alpha` on every residual, the stopping rule of [`refine`](crate::refine),
+//! where the outliers are part of what is studied; the verdict here adds materiality and
+//! leaves the outliers out, for the report of a fit.
+//!
 //! ```
 //! use cpm_calib::misfit::chi_square;
 //! // 100 residuals of 6.4 um against a declared 1 um noise, 36 parameters determined.
@@ -67,14 +74,10 @@ pub fn chi_square(
     if !(sigma_um.is_finite() && sigma_um > 0.0) {
         return None;
     }
-    let (ssr, count) = residuals_um
-        .iter()
-        .enumerate()
-        .filter(|(k, _)| !outliers.contains(k))
-        .fold((0.0, 0usize), |(s, n), (_, r)| (s + r * r, n + 1));
-    let dof = count.checked_sub(rank).filter(|d| *d > 0)?;
+    let (ssr, count) = sum_of_squares(residuals_um, outliers);
     let chi2 = ssr / (sigma_um * sigma_um);
-    let p_value = ChiSquared::new(dof as f64).ok()?.sf(chi2);
+    let dof = count.checked_sub(rank).filter(|d| *d > 0)?;
+    let p_value = upper_tail(chi2, dof)?;
     Some(Misfit {
         chi2,
         dof,
@@ -84,6 +87,28 @@ pub fn chi_square(
         sigma_um,
         outliers_left_out: residuals_um.len() - count,
     })
+}
+
+/// The chi-square statistic of residuals `residuals_um` against the noise `sigma_um`:
+/// `sum r^2 / sigma^2` over the residuals not in `outliers`, and how many were used.
+pub fn statistic(residuals_um: &[f64], sigma_um: f64, outliers: &[usize]) -> (f64, usize) {
+    let (ssr, count) = sum_of_squares(residuals_um, outliers);
+    (ssr / (sigma_um * sigma_um), count)
+}
+
+/// Sum of squared residuals not in `outliers`, and how many.
+fn sum_of_squares(residuals_um: &[f64], outliers: &[usize]) -> (f64, usize) {
+    residuals_um
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !outliers.contains(k))
+        .fold((0.0, 0usize), |(s, n), (_, r)| (s + r * r, n + 1))
+}
+
+/// Probability of a chi-square this large or larger with `dof` degrees of freedom (the upper
+/// tail, computed as such rather than as `1 - cdf`). `None` for zero degrees of freedom.
+pub fn upper_tail(chi2: f64, dof: usize) -> Option<f64> {
+    Some(ChiSquared::new(dof as f64).ok()?.sf(chi2))
 }
 
 #[cfg(test)]
@@ -116,5 +141,14 @@ mod tests {
         assert!(chi_square(&r, 1.0, 6, &[]).unwrap().inconsistent());
         assert!(chi_square(&r, 1.0, 50, &[]).is_none());
         assert!(chi_square(&r, 0.0, 6, &[]).is_none());
+    }
+
+    #[test]
+    fn diagnostics_uses_the_same_rule() {
+        let r: Vec<f64> = (0..80).map(|k| (k as f64 * 0.7).sin() * 2.5).collect();
+        let m = chi_square(&r, 2.0, 30, &[]).unwrap();
+        let d = crate::diagnostics::diagnose(&r, m.dof, Some(2.0), &[], 0.05);
+        assert_eq!(d.chi2, Some(m.chi2));
+        assert_eq!(d.chi2_p, Some(m.p_value));
     }
 }

@@ -10,7 +10,8 @@
 //! 1. forward kinematics of the commanded lengths of every pose, nominal geometry;
 //! 2. per session (one tracker file, one set-up of the instrument) the rigid transform that
 //!    best maps these poses onto the measured ones: a weighted Procrustes (Horn / Umeyama)
-//!    problem on positions and orientations together, solved by an SVD (nalgebra's);
+//!    problem on positions and orientations together, solved by an SVD (nalgebra's fixed-size
+//!    3x3 one, a start value only);
 //! 3. Gauss-Newton on all session frames and one offset per link together (the offsets are
 //!    a property of the machine, shared by every session), from the closed-form start, with
 //!    forward kinematics re-run at every step. Offsets are left out when the poses cannot
@@ -284,9 +285,9 @@ pub fn register_with_corrections(
         )?;
         let np = 6 * sessions.len() + if estimate_offsets { n } else { 0 };
         let (js, _) = scaled_columns(&lin.jacobian, np);
-        let svd = checked_svd(js, false)?;
-        let smax = svd.singular_values.max();
-        let smin = svd.singular_values.min();
+        let (sv, _) = checked_svd(&js)?;
+        let smax = sv.first().copied().unwrap_or(0.0);
+        let smin = sv.last().copied().unwrap_or(0.0);
         if estimate_offsets && !(smin > 1e-5 * smax) {
             // The poses do not tell the offsets from the frames: register without them.
             estimate_offsets = false;
@@ -356,12 +357,11 @@ pub fn register_with_corrections(
         f64::NAN
     };
     // Covariance of the scaled parameters: (Js^T Js)^-1 by the SVD.
-    let svd = checked_svd(js, false)?;
-    let vt = svd.v_t.expect("v_t");
+    let (sv, vm) = checked_svd(&js)?;
     let sd = |k: usize| -> f64 {
         let mut v = 0.0;
-        for (i, s) in svd.singular_values.iter().enumerate() {
-            v += (vt[(i, k)] / s).powi(2);
+        for (i, s) in sv.iter().enumerate() {
+            v += (vm[(k, i)] / s).powi(2);
         }
         (v * variance_factor).sqrt() * scale[k]
     };
@@ -541,22 +541,21 @@ fn procrustes(pairs: &[(Pose, Pose)], w_rot: f64) -> (Rotation3<f64>, Vector3<f6
     (r, qbar - r * pbar)
 }
 
-/// The SVD of a finite matrix (nalgebra's, with a bounded number of sweeps): an error, never
-/// a hang, for a non-finite matrix or no convergence.
-fn checked_svd(
-    m: DMatrix<f64>,
-    with_u: bool,
-) -> Result<nalgebra::SVD<f64, nalgebra::Dyn, nalgebra::Dyn>, CalibError> {
+/// Singular values (largest first) and right singular vectors (`n x min(m, n)`) of a finite
+/// matrix, by the crate's accurate SVD ([`crate::linalg::svd_values_and_v`]: faer after an
+/// exact power-of-two scaling; nalgebra's `try_svd` loses accuracy on small matrices, see
+/// [`cpm_kinematics::linalg`]): an error, never a hang, for a non-finite matrix or no
+/// convergence.
+fn checked_svd(m: &DMatrix<f64>) -> Result<(Vec<f64>, DMatrix<f64>), CalibError> {
     if m.iter().any(|v| !v.is_finite()) {
         return Err(CalibError::invalid(
             "registration",
             "the Jacobian has non-finite entries (an implausible pose or robot)",
         ));
     }
-    m.try_svd(with_u, true, f64::EPSILON, 10_000)
-        .ok_or_else(|| {
-            CalibError::invalid("registration", "the SVD of the Jacobian did not converge")
-        })
+    crate::linalg::svd_values_and_v(m).map_err(|_| {
+        CalibError::invalid("registration", "the SVD of the Jacobian did not converge")
+    })
 }
 
 /// The first `np` columns of `jac` scaled to unit norm, and the scale factors.
