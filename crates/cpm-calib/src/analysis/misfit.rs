@@ -14,7 +14,7 @@
 //! The statistic and its tail are the crate's one chi-square rule ([`statistic`],
 //! [`upper_tail`]); [`diagnostics`](crate::diagnostics) uses them too. Its verdict
 //! (`consistent_with_noise`) means something else on purpose: the plain test at the
-//! diagnostics' level `alpha` on every residual, the stopping rule of [`refine`](crate::refine),
+//! diagnostics' level `alpha` on every residual, the stopping rule of [`refine`](mod@crate::refine),
 //! where the outliers are part of what is studied; the verdict here adds materiality and
 //! leaves the outliers out, for the report of a fit.
 //!
