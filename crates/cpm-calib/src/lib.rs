@@ -27,6 +27,15 @@
 //! assert!(cal.estimate_um.iter().all(|e| e.is_none()));
 //! ```
 //!
+//! # Module map
+//!
+//! The crate is in rooms by purpose: [`model`] (the measurement model, effects, instrument
+//! models), [`fit`] (identification, registration, refinement, implicit loop, sessions, noise
+//! per kind), [`analysis`] (identifiability, residual diagnostics, misfit, accuracy), [`data`]
+//! (campaigns, simulation, pose generators), [`design`] (experiment design) and [`paper`] (the
+//! reproduction of the paper only). Every module's path from before the rooms is kept
+//! (`cpm_calib::identify`, `cpm_calib::misfit`, ...).
+//!
 //! # One's own robot from files
 //!
 //! A robot description (`docs/robot-description.md`) gives the model with the clearance and
@@ -75,10 +84,16 @@ pub mod model;
 pub mod paper;
 
 // Every module's path from before the rooms, kept.
-pub use analysis::{accuracy, diagnostics, identifiability, misfit, noise};
+pub use analysis::{accuracy, diagnostics, identifiability, misfit};
 pub use data::{campaign, simulate};
-pub use fit::{identify, implicit, refine, registration, session};
-pub use model::{effects, instruments, points, tilts};
+pub use fit::{identify, implicit, noise, refine, registration, session};
+pub use model::{effects, points, tilts};
+/// Open instruments ([`model::instruments`]), with their simulation
+/// ([`simulate::simulate_instruments`]) at its old path.
+pub mod instruments {
+    pub use crate::data::simulate::simulate_instruments;
+    pub use crate::model::instruments::*;
+}
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
 pub use campaign::{

@@ -146,14 +146,8 @@ impl Identifiability {
     }
 }
 
-/// A named physical error pattern: a subspace of the parameter space.
-#[derive(Debug, Clone)]
-pub struct Pattern {
-    /// Words for it.
-    pub description: String,
-    /// Spanning vectors (parameter space, any scale).
-    pub vectors: Vec<DVector<f64>>,
-}
+/// A named physical error pattern (defined with the model, whose parameters it names).
+pub use crate::model::patterns::Pattern;
 
 /// Physical error patterns worth naming for a machine and campaign: per-link rigid
 /// translation, joints moved along their link, all base joints rotated about each sensor's
@@ -483,4 +477,18 @@ pub fn parameter_names(num_links: usize) -> Vec<String> {
     (0..6 * num_links)
         .map(InstallationErrors::component_name)
         .collect()
+}
+
+/// The leverage `h_ii` of every observation: the diagonal of the hat matrix of the weighted
+/// Jacobian `j` in the identifiable subspace of its analysis `id`, `|| (J V_r S_r^-1)_i ||^2`.
+pub(crate) fn leverages(j: &DMatrix<f64>, id: &Identifiability) -> Vec<f64> {
+    let r = id.rank.min(id.v.ncols());
+    if r == 0 {
+        return vec![0.0; j.nrows()];
+    }
+    let mut jv: DMatrix<f64> = j * id.v.columns(0, r);
+    for c in 0..r {
+        jv.column_mut(c).unscale_mut(id.singular_values[c]);
+    }
+    jv.row_iter().map(|row| row.norm_squared()).collect()
 }

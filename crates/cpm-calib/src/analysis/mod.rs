@@ -3,10 +3,8 @@
 //! - [`identifiability`]: rank, singular values, blind directions, Cramér-Rao bounds;
 //! - [`diagnostics`]: residual size (chi-square), whiteness, outliers, regressors;
 //! - [`misfit`]: does the model fit? The chi-square verdict, by the rule of [`diagnostics`];
-//! - [`noise`]: noise per kind of observation, estimated from a fit's residual;
 //! - [`accuracy`]: platform pose error over validation poses, nominal against calibrated.
 pub mod accuracy;
 pub mod diagnostics;
 pub mod identifiability;
 pub mod misfit;
-pub mod noise;

@@ -228,6 +228,39 @@ pub fn simulate_pose_measurements(
     Ok(campaign)
 }
 
+/// Simulates the instrument measurements of `skeleton` ([`Campaign::instrument_measurements`], of one's own
+/// [`Instrument`](crate::instruments::Instrument)s)
+/// on the machine whose true parameters are `truth` (readings too, as
+/// [`simulate_campaign`] does), through the prediction path the fit
+/// uses: each value gets Gaussian noise of its measurement's `sigma` (the options' noise
+/// applies to the readings; its seed to both).
+pub fn simulate_instruments(
+    model: &MeasurementModel,
+    truth: &[f64],
+    skeleton: &Campaign,
+    options: &SimulationOptions,
+) -> Result<Campaign, CalibError> {
+    let mut campaign = simulate_campaign(model, truth, skeleton, options)?;
+    let exact = MeasurementModel {
+        kind: crate::ModelKind::Exact,
+        ..model.clone()
+    };
+    let prepared = Prepared::new(&exact, &campaign)?;
+    let y = predict(&exact, &prepared, &campaign, truth, None)?;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed ^ 0x696e_7374);
+    let mut k = campaign.first_instrument_observation();
+    for m in campaign.instrument_measurements.iter_mut() {
+        let noise = rand_distr::Normal::new(0.0, m.sigma)
+            .map_err(|e| CalibError::invalid("instrument measurement sigma", e.to_string()))?;
+        for v in m.values.iter_mut() {
+            *v = y[k] + rand_distr::Distribution::sample(&noise, &mut rng);
+            k += 1;
+        }
+    }
+    campaign.simulated = true;
+    Ok(campaign)
+}
+
 /// Settings of a simulated tracker ([`simulate_tracker_poses`], [`simulate_tracker_points`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackerSimulation {

@@ -389,7 +389,7 @@ pub fn identify(
         }
     };
     let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
-    let leverages = crate::analysis::noise::leverages(&jf, &ident);
+    let leverages = crate::analysis::identifiability::leverages(&jf, &ident);
     // Blind directions are named at the start (the nominal geometry, where the physical
     // patterns are exact); at the solution the errors tilt them by a few microradians.
     ident.blind_directions = first.blind_directions.clone();

@@ -5,9 +5,12 @@
 //!   done before any fit;
 //! - [`refine`]: fit, study the residual, add the missing effect, refit;
 //! - [`implicit`]: implicit-loop calibration, the actual poses as unknowns;
+//! - [`noise`]: noise per kind of observation, estimated from a fit's residual, and the fit
+//!   reweighed by it;
 //! - [`session`]: a new measurement session re-registered against a machine held fixed.
 pub mod identify;
 pub mod implicit;
+pub mod noise;
 pub mod refine;
 pub mod registration;
 pub mod session;

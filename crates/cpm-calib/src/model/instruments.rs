@@ -18,21 +18,22 @@
 //! `target_position`, `point_frame`, `inclinometer_mount`, `base_tilt`). A tracker pose's
 //! orientation is observed as the rotation from the measured to the predicted orientation, so
 //! its instrument holds the measured orientation (one per measurement), and rows lacking
-//! components ([`Campaign::unmeasured`]) keep the rest. The length-gauge reading stays apart: it
+//! components ([`Campaign::unmeasured`](crate::Campaign::unmeasured)) keep the rest. The length-gauge reading stays apart: it
 //! is not a function of the reached pose alone (the sensor sockets move it directly, and the
 //! sensor channel's gain and offset act on it), so it keeps its own row in `compose.rs`.
 //!
-//! One's own instrument goes into [`MeasurementModel::instruments`]; its measurements into
-//! [`Campaign::instrument_measurements`]. Its nuisance parameters are estimated (one block per
+//! One's own instrument goes into [`MeasurementModel::instruments`](crate::MeasurementModel::instruments); its measurements into
+//! [`Campaign::instrument_measurements`](crate::Campaign::instrument_measurements). Its nuisance parameters are estimated (one block per
 //! instrument after the effects' blocks: the per-instrument ones, then the per-session ones of
-//! each of [`MeasurementModel::instrument_sessions`] sessions), in the instrument's own units.
+//! each of [`MeasurementModel::instrument_sessions`](crate::MeasurementModel::instrument_sessions) sessions), in the instrument's own units.
 //!
 //! Here a laser distance sensor: each of its beams runs from a fixed point on the base to a
 //! reflector on the platform, and reads that distance with an unknown zero offset per beam.
 //!
 //! ```
 //! use std::sync::Arc;
-//! use cpm_calib::instruments::{simulate_instruments, Instrument, InstrumentInput};
+//! use cpm_calib::instruments::{Instrument, InstrumentInput};
+//! use cpm_calib::simulate::simulate_instruments;
 //! use cpm_calib::{paper::random_workspace_poses, *};
 //! use nalgebra::{DMatrix, Vector3};
 //!
@@ -90,11 +91,8 @@ use std::fmt::Debug;
 
 use cpm_geometry::Pose;
 use nalgebra::{DMatrix, Vector3};
-use rand::SeedableRng;
 
 use crate::model::effects::EffectInput;
-use crate::model::{predict, Prepared};
-use crate::{CalibError, Campaign, MeasurementModel, SimulationOptions};
 
 mod tracker;
 
@@ -287,36 +285,4 @@ impl Bound<'_> {
             }
         }
     }
-}
-
-/// Simulates the instrument measurements of `skeleton` ([`Campaign::instrument_measurements`])
-/// on the machine whose true parameters are `truth` (readings too, as
-/// [`simulate_campaign`](crate::simulate_campaign) does), through the prediction path the fit
-/// uses: each value gets Gaussian noise of its measurement's `sigma` (the options' noise
-/// applies to the readings; its seed to both).
-pub fn simulate_instruments(
-    model: &MeasurementModel,
-    truth: &[f64],
-    skeleton: &Campaign,
-    options: &SimulationOptions,
-) -> Result<Campaign, CalibError> {
-    let mut campaign = crate::simulate_campaign(model, truth, skeleton, options)?;
-    let exact = MeasurementModel {
-        kind: crate::ModelKind::Exact,
-        ..model.clone()
-    };
-    let prepared = Prepared::new(&exact, &campaign)?;
-    let y = predict(&exact, &prepared, &campaign, truth, None)?;
-    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed ^ 0x696e_7374);
-    let mut k = campaign.first_instrument_observation();
-    for m in campaign.instrument_measurements.iter_mut() {
-        let noise = rand_distr::Normal::new(0.0, m.sigma)
-            .map_err(|e| CalibError::invalid("instrument measurement sigma", e.to_string()))?;
-        for v in m.values.iter_mut() {
-            *v = y[k] + rand_distr::Distribution::sample(&noise, &mut rng);
-            k += 1;
-        }
-    }
-    campaign.simulated = true;
-    Ok(campaign)
 }

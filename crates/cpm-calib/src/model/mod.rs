@@ -4,6 +4,7 @@
 //!   measurement model): commanded pose -> link lengths -> clearance -> forward kinematics ->
 //!   sensor reading, and its Jacobian;
 //! - `compose`: how the effects' channels compose into a prediction and its Jacobian;
+//! - [`patterns`]: named physical error patterns (subspaces of the parameters in words);
 //! - [`effects`]: the effect library (link offsets, scale, backlash, thermal drift, ...);
 //! - the instrument models: [`instruments`] (the open [`Instrument`](instruments::Instrument)
 //!   trait and the tracker), [`points`] (point targets) and [`tilts`] (inclinometers). They
@@ -13,6 +14,7 @@ mod compose;
 pub mod effects;
 pub mod instruments;
 pub mod measurement;
+pub mod patterns;
 pub mod points;
 pub mod tilts;
 

@@ -23,9 +23,9 @@ use cpm_geometry::rotation::left_jacobian;
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::analysis::identifiability::Pattern;
 use crate::model::effects::{Channel, EffectModel};
 use crate::model::instruments::{Instrument, InstrumentInput};
+use crate::model::patterns::Pattern;
 use crate::{Effect, MeasurementModel};
 
 /// A point target on the platform (`[[target]]`).

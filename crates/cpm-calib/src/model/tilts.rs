@@ -23,9 +23,9 @@
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::analysis::identifiability::Pattern;
 use crate::model::effects::{Channel, EffectModel};
 use crate::model::instruments::{Instrument, InstrumentInput};
+use crate::model::patterns::Pattern;
 use crate::{Effect, MeasurementModel};
 use cpm_geometry::rotation::left_jacobian;
 

@@ -33,10 +33,8 @@
 //! // One kind alone: its estimate is the fit's own noise estimate.
 //! assert!((kinds[0].estimated.unwrap() - cal.sigma_um).abs() < 1e-9 * cal.sigma_um);
 //! ```
-use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
-use crate::analysis::identifiability::Identifiability;
 use crate::data::campaign::ObservationKind;
 use crate::fit::identify::{identify, Calibration, IdentifyOptions};
 use crate::{CalibError, Campaign, MeasurementModel};
@@ -346,18 +344,4 @@ fn name(model: &MeasurementModel, kind: Kind) -> String {
             None => format!("instrument {}", i + 1),
         },
     }
-}
-
-/// The leverage `h_ii` of every observation: the diagonal of the hat matrix of the weighted
-/// Jacobian `j` in the identifiable subspace of its analysis `id`, `|| (J V_r S_r^-1)_i ||^2`.
-pub(crate) fn leverages(j: &DMatrix<f64>, id: &Identifiability) -> Vec<f64> {
-    let r = id.rank.min(id.v.ncols());
-    if r == 0 {
-        return vec![0.0; j.nrows()];
-    }
-    let mut jv: DMatrix<f64> = j * id.v.columns(0, r);
-    for c in 0..r {
-        jv.column_mut(c).unscale_mut(id.singular_values[c]);
-    }
-    jv.row_iter().map(|row| row.norm_squared()).collect()
 }
