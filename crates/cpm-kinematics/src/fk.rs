@@ -106,47 +106,13 @@ fn singular(iteration: usize, jac: &Mat6, links: usize) -> KinematicsError {
     })
 }
 
-/// Solves `a x = b` in place (`b` becomes `x`) by Gaussian elimination with partial pivoting.
-/// False when a pivot is zero or anything is not finite.
-///
-/// The row updates run over whole rows (a fixed trip count of six that the compiler
-/// vectorises); the entries left of the pivot column become garbage that is never read.
-fn solve6(a: &mut Mat6, b: &mut [f64; 6]) -> bool {
-    for k in 0..6 {
-        let mut p = k;
-        let mut best = a[k][k].abs();
-        for i in k + 1..6 {
-            let v = a[i][k].abs();
-            if v > best {
-                best = v;
-                p = i;
-            }
-        }
-        if !(best > 0.0 && best.is_finite()) {
-            return false;
-        }
-        a.swap(p, k);
-        b.swap(p, k);
-        let inv = 1.0 / a[k][k];
-        let pivot_row = a[k];
-        let bk = b[k];
-        for i in k + 1..6 {
-            let f = a[i][k] * inv;
-            let row = &mut a[i];
-            for j in 0..6 {
-                row[j] -= f * pivot_row[j];
-            }
-            b[i] -= f * bk;
-        }
-    }
-    for k in (0..6).rev() {
-        let mut s = b[k];
-        for j in k + 1..6 {
-            s -= a[k][j] * b[j];
-        }
-        b[k] = s / a[k][k];
-    }
-    b.iter().all(|v| v.is_finite())
+/// Solves `a x = b` by nalgebra's fixed-size LU with partial pivoting (allocation-free).
+/// `None` when a pivot is zero or anything is not finite.
+fn solve6(a: &Mat6, b: &[f64; 6]) -> Option<Vector6<f64>> {
+    let x = Matrix6::from_fn(|i, j| a[i][j])
+        .lu()
+        .solve(&Vector6::from(*b))?;
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// Residual `l(x) - L` and J1 for six links (or the normal equations `J1^T J1`, `-J1^T r`
@@ -251,12 +217,9 @@ pub fn forward(
         if it == options.max_iterations {
             break;
         }
-        let mut lu = jac;
-        let mut step = rhs;
-        if !solve6(&mut lu, &mut step) {
+        let Some(step) = solve6(&jac, &rhs) else {
             return Err(singular(it, &jac, n));
-        }
-        let step = Vector6::from(step);
+        };
         // Cheap singularity guard: a huge step from a small residual means J1 is near singular.
         let dt = Vector3::new(step[0], step[1], step[2]);
         let dw = Vector3::new(step[3], step[4], step[5]);
