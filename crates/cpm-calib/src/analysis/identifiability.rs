@@ -434,7 +434,14 @@ fn analyze_with(
             // Blind: the pattern moves the readings less than the rank threshold does, in
             // every direction of its span.
             let b = DMatrix::from_columns(&basis);
-            let gain = (jacobian * &b).singular_values().max();
+            // Its largest singular value, by the crate's accurate SVD (no readings: no gain).
+            let jb = jacobian * &b;
+            let gain = if jb.nrows() == 0 {
+                0.0
+            } else {
+                crate::linalg::svd_values_and_v(&jb)
+                    .map_or(f64::INFINITY, |(s, _)| s.first().copied().unwrap_or(0.0))
+            };
             if gain > threshold {
                 continue;
             }

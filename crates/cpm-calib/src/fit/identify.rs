@@ -490,9 +490,12 @@ fn base_frame_gauge(
             y[3 * i + ax] = e[6 * i + ax] * 1e-3;
         }
     }
-    let Some(c) = a.clone().svd(true, true).solve(&y, 1e-12).ok() else {
+    // The crate's accurate SVD (faer, exactly scaled), singular values below 1e-12 of the
+    // largest dropped.
+    let Ok(svd) = cpm_kinematics::linalg::Svd::new(&a) else {
         return Ok(None);
     };
+    let c = svd.solve(&y, 1e-12);
     let (t, w) = (
         nalgebra::Vector3::new(c[0], c[1], c[2]),
         nalgebra::Vector3::new(c[3], c[4], c[5]),
