@@ -470,8 +470,14 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     set.add(dir.join("sockets.csv"), tidy_csv(&d.sockets_csv()));
     set.add(dir.join("robot.toml"), robot_toml);
     set.add(dir.join("design.json"), report.to_json()?);
-    set.add(dir.join("report.md"), report.markdown());
-    let written = commit_design(set, dir, args, "cpm experiment design", ctx)?;
+    let written = commit_design(
+        set,
+        dir,
+        args,
+        "cpm experiment design",
+        &report.markdown(),
+        ctx,
+    )?;
     ctx.finish();
     if args.json {
         writeln!(ctx.out, "{}", report.to_json()?)?;
@@ -731,12 +737,12 @@ fn run_limited(
         );
     }
     set.add(dir.join("design.json"), report.to_json()?);
-    set.add(dir.join("report.md"), report.markdown());
     let written = commit_design(
         set,
         dir,
         args,
         "cpm experiment design (instrument limits)",
+        &report.markdown(),
         ctx,
     )?;
     ctx.finish();
@@ -762,16 +768,18 @@ fn run_limited(
     Ok(Outcome::Done)
 }
 
-/// Stages `report.html` beside the staged `report.md` and commits the design's result
+/// Stages `report.md` (`markdown`) and `report.html` and commits the design's result
 /// directory (the robot and the sockets file are inputs it may not replace).
 fn commit_design(
     mut set: OutputSet,
     dir: &std::path::Path,
     args: &DesignArgs,
     title: &str,
+    markdown: &str,
     ctx: &Ctx<'_>,
 ) -> anyhow::Result<Vec<std::path::PathBuf>> {
-    crate::html::stage_report_html(&mut set, dir, title);
+    set.add(dir.join("report.md"), markdown);
+    common::stage_report_html(&mut set, dir, title, markdown);
     let inputs: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
         .chain(args.sockets.as_deref())
         .collect();

@@ -244,8 +244,9 @@ pub fn run(
     );
     let json = serde_json::to_string_pretty(&serde_json::to_value(&report)?)?;
     set.add(dir.join("design.json"), json.clone());
-    set.add(dir.join("report.md"), report.markdown());
-    crate::html::stage_report_html(&mut set, dir, "cpm experiment design");
+    let markdown = report.markdown();
+    set.add(dir.join("report.md"), markdown.as_str());
+    common::stage_report_html(&mut set, dir, "cpm experiment design", &markdown);
     let written = common::commit_dir(set, dir, &[args.robot.robot.as_path()], "design", ctx)?;
     ctx.finish();
     if args.json {

@@ -29,7 +29,8 @@ pub mod export;
 pub mod formulation;
 pub mod gauges;
 pub mod identifiability;
-pub mod plots;
+/// The figures of a fit (moved to [`crate::report::figures::fit`]).
+pub use crate::report::figures::fit as plots;
 pub mod refine;
 pub mod simulate;
 pub mod validate;

@@ -843,7 +843,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     ctx.finish();
     let mut written = Vec::new();
     if let Some(dir) = &args.out {
-        let svg = crate::plot::grouped_bars(
+        let svg = crate::report::figures::grouped_bars(
             &format!(
                 "Held-out prediction error{}",
                 if simulated { " (SIMULATED data)" } else { "" }

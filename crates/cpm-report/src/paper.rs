@@ -8,9 +8,9 @@
 use serde::Serialize;
 
 use super::format::{fixed, opt_fixed, opt_with_sd, sci, with_sd};
-use crate::calib::design::{MonteCarloReport, ObservabilityIndices};
-use crate::calib::paper::{CampaignOutcome, LimitedOutcome, PaperReproduction};
-use crate::geometry::InstallationErrors;
+use cpm_calib::design::{MonteCarloReport, ObservabilityIndices};
+use cpm_calib::paper::{CampaignOutcome, LimitedOutcome, PaperReproduction};
+use cpm_geometry::InstallationErrors;
 
 /// `summary.json` and what report.md adds, from one reproduction.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -554,7 +554,7 @@ fn accuracy(o: &CampaignOutcome) -> AccuracySummary {
         calibrated_rms_orientation_urad: o.accuracy.calibrated.rms_orientation_urad,
         compensation: format!(
             "identifiable combinations with Cramér-Rao std <= {} um",
-            crate::calib::paper::COMPENSATION_MAX_STD_UM
+            cpm_calib::paper::COMPENSATION_MAX_STD_UM
         ),
         minimum_norm_rms_position_um: o.accuracy_minimum_norm.calibrated.rms_position_um,
         minimum_norm_max_position_um: o.accuracy_minimum_norm.calibrated.max_position_um,
@@ -562,7 +562,7 @@ fn accuracy(o: &CampaignOutcome) -> AccuracySummary {
     }
 }
 
-fn socket(s: &crate::calib::design::Socket) -> SocketSummary {
+fn socket(s: &cpm_calib::design::Socket) -> SocketSummary {
     SocketSummary {
         name: s.name.clone(),
         position_mm: [s.position_mm.x, s.position_mm.y, s.position_mm.z],
@@ -572,7 +572,7 @@ fn socket(s: &crate::calib::design::Socket) -> SocketSummary {
 fn limited(l: &LimitedOutcome, max_readings: usize) -> LimitedSummary {
     let d = &l.design;
     let c = &d.constraints;
-    let names = crate::calib::identifiability::parameter_names(6);
+    let names = cpm_calib::identifiability::parameter_names(6);
     let (socket_moves, bar_changes) = d.remounts();
     LimitedSummary {
         constraints: LimitedConstraints {
@@ -665,7 +665,7 @@ impl PaperReport {
         let dz = &r.design;
         let t2 = InstallationErrors::paper_table2().to_vec_um();
         let t3 = InstallationErrors::paper_table3().to_vec_um();
-        let cands = crate::calib::design::SocketCandidates::paper_cubic();
+        let cands = cpm_calib::design::SocketCandidates::paper_cubic();
         let summary = PaperSummary {
             simulated: true,
             note: "All readings are simulated from the paper's Table 2 with the paper's clearance and noise model.".into(),
@@ -782,7 +782,7 @@ impl PaperReport {
             designed_range_mm: r.options.designed_range_mm,
             designed_range_deg: r.options.designed_range_deg,
             socket_candidates: (cands.base.len(), cands.platform.len()),
-            compensation_max_std_um: crate::calib::paper::COMPENSATION_MAX_STD_UM,
+            compensation_max_std_um: cpm_calib::paper::COMPENSATION_MAX_STD_UM,
             components: (0..36)
                 .map(|k| ComponentRow {
                     name: InstallationErrors::component_name(k).to_string(),
