@@ -15,8 +15,10 @@ pub mod calibrate;
 pub mod design;
 pub mod fit;
 pub mod format;
+pub mod identifiability;
 pub mod paper;
 pub mod refine;
+pub mod validate;
 
 #[cfg(feature = "svg")]
 pub mod figures;
@@ -24,3 +26,8 @@ pub mod figures;
 pub mod html;
 #[cfg(all(feature = "svg", feature = "html"))]
 pub mod paper_files;
+
+/// The examples of the crate's README.md, run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

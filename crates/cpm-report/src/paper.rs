@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use super::format::{fixed, opt_fixed, opt_with_sd, sci, with_sd};
 use cpm_calib::design::{MonteCarloReport, ObservabilityIndices};
-use cpm_calib::paper::{CampaignOutcome, LimitedOutcome, PaperReproduction};
+use cpm_calib::paper::{CampaignOutcome, LimitedOutcome, PaperReproduction, TradeoffRow};
 use cpm_geometry::InstallationErrors;
 
 /// `summary.json` and what report.md adds, from one reproduction.
@@ -405,26 +405,8 @@ pub struct WorstError {
     pub target_um: f64,
 }
 
-/// One gauge stroke of the trade-off.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct TradeoffSummary {
-    /// Stroke, mm.
-    pub stroke_mm: f64,
-    /// Setups.
-    pub setups: usize,
-    /// Readings.
-    pub readings: usize,
-    /// Rank.
-    pub rank: usize,
-    /// Cramér-Rao RMS, um.
-    pub crlb_rms_um: f64,
-    /// Cramér-Rao bound of the worst parameter, um.
-    pub crlb_max_um: f64,
-    /// Largest travel in a setup, mm.
-    pub max_travel_mm: f64,
-    /// Least gauge-link clearance, mm.
-    pub min_clearance_mm: f64,
-}
+/// One gauge stroke of the trade-off: cpm-calib's row, serialised as it is.
+pub type TradeoffSummary = TradeoffRow;
 
 /// The campaign under an instrument's limits.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -627,20 +609,7 @@ fn limited(l: &LimitedOutcome, max_readings: usize) -> LimitedSummary {
                 target_um: 6.0,
             }
         }),
-        tradeoff: l
-            .tradeoff
-            .iter()
-            .map(|t| TradeoffSummary {
-                stroke_mm: t.stroke_mm,
-                setups: t.setups,
-                readings: t.readings,
-                rank: t.rank,
-                crlb_rms_um: t.crlb_rms_um,
-                crlb_max_um: t.crlb_max_um,
-                max_travel_mm: t.max_travel_mm,
-                min_clearance_mm: t.min_clearance_mm,
-            })
-            .collect(),
+        tradeoff: l.tradeoff.clone(),
         log: d.log.clone(),
         files: [
             "designed/robot.toml",
