@@ -3,7 +3,6 @@
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use serde_json::json;
 
 use super::common::{self, EffectsArg, RobotArg};
 use super::{plots, Ctx, Outcome};
@@ -681,22 +680,9 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         ctx.note(w);
     }
     if args.fit.json {
-        let v = json!({
-            "simulated": cal.simulated,
-            "formulation": report.fit.formulation,
-            "out": dir.display().to_string(),
-            "files": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "rank": cal.identifiability.rank,
-            "parameters": cal.identifiability.num_params,
-            "determined": cal.identifiability.num_determined(),
-            "residual_rms_um": cal.residual_rms_um,
-            "converged": cal.solver.was_successful(),
-            "downweighted_share": cal.downweighted_share,
-            "robust_failed": cal.robust_failed,
-            "not_determined": report.fit.not_determined,
-            "outliers": report.fit.outliers,
-        });
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
+        let files = written.iter().map(|p| p.display().to_string()).collect();
+        let summary = report.summary(dir.display().to_string(), files);
+        writeln!(ctx.out, "{}", summary.to_json()?)?;
     } else {
         writeln!(
             ctx.out,
