@@ -14,6 +14,7 @@ pub use crate::report::fit::{
     misfit, misfit_message, observation_origin, warnings, ObservationOrigin,
 };
 use crate::report::fit::{FitInputs, FitReport};
+pub use crate::report::residuals::residuals_csv;
 
 /// Arguments of `cpm calibrate`.
 #[derive(Debug, Clone, Args)]
@@ -509,62 +510,6 @@ pub fn solver_options(
         identify.lm.max_evaluations = identify.lm.max_evaluations.max(n.saturating_add(1));
     }
     Ok(())
-}
-
-/// `residuals.csv`: every observation's residual (measured minus predicted, in its own unit:
-/// um for lengths, positions and points, urad for orientations and angles) with the file,
-/// line and what it is. `residuals` are the native residuals in observation order.
-///
-/// Tracker positions and orientations, and point coordinates, are given in the tracker's own
-/// axes (the rough registration the reader applied undone): the same whatever registration a
-/// command started from.
-pub fn residuals_csv(robot: &Robot, merged: &Merged, residuals: &[f64]) -> String {
-    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
-    let c = &merged.campaign;
-    let mut residuals = residuals.to_vec();
-    let mut to_tracker = |rows: &[Option<usize>], file: &str| {
-        let Some(r) = merged.tracker_axes(file) else {
-            return;
-        };
-        if let [Some(a), Some(b), Some(k)] = *rows {
-            let v = r * crate::geometry::Vector3::new(residuals[a], residuals[b], residuals[k]);
-            (residuals[a], residuals[b], residuals[k]) = (v.x, v.y, v.z);
-        }
-    };
-    for (q, rows) in c.pose_observation_rows().iter().enumerate() {
-        let pose = c.pose_measurements[q].pose;
-        let Some((file, ..)) = merged.pose_origin.get(pose) else {
-            continue;
-        };
-        to_tracker(&rows[..3], file);
-        to_tracker(&rows[3..], file);
-    }
-    let p0 = c.first_point_observation();
-    for (q, pm) in c.point_measurements.iter().enumerate() {
-        let Some((file, ..)) = merged.pose_origin.get(pm.pose) else {
-            continue;
-        };
-        let o = p0 + 3 * q;
-        to_tracker(&[Some(o), Some(o + 1), Some(o + 2)], file);
-    }
-    let mut out = String::from("observation,file,line,what,unit,residual\n");
-    for (k, r) in residuals.iter().enumerate() {
-        let o = observation_origin(robot, merged, k);
-        let unit = match merged.campaign.observation_kind(k) {
-            crate::calib::ObservationKind::TrackerOrientation(..)
-            | crate::calib::ObservationKind::Tilt(..) => "urad",
-            _ => "um",
-        };
-        out.push_str(&format!(
-            "{},{},{},{},{unit},{}\n",
-            k + 1,
-            quote(o.as_ref().map_or("", |o| o.file.as_str())),
-            o.as_ref().map_or(0, |o| o.line),
-            quote(o.as_ref().map_or("", |o| o.what.as_str())),
-            r,
-        ));
-    }
-    crate::report::format::tidy_csv(&out)
 }
 
 /// Stages `residuals.csv` of a fit (its weighted residuals brought back to each

@@ -258,7 +258,7 @@ fn errors_of(
             .zip(&predicted)
             .map(|(o, p)| (o - p) * 1e3)
             .collect();
-        let csv = super::calibrate::residuals_csv(robot, &origins, &native);
+        let csv = crate::report::residuals::residuals_csv(robot, &origins, &native);
         residual_rows.extend(csv.lines().skip(1).map(str::to_string));
         for (k, r) in campaign.readings.iter().enumerate() {
             let name = robot.table.sensors[r.sensor].name.clone();

@@ -18,6 +18,7 @@ pub mod format;
 pub mod identifiability;
 pub mod paper;
 pub mod refine;
+pub mod residuals;
 pub mod validate;
 
 #[cfg(feature = "svg")]
