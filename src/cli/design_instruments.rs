@@ -5,10 +5,10 @@
 use serde::Serialize;
 
 use super::common;
-use super::design::{CriterionArg, DesignArgs};
+use super::design_args::{CriterionArg, DesignArgs};
 use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::design::instruments::{InstrumentBounds, InstrumentNoise, Instruments};
-use crate::calib::design::{candidates, Criterion, SelectOptions};
+use crate::calib::design::{candidates, SelectOptions};
 use crate::io::{self, Robot};
 use crate::output::OutputSet;
 use crate::report::format::{sig, tidy_csv};
@@ -196,11 +196,7 @@ pub fn run(
             rejected.total()
         )));
     }
-    let criterion = match args.criterion {
-        CriterionArg::A => Criterion::AOptimal,
-        CriterionArg::D => Criterion::DOptimal,
-        CriterionArg::E => Criterion::EOptimal,
-    };
+    let criterion = args.criterion.criterion();
     ctx.stage(format!("choosing {n} of {} poses", cands.len()));
     let select = SelectOptions {
         criterion,

@@ -24,6 +24,7 @@ pub mod calibrate;
 pub mod common;
 pub mod compensate;
 pub mod design;
+pub mod design_args;
 pub mod design_instruments;
 pub mod export;
 pub mod formulation;
