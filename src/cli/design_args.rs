@@ -1,5 +1,5 @@
-//! The arguments of `cpm design` (shared by the socket design in [`super::design`] and the
-//! pose design for a mix of instruments in [`super::design_instruments`]).
+//! The arguments of `cpm design`, shared by the socket design (`cli::design`) and the pose
+//! design for a mix of instruments (`cli::design_instruments`).
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
