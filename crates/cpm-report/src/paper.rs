@@ -170,14 +170,8 @@ pub struct DesignedSummary {
     pub monte_carlo: Option<MonteCarloSummary>,
 }
 
-/// A socket place.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct SocketSummary {
-    /// Its name.
-    pub name: String,
-    /// Position, mm, in its side's frame.
-    pub position_mm: [f64; 3],
-}
+/// A socket place: cpm-calib's socket, serialised as it is (`name`, `position_mm`).
+pub type SocketSummary = cpm_calib::design::Socket;
 
 /// The length range of one sensor over the design.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -544,13 +538,6 @@ fn accuracy(o: &CampaignOutcome) -> AccuracySummary {
     }
 }
 
-fn socket(s: &cpm_calib::design::Socket) -> SocketSummary {
-    SocketSummary {
-        name: s.name.clone(),
-        position_mm: [s.position_mm.x, s.position_mm.y, s.position_mm.z],
-    }
-}
-
 fn limited(l: &LimitedOutcome, max_readings: usize) -> LimitedSummary {
     let d = &l.design;
     let c = &d.constraints;
@@ -693,8 +680,8 @@ impl PaperReport {
                 design: DesignSummary {
                     criterion: format!("{}-optimal", dz.criterion.name()),
                     candidate_poses: dz.candidates,
-                    base_sockets: dz.base_sockets.iter().map(socket).collect(),
-                    platform_sockets: dz.platform_sockets.iter().map(socket).collect(),
+                    base_sockets: dz.base_sockets.clone(),
+                    platform_sockets: dz.platform_sockets.clone(),
                     sensor_length_range_mm: dz
                         .sensors
                         .iter()
