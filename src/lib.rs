@@ -8,7 +8,9 @@
 //! - [`lm`] (`cpm-lm`): the Levenberg-Marquardt least-squares solver;
 //! - [`calib`] (`cpm-calib`): measurement model, identification, identifiability, design;
 //! - [`io`] (`cpm-io`): robot descriptions and measurement files, with errors that name the
-//!   file, line and field.
+//!   file, line and field;
+//! - [`report`] (`cpm-report`): every report as typed data, rendered to JSON, Markdown and
+//!   (with the `cli` feature) SVG figures and HTML.
 //!
 //! # A tour: one's own robot from files
 //!
@@ -62,18 +64,16 @@ pub use cpm_geometry as geometry;
 pub use cpm_io as io;
 pub use cpm_kinematics as kinematics;
 pub use cpm_lm as lm;
+/// The reports (the [`cpm-report`](cpm_report) crate): typed values rendered to JSON and
+/// Markdown; with the `cli` feature also to SVG figures (`report::figures`) and HTML
+/// (`report::html`).
+pub use cpm_report as report;
 
 #[cfg(feature = "cli")]
 pub mod cli;
 #[cfg(feature = "cli")]
 pub mod fuzzing;
 #[cfg(feature = "cli")]
-pub mod html;
-#[cfg(feature = "cli")]
 pub mod output;
 #[cfg(feature = "cli")]
 pub mod paper_report;
-#[cfg(feature = "cli")]
-pub mod plot;
-#[cfg(feature = "cli")]
-pub mod report;

@@ -3,7 +3,6 @@
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use serde_json::json;
 
 use super::common::{self, EffectsArg, RobotArg};
 use super::{plots, Ctx, Outcome};
@@ -11,7 +10,11 @@ use crate::calib::{Calibration, Campaign, IdentifyOptions, MeasurementModel};
 use crate::io::{self, Merged, Provenance, Robot};
 use crate::output::OutputSet;
 use crate::report::calibrate::{CalibrateReport, CalibratedFile};
-use crate::report::fit::FitReport;
+pub use crate::report::fit::{
+    misfit, misfit_message, observation_origin, warnings, ObservationOrigin,
+};
+use crate::report::fit::{FitInputs, FitReport};
+pub use crate::report::residuals::residuals_csv;
 
 /// Arguments of `cpm calibrate`.
 #[derive(Debug, Clone, Args)]
@@ -149,6 +152,18 @@ pub struct Inputs {
     /// The measurement files as read (the provenance may name them otherwise); empty for
     /// measurements read from memory.
     pub data_paths: Vec<PathBuf>,
+}
+
+impl Inputs {
+    /// What a fit's report needs of the inputs.
+    pub fn report_inputs(&self) -> FitInputs<'_> {
+        FitInputs {
+            robot: &self.robot,
+            merged: &self.merged,
+            provenance: &self.provenance,
+            loss: &self.identify.lm.loss,
+        }
+    }
 }
 
 /// Loads robot, effects and data for `calibrate` and `refine`.
@@ -323,46 +338,6 @@ pub fn provenance_lines(p: &Provenance, simulated: bool, command: &str) -> Vec<S
     v
 }
 
-/// The `estimates.svg` figure: determined installation errors with error bars.
-pub fn estimates_figure(model: &MeasurementModel, cal: &Calibration) -> anyhow::Result<String> {
-    // One panel per physical group and unit: the installation errors, then each effect's
-    // parameters of one unit; numbered as the determined rows of report.md's table.
-    let mut groups: Vec<plots::EstimateGroup> = Vec::new();
-    let mut number = 0;
-    for b in model.blocks() {
-        for k in b.offset..b.offset + b.len {
-            let Some(v) = cal.estimate_um.get(k).copied().flatten() else {
-                continue;
-            };
-            number += 1;
-            let label = match (b.effect, b.instrument) {
-                (Some(e), _) => format!("{}, {}", e.name(), e.param_unit(k - b.offset)),
-                (None, Some(i)) => format!("instrument {}", model.instruments[i].name()),
-                (None, None) => "installation errors, um".to_string(),
-            };
-            let point = (number, v, cal.std_um[k].unwrap_or(0.0));
-            match groups.iter_mut().find(|g| g.label == label) {
-                Some(g) => g.points.push(point),
-                None => groups.push(plots::EstimateGroup {
-                    label,
-                    points: vec![point],
-                }),
-            }
-        }
-    }
-    Ok(plots::estimates(
-        &format!(
-            "Determined parameters with +-2 std error bars{}",
-            if cal.simulated {
-                " (SIMULATED data)"
-            } else {
-                ""
-            }
-        ),
-        &groups,
-    )?)
-}
-
 /// Stages the figures of a fit.
 pub fn stage_figures(
     set: &mut OutputSet,
@@ -397,7 +372,10 @@ pub fn stage_figures(
         set.add(dir.join("residuals_time.svg"), svg?);
         files.push("residuals_time.svg");
     }
-    set.add(dir.join("estimates.svg"), estimates_figure(model, cal)?);
+    set.add(
+        dir.join("estimates.svg"),
+        plots::estimates_figure(model, cal)?,
+    );
     Ok(files)
 }
 
@@ -534,152 +512,6 @@ pub fn solver_options(
     Ok(())
 }
 
-/// The chi-square test of the fit against the declared noise (`None` when the noise was
-/// estimated from the residual, or no degree of freedom is left).
-pub fn misfit(cal: &Calibration) -> Option<crate::calib::misfit::Misfit> {
-    if cal.sigma_estimated {
-        return None;
-    }
-    crate::calib::misfit::chi_square(
-        &cal.residuals_um,
-        cal.sigma_um,
-        cal.identifiability.rank,
-        &cal.outliers,
-    )
-}
-
-/// What a misfit says, in words.
-pub fn misfit_message(m: &crate::calib::misfit::Misfit) -> String {
-    format!(
-        "**The model does not fit the data to the declared noise**: chi2/dof = {:.2} on {} degrees of freedom (p {}), residual RMS {:.3} um against the declared {} um{}. The standard deviations assume the declared noise and are too small. An effect the model lacks (backlash, link offsets or scales, thermal drift, ...) or a noise larger than declared: `cpm refine` tests the effect library on these data.",
-        m.chi2_per_dof,
-        m.dof,
-        if m.p_value < 1e-300 {
-            "< 1e-300".to_string()
-        } else {
-            format!("= {:.1e}", m.p_value)
-        },
-        m.residual_rms_um,
-        m.sigma_um,
-        if m.outliers_left_out > 0 {
-            format!(", {} flagged outliers left out", m.outliers_left_out)
-        } else {
-            String::new()
-        }
-    )
-}
-
-/// What the data did not determine, how the fit ended, and whether the model fits the
-/// declared noise, in a few lines for the top of a report (empty when all is well).
-pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
-    let mut w = Vec::new();
-    if let Some(why) = cal.robust_failure() {
-        w.push(format!(
-            "**The fit failed**: {why}. Use a larger K (about 3 x the noise) or least squares."
-        ));
-    }
-    if !cal.solver.was_successful() {
-        w.push(format!(
-            "**The solver did not converge** ({}): the estimates are where it stopped; treat them with suspicion.",
-            cal.solver.termination
-        ));
-    }
-    let id = &cal.identifiability;
-    if id.rank < id.num_params {
-        w.push(format!(
-            "**Rank-deficient fit**: the data determine {} of {} parameters on their own (rank {} of {}); the others have no estimate (`n.d.`, see \"What the data identify\").",
-            id.num_determined(),
-            model.num_params(),
-            id.rank,
-            id.num_params
-        ));
-    }
-    if cal.sigma_estimated && cal.residuals_um.len() <= id.rank {
-        w.push(format!(
-            "**The noise cannot be estimated**: {} observations for {} identifiable combinations leave no residual degrees of freedom; the standard deviations are meaningless. Give the noise with `--sigma-um`.",
-            cal.residuals_um.len(),
-            id.rank
-        ));
-    }
-    if !cal.outliers.is_empty() {
-        w.push(format!(
-            "**{} outlier observation{}** (more than 5 robust standard deviations off): listed under \"Outliers\".",
-            cal.outliers.len(),
-            if cal.outliers.len() == 1 { "" } else { "s" }
-        ));
-    }
-    if let Some(m) = misfit(cal).filter(|m| m.inconsistent()) {
-        w.push(misfit_message(&m));
-    }
-    w
-}
-
-/// Where observation `k` of a merged campaign came from and what it is.
-pub struct ObservationOrigin {
-    /// The file.
-    pub file: String,
-    /// Its line.
-    pub line: usize,
-    /// What was observed: `sensor s1 at pose "3"`, `tracker x of pose "7"`.
-    pub what: String,
-}
-
-/// `residuals.csv`: every observation's residual (measured minus predicted, in its own unit:
-/// um for lengths, positions and points, urad for orientations and angles) with the file,
-/// line and what it is. `residuals` are the native residuals in observation order.
-///
-/// Tracker positions and orientations, and point coordinates, are given in the tracker's own
-/// axes (the rough registration the reader applied undone): the same whatever registration a
-/// command started from.
-pub fn residuals_csv(robot: &Robot, merged: &Merged, residuals: &[f64]) -> String {
-    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
-    let c = &merged.campaign;
-    let mut residuals = residuals.to_vec();
-    let mut to_tracker = |rows: &[Option<usize>], file: &str| {
-        let Some(r) = merged.tracker_axes(file) else {
-            return;
-        };
-        if let [Some(a), Some(b), Some(k)] = *rows {
-            let v = r * crate::geometry::Vector3::new(residuals[a], residuals[b], residuals[k]);
-            (residuals[a], residuals[b], residuals[k]) = (v.x, v.y, v.z);
-        }
-    };
-    for (q, rows) in c.pose_observation_rows().iter().enumerate() {
-        let pose = c.pose_measurements[q].pose;
-        let Some((file, ..)) = merged.pose_origin.get(pose) else {
-            continue;
-        };
-        to_tracker(&rows[..3], file);
-        to_tracker(&rows[3..], file);
-    }
-    let p0 = c.first_point_observation();
-    for (q, pm) in c.point_measurements.iter().enumerate() {
-        let Some((file, ..)) = merged.pose_origin.get(pm.pose) else {
-            continue;
-        };
-        let o = p0 + 3 * q;
-        to_tracker(&[Some(o), Some(o + 1), Some(o + 2)], file);
-    }
-    let mut out = String::from("observation,file,line,what,unit,residual\n");
-    for (k, r) in residuals.iter().enumerate() {
-        let o = observation_origin(robot, merged, k);
-        let unit = match merged.campaign.observation_kind(k) {
-            crate::calib::ObservationKind::TrackerOrientation(..)
-            | crate::calib::ObservationKind::Tilt(..) => "urad",
-            _ => "um",
-        };
-        out.push_str(&format!(
-            "{},{},{},{},{unit},{}\n",
-            k + 1,
-            quote(o.as_ref().map_or("", |o| o.file.as_str())),
-            o.as_ref().map_or(0, |o| o.line),
-            quote(o.as_ref().map_or("", |o| o.what.as_str())),
-            r,
-        ));
-    }
-    crate::report::format::tidy_csv(&out)
-}
-
 /// Stages `residuals.csv` of a fit (its weighted residuals brought back to each
 /// observation's own unit).
 pub fn stage_residuals(set: &mut OutputSet, dir: &Path, inputs: &Inputs, cal: &Calibration) {
@@ -694,75 +526,6 @@ pub fn stage_residuals(set: &mut OutputSet, dir: &Path, inputs: &Inputs, cal: &C
         dir.join("residuals.csv"),
         residuals_csv(&inputs.robot, &inputs.merged, &native),
     );
-}
-
-/// The origin of observation `k` (readings first, then 6 per pose measurement).
-pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<ObservationOrigin> {
-    let c = &merged.campaign;
-    let m = c.readings.len();
-    if k < m {
-        let r = &c.readings[k];
-        let (file, line) = merged.reading_origin.get(k)?.clone();
-        let label = merged.pose_origin.get(r.pose).map_or("?", |o| o.2.as_str());
-        let sensor = robot
-            .table
-            .sensors
-            .get(r.sensor)
-            .map_or("?", |s| s.name.as_str());
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!("sensor {sensor} at pose {label:?}"),
-        })
-    } else if k >= c.first_tilt_observation() {
-        let q = k - c.first_tilt_observation();
-        let t = c.tilt_measurements.get(q)?;
-        let (file, line, label) = merged.pose_origin.get(t.pose)?.clone();
-        let line = merged.tilt_origin.get(q).map_or(line, |o| o.1);
-        let name = robot
-            .description
-            .inclinometers
-            .get(t.inclinometer)
-            .map_or("?", |c| c.name.as_str());
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!(
-                "inclinometer {name} angle_{}_deg at pose {label:?}",
-                t.axis + 1
-            ),
-        })
-    } else if k >= c.first_point_observation() {
-        let q = (k - c.first_point_observation()) / 3;
-        let pm = c.point_measurements.get(q)?;
-        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
-        let line = merged.point_origin.get(q).map_or(line, |o| o.1);
-        let target = robot
-            .description
-            .targets
-            .get(pm.target)
-            .map_or("?", |t| t.name.as_str());
-        let comp = ["x", "y", "z"][(k - c.first_point_observation()) % 3];
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!("target {target} {comp} at pose {label:?}"),
-        })
-    } else {
-        let (q, a) = match c.observation_kind(k) {
-            crate::calib::ObservationKind::TrackerPosition(q, a) => (q, a),
-            crate::calib::ObservationKind::TrackerOrientation(q, a) => (q, 3 + a),
-            _ => return None,
-        };
-        let pm = c.pose_measurements.get(q)?;
-        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
-        let comp = ["x", "y", "z", "rotation x", "rotation y", "rotation z"][a];
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!("tracker {comp} of pose {label:?}"),
-        })
-    }
 }
 
 /// A fit and its staged outputs (not yet written).
@@ -799,7 +562,7 @@ pub fn fit_with(
     let cal = super::formulation::identify_with(formulation, model, campaign, &inputs.identify)
         .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
-    let mut fit = FitReport::new(inputs, model, &cal, Some(formulation));
+    let mut fit = FitReport::new(&inputs.report_inputs(), model, &cal, Some(formulation));
     add_session_warnings(&mut fit, inputs, model)?;
     set.add(dir.join("calibration.json"), fit.to_json()?);
     stage_residuals(&mut set, dir, inputs, &cal);
@@ -825,8 +588,9 @@ pub fn fit_with(
         figures: figures.iter().map(|f| f.to_string()).collect(),
         fit,
     };
-    set.add(dir.join("report.md"), report.markdown());
-    crate::html::stage_report_html(&mut set, dir, "cpm calibration report");
+    let markdown = report.markdown();
+    set.add(dir.join("report.md"), markdown.as_str());
+    common::stage_report_html(&mut set, dir, "cpm calibration report", &markdown);
     Ok(Fitted { cal, set, report })
 }
 
@@ -861,22 +625,9 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         ctx.note(w);
     }
     if args.fit.json {
-        let v = json!({
-            "simulated": cal.simulated,
-            "formulation": report.fit.formulation,
-            "out": dir.display().to_string(),
-            "files": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "rank": cal.identifiability.rank,
-            "parameters": cal.identifiability.num_params,
-            "determined": cal.identifiability.num_determined(),
-            "residual_rms_um": cal.residual_rms_um,
-            "converged": cal.solver.was_successful(),
-            "downweighted_share": cal.downweighted_share,
-            "robust_failed": cal.robust_failed,
-            "not_determined": report.fit.not_determined,
-            "outliers": report.fit.outliers,
-        });
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
+        let files = written.iter().map(|p| p.display().to_string()).collect();
+        let summary = report.summary(dir.display().to_string(), files);
+        writeln!(ctx.out, "{}", summary.to_json()?)?;
     } else {
         writeln!(
             ctx.out,

@@ -319,14 +319,29 @@ pub fn parse_loss(spec: &str) -> Result<cpm_lm::Loss, String> {
     }
 }
 
-/// The loss in words, e.g. `Huber, K = 3 um`.
-pub fn describe_loss(loss: &cpm_lm::Loss) -> String {
-    match loss {
-        cpm_lm::Loss::Squared => "least squares".into(),
-        cpm_lm::Loss::Huber(k) => format!("Huber, K = {k} um"),
-        cpm_lm::Loss::Cauchy(k) => format!("Cauchy, K = {k} um"),
-        cpm_lm::Loss::Tukey(k) => format!("Tukey, K = {k} um"),
-    }
+pub use crate::report::fit::{describe_loss, describe_model, effect_list};
+
+/// Stages `report.html` of `markdown` (the `report.md` staged in `set` under `dir`), with
+/// the SVG figures staged in the same directory inlined ([`crate::report::html::report_page`]).
+pub fn stage_report_html(
+    set: &mut crate::output::OutputSet,
+    dir: &Path,
+    title: &str,
+    markdown: &str,
+) {
+    let figures: Vec<(String, String)> = set
+        .paths()
+        .filter(|p| p.parent() == Some(dir) && p.extension().is_some_and(|e| e == "svg"))
+        .filter_map(|p| {
+            let name = p.file_name()?.to_string_lossy().to_string();
+            let svg = String::from_utf8_lossy(set.contents(p)?).to_string();
+            Some((name, svg))
+        })
+        .collect();
+    set.add(
+        dir.join("report.html"),
+        crate::report::html::report_page(title, markdown, &figures),
+    );
 }
 
 /// The noise standard deviation for the fit: `--sigma-um`, else the description's.
@@ -400,39 +415,6 @@ pub fn write_out(
             .with_context(|| format!("writing {}", path.display()))?,
     }
     Ok(target)
-}
-
-/// Effect names, comma-separated (`none` when empty).
-pub fn effect_list(effects: &[Effect]) -> String {
-    if effects.is_empty() {
-        "none".into()
-    } else {
-        effects
-            .iter()
-            .map(|e| e.name())
-            .collect::<Vec<_>>()
-            .join(", ")
-    }
-}
-
-/// The model's parameter count in words.
-pub fn describe_model(model: &MeasurementModel) -> String {
-    let known: Vec<Effect> = model.known_effects.iter().map(|k| k.effect).collect();
-    format!(
-        "{} parameters ({} installation errors{}){}",
-        model.num_params(),
-        model.num_installation_params(),
-        if model.effects.is_empty() {
-            String::new()
-        } else {
-            format!(" + {}", effect_list(&model.effects))
-        },
-        if known.is_empty() {
-            String::new()
-        } else {
-            format!(", known {}", effect_list(&known))
-        }
-    )
 }
 
 /// The model for a campaign with point target or inclinometer measurements: `model` with the

@@ -1,16 +1,11 @@
 //! `cpm design`: choose sensor sockets and poses for a calibration campaign (wraps
 //! `cpm_calib::design::design`), and write the poses, the sockets and a robot description with
 //! the chosen sensors.
-use std::path::PathBuf;
-
-use clap::{Args, ValueEnum};
-
-use super::common::{self, RobotArg};
+use super::common;
 use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::design::{
-    candidates, design, design_setups, sockets::Socket, Clearance, Constraints, Criterion,
-    DesignLimits, DesignOptions, Gauge, GaugeKind, JointLimits, SelectOptions, SetupOptions,
-    SocketCandidates,
+    candidates, design, design_setups, sockets::Socket, Clearance, Constraints, DesignLimits,
+    DesignOptions, Gauge, GaugeKind, JointLimits, SelectOptions, SetupOptions, SocketCandidates,
 };
 use crate::calib::Effect;
 use crate::geometry::description::{SensorSpec, SocketSide};
@@ -18,125 +13,7 @@ use crate::io::{self, table::Table, InputError, Robot};
 use crate::output::OutputSet;
 use crate::report::format::tidy_csv;
 
-/// Optimality criterion of the pose selection.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum CriterionArg {
-    /// A-optimal: smallest sum of Cramér-Rao variances (RMS bound).
-    A,
-    /// D-optimal: largest determinant of the information matrix.
-    D,
-    /// E-optimal: best worst direction (slow).
-    E,
-}
-
-/// Kind of gauge of a design under limits.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum GaugeArg {
-    /// Telescoping length gauge.
-    Telescoping,
-    /// Ballbar.
-    Ballbar,
-}
-
-/// Arguments of `cpm design`.
-#[derive(Debug, Clone, Args)]
-#[command(
-    after_help = "Examples:\n  cpm design --robot examples/hexapod_66.toml --base-sockets 3 --platform-sockets 3 --readings 360 --out design/\n  cpm design --robot robot.toml --sockets candidate_sockets.csv --readings 2000 --criterion d --out design/"
-)]
-pub struct DesignArgs {
-    /// The robot description.
-    #[command(flatten)]
-    pub robot: RobotArg,
-    /// Candidate socket places, CSV `name,side,x_mm,y_mm,z_mm` (side `base` in {B} or
-    /// `platform` in {P}), or socket pairs as `cpm design` writes them in `sockets.csv`;
-    /// default: the description's `[[socket]]` and `[[socket_region]]` places, else the
-    /// sockets of its `[[sensor]]` tables.
-    #[arg(long, value_name = "SOCKETS.csv")]
-    pub sockets: Option<PathBuf>,
-    /// Reading budget (poses x socket pairs).
-    #[arg(long, value_name = "N", default_value_t = 2000)]
-    pub readings: usize,
-    /// Base sockets to use (each paired with every platform socket).
-    #[arg(long, value_name = "N", default_value_t = 3)]
-    pub base_sockets: usize,
-    /// Platform sockets to use.
-    #[arg(long, value_name = "N", default_value_t = 3)]
-    pub platform_sockets: usize,
-    /// Poses to drive (default: as many as the budget allows).
-    #[arg(long, value_name = "N")]
-    pub poses: Option<usize>,
-    /// Random candidate poses (plus circles) to choose from.
-    #[arg(long, value_name = "N", default_value_t = 1000)]
-    pub candidates: usize,
-    /// Half range of candidate positions about home, mm.
-    #[arg(long, value_name = "MM", default_value_t = 50.0)]
-    pub range_mm: f64,
-    /// Half range of candidate roll, pitch, yaw about home, degrees.
-    #[arg(long, value_name = "DEG", default_value_t = 10.0)]
-    pub range_deg: f64,
-    /// Selection criterion.
-    #[arg(long, value_enum, default_value_t = CriterionArg::A)]
-    pub criterion: CriterionArg,
-    /// Sensor noise for the reported bounds, um (default: the description's, else 1).
-    #[arg(long, value_name = "UM")]
-    pub sigma_um: Option<f64>,
-    /// Random seed of the candidates.
-    #[arg(long, value_name = "N", default_value_t = 1)]
-    pub seed: u64,
-    /// Design under an instrument's limits: the gauge's stroke per setup, mm. Turns the
-    /// setup design on (one socket pair with one bar per setup; readings only within the
-    /// stroke, the clearance and the joint cones); writes setup_sheet.md/.csv and plans/.
-    /// The setup design is also on when the description declares a `[[gauge]]`: its
-    /// `[[gauge]]` and `[limits]` give the limits, and the flags below override them.
-    #[arg(long, value_name = "MM")]
-    pub stroke_mm: Option<f64>,
-    /// The description's `[[gauge]]` to design for (default: its first).
-    #[arg(long, value_name = "NAME")]
-    pub gauge_name: Option<String>,
-    /// Kind of gauge (default: the description's gauge, else telescoping).
-    #[arg(long, value_enum)]
-    pub gauge: Option<GaugeArg>,
-    /// Shortest socket-to-socket length the gauge reads, mm (default: the description's
-    /// gauge, else 150; 100 for a ballbar).
-    #[arg(long, value_name = "MM")]
-    pub shortest_mm: Option<f64>,
-    /// Longest socket-to-socket length the gauge reads with any bar, mm (default: the
-    /// description's gauge, else 1000).
-    #[arg(long, value_name = "MM")]
-    pub longest_mm: Option<f64>,
-    /// Extension bars available, mm, comma-separated (default: the description's gauge's
-    /// `bars_mm`, else any length).
-    #[arg(long, value_name = "MM,..", value_delimiter = ',')]
-    pub bars_mm: Vec<f64>,
-    /// Smallest distance between the gauge axis and any link axis, mm (default: the
-    /// description's `[limits]`, else 30). Without a gauge, the limits apply when this,
-    /// --cone-deg or the description's `[limits]` is given.
-    #[arg(long, value_name = "MM")]
-    pub clearance_mm: Option<f64>,
-    /// Largest cone angle of every base and platform joint from home, deg (default: the
-    /// description's `[limits]`, else 40). Without a gauge, the limits apply when this,
-    /// --clearance-mm or the description's `[limits]` is given.
-    #[arg(long, value_name = "DEG")]
-    pub cone_deg: Option<f64>,
-    /// Most setups (gauge mounts) (with --stroke-mm).
-    #[arg(long, value_name = "N", default_value_t = 16)]
-    pub setups: usize,
-    /// Output directory: poses.csv, sockets.csv, robot.toml, design.json, report.md (with
-    /// --stroke-mm: robot.toml, setup_sheet.md, setup_sheet.csv, plans/SETUP.csv,
-    /// design.json, report.md).
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
-    /// Print a JSON summary on stdout.
-    #[arg(long)]
-    pub json: bool,
-    /// Choose the poses for these instruments instead of designing gauge sockets: a
-    /// comma-separated mix of `gauges` (the description's `[[sensor]]`s), `tracker` (6-D poses),
-    /// `points` (every `[[target]]`) and `tilts` (every `[[inclinometer]]`). --readings is then
-    /// the budget of scalar observations; writes poses.csv, design.json and report.md with the
-    /// Cramér-Rao bounds of the mix and of each instrument alone.
-    #[arg(long, value_name = "LIST")]
-    pub instruments: Option<String>,
-}
+pub use super::design_args::{CriterionArg, DesignArgs, GaugeArg};
 
 /// The most candidate sockets a `--sockets` file may list.
 pub const MAX_SOCKETS: usize = 10_000;
@@ -411,11 +288,7 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         platform_sockets: args.platform_sockets,
         poses: args.poses,
         select: SelectOptions {
-            criterion: match args.criterion {
-                CriterionArg::A => Criterion::AOptimal,
-                CriterionArg::D => Criterion::DOptimal,
-                CriterionArg::E => Criterion::EOptimal,
-            },
+            criterion: args.criterion.criterion(),
             ..SelectOptions::default()
         },
         sigma_um: sigma,
@@ -470,8 +343,14 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     set.add(dir.join("sockets.csv"), tidy_csv(&d.sockets_csv()));
     set.add(dir.join("robot.toml"), robot_toml);
     set.add(dir.join("design.json"), report.to_json()?);
-    set.add(dir.join("report.md"), report.markdown());
-    let written = commit_design(set, dir, args, "cpm experiment design", ctx)?;
+    let written = commit_design(
+        set,
+        dir,
+        args,
+        "cpm experiment design",
+        &report.markdown(),
+        ctx,
+    )?;
     ctx.finish();
     if args.json {
         writeln!(ctx.out, "{}", report.to_json()?)?;
@@ -495,14 +374,6 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
 }
 
 // ---- Design under an instrument's limits (--stroke-mm) -------------------------------------
-
-fn criterion(arg: CriterionArg) -> Criterion {
-    match arg {
-        CriterionArg::A => Criterion::AOptimal,
-        CriterionArg::D => Criterion::DOptimal,
-        CriterionArg::E => Criterion::EOptimal,
-    }
-}
 
 /// The description `robot` with one sensor per setup of `design` instead of its own, the
 /// gauge and the limits (known sensor effects dropped).
@@ -694,7 +565,7 @@ fn run_limited(
         max_readings: args.readings,
         max_setups: args.setups,
         select: SelectOptions {
-            criterion: criterion(args.criterion),
+            criterion: args.criterion.criterion(),
             max_exchanges: 400,
             ..SelectOptions::default()
         },
@@ -731,12 +602,12 @@ fn run_limited(
         );
     }
     set.add(dir.join("design.json"), report.to_json()?);
-    set.add(dir.join("report.md"), report.markdown());
     let written = commit_design(
         set,
         dir,
         args,
         "cpm experiment design (instrument limits)",
+        &report.markdown(),
         ctx,
     )?;
     ctx.finish();
@@ -762,16 +633,18 @@ fn run_limited(
     Ok(Outcome::Done)
 }
 
-/// Stages `report.html` beside the staged `report.md` and commits the design's result
+/// Stages `report.md` (`markdown`) and `report.html` and commits the design's result
 /// directory (the robot and the sockets file are inputs it may not replace).
 fn commit_design(
     mut set: OutputSet,
     dir: &std::path::Path,
     args: &DesignArgs,
     title: &str,
+    markdown: &str,
     ctx: &Ctx<'_>,
 ) -> anyhow::Result<Vec<std::path::PathBuf>> {
-    crate::html::stage_report_html(&mut set, dir, title);
+    set.add(dir.join("report.md"), markdown);
+    common::stage_report_html(&mut set, dir, title, markdown);
     let inputs: Vec<&std::path::Path> = std::iter::once(args.robot.robot.as_path())
         .chain(args.sockets.as_deref())
         .collect();

@@ -5,10 +5,10 @@
 use serde::Serialize;
 
 use super::common;
-use super::design::{CriterionArg, DesignArgs};
+use super::design_args::{CriterionArg, DesignArgs};
 use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::design::instruments::{InstrumentBounds, InstrumentNoise, Instruments};
-use crate::calib::design::{candidates, Criterion, SelectOptions};
+use crate::calib::design::{candidates, SelectOptions};
 use crate::io::{self, Robot};
 use crate::output::OutputSet;
 use crate::report::format::{sig, tidy_csv};
@@ -196,11 +196,7 @@ pub fn run(
             rejected.total()
         )));
     }
-    let criterion = match args.criterion {
-        CriterionArg::A => Criterion::AOptimal,
-        CriterionArg::D => Criterion::DOptimal,
-        CriterionArg::E => Criterion::EOptimal,
-    };
+    let criterion = args.criterion.criterion();
     ctx.stage(format!("choosing {n} of {} poses", cands.len()));
     let select = SelectOptions {
         criterion,
@@ -244,8 +240,9 @@ pub fn run(
     );
     let json = serde_json::to_string_pretty(&serde_json::to_value(&report)?)?;
     set.add(dir.join("design.json"), json.clone());
-    set.add(dir.join("report.md"), report.markdown());
-    crate::html::stage_report_html(&mut set, dir, "cpm experiment design");
+    let markdown = report.markdown();
+    set.add(dir.join("report.md"), markdown.as_str());
+    common::stage_report_html(&mut set, dir, "cpm experiment design", &markdown);
     let written = common::commit_dir(set, dir, &[args.robot.robot.as_path()], "design", ctx)?;
     ctx.finish();
     if args.json {

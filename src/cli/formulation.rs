@@ -27,36 +27,7 @@ pub enum FormulationArg {
     Implicit,
 }
 
-/// A formulation of the calibration problem.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Formulation {
-    /// Forward kinematics in the loop; the unknowns are the installation errors and effects.
-    Nested,
-    /// The actual poses are unknowns too; the pose blocks are eliminated by a Schur complement.
-    Implicit,
-}
-
-impl Formulation {
-    /// The name written to `calibration.json` (`formulation`).
-    pub fn key(self) -> &'static str {
-        match self {
-            Formulation::Nested => "nested",
-            Formulation::Implicit => "implicit",
-        }
-    }
-
-    /// One sentence for report.md.
-    pub fn describe(self) -> &'static str {
-        match self {
-            Formulation::Nested => {
-                "nested (forward kinematics of every pose inside the fit; dense Jacobian in the installation errors)"
-            }
-            Formulation::Implicit => {
-                "implicit (every pose an unknown beside the installation errors, commanded lengths as exact closures; pose blocks eliminated by a sparse Schur complement)"
-            }
-        }
-    }
-}
+pub use crate::report::fit::Formulation;
 
 /// The formulation for this fit: implicit for campaigns of at least
 /// [`IMPLICIT_FROM_READINGS`] readings that it supports (length readings only, plain least

@@ -24,12 +24,14 @@ pub mod calibrate;
 pub mod common;
 pub mod compensate;
 pub mod design;
+pub mod design_args;
 pub mod design_instruments;
 pub mod export;
 pub mod formulation;
 pub mod gauges;
 pub mod identifiability;
-pub mod plots;
+/// The figures of a fit (moved to [`crate::report::figures::fit`]).
+pub use crate::report::figures::fit as plots;
 pub mod refine;
 pub mod simulate;
 pub mod validate;

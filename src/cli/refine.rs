@@ -99,7 +99,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let mut set = OutputSet::new();
     let doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
     set.add(dir.join("refine.json"), doc.to_json()?);
-    let mut fit = FitReport::new(&inputs, &r.model, cal, None);
+    let mut fit = FitReport::new(&inputs.report_inputs(), &r.model, cal, None);
     calibrate::add_session_warnings(&mut fit, &inputs, &r.model)?;
     set.add(dir.join("calibration.json"), fit.to_json()?);
     calibrate::stage_residuals(&mut set, dir, &inputs, cal);
@@ -155,8 +155,9 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         fit,
         doc,
     };
-    set.add(dir.join("report.md"), report.markdown());
-    crate::html::stage_report_html(&mut set, dir, "cpm refinement report");
+    let markdown = report.markdown();
+    set.add(dir.join("report.md"), markdown.as_str());
+    common::stage_report_html(&mut set, dir, "cpm refinement report", &markdown);
     let inputs_paths: Vec<&std::path::Path> = std::iter::once(args.fit.robot.robot.as_path())
         .chain(args.fit.data.iter().map(std::path::PathBuf::as_path))
         .collect();

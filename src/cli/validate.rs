@@ -15,7 +15,6 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use serde_json::json;
 
 use super::common;
 use super::{Ctx, Outcome};
@@ -23,6 +22,11 @@ use crate::calib::model::{predict, Prepared};
 use crate::calib::{Campaign, MeasurementModel};
 use crate::io::{FileKind, ReadOptions, Robot};
 use crate::output::OutputSet;
+pub use crate::report::validate::SessionCheck;
+use crate::report::validate::{
+    rms, CompensationReport, GroupErrors as Errors, PredictionErrors as RobotErrors,
+    ReachedSummary, TargetError, ValidateReport,
+};
 
 /// Arguments of `cpm validate`.
 #[derive(Debug, Clone, Args)]
@@ -95,90 +99,6 @@ impl ValidateArgs {
             .map(|p| p.as_path())
             .collect()
     }
-}
-
-/// Prediction errors of one robot on one group of observations.
-#[derive(Debug, Clone, Default)]
-struct Errors {
-    /// Reading or position errors, um (per coordinate for positions).
-    values_um: Vec<f64>,
-    /// Orientation errors, urad (per component).
-    orientation_urad: Vec<f64>,
-}
-
-fn rms(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
-    }
-}
-
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(
-        f64::NAN,
-        |m, x| if m.is_nan() { x.abs() } else { m.max(x.abs()) },
-    )
-}
-
-fn mean_sd(v: &[f64]) -> (f64, f64) {
-    if v.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let n = v.len() as f64;
-    let m = v.iter().sum::<f64>() / n;
-    let sd = if v.len() > 1 {
-        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt()
-    } else {
-        0.0
-    };
-    (m, sd)
-}
-
-/// One held-out tracker file (a session) re-registered against one robot.
-#[derive(Debug, Clone, serde::Serialize)]
-pub struct SessionCheck {
-    /// The file.
-    pub file: String,
-    /// The rough registration the reader applied: translation (mm) and rotation angle (deg)
-    /// of the tracker frame from the base frame.
-    pub rough_translation_mm: [f64; 3],
-    /// Its rotation angle, deg.
-    pub rough_rotation_deg: f64,
-    /// The frame fitted on top of it with the machine held fixed (tx ty tz um, rx ry rz urad).
-    pub frame: [f64; 6],
-    /// Standard deviations of `frame`.
-    pub frame_sd: [f64; 6],
-    /// RMS of the weighted residual (positions um, orientations at the tracker's position
-    /// over orientation noise, um per urad), the quantity the frame fit minimises, with the
-    /// rough registration only.
-    pub rms_before_um: f64,
-    /// The same with the session frame fitted.
-    pub rms_after_um: f64,
-    /// Position error RMS (um, per coordinate) with the rough registration only.
-    pub position_rms_before_um: f64,
-    /// Position error RMS (um, per coordinate) with the session frame fitted.
-    pub position_rms_after_um: f64,
-}
-
-/// What one robot predicts on the held-out files.
-#[derive(Debug, Clone, Default)]
-struct RobotErrors {
-    names: Vec<String>,
-    groups: Vec<Errors>,
-    simulated: bool,
-    sessions: Vec<SessionCheck>,
-    /// Logged link lengths minus those the model needs for the measured poses, mm.
-    link_mm: Vec<f64>,
-    /// Position error per tracker pose (norm), um.
-    position_norm_um: Vec<f64>,
-    /// Tracker poses outside the pose range a known pose map was fitted on.
-    outside_pose_map: usize,
-    /// Tracker poses.
-    tracker_poses: usize,
-    /// `residuals.csv`: every observation of every file, measured minus predicted in its own
-    /// unit, with its file, line and what it is (as `calibrate` writes it).
-    residuals_csv: String,
 }
 
 /// The readings a controller sent for a file without logged link readings: its own inverse
@@ -338,7 +258,7 @@ fn errors_of(
             .zip(&predicted)
             .map(|(o, p)| (o - p) * 1e3)
             .collect();
-        let csv = super::calibrate::residuals_csv(robot, &origins, &native);
+        let csv = crate::report::residuals::residuals_csv(robot, &origins, &native);
         residual_rows.extend(csv.lines().skip(1).map(str::to_string));
         for (k, r) in campaign.readings.iter().enumerate() {
             let name = robot.table.sensors[r.sensor].name.clone();
@@ -561,106 +481,42 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
         args.from_home,
         args.temperature_c,
     )?;
-    let summary = |p: &[f64], r: &[f64]| {
-        json!({
-            "position_rms_um": rms(p),
-            "position_max_um": max_abs(p),
-            "orientation_rms_urad": rms(r),
-            "orientation_max_urad": max_abs(r),
-        })
+    let report = CompensationReport {
+        simulated: true,
+        truth: truth.file.clone(),
+        reference_robot: reference.file.clone(),
+        commands: commands.display().to_string(),
+        targets: targets.len(),
+        compensated: ReachedSummary::new(&pos, &rot),
+        reference: ReachedSummary::new(&pos_ref, &rot_ref),
+        per_target: targets
+            .iter()
+            .enumerate()
+            .map(|(j, t)| TargetError {
+                pose: t.label.clone(),
+                position_um: pos[j],
+                orientation_urad: rot[j],
+                reference_position_um: pos_ref[j],
+            })
+            .collect(),
     };
-    let value = json!({
-        "simulated": true,
-        "truth": truth.file,
-        "reference_robot": reference.file,
-        "commands": commands.display().to_string(),
-        "targets": targets.len(),
-        "compensated": summary(&pos, &rot),
-        "reference": summary(&pos_ref, &rot_ref),
-        "per_target": targets.iter().enumerate().map(|(j, t)| json!({
-            "pose": t.label,
-            "position_um": pos[j],
-            "orientation_urad": rot[j],
-            "reference_position_um": pos_ref[j],
-        })).collect::<Vec<_>>(),
-    });
-    let mut md = String::from("# Compensation checked on a simulated machine\n\n**SIMULATED: the machine is the description ");
-    md.push_str(&format!(
-        "`{}`, not a measurement.**\n\nIt executes `{}` (compensated) and, for reference, the inverse kinematics of `{}` (uncompensated), aiming at the same {} targets.\n\n| commands | position RMS (um) | position max (um) | orientation RMS (urad) | orientation max (urad) |\n|---|---|---|---|---|\n| compensated | {:.3} | {:.3} | {:.2} | {:.2} |\n| uncompensated | {:.3} | {:.3} | {:.2} | {:.2} |\n",
-        truth.file,
-        commands.display(),
-        reference.file,
-        targets.len(),
-        rms(&pos), max_abs(&pos), rms(&rot), max_abs(&rot),
-        rms(&pos_ref), max_abs(&pos_ref), rms(&rot_ref), max_abs(&rot_ref),
-    ));
     ctx.finish();
     let mut written = Vec::new();
     if let Some(dir) = &args.out {
         let mut set = OutputSet::new();
-        set.add(
-            dir.join("compensation.json"),
-            serde_json::to_string_pretty(&value)?,
-        );
-        set.add(dir.join("compensation.md"), md);
+        set.add(dir.join("compensation.json"), report.to_json()?);
+        set.add(dir.join("compensation.md"), report.markdown());
         written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }
     if args.json {
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&value)?)?;
+        writeln!(ctx.out, "{}", report.to_json()?)?;
     } else {
-        writeln!(
-            ctx.out,
-            "SIMULATED machine {}: compensated position error RMS {:.3} um (max {:.3}), uncompensated {:.3} um (max {:.3}) over {} targets",
-            truth.file,
-            rms(&pos),
-            max_abs(&pos),
-            rms(&pos_ref),
-            max_abs(&pos_ref),
-            targets.len()
-        )?;
+        writeln!(ctx.out, "{}", report.console_line())?;
         for w in &written {
             writeln!(ctx.out, "wrote {}", w.display())?;
         }
     }
     Ok(Outcome::Done)
-}
-
-/// The sessions, link-length and pose-accuracy sections of validation.md.
-fn session_markdown(md: &mut String, cal: &RobotErrors, reference: &RobotErrors) {
-    if cal.sessions.is_empty() {
-        return;
-    }
-    md.push_str("\n## Sessions\n\nEach held-out tracker file is a session: its frame is registered afresh against each robot (held fixed), the rough registration of the reader first, then the six frame parameters through the prediction model. Frame: translation um, rotation urad, +- one standard deviation.\n\n| file | robot | rough frame (mm, deg) | fitted frame t (um) | fitted frame r (urad) | weighted RMS before (um) | after (um) | position RMS after (um) |\n|---|---|---|---|---|---|---|---|\n");
-    for (label, e) in [("calibrated", cal), ("reference", reference)] {
-        for s in &e.sessions {
-            let t = s.rough_translation_mm;
-            let f = |a: usize| format!("{:.1}+-{:.1}", s.frame[a], s.frame_sd[a]);
-            md.push_str(&format!(
-                "| {} | {label} | ({:.3}, {:.3}, {:.3}), {:.4} | {}, {}, {} | {}, {}, {} | {:.3} | {:.3} | {:.3} |\n",
-                s.file, t[0], t[1], t[2], s.rough_rotation_deg, f(0), f(1), f(2), f(3), f(4), f(5), s.rms_before_um, s.rms_after_um, s.position_rms_after_um
-            ));
-        }
-    }
-    md.push_str("\n| figure | calibrated | reference |\n|---|---|---|\n");
-    if !cal.link_mm.is_empty() {
-        md.push_str(&format!(
-            "| link-length error RMS (logged readings against the lengths the model needs for the measured poses), mm | {:.4} | {:.4} |\n",
-            rms(&cal.link_mm),
-            rms(&reference.link_mm)
-        ));
-    }
-    let (cm, cs) = mean_sd(&cal.position_norm_um);
-    let (rm, rs) = mean_sd(&reference.position_norm_um);
-    md.push_str(&format!(
-        "| pose accuracy (ISO 9283 style): mean position error, um | {cm:.3} | {rm:.3} |\n| its spread (standard deviation), um | {cs:.3} | {rs:.3} |\n| held-out poses | {} | {} |\n",
-        cal.tracker_poses, reference.tracker_poses
-    ));
-    if cal.outside_pose_map > 0 {
-        md.push_str(&format!(
-            "\n{} of {} held-out poses lie outside the pose range the calibrated pose error map was fitted on: the map does not extrapolate there.\n",
-            cal.outside_pose_map, cal.tracker_poses
-        ));
-    }
 }
 
 /// The reference robot: `--reference`, else the description the calibrated robot records
@@ -744,8 +600,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             sensors(&reference).join(", ")
         ))
     })?;
-    let (names, cal, simulated) = (&cal_errors.names, &cal_errors.groups, cal_errors.simulated);
-    let (ref_names, reference_errors) = (&ref_errors.names, &ref_errors.groups);
+    let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
     if names != ref_names {
         return Err(super::input_error(format!(
             "the robot and the reference name different sensors ({} / {})",
@@ -753,153 +608,28 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             ref_names.join(", ")
         )));
     }
-    let all = |g: &[Errors]| -> (Vec<f64>, Vec<f64>) {
-        (
-            g.iter().flat_map(|e| e.values_um.iter().copied()).collect(),
-            g.iter()
-                .flat_map(|e| e.orientation_urad.iter().copied())
-                .collect(),
-        )
-    };
-    let (cal_all, cal_rot) = all(cal);
-    let (ref_all, ref_rot) = all(reference_errors);
-    let summary = |v: &[f64], rot: &[f64], e: &RobotErrors| {
-        let (mean, sd) = mean_sd(&e.position_norm_um);
-        json!({
-            "rms_um": rms(v),
-            "max_um": max_abs(v),
-            "orientation_rms_urad": if rot.is_empty() { serde_json::Value::Null } else { json!(rms(rot)) },
-            "link_rms_mm": if e.link_mm.is_empty() { serde_json::Value::Null } else { json!(rms(&e.link_mm)) },
-            "position_error_mean_um": if e.position_norm_um.is_empty() { serde_json::Value::Null } else { json!(mean) },
-            "position_error_sd_um": if e.position_norm_um.is_empty() { serde_json::Value::Null } else { json!(sd) },
-            "sessions": e.sessions,
-            "outside_pose_map_share": if e.tracker_poses == 0 { serde_json::Value::Null } else { json!(e.outside_pose_map as f64 / e.tracker_poses as f64) },
-        })
-    };
-    let group_summary = |v: &[f64], rot: &[f64]| {
-        json!({
-            "rms_um": rms(v),
-            "max_um": max_abs(v),
-            "orientation_rms_urad": if rot.is_empty() { serde_json::Value::Null } else { json!(rms(rot)) },
-        })
-    };
-    let groups_json: Vec<serde_json::Value> = names
-        .iter()
-        .zip(cal.iter().zip(reference_errors))
-        .map(|(n, (c, r))| {
-            json!({
-                "name": n,
-                "count": c.values_um.len(),
-                "calibrated": group_summary(&c.values_um, &c.orientation_urad),
-                "reference": group_summary(&r.values_um, &r.orientation_urad),
-            })
-        })
-        .collect();
-    let value = json!({
-        "simulated": simulated,
-        "robot": robot.file,
-        "reference_robot": reference.file,
-        "data": args.data.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-        "calibrated": summary(&cal_all, &cal_rot, &cal_errors),
-        "reference": summary(&ref_all, &ref_rot, &ref_errors),
-        "groups": groups_json,
-    });
-    let mut md = String::from("# Validation on held-out data\n\n");
-    if simulated {
-        md.push_str("**The measurements are SIMULATED.**\n\n");
-    }
-    md.push_str(&format!(
-        "Calibrated robot `{}` against the reference `{}`, on {}; predictions with every known effect applied, nothing estimated. Gauge rows: reading errors; tracker rows: position errors per coordinate.\n\n",
-        robot.file,
-        reference.file,
-        args.data
-            .iter()
-            .map(|p| format!("`{}`", p.display()))
-            .collect::<Vec<_>>()
-            .join(", ")
-    ));
-    md.push_str("| group | observations | calibrated RMS (um) | calibrated max (um) | reference RMS (um) | reference max (um) |\n|---|---|---|---|---|---|\n");
-    let row = |md: &mut String, name: &str, n: usize, c: &[f64], r: &[f64]| {
-        md.push_str(&format!(
-            "| {name} | {n} | {:.3} | {:.3} | {:.3} | {:.3} |\n",
-            rms(c),
-            max_abs(c),
-            rms(r),
-            max_abs(r)
-        ));
-    };
-    for (n, (c, r)) in names.iter().zip(cal.iter().zip(reference_errors)) {
-        row(&mut md, n, c.values_um.len(), &c.values_um, &r.values_um);
-    }
-    row(&mut md, "**all**", cal_all.len(), &cal_all, &ref_all);
-    if !cal_rot.is_empty() {
-        md.push_str(&format!(
-            "\nTracker orientation error RMS: calibrated {:.2} urad, reference {:.2} urad.\n",
-            rms(&cal_rot),
-            rms(&ref_rot)
-        ));
-    }
-    session_markdown(&mut md, &cal_errors, &ref_errors);
+    let report = ValidateReport::new(
+        &robot.file,
+        &reference.file,
+        args.data.iter().map(|p| p.display().to_string()).collect(),
+        &cal_errors,
+        &ref_errors,
+    );
     ctx.finish();
     let mut written = Vec::new();
     if let Some(dir) = &args.out {
-        let svg = crate::plot::grouped_bars(
-            &format!(
-                "Held-out prediction error{}",
-                if simulated { " (SIMULATED data)" } else { "" }
-            ),
-            "RMS error (um)",
-            names,
-            &[
-                (
-                    "calibrated".to_string(),
-                    cal.iter().map(|e| rms(&e.values_um)).collect(),
-                ),
-                (
-                    "reference".to_string(),
-                    reference_errors.iter().map(|e| rms(&e.values_um)).collect(),
-                ),
-            ],
-        )
-        .map_err(|e| super::trouble(e.to_string()))?;
-        md.push_str("\n![held-out RMS per group](validation.svg)\n");
+        let svg = report.figure().map_err(|e| super::trouble(e.to_string()))?;
         let mut set = OutputSet::new();
-        set.add(
-            dir.join("validation.json"),
-            serde_json::to_string_pretty(&value)?,
-        );
-        set.add(dir.join("validation.md"), md.clone());
+        set.add(dir.join("validation.json"), report.to_json()?);
+        set.add(dir.join("validation.md"), report.markdown(true));
         set.add(dir.join("validation.svg"), svg);
         set.add(dir.join("residuals.csv"), cal_errors.residuals_csv.clone());
         written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }
     if args.json {
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&value)?)?;
+        writeln!(ctx.out, "{}", report.to_json()?)?;
     } else {
-        if cal_all.is_empty() && !cal_rot.is_empty() {
-            // Angles only (inclinometers, orientations).
-            writeln!(
-                ctx.out,
-                "{}held-out: calibrated RMS {:.3} urad (max {:.3}), reference RMS {:.3} urad (max {:.3}) over {} angles",
-                if simulated { "SIMULATED data: " } else { "" },
-                rms(&cal_rot),
-                max_abs(&cal_rot),
-                rms(&ref_rot),
-                max_abs(&ref_rot),
-                cal_rot.len()
-            )?;
-        } else {
-            writeln!(
-                ctx.out,
-                "{}held-out: calibrated RMS {:.3} um (max {:.3}), reference RMS {:.3} um (max {:.3}) over {} observations",
-                if simulated { "SIMULATED data: " } else { "" },
-                rms(&cal_all),
-                max_abs(&cal_all),
-                rms(&ref_all),
-                max_abs(&ref_all),
-                cal_all.len()
-            )?;
-        }
+        writeln!(ctx.out, "{}", report.console_line())?;
         for w in &written {
             writeln!(ctx.out, "wrote {}", w.display())?;
         }

@@ -74,9 +74,9 @@ fn scale(args: &[String]) -> ExitCode {
     if args.first().map(String::as_str) == Some("--sweep") {
         return sweep(&args[1..]);
     }
-    use cpm::calib::implicit::{identify_implicit, ImplicitOptions};
-    use cpm::calib::paper::{designed_sensors, random_workspace_poses};
-    use cpm::calib::*;
+    use cpm_calib::implicit::{identify_implicit, ImplicitOptions};
+    use cpm_calib::paper::{designed_sensors, random_workspace_poses};
+    use cpm_calib::*;
     let mut poses = 1000usize;
     let mut nested = false;
     let mut stored = false;
@@ -103,13 +103,13 @@ fn scale(args: &[String]) -> ExitCode {
             _ => return usage(),
         }
     }
-    let mut model = MeasurementModel::new(cpm::geometry::JointTable::paper_cubic());
+    let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
     model.nominal.sensors = designed_sensors();
     let plan = Plan {
         poses: random_workspace_poses(&model.nominal, poses, 100.0, 25.0, 3.0, seed),
         sensors: (0..model.nominal.sensors.len()).collect(),
     };
-    let truth = cpm::geometry::InstallationErrors::paper_table2().to_vec_um();
+    let truth = cpm_geometry::InstallationErrors::paper_table2().to_vec_um();
     let sim = SimulationOptions {
         seed,
         ..SimulationOptions::default()
@@ -206,7 +206,7 @@ fn scale(args: &[String]) -> ExitCode {
 
 fn reproduce_paper(args: &[String]) -> ExitCode {
     let mut out = PathBuf::from("target/reproduce-paper");
-    let mut options = cpm::calib::paper::PaperOptions::default();
+    let mut options = cpm_calib::paper::PaperOptions::default();
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match (a.as_str(), it.next()) {
@@ -255,7 +255,7 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
         }
     }
     let t0 = Instant::now();
-    let result = cpm::calib::paper::reproduce(&options, |stage| {
+    let result = cpm_calib::paper::reproduce(&options, |stage| {
         eprintln!("[{:6.1} s] {stage}", t0.elapsed().as_secs_f64());
     });
     let r = match result {
@@ -265,18 +265,23 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let mut files = cpm::output::OutputSet::new();
-    if let Err(e) = cpm::paper_report::render(&r, &out, &mut files) {
-        eprintln!("error: {e}");
-        return ExitCode::FAILURE;
+    let mut files: Vec<(PathBuf, String)> = match cpm_report::paper_files::files(&r) {
+        Ok(f) => f.into_iter().map(|(n, t)| (out.join(n), t)).collect(),
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match cpm_report::paper_files::limited_files(&r, &out) {
+        Ok(f) => files.extend(f.into_iter().map(|(n, t)| (out.join(n), t))),
+        Err(e) => {
+            eprintln!("error: the campaign under limits: {e}");
+            return ExitCode::FAILURE;
+        }
     }
-    if let Err(e) = cpm::paper_report::render_limited(&r, &out, &mut files) {
-        eprintln!("error: the campaign under limits: {e}");
-        return ExitCode::FAILURE;
-    }
-    match files.commit() {
+    match write_files(&files) {
         Ok(written) => {
-            let summary = cpm::paper_report::summary_json(&r);
+            let summary = cpm_report::paper_files::summary_json(&r);
             println!(
                 "SIMULATED data (paper's Table 2 as truth), {:.1} s",
                 t0.elapsed().as_secs_f64()
@@ -288,7 +293,7 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
             );
             // Console figures rounded to three significant digits (the JSON keeps them whole).
             let g = |v: &serde_json::Value| match v.as_f64() {
-                Some(x) => cpm::report::format::sig(x, 3),
+                Some(x) => cpm_report::format::sig(x, 3),
                 None => v.to_string(),
             };
             println!(
@@ -342,4 +347,21 @@ fn main() -> ExitCode {
         Some("scale") => scale(&args[1..]),
         _ => usage(),
     }
+}
+
+/// Writes `files` (creating their folders), each to a temporary sibling renamed into place,
+/// so that an interruption never leaves a half-written file under its name.
+fn write_files(files: &[(PathBuf, String)]) -> std::io::Result<Vec<PathBuf>> {
+    let mut written = Vec::with_capacity(files.len());
+    for (path, text) in files {
+        if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(d)?;
+        }
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        let tmp = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
+        std::fs::write(&tmp, text)?;
+        std::fs::rename(&tmp, path)?;
+        written.push(path.clone());
+    }
+    Ok(written)
 }

@@ -263,7 +263,7 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
-/// Renders Markdown as the self-contained HTML page of `report.html` ([`cpm::html::render`]),
+/// Renders Markdown as the self-contained HTML page of `report.html` ([`cpm::report::html::render`]),
 /// inlining the SVG figures of `svgs` (image name -> SVG text).
 #[pyfunction]
 pub fn render_html(
@@ -271,5 +271,5 @@ pub fn render_html(
     markdown: &str,
     svgs: std::collections::HashMap<String, String>,
 ) -> String {
-    cpm::html::render(title, markdown, |name| svgs.get(name).cloned())
+    cpm::report::html::render(title, markdown, |name| svgs.get(name).cloned())
 }

@@ -3,7 +3,7 @@
 //! shows as `-0.000`, `3.0000000000000004` or `NaN`.
 //!
 //! ```
-//! use cpm::report::format::{fixed, with_sd};
+//! use cpm_report::format::{fixed, with_sd};
 //! assert_eq!(fixed(-0.00001, 3), "0.000");
 //! assert_eq!(fixed(0.1 + 0.2, 3), "0.300");
 //! assert_eq!(with_sd(12.34567, 0.0123), ("12.346".to_string(), "0.012".to_string()));
@@ -223,6 +223,11 @@ pub fn find_artefact(text: &str) -> Option<String> {
         }
     }
     None
+}
+
+/// The value when it is finite (`None` for NaN and infinities: written `null` in JSON).
+pub(crate) fn finite(v: Option<f64>) -> Option<f64> {
+    v.filter(|x| x.is_finite())
 }
 
 #[cfg(test)]

@@ -1,5 +1,8 @@
-//! SVG figures (plotters): grouped bars, log-scale spectra, scatter series.
+//! SVG figures (plotters): grouped bars, log-scale spectra, scatter series; the figures of a
+//! fit in [`fit`].
 use plotters::prelude::*;
+
+pub mod fit;
 
 /// A plotting failure (plotters' drawing error, as text).
 #[derive(Debug, thiserror::Error)]
@@ -11,7 +14,7 @@ pub struct PlotError {
     pub message: String,
 }
 
-fn err(title: &str, e: impl std::fmt::Display) -> PlotError {
+pub(crate) fn err(title: &str, e: impl std::fmt::Display) -> PlotError {
     PlotError {
         title: title.to_string(),
         message: e.to_string(),
@@ -264,7 +267,7 @@ pub fn grouped_bars_with_errors(
                 }
             })
             .y_desc(y_label)
-            .y_label_formatter(&|y| crate::report::format::short(*y))
+            .y_label_formatter(&|y| crate::format::short(*y))
             .draw()
             .map_err(|e| err(title, e))?;
         let w = 0.8 / k;
@@ -530,8 +533,8 @@ pub fn scatter(
             .configure_mesh()
             .x_desc(x_label)
             .y_desc(y_label)
-            .x_label_formatter(&|x| crate::report::format::short(*x))
-            .y_label_formatter(&|y| crate::report::format::short(*y))
+            .x_label_formatter(&|x| crate::format::short(*x))
+            .y_label_formatter(&|y| crate::format::short(*y))
             .draw()
             .map_err(|e| err(title, e))?;
         for (si, (_, vals)) in series.iter().enumerate() {

@@ -2,15 +2,9 @@
 //! bars (SVG, plotters).
 use plotters::prelude::*;
 
-use crate::calib::Campaign;
-use crate::plot::{scatter, PlotError};
+use cpm_calib::{Calibration, Campaign, MeasurementModel};
 
-fn err(title: &str, e: impl std::fmt::Display) -> PlotError {
-    PlotError {
-        title: title.to_string(),
-        message: e.to_string(),
-    }
-}
+use super::{err, scatter, PlotError};
 
 /// Residual series per sensor (and tracker) against `x(reading)`.
 fn residual_series(
@@ -200,7 +194,7 @@ pub fn estimates(title: &str, groups: &[EstimateGroup]) -> Result<String, PlotEr
                         String::new()
                     }
                 })
-                .y_label_formatter(&|y| crate::report::format::short(*y))
+                .y_label_formatter(&|y| crate::format::short(*y))
                 .draw()
                 .map_err(|e| err(title, e))?;
             chart
@@ -225,4 +219,44 @@ pub fn estimates(title: &str, groups: &[EstimateGroup]) -> Result<String, PlotEr
         root.present().map_err(|e| err(title, e))?;
     }
     Ok(svg)
+}
+
+/// The `estimates.svg` figure: determined installation errors with error bars.
+pub fn estimates_figure(model: &MeasurementModel, cal: &Calibration) -> Result<String, PlotError> {
+    // One panel per physical group and unit: the installation errors, then each effect's
+    // parameters of one unit; numbered as the determined rows of report.md's table.
+    let mut groups: Vec<EstimateGroup> = Vec::new();
+    let mut number = 0;
+    for b in model.blocks() {
+        for k in b.offset..b.offset + b.len {
+            let Some(v) = cal.estimate_um.get(k).copied().flatten() else {
+                continue;
+            };
+            number += 1;
+            let label = match (b.effect, b.instrument) {
+                (Some(e), _) => format!("{}, {}", e.name(), e.param_unit(k - b.offset)),
+                (None, Some(i)) => format!("instrument {}", model.instruments[i].name()),
+                (None, None) => "installation errors, um".to_string(),
+            };
+            let point = (number, v, cal.std_um[k].unwrap_or(0.0));
+            match groups.iter_mut().find(|g| g.label == label) {
+                Some(g) => g.points.push(point),
+                None => groups.push(EstimateGroup {
+                    label,
+                    points: vec![point],
+                }),
+            }
+        }
+    }
+    estimates(
+        &format!(
+            "Determined parameters with +-2 std error bars{}",
+            if cal.simulated {
+                " (SIMULATED data)"
+            } else {
+                ""
+            }
+        ),
+        &groups,
+    )
 }

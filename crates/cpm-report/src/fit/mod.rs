@@ -6,16 +6,35 @@
 //! "Estimates", "Outliers" and "Tracker registration" sections from the same value.
 use serde::Serialize;
 
-use super::format::{fixed, opt_fixed, opt_with_sd, short, sig, with_sd};
-use crate::calib::{Calibration, Campaign, Effect, MeasurementModel};
-use crate::cli::calibrate::{misfit, misfit_message, observation_origin, warnings, Inputs};
-use crate::cli::common;
-use crate::geometry::InstallationErrors;
-use crate::io::robot::split_params;
-use crate::io::{self, Provenance};
+use crate::format::{finite, fixed, opt_fixed, opt_with_sd, short, sig, with_sd};
+use cpm_calib::{Calibration, Effect, MeasurementModel};
+use cpm_geometry::InstallationErrors;
+use cpm_io::robot::split_params;
+use cpm_io::{Merged, Provenance, Robot};
 
-fn finite(v: Option<f64>) -> Option<f64> {
-    v.filter(|x| x.is_finite())
+pub use crate::identifiability::{
+    BlindDirection, IdentifiabilityDoc, IdentifiabilityReport, ParameterIdentifiability,
+};
+
+mod words;
+pub use words::{
+    describe_loss, describe_model, effect_list, misfit, misfit_message, observation_origin,
+    warnings, Formulation, ObservationOrigin,
+};
+
+/// What a fit's report needs besides the model and the calibration: the robot, the merged
+/// data (campaign, registration, where each observation came from), the provenance and the
+/// loss the fit used. The command line fills it from what it loaded.
+#[derive(Debug, Clone, Copy)]
+pub struct FitInputs<'a> {
+    /// The robot.
+    pub robot: &'a Robot,
+    /// The merged data.
+    pub merged: &'a Merged,
+    /// Where it all came from.
+    pub provenance: &'a Provenance,
+    /// The loss of the fit.
+    pub loss: &'a cpm_lm::Loss,
 }
 
 /// Installation errors per joint, um: `base[i] = [dx, dy, dz]` of link i+1's base joint.
@@ -73,110 +92,6 @@ pub struct KnownEffectValues {
     pub unit: String,
     /// The values.
     pub values: Vec<f64>,
-}
-
-/// A blind direction of the fit.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct BlindDirection {
-    /// What it is, in words.
-    pub description: String,
-    /// Its dimension.
-    pub dimensions: usize,
-}
-
-/// What the data determine about one parameter.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct ParameterIdentifiability {
-    /// The parameter.
-    pub name: String,
-    /// Determined on its own.
-    pub determined: bool,
-    /// The fraction of it in the null space.
-    pub null_fraction: f64,
-    /// Its Cramér-Rao bound, um.
-    pub crlb_std: Option<f64>,
-}
-
-/// `calibration.json`'s `identifiability` object.
-#[derive(Debug, Clone, Serialize, PartialEq, Default)]
-pub struct IdentifiabilityReport {
-    /// Parameters fitted.
-    pub parameters: usize,
-    /// Observations.
-    pub observations: usize,
-    /// Numerical rank.
-    pub rank: usize,
-    /// Relative rank tolerance.
-    pub rank_rtol: f64,
-    /// Absolute singular-value threshold.
-    pub threshold: f64,
-    /// Parameters determined on their own.
-    pub determined: usize,
-    /// Singular values of the scaled Jacobian.
-    pub singular_values: Vec<f64>,
-    /// Named blind directions.
-    pub blind_directions: Vec<BlindDirection>,
-    /// Null-space dimensions no name explains.
-    pub unexplained_null_dimensions: usize,
-    /// The noise used, um.
-    pub sigma_um: f64,
-    /// RMS of the Cramér-Rao bounds of the determined parameters, um.
-    pub crlb_rms_um: Option<f64>,
-    /// Largest of them, um.
-    pub crlb_max_um: Option<f64>,
-    /// Per parameter.
-    pub per_parameter: Vec<ParameterIdentifiability>,
-}
-
-impl IdentifiabilityReport {
-    /// The report of an analysis whose parameters are named `names`.
-    pub fn new(id: &crate::calib::Identifiability, names: &[String]) -> Self {
-        Self {
-            parameters: id.num_params,
-            observations: id.num_readings,
-            rank: id.rank,
-            rank_rtol: id.rank_rtol,
-            threshold: id.threshold,
-            determined: id.num_determined(),
-            singular_values: id.singular_values.clone(),
-            blind_directions: id
-                .blind_directions
-                .iter()
-                .map(|b| BlindDirection {
-                    description: b.description.clone(),
-                    dimensions: b.dimensions,
-                })
-                .collect(),
-            unexplained_null_dimensions: id.unexplained_null_dimensions,
-            sigma_um: id.sigma_um,
-            crlb_rms_um: finite(id.crlb_rms_um()),
-            crlb_max_um: finite(id.crlb_max_um()),
-            per_parameter: names
-                .iter()
-                .enumerate()
-                .map(|(k, n)| ParameterIdentifiability {
-                    name: n.clone(),
-                    determined: id.determined[k],
-                    null_fraction: id.null_fraction[k],
-                    crlb_std: finite(id.crlb_std_um[k]),
-                })
-                .collect(),
-        }
-    }
-}
-
-/// `cpm identifiability --json`: the analysis with where it came from.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct IdentifiabilityDoc {
-    /// The analysis.
-    #[serde(flatten)]
-    pub analysis: IdentifiabilityReport,
-    /// The measurement files, or `plan`.
-    pub source: String,
-    /// The measurements are simulated (false for a plan).
-    pub simulated: bool,
-    /// The effects modelled.
-    pub effects: Vec<String>,
 }
 
 /// `calibration.json`'s `solver` object.
@@ -381,8 +296,8 @@ pub struct NoiseKindReport {
 
 /// The warning when a kind of observation's residual says a noise more than 3 times above or
 /// below the one the fit weighed it with (at least 10 degrees of freedom).
-pub fn noise_warning(kinds: &[crate::calib::noise::KindNoise]) -> Option<String> {
-    let off = crate::calib::noise::mismatched(kinds, 3.0);
+pub fn noise_warning(kinds: &[cpm_calib::noise::KindNoise]) -> Option<String> {
+    let off = cpm_calib::noise::mismatched(kinds, 3.0);
     if off.is_empty() || kinds.len() < 2 {
         return None;
     }
@@ -491,139 +406,190 @@ fn named_block(
     )
 }
 
+/// The fitted effects' parameters, named, with their units.
+fn effect_estimates(model: &MeasurementModel, cal: &Calibration) -> Vec<EffectEstimates> {
+    let sensors: Vec<String> = model
+        .nominal
+        .sensors
+        .iter()
+        .map(|s| s.name.clone())
+        .collect();
+    let est = split_params(model, &cal.estimate_um);
+    let sd = split_params(model, &cal.std_um);
+    est.effects
+        .iter()
+        .zip(&sd.effects)
+        .map(|((e, v), (_, s))| EffectEstimates {
+            effect: e.name().to_string(),
+            parameters: v
+                .iter()
+                .zip(s)
+                .enumerate()
+                .map(|(k, (v, s))| EffectParameter {
+                    name: e.param_name(k, &sensors),
+                    value: finite(*v),
+                    std: finite(*s),
+                    unit: e.param_unit(k).to_string(),
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+/// The flagged outliers with the file, line and what each observed.
+fn outliers(inputs: &FitInputs<'_>, cal: &Calibration) -> Vec<Outlier> {
+    cal.outliers
+        .iter()
+        .map(|&k| {
+            let o = observation_origin(inputs.robot, inputs.merged, k);
+            Outlier {
+                observation: k + 1,
+                file: o.as_ref().map(|o| o.file.clone()),
+                line: o.as_ref().map(|o| o.line),
+                what: o.as_ref().map(|o| o.what.clone()),
+                residual_um: finite(cal.residuals_um.get(k).copied()),
+            }
+        })
+        .collect()
+}
+
+/// One tracker session's registered frame.
+fn session_report(s: &cpm_io::SessionRegistration) -> SessionReport {
+    let f = &s.frame;
+    SessionReport {
+        file: s.file.clone(),
+        poses: f.poses,
+        applied: s.applied,
+        largest_move_mm: s.largest_move_mm,
+        translation_mm: [f.translation_mm.x, f.translation_mm.y, f.translation_mm.z],
+        translation_sd_mm: f.translation_sd_mm,
+        rotation_vector_deg: f.rotation_vector_deg(),
+        rotation_sd_deg: f.rotation_sd_deg,
+        rotation_angle_deg: f.rotation_angle_deg(),
+        roll_pitch_yaw_deg: f.as_pose().rpy_deg(),
+        rms_before_mm: f.rms_before_mm,
+        rms_after_mm: f.rms_after_mm,
+        orientation_rms_before_deg: f.orientation_rms_before_deg,
+        orientation_rms_after_deg: f.orientation_rms_after_deg,
+    }
+}
+
+/// The tracker registration and what the fit refined on top of it (`None` without tracker
+/// files).
+fn registration(
+    merged: &Merged,
+    model: &MeasurementModel,
+    cal: &Calibration,
+) -> Option<RegistrationSummary> {
+    let r = merged.registration.as_ref()?;
+    Some(RegistrationSummary {
+        apply_threshold_mm: cpm_io::REGISTRATION_APPLY_MM,
+        failure: r.failure.clone(),
+        sessions: r.sessions.iter().map(session_report).collect(),
+        link_reading_offset_mm: r.link_offset_mm.clone(),
+        link_reading_offset_sd_mm: r.link_offset_sd_mm.clone(),
+        offsets_estimated: r.offsets_estimated,
+        offsets_applied: r.offsets_applied,
+        variance_factor: r.variance_factor,
+        refined_by_fit: RefinedByFit {
+            tracker_frame: named_block(model, cal, Effect::TrackerFrame),
+            link_offset: named_block(model, cal, Effect::LinkOffset),
+            gauge_freedoms: cal
+                .identifiability
+                .blind_directions
+                .iter()
+                .filter(|b| b.description.contains("tracker"))
+                .map(|b| b.description.clone())
+                .collect(),
+        },
+    })
+}
+
+/// The chi-square test against the declared noise (`None` when the noise was estimated).
+fn misfit_report(cal: &Calibration) -> Option<MisfitReport> {
+    misfit(cal).map(|m| MisfitReport {
+        chi2: m.chi2,
+        dof: m.dof,
+        chi2_per_dof: m.chi2_per_dof,
+        p_value: m.p_value,
+        residual_rms_um: m.residual_rms_um,
+        sigma_um: m.sigma_um,
+        outliers_left_out: m.outliers_left_out,
+        inconsistent: m.inconsistent(),
+        rule: format!(
+            "inconsistent when p < {} and chi2/dof > {}",
+            cpm_calib::misfit::MISFIT_P,
+            cpm_calib::misfit::MISFIT_CHI2_PER_DOF
+        ),
+        message: m
+            .inconsistent()
+            .then(|| misfit_message(&m).replace("**", "")),
+    })
+}
+
+/// How the solver ended.
+fn solver_report(cal: &Calibration) -> SolverReport {
+    SolverReport {
+        converged: cal.solver.was_successful(),
+        termination: cal.solver.termination.to_string(),
+        iterations: cal.solver.num_iterations(),
+        initial_cost: cal.solver.initial_cost,
+        final_cost: cal.solver.final_cost,
+        summary: cal.solver.brief(),
+    }
+}
+
+/// What only report.md says: the robot, the model and formulation in words, every parameter's
+/// row, the warnings in Markdown.
+fn fit_text(
+    inputs: &FitInputs<'_>,
+    model: &MeasurementModel,
+    cal: &Calibration,
+    formulation: Option<Formulation>,
+    warnings_md: Vec<String>,
+) -> FitText {
+    FitText {
+        robot_file: inputs.robot.file.clone(),
+        links: inputs.robot.num_links(),
+        sensors: inputs.robot.table.sensors.len(),
+        clearance_um: model.clearance.radius_um,
+        model: describe_model(model),
+        formulation: formulation.map(|f| f.describe().to_string()),
+        parameters: model
+            .parameter_names()
+            .iter()
+            .enumerate()
+            .map(|(k, n)| ParameterRow {
+                name: n.clone(),
+                estimate: cal.estimate_um[k],
+                std: cal.std_um[k],
+            })
+            .collect(),
+        warnings: warnings_md,
+        sigma_excludes_outliers_note: cal.sigma_excludes_outliers,
+    }
+}
+
 impl FitReport {
-    /// The report of `cal`, a fit of `model` to the inputs' campaign.
+    /// The report of `cal`, a fit of `model` to the inputs' campaign; `formulation` is the
+    /// one `cpm calibrate` fitted with (`None` for `cpm refine`'s final model).
     pub fn new(
-        inputs: &Inputs,
+        inputs: &FitInputs<'_>,
         model: &MeasurementModel,
         cal: &Calibration,
-        formulation: Option<crate::cli::formulation::Formulation>,
+        formulation: Option<Formulation>,
     ) -> Self {
-        let campaign: &Campaign = &inputs.merged.campaign;
-        let provenance: &Provenance = &inputs.provenance;
+        let campaign = &inputs.merged.campaign;
         let ni = model.num_installation_params();
-        let names = model.parameter_names();
-        let sensors: Vec<String> = model
-            .nominal
-            .sensors
-            .iter()
-            .map(|s| s.name.clone())
-            .collect();
-        let est = split_params(model, &cal.estimate_um);
-        let sd = split_params(model, &cal.std_um);
-        let effects = est
-            .effects
-            .iter()
-            .zip(&sd.effects)
-            .map(|((e, v), (_, s))| EffectEstimates {
-                effect: e.name().to_string(),
-                parameters: v
-                    .iter()
-                    .zip(s)
-                    .enumerate()
-                    .map(|(k, (v, s))| EffectParameter {
-                        name: e.param_name(k, &sensors),
-                        value: finite(*v),
-                        std: finite(*s),
-                        unit: e.param_unit(k).to_string(),
-                    })
-                    .collect(),
-            })
-            .collect();
         let minimum_norm: Vec<Option<f64>> = cal.minimum_norm_um.iter().map(|v| Some(*v)).collect();
-        let id = &cal.identifiability;
-        let identifiability = IdentifiabilityReport::new(&cal.identifiability, &names);
-        let outliers = cal
-            .outliers
-            .iter()
-            .map(|&k| {
-                let o = observation_origin(&inputs.robot, &inputs.merged, k);
-                Outlier {
-                    observation: k + 1,
-                    file: o.as_ref().map(|o| o.file.clone()),
-                    line: o.as_ref().map(|o| o.line),
-                    what: o.as_ref().map(|o| o.what.clone()),
-                    residual_um: finite(cal.residuals_um.get(k).copied()),
-                }
-            })
-            .collect();
-        let registration = inputs
-            .merged
-            .registration
-            .as_ref()
-            .map(|r| RegistrationSummary {
-                apply_threshold_mm: io::REGISTRATION_APPLY_MM,
-                failure: r.failure.clone(),
-                sessions: r
-                    .sessions
-                    .iter()
-                    .map(|s| {
-                        let f = &s.frame;
-                        SessionReport {
-                            file: s.file.clone(),
-                            poses: f.poses,
-                            applied: s.applied,
-                            largest_move_mm: s.largest_move_mm,
-                            translation_mm: [
-                                f.translation_mm.x,
-                                f.translation_mm.y,
-                                f.translation_mm.z,
-                            ],
-                            translation_sd_mm: f.translation_sd_mm,
-                            rotation_vector_deg: f.rotation_vector_deg(),
-                            rotation_sd_deg: f.rotation_sd_deg,
-                            rotation_angle_deg: f.rotation_angle_deg(),
-                            roll_pitch_yaw_deg: f.as_pose().rpy_deg(),
-                            rms_before_mm: f.rms_before_mm,
-                            rms_after_mm: f.rms_after_mm,
-                            orientation_rms_before_deg: f.orientation_rms_before_deg,
-                            orientation_rms_after_deg: f.orientation_rms_after_deg,
-                        }
-                    })
-                    .collect(),
-                link_reading_offset_mm: r.link_offset_mm.clone(),
-                link_reading_offset_sd_mm: r.link_offset_sd_mm.clone(),
-                offsets_estimated: r.offsets_estimated,
-                offsets_applied: r.offsets_applied,
-                variance_factor: r.variance_factor,
-                refined_by_fit: RefinedByFit {
-                    tracker_frame: named_block(model, cal, Effect::TrackerFrame),
-                    link_offset: named_block(model, cal, Effect::LinkOffset),
-                    gauge_freedoms: id
-                        .blind_directions
-                        .iter()
-                        .filter(|b| b.description.contains("tracker"))
-                        .map(|b| b.description.clone())
-                        .collect(),
-                },
-            });
-        let misfit = misfit(cal).map(|m| MisfitReport {
-            chi2: m.chi2,
-            dof: m.dof,
-            chi2_per_dof: m.chi2_per_dof,
-            p_value: m.p_value,
-            residual_rms_um: m.residual_rms_um,
-            sigma_um: m.sigma_um,
-            outliers_left_out: m.outliers_left_out,
-            inconsistent: m.inconsistent(),
-            rule: format!(
-                "inconsistent when p < {} and chi2/dof > {}",
-                crate::calib::misfit::MISFIT_P,
-                crate::calib::misfit::MISFIT_CHI2_PER_DOF
-            ),
-            message: m
-                .inconsistent()
-                .then(|| misfit_message(&m).replace("**", "")),
-        });
-        let kinds = crate::calib::noise::by_kind(model, campaign, cal);
+        let kinds = cpm_calib::noise::by_kind(model, campaign, cal);
         let mut warnings_md = warnings(model, cal);
         warnings_md.extend(noise_warning(&kinds));
-        let calibrate = formulation.is_some();
         Self {
             cpm_version: env!("CARGO_PKG_VERSION").to_string(),
             simulated: cal.simulated,
-            robot: provenance.robot.clone(),
-            data: provenance.data.clone(),
+            robot: inputs.provenance.robot.clone(),
+            data: inputs.provenance.data.clone(),
             readings: campaign.readings.len(),
             pose_measurements: campaign.pose_measurements.len(),
             poses: campaign.poses.len(),
@@ -634,7 +600,7 @@ impl FitReport {
                 .filter(|&k| cal.estimate_um[k].is_none())
                 .map(InstallationErrors::component_name)
                 .collect(),
-            effects,
+            effects: effect_estimates(model, cal),
             known_effects: model
                 .known_effects
                 .iter()
@@ -649,26 +615,22 @@ impl FitReport {
             sigma_um: cal.sigma_um,
             sigma_estimated: cal.sigma_estimated,
             sigma_excludes_outliers: cal.sigma_excludes_outliers,
-            identifiability,
-            solver: SolverReport {
-                converged: cal.solver.was_successful(),
-                termination: cal.solver.termination.to_string(),
-                iterations: cal.solver.num_iterations(),
-                initial_cost: cal.solver.initial_cost,
-                final_cost: cal.solver.final_cost,
-                summary: cal.solver.brief(),
-            },
+            identifiability: IdentifiabilityReport::new(
+                &cal.identifiability,
+                &model.parameter_names(),
+            ),
+            solver: solver_report(cal),
             formulation: formulation.map(|f| f.key().to_string()),
-            robust_loss: common::describe_loss(&inputs.identify.lm.loss),
-            robust: calibrate.then_some(RobustReport {
+            robust_loss: describe_loss(inputs.loss),
+            robust: formulation.is_some().then_some(RobustReport {
                 downweighted_share: cal.downweighted_share,
-                downweight_level: crate::calib::DOWNWEIGHT_LEVEL,
-                max_downweighted_share: crate::calib::MAX_DOWNWEIGHTED_SHARE,
+                downweight_level: cpm_calib::DOWNWEIGHT_LEVEL,
+                max_downweighted_share: cpm_calib::MAX_DOWNWEIGHTED_SHARE,
                 failed: cal.robust_failed,
             }),
-            outliers,
-            registration,
-            misfit,
+            outliers: outliers(inputs, cal),
+            registration: registration(inputs.merged, model, cal),
+            misfit: misfit_report(cal),
             noise_by_kind: kinds
                 .iter()
                 .map(|k| NoiseKindReport {
@@ -681,25 +643,7 @@ impl FitReport {
                 })
                 .collect(),
             warnings: warnings_md.iter().map(|w| w.replace("**", "")).collect(),
-            text: FitText {
-                robot_file: inputs.robot.file.clone(),
-                links: inputs.robot.num_links(),
-                sensors: inputs.robot.table.sensors.len(),
-                clearance_um: model.clearance.radius_um,
-                model: common::describe_model(model),
-                formulation: formulation.map(|f| f.describe().to_string()),
-                parameters: names
-                    .iter()
-                    .enumerate()
-                    .map(|(k, n)| ParameterRow {
-                        name: n.clone(),
-                        estimate: cal.estimate_um[k],
-                        std: cal.std_um[k],
-                    })
-                    .collect(),
-                warnings: warnings_md,
-                sigma_excludes_outliers_note: cal.sigma_excludes_outliers,
-            },
+            text: fit_text(inputs, model, cal, formulation, warnings_md),
         }
     }
 
@@ -795,7 +739,7 @@ impl FitReport {
             id.rank,
             id.parameters,
             id.observations,
-            super::format::sci(id.threshold, 3),
+            crate::format::sci(id.threshold, 3),
             id.determined
         ));
         if id.rank < id.parameters {
@@ -940,7 +884,7 @@ impl FitReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::report::format::find_artefact;
+    use crate::format::find_artefact;
 
     #[test]
     fn markdown_rounds_to_the_deviation_and_shows_no_artefact() {

@@ -1,6 +1,8 @@
 //! The report of `cpm calibrate`: `calibration.json` and report.md (hence report.html) from one
 //! [`CalibrateReport`].
-use super::fit::FitReport;
+use serde::Serialize;
+
+use super::fit::{FitReport, Outlier};
 
 /// What `calibrated.toml` holds, for the outputs section.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -26,7 +28,65 @@ pub struct CalibrateReport {
     pub figures: Vec<String>,
 }
 
+/// `cpm calibrate --json`: the summary printed on standard output.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct CalibrateSummary {
+    /// The data are simulated.
+    pub simulated: bool,
+    /// `nested` or `implicit`.
+    pub formulation: Option<String>,
+    /// The output directory.
+    pub out: String,
+    /// The files written.
+    pub files: Vec<String>,
+    /// Numerical rank.
+    pub rank: usize,
+    /// Parameters fitted.
+    pub parameters: usize,
+    /// Parameters determined on their own.
+    pub determined: usize,
+    /// Residual RMS, um.
+    pub residual_rms_um: f64,
+    /// The solver converged.
+    pub converged: bool,
+    /// Share of observations the robust loss down-weighted.
+    pub downweighted_share: f64,
+    /// The robust fit failed.
+    pub robust_failed: bool,
+    /// Installation-error components not determined.
+    pub not_determined: Vec<String>,
+    /// Flagged outliers.
+    pub outliers: Vec<Outlier>,
+}
+
+impl CalibrateSummary {
+    /// Pretty-printed (keys sorted).
+    pub fn to_json(&self) -> serde_json::Result<String> {
+        serde_json::to_string_pretty(&serde_json::to_value(self)?)
+    }
+}
+
 impl CalibrateReport {
+    /// The `--json` summary of the run that wrote `files` into `out`.
+    pub fn summary(&self, out: String, files: Vec<String>) -> CalibrateSummary {
+        let f = &self.fit;
+        CalibrateSummary {
+            simulated: f.simulated,
+            formulation: f.formulation.clone(),
+            out,
+            files,
+            rank: f.identifiability.rank,
+            parameters: f.identifiability.parameters,
+            determined: f.identifiability.determined,
+            residual_rms_um: f.residual_rms_um,
+            converged: f.solver.converged,
+            downweighted_share: f.robust.as_ref().map_or(0.0, |r| r.downweighted_share),
+            robust_failed: f.robust.as_ref().is_some_and(|r| r.failed),
+            not_determined: f.not_determined.clone(),
+            outliers: f.outliers.clone(),
+        }
+    }
+
     /// `calibration.json`.
     pub fn json(&self) -> serde_json::Result<String> {
         self.fit.to_json()

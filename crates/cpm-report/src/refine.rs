@@ -5,7 +5,7 @@ use serde::Serialize;
 use super::calibrate::CalibratedFile;
 use super::fit::FitReport;
 use super::format::{fixed, opt_with_sd, p_value, short, sig, yes_no};
-use crate::calib::{AgainstCalibrate, Refinement};
+use cpm_calib::{AgainstCalibrate, Refinement};
 
 fn finite(v: f64) -> Option<f64> {
     v.is_finite().then_some(v)

@@ -3,7 +3,7 @@
 use serde::Serialize;
 
 use super::format::{fixed, short, sig};
-use crate::calib::design::{Criterion, Design};
+use cpm_calib::design::{Criterion, Design};
 
 /// The criterion in words (`A-optimal`), never its Rust name.
 pub fn criterion_text(c: Criterion) -> String {
@@ -58,7 +58,7 @@ pub struct DesignReport {
     /// How it was chosen.
     pub log: Vec<String>,
     /// The limits honoured (joint cones, clearances), `null` when none were given.
-    pub limits: Option<crate::calib::design::DesignLimits>,
+    pub limits: Option<cpm_calib::design::DesignLimits>,
     /// Largest base joint cone angle over the poses, deg.
     pub max_base_cone_deg: f64,
     /// Largest platform joint cone angle over the poses, deg.
@@ -279,9 +279,9 @@ impl LimitedDesignReport {
     /// From a design under `constraints` of the robot `robot`, with the gauge named
     /// `gauge_name`.
     pub fn new(
-        robot: &crate::io::Robot,
-        d: &crate::calib::design::SetupDesign,
-        constraints: &crate::calib::design::Constraints,
+        robot: &cpm_io::Robot,
+        d: &cpm_calib::design::SetupDesign,
+        constraints: &cpm_calib::design::Constraints,
         gauge_name: &str,
     ) -> Self {
         let (max_base, max_platform) = d.max_cone_deg(&robot.table);

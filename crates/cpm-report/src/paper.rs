@@ -8,9 +8,9 @@
 use serde::Serialize;
 
 use super::format::{fixed, opt_fixed, opt_with_sd, sci, with_sd};
-use crate::calib::design::{MonteCarloReport, ObservabilityIndices};
-use crate::calib::paper::{CampaignOutcome, LimitedOutcome, PaperReproduction};
-use crate::geometry::InstallationErrors;
+use cpm_calib::design::{MonteCarloReport, ObservabilityIndices};
+use cpm_calib::paper::{CampaignOutcome, LimitedOutcome, PaperReproduction, TradeoffRow};
+use cpm_geometry::InstallationErrors;
 
 /// `summary.json` and what report.md adds, from one reproduction.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -170,14 +170,8 @@ pub struct DesignedSummary {
     pub monte_carlo: Option<MonteCarloSummary>,
 }
 
-/// A socket place.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct SocketSummary {
-    /// Its name.
-    pub name: String,
-    /// Position, mm, in its side's frame.
-    pub position_mm: [f64; 3],
-}
+/// A socket place: cpm-calib's socket, serialised as it is (`name`, `position_mm`).
+pub type SocketSummary = cpm_calib::design::Socket;
 
 /// The length range of one sensor over the design.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -405,26 +399,8 @@ pub struct WorstError {
     pub target_um: f64,
 }
 
-/// One gauge stroke of the trade-off.
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct TradeoffSummary {
-    /// Stroke, mm.
-    pub stroke_mm: f64,
-    /// Setups.
-    pub setups: usize,
-    /// Readings.
-    pub readings: usize,
-    /// Rank.
-    pub rank: usize,
-    /// Cramér-Rao RMS, um.
-    pub crlb_rms_um: f64,
-    /// Cramér-Rao bound of the worst parameter, um.
-    pub crlb_max_um: f64,
-    /// Largest travel in a setup, mm.
-    pub max_travel_mm: f64,
-    /// Least gauge-link clearance, mm.
-    pub min_clearance_mm: f64,
-}
+/// One gauge stroke of the trade-off: cpm-calib's row, serialised as it is.
+pub type TradeoffSummary = TradeoffRow;
 
 /// The campaign under an instrument's limits.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -554,7 +530,7 @@ fn accuracy(o: &CampaignOutcome) -> AccuracySummary {
         calibrated_rms_orientation_urad: o.accuracy.calibrated.rms_orientation_urad,
         compensation: format!(
             "identifiable combinations with Cramér-Rao std <= {} um",
-            crate::calib::paper::COMPENSATION_MAX_STD_UM
+            cpm_calib::paper::COMPENSATION_MAX_STD_UM
         ),
         minimum_norm_rms_position_um: o.accuracy_minimum_norm.calibrated.rms_position_um,
         minimum_norm_max_position_um: o.accuracy_minimum_norm.calibrated.max_position_um,
@@ -562,17 +538,10 @@ fn accuracy(o: &CampaignOutcome) -> AccuracySummary {
     }
 }
 
-fn socket(s: &crate::calib::design::Socket) -> SocketSummary {
-    SocketSummary {
-        name: s.name.clone(),
-        position_mm: [s.position_mm.x, s.position_mm.y, s.position_mm.z],
-    }
-}
-
 fn limited(l: &LimitedOutcome, max_readings: usize) -> LimitedSummary {
     let d = &l.design;
     let c = &d.constraints;
-    let names = crate::calib::identifiability::parameter_names(6);
+    let names = cpm_calib::identifiability::parameter_names(6);
     let (socket_moves, bar_changes) = d.remounts();
     LimitedSummary {
         constraints: LimitedConstraints {
@@ -627,20 +596,7 @@ fn limited(l: &LimitedOutcome, max_readings: usize) -> LimitedSummary {
                 target_um: 6.0,
             }
         }),
-        tradeoff: l
-            .tradeoff
-            .iter()
-            .map(|t| TradeoffSummary {
-                stroke_mm: t.stroke_mm,
-                setups: t.setups,
-                readings: t.readings,
-                rank: t.rank,
-                crlb_rms_um: t.crlb_rms_um,
-                crlb_max_um: t.crlb_max_um,
-                max_travel_mm: t.max_travel_mm,
-                min_clearance_mm: t.min_clearance_mm,
-            })
-            .collect(),
+        tradeoff: l.tradeoff.clone(),
         log: d.log.clone(),
         files: [
             "designed/robot.toml",
@@ -665,7 +621,7 @@ impl PaperReport {
         let dz = &r.design;
         let t2 = InstallationErrors::paper_table2().to_vec_um();
         let t3 = InstallationErrors::paper_table3().to_vec_um();
-        let cands = crate::calib::design::SocketCandidates::paper_cubic();
+        let cands = cpm_calib::design::SocketCandidates::paper_cubic();
         let summary = PaperSummary {
             simulated: true,
             note: "All readings are simulated from the paper's Table 2 with the paper's clearance and noise model.".into(),
@@ -724,8 +680,8 @@ impl PaperReport {
                 design: DesignSummary {
                     criterion: format!("{}-optimal", dz.criterion.name()),
                     candidate_poses: dz.candidates,
-                    base_sockets: dz.base_sockets.iter().map(socket).collect(),
-                    platform_sockets: dz.platform_sockets.iter().map(socket).collect(),
+                    base_sockets: dz.base_sockets.clone(),
+                    platform_sockets: dz.platform_sockets.clone(),
                     sensor_length_range_mm: dz
                         .sensors
                         .iter()
@@ -782,7 +738,7 @@ impl PaperReport {
             designed_range_mm: r.options.designed_range_mm,
             designed_range_deg: r.options.designed_range_deg,
             socket_candidates: (cands.base.len(), cands.platform.len()),
-            compensation_max_std_um: crate::calib::paper::COMPENSATION_MAX_STD_UM,
+            compensation_max_std_um: cpm_calib::paper::COMPENSATION_MAX_STD_UM,
             components: (0..36)
                 .map(|k| ComponentRow {
                     name: InstallationErrors::component_name(k).to_string(),

@@ -7,15 +7,11 @@
 //! script, no external font or style.
 //!
 //! ```
-//! let html = cpm::html::render("Demo", "# Title\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\n![f](f.svg)\n",
+//! let html = cpm_report::html::render("Demo", "# Title\n\n| a | b |\n|---|---|\n| 1 | 2 |\n\n![f](f.svg)\n",
 //!     |name| (name == "f.svg").then(|| "<svg xmlns=\"http://www.w3.org/2000/svg\"></svg>".to_string()));
 //! assert!(html.contains("<table>") && html.contains("<svg") && !html.contains("f.svg\""));
 //! ```
-use std::path::Path;
-
 use pulldown_cmark::{html, Event, Options, Parser, Tag, TagEnd};
-
-use crate::output::OutputSet;
 
 const STYLE: &str = "body{font-family:sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;line-height:1.45;color:#222}\
 table{border-collapse:collapse;margin:1em 0;font-size:0.9em}th,td{border:1px solid #bbb;padding:3px 8px;text-align:left}\
@@ -68,18 +64,15 @@ pub fn render(title: &str, markdown: &str, svg: impl Fn(&str) -> Option<String>)
     )
 }
 
-/// Stages `report.html` beside the `report.md` staged in `set` under `dir`, inlining the SVG
-/// figures staged in the same directory: where the Markdown shows them as images, and the
-/// others in a closing "Figures" section. Does nothing when no `report.md` is staged there.
-pub fn stage_report_html(set: &mut OutputSet, dir: &Path, title: &str) {
-    let Some(md) = set.contents(&dir.join("report.md")) else {
-        return;
-    };
-    let mut md = String::from_utf8_lossy(md).to_string();
-    let others: Vec<String> = set
-        .paths()
-        .filter(|p| p.parent() == Some(dir) && p.extension().is_some_and(|e| e == "svg"))
-        .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().to_string()))
+/// The `report.html` page of a command's `markdown`, titled `title`, with the SVG `figures`
+/// (file name, SVG text) that sit beside the report inlined: where the Markdown shows them as
+/// images, and the others, in the order given, in a closing "Figures" section. Only plain
+/// `.svg` names are looked up (no path, no `..`).
+pub fn report_page(title: &str, markdown: &str, figures: &[(String, String)]) -> String {
+    let mut md = markdown.to_string();
+    let others: Vec<&str> = figures
+        .iter()
+        .map(|(n, _)| n.as_str())
         .filter(|n| !md.contains(&format!("]({n})")))
         .collect();
     if !others.is_empty() {
@@ -88,14 +81,15 @@ pub fn stage_report_html(set: &mut OutputSet, dir: &Path, title: &str) {
             md.push_str(&format!("![{n}]({n})\n\n"));
         }
     }
-    let page = render(title, &md, |name| {
+    render(title, &md, |name| {
         if !name.ends_with(".svg") || name.contains('/') || name.contains("..") {
             return None;
         }
-        set.contents(&dir.join(name))
-            .map(|b| String::from_utf8_lossy(b).to_string())
-    });
-    set.add(dir.join("report.html"), page);
+        figures
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, svg)| svg.clone())
+    })
 }
 
 fn strip_xml_prolog(s: &str) -> &str {

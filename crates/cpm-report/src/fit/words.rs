@@ -1,0 +1,238 @@
+//! A fit in words: the model, the loss and the formulation described, the warnings of a fit
+//! (failure, convergence, rank, noise, outliers, misfit), and where each observation came
+//! from (file, line, what was observed).
+use cpm_calib::{Calibration, Effect, MeasurementModel};
+use cpm_io::{Merged, Robot};
+
+/// A formulation of the calibration problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Formulation {
+    /// Forward kinematics in the loop; the unknowns are the installation errors and effects.
+    Nested,
+    /// The actual poses are unknowns too; the pose blocks are eliminated by a Schur complement.
+    Implicit,
+}
+
+impl Formulation {
+    /// The name written to `calibration.json` (`formulation`).
+    pub fn key(self) -> &'static str {
+        match self {
+            Formulation::Nested => "nested",
+            Formulation::Implicit => "implicit",
+        }
+    }
+
+    /// One sentence for report.md.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Formulation::Nested => {
+                "nested (forward kinematics of every pose inside the fit; dense Jacobian in the installation errors)"
+            }
+            Formulation::Implicit => {
+                "implicit (every pose an unknown beside the installation errors, commanded lengths as exact closures; pose blocks eliminated by a sparse Schur complement)"
+            }
+        }
+    }
+}
+
+/// The loss in words, e.g. `Huber, K = 3 um`.
+pub fn describe_loss(loss: &cpm_lm::Loss) -> String {
+    match loss {
+        cpm_lm::Loss::Squared => "least squares".into(),
+        cpm_lm::Loss::Huber(k) => format!("Huber, K = {k} um"),
+        cpm_lm::Loss::Cauchy(k) => format!("Cauchy, K = {k} um"),
+        cpm_lm::Loss::Tukey(k) => format!("Tukey, K = {k} um"),
+    }
+}
+
+/// Effect names, comma-separated (`none` when empty).
+pub fn effect_list(effects: &[Effect]) -> String {
+    if effects.is_empty() {
+        "none".into()
+    } else {
+        effects
+            .iter()
+            .map(|e| e.name())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// The model's parameter count in words.
+pub fn describe_model(model: &MeasurementModel) -> String {
+    let known: Vec<Effect> = model.known_effects.iter().map(|k| k.effect).collect();
+    format!(
+        "{} parameters ({} installation errors{}){}",
+        model.num_params(),
+        model.num_installation_params(),
+        if model.effects.is_empty() {
+            String::new()
+        } else {
+            format!(" + {}", effect_list(&model.effects))
+        },
+        if known.is_empty() {
+            String::new()
+        } else {
+            format!(", known {}", effect_list(&known))
+        }
+    )
+}
+
+/// The chi-square test of the fit against the declared noise (`None` when the noise was
+/// estimated from the residual, or no degree of freedom is left).
+pub fn misfit(cal: &Calibration) -> Option<cpm_calib::misfit::Misfit> {
+    if cal.sigma_estimated {
+        return None;
+    }
+    cpm_calib::misfit::chi_square(
+        &cal.residuals_um,
+        cal.sigma_um,
+        cal.identifiability.rank,
+        &cal.outliers,
+    )
+}
+
+/// What a misfit says, in words.
+pub fn misfit_message(m: &cpm_calib::misfit::Misfit) -> String {
+    format!(
+        "**The model does not fit the data to the declared noise**: chi2/dof = {:.2} on {} degrees of freedom (p {}), residual RMS {:.3} um against the declared {} um{}. The standard deviations assume the declared noise and are too small. An effect the model lacks (backlash, link offsets or scales, thermal drift, ...) or a noise larger than declared: `cpm refine` tests the effect library on these data.",
+        m.chi2_per_dof,
+        m.dof,
+        if m.p_value < 1e-300 {
+            "< 1e-300".to_string()
+        } else {
+            format!("= {:.1e}", m.p_value)
+        },
+        m.residual_rms_um,
+        m.sigma_um,
+        if m.outliers_left_out > 0 {
+            format!(", {} flagged outliers left out", m.outliers_left_out)
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// What the data did not determine, how the fit ended, and whether the model fits the
+/// declared noise, in a few lines for the top of a report (empty when all is well).
+pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
+    let mut w = Vec::new();
+    if let Some(why) = cal.robust_failure() {
+        w.push(format!(
+            "**The fit failed**: {why}. Use a larger K (about 3 x the noise) or least squares."
+        ));
+    }
+    if !cal.solver.was_successful() {
+        w.push(format!(
+            "**The solver did not converge** ({}): the estimates are where it stopped; treat them with suspicion.",
+            cal.solver.termination
+        ));
+    }
+    let id = &cal.identifiability;
+    if id.rank < id.num_params {
+        w.push(format!(
+            "**Rank-deficient fit**: the data determine {} of {} parameters on their own (rank {} of {}); the others have no estimate (`n.d.`, see \"What the data identify\").",
+            id.num_determined(),
+            model.num_params(),
+            id.rank,
+            id.num_params
+        ));
+    }
+    if cal.sigma_estimated && cal.residuals_um.len() <= id.rank {
+        w.push(format!(
+            "**The noise cannot be estimated**: {} observations for {} identifiable combinations leave no residual degrees of freedom; the standard deviations are meaningless. Give the noise with `--sigma-um`.",
+            cal.residuals_um.len(),
+            id.rank
+        ));
+    }
+    if !cal.outliers.is_empty() {
+        w.push(format!(
+            "**{} outlier observation{}** (more than 5 robust standard deviations off): listed under \"Outliers\".",
+            cal.outliers.len(),
+            if cal.outliers.len() == 1 { "" } else { "s" }
+        ));
+    }
+    if let Some(m) = misfit(cal).filter(|m| m.inconsistent()) {
+        w.push(misfit_message(&m));
+    }
+    w
+}
+
+/// Where observation `k` of a merged campaign came from and what it is.
+pub struct ObservationOrigin {
+    /// The file.
+    pub file: String,
+    /// Its line.
+    pub line: usize,
+    /// What was observed: `sensor s1 at pose "3"`, `tracker x of pose "7"`.
+    pub what: String,
+}
+
+/// The origin of observation `k` (readings first, then 6 per pose measurement).
+pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<ObservationOrigin> {
+    let c = &merged.campaign;
+    let m = c.readings.len();
+    if k < m {
+        let r = &c.readings[k];
+        let (file, line) = merged.reading_origin.get(k)?.clone();
+        let label = merged.pose_origin.get(r.pose).map_or("?", |o| o.2.as_str());
+        let sensor = robot
+            .table
+            .sensors
+            .get(r.sensor)
+            .map_or("?", |s| s.name.as_str());
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!("sensor {sensor} at pose {label:?}"),
+        })
+    } else if k >= c.first_tilt_observation() {
+        let q = k - c.first_tilt_observation();
+        let t = c.tilt_measurements.get(q)?;
+        let (file, line, label) = merged.pose_origin.get(t.pose)?.clone();
+        let line = merged.tilt_origin.get(q).map_or(line, |o| o.1);
+        let name = robot
+            .description
+            .inclinometers
+            .get(t.inclinometer)
+            .map_or("?", |c| c.name.as_str());
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!(
+                "inclinometer {name} angle_{}_deg at pose {label:?}",
+                t.axis + 1
+            ),
+        })
+    } else if k >= c.first_point_observation() {
+        let q = (k - c.first_point_observation()) / 3;
+        let pm = c.point_measurements.get(q)?;
+        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
+        let line = merged.point_origin.get(q).map_or(line, |o| o.1);
+        let target = robot
+            .description
+            .targets
+            .get(pm.target)
+            .map_or("?", |t| t.name.as_str());
+        let comp = ["x", "y", "z"][(k - c.first_point_observation()) % 3];
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!("target {target} {comp} at pose {label:?}"),
+        })
+    } else {
+        let (q, a) = match c.observation_kind(k) {
+            cpm_calib::ObservationKind::TrackerPosition(q, a) => (q, a),
+            cpm_calib::ObservationKind::TrackerOrientation(q, a) => (q, 3 + a),
+            _ => return None,
+        };
+        let pm = c.pose_measurements.get(q)?;
+        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
+        let comp = ["x", "y", "z", "rotation x", "rotation y", "rotation z"][a];
+        Some(ObservationOrigin {
+            file,
+            line,
+            what: format!("tracker {comp} of pose {label:?}"),
+        })
+    }
+}
