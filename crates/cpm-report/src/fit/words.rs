@@ -4,36 +4,8 @@
 use cpm_calib::{Calibration, Effect, MeasurementModel};
 use cpm_io::{Merged, Robot};
 
-/// A formulation of the calibration problem.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Formulation {
-    /// Forward kinematics in the loop; the unknowns are the installation errors and effects.
-    Nested,
-    /// The actual poses are unknowns too; the pose blocks are eliminated by a Schur complement.
-    Implicit,
-}
-
-impl Formulation {
-    /// The name written to `calibration.json` (`formulation`).
-    pub fn key(self) -> &'static str {
-        match self {
-            Formulation::Nested => "nested",
-            Formulation::Implicit => "implicit",
-        }
-    }
-
-    /// One sentence for report.md.
-    pub fn describe(self) -> &'static str {
-        match self {
-            Formulation::Nested => {
-                "nested (forward kinematics of every pose inside the fit; dense Jacobian in the installation errors)"
-            }
-            Formulation::Implicit => {
-                "implicit (every pose an unknown beside the installation errors, commanded lengths as exact closures; pose blocks eliminated by a sparse Schur complement)"
-            }
-        }
-    }
-}
+/// The formulation of a fit (defined with the fit, in cpm-calib).
+pub use cpm_calib::fit::formulation::Formulation;
 
 /// The loss in words, e.g. `Huber, K = 3 um`.
 pub fn describe_loss(loss: &cpm_lm::Loss) -> String {

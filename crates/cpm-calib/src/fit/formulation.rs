@@ -1,0 +1,79 @@
+//! Which formulation a fit runs in: the nested one (forward kinematics inside
+//! every residual, a dense Jacobian in the installation errors) for ordinary campaigns, the
+//! implicit one (every pose an unknown, a sparse Schur-complement solve) for large ones.
+//!
+//! The nested formulation's dense Jacobian and its SVD grow as `readings x parameters`; the
+//! implicit one's work and memory grow with the poses' blocks. Both give the same estimates
+//! (to a small fraction of a standard deviation) on a campaign either can fit; the implicit
+//! one takes length readings only, plain least squares, and no effect with a known value.
+use crate::fit::identify::{identify, Calibration, IdentifyOptions};
+use crate::fit::implicit::{identify_implicit_calibration, supported};
+use crate::{CalibError, Campaign, MeasurementModel};
+
+/// Campaigns with at least this many readings are fitted with the implicit formulation
+/// (when it supports them); smaller ones with the nested one.
+pub const IMPLICIT_FROM_READINGS: usize = 100_000;
+
+/// A formulation of the calibration problem.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Formulation {
+    /// Forward kinematics in the loop; the unknowns are the installation errors and effects.
+    Nested,
+    /// The actual poses are unknowns too; the pose blocks are eliminated by a Schur complement.
+    Implicit,
+}
+
+impl Formulation {
+    /// The name written to `calibration.json` (`formulation`).
+    pub fn key(self) -> &'static str {
+        match self {
+            Formulation::Nested => "nested",
+            Formulation::Implicit => "implicit",
+        }
+    }
+
+    /// One sentence for report.md.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Formulation::Nested => {
+                "nested (forward kinematics of every pose inside the fit; dense Jacobian in the installation errors)"
+            }
+            Formulation::Implicit => {
+                "implicit (every pose an unknown beside the installation errors, commanded lengths as exact closures; pose blocks eliminated by a sparse Schur complement)"
+            }
+        }
+    }
+}
+
+/// The formulation for this fit: implicit for campaigns of at least
+/// [`IMPLICIT_FROM_READINGS`] readings that it supports (length readings only, plain least
+/// squares, no start, no known effects), nested otherwise.
+pub fn choose(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+) -> Formulation {
+    let large = campaign.readings.len() >= IMPLICIT_FROM_READINGS;
+    if large
+        && options.lm.loss.is_squared()
+        && options.start_um.is_none()
+        && supported(model, campaign).is_ok()
+    {
+        Formulation::Implicit
+    } else {
+        Formulation::Nested
+    }
+}
+
+/// Fits with the given formulation.
+pub fn identify_with(
+    formulation: Formulation,
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+) -> Result<Calibration, CalibError> {
+    match formulation {
+        Formulation::Nested => identify(model, campaign, options),
+        Formulation::Implicit => identify_implicit_calibration(model, campaign, options),
+    }
+}
