@@ -609,7 +609,7 @@ pub fn open(path: &Path) -> Result<std::fs::File, ReadError> {
 }
 
 /// The error of a reader: an I/O error when the table met one, else the input error.
-fn finish<R: Read>(t: &mut Table<R>, e: InputError) -> ReadError {
+pub(crate) fn finish<R: Read>(t: &mut Table<R>, e: InputError) -> ReadError {
     match t.take_io_error() {
         Some(source) => ReadError::Io {
             file: t.file.clone(),
@@ -617,81 +617,6 @@ fn finish<R: Read>(t: &mut Table<R>, e: InputError) -> ReadError {
         },
         None => ReadError::Input(e),
     }
-}
-
-/// Reads a measurement file of either kind (told from the header) from text.
-pub fn read_data(
-    text: &str,
-    file: &str,
-    robot: &Robot,
-    options: &ReadOptions,
-) -> Result<DataFile, InputError> {
-    read_data_from(text.as_bytes(), file, robot, options).map_err(ReadError::into_input)
-}
-
-/// Reads a measurement file of either kind, streaming its rows from the file at `path`.
-pub fn read_data_file(
-    path: &Path,
-    robot: &Robot,
-    options: &ReadOptions,
-) -> Result<DataFile, ReadError> {
-    read_data_from(open(path)?, &path.display().to_string(), robot, options)
-}
-
-/// Reads a measurement file of either kind (told from the header) from a reader, row by row:
-/// the first problem stops the reading there.
-pub fn read_data_from<R: Read>(
-    source: R,
-    file: &str,
-    robot: &Robot,
-    options: &ReadOptions,
-) -> Result<DataFile, ReadError> {
-    let mut t = Table::from_reader(source, file)?;
-    let r = match t.kind() {
-        Ok(FileKind::Readings) => read_readings_table(&mut t, robot, options),
-        Ok(FileKind::PoseMeasurements) => read_pose_measurements_table(&mut t, robot, options),
-        Ok(FileKind::PointMeasurements) => {
-            crate::points::read_point_measurements_table(&mut t, robot, options)
-        }
-        Ok(FileKind::TiltMeasurements) => {
-            crate::points::read_tilt_measurements_table(&mut t, robot, options)
-        }
-        Ok(FileKind::Poses) => Err(InputError::line(
-            file,
-            t.header_line,
-            "this is a list of poses (no sensor readings and no link readings): measurements need `sensor` and `length_mm` columns, or `reading_1`.. columns with a measured pose",
-        )),
-        Err(e) => Err(e),
-    };
-    let mut f = r.map_err(|e| finish(&mut t, e))?;
-    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
-    Ok(f)
-}
-
-/// Reads several measurement files (see [`read_data_file`]); the tracker files among them are
-/// registered together ([`register_tracker_files`]: a frame per file, reading offsets shared)
-/// before their consistency checks.
-pub fn read_data_files(
-    paths: &[std::path::PathBuf],
-    robot: &Robot,
-    options: &ReadOptions,
-) -> Result<Vec<DataFile>, ReadError> {
-    let mut files = Vec::with_capacity(paths.len());
-    for path in paths {
-        let file = path.display().to_string();
-        let mut t = Table::from_reader(open(path)?, &file)?;
-        let r = match t.kind() {
-            Ok(FileKind::PoseMeasurements) => read_pose_measurements_table(&mut t, robot, options),
-            _ => {
-                drop(t);
-                files.push(read_data_file(path, robot, options)?);
-                continue;
-            }
-        };
-        files.push(r.map_err(|e| finish(&mut t, e))?);
-    }
-    register_tracker_files(&mut files, robot, options)?;
-    Ok(files)
 }
 
 /// Checks the `reading_k` columns: none, or exactly `reading_1..reading_n`.
@@ -805,7 +730,7 @@ pub fn read_readings(
     read_readings_table(&mut t, robot, options)
 }
 
-fn read_readings_table<R: Read>(
+pub(crate) fn read_readings_table<R: Read>(
     t: &mut Table<R>,
     robot: &Robot,
     options: &ReadOptions,
@@ -1051,7 +976,7 @@ pub fn read_pose_measurements(
     Ok(f)
 }
 
-fn read_pose_measurements_table<R: Read>(
+pub(crate) fn read_pose_measurements_table<R: Read>(
     t: &mut Table<R>,
     robot: &Robot,
     options: &ReadOptions,

@@ -52,6 +52,7 @@
 pub mod campaign;
 pub mod error;
 pub mod points;
+pub mod read;
 pub mod robot;
 pub mod table;
 
@@ -65,12 +66,12 @@ pub struct Provenance {
     pub data: Vec<String>,
 }
 pub use campaign::{
-    merge, read_commands_file, read_data, read_data_file, read_data_files, read_data_from,
-    read_pose_list, read_pose_list_file, read_pose_list_from, read_pose_measurements,
-    read_readings, register_tracker_files, write_commands, write_pose_list,
+    merge, read_commands_file, read_pose_list, read_pose_list_file, read_pose_list_from,
+    read_pose_measurements, read_readings, register_tracker_files, write_commands, write_pose_list,
     write_pose_measurements, write_readings, DataFile, Merged, PoseRow, ReadOptions,
     RegistrationReport, SessionRegistration, TrackerRow, MAX_ROWS, REGISTRATION_APPLY_MM,
 };
 pub use error::{read_text, InputError, ReadError};
+pub use read::{read_data, read_data_file, read_data_files, read_data_from};
 pub use robot::{calibrated_description, calibrated_toml, parse_effects, Robot};
 pub use table::FileKind;

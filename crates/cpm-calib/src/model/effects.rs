@@ -89,9 +89,11 @@ use nalgebra::{Rotation3, Vector3, Vector6};
 use serde::{Deserialize, Serialize};
 
 mod builtin;
+pub(crate) mod instrument_blocks;
 mod pose_map;
 
 pub use builtin::*;
+pub use instrument_blocks::{BaseTilt, InclinometerMount, PointFrame, TargetPosition};
 pub use pose_map::{PoseMap, PoseTerm, POSE_ANGLE_SCALE_DEG, POSE_LENGTH_SCALE_MM};
 
 /// A way an effect reaches the predicted observations.
@@ -326,10 +328,10 @@ impl Effect {
             Effect::ScrewPeriodic => &ScrewPeriodic,
             Effect::SocketError => &SocketError,
             Effect::TrackerFrame => &TrackerFrame,
-            Effect::TargetPosition => &crate::model::points::TargetPosition,
-            Effect::PointFrame => &crate::model::points::PointFrame,
-            Effect::InclinometerMount => &crate::model::tilts::InclinometerMount,
-            Effect::BaseTilt => &crate::model::tilts::BaseTilt,
+            Effect::TargetPosition => &TargetPosition,
+            Effect::PointFrame => &PointFrame,
+            Effect::InclinometerMount => &InclinometerMount,
+            Effect::BaseTilt => &BaseTilt,
             Effect::PoseMap(t) => t.model(),
             Effect::User(i) => {
                 registry()

@@ -23,7 +23,7 @@ use cpm_geometry::rotation::left_jacobian;
 use nalgebra::{DMatrix, DVector, Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::model::effects::{Channel, EffectModel};
+use crate::model::effects::EffectModel;
 use crate::model::instruments::{Instrument, InstrumentInput};
 use crate::model::patterns::Pattern;
 use crate::{Effect, MeasurementModel};
@@ -141,61 +141,9 @@ impl Instrument for PointTargets {
     }
 }
 
-const AXES: [&str; 3] = ["x", "y", "z"];
-const FRAME: [&str; 6] = ["tx", "ty", "tz", "rx", "ry", "rz"];
-
-/// `target_position`: each target's platform position, x y z um per target (sized by the
-/// model's [`targets`](MeasurementModel::targets)).
-#[derive(Debug, Clone, Copy)]
-pub struct TargetPosition;
-impl EffectModel for TargetPosition {
-    fn name(&self) -> &str {
-        "target_position"
-    }
-    /// Sized by the model ([`MeasurementModel::blocks`]), not by links and sensors.
-    fn num_params(&self, _: usize, _: usize) -> usize {
-        0
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        format!("target {} {}", k / 3 + 1, AXES[k % 3])
-    }
-    fn unit(&self) -> &str {
-        "um"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[]
-    }
-}
-
-/// `point_frame`: the tracker frame of each point-measurement session, tx ty tz um, rx ry rz
-/// urad per session (sized by the model's [`point_sessions`](MeasurementModel::point_sessions)).
-#[derive(Debug, Clone, Copy)]
-pub struct PointFrame;
-impl EffectModel for PointFrame {
-    fn name(&self) -> &str {
-        "point_frame"
-    }
-    /// Sized by the model ([`MeasurementModel::blocks`]), not by links and sensors.
-    fn num_params(&self, _: usize, _: usize) -> usize {
-        0
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        format!("session {} {}", k / 6 + 1, FRAME[k % 6])
-    }
-    fn unit(&self) -> &str {
-        "um (translation), urad (rotation)"
-    }
-    fn param_unit(&self, k: usize) -> &str {
-        if k % 6 >= 3 {
-            "urad"
-        } else {
-            "um"
-        }
-    }
-    fn channels(&self) -> &[Channel] {
-        &[]
-    }
-}
+use crate::model::effects::instrument_blocks::{AXES, FRAME};
+/// Their effects, defined with the other effects (the effect list dispatches to them).
+pub use crate::model::effects::{PointFrame, TargetPosition};
 
 /// The name of parameter `k` of an instrument block, with the model's target names.
 pub(crate) fn param_name(model: &MeasurementModel, effect: Effect, k: usize) -> String {

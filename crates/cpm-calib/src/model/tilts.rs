@@ -23,7 +23,6 @@
 use nalgebra::{DMatrix, DVector, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
-use crate::model::effects::{Channel, EffectModel};
 use crate::model::instruments::{Instrument, InstrumentInput};
 use crate::model::patterns::Pattern;
 use crate::{Effect, MeasurementModel};
@@ -177,53 +176,9 @@ impl Instrument for Inclinometers {
     }
 }
 
-const ROT: [&str; 3] = ["rx", "ry", "rz"];
-
-/// `inclinometer_mount`: each inclinometer's mount rotation on the platform, rx ry rz urad
-/// per instrument (a rotation vector in {P}, on top of the known mount).
-#[derive(Debug, Clone, Copy)]
-pub struct InclinometerMount;
-impl EffectModel for InclinometerMount {
-    fn name(&self) -> &str {
-        "inclinometer_mount"
-    }
-    /// Sized by the model ([`MeasurementModel::blocks`]), not by links and sensors.
-    fn num_params(&self, _: usize, _: usize) -> usize {
-        0
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        format!("inclinometer {} {}", k / 3 + 1, ROT[k % 3])
-    }
-    fn unit(&self) -> &str {
-        "urad"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[]
-    }
-}
-
-/// `base_tilt`: the base's tilt against gravity per inclinometer session, rx ry urad (a
-/// rotation of gravity's up in the base frame).
-#[derive(Debug, Clone, Copy)]
-pub struct BaseTilt;
-impl EffectModel for BaseTilt {
-    fn name(&self) -> &str {
-        "base_tilt"
-    }
-    /// Sized by the model ([`MeasurementModel::blocks`]), not by links and sensors.
-    fn num_params(&self, _: usize, _: usize) -> usize {
-        0
-    }
-    fn param_name(&self, k: usize, _: &[String]) -> String {
-        format!("session {} {}", k / 2 + 1, ROT[k % 2])
-    }
-    fn unit(&self) -> &str {
-        "urad"
-    }
-    fn channels(&self) -> &[Channel] {
-        &[]
-    }
-}
+use crate::model::effects::instrument_blocks::ROT;
+/// Their effects, defined with the other effects (the effect list dispatches to them).
+pub use crate::model::effects::{BaseTilt, InclinometerMount};
 
 /// The name of parameter `k` of an inclinometer block, with the model's instrument names.
 pub(crate) fn param_name(model: &MeasurementModel, effect: Effect, k: usize) -> String {
