@@ -87,6 +87,11 @@ pub struct IterationRecord {
 }
 
 /// Where the time went.
+///
+/// Timed only when the set-up and the first linearisation of the solve took at least
+/// 20 µs: for a quicker (small) problem a clock read costs as much as a phase, so the phases
+/// are not timed and every field is zero ([`Report::elapsed`] and each iteration's
+/// `elapsed` are still measured).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Timings {
     /// In the user's residual function.
@@ -144,7 +149,7 @@ pub struct Report {
     /// the first call of [`Report::statistics`].
     pub(crate) statistics: OnceLock<Statistics>,
     /// What the statistics are computed from, when kept.
-    pub(crate) fit: Option<Box<FitAtSolution>>,
+    pub(crate) fit: Option<FitAtSolution>,
 }
 
 /// The (reweighted) Jacobian and residuals at the solution, kept for the statistics.

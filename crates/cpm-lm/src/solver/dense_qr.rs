@@ -18,12 +18,9 @@ pub(crate) struct DenseQr {
     m: usize,
     /// Rows of the factored matrix: `max(m, n)` (zero rows pad a wide Jacobian).
     rows: usize,
-    /// `rows x n` column-major: Householder vectors, then `R` (upper triangle with
-    /// diagonal); the strict lower triangle of the top `n x n` block is scratch for `qrsolv`.
-    a: Vec<f64>,
+    /// The matrix and the vectors, in one allocation (see [`DenseQr::parts`]).
+    store: Vec<f64>,
     ipvt: Vec<usize>,
-    /// The vectors, in one allocation (see [`Vectors`]).
-    buf: Vec<f64>,
     /// Whether the strict lower triangle and `sdiag` hold the factor `S` of the last solve
     /// (`P^T (J^T J + mu D^2) P = S^T S`).
     factored: bool,
@@ -51,11 +48,18 @@ impl DenseQr {
             n,
             m,
             rows,
-            a: vec![0.0; rows * n],
+            store: vec![0.0; rows * n + 7 * n + 2 * rows],
             ipvt: vec![0; n],
-            buf: vec![0.0; 7 * n + 2 * rows],
             factored: false,
         }
+    }
+
+    /// The `rows x n` column-major matrix (Householder vectors, then `R`: upper triangle
+    /// with diagonal; the strict lower triangle of the top `n x n` block is scratch for
+    /// `qrsolv`) and the vectors.
+    fn parts(store: &mut [f64], rows: usize, n: usize) -> (&mut [f64], Vectors<'_>) {
+        let (a, buf) = store.split_at_mut(rows * n);
+        (a, Self::split(buf, n))
     }
 
     fn split(buf: &mut [f64], n: usize) -> Vectors<'_> {
@@ -236,26 +240,18 @@ impl LinearSystem for DenseQr {
         };
         let (m, n, rows) = (self.m, self.n, self.rows);
         self.factored = false;
+        let (a, v) = Self::parts(&mut self.store, rows, n);
         for c in 0..n {
-            let dst = &mut self.a[c * rows..(c + 1) * rows];
+            let dst = &mut a[c * rows..(c + 1) * rows];
             dst[..m].copy_from_slice(j.col_as_slice(c));
             dst[m..].fill(0.0);
         }
-        let v = Self::split(&mut self.buf, n);
-        qrfac(
-            rows,
-            n,
-            &mut self.a,
-            &mut self.ipvt,
-            v.rdiag,
-            v.acnorm,
-            v.wa,
-        );
+        qrfac(rows, n, a, &mut self.ipvt, v.rdiag, v.acnorm, v.wa);
         // Q^T r, then store R's diagonal in place.
         v.wb[..m].copy_from_slice(r);
         v.wb[m..].fill(0.0);
         for jj in 0..n {
-            let col = &mut self.a[jj * rows..(jj + 1) * rows];
+            let col = &mut a[jj * rows..(jj + 1) * rows];
             let ajj = col[jj];
             if ajj != 0.0 {
                 let sum = small::dot(&col[jj..], &v.wb[jj..]);
@@ -271,22 +267,13 @@ impl LinearSystem for DenseQr {
     }
 
     fn solve(&mut self, _jac: &Jacobian, mu: f64, d: &[f64], _g: &[f64], h: &mut [f64]) -> bool {
-        let v = Self::split(&mut self.buf, self.n);
+        let (a, v) = Self::parts(&mut self.store, self.rows, self.n);
         let s = mu.sqrt();
         for (dd, &dv) in v.diag.iter_mut().zip(d) {
             *dd = s * dv;
         }
         qrsolv(
-            self.n,
-            &mut self.a,
-            self.rows,
-            &self.ipvt,
-            v.diag,
-            v.qtf,
-            v.z,
-            v.sdiag,
-            v.wa,
-            v.xdiag,
+            self.n, a, self.rows, &self.ipvt, v.diag, v.qtf, v.z, v.sdiag, v.wa, v.xdiag,
         );
         let mut ok = true;
         for (hh, &z) in h.iter_mut().zip(v.z.iter()) {
@@ -303,7 +290,7 @@ impl LinearSystem for DenseQr {
         }
         // h = -P S^-1 S^-T P^T g with the factor S of the last solve.
         let (n, ldr) = (self.n, self.rows);
-        let v = Self::split(&mut self.buf, n);
+        let (a, v) = Self::parts(&mut self.store, ldr, n);
         for j in 0..n {
             v.wa[j] = g[self.ipvt[j]];
         }
@@ -313,13 +300,13 @@ impl LinearSystem for DenseQr {
             }
             v.wa[j] /= v.sdiag[j];
             let t = v.wa[j];
-            let col = &self.a[j * ldr + j + 1..j * ldr + n];
+            let col = &a[j * ldr + j + 1..j * ldr + n];
             for (wi, &r) in v.wa[j + 1..n].iter_mut().zip(col) {
                 *wi -= r * t;
             }
         }
         for j in (0..n).rev() {
-            let col = &self.a[j * ldr + j + 1..j * ldr + n];
+            let col = &a[j * ldr + j + 1..j * ldr + n];
             let sum = small::dot(col, &v.wa[j + 1..n]);
             v.wa[j] = (v.wa[j] - sum) / v.sdiag[j];
         }
@@ -338,7 +325,7 @@ impl LinearSystem for DenseQr {
         // ||S^-T P^T w||^2 (MINPACK lmpar's Newton correction): S^T is the lower triangle
         // left by qrsolv, with diagonal sdiag.
         let (n, ldr) = (self.n, self.rows);
-        let v = Self::split(&mut self.buf, n);
+        let (a, v) = Self::parts(&mut self.store, ldr, n);
         for j in 0..n {
             v.wa[j] = w[self.ipvt[j]];
         }
@@ -348,7 +335,7 @@ impl LinearSystem for DenseQr {
             }
             v.wa[j] /= v.sdiag[j];
             let t = v.wa[j];
-            let col = &self.a[j * ldr + j + 1..j * ldr + n];
+            let col = &a[j * ldr + j + 1..j * ldr + n];
             for (wi, &r) in v.wa[j + 1..n].iter_mut().zip(col) {
                 *wi -= r * t;
             }

@@ -21,12 +21,12 @@ use crate::error::{EvalStage, LmError};
 use crate::options::{Options, ScaleUpdate, StatisticsMode};
 use crate::problem::{Linearization, NormalEquations};
 use crate::report::{FitAtSolution, IterationRecord, Report, TerminationReason, Timings};
-use crate::solver::build_linear;
 use crate::solver::jacobian::Jacobian;
 use crate::solver::model::Model;
 use crate::solver::small::{dot, norm2};
 use crate::solver::trust_region::lmpar;
 use crate::solver::LinearSystem;
+use crate::solver::{build_linear, Linear};
 
 /// Robust reweighting of the residuals at the current point (non-square losses only):
 /// fills `rw` and scales the Jacobian rows.
@@ -51,17 +51,54 @@ fn weigh(
 pub(crate) type Callback<'a, 'b> =
     Option<&'a mut (dyn FnMut(&IterationRecord) -> ControlFlow<()> + 'b)>;
 
-/// Chained timestamps (one clock read per phase boundary: on small problems the clock
-/// costs as much as the arithmetic).
-struct Clock(Instant);
+/// Chained timestamps: one clock read per phase boundary. On small problems a read costs
+/// as much as a phase: when the set-up and the first linearisation took less than
+/// [`PHASE_TIMING_MIN`], the phases are no longer timed (the report's [`Timings`] are zero)
+/// and the clock is read once per iteration, for the iteration's time.
+struct Clock {
+    start: Instant,
+    last: Instant,
+    phases: bool,
+}
+
+/// The shortest set-up and first linearisation after which the phases of a solve are timed.
+const PHASE_TIMING_MIN: Duration = Duration::from_micros(20);
 
 impl Clock {
-    /// Time since the last lap.
+    fn new(start: Instant) -> Self {
+        Self {
+            start,
+            last: Instant::now(),
+            phases: true,
+        }
+    }
+
+    /// Time since the last lap (zero when the phases are not timed).
     fn lap(&mut self) -> Duration {
+        if !self.phases {
+            return Duration::ZERO;
+        }
         let now = Instant::now();
-        let d = now - self.0;
-        self.0 = now;
+        let d = now - self.last;
+        self.last = now;
         d
+    }
+
+    /// Time since the start: at the last lap, or now when the phases are not timed.
+    fn elapsed(&self) -> Duration {
+        if self.phases {
+            self.last - self.start
+        } else {
+            self.start.elapsed()
+        }
+    }
+
+    /// After the first linearisation: stops timing the phases of a quick solve.
+    fn settle(&mut self, timings: &mut Timings) {
+        if self.phases && self.last - self.start < PHASE_TIMING_MIN {
+            self.phases = false;
+            *timings = Timings::default();
+        }
     }
 }
 
@@ -78,13 +115,17 @@ fn model_error(iteration: usize, stage: EvalStage) -> impl FnOnce(crate::ModelEr
 pub(crate) struct Stored<'p, M> {
     model: &'p mut M,
     jac: Jacobian,
-    linear: Box<dyn LinearSystem>,
+    linear: Linear,
     robust: bool,
-    r: Vec<f64>,
-    r_trial: Vec<f64>,
+    /// Number of residuals.
+    m: usize,
+    /// The residuals at the current point and at the trial point, then `J s` (see
+    /// [`jstep`]), in one allocation of slots of length `m`: slot `cur` holds the current
+    /// residuals, slot `1 - cur` the trial's (an accepted trial flips `cur`).
+    rbuf: Vec<f64>,
+    cur: usize,
     rw: Vec<f64>,
     row_scale: Vec<f64>,
-    jstep: Vec<f64>,
     jdir: Vec<f64>,
     /// Geodesic acceleration: residuals at x + h v, the acceleration and its right-hand side.
     r_probe: Vec<f64>,
@@ -108,9 +149,10 @@ pub(crate) struct Normal<'p> {
 }
 
 /// What differs between the problem kinds.
+#[allow(clippy::large_enum_variant)]
 pub(crate) enum Backend<'p, M> {
-    /// A stored Jacobian.
-    Stored(Box<Stored<'p, M>>),
+    /// A stored Jacobian (held in place: one allocation fewer per solve).
+    Stored(Stored<'p, M>),
     /// Normal equations formed by the problem.
     Normal(Normal<'p>),
 }
@@ -151,21 +193,21 @@ impl<'p> Backend<'p, NoModel> {
 
 impl<'p, M: Model> Backend<'p, M> {
     pub(crate) fn stored(model: &'p mut M) -> Self {
-        Backend::Stored(Box::new(Stored {
+        Backend::Stored(Stored {
             model,
             jac: Jacobian::Dense(faer::Mat::zeros(0, 0)),
-            linear: Box::new(NoSystem),
+            linear: Linear::Other(Box::new(NoSystem)),
             robust: false,
-            r: Vec::new(),
-            r_trial: Vec::new(),
+            m: 0,
+            rbuf: Vec::new(),
+            cur: 0,
             rw: Vec::new(),
             row_scale: Vec::new(),
-            jstep: Vec::new(),
             jdir: Vec::new(),
             r_probe: Vec::new(),
             acc: Vec::new(),
             jac_current: false,
-        }))
+        })
     }
 
     fn dims(&self) -> (usize, usize) {
@@ -191,11 +233,11 @@ impl<'p, M: Model> Backend<'p, M> {
         let accel = options.acceleration.is_some();
         let buffer = |needed: bool, v: f64| if needed { vec![v; m] } else { Vec::new() };
         s.robust = robust;
-        s.r = vec![0.0; m];
-        s.r_trial = vec![0.0; m];
+        s.m = m;
+        s.rbuf = vec![0.0; if dense_jac || cubic { 3 * m } else { 2 * m }];
+        s.cur = 0;
         s.rw = buffer(robust, 0.0);
         s.row_scale = buffer(robust, 1.0);
-        s.jstep = buffer(dense_jac || cubic, 0.0);
         s.jdir = buffer(cubic || accel, 0.0);
         s.r_probe = buffer(accel, 0.0);
         s.acc = if accel { vec![0.0; 2 * n] } else { Vec::new() };
@@ -214,10 +256,11 @@ impl<'p, M: Model> Backend<'p, M> {
     ) -> Result<f64, LmError> {
         match self {
             Backend::Stored(s) => {
+                let r = slot_mut(&mut s.rbuf, s.cur, s.m);
                 s.model
-                    .residuals(x, &mut s.r)
+                    .residuals(x, r)
                     .map_err(model_error(0, EvalStage::Residuals))?;
-                Ok(options.loss.cost(&s.r))
+                Ok(options.loss.cost(r))
             }
             Backend::Normal(p) => {
                 let lin = Linearization {
@@ -266,10 +309,11 @@ impl<'p, M: Model> Backend<'p, M> {
                 if !s.jac.is_finite() {
                     return Ok(None);
                 }
+                let r = slot(&s.rbuf, s.cur, s.m);
                 if s.robust {
-                    weigh(options, &s.r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+                    weigh(options, r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
                 }
-                let rw: &[f64] = if s.robust { &s.rw } else { &s.r };
+                let rw: &[f64] = if s.robust { &s.rw } else { r };
                 s.jac.gradient_and_norms(rw, g, norms2);
                 *any_frozen = match bounds {
                     Some(b) => b.freeze(x, g, frozen),
@@ -291,7 +335,10 @@ impl<'p, M: Model> Backend<'p, M> {
                 timings.jacobian += clock.lap();
                 // The preparation is timed with the solve that follows (one clock read
                 // fewer per iteration: on small problems a read costs as much as a solve).
-                s.linear.prepare(&s.jac, rw).map_err(LmError::Numerical)?;
+                s.linear
+                    .as_dyn()
+                    .prepare(&s.jac, rw)
+                    .map_err(LmError::Numerical)?;
                 s.jac_current = true;
                 Ok(Some(norm2(rw).sqrt()))
             }
@@ -336,7 +383,7 @@ impl<'p, M: Model> Backend<'p, M> {
         match self {
             Backend::Stored(s) => Ok(if damping.is_trust_region() {
                 match lmpar(
-                    s.linear.as_mut(),
+                    s.linear.as_dyn(),
                     &s.jac,
                     damping.radius(),
                     damping.gn_scale(),
@@ -354,7 +401,7 @@ impl<'p, M: Model> Backend<'p, M> {
                 }
             } else {
                 let mu = damping.mu();
-                (s.linear.solve(&s.jac, mu, d, g, h), mu)
+                (s.linear.as_dyn().solve(&s.jac, mu, d, g, h), mu)
             }),
             Backend::Normal(p) => {
                 let mu = damping.mu();
@@ -386,7 +433,7 @@ impl<'p, M: Model> Backend<'p, M> {
     /// (`scratch`: length `n`).
     fn step_norm2(&mut self, step: &[f64], alpha: f64) -> f64 {
         match self {
-            Backend::Stored(s) => s.jac.product_norm2(step, &mut s.jstep),
+            Backend::Stored(s) => s.jac.product_norm2(step, jstep(&mut s.rbuf, s.m)),
             Backend::Normal(p) => alpha * alpha * p.jh_norm2,
         }
     }
@@ -402,10 +449,11 @@ impl<'p, M: Model> Backend<'p, M> {
     ) -> Result<f64, LmError> {
         match self {
             Backend::Stored(s) => {
+                let r_trial = slot_mut(&mut s.rbuf, 1 - s.cur, s.m);
                 s.model
-                    .residuals(x_trial, &mut s.r_trial)
+                    .residuals(x_trial, r_trial)
                     .map_err(model_error(iteration, EvalStage::Residuals))?;
-                Ok(options.loss.cost(&s.r_trial))
+                Ok(options.loss.cost(r_trial))
             }
             Backend::Normal(p) => match p.trial_cost.take() {
                 Some(c) if unmodified => Ok(c),
@@ -421,7 +469,7 @@ impl<'p, M: Model> Backend<'p, M> {
     fn accept(&mut self, jacobian_still_good: bool) {
         match self {
             Backend::Stored(s) => {
-                std::mem::swap(&mut s.r, &mut s.r_trial);
+                s.cur = 1 - s.cur;
                 s.jac_current = !s.robust && jacobian_still_good;
             }
             Backend::Normal(p) => {
@@ -465,12 +513,13 @@ impl<M: Model> Stored<'_, M> {
             .residuals(x_probe, &mut self.r_probe)
             .map_err(model_error(iteration, EvalStage::Residuals))?;
         self.jac.mul(h, &mut self.jdir);
-        for i in 0..self.r.len() {
-            self.r_probe[i] = (2.0 / fd) * ((self.r_probe[i] - self.r[i]) / fd - self.jdir[i]);
+        let r = slot(&self.rbuf, self.cur, self.m);
+        for i in 0..self.m {
+            self.r_probe[i] = (2.0 / fd) * ((self.r_probe[i] - r[i]) / fd - self.jdir[i]);
         }
         let (a, rhs) = self.acc.split_at_mut(n);
         self.jac.transpose_mul(&self.r_probe, rhs);
-        Ok(if self.linear.resolve(&self.jac, mu, d, rhs, a) {
+        Ok(if self.linear.as_dyn().resolve(&self.jac, mu, d, rhs, a) {
             let (mut da2, mut dv2) = (0.0, 0.0);
             for j in 0..n {
                 da2 += (d[j] * a[j]).powi(2);
@@ -486,6 +535,23 @@ impl<M: Model> Stored<'_, M> {
             0.0
         })
     }
+}
+
+/// Slot `k` (length `m`) of a residual buffer.
+fn slot(buf: &[f64], k: usize, m: usize) -> &[f64] {
+    &buf[k * m..(k + 1) * m]
+}
+
+/// Slot `k` (length `m`) of a residual buffer, mutably.
+fn slot_mut(buf: &mut [f64], k: usize, m: usize) -> &mut [f64] {
+    &mut buf[k * m..(k + 1) * m]
+}
+
+/// The scratch for `J s` after the two residual slots: empty when the buffer has none (a
+/// sparse product is reduced row by row).
+fn jstep(buf: &mut [f64], m: usize) -> &mut [f64] {
+    let from = (2 * m).min(buf.len());
+    &mut buf[from..]
 }
 
 /// A placeholder linear system before [`Backend::setup`].
@@ -531,7 +597,19 @@ pub(crate) fn run_stored<M: Model>(
     mut callback: Callback<'_, '_>,
 ) -> Result<Report, LmError> {
     let restart = globalised(options);
-    let x0 = if restart { x.to_vec() } else { Vec::new() };
+    // The start, for a restart: on the stack for a small problem (no allocation).
+    let mut x0_small = [0.0; SMALL_START];
+    let mut x0_heap = Vec::new();
+    let x0: &mut [f64] = if !restart {
+        &mut []
+    } else if x.len() <= SMALL_START {
+        let s = &mut x0_small[..x.len()];
+        s.copy_from_slice(x);
+        s
+    } else {
+        x0_heap.extend_from_slice(x);
+        &mut x0_heap
+    };
     let first = run(
         Backend::stored(&mut *model),
         x,
@@ -560,16 +638,15 @@ pub(crate) fn run_stored<M: Model>(
         cost: first.final_cost,
         evaporated: first.evaporated.clone(),
     });
-    let mut x1 = x0;
     let second = run(
         Backend::stored(model),
-        &mut x1,
+        &mut *x0,
         &accelerated,
         abandon,
         callback,
     )?;
     let (mut keep, other) = if second.final_cost < first.final_cost {
-        x.copy_from_slice(&x1);
+        x.copy_from_slice(x0);
         (second, first)
     } else {
         (first, second)
@@ -586,6 +663,9 @@ pub(crate) fn run_stored<M: Model>(
     keep.timings.statistics += other.timings.statistics;
     Ok(keep)
 }
+
+/// Largest number of parameters whose start [`run_stored`] keeps on the stack.
+const SMALL_START: usize = 16;
 
 /// Whether the globalisation of [`Evaporation`](crate::Evaporation) applies: a stored
 /// problem solved with plain steps, plain least squares, a damping other than the cubic
@@ -699,7 +779,7 @@ pub(crate) fn run<M: Model>(
     let (mut accepted_steps, mut rejected_steps) = (0usize, 0usize);
 
     let mut damping = DampingState::new(options.damping, 1.0);
-    let mut clock = Clock(Instant::now());
+    let mut clock = Clock::new(start);
     let mut cost = backend.start(options, x, damping.mu(), g, norms2, d)?;
     match backend {
         Backend::Stored(_) => timings.residuals += clock.lap(),
@@ -759,6 +839,7 @@ pub(crate) fn run<M: Model>(
                 }
             }
             if first {
+                clock.settle(&mut timings);
                 let mut mu0 = 0.0f64;
                 for j in 0..n {
                     mu0 = mu0.max(norms2[j] / (d[j] * d[j]));
@@ -839,7 +920,7 @@ pub(crate) fn run<M: Model>(
             gain_ratio: f64::NAN,
             accepted: false,
             gradient_norm: grad_inf,
-            elapsed: clock.0 - start,
+            elapsed: clock.elapsed(),
         };
         if !solved {
             timings.linear_solver += clock.lap();
@@ -927,7 +1008,7 @@ pub(crate) fn run<M: Model>(
                 for j in 0..n {
                     wa[j] = step[j] - 0.5 * alpha * s.acc[j];
                 }
-                (s.jac.product_norm2(wa, &mut s.jstep), dot(g, wa))
+                (s.jac.product_norm2(wa, jstep(&mut s.rbuf, s.m)), dot(g, wa))
             }
             _ => (backend.step_norm2(step, alpha), dot(g, step)),
         };
@@ -1005,7 +1086,7 @@ pub(crate) fn run<M: Model>(
             gain_ratio: rho,
             accepted: accept,
             gradient_norm: grad_inf,
-            elapsed: clock.0 - start,
+            elapsed: clock.elapsed(),
         };
         records.push(rec);
         if cost == 0.0 {
@@ -1049,13 +1130,25 @@ pub(crate) fn run<M: Model>(
                     .map_err(model_error(records.len(), EvalStage::Jacobian))?;
                 jacobian_evaluations += 1;
                 if s.robust {
-                    weigh(options, &s.r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+                    let r = slot(&s.rbuf, s.cur, s.m);
+                    weigh(options, r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
                 }
             }
-            let s = *s;
+            let residuals = if s.robust {
+                s.rw
+            } else {
+                // The current residuals moved to the front of their buffer (no copy into a
+                // new allocation).
+                let mut r = s.rbuf;
+                if s.cur != 0 {
+                    r.copy_within(s.cur * s.m..(s.cur + 1) * s.m, 0);
+                }
+                r.truncate(s.m);
+                r
+            };
             let fit = FitAtSolution {
                 jacobian: s.jac,
-                residuals: if s.robust { s.rw } else { s.r },
+                residuals,
                 rank_tol: options.rank_tol,
             };
             if options.statistics == StatisticsMode::AtEnd {
@@ -1063,7 +1156,7 @@ pub(crate) fn run<M: Model>(
             }
             // The clock was read at the end of the loop.
             timings.statistics = clock.lap();
-            Some(Box::new(fit))
+            Some(fit)
         }
         _ => None,
     };
@@ -1078,7 +1171,7 @@ pub(crate) fn run<M: Model>(
         residual_evaluations,
         jacobian_evaluations,
         // The last lap ended the solve (the report's assembly is not timed).
-        elapsed: clock.0 - start,
+        elapsed: clock.elapsed(),
         timings,
         num_params: n,
         num_residuals: m,

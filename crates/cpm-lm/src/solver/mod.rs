@@ -106,22 +106,38 @@ pub(crate) trait LinearSystem {
     fn inverse_quadratic(&mut self, jac: &Jacobian, w: &[f64]) -> Option<f64>;
 }
 
-pub(crate) fn build_linear(
-    solver: &LinearSolver,
-    jac: &Jacobian,
-) -> Result<Box<dyn LinearSystem>, LmError> {
+/// A linear system built for one solve: the default dense QR held in place (one allocation
+/// fewer per solve: on small problems the allocator is a fair part of the time), the others
+/// boxed.
+pub(crate) enum Linear {
+    DenseQr(dense_qr::DenseQr),
+    Other(Box<dyn LinearSystem>),
+}
+
+impl Linear {
+    pub(crate) fn as_dyn(&mut self) -> &mut dyn LinearSystem {
+        match self {
+            Linear::DenseQr(q) => q,
+            Linear::Other(b) => b.as_mut(),
+        }
+    }
+}
+
+pub(crate) fn build_linear(solver: &LinearSolver, jac: &Jacobian) -> Result<Linear, LmError> {
     let (m, n) = match jac {
         Jacobian::Dense(j) => (j.nrows(), j.ncols()),
         Jacobian::Sparse(s) => (s.nrows, s.ncols),
     };
     Ok(match (solver, jac) {
-        (LinearSolver::DenseQr, _) => Box::new(dense_qr::DenseQr::new(m, n)),
-        (LinearSolver::DenseCholesky, _) => Box::new(dense_cholesky::DenseCholesky::new(n)),
+        (LinearSolver::DenseQr, _) => Linear::DenseQr(dense_qr::DenseQr::new(m, n)),
+        (LinearSolver::DenseCholesky, _) => {
+            Linear::Other(Box::new(dense_cholesky::DenseCholesky::new(n)))
+        }
         (LinearSolver::SparseCholesky, Jacobian::Sparse(s)) => {
-            Box::new(sparse_cholesky::SparseCholesky::new(s)?)
+            Linear::Other(Box::new(sparse_cholesky::SparseCholesky::new(s)?))
         }
         (LinearSolver::Schur { local_block_sizes }, Jacobian::Sparse(s)) => {
-            Box::new(schur::Schur::new(s, local_block_sizes)?)
+            Linear::Other(Box::new(schur::Schur::new(s, local_block_sizes)?))
         }
         _ => {
             return Err(LmError::Numerical(
@@ -409,7 +425,8 @@ mod tests {
             } else {
                 Jacobian::Dense(dense.clone())
             };
-            let mut sys = build_linear(&solver, &jac).unwrap();
+            let mut linear = build_linear(&solver, &jac).unwrap();
+            let sys = linear.as_dyn();
             sys.prepare(&jac, &r).unwrap();
             assert!(sys.inverse_quadratic(&jac, &w).is_none(), "{solver:?}");
             for mu in [0.0, 1e-3, 1.0, 50.0] {
