@@ -90,8 +90,8 @@ pub struct IterationRecord {
 ///
 /// Timed only when the set-up and the first linearisation of the solve took at least
 /// 20 µs: for a quicker (small) problem a clock read costs as much as a phase, so the phases
-/// are not timed and every field is zero ([`Report::elapsed`] and each iteration's
-/// `elapsed` are still measured).
+/// are not timed, every duration is zero and [`Timings::phases_timed`] is false
+/// ([`Report::elapsed`] and each iteration's `elapsed` are still measured).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Timings {
     /// In the user's residual function.
@@ -104,6 +104,9 @@ pub struct Timings {
     /// [`StatisticsMode::AtEnd`](crate::StatisticsMode::AtEnd), computing the statistics;
     /// statistics computed on demand are not timed here.
     pub statistics: Duration,
+    /// Whether the phases above were timed (false for a quick solve: then they are zero, not
+    /// measured).
+    pub phases_timed: bool,
 }
 
 /// The outcome of a solve.
@@ -266,11 +269,19 @@ impl Report {
             self.jacobian_evaluations
         );
         let t = &self.timings;
-        let _ = writeln!(
-            s,
-            "time: {:.3?} total ({:.3?} residuals, {:.3?} Jacobian, {:.3?} linear solver, {:.3?} statistics)",
-            self.elapsed, t.residuals, t.jacobian, t.linear_solver, t.statistics
-        );
+        let _ = if t.phases_timed {
+            writeln!(
+                s,
+                "time: {:.3?} total ({:.3?} residuals, {:.3?} Jacobian, {:.3?} linear solver, {:.3?} statistics)",
+                self.elapsed, t.residuals, t.jacobian, t.linear_solver, t.statistics
+            )
+        } else {
+            writeln!(
+                s,
+                "time: {:.3?} total (a quick solve: its phases were not timed)",
+                self.elapsed
+            )
+        };
         if let Some(st) = self.statistics() {
             let _ = write!(s, "{st}");
         }

@@ -726,3 +726,51 @@ fn report_counts_and_text() {
     assert_eq!(a.std_dev, b.std_dev);
     assert_eq!(a.singular_values, b.singular_values);
 }
+
+/// [`Decay`] with a residual function that takes at least 50 us (a slow model).
+struct SlowDecay(Decay);
+
+impl Problem for SlowDecay {
+    fn num_params(&self) -> usize {
+        self.0.num_params()
+    }
+    fn num_residuals(&self) -> usize {
+        self.0.num_residuals()
+    }
+    fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+        std::thread::sleep(std::time::Duration::from_micros(50));
+        self.0.residuals(x, r)
+    }
+}
+
+impl DenseJacobian for SlowDecay {
+    fn jacobian(&mut self, x: &[f64], j: MatMut<'_, f64>) -> Result<(), ModelError> {
+        self.0.jacobian(x, j)
+    }
+}
+
+#[test]
+fn phases_are_timed_or_said_not_to_be() {
+    // A slow model: its phases are timed, and the residuals took at least 50 us a call.
+    let mut p = SlowDecay(Decay::new(&[]));
+    let mut x = [1.0, 1.0, 0.0];
+    let r = minimize(&mut p, &mut x, &Options::default()).unwrap();
+    assert!(r.timings.phases_timed);
+    let calls = u32::try_from(r.residual_evaluations).unwrap();
+    assert!(r.timings.residuals >= std::time::Duration::from_micros(50) * calls);
+    assert!(r.full().contains(" residuals, "), "{}", r.full());
+    // Whatever a solve's speed, untimed phases are zero and the summary says they were not
+    // timed rather than printing zeros.
+    let mut q = Decay::new(&[]);
+    let mut y = [1.0, 1.0, 0.0];
+    let r = minimize(&mut q, &mut y, &Options::default()).unwrap();
+    if r.timings.phases_timed {
+        assert!(r.full().contains(" residuals, "));
+    } else {
+        assert_eq!(
+            r.timings.residuals + r.timings.jacobian,
+            std::time::Duration::ZERO
+        );
+        assert!(r.full().contains("phases were not timed"), "{}", r.full());
+    }
+}

@@ -53,8 +53,8 @@ pub(crate) type Callback<'a, 'b> =
 
 /// Chained timestamps: one clock read per phase boundary. On small problems a read costs
 /// as much as a phase: when the set-up and the first linearisation took less than
-/// [`PHASE_TIMING_MIN`], the phases are no longer timed (the report's [`Timings`] are zero)
-/// and the clock is read once per iteration, for the iteration's time.
+/// [`PHASE_TIMING_MIN`], the phases are no longer timed (the report's [`Timings`] are zero
+/// and say so) and the clock is read once per iteration, for the iteration's time.
 struct Clock {
     start: Instant,
     last: Instant,
@@ -748,7 +748,10 @@ pub(crate) fn run<M: Model>(
     }
     backend.setup(options, m, n)?;
 
-    let mut timings = Timings::default();
+    let mut timings = Timings {
+        phases_timed: true,
+        ..Timings::default()
+    };
     let cubic = options.damping == Damping::CubicInterpolation;
     let mut accel = options.acceleration;
     // Residual evaluations after which plain steps switch to geodesic acceleration.

@@ -14,6 +14,18 @@ fn sensor_name(s: usize, sensor_names: &[String]) -> String {
         .unwrap_or_else(|| format!("{}", s + 1))
 }
 
+/// The unit of a rigid frame's six parameters (translation, then rotation vector).
+pub(crate) const FRAME_UNIT: &str = "um (translation), urad (rotation)";
+
+/// The unit of parameter `k` of a rigid frame: um for tx ty tz, urad for rx ry rz.
+pub(crate) fn frame_param_unit(k: usize) -> &'static str {
+    if k % 6 >= 3 {
+        "urad"
+    } else {
+        "um"
+    }
+}
+
 fn sign(t: f64) -> f64 {
     if t > 0.0 {
         1.0
@@ -287,14 +299,10 @@ impl EffectModel for TrackerFrame {
         ["tx", "ty", "tz", "rx", "ry", "rz"][k % 6].to_string()
     }
     fn unit(&self) -> &str {
-        "um (translation), urad (rotation)"
+        FRAME_UNIT
     }
     fn param_unit(&self, k: usize) -> &str {
-        if k % 6 >= 3 {
-            "urad"
-        } else {
-            "um"
-        }
+        frame_param_unit(k)
     }
     fn channels(&self) -> &[Channel] {
         &[Channel::TrackerFrame]

@@ -2,6 +2,7 @@
 //! targets' positions and their sessions' tracker frames ([`crate::points`]), inclinometer
 //! mounts and the base tilt of their sessions ([`crate::tilts`]). One type each, as the
 //! built-in effects; the instruments' own modules predict through them.
+use super::builtin::{frame_param_unit, FRAME_UNIT};
 use super::{Channel, EffectModel};
 
 pub(crate) const AXES: [&str; 3] = ["x", "y", "z"];
@@ -46,14 +47,10 @@ impl EffectModel for PointFrame {
         format!("session {} {}", k / 6 + 1, FRAME[k % 6])
     }
     fn unit(&self) -> &str {
-        "um (translation), urad (rotation)"
+        FRAME_UNIT
     }
     fn param_unit(&self, k: usize) -> &str {
-        if k % 6 >= 3 {
-            "urad"
-        } else {
-            "um"
-        }
+        frame_param_unit(k)
     }
     fn channels(&self) -> &[Channel] {
         &[]
