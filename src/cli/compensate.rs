@@ -18,7 +18,6 @@
 use std::path::PathBuf;
 
 use clap::Args;
-use serde_json::json;
 
 use super::common::{self, RobotArg};
 use super::{usage_error, Ctx, Outcome};
@@ -266,15 +265,19 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
                 return Ok(Outcome::Done);
             }
             if args.json {
-                let v = json!({
-                    "out": out.display().to_string(),
-                    "targets": targets.len(),
-                    "robot": robot.file,
-                    "clearance_um": robot.clearance().radius_um,
-                    "known_effects": model.known_effects.iter().map(|k| k.effect.name()).collect::<Vec<_>>(),
-                    "outside_pose_map_range": outside,
-                });
-                writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
+                let summary = crate::report::commands::CompensateSummary {
+                    clearance_um: robot.clearance().radius_um,
+                    known_effects: model
+                        .known_effects
+                        .iter()
+                        .map(|k| k.effect.name().to_string())
+                        .collect(),
+                    out: out.display().to_string(),
+                    outside_pose_map_range: outside.iter().map(|s| s.to_string()).collect(),
+                    robot: robot.file.clone(),
+                    targets: targets.len(),
+                };
+                writeln!(ctx.out, "{}", summary.to_json())?;
             } else {
                 writeln!(
                     ctx.out,

@@ -3,7 +3,6 @@
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
-use serde_json::json;
 
 use super::common::{self, EffectsArg, PlanArgs, RobotArg};
 use super::{input_error, usage_error, Ctx, Outcome};
@@ -629,21 +628,21 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         return Ok(Outcome::Done);
     }
     if args.json {
-        let v = json!({
-            "simulated": true,
-            "out": args.out.display().to_string(),
-            "measure": format!("{:?}", args.measure).to_lowercase(),
-            "poses": campaign.poses.len(),
-            "readings": campaign.readings.len(),
-            "pose_measurements": campaign.pose_measurements.len(),
-            "point_measurements": campaign.point_measurements.len(),
-            "tilt_measurements": campaign.tilt_measurements.len(),
-            "effects": truth.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
-            "truth": truth.what,
-            "noise": noise_words,
-            "seed": args.plan.seed,
-        });
-        writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
+        let summary = crate::report::commands::SimulateSummary {
+            effects: truth.effects.iter().map(|e| e.name().to_string()).collect(),
+            measure: format!("{:?}", args.measure).to_lowercase(),
+            noise: noise_words.clone(),
+            out: args.out.display().to_string(),
+            point_measurements: campaign.point_measurements.len(),
+            pose_measurements: campaign.pose_measurements.len(),
+            poses: campaign.poses.len(),
+            readings: campaign.readings.len(),
+            seed: args.plan.seed,
+            simulated: true,
+            tilt_measurements: campaign.tilt_measurements.len(),
+            truth: truth.what.clone(),
+        };
+        writeln!(ctx.out, "{}", summary.to_json())?;
     } else {
         writeln!(
             ctx.out,

@@ -12,6 +12,7 @@
 #![forbid(unsafe_code)]
 
 pub mod calibrate;
+pub mod commands;
 pub mod design;
 pub mod fit;
 pub mod format;
