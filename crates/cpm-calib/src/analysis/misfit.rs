@@ -35,8 +35,8 @@ pub const MISFIT_P: f64 = 1e-3;
 /// chi2/dof above which a rejected fit is reported as not fitting.
 pub const MISFIT_CHI2_PER_DOF: f64 = 1.5;
 
-/// The chi-square test of a fit.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The chi-square test of a fit (serialised as `calibration.json`'s `misfit` figures).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Misfit {
     /// Sum of squared residuals over the declared noise squared.
     pub chi2: f64,

@@ -142,20 +142,10 @@ pub struct Outlier {
 /// `calibration.json`'s `misfit` object.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct MisfitReport {
-    /// Chi-square.
-    pub chi2: f64,
-    /// Degrees of freedom.
-    pub dof: usize,
-    /// Chi-square per degree of freedom.
-    pub chi2_per_dof: f64,
-    /// p-value.
-    pub p_value: f64,
-    /// Residual RMS, um.
-    pub residual_rms_um: f64,
-    /// Declared noise, um.
-    pub sigma_um: f64,
-    /// Outliers left out of the test.
-    pub outliers_left_out: usize,
+    /// The test's figures: chi-square, degrees of freedom, chi-square per degree of freedom,
+    /// p-value, residual RMS and declared noise (um), outliers left out.
+    #[serde(flatten)]
+    pub test: cpm_calib::misfit::Misfit,
     /// The test rejects the model.
     pub inconsistent: bool,
     /// The rule.
@@ -508,13 +498,7 @@ fn registration(
 /// The chi-square test against the declared noise (`None` when the noise was estimated).
 fn misfit_report(cal: &Calibration) -> Option<MisfitReport> {
     misfit(cal).map(|m| MisfitReport {
-        chi2: m.chi2,
-        dof: m.dof,
-        chi2_per_dof: m.chi2_per_dof,
-        p_value: m.p_value,
-        residual_rms_um: m.residual_rms_um,
-        sigma_um: m.sigma_um,
-        outliers_left_out: m.outliers_left_out,
+        test: m,
         inconsistent: m.inconsistent(),
         rule: format!(
             "inconsistent when p < {} and chi2/dof > {}",
