@@ -8,7 +8,9 @@
 
 use std::fmt;
 
-use crate::problem::ModelError;
+/// The error a user's model may return from any evaluation. It stops the solve and comes
+/// back inside [`LmError::Model`].
+pub type ModelError = Box<dyn std::error::Error + Send + Sync + 'static>;
 
 /// Which user callback failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -4,9 +4,7 @@
 
 use crate::options::ScaleUpdate;
 
-/// The error a user's model may return from any evaluation. It stops the solve and comes
-/// back inside [`LmError::Model`](crate::LmError::Model).
-pub type ModelError = Box<dyn std::error::Error + Send + Sync + 'static>;
+pub use crate::error::ModelError;
 
 /// A nonlinear least-squares problem: minimise `0.5 * sum_i r_i(x)^2` over `x`.
 pub trait Problem {

@@ -6,6 +6,7 @@
 use std::ops::ControlFlow;
 
 use crate::error::LmError;
+pub use crate::options::LinearSolver;
 use crate::options::Options;
 use crate::problem::{DenseJacobian, NormalEquations, SparseJacobian};
 use crate::report::{IterationRecord, Report};
@@ -22,67 +23,6 @@ mod trust_region;
 
 use jacobian::Jacobian;
 use model::{DenseModel, SparseModel};
-
-/// Linear solver for the damped normal equations `(J^T J + mu D^2) h = -J^T r`.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub enum LinearSolver {
-    /// Pivoted Householder QR of `J`, then Givens elimination of the damping rows per
-    /// damping value (MINPACK's approach). Accurate (never forms `J^T J`); default.
-    #[default]
-    DenseQr,
-    /// Dense Cholesky of `J^T J + mu D^2`. Faster for `m >> n`, squares the conditioning.
-    DenseCholesky,
-    /// Sparse Cholesky of `J^T J + mu D^2` (faer's supernodal/simplicial LLT with an AMD
-    /// ordering): the symbolic factorisation is done once, the numeric one per damping value.
-    SparseCholesky,
-    /// Schur complement for many small local blocks plus a few global parameters: the
-    /// local blocks are eliminated block by block, the reduced global system is solved
-    /// densely and the local steps are back-substituted. Each residual may depend on at most
-    /// one local block (and on any global parameters).
-    Schur {
-        /// Sizes of the local blocks: parameters `0..sizes[0]` form block 0, the next
-        /// `sizes[1]` block 1, and so on; parameters after `sum(sizes)` are global.
-        local_block_sizes: Vec<usize>,
-    },
-    /// The problem solves its own damped normal equations: required by, and only by,
-    /// [`NormalEquations`] problems ([`minimize_normal`]).
-    Supplied {
-        /// What the problem's solver is, for reports.
-        name: &'static str,
-    },
-}
-
-impl LinearSolver {
-    /// Short name for reports.
-    pub fn name(&self) -> &'static str {
-        match self {
-            LinearSolver::DenseQr => "dense QR",
-            LinearSolver::DenseCholesky => "dense Cholesky",
-            LinearSolver::SparseCholesky => "sparse Cholesky",
-            LinearSolver::Schur { .. } => "Schur complement",
-            LinearSolver::Supplied { name } => name,
-        }
-    }
-
-    /// Whether the solver works on the sparse Jacobian structure.
-    pub fn is_sparse(&self) -> bool {
-        matches!(
-            self,
-            LinearSolver::SparseCholesky | LinearSolver::Schur { .. }
-        )
-    }
-
-    pub(crate) fn validate(&self) -> Result<(), LmError> {
-        if let LinearSolver::Schur { local_block_sizes } = self {
-            if let Some(i) = local_block_sizes.iter().position(|&s| s == 0) {
-                return Err(LmError::InvalidOptions(format!(
-                    "Schur local_block_sizes[{i}] is 0; every local block needs at least one parameter"
-                )));
-            }
-        }
-        Ok(())
-    }
-}
 
 /// A linear solver for the damped system, set up once per solve.
 pub(crate) trait LinearSystem {
