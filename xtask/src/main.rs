@@ -265,21 +265,23 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    let mut files: Vec<(PathBuf, String)> = match cpm_report::paper_files::files(&r) {
-        Ok(f) => f.into_iter().map(|(n, t)| (out.join(n), t)).collect(),
+    // Every file of the reproduction, written all or none.
+    let mut files = cpm_io::write::OutputSet::new();
+    match cpm_report::paper_files::files(&r) {
+        Ok(f) => f.into_iter().for_each(|(n, t)| files.add(out.join(n), t)),
         Err(e) => {
             eprintln!("error: {e}");
             return ExitCode::FAILURE;
         }
-    };
+    }
     match cpm_report::paper_files::limited_files(&r, &out) {
-        Ok(f) => files.extend(f.into_iter().map(|(n, t)| (out.join(n), t))),
+        Ok(f) => f.into_iter().for_each(|(n, t)| files.add(out.join(n), t)),
         Err(e) => {
             eprintln!("error: the campaign under limits: {e}");
             return ExitCode::FAILURE;
         }
     }
-    match write_files(&files) {
+    match files.commit() {
         Ok(written) => {
             let summary = cpm_report::paper_files::summary_json(&r);
             println!(
@@ -347,21 +349,4 @@ fn main() -> ExitCode {
         Some("scale") => scale(&args[1..]),
         _ => usage(),
     }
-}
-
-/// Writes `files` (creating their folders), each to a temporary sibling renamed into place,
-/// so that an interruption never leaves a half-written file under its name.
-fn write_files(files: &[(PathBuf, String)]) -> std::io::Result<Vec<PathBuf>> {
-    let mut written = Vec::with_capacity(files.len());
-    for (path, text) in files {
-        if let Some(d) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(d)?;
-        }
-        let name = path.file_name().unwrap_or_default().to_string_lossy();
-        let tmp = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
-        std::fs::write(&tmp, text)?;
-        std::fs::rename(&tmp, path)?;
-        written.push(path.clone());
-    }
-    Ok(written)
 }

@@ -55,6 +55,7 @@ pub mod points;
 pub mod read;
 pub mod robot;
 pub mod table;
+pub mod write;
 
 /// Where the inputs of a fit came from, for the record (`calibration.json` `robot`, `data`;
 /// the headers of generated files).
