@@ -26,6 +26,7 @@
 //! assert!((ix.o2_condition - 2.0).abs() < 1e-12);
 //! assert!((ix.crlb_worst_um - 2f64.sqrt()).abs() < 1e-12); // sigma / s_min, s_min = 1/sqrt(2)
 //! ```
+use crate::fit::identify::rms;
 use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
@@ -186,13 +187,6 @@ pub fn indices_from_information(
     };
     fill_singular(&mut ix, sv);
     ix
-}
-
-fn rms(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
 }
 
 fn fill_singular(ix: &mut ObservabilityIndices, sv: Vec<f64>) {
