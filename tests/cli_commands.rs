@@ -1445,3 +1445,36 @@ fn readings_beyond_a_gauges_stroke_are_refused() {
         &p(&d.join("small.csv")),
     ]);
 }
+
+#[test]
+fn simulate_json_summary_counts_what_the_file_holds() {
+    let d = scratch("simulate-json");
+    let robot_path = example("hexapod_66.toml");
+    let data = d.join("data.csv");
+    let out = ok(&[
+        "simulate",
+        "--robot",
+        &robot_path,
+        "--random",
+        "20",
+        "--noise",
+        "gaussian:0.5",
+        "--seed",
+        "7",
+        "--out",
+        &p(&data),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let robot = Robot::load(Path::new(&robot_path)).unwrap();
+    let back = cpm::io::read_data_file(&data, &robot, &Default::default()).unwrap();
+    assert_eq!(v["simulated"], true);
+    assert!(back.campaign.simulated);
+    assert_eq!(v["out"], p(&data));
+    assert_eq!(v["seed"], 7);
+    assert_eq!(v["measure"], "lengths");
+    assert_eq!(v["readings"], back.campaign.readings.len());
+    assert_eq!(v["poses"], back.campaign.poses.len());
+    assert!(back.campaign.readings.len() >= 20, "{v}");
+    assert_eq!(v["pose_measurements"], 0);
+}
