@@ -84,9 +84,70 @@ pub struct FitArgs {
     /// `[calibration]` for the tracker kinds.
     #[arg(long)]
     pub noise_per_kind: bool,
+    /// A-priori tolerance of a group of parameters, GROUP=VALUE in the group's unit
+    /// (`installation_errors=2000` um, `link_scale=50000` ppm, `compliance=...` um/kN, `inf`
+    /// frees the group); repeatable. A direction the data see less well than its tolerance
+    /// is held near nominal and named in the report (a maximum a posteriori fit; see
+    /// docs/estimation.md). Default: `[calibration.tolerances]` of the description, else
+    /// cpm-calib's defaults scaled to the machine.
+    #[arg(long = "tolerance", value_name = "GROUP=VALUE")]
+    pub tolerance: Vec<String>,
+    /// Groups of parameters held at nominal and not fitted (comma-separated group names,
+    /// e.g. `installation_errors` to fit only the effects). Default: `[calibration] hold`.
+    #[arg(long, value_delimiter = ',', value_name = "GROUP")]
+    pub hold: Vec<String>,
+    /// No prior: the plain least-squares fit in every direction the data see at all (the fit
+    /// may then run off along directions the noise hides).
+    #[arg(long)]
+    pub no_prior: bool,
+    /// Residuals of 6-D tracker poses: `pose` (position and orientation), `legs` (each link's
+    /// length against the length the joints need for the measured pose: the
+    /// inverse-kinematics formulation), or `auto` (the default: whichever predicts held-out
+    /// poses better, judged by cross-validation in acquisition order; the report says which).
+    #[arg(long, value_enum, default_value_t = TrackerResiduals::Auto)]
+    pub tracker_residuals: TrackerResiduals,
+}
+
+/// `--tracker-residuals`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum TrackerResiduals {
+    /// Chosen out of sample.
+    Auto,
+    /// Pose residuals.
+    Pose,
+    /// Leg-length residuals (inverse kinematics of the measured pose).
+    Legs,
 }
 
 impl FitArgs {
+    /// The tolerances of the fit: the description's, then the options'.
+    pub fn tolerances(&self, robot: &Robot) -> anyhow::Result<crate::calib::Tolerances> {
+        let mut t = robot
+            .tolerances()
+            .map_err(|e| anyhow::Error::new(crate::io::ReadError::from(e)))?;
+        for spec in &self.tolerance {
+            let (group, value) = spec.split_once('=').ok_or_else(|| {
+                super::usage_error(format!(
+                    "--tolerance {spec:?}: expected GROUP=VALUE, e.g. installation_errors=2000"
+                ))
+            })?;
+            let v: f64 = match value.trim() {
+                "inf" | "infinity" => f64::INFINITY,
+                x => x.parse().map_err(|_| {
+                    super::usage_error(format!("--tolerance {spec:?}: {x:?} is not a number"))
+                })?,
+            };
+            t.set(group.trim(), v)
+                .map_err(|e| super::usage_error(format!("--tolerance {spec:?}: {e}")))?;
+        }
+        for h in &self.hold {
+            if !t.hold.contains(h) {
+                t.hold.push(h.clone());
+            }
+        }
+        t.off = self.no_prior;
+        Ok(t)
+    }
     /// Checks the options (usage errors before any file is read), then loads and checks the
     /// robot, the effects and the data.
     pub fn load(&self, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
@@ -234,6 +295,21 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         model = m;
         ctx.note(common::instruments_note(&model));
     }
+    // No hidden load: an effect whose direction comes from the link forces needs the load
+    // the description declares.
+    if robot.description.load.is_none() {
+        if let Some(e) = model.effects.iter().find(|e| needs_load(**e)) {
+            return Err(super::input_error(format!(
+                "{}: the effect `{}` needs the platform's load (the link forces give its direction), and the description declares none: add a [load] table (platform_mass_kg, platform_com_mm, optional payload and external wrench; docs/formats.md) or leave `{}` out",
+                robot.file,
+                e.name(),
+                e.name()
+            )));
+        }
+    }
+    let tolerances = args.tolerances(&robot)?;
+    crate::calib::prior::prior_std(&model, &tolerances)
+        .map_err(|e| super::usage_error(format!("tolerances: {e}")))?;
     Ok(Inputs {
         data_paths: data.clone(),
         provenance: Provenance {
@@ -242,12 +318,23 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         },
         identify: IdentifyOptions {
             sigma_um: sigma,
+            tolerances,
+            leg_space: args.tracker_residuals == TrackerResiduals::Legs,
             ..IdentifyOptions::default()
         },
         robot,
         model,
         merged,
     })
+}
+
+/// True for the effects whose direction the link forces set, and so need a declared `[load]`:
+/// compliance and the clearance correction.
+pub fn needs_load(effect: crate::calib::Effect) -> bool {
+    matches!(
+        effect,
+        crate::calib::Effect::Compliance | crate::calib::Effect::Clearance
+    )
 }
 
 /// The sessions of a campaign that hold tracker pose measurements, when there are two or more

@@ -55,6 +55,29 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     };
     let inputs = args.fit.load(ctx)?;
     let campaign = &inputs.merged.campaign;
+    // No hidden load: without a declared [load], the effects whose direction the link
+    // forces set are not candidates (an explicit --candidates naming one is an error).
+    let candidates = if inputs.robot.description.load.is_none() {
+        let (skip, keep): (Vec<Effect>, Vec<Effect>) = candidates
+            .into_iter()
+            .partition(|e| calibrate::needs_load(*e));
+        if !skip.is_empty() {
+            if args.candidates.is_some() {
+                return Err(super::input_error(format!(
+                    "{}: --candidates names {}, which needs the platform's load, and the description declares none: add a [load] table (docs/formats.md) or leave it out",
+                    inputs.robot.file,
+                    skip.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
+                )));
+            }
+            ctx.note(format!(
+                "{} not tried: the description declares no [load], and the link forces that give these effects their direction need one",
+                skip.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
+            ));
+        }
+        keep
+    } else {
+        candidates
+    };
     // An explicit --candidates list is the whole candidate set: the pose map scan joins it
     // only when --pose-map-degree asks for it.
     let pose_map_degree = match (args.pose_map_degree, &args.candidates) {

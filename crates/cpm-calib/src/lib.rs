@@ -86,7 +86,7 @@ pub mod paper;
 // Every module's path from before the rooms, kept.
 pub use analysis::{accuracy, diagnostics, identifiability, misfit};
 pub use data::{campaign, simulate};
-pub use fit::{identify, implicit, noise, refine, registration, session};
+pub use fit::{identify, implicit, noise, prior, refine, registration, session};
 pub use model::{effects, points, tilts};
 /// Open instruments ([`model::instruments`]), with their simulation
 /// ([`simulate::simulate_instruments`]) at its old path.
@@ -104,7 +104,7 @@ pub use effects::{Channel, Effect, EffectInput, EffectModel, EffectSettings, Kno
 pub use error::CalibError;
 pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
 pub use identify::{
-    identifiability, identification_jacobian, identify, Calibration, IdentifyOptions,
+    identifiability, identification_jacobian, identify, Calibration, IdentifyOptions, Tolerances,
     DOWNWEIGHT_LEVEL, MAX_DOWNWEIGHTED_SHARE,
 };
 pub use instruments::{Instrument, InstrumentInput};

@@ -435,6 +435,17 @@ pub struct CalibrationSpec {
     /// by the calibration crate. Default none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub known_effects: BTreeMap<String, Vec<f64>>,
+    /// `[calibration.tolerances]`: the a-priori tolerance (standard deviation) of each group of
+    /// parameters, keyed by group (`installation_errors` in um, an effect's name in the
+    /// effect's unit, e.g. `link_scale = 50000` ppm); interpreted by the calibration crate,
+    /// which documents the defaults (scaled to the machine). A fit holds a direction that the
+    /// data see less well than its tolerance near nominal. Default: the calibration crate's.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub tolerances: BTreeMap<String, f64>,
+    /// Groups of parameters held at their nominal (or known) values and not fitted, e.g.
+    /// `hold = ["installation_errors"]` to fit only the effects. Default none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hold: Vec<String>,
     /// The description this calibration started from (written by `cpm calibrate` and
     /// `cpm refine`: the path as given to them, made absolute), so that `cpm validate` can
     /// take it as the reference by default. Optional.

@@ -198,6 +198,25 @@ impl Robot {
         )
     }
 
+    /// The a-priori tolerances of `[calibration.tolerances]` and the groups of `[calibration]
+    /// hold` (checked against the model when a fit uses them: a group the model does not
+    /// have is an error naming it).
+    pub fn tolerances(&self) -> Result<cpm_calib::fit::prior::Tolerances, InputError> {
+        let mut t = cpm_calib::fit::prior::Tolerances::default();
+        if let Some(c) = &self.description.calibration {
+            for (name, v) in &c.tolerances {
+                t.set(name, *v).map_err(|e| InputError {
+                    file: self.file.clone(),
+                    line: None,
+                    field: Some(format!("calibration.tolerances.{name}")),
+                    message: e.to_string(),
+                })?;
+            }
+            t.hold = c.hold.clone();
+        }
+        Ok(t)
+    }
+
     /// `[calibration] sensor_noise_um` when declared and positive.
     pub fn sensor_noise_um(&self) -> Option<f64> {
         self.description

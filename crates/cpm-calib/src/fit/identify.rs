@@ -12,13 +12,31 @@ use serde::{Deserialize, Serialize};
 use crate::analysis::identifiability::{
     physical_patterns, try_analyze, Identifiability, RankOptions,
 };
+pub use crate::fit::prior::Tolerances;
+use crate::fit::prior::{prior_std, summarize, PriorSummary};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, Effect, MeasurementModel};
 
 /// Options of [`identify`]. The default: cpm-lm's defaults, default rank thresholds, noise
-/// estimated from the residual, start at the nominal geometry.
+/// estimated from the residual, start at the nominal geometry, every group's default
+/// tolerance as its prior ([`crate::fit::prior`]).
 #[derive(Debug, Clone, Default)]
 pub struct IdentifyOptions {
+    /// A-priori tolerances per group of parameters and the groups held at their start: the
+    /// prior of the maximum a posteriori fit ([`crate::fit::prior`]). Default: every group's
+    /// default tolerance, nothing held; [`Tolerances::none`] is the plain least-squares fit.
+    pub tolerances: Tolerances,
+    /// The noise (weighted, um of the reference) the prior is weighed against when the noise is
+    /// not declared: set it to a full fit's estimate to fit a part of the same campaign (a
+    /// cross-validation fold) without estimating it again. Default `None`: estimated with the
+    /// fit.
+    pub prior_noise_um: Option<f64>,
+    /// Fit 6-D tracker poses in leg space ([`crate::model::leg_residuals`]: each link's
+    /// effective length against the length the joints need for the measured pose, um) rather
+    /// than in pose space; the reported residuals, noise and standard deviations stay in pose
+    /// space (what `calibrated.toml` reproduces). Applies only where
+    /// [`crate::model::leg_space_applies`]; ignored elsewhere. Default false.
+    pub leg_space: bool,
     /// Least-squares options (damping strategy etc.). Default: cpm-lm's defaults (the trust-region damping, [`cpm_lm::Damping::TrustRegion`]).
     pub lm: cpm_lm::Options,
     /// Rank thresholds. Default [`RankOptions::default`].
@@ -91,6 +109,13 @@ pub struct Calibration {
     /// The leverage of each observation (diagonal of the hat matrix of the weighted
     /// Jacobian in the identifiable subspace, [`crate::noise`]); empty when not computed.
     pub leverages: Vec<f64>,
+    /// What the prior did (`None` for a fit without one, [`Tolerances::none`]): per parameter
+    /// the prior and posterior standard deviations and the data's share, and the directions
+    /// held near nominal because the data see them less well than their tolerance.
+    pub prior: Option<PriorSummary>,
+    /// The a-priori standard deviation of every parameter as applied (model units; 0 held,
+    /// infinite free).
+    pub prior_std: Vec<f64>,
 }
 
 /// The weight `rho'(r^2)` below which a robust loss is said to down-weight an observation.
@@ -135,9 +160,70 @@ struct Subspace<'a> {
     cached_theta: Vec<f64>,
     cached_y: Vec<f64>,
     cached: bool,
+    /// Parameters with a finite, non-zero prior: (index, 1 / tolerance).
+    prior_rows: Vec<(usize, f64)>,
+    /// The noise the prior rows are weighed against (um of the reference).
+    prior_sigma: f64,
+    /// Leg-space residuals (um of leg length) instead of the predictions' (pose space).
+    leg: bool,
+    /// The last leg-space residuals (um) and their Jacobian in the fit's directions.
+    leg_r: Vec<f64>,
+    leg_jac: DMatrix<f64>,
 }
 
+/// Refits the tracker frames of `e` in pose space (the machine held fixed); the problem's
+/// start becomes the result and its directions the frames' (so that `theta = 0` is it).
+fn reregister_frames(
+    problem: &mut Subspace<'_>,
+    e: Vec<f64>,
+    lm: &cpm_lm::Options,
+) -> Result<Vec<f64>, CalibError> {
+    let Some(b) = problem
+        .model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(Effect::TrackerFrame))
+    else {
+        problem.start_um = DVector::from_vec(e);
+        problem.basis = DMatrix::zeros(problem.start_um.len(), 0);
+        problem.cached = false;
+        return Ok(problem.start_um.iter().copied().collect());
+    };
+    let np = e.len();
+    let mut basis = DMatrix::zeros(np, b.len);
+    for c in 0..b.len {
+        basis[(b.offset + c, c)] = 1.0;
+    }
+    problem.start_um = DVector::from_vec(e);
+    problem.basis = basis;
+    problem.leg = false;
+    problem.prior_rows.clear();
+    problem.cached = false;
+    let mut x = vec![0.0; b.len];
+    cpm_lm::minimize(
+        problem,
+        &mut x,
+        &cpm_lm::Options {
+            loss: cpm_lm::Loss::Squared,
+            ..lm.clone()
+        },
+    )?;
+    let out = problem.errors(&x);
+    problem.start_um = DVector::from_column_slice(&out);
+    problem.cached = false;
+    Ok(out)
+}
+
+/// Step of the leg-space Jacobian's central differences, in the fit's coordinates.
+const LEG_STEP: f64 = 1e-4;
+
 impl Subspace<'_> {
+    /// Leg-space residuals at parameters `e`, um.
+    fn leg_at(&self, e: &[f64]) -> Result<Vec<f64>, CalibError> {
+        let r = crate::model::leg_residuals(self.model, self.prepared, self.campaign, e)?;
+        Ok(r.into_iter().map(|x| x * 1e3).collect())
+    }
+
     fn errors(&self, theta: &[f64]) -> Vec<f64> {
         let e = &self.start_um + &self.basis * DVector::from_column_slice(theta);
         e.iter().copied().collect()
@@ -170,11 +256,21 @@ impl Problem for Subspace<'_> {
         self.basis.ncols()
     }
     fn num_residuals(&self) -> usize {
-        self.measured_mm.len()
+        self.measured_mm.len() + self.prior_rows.len()
     }
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+        let m = self.measured_mm.len();
+        if self.leg {
+            let e = self.errors(x);
+            self.leg_r = self.leg_at(&e)?;
+            r[..m].copy_from_slice(&self.leg_r);
+            for (q, &(k, inv)) in self.prior_rows.iter().enumerate() {
+                r[m + q] = self.prior_sigma * inv * e[k];
+            }
+            return Ok(());
+        }
         self.evaluate(x)?;
-        for (((ri, yi), mi), w) in r
+        for (((ri, yi), mi), w) in r[..m]
             .iter_mut()
             .zip(&self.cached_y)
             .zip(&self.measured_mm)
@@ -182,12 +278,50 @@ impl Problem for Subspace<'_> {
         {
             *ri = (yi - mi) * 1e3 * w;
         }
+        // The prior: the departure from nominal in tolerances, weighed against the noise.
+        if !self.prior_rows.is_empty() {
+            let e = self.errors(x);
+            for (q, &(k, inv)) in self.prior_rows.iter().enumerate() {
+                r[m + q] = self.prior_sigma * inv * e[k];
+            }
+        }
         Ok(())
     }
 }
 
 impl DenseJacobian for Subspace<'_> {
     fn jacobian(&mut self, x: &[f64], mut jac: faer::MatMut<'_, f64>) -> Result<(), ModelError> {
+        if self.leg {
+            // Central differences along the fit's directions (the leg-space residuals are
+            // cheap: inverse kinematics, no forward kinematics).
+            let m = self.measured_mm.len();
+            let r = self.basis.ncols();
+            let mut j = DMatrix::zeros(m, r);
+            let mut xp = x.to_vec();
+            for c in 0..r {
+                let h = LEG_STEP * (1.0 + x[c].abs());
+                xp[c] = x[c] + h;
+                let up = self.leg_at(&self.errors(&xp))?;
+                xp[c] = x[c] - h;
+                let down = self.leg_at(&self.errors(&xp))?;
+                xp[c] = x[c];
+                for row in 0..m {
+                    j[(row, c)] = (up[row] - down[row]) / (2.0 * h);
+                }
+            }
+            for c in 0..r {
+                for row in 0..m {
+                    jac[(row, c)] = j[(row, c)];
+                }
+            }
+            for (q, &(k, inv)) in self.prior_rows.iter().enumerate() {
+                for c in 0..r {
+                    jac[(m + q, c)] = self.prior_sigma * inv * self.basis[(k, c)];
+                }
+            }
+            self.leg_jac = j;
+            return Ok(());
+        }
         self.evaluate(x)?;
         let reduced = &self.full_jac * &self.basis * 1e3;
         for c in 0..reduced.ncols() {
@@ -195,8 +329,146 @@ impl DenseJacobian for Subspace<'_> {
                 jac[(r, c)] = reduced[(r, c)] * self.weights[r];
             }
         }
+        let m = self.measured_mm.len();
+        for (q, &(k, inv)) in self.prior_rows.iter().enumerate() {
+            for c in 0..self.basis.ncols() {
+                jac[(m + q, c)] = self.prior_sigma * inv * self.basis[(k, c)];
+            }
+        }
         Ok(())
     }
+}
+
+/// The weighted residuals (um of the reference) of predictions `y` against the campaign.
+fn r0_of(_j: &DMatrix<f64>, y: &[f64], campaign: &Campaign, weights: &[f64]) -> Vec<f64> {
+    y.iter()
+        .zip(campaign.observations())
+        .zip(weights)
+        .map(|((a, b), w)| (a - b) * 1e3 * w)
+        .collect()
+}
+
+/// The directions a fit under a prior moves along (columns, in the model's units): the row
+/// space of the tolerance-scaled problem `[J diag(t) / sigma; I]` (the identity rows for the
+/// parameters with a tolerance). Free parameters' columns are scaled to the median norm of
+/// the others (so that a relative cut treats them alike); held ones take no part. Directions
+/// below `rtol` of the largest singular value, or below 1/2 (a prior row alone gives 1), are
+/// left out: those are blind free directions.
+fn prior_basis(j: &DMatrix<f64>, prior: &[f64], sigma: f64, rtol: f64) -> DMatrix<f64> {
+    let (m, np) = (j.nrows(), prior.len());
+    let mut d = vec![0.0; np];
+    let mut norms = Vec::new();
+    for k in 0..np {
+        if prior[k].is_finite() && prior[k] > 0.0 {
+            d[k] = prior[k] / sigma;
+            let n = j.column(k).norm() * d[k];
+            if n > 0.0 {
+                norms.push(n);
+            }
+        }
+    }
+    norms.sort_by(f64::total_cmp);
+    let typical = norms.get(norms.len() / 2).copied().unwrap_or(1.0);
+    for k in 0..np {
+        if prior[k].is_infinite() {
+            let n = j.column(k).norm();
+            d[k] = if n > 0.0 { typical / n } else { 0.0 };
+        }
+    }
+    // A^T A = D J^T J D + diag(1 for the prior rows).
+    let mut jd = j.clone();
+    for k in 0..np {
+        jd.column_mut(k).scale_mut(d[k]);
+    }
+    let _ = m;
+    let mut ata = jd.transpose() * &jd;
+    for k in 0..np {
+        if prior[k].is_finite() && prior[k] > 0.0 {
+            ata[(k, k)] += 1.0;
+        }
+    }
+    let eig = ata.symmetric_eigen();
+    let smax = eig
+        .eigenvalues
+        .iter()
+        .fold(0.0_f64, |a, b| a.max(*b))
+        .max(0.0)
+        .sqrt();
+    let cut = (rtol * smax).min(0.5);
+    let keep: Vec<usize> = (0..np)
+        .filter(|&i| eig.eigenvalues[i].max(0.0).sqrt() > cut)
+        .collect();
+    let mut basis = DMatrix::zeros(np, keep.len());
+    for (c, &i) in keep.iter().enumerate() {
+        for k in 0..np {
+            basis[(k, c)] = d[k] * eig.eigenvectors[(k, i)];
+        }
+    }
+    basis
+}
+
+/// Most refits while the noise the prior is weighed against settles.
+const MAX_NOISE_ROUNDS: usize = 8;
+
+/// Relative change of the noise estimate below which it has settled.
+const NOISE_SETTLED: f64 = 0.02;
+
+/// The noise of the weighted data residuals at the problem's current point (um of the
+/// reference): their sum of squares over the observations less the effective number of
+/// parameters (the prior's share left out); a robust fit's flagged outliers are left out.
+fn noise_of_fit(
+    problem: &Subspace<'_>,
+    campaign: &Campaign,
+    loss: &cpm_lm::Loss,
+    robust: bool,
+) -> Result<f64, CalibError> {
+    let r: Vec<f64> = if problem.leg {
+        problem.leg_r.clone()
+    } else {
+        problem
+            .cached_y
+            .iter()
+            .zip(&problem.measured_mm)
+            .zip(&problem.weights)
+            .map(|((a, b), w)| (a - b) * 1e3 * w)
+            .collect()
+    };
+    let outliers = if robust {
+        crate::analysis::diagnostics::outliers_by_kind(&r, campaign, None)
+    } else {
+        Vec::new()
+    };
+    let _ = loss;
+    let (ssr, count) = r
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| outliers.binary_search(k).is_err())
+        .fold((0.0, 0usize), |(s, n), (_, x)| (s + x * x, n + 1));
+    // Effective parameters in the fit's subspace: tr(H^-1 Jr^T Jr / s^2), H = Jr^T Jr / s^2
+    // + B^T diag(1/t^2) B.
+    let s2 = problem.prior_sigma * problem.prior_sigma;
+    let jr = if problem.leg && problem.leg_jac.nrows() > 0 {
+        problem.leg_jac.clone()
+    } else {
+        let mut jr = &problem.full_jac * &problem.basis * 1e3;
+        for (row, w) in problem.weights.iter().enumerate() {
+            let mut x = jr.row_mut(row);
+            x *= *w;
+        }
+        jr
+    };
+    let g = jr.transpose() * &jr / s2;
+    let mut h = g.clone();
+    for &(k, inv) in &problem.prior_rows {
+        let b = problem.basis.row(k);
+        h += b.transpose() * b * (inv * inv);
+    }
+    let p_eff = match h.clone().cholesky() {
+        Some(c) => (c.solve(&g)).trace(),
+        None => problem.basis.ncols() as f64,
+    };
+    let dof = (count as f64 - p_eff).max(1.0);
+    Ok((ssr / dof).sqrt())
 }
 
 /// Root mean square (0 for no values).
@@ -286,6 +558,8 @@ pub fn identify(
     }
     let prepared = Prepared::new(model, campaign)?;
     let m = campaign.len();
+    let prior = prior_std(model, &options.tolerances)?;
+    let with_prior = prior.iter().any(|p| p.is_finite());
     let sigma_ref = options.sigma_um.unwrap_or(campaign.pose_sigma());
     let weights = campaign.observation_weights(sigma_ref);
     let weigh = |mut j: DMatrix<f64>| {
@@ -297,50 +571,127 @@ pub fn identify(
     };
     let mut j0 = DMatrix::zeros(m, np);
     let y0 = predict(model, &prepared, campaign, &start, Some(&mut j0))?;
+    let r0_pose = r0_of(&j0, &y0, campaign, &weights);
     let patterns = physical_patterns(model, campaign);
-    let first = try_analyze(&weigh(j0.clone()), 1.0, &options.rank, &patterns)?;
+    // Held parameters take no part in the fit: their columns are left out of the directions
+    // the fit moves along.
+    let mut j_free = weigh(j0.clone());
+    for (k, p) in prior.iter().enumerate() {
+        if *p == 0.0 {
+            j_free.column_mut(k).fill(0.0);
+        }
+    }
+    let first = try_analyze(&j_free, 1.0, &options.rank, &patterns)?;
     if first.rank == 0 {
         return Err(CalibError::NoInformation(
             "the identification Jacobian is zero: the readings do not depend on any installation error".into(),
         ));
     }
+    let prior_rows: Vec<(usize, f64)> = prior
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.is_finite() && **p > 0.0)
+        .map(|(k, p)| (k, 1.0 / p))
+        .collect();
+    // Under a prior the fit moves in the directions of the tolerance-scaled problem (the
+    // data's Jacobian in tolerances, with the prior's rows): every direction with a tolerance
+    // takes part (the prior holds what the data do not see), and a free parameter's blind
+    // directions stay out. Without one, in the identifiable subspace of the data alone.
+    let basis = if with_prior {
+        let sigma0 = options
+            .sigma_um
+            .or(options.prior_noise_um)
+            .unwrap_or_else(|| rms(&r0_of(&j_free, &y0, campaign, &weights)).max(1e-9 * sigma_ref));
+        prior_basis(&j_free, &prior, sigma0, options.rank.rank_rtol)
+    } else {
+        first.row_space()
+    };
+    let rank = basis.ncols();
     let mut problem = Subspace {
         model,
         prepared: &prepared,
         campaign,
         start_um: DVector::from_vec(start),
-        basis: first.row_space(),
+        basis,
         measured_mm: campaign.observations(),
         weights: weights.clone(),
         // The start (theta = 0) is evaluated already.
         full_jac: j0,
-        cached_theta: vec![0.0; first.rank],
+        cached_theta: vec![0.0; rank],
         cached_y: y0,
         cached: true,
+        prior_rows,
+        prior_sigma: 0.0,
+        leg: options.leg_space && crate::model::leg_space_applies(campaign),
+        leg_r: Vec::new(),
+        leg_jac: DMatrix::zeros(0, 0),
     };
-    let mut theta = vec![0.0; first.rank];
-    let mut r0 = vec![0.0; m];
+    let mut theta = vec![0.0; rank];
+    let mut r0 = vec![0.0; m + problem.prior_rows.len()];
     problem
         .residuals(&theta, &mut r0)
         .map_err(|e| CalibError::invalid("model at the start", e.to_string()))?;
+    r0.truncate(m);
     // A robust (above all a redescending) loss started far from the solution sees every
     // residual beyond its scale and down-weights everything: start it from least squares,
     // and a redescending one from Huber's solution at the same scale.
     let robust = !options.lm.loss.is_squared();
-    let solver = if robust {
-        let stage = |loss| cpm_lm::Options {
-            loss,
-            ..options.lm.clone()
+    let solve =
+        |problem: &mut Subspace<'_>, theta: &mut Vec<f64>| -> Result<cpm_lm::Report, CalibError> {
+            Ok(if robust {
+                let stage = |loss| cpm_lm::Options {
+                    loss,
+                    ..options.lm.clone()
+                };
+                cpm_lm::minimize(problem, theta, &stage(cpm_lm::Loss::Squared))?;
+                if let cpm_lm::Loss::Tukey(k) | cpm_lm::Loss::Cauchy(k) = options.lm.loss {
+                    cpm_lm::minimize(problem, theta, &stage(cpm_lm::Loss::Huber(k)))?;
+                }
+                cpm_lm::minimize(problem, theta, &options.lm)?
+            } else {
+                cpm_lm::minimize(problem, theta, &options.lm)?
+            })
         };
-        cpm_lm::minimize(&mut problem, &mut theta, &stage(cpm_lm::Loss::Squared))?;
-        if let cpm_lm::Loss::Tukey(k) | cpm_lm::Loss::Cauchy(k) = options.lm.loss {
-            cpm_lm::minimize(&mut problem, &mut theta, &stage(cpm_lm::Loss::Huber(k)))?;
+    // The prior is weighed against the noise: the declared one, else the residual's,
+    // estimated with the fit (from the nominal's residual down, until it settles).
+    let solver = match (with_prior, options.sigma_um) {
+        (false, _) => solve(&mut problem, &mut theta)?,
+        (true, Some(s)) => {
+            problem.prior_sigma = s;
+            solve(&mut problem, &mut theta)?
         }
-        cpm_lm::minimize(&mut problem, &mut theta, &options.lm)?
-    } else {
-        cpm_lm::minimize(&mut problem, &mut theta, &options.lm)?
+        (true, None) if options.prior_noise_um.is_some() => {
+            problem.prior_sigma = options.prior_noise_um.unwrap_or(sigma_ref);
+            solve(&mut problem, &mut theta)?
+        }
+        (true, None) => {
+            problem.prior_sigma = rms(&r0).max(1e-9 * sigma_ref);
+            let mut report = solve(&mut problem, &mut theta)?;
+            for _ in 0..MAX_NOISE_ROUNDS {
+                if problem.leg {
+                    problem.leg_r = problem.leg_at(&problem.errors(&theta))?;
+                } else {
+                    problem.evaluate(&theta)?;
+                }
+                let s = noise_of_fit(&problem, campaign, &options.lm.loss, robust)?;
+                let settled =
+                    (s - problem.prior_sigma).abs() <= NOISE_SETTLED * problem.prior_sigma;
+                problem.prior_sigma = s;
+                if settled {
+                    break;
+                }
+                report = solve(&mut problem, &mut theta)?;
+            }
+            report
+        }
     };
-    let e_hat = problem.errors(&theta);
+    let mut e_hat = problem.errors(&theta);
+    if problem.leg {
+        // The session frames registered again in pose space with the machine held fixed, as
+        // `validate` registers a session: the written machine then reproduces the fit.
+        e_hat = reregister_frames(&mut problem, e_hat, &options.lm)?;
+        theta = vec![0.0; problem.basis.ncols()];
+    }
     problem.evaluate(&theta)?;
     let (e_hat, y, jf) = match base_frame_gauge(model, campaign, &e_hat)? {
         // The same fit, told in the base joints' own frame: predicted again there (equal to
@@ -362,7 +713,12 @@ pub fn identify(
         .zip(&weights)
         .map(|((a, b), w)| (a - b) * 1e3 * w)
         .collect();
-    let jf = weigh(jf);
+    let mut jf = weigh(jf);
+    for (k, p) in prior.iter().enumerate() {
+        if *p == 0.0 {
+            jf.column_mut(k).fill(0.0);
+        }
+    }
     let outliers =
         crate::analysis::diagnostics::outliers_by_kind(&residuals_um, campaign, options.sigma_um);
     let downweighted_share = if robust && !residuals_um.is_empty() {
@@ -383,20 +739,38 @@ pub fn identify(
         .fold((0.0, 0usize), |(s, n), (_, r)| (s + r * r, n + 1));
     let (sigma_um, sigma_estimated) = match options.sigma_um {
         Some(s) => (s, false),
+        None if with_prior => {
+            // The residual's degrees of freedom: the observations less the effective number
+            // of parameters the fit used (the prior takes the rest).
+            let p_eff = summarize(&jf, &prior, problem.prior_sigma).effective_params;
+            let dof = (count as f64 - p_eff).max(1.0);
+            ((ssr / dof).sqrt(), true)
+        }
         None => {
             let dof = count.saturating_sub(first.rank).max(1);
             ((ssr / dof as f64).sqrt(), true)
         }
     };
     let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
+    let prior_summary = with_prior.then(|| summarize(&jf, &prior, sigma_um));
     let leverages = crate::analysis::identifiability::leverages(&jf, &ident);
     // Blind directions are named at the start (the nominal geometry, where the physical
     // patterns are exact); at the solution the errors tilt them by a few microradians.
     ident.blind_directions = first.blind_directions.clone();
     ident.unexplained_null_dimensions = (ident.num_params - ident.rank)
         .saturating_sub(first.blind_directions.iter().map(|b| b.dimensions).sum());
-    let estimate_um: Vec<Option<f64>> = (0..np)
-        .map(|k| ident.determined[k].then_some(e_hat[k]))
+    // A parameter is reported as measured when the data determine it on its own and, under a
+    // prior, supply at least half of its determination; its standard deviation is then the
+    // posterior one (equal to the Cramér-Rao bound when the prior is far looser).
+    let measured =
+        |k: usize| ident.determined[k] && prior_summary.as_ref().is_none_or(|p| p.determined(k));
+    let estimate_um: Vec<Option<f64>> = (0..np).map(|k| measured(k).then_some(e_hat[k])).collect();
+    let std_um: Vec<Option<f64>> = (0..np)
+        .map(|k| match &prior_summary {
+            Some(p) if measured(k) => p.posterior_std[k].or(ident.crlb_std_um[k]),
+            Some(_) => None,
+            None => ident.crlb_std_um[k],
+        })
         .collect();
     let combinations = (0..ident.rank)
         .map(|c| {
@@ -415,7 +789,7 @@ pub fn identify(
     Ok(Calibration {
         simulated: campaign.simulated,
         estimate_um,
-        std_um: ident.crlb_std_um.clone(),
+        std_um,
         minimum_norm_um: e_hat,
         combinations,
         identifiability: ident,
@@ -423,7 +797,7 @@ pub fn identify(
         sigma_estimated,
         sigma_excludes_outliers,
         outliers,
-        initial_rms_um: rms(&r0),
+        initial_rms_um: rms(&r0_pose),
         residual_rms_um: rms(&residuals_um),
         residuals_um,
         solver,
@@ -431,6 +805,8 @@ pub fn identify(
         robust_failed: downweighted_share > MAX_DOWNWEIGHTED_SHARE,
         sigma_ref_um: sigma_ref,
         leverages,
+        prior: prior_summary,
+        prior_std: prior,
     })
 }
 

@@ -702,5 +702,9 @@ pub fn identify_implicit_calibration(
         // Readings only, weighted by 1: their own noise.
         sigma_ref_um: sigma_um,
         leverages: Vec::new(),
+        // The implicit formulation fits length readings at scale, least squares without a
+        // prior (its campaigns determine every parameter they fit far below any tolerance).
+        prior: None,
+        prior_std: vec![f64::INFINITY; np],
     })
 }

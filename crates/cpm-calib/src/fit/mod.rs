@@ -8,11 +8,13 @@
 //! - [`implicit`]: implicit-loop calibration, the actual poses as unknowns;
 //! - [`noise`]: noise per kind of observation, estimated from a fit's residual, and the fit
 //!   reweighed by it;
-//! - [`session`]: a new measurement session re-registered against a machine held fixed.
+//! - [`session`]: a new measurement session re-registered against a machine held fixed;
+//! - [`prior`]: the a-priori tolerances of the parameters, the prior of the fit.
 pub mod formulation;
 pub mod identify;
 pub mod implicit;
 pub mod noise;
+pub mod prior;
 pub mod refine;
 pub mod registration;
 pub mod session;

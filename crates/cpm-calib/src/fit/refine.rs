@@ -38,6 +38,7 @@
 //! Rounds stop when no candidate is significant, when the residual is white and consistent with
 //! the declared noise, or after `max_steps`. What remains correlated with a regressor is
 //! reported as unexplained structure, by name, rather than forced into an effect.
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
@@ -259,11 +260,6 @@ impl PoseRange {
     }
 }
 
-/// Campaigns of at most this many observations get the blocked cross-validated error of every
-/// fitted candidate in the report (larger ones: of the eligible candidates up to the one
-/// added).
-pub const CV_EVERY_CANDIDATE_MAX_OBSERVATIONS: usize = 20_000;
-
 /// A residual RMS below this (um) is rounding, not a signal: no effect is added to explain it.
 pub const RESIDUAL_FLOOR_UM: f64 = 1e-6;
 
@@ -275,9 +271,21 @@ fn rss(r: &[f64]) -> f64 {
     r.iter().map(|x| x * x).sum()
 }
 
-fn bic(rss: f64, m: usize, k: usize) -> f64 {
+fn bic(rss: f64, m: usize, k: f64) -> f64 {
     let m = m as f64;
-    m * (rss / m).max(1e-300).ln() + k as f64 * m.ln()
+    m * (rss / m).max(1e-300).ln() + k * m.ln()
+}
+
+/// The least number of effective parameters an effect must add to be tested (a block the
+/// prior holds whole adds nothing the data determine).
+const MIN_ADDED_DIMENSION: f64 = 0.5;
+
+/// The parameters a fit used: its rank, or under a prior its effective number (trace of the
+/// hat matrix).
+fn params_used(c: &Calibration) -> f64 {
+    c.prior
+        .as_ref()
+        .map_or(c.identifiability.rank as f64, |p| p.effective_params)
 }
 
 /// Cross-validated RMS (um) over folds that respect the order the data were taken in: with
@@ -296,25 +304,182 @@ pub fn cross_validated_rms(
     folds: usize,
     start: &[f64],
 ) -> Result<f64, CalibError> {
+    let e = cross_validated_errors(model, campaign, options, folds, start)?;
+    Ok((e.squared.iter().sum::<f64>() / e.squared.len().max(1) as f64).sqrt())
+}
+
+/// How the poses of a campaign are split into folds for cross-validation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FoldKind {
+    /// One fold per measurement session (file): a new session brings a new set-up.
+    Sessions,
+    /// One fold per commanded XY position (leave-position-out): where the poses repeat at the
+    /// same commanded positions (a tilt grid), a model must predict a position it never saw.
+    Positions,
+    /// Contiguous blocks in acquisition order.
+    Blocks,
+}
+
+/// The folds of a cross-validation: their kind, count and each pose's fold.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Folds {
+    /// How the poses were split.
+    pub kind: FoldKind,
+    /// Number of folds.
+    pub count: usize,
+    /// The fold of each pose.
+    pub fold_of_pose: Vec<usize>,
+}
+
+/// Most folds of a leave-position-out split: more positions are grouped, in order of first
+/// visit, into this many folds (each fold leaves out whole positions).
+const MAX_POSITION_FOLDS: usize = 6;
+
+/// The folds of `campaign`: by session when it has several, by commanded XY position when
+/// the poses repeat at a few positions (at least 3 positions, each visited at least twice on
+/// average), else `folds` contiguous blocks in acquisition order. Never random: random folds
+/// inside one sitting flatter effects that drift and set-ups defeat.
+pub fn cv_folds(campaign: &Campaign, folds: usize) -> Folds {
     let n = campaign.poses.len().max(1);
-    let (folds, fold_of): (usize, Box<dyn Fn(usize) -> usize>) =
-        if campaign.session_starts.is_empty() {
-            let folds = folds.max(2);
-            (folds, Box::new(move |p: usize| p * folds / n))
-        } else {
-            let starts = campaign.session_starts.clone();
-            (
-                starts.len() + 1,
-                Box::new(move |p: usize| starts.partition_point(|s| *s <= p)),
-            )
+    if !campaign.session_starts.is_empty() {
+        let starts = &campaign.session_starts;
+        return Folds {
+            kind: FoldKind::Sessions,
+            count: starts.len() + 1,
+            fold_of_pose: (0..campaign.poses.len())
+                .map(|p| starts.partition_point(|s| *s <= p))
+                .collect(),
         };
-    let mut sq = 0.0;
-    let mut count = 0usize;
-    for f in 0..folds {
-        let train = campaign.filter_poses(|p| fold_of(p) != f);
-        let test = campaign.filter_poses(|p| fold_of(p) == f);
+    }
+    // Commanded XY positions, to 0.5 mm, in order of first appearance.
+    let mut keys: Vec<(i64, i64)> = Vec::new();
+    let group: Vec<usize> = campaign
+        .poses
+        .iter()
+        .map(|p| {
+            let k = (
+                (p.position_mm.x * 2.0).round() as i64,
+                (p.position_mm.y * 2.0).round() as i64,
+            );
+            match keys.iter().position(|x| *x == k) {
+                Some(i) => i,
+                None => {
+                    keys.push(k);
+                    keys.len() - 1
+                }
+            }
+        })
+        .collect();
+    let g = keys.len();
+    if g >= 3 && 2 * g <= campaign.poses.len() {
+        let count = g.min(MAX_POSITION_FOLDS);
+        return Folds {
+            kind: FoldKind::Positions,
+            count,
+            fold_of_pose: group.iter().map(|&i| i * count / g).collect(),
+        };
+    }
+    let folds = folds.max(2);
+    Folds {
+        kind: FoldKind::Blocks,
+        count: folds,
+        fold_of_pose: (0..campaign.poses.len()).map(|p| p * folds / n).collect(),
+    }
+}
+
+/// Out-of-sample errors of a model: the squared weighted error of every held-out observation
+/// (um of the reference, squared), and the held-out pose each belongs to (a key unique over
+/// the folds), in fold order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CvErrors {
+    /// Squared weighted errors.
+    pub squared: Vec<f64>,
+    /// The pose (fold-unique key) of each.
+    pub pose: Vec<usize>,
+    /// How the folds were made.
+    pub kind: FoldKind,
+}
+
+impl CvErrors {
+    /// Their root mean square, um of the reference.
+    pub fn rms(&self) -> f64 {
+        (self.squared.iter().sum::<f64>() / self.squared.len().max(1) as f64).sqrt()
+    }
+
+    /// True when `other` predicts the held-out data better than `self` by more than one
+    /// standard error of the difference of their mean squared errors (the poses as the
+    /// independent units): a candidate chosen among many on a small campaign must beat the
+    /// current model clearly, not by the luck of the folds.
+    pub fn clearly_worse_than(&self, other: &CvErrors) -> bool {
+        if self.squared.len() != other.squared.len() || self.squared.is_empty() {
+            return false;
+        }
+        let n = self.squared.len() as f64;
+        let mut by_pose = std::collections::BTreeMap::<usize, f64>::new();
+        for ((a, b), p) in self.squared.iter().zip(&other.squared).zip(&self.pose) {
+            *by_pose.entry(*p).or_default() += a - b;
+        }
+        let per_pose: Vec<f64> = by_pose.into_values().collect();
+        let np = per_pose.len() as f64;
+        let gain = per_pose.iter().sum::<f64>() / n;
+        if np < 2.0 {
+            return gain > 0.0;
+        }
+        let mean = per_pose.iter().sum::<f64>() / np;
+        let var = per_pose.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (np - 1.0);
+        let se = (np * var).sqrt() / n;
+        gain > se
+    }
+}
+
+/// The out-of-sample errors of `model` on `campaign` ([`cv_folds`]): each fold fitted on the
+/// others and predicted (a held-out tracker session re-registered first, as `cpm validate`
+/// does).
+pub fn cross_validated_errors(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+    folds: usize,
+    start: &[f64],
+) -> Result<CvErrors, CalibError> {
+    let split = cv_folds(campaign, folds);
+    let fold_of = |p: usize| split.fold_of_pose[p];
+    let mut out = CvErrors {
+        squared: Vec::new(),
+        pose: Vec::new(),
+        kind: split.kind,
+    };
+    // The folds' fits are independent: in parallel, gathered in fold order.
+    let per_fold: Vec<Option<(Vec<f64>, Vec<usize>, usize)>> = (0..split.count)
+        .into_par_iter()
+        .map(|f| fold_errors(model, campaign, options, start, &|p| fold_of(p) == f))
+        .collect::<Result<_, _>>()?;
+    let mut pose_base = 0;
+    for (sq, pose, n) in per_fold.into_iter().flatten() {
+        out.squared.extend(sq);
+        out.pose.extend(pose.into_iter().map(|p| pose_base + p));
+        pose_base += n;
+    }
+    Ok(out)
+}
+
+/// One fold of a cross-validation: fitted without the poses `held`, the squared weighted
+/// errors of the held-out observations and their poses (in the held-out campaign), and its
+/// number of poses; `None` for an empty fold.
+#[allow(clippy::type_complexity)]
+fn fold_errors(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+    start: &[f64],
+    held: &(dyn Fn(usize) -> bool + Sync),
+) -> Result<Option<(Vec<f64>, Vec<usize>, usize)>, CalibError> {
+    {
+        let train = campaign.filter_poses(|p| !held(p));
+        let test = campaign.filter_poses(held);
         if test.is_empty() || train.is_empty() {
-            continue;
+            return Ok(None);
         }
         let opts = IdentifyOptions {
             start_um: Some(start.to_vec()),
@@ -337,12 +502,14 @@ pub fn cross_validated_rms(
             predict(model, &prepared, &test, &cal.minimum_norm_um, None)?
         };
         let w = test.observation_weights(options.sigma_um.unwrap_or(test.pose_sigma()));
-        for ((yk, mk), wk) in y.iter().zip(test.observations()).zip(w) {
-            sq += ((yk - mk) * 1e3 * wk).powi(2);
-            count += 1;
+        let mut sq = Vec::with_capacity(y.len());
+        let mut pose = Vec::with_capacity(y.len());
+        for (k, ((yk, mk), wk)) in y.iter().zip(test.observations()).zip(w).enumerate() {
+            sq.push(((yk - mk) * 1e3 * wk).powi(2));
+            pose.push(test.observation_pose(k));
         }
+        Ok(Some((sq, pose, test.poses.len())))
     }
-    Ok((sq / count.max(1) as f64).sqrt())
 }
 
 /// The campaign without the observations `drop` (indices of [`Campaign::observations`]): a
@@ -449,18 +616,28 @@ fn outliers_or_signal(
         return Ok((Vec::new(), None));
     }
     let mut best: Option<(Effect, Vec<usize>)> = None;
-    for &e in options
+    let tried: Vec<Effect> = options
         .candidates
         .iter()
+        .copied()
         .filter(|e| !matches!(e, Effect::PoseMap(_)) && !model.effects.contains(e))
-    {
-        let aug = with_effect(model, e);
-        let opts = IdentifyOptions {
-            start_um: Some(extend_start(&first.minimum_norm_um, &aug)),
-            ..options.identify.clone()
-        };
+        .collect();
+    // The candidates' fits are independent: in parallel, taken in order.
+    let fits: Vec<Option<Calibration>> = tried
+        .par_iter()
+        .map(|&e| {
+            let aug = with_effect(model, e);
+            let opts = IdentifyOptions {
+                start_um: Some(extend_start(&first.minimum_norm_um, &aug)),
+                prior_noise_um: first.sigma_estimated.then_some(first.sigma_um),
+                ..options.identify.clone()
+            };
+            identify(&aug, campaign, &opts).ok()
+        })
+        .collect();
+    for (&e, cal) in tried.iter().zip(fits) {
         // A candidate the data cannot fit (no readings for a sensor effect) explains nothing.
-        let Ok(cal) = identify(&aug, campaign, &opts) else {
+        let Some(cal) = cal else {
             continue;
         };
         let left: Vec<usize> = flagged
@@ -522,13 +699,20 @@ pub fn refine(
     let initial_residuals_um = first.residuals_um.clone();
     let initial_diagnostics = diag_of(&current, &cal)?;
     let mut diag = initial_diagnostics.clone();
-    let mut cv = cross_validated_rms(
+    // The fits inside the folds weigh the prior against the whole campaign's noise (not
+    // estimated again on each fold).
+    let cv_opts = |c: &Calibration| IdentifyOptions {
+        prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
+        ..options.identify.clone()
+    };
+    let mut cv_err = cross_validated_errors(
         &current,
         campaign,
-        &options.identify,
+        &cv_opts(&cal),
         options.folds,
         &cal.minimum_norm_um,
     )?;
+    let mut cv = cv_err.rms();
     let initial_cv = cv;
     let mut rejected_by_cv = Vec::new();
     let scan = |mdl: &MeasurementModel, cal: &Calibration| {
@@ -577,20 +761,43 @@ pub fn refine(
         }
         let level = options.alpha / (library + scanned).max(1) as f64;
         let rss0 = rss(&cal.residuals_um);
-        let k0 = cal.identifiability.rank;
+        let k0 = params_used(&cal);
         let bic0 = bic(rss0, m, k0);
         let mut scores = Vec::new();
         let mut eligible: Vec<(usize, MeasurementModel, Calibration)> = Vec::new();
-        for e in remaining {
+        // Every candidate's novelty and fit, in parallel (independent), then judged in order.
+        let tried: Vec<(f64, Option<Calibration>)> = remaining
+            .par_iter()
+            .map(|&e| -> Result<(f64, Option<Calibration>), CalibError> {
+                let aug = with_effect(&current, e);
+                let start = extend_start(&cal.minimum_norm_um, &aug);
+                let nov = novelty(
+                    &aug,
+                    campaign,
+                    &start,
+                    current.num_params(),
+                    options.identify.rank.rank_rtol,
+                )?;
+                let threshold = if matches!(e, Effect::PoseMap(_)) {
+                    options.min_novelty
+                } else {
+                    options.min_novelty * PHYSICAL_NOVELTY_FRACTION
+                };
+                if nov < threshold {
+                    return Ok((nov, None));
+                }
+                // Screened with the prior weighed against the current fit's noise (the
+                // accepted model is fitted again at the end with its own).
+                let opts = IdentifyOptions {
+                    start_um: Some(start),
+                    prior_noise_um: cal.sigma_estimated.then_some(cal.sigma_um),
+                    ..options.identify.clone()
+                };
+                Ok((nov, identify(&aug, campaign, &opts).ok()))
+            })
+            .collect::<Result<_, _>>()?;
+        for (e, (nov, fitted)) in remaining.into_iter().zip(tried) {
             let aug = with_effect(&current, e);
-            let start = extend_start(&cal.minimum_norm_um, &aug);
-            let nov = novelty(
-                &aug,
-                campaign,
-                &start,
-                current.num_params(),
-                options.identify.rank.rank_rtol,
-            )?;
             let mut score = CandidateScore {
                 effect: e,
                 novelty: nov,
@@ -611,21 +818,19 @@ pub fn refine(
                 scores.push(score);
                 continue;
             }
-            let opts = IdentifyOptions {
-                start_um: Some(start),
-                ..options.identify.clone()
-            };
-            let Ok(c1) = identify(&aug, campaign, &opts) else {
+            let Some(c1) = fitted else {
                 scores.push(score);
                 continue;
             };
-            let k1 = c1.identifiability.rank;
+            let k1 = params_used(&c1);
             let rss1 = rss(&c1.residuals_um);
             score.rms_um = Some(c1.residual_rms_um);
-            if k1 > k0 && m > k1 && rss1 > 0.0 {
-                let dk = (k1 - k0) as f64;
-                let f = ((rss0 - rss1).max(0.0) / dk) / (rss1 / (m - k1) as f64);
-                let p = FisherSnedecor::new(dk, (m - k1) as f64)
+            // The parameters a fit used: its rank, or under a prior its effective number
+            // (a direction the prior holds costs no degree of freedom).
+            if k1 > k0 + MIN_ADDED_DIMENSION && (m as f64) > k1 + 1.0 && rss1 > 0.0 {
+                let dk = k1 - k0;
+                let f = ((rss0 - rss1).max(0.0) / dk) / (rss1 / (m as f64 - k1));
+                let p = FisherSnedecor::new(dk, m as f64 - k1)
                     .map(|d| 1.0 - d.cdf(f))
                     .unwrap_or(1.0);
                 let db = bic(rss1, m, k1) - bic0;
@@ -647,19 +852,10 @@ pub fn refine(
                 // A residual at rounding level has nothing left to explain: the F-test on it
                 // measures floating-point noise.
                 let explainable = cal.residual_rms_um > RESIDUAL_FLOOR_UM;
+                // Only the candidates that pass the screening are cross-validated (a
+                // cross-validation is a fit per fold; the others' would only be reported).
                 if p < level && db < 0.0 && !c1.robust_failed && !loses && explainable {
                     eligible.push((scores.len(), aug, c1));
-                } else if m <= CV_EVERY_CANDIDATE_MAX_OBSERVATIONS {
-                    // Its blocked cross-validated error, for the report only.
-                    let cv1 = cross_validated_rms(
-                        &aug,
-                        campaign,
-                        &options.identify,
-                        options.folds,
-                        &c1.minimum_norm_um,
-                    )
-                    .ok();
-                    score.cv_rms_um = cv1;
                 }
             }
             scores.push(score);
@@ -677,36 +873,27 @@ pub fn refine(
             ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
         });
         let mut best = None;
-        let every = m <= CV_EVERY_CANDIDATE_MAX_OBSERVATIONS;
         for (i, aug, c1) in eligible {
             if best.is_some() {
-                if every {
-                    scores[i].cv_rms_um = cross_validated_rms(
-                        &aug,
-                        campaign,
-                        &options.identify,
-                        options.folds,
-                        &c1.minimum_norm_um,
-                    )
-                    .ok();
-                }
                 continue;
             }
-            let cv1 = cross_validated_rms(
+            let e1 = cross_validated_errors(
                 &aug,
                 campaign,
-                &options.identify,
+                &cv_opts(&c1),
                 options.folds,
                 &c1.minimum_norm_um,
             )?;
+            let cv1 = e1.rms();
             scores[i].cv_rms_um = Some(cv1);
-            if cv1 < cv {
-                best = Some((i, aug, c1, cv1));
+            // Out of sample, and clearly: by more than a standard error of the difference.
+            if cv_err.clearly_worse_than(&e1) {
+                best = Some((i, aug, c1, cv1, e1));
                 continue;
             }
             rejected_by_cv.push((scores[i].effect, cv, cv1));
         }
-        let Some((i, aug, c1, cv1)) = best else {
+        let Some((i, aug, c1, cv1, e1)) = best else {
             last_round = scores;
             break;
         };
@@ -729,6 +916,7 @@ pub fn refine(
         current = aug;
         cal = c1;
         cv = cv1;
+        cv_err = e1;
         diag = diag_of(&current, &cal)?;
         pose_structure = scan(&current, &cal)?;
     }
@@ -750,9 +938,18 @@ pub fn refine(
         }
         u
     };
-    // The final model on the whole campaign (residuals and outliers for every observation).
+    // The final model on the whole campaign (residuals and outliers for every observation),
+    // its noise estimated with it.
     let cal = if outliers_before.is_empty() {
-        cal
+        if steps.is_empty() {
+            cal
+        } else {
+            let opts = IdentifyOptions {
+                start_um: Some(cal.minimum_norm_um.clone()),
+                ..options.identify.clone()
+            };
+            identify(&current, full, &opts)?
+        }
     } else {
         let opts = IdentifyOptions {
             start_um: Some(cal.minimum_norm_um.clone()),
@@ -771,7 +968,7 @@ pub fn refine(
         let calibrate_cv_rms_um = cross_validated_rms(
             model,
             full,
-            &options.identify,
+            &cv_opts(&first),
             options.folds,
             &first.minimum_norm_um,
         )?;
@@ -783,7 +980,7 @@ pub fn refine(
                 cross_validated_rms(
                     &current,
                     full,
-                    &options.identify,
+                    &cv_opts(&cal),
                     options.folds,
                     &cal.minimum_norm_um,
                 )?

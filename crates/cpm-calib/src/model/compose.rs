@@ -403,31 +403,29 @@ impl<'a> Channels<'a> {
         np: usize,
     ) -> Result<DMatrix<f64>, CalibError> {
         let n = kin.links.len();
-        let lu = kin.j1.lu();
+        // dx = -J1^-1 J2 de: the right-hand sides are sparse (an installation error touches
+        // one link, an effect's coefficient one link each), so each column is a column of
+        // J1^-1 scaled, summed over the links it touches.
+        let inv = kin.j1.try_inverse().ok_or_else(|| kin.singular())?;
         let mut dx = DMatrix::zeros(6, np);
-        let mut rhs = Vector6::zeros();
-        for p in 0..np {
-            rhs.fill(0.0);
-            let mut any = false;
-            if p < 6 * n {
-                let (i, a) = (p / 6, p % 6);
-                let ls = &kin.links[i];
-                let zp = kin.rt * ls.unit;
-                // J2 entry per um: base -z, platform R^T z; dx = -J1^-1 J2 de.
-                rhs[i] = if a < 3 { ls.unit[a] } else { -zp[a - 3] } * 1e-3;
-                any = true;
-            }
-            for (i, c) in at.coeff.iter().enumerate() {
-                for &(q, a) in c {
-                    if q == p {
-                        rhs[i] += a;
-                        any = true;
-                    }
+        for p in 0..(6 * n).min(np) {
+            let (i, a) = (p / 6, p % 6);
+            let ls = &kin.links[i];
+            // J2 entry per um: base -z, platform R^T z.
+            let v = if a < 3 {
+                ls.unit[a]
+            } else {
+                -(kin.rt * ls.unit)[a - 3]
+            } * 1e-3;
+            dx.set_column(p, &(inv.column(i) * v));
+        }
+        for (i, c) in at.coeff.iter().enumerate() {
+            for &(q, a) in c {
+                if q < np {
+                    let col = inv.column(i) * a;
+                    let mut d = dx.column_mut(q);
+                    d += col;
                 }
-            }
-            if any {
-                let sol = lu.solve(&rhs).ok_or_else(|| kin.singular())?;
-                dx.set_column(p, &sol);
             }
         }
         if kin.moved {

@@ -1317,6 +1317,90 @@ fn predict_exact(
     Ok(y)
 }
 
+/// True when every observation of `campaign` is a tracker pose measured in full (six
+/// components) at a pose whose link lengths were logged: the campaigns the leg-space
+/// formulation ([`leg_residuals`]) applies to.
+pub fn leg_space_applies(campaign: &Campaign) -> bool {
+    !campaign.pose_measurements.is_empty()
+        && campaign.readings.is_empty()
+        && campaign.point_measurements.is_empty()
+        && campaign.tilt_measurements.is_empty()
+        && campaign.instrument_measurements.is_empty()
+        && campaign
+            .pose_observation_rows()
+            .iter()
+            .all(|rows| rows.iter().all(Option::is_some))
+}
+
+/// Leg-space residuals of the tracker pose measurements, mm: for each pose measurement (in
+/// order) and link, the effective length of the commanded link (commanded, clearance and every
+/// link effect at `params`) less the length the candidate joints need for the *measured* pose
+/// (inverse kinematics of the measured pose taken into the base frame through the session's
+/// tracker frame, the pose channel's twist undone). The same parameters as [`predict`]; the
+/// formulation of an independent inverse-kinematics calibration, whose residuals are in the
+/// legs' own unit and need no forward kinematics.
+///
+/// Only for a campaign where [`leg_space_applies`].
+pub fn leg_residuals(
+    model: &MeasurementModel,
+    prepared: &Prepared,
+    campaign: &Campaign,
+    params: &[f64],
+) -> Result<Vec<f64>, CalibError> {
+    let np = model.num_params();
+    if params.len() != np {
+        return Err(CalibError::invalid(
+            "parameters",
+            format!("{} values, expected {np}", params.len()),
+        ));
+    }
+    let table = model.table_with(params)?;
+    let n = table.num_links();
+    let channels = Channels::new(model, params);
+    let tracker = channels.tracker_poses();
+    let block = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(Effect::TrackerFrame));
+    let mut out = Vec::with_capacity(n * campaign.pose_measurements.len());
+    let mut at = AtPose::new(n);
+    let mut needed = vec![0.0; n];
+    for pm in &campaign.pose_measurements {
+        let j = pm.pose;
+        let input = EffectInput {
+            context: &prepared.contexts[j],
+            commanded: &campaign.poses[j],
+            home: &model.nominal.home,
+            settings: &model.effect_settings,
+            t0_s: prepared.t0_s,
+        };
+        channels.at_pose(&input, &prepared.lengths_mm[j], &mut at);
+        // The session's frame: p_tracker = rr (kr p + kt) + rt.
+        let (kt, kr) = tracker.known;
+        let (rt, rr) = match block {
+            Some(b) => {
+                let f = model.tracker_frame_of(campaign, j)?;
+                let q = &params[b.offset + 6 * f..b.offset + 6 * f + 6];
+                tracker.frame.tracker_registration(q)
+            }
+            None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
+        };
+        let m = &pm.measured;
+        let base = Pose::new(
+            kr.inverse() * (rr.inverse() * (m.position_mm - rt) - kt),
+            kr.inverse() * rr.inverse() * m.rotation,
+        );
+        let base = if at.twist == nalgebra::Vector6::zeros() {
+            base
+        } else {
+            base.perturbed(&-at.twist)
+        };
+        cpm_kinematics::inverse_lengths_into(&table, &base, &mut needed);
+        out.extend(at.lengths.iter().zip(&needed).map(|(l, nd)| l - nd));
+    }
+    Ok(out)
+}
+
 /// A campaign's predictions as a [`cpm_lm`] problem (residuals = predicted observations, mm;
 /// parameters in the model's units): to check a model's Jacobian, a user effect's above all,
 /// with [`cpm_lm::check_jacobian`].

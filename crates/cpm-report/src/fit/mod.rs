@@ -16,6 +16,7 @@ pub use crate::identifiability::{
     BlindDirection, IdentifiabilityDoc, IdentifiabilityReport, ParameterIdentifiability,
 };
 
+pub mod prior;
 mod words;
 pub use words::{
     describe_loss, describe_model, effect_list, misfit, misfit_message, observation_origin,
@@ -371,6 +372,9 @@ pub struct FitReport {
     /// The noise of each kind of observation: assumed by the fit, and what its own residual
     /// says (cpm_calib::noise).
     pub noise_by_kind: Vec<NoiseKindReport>,
+    /// What the prior did: tolerances per group, each parameter's posterior against its prior,
+    /// the directions held near nominal (`null` for a fit without a prior).
+    pub prior: Option<prior::PriorReport>,
     /// The warnings, plain text.
     pub warnings: Vec<String>,
     /// What only the text says.
@@ -569,6 +573,7 @@ impl FitReport {
         let kinds = cpm_calib::noise::by_kind(model, campaign, cal);
         let mut warnings_md = warnings(model, cal);
         warnings_md.extend(noise_warning(&kinds));
+        warnings_md.extend(prior::warning(model, cal));
         Self {
             cpm_version: env!("CARGO_PKG_VERSION").to_string(),
             simulated: cal.simulated,
@@ -626,6 +631,7 @@ impl FitReport {
                     estimated: k.estimated,
                 })
                 .collect(),
+            prior: prior::PriorReport::new(model, cal),
             warnings: warnings_md.iter().map(|w| w.replace("**", "")).collect(),
             text: fit_text(inputs, model, cal, formulation, warnings_md),
         }
@@ -749,6 +755,9 @@ impl FitReport {
             id.crlb_max_um
                 .map_or_else(|| "n.d.".to_string(), |v| sig(v, 3))
         ));
+        if let Some(p) = &self.prior {
+            p.markdown(s);
+        }
         s.push_str("## Estimates\n\nn.d. = not determined by the data: no estimate exists, whatever a solver would print. Each estimate is rounded to two significant digits of its standard deviation. The numbers `#` match `estimates.svg`.\n\n| # | parameter | estimate | std |\n|---|---|---|---|\n");
         let mut plotted = 0;
         for p in &t.parameters {

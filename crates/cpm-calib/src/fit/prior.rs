@@ -1,0 +1,427 @@
+//! A-priori tolerances of the parameters: how far a fit may move each group before the data
+//! have spoken, as the prior of a maximum a posteriori fit.
+//!
+//! **Why a prior.** Real data are noisier than a design study assumes, miss effects the model
+//! does not declare, and come from constrained pose grids. A least-squares fit then pours the
+//! misfit into the directions the data barely see: on a real inclinometer session the plain
+//! fit moved base joints by 100 mm along directions whose Cramér-Rao standard deviation at the
+//! real noise was 88 mm. No machine is built that wrong, and a metrologist knows it before
+//! measuring: every parameter has a tolerance (a drawing, an assembly procedure, a spool
+//! diameter). The fit here minimises
+//!
+//! `sum_i (r_i / sigma)^2 + sum_k (p_k / t_k)^2`
+//!
+//! (`r_i` the weighted residuals, `sigma` their noise, `p_k` a parameter's departure from
+//! nominal, `t_k` its tolerance): the posterior mode under a Gaussian prior of standard
+//! deviation `t_k` centred on the nominal (Tarantola, *Inverse Problem Theory*, 2005, ch. 3;
+//! the "a-priori uncertainty" of GUM Supplement 1 and of the bundle adjustments of
+//! photogrammetry). A direction the data determine much better than its tolerance is
+//! untouched (the prior adds `(sigma/t)^2` to a curvature of `s^2`); one whose Cramér-Rao
+//! standard deviation exceeds its tolerance is held near nominal and *named* as held
+//! ([`HeldDirection`]). The prior is used rather than a hard truncation of the singular values
+//! because it is smooth (no direction flips in or out with a tiny change of the data),
+//! because its cut is set in physical units per group rather than as a relative singular
+//! value, and because the posterior covariance says per parameter how much of it the data
+//! determined ([`PriorSummary::data_share`]).
+//!
+//! **Defaults** scale with the machine: `size` is the mean link length at the home pose
+//! ([`machine_size_mm`]). Installation errors `4e-3 size` (2 mm for a 500 mm machine: an
+//! assembled joint is off by a millimetre or two, not by centimetres), link and sensor offsets
+//! `5e-2 size` (a leg's zero is often known only to tens of millimetres), link and sensor
+//! scales 5 % (50,000 ppm: a spool or screw lead is known to a few per cent), link
+//! non-linearity, screw periodic error and socket errors as the joints, joint clearance and
+//! backlash `2e-3 size`, thermal drift 100 ppm per degree, compliance the deflection of
+//! `1e-2 size` under the declared load's weight shared by the links (see
+//! [`default_tolerance`]). The instruments' nuisance blocks (tracker and point frames, base
+//! tilts, inclinometer mounts, target positions, one's own instruments), pose map terms and
+//! user effects are free (no prior): they describe a set-up, not the machine, or have no
+//! physical scale. Every default is overridden per group in the description's
+//! `[calibration.tolerances]` or on the command line (`--tolerance GROUP=VALUE`).
+use std::collections::BTreeMap;
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use crate::model::Block;
+use crate::{CalibError, Effect, MeasurementModel};
+
+/// The name of the installation errors' group (the 36 joint errors of a 6-link machine).
+pub const INSTALLATION_ERRORS: &str = "installation_errors";
+
+/// Tolerances per group of parameters, in each group's own unit (um for the installation
+/// errors and length effects, ppm for scales, um/kN for compliance, ...).
+///
+/// ```
+/// use cpm_calib::fit::prior::{prior_std, Tolerances};
+/// use cpm_calib::{Effect, MeasurementModel};
+/// let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
+/// model.effects = vec![Effect::LinkScale];
+/// let mut t = Tolerances::default();
+/// t.set("link_scale", 20_000.0).unwrap(); // 2 %
+/// t.hold.push("installation_errors".into());
+/// let std = prior_std(&model, &t).unwrap();
+/// assert_eq!(std[0], 0.0); // held at nominal
+/// assert_eq!(std[36], 20_000.0); // ppm
+/// ```
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Tolerances {
+    /// A-priori standard deviation per group name ([`INSTALLATION_ERRORS`], an effect's name,
+    /// or one's own instrument's name), in the group's unit; `f64::INFINITY` frees the group.
+    /// Groups not named take [`default_tolerance`].
+    pub by_group: BTreeMap<String, f64>,
+    /// Groups held at their start (the nominal, or a known value), by name.
+    pub hold: Vec<String>,
+    /// No prior at all: every group free (the plain least-squares fit of cpm 0.1). Default
+    /// false.
+    pub off: bool,
+}
+
+impl Tolerances {
+    /// Sets a group's tolerance (checked: finite and > 0, or infinite to free it).
+    pub fn set(&mut self, group: &str, value: f64) -> Result<(), CalibError> {
+        if !(value > 0.0) || value.is_nan() {
+            return Err(CalibError::invalid(
+                "tolerance",
+                format!("{group} = {value}: a tolerance must be > 0 (inf frees the group; hold it to keep it at nominal)"),
+            ));
+        }
+        self.by_group.insert(group.to_string(), value);
+        Ok(())
+    }
+
+    /// The plain least-squares fit: no prior, nothing held.
+    pub fn none() -> Self {
+        Self {
+            off: true,
+            ..Self::default()
+        }
+    }
+}
+
+/// The name of a parameter block's group.
+pub fn group_name(model: &MeasurementModel, block: &Block) -> String {
+    match (block.effect, block.instrument) {
+        (Some(e), _) => e.name().to_string(),
+        (None, Some(i)) => model.instruments[i].name().to_string(),
+        (None, None) => INSTALLATION_ERRORS.to_string(),
+    }
+}
+
+/// The unit of a group's tolerance.
+pub fn group_unit(model: &MeasurementModel, block: &Block) -> String {
+    match (block.effect, block.instrument) {
+        (Some(e), _) => e.unit().to_string(),
+        (None, Some(i)) => model.instruments[i].param_unit(0).to_string(),
+        (None, None) => "um".into(),
+    }
+}
+
+/// The machine's size for the default tolerances: the mean link length at the home pose, mm.
+pub fn machine_size_mm(model: &MeasurementModel) -> f64 {
+    let table = model.design.as_ref().unwrap_or(&model.nominal);
+    let l = cpm_kinematics::inverse_lengths(table, &table.home);
+    if l.is_empty() {
+        return 0.0;
+    }
+    l.iter().sum::<f64>() / l.len() as f64
+}
+
+/// The default tolerance of a group, in its unit (module docs); `f64::INFINITY` for the free
+/// groups.
+pub fn default_tolerance(model: &MeasurementModel, block: &Block) -> f64 {
+    let size_um = machine_size_mm(model) * 1e3;
+    let Some(effect) = block.effect else {
+        return if block.instrument.is_some() {
+            f64::INFINITY
+        } else {
+            4e-3 * size_um
+        };
+    };
+    match effect {
+        Effect::LinkOffset | Effect::SensorOffset => 5e-2 * size_um,
+        Effect::LinkScale | Effect::SensorScale => 5e4,
+        Effect::LinkNonlinearity | Effect::ScrewPeriodic | Effect::SocketError => 4e-3 * size_um,
+        Effect::Clearance | Effect::Backlash => 2e-3 * size_um,
+        Effect::ThermalDrift => 100.0,
+        Effect::Compliance => {
+            // Deflection of 1 % of the size under the load's weight (and external force)
+            // shared by the links: um per kN.
+            let load = &model.load;
+            let g = load.gravity_mm_s2.norm() * 1e-3; // m/s^2
+            let force_kn = ((load.platform_mass_kg + load.payload_mass_kg) * g
+                + load.external_force_n.norm())
+                * 1e-3
+                / model.nominal.num_links().max(1) as f64;
+            if force_kn > 0.0 {
+                1e-2 * size_um / force_kn
+            } else {
+                f64::INFINITY
+            }
+        }
+        _ => f64::INFINITY,
+    }
+}
+
+/// The prior standard deviation of every parameter of `model`, in the model's units: `0` for
+/// a held parameter, `f64::INFINITY` for a free one. Fails on a group name that is not in the
+/// model (naming it and the model's groups).
+pub fn prior_std(
+    model: &MeasurementModel,
+    tolerances: &Tolerances,
+) -> Result<Vec<f64>, CalibError> {
+    let blocks = model.blocks();
+    let names: Vec<String> = blocks.iter().map(|b| group_name(model, b)).collect();
+    for name in tolerances.by_group.keys().chain(&tolerances.hold) {
+        if !names.contains(name) {
+            return Err(CalibError::invalid(
+                "tolerances",
+                format!(
+                    "`{name}` is not a parameter group of this fit (its groups: {})",
+                    names.join(", ")
+                ),
+            ));
+        }
+    }
+    let mut out = vec![f64::INFINITY; model.num_params()];
+    for (b, name) in blocks.iter().zip(&names) {
+        let t = if tolerances.hold.contains(name) {
+            0.0
+        } else if tolerances.off {
+            f64::INFINITY
+        } else {
+            tolerances
+                .by_group
+                .get(name)
+                .copied()
+                .unwrap_or_else(|| default_tolerance(model, b))
+        };
+        out[b.offset..b.offset + b.len].fill(t);
+    }
+    Ok(out)
+}
+
+/// The tolerance of each group as applied (for the reports): name, unit, value (`inf` free,
+/// 0 held), and whether it was declared or the default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GroupTolerance {
+    /// Group name.
+    pub group: String,
+    /// Unit of the tolerance.
+    pub unit: String,
+    /// The a-priori standard deviation (`None`: free, no prior).
+    pub tolerance: Option<f64>,
+    /// True when held at its start.
+    pub held: bool,
+    /// True when declared (description or command line), false for the default.
+    pub declared: bool,
+}
+
+/// The groups of `model` with their tolerances as [`prior_std`] applies them.
+pub fn group_tolerances(model: &MeasurementModel, tolerances: &Tolerances) -> Vec<GroupTolerance> {
+    model
+        .blocks()
+        .iter()
+        .map(|b| {
+            let group = group_name(model, b);
+            let held = tolerances.hold.contains(&group);
+            let declared = held || tolerances.by_group.contains_key(&group);
+            let t = if held || tolerances.off {
+                None
+            } else {
+                Some(
+                    tolerances
+                        .by_group
+                        .get(&group)
+                        .copied()
+                        .unwrap_or_else(|| default_tolerance(model, b)),
+                )
+            };
+            GroupTolerance {
+                unit: group_unit(model, b),
+                group,
+                tolerance: t.filter(|t| t.is_finite()),
+                held,
+                declared,
+            }
+        })
+        .collect()
+}
+
+/// A direction of the parameters that the data see less well than its tolerance: held near
+/// nominal by the prior, not measured.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HeldDirection {
+    /// The direction's Cramér-Rao standard deviation from the data alone, in tolerances (above
+    /// 1: the data know it worse than the drawing does).
+    pub data_std_in_tolerances: f64,
+    /// The largest loadings: (parameter index, coefficient of the unit direction in
+    /// tolerance-scaled parameters).
+    pub loadings: Vec<(usize, f64)>,
+}
+
+/// What the prior did in a fit: per parameter, its prior and posterior standard deviation
+/// and the share of its determination the data supplied.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PriorSummary {
+    /// Prior standard deviation per parameter (model units); `None` free, `Some(0)` held.
+    pub prior_std: Vec<Option<f64>>,
+    /// Posterior standard deviation per parameter (model units); `None` where the posterior
+    /// is not defined (a free parameter the data do not see) or the parameter is held.
+    pub posterior_std: Vec<Option<f64>>,
+    /// `1 - posterior variance / prior variance` per parameter with a prior: 1 = the data
+    /// alone determine it, 0 = the data say nothing (it stayed at nominal).
+    pub data_share: Vec<Option<f64>>,
+    /// Directions the data see less well than their tolerance, weakest first.
+    pub held_directions: Vec<HeldDirection>,
+    /// Parameter-space dimensions the data determine better than their tolerance (of those
+    /// with a prior), plus the free ones the data see.
+    pub determined_dimensions: usize,
+    /// The effective number of parameters fitted (trace of the hat matrix): the residual
+    /// degrees of freedom are the observations less this.
+    pub effective_params: f64,
+    /// The noise (weighted, um of the reference) the prior was weighed against.
+    pub sigma_um: f64,
+}
+
+/// The share of the data below which a parameter counts as held by its prior rather than
+/// determined by the data (posterior standard deviation at least `1/sqrt(2)` of the prior's).
+pub const MIN_DATA_SHARE: f64 = 0.5;
+
+impl PriorSummary {
+    /// True when the data determined parameter `k` (free and seen, or with a share of at
+    /// least [`MIN_DATA_SHARE`]).
+    pub fn determined(&self, k: usize) -> bool {
+        match (self.prior_std[k], self.data_share[k]) {
+            (Some(p), _) if p == 0.0 => false,
+            (Some(_), Some(s)) => s >= MIN_DATA_SHARE,
+            (Some(_), None) => false,
+            (None, _) => self.posterior_std[k].is_some(),
+        }
+    }
+}
+
+/// The posterior of a fit with prior standard deviations `prior` (model units, 0 held,
+/// infinite free), weighted Jacobian `j` (um of reference per model unit) and noise
+/// `sigma_um`.
+pub fn summarize(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> PriorSummary {
+    let np = prior.len();
+    let free: Vec<usize> = (0..np).filter(|&k| prior[k] > 0.0).collect();
+    let nf = free.len();
+    // Precision in the unheld parameters: J^T J / sigma^2 + diag(1 / t^2).
+    let jf = j.select_columns(&free);
+    let g = jf.transpose() * &jf / (sigma_um * sigma_um);
+    let mut h = g.clone();
+    for (a, &ka) in free.iter().enumerate() {
+        if prior[ka].is_finite() {
+            h[(a, a)] += 1.0 / (prior[ka] * prior[ka]);
+        }
+    }
+    let eig = h.clone().symmetric_eigen();
+    let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+    let mut cov = DMatrix::zeros(nf, nf);
+    for (i, &l) in eig.eigenvalues.iter().enumerate() {
+        if l > 1e-12 * lmax && l > 0.0 {
+            let v = eig.eigenvectors.column(i);
+            cov += v * v.transpose() / l;
+        }
+    }
+    // Which free parameters the posterior leaves undefined (inside the pseudo-inverse's null
+    // space): their precision row is (numerically) zero.
+    let mut posterior_std = vec![None; np];
+    let mut data_share = vec![None; np];
+    let mut effective = 0.0;
+    for (a, &k) in free.iter().enumerate() {
+        let seen = h[(a, a)] > 1e-12 * lmax.max(f64::MIN_POSITIVE);
+        if seen {
+            let var = cov[(a, a)].max(0.0);
+            posterior_std[k] = Some(var.sqrt());
+            if prior[k].is_finite() {
+                data_share[k] = Some((1.0 - var / (prior[k] * prior[k])).clamp(0.0, 1.0));
+            }
+        }
+    }
+    // Effective parameters: tr(C J^T J) / sigma^2.
+    effective += (&cov * &g).trace();
+    // Held directions: the data's curvature in tolerance-scaled coordinates of the parameters
+    // with a prior, the free ones eliminated (their best value follows the others).
+    let with: Vec<usize> = free
+        .iter()
+        .copied()
+        .filter(|&k| prior[k].is_finite())
+        .collect();
+    let nofree: Vec<usize> = free
+        .iter()
+        .copied()
+        .filter(|&k| prior[k].is_infinite())
+        .collect();
+    let mut held_directions = Vec::new();
+    let mut determined_dimensions = 0;
+    if !with.is_empty() {
+        let m = j.nrows();
+        let mut a = DMatrix::zeros(m, with.len());
+        for (c, &k) in with.iter().enumerate() {
+            a.set_column(c, &(j.column(k) * (prior[k] / sigma_um)));
+        }
+        if !nofree.is_empty() {
+            let mut f = DMatrix::zeros(m, nofree.len());
+            for (c, &k) in nofree.iter().enumerate() {
+                f.set_column(c, &j.column(k));
+            }
+            // Project out the free columns' span.
+            let svd = f.svd(true, false);
+            if let Some(u) = svd.u {
+                let smax = svd.singular_values.iter().cloned().fold(0.0, f64::max);
+                for (i, s) in svd.singular_values.iter().enumerate() {
+                    if *s > 1e-10 * smax {
+                        let ui = u.column(i).into_owned();
+                        let proj = &ui * (ui.transpose() * &a);
+                        a -= proj;
+                    }
+                }
+            }
+        }
+        let ata = a.transpose() * &a;
+        let eig = ata.symmetric_eigen();
+        let mut order: Vec<usize> = (0..with.len()).collect();
+        order.sort_by(|x, y| eig.eigenvalues[*x].total_cmp(&eig.eigenvalues[*y]));
+        for i in order {
+            let s2 = eig.eigenvalues[i].max(0.0);
+            if s2 >= 1.0 {
+                determined_dimensions += 1;
+                continue;
+            }
+            let v = eig.eigenvectors.column(i);
+            let mut load: Vec<(usize, f64)> =
+                v.iter().enumerate().map(|(c, x)| (with[c], *x)).collect();
+            load.sort_by(|x, y| y.1.abs().total_cmp(&x.1.abs()));
+            load.truncate(4);
+            held_directions.push(HeldDirection {
+                data_std_in_tolerances: if s2 > 0.0 {
+                    1.0 / s2.sqrt()
+                } else {
+                    f64::INFINITY
+                },
+                loadings: load,
+            });
+        }
+        // Weakest first.
+        held_directions.sort_by(|x, y| {
+            y.data_std_in_tolerances
+                .total_cmp(&x.data_std_in_tolerances)
+        });
+    }
+    determined_dimensions += nofree
+        .iter()
+        .filter(|&&k| posterior_std[k].is_some())
+        .count();
+    let _ = DVector::<f64>::zeros(0);
+    PriorSummary {
+        prior_std: prior.iter().map(|p| p.is_finite().then_some(*p)).collect(),
+        posterior_std,
+        data_share,
+        held_directions,
+        determined_dimensions,
+        effective_params: effective,
+        sigma_um,
+    }
+}

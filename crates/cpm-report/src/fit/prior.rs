@@ -1,0 +1,190 @@
+//! What the prior of a fit did: the tolerance of each group, how much of each parameter the
+//! data determined (posterior against prior), and the directions held near nominal, in words.
+use cpm_calib::fit::prior::{group_name, group_unit, PriorSummary};
+use cpm_calib::{Calibration, MeasurementModel};
+use serde::Serialize;
+
+use crate::format::sig;
+
+/// A group of parameters and its a-priori tolerance as the fit applied it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct GroupReport {
+    /// The group (`installation_errors`, an effect's name, an instrument's name).
+    pub group: String,
+    /// The unit of its tolerance and parameters.
+    pub unit: String,
+    /// `prior` (a tolerance), `free` (no prior: a set-up's nuisance or no physical scale) or
+    /// `held` (not fitted: kept at its start).
+    pub treatment: String,
+    /// The tolerance (a-priori standard deviation), `null` when free or held.
+    pub tolerance: Option<f64>,
+    /// Its parameters the data determined (share of at least 0.5).
+    pub determined: usize,
+    /// Its parameters.
+    pub parameters: usize,
+}
+
+/// One parameter: prior, posterior and the data's share.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ParameterPrior {
+    /// Its name, with its unit.
+    pub name: String,
+    /// Prior standard deviation (`null` free, 0 held).
+    pub prior_std: Option<f64>,
+    /// Posterior standard deviation (`null` where undefined or held).
+    pub posterior_std: Option<f64>,
+    /// `1 - posterior variance / prior variance` (`null` without a prior).
+    pub data_share: Option<f64>,
+}
+
+/// A direction held near nominal because the data see it less well than its tolerance.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct HeldDirectionReport {
+    /// The data's standard deviation of the direction, in tolerances.
+    pub data_std_in_tolerances: f64,
+    /// What moves, in words: the largest loadings (tolerance-scaled) by parameter name.
+    pub description: String,
+}
+
+/// `calibration.json` `prior`.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PriorReport {
+    /// The estimator, in words.
+    pub method: String,
+    /// The groups and their tolerances.
+    pub groups: Vec<GroupReport>,
+    /// Every parameter, in model order.
+    pub parameters: Vec<ParameterPrior>,
+    /// Directions held near nominal, weakest first.
+    pub held_directions: Vec<HeldDirectionReport>,
+    /// Directions the data determine better than their tolerance.
+    pub determined_dimensions: usize,
+    /// Effective number of parameters fitted (trace of the hat matrix).
+    pub effective_params: f64,
+}
+
+/// Words for a direction: its largest loadings by parameter name.
+fn describe(names: &[String], loadings: &[(usize, f64)]) -> String {
+    loadings
+        .iter()
+        .filter(|(_, c)| c.abs() >= 0.2)
+        .map(|(k, c)| format!("{} {}", sig(*c, 2), names[*k]))
+        .collect::<Vec<_>>()
+        .join(" + ")
+}
+
+impl PriorReport {
+    /// The report of a fit's prior (`None` for a fit without one).
+    pub fn new(model: &MeasurementModel, cal: &Calibration) -> Option<Self> {
+        let p: &PriorSummary = cal.prior.as_ref()?;
+        let names = model.parameter_names();
+        let groups = model
+            .blocks()
+            .iter()
+            .map(|b| {
+                let t = cal
+                    .prior_std
+                    .get(b.offset)
+                    .copied()
+                    .unwrap_or(f64::INFINITY);
+                let treatment = if t == 0.0 {
+                    "held"
+                } else if t.is_finite() {
+                    "prior"
+                } else {
+                    "free"
+                };
+                GroupReport {
+                    group: group_name(model, b),
+                    unit: group_unit(model, b),
+                    treatment: treatment.into(),
+                    tolerance: (t.is_finite() && t > 0.0).then_some(t),
+                    determined: (b.offset..b.offset + b.len)
+                        .filter(|&k| cal.estimate_um[k].is_some())
+                        .count(),
+                    parameters: b.len,
+                }
+            })
+            .collect();
+        Some(Self {
+            method: "maximum a posteriori: least squares plus each parameter's departure from nominal over its tolerance (a Gaussian prior); noise estimated with the fit when not declared".into(),
+            groups,
+            parameters: names
+                .iter()
+                .enumerate()
+                .map(|(k, n)| ParameterPrior {
+                    name: n.clone(),
+                    prior_std: p.prior_std[k],
+                    posterior_std: p.posterior_std[k],
+                    data_share: p.data_share[k],
+                })
+                .collect(),
+            held_directions: p
+                .held_directions
+                .iter()
+                .map(|h| HeldDirectionReport {
+                    data_std_in_tolerances: h.data_std_in_tolerances,
+                    description: describe(&names, &h.loadings),
+                })
+                .collect(),
+            determined_dimensions: p.determined_dimensions,
+            effective_params: p.effective_params,
+        })
+    }
+
+    /// The report.md section.
+    pub fn markdown(&self, s: &mut String) {
+        s.push_str("## What the data determine at their noise\n\n");
+        s.push_str(&format!(
+            "Estimator: {}. {} directions determined better than their tolerance; {} held near nominal by it; {} effective parameters.\n\n",
+            self.method,
+            self.determined_dimensions,
+            self.held_directions.len(),
+            sig(self.effective_params, 3)
+        ));
+        s.push_str("| group | treatment | tolerance | determined |\n|---|---|---|---|\n");
+        for g in &self.groups {
+            s.push_str(&format!(
+                "| {} | {} | {} | {} of {} |\n",
+                g.group,
+                g.treatment,
+                g.tolerance
+                    .map_or("-".to_string(), |t| format!("{} {}", sig(t, 3), g.unit)),
+                g.determined,
+                g.parameters
+            ));
+        }
+        s.push('\n');
+        if !self.held_directions.is_empty() {
+            s.push_str("Held near nominal (the data see these less well than their tolerance; they are not measured):\n\n");
+            for h in self.held_directions.iter().take(12) {
+                s.push_str(&format!(
+                    "- {} (data std {} tolerances)\n",
+                    h.description,
+                    sig(h.data_std_in_tolerances, 2)
+                ));
+            }
+            if self.held_directions.len() > 12 {
+                s.push_str(&format!(
+                    "- and {} more (calibration.json `prior.held_directions`)\n",
+                    self.held_directions.len() - 12
+                ));
+            }
+            s.push('\n');
+        }
+    }
+}
+
+/// The warning when the prior held directions near nominal: the data do not measure them.
+pub fn warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
+    let p = cal.prior.as_ref()?;
+    let weakest = p.held_directions.first()?;
+    let names = model.parameter_names();
+    Some(format!(
+        "**Held near nominal**: {} direction{} of the parameters the data see less well than their tolerance (the weakest: {}, known to {} tolerances from the data alone); the fit keeps them near nominal instead of measuring them. They are listed under \"What the data determine at their noise\"; a campaign with more varied poses, another instrument or a declared effect the model lacks would determine them.",
+        p.held_directions.len(),
+        if p.held_directions.len() == 1 { "" } else { "s" },
+        describe(&names, &weakest.loadings),
+        sig(weakest.data_std_in_tolerances, 2)
+    ))
+}
