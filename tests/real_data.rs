@@ -122,23 +122,43 @@ fn the_real_tilt_session_calibrates_to_a_plausible_machine() {
     assert!(file < 0.5 * nominal);
 }
 
+/// Fitted on nine positions, judged on the other eight, each model's session re-levelled by
+/// `validate`: `refine` (choosing its effects out of sample) and `calibrate` with the leg
+/// compliance a user who knows the machine declares.
 #[test]
 fn the_real_tilt_session_predicts_positions_it_never_saw() {
     let dir = scratch("real", "tilt-split");
     let (train, test) = (dir.join("train.csv"), dir.join("test.csv"));
     assert_eq!(write_rows(&train, training_position), 9 * 17 - 4);
     assert_eq!(write_rows(&test, |xy| !training_position(xy)), 8 * 17);
+    let refined = dir.join("refined");
+    ok(&[
+        "refine",
+        "--robot",
+        &robot(),
+        "--data",
+        &p(&train),
+        "--out",
+        &p(&refined),
+    ]);
     let cal = dir.join("cal");
-    calibrate_json(Path::new(&robot()), &[&train], &[], &cal);
-    let calibrated = cal.join("calibrated.toml");
-    let (joints_mm, scale_pct) = plausibility(&calibrated);
-    assert!(
-        joints_mm < 5.0 && scale_pct < 10.0,
-        "{joints_mm} mm, {scale_pct} %"
+    calibrate_json(
+        Path::new(&robot()),
+        &[&train],
+        &["--effects", "link_offset,link_scale,compliance"],
+        &cal,
     );
-    let deg = held_out_deg(&calibrated, &test);
-    eprintln!("tilt session, 9 positions -> the other 8: {deg:.4} deg");
-    assert!(deg <= 0.105, "held-out positions {deg} deg");
+    for (who, out) in [("refine", &refined), ("calibrate", &cal)] {
+        let calibrated = out.join("calibrated.toml");
+        let (joints_mm, scale_pct) = plausibility(&calibrated);
+        assert!(
+            joints_mm < 5.0 && scale_pct < 10.0,
+            "{who}: {joints_mm} mm, {scale_pct} %"
+        );
+        let deg = held_out_deg(&calibrated, &test);
+        eprintln!("tilt session, 9 positions -> the other 8, {who}: {deg:.4} deg");
+        assert!(deg <= 0.105, "{who}: held-out positions {deg} deg");
+    }
 }
 
 #[test]
@@ -206,8 +226,10 @@ fn refine_on_the_real_tilt_session_finds_a_load_dependent_leg_effect() {
         .map(|s| s["effect"].as_str().unwrap().to_string())
         .collect();
     eprintln!("refine on the tilt session added {added:?}");
+    // Compliance (a leg shortened by its force) or joint clearance (a leg's play taken up in
+    // the direction of its force): the effects whose signature is the load's.
     assert!(
-        added.iter().any(|e| e == "compliance"),
+        added.iter().any(|e| e == "compliance" || e == "clearance"),
         "no load-dependent effect found: {added:?}"
     );
     let (joints_mm, scale_pct) = plausibility(&out.join("calibrated.toml"));
@@ -386,10 +408,21 @@ fn independent_leg_fit(robot_toml: &Path, data: &Path) -> String {
     )
 }
 
-fn link_rms_mm(calibrated: &Path, data: &Path) -> f64 {
-    validate_json(calibrated, &[data])["calibrated"]["link_rms_mm"]
-        .as_f64()
-        .unwrap()
+/// The held-out leg RMS (mm) of a calibrated description, its session re-registered by
+/// `cpm validate` (the same judge for every model).
+fn link_rms_mm(calibrated: &Path, reference: &Path, data: &Path) -> f64 {
+    let out = ok(&[
+        "validate",
+        "--robot",
+        &p(calibrated),
+        "--reference",
+        &p(reference),
+        "--data",
+        &p(data),
+        "--json",
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    v["calibrated"]["link_rms_mm"].as_f64().unwrap()
 }
 
 #[test]
@@ -398,11 +431,11 @@ fn motion_capture_calibrate_generalises_as_well_as_an_independent_leg_fit() {
     let (robot, first, last) = mocap_split(&dir);
     let independent = dir.join("independent.toml");
     std::fs::write(&independent, independent_leg_fit(&robot, &first)).unwrap();
-    let reference = link_rms_mm(&independent, &last);
+    let reference = link_rms_mm(&independent, &robot, &last);
     let cal = dir.join("cal");
     let fit = calibrate_json(&robot, &[&first], &[], &cal);
     assert_eq!(fit["simulated"], false);
-    let calibrated = link_rms_mm(&cal.join("calibrated.toml"), &last);
+    let calibrated = link_rms_mm(&cal.join("calibrated.toml"), &robot, &last);
     let refined_dir = dir.join("refined");
     ok(&[
         "refine",
@@ -413,7 +446,7 @@ fn motion_capture_calibrate_generalises_as_well_as_an_independent_leg_fit() {
         "--out",
         &p(&refined_dir),
     ]);
-    let refined = link_rms_mm(&refined_dir.join("calibrated.toml"), &last);
+    let refined = link_rms_mm(&refined_dir.join("calibrated.toml"), &robot, &last);
     eprintln!(
         "motion capture, rows 73-108 held out (frame re-registered), leg RMS: independent leg fit {reference:.4} mm, cpm calibrate {calibrated:.4} mm, cpm refine {refined:.4} mm"
     );

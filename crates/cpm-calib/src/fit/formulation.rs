@@ -77,3 +77,49 @@ pub fn identify_with(
         Formulation::Implicit => identify_implicit_calibration(model, campaign, options),
     }
 }
+
+/// The residuals a fit to 6-D tracker poses runs on, chosen out of sample.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrackerResidualChoice {
+    /// True when the leg-space residuals were chosen.
+    pub leg_space: bool,
+    /// Cross-validated RMS of the pose-space fit (weighted, um of the reference).
+    pub pose_cv_rms: f64,
+    /// Cross-validated RMS of the leg-space fit, judged on the same held-out pose residuals.
+    pub leg_cv_rms: f64,
+    /// How the folds were made.
+    pub folds: crate::fit::refine::FoldKind,
+}
+
+/// Pose-space or leg-space residuals for a campaign of full tracker poses: each fitted on the
+/// folds of [`crate::fit::refine::cv_folds`] (acquisition order, sessions or positions) and
+/// judged on the held-out poses' residuals; the lower wins (pose space on a tie). `None` when
+/// the leg-space formulation does not apply ([`crate::model::leg_space_applies`]).
+pub fn choose_tracker_residuals(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+    folds: usize,
+) -> Result<Option<TrackerResidualChoice>, CalibError> {
+    if !crate::model::leg_space_applies(campaign) {
+        return Ok(None);
+    }
+    let start = options
+        .start_um
+        .clone()
+        .unwrap_or_else(|| vec![0.0; model.num_params()]);
+    let score = |leg: bool| {
+        let o = IdentifyOptions {
+            leg_space: leg,
+            ..options.clone()
+        };
+        crate::fit::refine::cross_validated_errors(model, campaign, &o, folds, &start)
+    };
+    let (pose, leg) = (score(false)?, score(true)?);
+    Ok(Some(TrackerResidualChoice {
+        leg_space: leg.rms() < pose.rms(),
+        pose_cv_rms: pose.rms(),
+        leg_cv_rms: leg.rms(),
+        folds: pose.kind,
+    }))
+}

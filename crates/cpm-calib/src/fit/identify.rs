@@ -116,6 +116,9 @@ pub struct Calibration {
     /// The a-priori standard deviation of every parameter as applied (model units; 0 held,
     /// infinite free).
     pub prior_std: Vec<f64>,
+    /// True when the 6-D tracker poses were fitted in leg space
+    /// ([`IdentifyOptions::leg_space`]); the residuals here are in pose space either way.
+    pub leg_space: bool,
 }
 
 /// The weight `rho'(r^2)` below which a robust loss is said to down-weight an observation.
@@ -178,28 +181,40 @@ fn reregister_frames(
     e: Vec<f64>,
     lm: &cpm_lm::Options,
 ) -> Result<Vec<f64>, CalibError> {
-    let Some(b) = problem
+    let sessions: Vec<_> = problem
         .model
         .blocks()
         .into_iter()
-        .find(|b| b.effect == Some(Effect::TrackerFrame))
-    else {
+        .filter(|b| {
+            matches!(
+                b.effect,
+                Some(Effect::TrackerFrame | Effect::BaseTilt | Effect::PointFrame)
+            )
+        })
+        .collect();
+    let n: usize = sessions.iter().map(|b| b.len).sum();
+    let np = e.len();
+    let mut basis = DMatrix::zeros(np, n);
+    let mut c = 0;
+    for b in &sessions {
+        for k in 0..b.len {
+            basis[(b.offset + k, c)] = 1.0;
+            c += 1;
+        }
+    }
+    if n == 0 {
         problem.start_um = DVector::from_vec(e);
-        problem.basis = DMatrix::zeros(problem.start_um.len(), 0);
+        problem.basis = basis;
+        problem.leg = false;
         problem.cached = false;
         return Ok(problem.start_um.iter().copied().collect());
-    };
-    let np = e.len();
-    let mut basis = DMatrix::zeros(np, b.len);
-    for c in 0..b.len {
-        basis[(b.offset + c, c)] = 1.0;
     }
     problem.start_um = DVector::from_vec(e);
     problem.basis = basis;
     problem.leg = false;
     problem.prior_rows.clear();
     problem.cached = false;
-    let mut x = vec![0.0; b.len];
+    let mut x = vec![0.0; n];
     cpm_lm::minimize(
         problem,
         &mut x,
@@ -607,6 +622,7 @@ pub fn identify(
         first.row_space()
     };
     let rank = basis.ncols();
+    let leg_space = options.leg_space && crate::model::leg_space_applies(campaign);
     let mut problem = Subspace {
         model,
         prepared: &prepared,
@@ -622,7 +638,7 @@ pub fn identify(
         cached: true,
         prior_rows,
         prior_sigma: 0.0,
-        leg: options.leg_space && crate::model::leg_space_applies(campaign),
+        leg: leg_space,
         leg_r: Vec::new(),
         leg_jac: DMatrix::zeros(0, 0),
     };
@@ -686,9 +702,11 @@ pub fn identify(
         }
     };
     let mut e_hat = problem.errors(&theta);
-    if problem.leg {
-        // The session frames registered again in pose space with the machine held fixed, as
-        // `validate` registers a session: the written machine then reproduces the fit.
+    if problem.leg || (with_prior && options.lm.loss.is_squared()) {
+        // The sessions' own parameters (tracker and point frames, base tilts) registered
+        // again in pose space with the machine held fixed, as `validate` registers a session:
+        // the written machine then reproduces the fit to the solver's precision, whatever
+        // the prior did to the rest.
         e_hat = reregister_frames(&mut problem, e_hat, &options.lm)?;
         theta = vec![0.0; problem.basis.ncols()];
     }
@@ -807,6 +825,7 @@ pub fn identify(
         leverages,
         prior: prior_summary,
         prior_std: prior,
+        leg_space,
     })
 }
 

@@ -706,5 +706,6 @@ pub fn identify_implicit_calibration(
         // prior (its campaigns determine every parameter they fit far below any tolerance).
         prior: None,
         prior_std: vec![f64::INFINITY; np],
+        leg_space: false,
     })
 }

@@ -141,7 +141,7 @@ pub fn default_tolerance(model: &MeasurementModel, block: &Block) -> f64 {
         Effect::LinkOffset | Effect::SensorOffset => 5e-2 * size_um,
         Effect::LinkScale | Effect::SensorScale => 5e4,
         Effect::LinkNonlinearity | Effect::ScrewPeriodic | Effect::SocketError => 4e-3 * size_um,
-        Effect::Clearance | Effect::Backlash => 2e-3 * size_um,
+        Effect::Clearance | Effect::Backlash => 2e-4 * size_um,
         Effect::ThermalDrift => 100.0,
         Effect::Compliance => {
             // Deflection of 1 % of the size under the load's weight (and external force)

@@ -872,26 +872,48 @@ pub fn refine(
             let (ka, kb) = (key(a.0), key(b.0));
             ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
         });
+        // Out of sample decides: every eligible candidate of a family (physical effects
+        // first, pose map terms only when no physical effect helps) is cross-validated, and
+        // the one that predicts held-out poses best is added if it beats the current model
+        // clearly (by more than a standard error of the difference).
         let mut best = None;
-        for (i, aug, c1) in eligible {
-            if best.is_some() {
+        let (physical, maps): (Vec<_>, Vec<_>) = eligible
+            .into_iter()
+            .partition(|(i, _, _)| !matches!(scores[*i].effect, Effect::PoseMap(_)));
+        for family in [physical, maps] {
+            if best.is_some() || family.is_empty() {
                 continue;
             }
-            let e1 = cross_validated_errors(
-                &aug,
-                campaign,
-                &cv_opts(&c1),
-                options.folds,
-                &c1.minimum_norm_um,
-            )?;
-            let cv1 = e1.rms();
-            scores[i].cv_rms_um = Some(cv1);
-            // Out of sample, and clearly: by more than a standard error of the difference.
-            if cv_err.clearly_worse_than(&e1) {
-                best = Some((i, aug, c1, cv1, e1));
-                continue;
+            let judged: Vec<CvErrors> = family
+                .par_iter()
+                .map(|(_, aug, c1)| {
+                    cross_validated_errors(
+                        aug,
+                        campaign,
+                        &cv_opts(c1),
+                        options.folds,
+                        &c1.minimum_norm_um,
+                    )
+                })
+                .collect::<Result<_, _>>()?;
+            let mut pick: Option<usize> = None;
+            for (f, ((i, _, _), e1)) in family.iter().zip(&judged).enumerate() {
+                scores[*i].cv_rms_um = Some(e1.rms());
+                if pick.is_none_or(|b| e1.rms() < judged[b].rms()) {
+                    pick = Some(f);
+                }
             }
-            rejected_by_cv.push((scores[i].effect, cv, cv1));
+            let b = pick.expect("a non-empty family");
+            let mut judged: Vec<Option<CvErrors>> = judged.into_iter().map(Some).collect();
+            for (f, (i, aug, c1)) in family.into_iter().enumerate() {
+                let e1 = judged[f].take().expect("judged once");
+                let cv1 = e1.rms();
+                if f == b && cv_err.clearly_worse_than(&e1) {
+                    best = Some((i, aug, c1, cv1, e1));
+                } else {
+                    rejected_by_cv.push((scores[i].effect, cv, cv1));
+                }
+            }
         }
         let Some((i, aug, c1, cv1, e1)) = best else {
             last_round = scores;

@@ -375,6 +375,9 @@ pub struct FitReport {
     /// What the prior did: tolerances per group, each parameter's posterior against its prior,
     /// the directions held near nominal (`null` for a fit without a prior).
     pub prior: Option<prior::PriorReport>,
+    /// The residuals the tracker poses were fitted on: `pose` or `legs` (the
+    /// inverse-kinematics formulation); `null` without tracker poses.
+    pub tracker_residuals: Option<String>,
     /// The warnings, plain text.
     pub warnings: Vec<String>,
     /// What only the text says.
@@ -632,6 +635,8 @@ impl FitReport {
                 })
                 .collect(),
             prior: prior::PriorReport::new(model, cal),
+            tracker_residuals: (campaign.pose_measurements.len() > 0)
+                .then(|| if cal.leg_space { "legs" } else { "pose" }.to_string()),
             warnings: warnings_md.iter().map(|w| w.replace("**", "")).collect(),
             text: fit_text(inputs, model, cal, formulation, warnings_md),
         }
