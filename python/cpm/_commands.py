@@ -70,6 +70,10 @@ def _argv(command: str, scratch: Scratch, options: Dict[str, Any]) -> List[str]:
             for p in value._cli_paths(scratch):
                 argv += [flag, p]
             continue
+        if key == "tolerances" and isinstance(value, dict):
+            # {"link_scale": 20000, "installation_errors": float("inf")} -> --tolerance G=V
+            flag = "--tolerance"
+            value = [f"{k}={'inf' if np.isinf(v) else repr(float(v))}" for k, v in value.items()]
         if key == "truth_effect" and isinstance(value, dict):
             value = [f"{k}=" + ",".join(repr(float(v)) for v in np.atleast_1d(vs))
                      for k, vs in value.items()]
@@ -316,7 +320,11 @@ def calibrate(
 
     ``robust="huber:K"`` (``cauchy:K``, ``tukey:K``), ``sigma_um`` (the sensor noise), and the
     other options of the command by name (``pose_sigma_um``, ``orientation_sigma_urad``,
-    ``minimum_norm``, ``max_iterations``, ``formulation``). With ``out`` the outputs are written
+    ``minimum_norm``, ``max_iterations``, ``formulation``). The estimator's prior:
+    ``tolerances={"installation_errors": 2000, "link_scale": 50000}`` (each group's a-priori
+    standard deviation in its unit, ``float("inf")`` frees it), ``hold=["installation_errors"]``
+    (groups kept at nominal), ``no_prior=True`` (plain least squares);
+    ``tracker_residuals="auto"|"pose"|"legs"`` for 6-D tracker poses (docs/estimation.md). With ``out`` the outputs are written
     there as the command writes them. The GIL is released during the fit; Ctrl-C raises
     ``KeyboardInterrupt`` at once (the fit itself finishes in the background and is dropped;
     nothing is written).

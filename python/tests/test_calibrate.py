@@ -240,3 +240,20 @@ def test_noise_per_kind_reaches_the_fit(in_root, tmp_path):
     assert abs(kinds["tracker positions"]["estimated"] / 2.0 - 1.0) < 0.15
     assert abs(kinds["tracker orientations"]["estimated"] / 500.0 - 1.0) < 0.15
     assert not any(w.startswith("Noise not as weighed") for w in weighed.warnings)
+
+
+def test_tolerances_and_hold_reach_the_fit(in_root):
+    """The estimator's prior from Python: a held group stays at nominal, a tolerance is the
+    one the report lists, and a group the model does not have is refused by name."""
+    robot = cpm.Robot.from_toml(HEXAPOD)
+    data = cpm.read_measurements(HEXAPOD_READINGS, robot)
+    held = cpm.calibrate(robot, data, effects=["link_offset"], hold=["installation_errors"])
+    assert np.all(held.minimum_norm_um[:36] == 0.0)
+    assert np.any(held.minimum_norm_um[36:] != 0.0)
+    tight = cpm.calibrate(robot, data, effects=["link_offset"],
+                          tolerances={"link_offset": 123.0})
+    groups = {g["group"]: g for g in json.loads(tight.text("calibration.json"))["prior"]["groups"]}
+    assert groups["link_offset"]["tolerance"] == 123.0
+    assert groups["link_offset"]["treatment"] == "prior"
+    with pytest.raises(cpm.CpmError, match="not_a_group"):
+        cpm.calibrate(robot, data, tolerances={"not_a_group": 1.0})

@@ -90,8 +90,17 @@ pub struct SimulateArgs {
 /// The largest simulated noise, um.
 pub const MAX_NOISE_UM: f64 = 1000.0;
 
-/// Parses a noise specification.
+/// The largest simulated angle noise (inclinometers), urad: 0.1 rad, 5.7 deg.
+pub const MAX_NOISE_URAD: f64 = 1e5;
+
+/// Parses a noise specification (um).
 pub fn parse_noise(spec: &str) -> Result<Noise, String> {
+    parse_noise_in(spec, "um", MAX_NOISE_UM, "1 mm")
+}
+
+/// Parses a noise specification in an instrument's unit (`um`, or `urad` for angles), with
+/// its largest plausible value (and that value in words).
+pub fn parse_noise_in(spec: &str, unit: &str, max: f64, max_words: &str) -> Result<Noise, String> {
     let spec = spec.trim();
     if spec == "none" {
         return Ok(Noise::None);
@@ -104,11 +113,12 @@ pub fn parse_noise(spec: &str) -> Result<Noise, String> {
         .parse()
         .ok()
         .filter(|v: &f64| v.is_finite() && *v >= 0.0)
-        .ok_or_else(|| format!("{spec:?}: {value:?} is not a non-negative number of um"))?;
-    if v > MAX_NOISE_UM {
+        .ok_or_else(|| format!("{spec:?}: {value:?} is not a non-negative number of {unit}"))?;
+    if v > max {
         return Err(format!(
-            "{spec:?}: {} um is implausibly large (over {MAX_NOISE_UM} um = 1 mm; the noise is in um)",
-            crate::io::table::show(v, None)
+            "{spec:?}: {} {unit} is implausibly large (over {} {unit} = {max_words}; the noise is in {unit})",
+            crate::io::table::show(v, None),
+            crate::io::table::show(max, None)
         ));
     }
     match kind.trim() {
@@ -148,6 +158,10 @@ fn blame_truth(args: &SimulateArgs, e: impl Into<anyhow::Error>) -> anyhow::Erro
 /// like the largest plausible installation error (100 mm in um).
 pub const MAX_TRUTH_EFFECT: f64 = 1e5;
 
+/// The largest `--truth-effect compliance` value, um/kN (100 mm per kN: a light platform's
+/// soft legs, whose deflection at the declared load is still millimetres).
+pub const MAX_TRUTH_COMPLIANCE: f64 = 1e8;
+
 fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
     let (name, values) = s
         .split_once('=')
@@ -162,11 +176,17 @@ fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
                 .filter(|x| x.is_finite())
                 .ok_or_else(|| format!("{s:?}: {v:?} is not a number"))
                 .and_then(|x| {
-                    if x.abs() <= MAX_TRUTH_EFFECT {
+                    let max = if effect == Effect::Compliance {
+                        MAX_TRUTH_COMPLIANCE
+                    } else {
+                        MAX_TRUTH_EFFECT
+                    };
+                    if x.abs() <= max {
                         Ok(x)
                     } else {
                         Err(format!(
-                            "{s:?}: {x:e} is implausibly large (at most {MAX_TRUTH_EFFECT:e} in the effect's unit)"
+                            "{s:?}: {x:e} is implausibly large (at most {max:e} in the effect's unit, {})",
+                            effect.unit()
                         ))
                     }
                 })
@@ -458,6 +478,10 @@ pub fn run(args: &SimulateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let robot = common::load_robot(&args.robot.robot, ctx)?;
     let declared = args.effects.resolve(&robot)?;
     let noise = match &args.noise {
+        Some(s) if args.measure == Measure::Tilts => {
+            parse_noise_in(s, "urad", MAX_NOISE_URAD, "5.7 deg")
+                .map_err(|m| usage_error(format!("--noise {m}")))?
+        }
         Some(s) => parse_noise(s).map_err(|m| usage_error(format!("--noise {m}")))?,
         None => match robot.sensor_noise_um() {
             Some(s) => Noise::Gaussian { sigma_um: s },

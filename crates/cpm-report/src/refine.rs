@@ -182,6 +182,10 @@ pub struct RefineDoc {
     pub rejected_by_cross_validation: Vec<RejectedByCv>,
     /// Plain calibration against the refined model, on data the fits did not see.
     pub against_calibrate: AgainstCalibrate,
+    /// The groups refine tried to hold at nominal, judged out of sample.
+    pub hold_trials: Vec<cpm_calib::refine::HoldTrial>,
+    /// The groups the final model holds at nominal (declared or chosen).
+    pub held_groups: Vec<String>,
 }
 
 impl RefineDoc {
@@ -293,6 +297,8 @@ impl RefineDoc {
                 })
                 .collect(),
             against_calibrate: r.against_calibrate,
+            hold_trials: r.hold_trials.clone(),
+            held_groups: r.held_groups.clone(),
         }
     }
 

@@ -70,6 +70,11 @@ pub struct RefineOptions {
     pub pose_map_proposals: usize,
     /// Identification options (declared noise in `sigma_um`).
     pub identify: IdentifyOptions,
+    /// Groups of parameters refine may hold at nominal (`[calibration] hold`), each tried
+    /// before any effect is added and held when the model without it predicts held-out data
+    /// clearly better. Default `["installation_errors"]` (where the data see the joints worse
+    /// than their effects, a model of the effects alone generalises better).
+    pub hold_candidates: Vec<String>,
 }
 
 impl Default for RefineOptions {
@@ -83,6 +88,7 @@ impl Default for RefineOptions {
             pose_map_degree: 2,
             pose_map_proposals: 3,
             identify: IdentifyOptions::default(),
+            hold_candidates: vec![crate::fit::prior::INSTALLATION_ERRORS.to_string()],
         }
     }
 }
@@ -175,6 +181,83 @@ pub struct Refinement {
     pub pose_range: PoseRange,
     /// Plain calibration against refinement, judged on data the fits did not see.
     pub against_calibrate: AgainstCalibrate,
+    /// The groups refine tried to hold at nominal, with their out-of-sample scores.
+    pub hold_trials: Vec<HoldTrial>,
+    /// The groups held (declared or chosen): the final fit keeps them at nominal.
+    pub held_groups: Vec<String>,
+}
+
+/// A group of parameters refine tried to hold at nominal.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct HoldTrial {
+    /// The group.
+    pub group: String,
+    /// Cross-validated RMS with the group fitted (weighted, um of the reference).
+    pub cv_rms_fitted_um: f64,
+    /// Cross-validated RMS with the group held.
+    pub cv_rms_held_um: f64,
+    /// True when held (clearly better out of sample).
+    pub held: bool,
+}
+
+/// Refine's choice of groups to hold: each candidate group held in turn (on top of those
+/// already held), kept when the fit without it predicts held-out data clearly better.
+fn choose_holds(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &RefineOptions,
+) -> Result<(IdentifyOptions, Vec<HoldTrial>), CalibError> {
+    let mut opts = options.identify.clone();
+    let mut trials = Vec::new();
+    if opts.tolerances.off || options.hold_candidates.is_empty() {
+        return Ok((opts, trials));
+    }
+    let np = model.num_params();
+    let score = |o: &IdentifyOptions| -> Result<CvErrors, CalibError> {
+        let c = identify(model, campaign, o)?;
+        let cvo = IdentifyOptions {
+            prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
+            ..o.clone()
+        };
+        cross_validated_errors(model, campaign, &cvo, options.folds, &vec![0.0; np])
+    };
+    let mut current: Option<CvErrors> = None;
+    for g in &options.hold_candidates {
+        if opts.tolerances.hold.contains(g) {
+            continue;
+        }
+        let mut held = opts.clone();
+        held.tolerances.hold.push(g.clone());
+        // A group this model does not have, or holding which leaves nothing to fit.
+        if crate::fit::prior::prior_std(model, &held.tolerances).is_err() {
+            continue;
+        }
+        if model.effects.is_empty() && g == crate::fit::prior::INSTALLATION_ERRORS {
+            continue;
+        }
+        let base = match current.take() {
+            Some(c) => c,
+            None => score(&opts)?,
+        };
+        let Ok(with) = score(&held) else {
+            current = Some(base);
+            continue;
+        };
+        let better = base.clearly_worse_than(&with);
+        trials.push(HoldTrial {
+            group: g.clone(),
+            cv_rms_fitted_um: base.rms(),
+            cv_rms_held_um: with.rms(),
+            held: better,
+        });
+        if better {
+            opts = held;
+            current = Some(with);
+        } else {
+            current = Some(base);
+        }
+    }
+    Ok((opts, trials))
 }
 
 /// Plain calibration (the starting model, as `cpm calibrate` fits it) against the refined
@@ -658,7 +741,9 @@ fn outliers_or_signal(
     })
 }
 
-/// Runs the refinement loop on a campaign, starting from `model` (its declared effects).
+/// Runs the refinement loop on a campaign, starting from `model` (its declared effects):
+/// first the groups to hold ([`RefineOptions::hold_candidates`]), then the effects, each
+/// choice judged out of sample.
 pub fn refine(
     model: &MeasurementModel,
     campaign: &Campaign,
@@ -670,6 +755,32 @@ pub fn refine(
             format!("{} must be in (0, 1)", options.alpha),
         ));
     }
+    let (identify_options, hold_trials) = choose_holds(model, campaign, options)?;
+    let held = RefineOptions {
+        identify: identify_options,
+        ..options.clone()
+    };
+    let mut r = refine_effects(model, campaign, &held)?;
+    if hold_trials.iter().any(|t| t.held) {
+        // Plain calibration is the model with nothing held but what was declared.
+        let c = identify(model, campaign, &options.identify)?;
+        let o = IdentifyOptions {
+            prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
+            ..options.identify.clone()
+        };
+        r.against_calibrate.calibrate_cv_rms_um =
+            cross_validated_rms(model, campaign, &o, options.folds, &c.minimum_norm_um)?;
+    }
+    r.held_groups = held.identify.tolerances.hold.clone();
+    r.hold_trials = hold_trials;
+    Ok(r)
+}
+
+fn refine_effects(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &RefineOptions,
+) -> Result<Refinement, CalibError> {
     let first = identify(model, campaign, &options.identify)?;
     let (outliers_before, outliers_explained) =
         outliers_or_signal(model, campaign, options, &first)?;
@@ -1025,6 +1136,8 @@ pub fn refine(
         initial_pose_structure,
         pose_range: PoseRange::of(full),
         against_calibrate,
+        hold_trials: Vec::new(),
+        held_groups: Vec::new(),
     })
 }
 
