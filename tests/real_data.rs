@@ -523,16 +523,26 @@ fn simulated_tilts_on_the_real_grid_with_an_undeclared_effect() {
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap())
             .unwrap();
-    let effects = doc["effects"].as_array().unwrap();
+    // The written values (calibrated.toml's known effects) with their posterior standard
+    // deviations (the data and the tolerances together; the rank-deficient tilt data determine
+    // no parameter on its own).
+    let written = cpm::io::Robot::load(&out.join("calibrated.toml")).unwrap();
+    let known = written.description.calibration.unwrap().known_effects;
+    let params = doc["prior"]["parameters"].as_array().unwrap();
     let values = |name: &str| -> Vec<(f64, f64)> {
-        effects
-            .iter()
-            .find(|e| e["effect"] == name)
-            .unwrap_or_else(|| panic!("{name} not in the refined model: {effects:?}"))["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|q| (q["value"].as_f64().unwrap(), q["std"].as_f64().unwrap()))
+        let v = known
+            .get(name)
+            .unwrap_or_else(|| panic!("{name} not in the refined model: {known:?}"));
+        v.iter()
+            .enumerate()
+            .map(|(k, x)| {
+                let label = format!("{name} link {} [", k + 1);
+                let q = params
+                    .iter()
+                    .find(|q| q["name"].as_str().unwrap().starts_with(&label))
+                    .unwrap_or_else(|| panic!("no prior entry {label}"));
+                (*x, q["posterior_std"].as_f64().unwrap())
+            })
             .collect()
     };
     for (name, truth) in [("link_scale", scale_ppm), ("compliance", compliance)] {

@@ -782,7 +782,17 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     );
     // Force- and pose-dependent effects too (compliance reads the link forces at the
     // commanded pose, a pose map the commanded pose itself): the file still reproduces the fit.
+    // Compliance takes its direction from the load, which the description must declare: a
+    // copy with an assumed one (no hidden load).
     let cal2 = dir.join("cal2");
+    let loaded = dir.join("robot_with_load.toml");
+    std::fs::write(
+        &loaded,
+        std::fs::read_to_string(&robot).unwrap()
+            + "\n[load]\nplatform_mass_kg = 5.0\nplatform_com_mm = [0.0, 0.0, 0.0]\n",
+    )
+    .unwrap();
+    let robot = p(&loaded);
     let effects = "link_offset,link_scale,tracker_frame,compliance,pose_map_z_roll";
     let fit2 = calibrate(&cal2, &robot, &first, effects, &[])["residual_rms_um"]
         .as_f64()

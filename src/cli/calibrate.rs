@@ -194,6 +194,31 @@ impl FitArgs {
             c.tilt_sigma_urad = r.campaign.tilt_sigma_urad;
             inputs.identify.sigma_um = r.options.sigma_um;
         }
+        // Full tracker poses: pose or leg residuals, whichever predicts held-out poses better
+        // (after the noise per kind, which weighs the pose residuals).
+        if self.tracker_residuals == TrackerResiduals::Auto {
+            let (model, merged) = (&inputs.model, &inputs.merged);
+            if crate::calib::model::leg_space_applies(&merged.campaign) {
+                ctx.stage("choosing the tracker residuals (pose or legs) by cross-validation");
+            }
+            let choice = crate::calib::fit::formulation::choose_tracker_residuals(
+                model,
+                &merged.campaign,
+                &inputs.identify,
+                5,
+            )
+            .map_err(|e| common::locate(e, merged))?;
+            if let Some(c) = choice {
+                inputs.identify.leg_space = c.leg_space;
+                ctx.note(format!(
+                    "tracker residuals: {} (cross-validated over {:?} folds: pose residuals {:.3}, leg residuals {:.3}, weighted RMS in um of the reference; --tracker-residuals chooses)",
+                    if c.leg_space { "legs" } else { "pose" },
+                    c.folds,
+                    c.pose_cv_rms,
+                    c.leg_cv_rms
+                ));
+            }
+        }
         Ok(inputs)
     }
 }
@@ -310,33 +335,12 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     let tolerances = args.tolerances(&robot)?;
     crate::calib::prior::prior_std(&model, &tolerances)
         .map_err(|e| super::usage_error(format!("tolerances: {e}")))?;
-    let mut identify = IdentifyOptions {
+    let identify = IdentifyOptions {
         sigma_um: sigma,
         tolerances,
         leg_space: args.tracker_residuals == TrackerResiduals::Legs,
         ..IdentifyOptions::default()
     };
-    // Full tracker poses: pose or leg residuals, whichever predicts held-out poses better.
-    if args.tracker_residuals == TrackerResiduals::Auto {
-        ctx.stage("choosing the tracker residuals (pose or legs) by cross-validation");
-        let choice = crate::calib::fit::formulation::choose_tracker_residuals(
-            &model,
-            &merged.campaign,
-            &identify,
-            5,
-        )
-        .map_err(|e| common::locate(e, &merged))?;
-        if let Some(c) = choice {
-            identify.leg_space = c.leg_space;
-            ctx.note(format!(
-                "tracker residuals: {} (cross-validated over {:?} folds: pose residuals {:.3}, leg residuals {:.3}, weighted RMS in um of the reference; --tracker-residuals chooses)",
-                if c.leg_space { "legs" } else { "pose" },
-                c.folds,
-                c.pose_cv_rms,
-                c.leg_cv_rms
-            ));
-        }
-    }
     Ok(Inputs {
         data_paths: data.clone(),
         provenance: Provenance {

@@ -399,7 +399,7 @@ fn machine_truth(robot: &Robot, truth: &Truth, what: &str) -> anyhow::Result<()>
     let model = robot.model(&truth.effects);
     match unsupported_machine_effect(&model, &truth.params) {
         Some(e) => Err(usage_error(format!(
-            "--measure {what} simulates installation errors, link_offset and link_scale; the truth has {} values",
+            "--measure {what} simulates installation errors, link_offset, link_scale and compliance; the truth has {} values",
             e.name()
         ))),
         None => Ok(()),

@@ -109,6 +109,8 @@ fn round_trip_with_every_section() {
         ]
         .into_iter()
         .collect(),
+        tolerances: [("link_scale".to_string(), 20_000.0)].into_iter().collect(),
+        hold: vec!["installation_errors".into()],
         calibrated_from: Some("/work/robot.toml".into()),
         simulated: true,
     });

@@ -367,7 +367,12 @@ pub fn unsupported_machine_effect(model: &MeasurementModel, truth_um: &[f64]) ->
         let nonzero = truth_um[b.offset..b.offset + b.len]
             .iter()
             .any(|v| *v != 0.0);
-        (nonzero && !matches!(e, Effect::LinkOffset | Effect::LinkScale)).then_some(e)
+        (nonzero
+            && !matches!(
+                e,
+                Effect::LinkOffset | Effect::LinkScale | Effect::Compliance
+            ))
+        .then_some(e)
     })
 }
 
@@ -397,7 +402,7 @@ pub fn reached_poses(
         return Err(CalibError::invalid(
             "truth",
             format!(
-                "the machine acts out installation errors, link_offset and link_scale; the truth has {} values",
+                "the machine acts out installation errors, link_offset, link_scale and compliance; the truth has {} values",
                 e.name()
             ),
         ));
@@ -412,6 +417,8 @@ pub fn reached_poses(
     };
     let offset = block(Effect::LinkOffset).unwrap_or_else(|| vec![0.0; n]);
     let scale = block(Effect::LinkScale).unwrap_or_else(|| vec![0.0; n]);
+    // Compliance: each link shortened by its force (the statics of the model's load).
+    let compliance = block(Effect::Compliance);
     let true_table = model.table_with(&truth_um[..6 * n])?;
     let mut reached_all = Vec::with_capacity(poses.len());
     let mut commanded = Vec::new();
@@ -428,9 +435,36 @@ pub fn reached_poses(
             .map_err(|source| CalibError::Clearance { pose: j, source })?;
         let known = model.known_link_shift_mm(&ctx, 0.0);
         let pose_map = model.known_pose_twist(&ctx, p, 0.0);
+        let compliant: Vec<f64> = match &compliance {
+            Some(c) => {
+                let input = crate::effects::EffectInput {
+                    context: &ctx,
+                    commanded: p,
+                    home: &model.nominal.home,
+                    settings: &model.effect_settings,
+                    t0_s: 0.0,
+                };
+                let m = Effect::Compliance.model();
+                (0..n)
+                    .map(|i| {
+                        (0..c.len())
+                            .map(|k| c[k] * m.link_coefficient(k, i, &input))
+                            .sum()
+                    })
+                    .collect()
+            }
+            None => vec![0.0; n],
+        };
         previous = Some(ctx);
         let eff: Vec<f64> = (0..n)
-            .map(|i| cmd[i] + shift[i] + known[i] + offset[i] * 1e-3 + scale[i] * 1e-6 * cmd[i])
+            .map(|i| {
+                cmd[i]
+                    + shift[i]
+                    + known[i]
+                    + offset[i] * 1e-3
+                    + scale[i] * 1e-6 * cmd[i]
+                    + compliant[i]
+            })
             .collect();
         let (reached, _) = cpm_kinematics::forward(&true_table, &eff, p, &model.fk)
             .map_err(|source| CalibError::Kinematics { pose: j, source })?;

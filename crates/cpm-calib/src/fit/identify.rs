@@ -755,12 +755,24 @@ pub fn identify(
         .enumerate()
         .filter(|(k, _)| !sigma_excludes_outliers || outliers.binary_search(k).is_err())
         .fold((0.0, 0usize), |(s, n), (_, r)| (s + r * r, n + 1));
+    // Under a prior, the leverages of the regularised hat matrix (at the noise the prior was
+    // weighed against): they add up to the effective number of parameters.
+    let prior_leverages = with_prior.then(|| {
+        crate::fit::prior::leverages(&jf, &prior, options.sigma_um.unwrap_or(problem.prior_sigma))
+    });
     let (sigma_um, sigma_estimated) = match options.sigma_um {
         Some(s) => (s, false),
         None if with_prior => {
             // The residual's degrees of freedom: the observations less the effective number
-            // of parameters the fit used (the prior takes the rest).
-            let p_eff = summarize(&jf, &prior, problem.prior_sigma).effective_params;
+            // of parameters the fit used (the prior takes the rest), counted over the
+            // observations the estimate uses.
+            let h = prior_leverages.as_deref().unwrap_or(&[]);
+            let p_eff: f64 = h
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| !sigma_excludes_outliers || outliers.binary_search(k).is_err())
+                .map(|(_, x)| x)
+                .sum();
             let dof = (count as f64 - p_eff).max(1.0);
             ((ssr / dof).sqrt(), true)
         }
@@ -771,7 +783,10 @@ pub fn identify(
     };
     let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
     let prior_summary = with_prior.then(|| summarize(&jf, &prior, sigma_um));
-    let leverages = crate::analysis::identifiability::leverages(&jf, &ident);
+    let leverages = match prior_leverages {
+        Some(h) => h,
+        None => crate::analysis::identifiability::leverages(&jf, &ident),
+    };
     // Blind directions are named at the start (the nominal geometry, where the physical
     // patterns are exact); at the solution the errors tilt them by a few microradians.
     ident.blind_directions = first.blind_directions.clone();

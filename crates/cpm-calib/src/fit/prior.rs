@@ -425,3 +425,31 @@ pub fn summarize(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> PriorSummary
         sigma_um,
     }
 }
+
+/// The leverage of each observation under the prior: the diagonal of the regularised hat
+/// matrix `J C J^T / sigma^2` (`C` the posterior covariance of the unheld parameters); they add
+/// up to the effective number of parameters, so that each kind of observation's redundancy
+/// (`1 - h`) shares the residual's degrees of freedom as the noise estimate counts them.
+pub fn leverages(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> Vec<f64> {
+    let free: Vec<usize> = (0..prior.len()).filter(|&k| prior[k] > 0.0).collect();
+    let jf = j.select_columns(&free);
+    let mut h = jf.transpose() * &jf / (sigma_um * sigma_um);
+    for (a, &k) in free.iter().enumerate() {
+        if prior[k].is_finite() {
+            h[(a, a)] += 1.0 / (prior[k] * prior[k]);
+        }
+    }
+    let eig = h.symmetric_eigen();
+    let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+    // J C J^T / s^2 = sum over eigenpairs (J v)(J v)^T / (l s^2).
+    let mut out = vec![0.0; j.nrows()];
+    for (i, &l) in eig.eigenvalues.iter().enumerate() {
+        if l > 1e-12 * lmax && l > 0.0 {
+            let u = &jf * eig.eigenvectors.column(i);
+            for (o, x) in out.iter_mut().zip(u.iter()) {
+                *o += x * x / (l * sigma_um * sigma_um);
+            }
+        }
+    }
+    out
+}

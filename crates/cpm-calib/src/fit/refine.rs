@@ -359,6 +359,10 @@ fn bic(rss: f64, m: usize, k: f64) -> f64 {
     m * (rss / m).max(1e-300).ln() + k * m.ln()
 }
 
+/// Most candidates of a family (physical effects, pose map terms) cross-validated per round:
+/// the best by BIC.
+pub const CV_CANDIDATES: usize = 3;
+
 /// The least number of effective parameters an effect must add to be tested (a block the
 /// prior holds whole adds nothing the data determine).
 const MIN_ADDED_DIMENSION: f64 = 0.5;
@@ -991,10 +995,12 @@ fn refine_effects(
         let (physical, maps): (Vec<_>, Vec<_>) = eligible
             .into_iter()
             .partition(|(i, _, _)| !matches!(scores[*i].effect, Effect::PoseMap(_)));
-        for family in [physical, maps] {
+        for mut family in [physical, maps] {
             if best.is_some() || family.is_empty() {
                 continue;
             }
+            // The best few by BIC are judged (a cross-validation is a fit per fold).
+            family.truncate(CV_CANDIDATES);
             let judged: Vec<CvErrors> = family
                 .par_iter()
                 .map(|(_, aug, c1)| {
