@@ -58,5 +58,46 @@ fn implicit_solvers(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, formulations, implicit_solvers);
+/// The real inclinometer session (tests/data/jugglebot_tilt, measured: 285 poses, 570 angles)
+/// as `cpm calibrate` and `cpm refine` load it: the model with the instruments' unknowns, the
+/// description's tolerances.
+fn tilt_session() -> (MeasurementModel, Campaign, IdentifyOptions) {
+    use std::path::{Path, PathBuf};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot_tilt");
+    let robot = cpm::io::Robot::load(&dir.join("robot.toml")).expect("robot");
+    let effects = robot.declared_effects().expect("effects");
+    let model = robot.model(&effects);
+    let paths: Vec<PathBuf> = vec![dir.join("session_1.csv")];
+    let merged =
+        cpm::cli::common::load_data(&paths, &robot, &cpm::cli::common::read_options(&model))
+            .expect("data");
+    let model =
+        cpm::cli::common::with_instruments(&robot, &model, &merged.campaign).unwrap_or(model);
+    let options = IdentifyOptions {
+        tolerances: robot.tolerances().expect("tolerances"),
+        ..IdentifyOptions::default()
+    };
+    (model, merged.campaign, options)
+}
+
+/// `refine` and `calibrate`'s fit on the real 285-pose inclinometer session (goal: refine
+/// under 5 s on 2 cores).
+fn real_session(c: &mut Criterion) {
+    let (model, data, options) = tilt_session();
+    let mut group = c.benchmark_group("real_tilt_session");
+    group.sample_size(10);
+    group.bench_function("identify_map", |b| {
+        b.iter(|| identify(&model, black_box(&data), &options).expect("fit"))
+    });
+    let refine_options = RefineOptions {
+        identify: options.clone(),
+        ..RefineOptions::default()
+    };
+    group.bench_function("refine", |b| {
+        b.iter(|| refine(&model, black_box(&data), &refine_options).expect("refine"))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, formulations, implicit_solvers, real_session);
 criterion_main!(benches);

@@ -23,8 +23,11 @@ fn tilt_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot_tilt")
 }
 
+/// A row of the tilt session and its commanded XY position (mm).
+type Row = (String, (f64, f64));
+
 /// The tilt session's rows (header first) and each row's commanded XY position (mm).
-fn tilt_rows() -> (String, Vec<(String, (f64, f64))>) {
+fn tilt_rows() -> (String, Vec<Row>) {
     let text = std::fs::read_to_string(tilt_dir().join("session_1.csv")).unwrap();
     let mut lines = text.lines();
     let header = lines.next().unwrap().to_string();
@@ -103,7 +106,7 @@ fn the_real_tilt_session_calibrates_to_a_plausible_machine() {
     assert!(scale_pct < 10.0, "scale {scale_pct} %");
     // The prior held what the data do not see, and says so.
     let prior = &fit["prior"];
-    assert!(prior["held_directions"].as_array().unwrap().len() > 0);
+    assert!(!prior["held_directions"].as_array().unwrap().is_empty());
     let warned = fit["warnings"]
         .as_array()
         .unwrap()

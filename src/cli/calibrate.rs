@@ -122,31 +122,7 @@ pub enum TrackerResiduals {
 impl FitArgs {
     /// The tolerances of the fit: the description's, then the options'.
     pub fn tolerances(&self, robot: &Robot) -> anyhow::Result<crate::calib::Tolerances> {
-        let mut t = robot
-            .tolerances()
-            .map_err(|e| anyhow::Error::new(crate::io::ReadError::from(e)))?;
-        for spec in &self.tolerance {
-            let (group, value) = spec.split_once('=').ok_or_else(|| {
-                super::usage_error(format!(
-                    "--tolerance {spec:?}: expected GROUP=VALUE, e.g. installation_errors=2000"
-                ))
-            })?;
-            let v: f64 = match value.trim() {
-                "inf" | "infinity" => f64::INFINITY,
-                x => x.parse().map_err(|_| {
-                    super::usage_error(format!("--tolerance {spec:?}: {x:?} is not a number"))
-                })?,
-            };
-            t.set(group.trim(), v)
-                .map_err(|e| super::usage_error(format!("--tolerance {spec:?}: {e}")))?;
-        }
-        for h in &self.hold {
-            if !t.hold.contains(h) {
-                t.hold.push(h.clone());
-            }
-        }
-        t.off = self.no_prior;
-        Ok(t)
+        tolerances_of(robot, &self.tolerance, &self.hold, self.no_prior)
     }
     /// Checks the options (usage errors before any file is read), then loads and checks the
     /// robot, the effects and the data.
@@ -352,6 +328,41 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
         model,
         merged,
     })
+}
+
+/// The tolerances of a description's `[calibration]`, then `--tolerance GROUP=VALUE` and
+/// `--hold GROUP` options on top, and `--no-prior`.
+pub fn tolerances_of(
+    robot: &Robot,
+    tolerance: &[String],
+    hold: &[String],
+    no_prior: bool,
+) -> anyhow::Result<crate::calib::Tolerances> {
+    let mut t = robot
+        .tolerances()
+        .map_err(|e| anyhow::Error::new(crate::io::ReadError::from(e)))?;
+    for spec in tolerance {
+        let (group, value) = spec.split_once('=').ok_or_else(|| {
+            super::usage_error(format!(
+                "--tolerance {spec:?}: expected GROUP=VALUE, e.g. installation_errors=2000"
+            ))
+        })?;
+        let v: f64 = match value.trim() {
+            "inf" | "infinity" => f64::INFINITY,
+            x => x.parse().map_err(|_| {
+                super::usage_error(format!("--tolerance {spec:?}: {x:?} is not a number"))
+            })?,
+        };
+        t.set(group.trim(), v)
+            .map_err(|e| super::usage_error(format!("--tolerance {spec:?}: {e}")))?;
+    }
+    for h in hold {
+        if !t.hold.contains(h) {
+            t.hold.push(h.clone());
+        }
+    }
+    t.off = no_prior;
+    Ok(t)
 }
 
 /// True for the effects whose direction the link forces set, and so need a declared `[load]`:

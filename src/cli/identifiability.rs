@@ -36,6 +36,14 @@ pub struct IdentifiabilityArgs {
     /// Print JSON on stdout instead of text.
     #[arg(long)]
     pub json: bool,
+    /// A-priori tolerance of a group, GROUP=VALUE in its unit (as for `cpm calibrate`);
+    /// repeatable. With the noise, says which directions a fit would determine and which it
+    /// would hold near nominal (docs/estimation.md).
+    #[arg(long = "tolerance", value_name = "GROUP=VALUE")]
+    pub tolerance: Vec<String>,
+    /// Groups held at nominal (comma-separated), as for `cpm calibrate`.
+    #[arg(long, value_delimiter = ',', value_name = "GROUP")]
+    pub hold: Vec<String>,
 }
 
 /// Runs `cpm identifiability`.
@@ -93,14 +101,31 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
         ..RankOptions::default()
     };
     let ident = crate::calib::identifiability(&model, &campaign, sigma, &options)?;
-    ctx.finish();
+    // Against the tolerances at this noise: what a fit determines, what it holds.
+    let tolerances = super::calibrate::tolerances_of(&robot, &args.tolerance, &args.hold, false)?;
+    let prior = crate::calib::prior::prior_std(&model, &tolerances)
+        .map_err(|e| usage_error(format!("tolerances: {e}")))?;
     let names = model.parameter_names();
+    let against = if prior.iter().any(|p| p.is_finite()) {
+        let j = crate::calib::identification_jacobian(
+            &model,
+            &campaign,
+            &vec![0.0; model.num_params()],
+        )?;
+        Some(crate::report::identifiability::AgainstTolerances::new(
+            &j, &prior, sigma, &names,
+        ))
+    } else {
+        None
+    };
+    ctx.finish();
     if args.json {
         let doc = IdentifiabilityDoc {
             analysis: IdentifiabilityReport::new(&ident, &names),
             source: source.clone(),
             simulated: campaign.simulated && !args.data.is_empty(),
             effects: effects.iter().map(|e| e.name().to_string()).collect(),
+            against_tolerances: against,
         };
         // Keys sorted, as every cpm JSON file.
         let v = serde_json::to_value(&doc)?;
@@ -129,6 +154,25 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
         fmt_opt(ident.crlb_rms_um()),
         fmt_opt(ident.crlb_max_um())
     )?;
+    if let Some(a) = &against {
+        writeln!(
+            o,
+            "Against the tolerances at noise {sigma} um: {} directions determined better than their tolerance, {} a fit holds near nominal{}",
+            a.determined_dimensions,
+            a.held_directions.len(),
+            if a.held_directions.is_empty() { "" } else { ":" }
+        )?;
+        for h in a.held_directions.iter().take(12) {
+            writeln!(
+                o,
+                "  {} (data std {:.2e} tolerances)",
+                h.description, h.data_std_in_tolerances
+            )?;
+        }
+        if a.held_directions.len() > 12 {
+            writeln!(o, "  and {} more (--json)", a.held_directions.len() - 12)?;
+        }
+    }
     writeln!(o, "\nsingular values:")?;
     for (k, s) in ident.singular_values.iter().enumerate() {
         writeln!(

@@ -107,4 +107,38 @@ pub struct IdentifiabilityDoc {
     pub simulated: bool,
     /// The effects modelled.
     pub effects: Vec<String>,
+    /// At the stated noise, against each group's a-priori tolerance: the directions the data
+    /// determine better than their tolerance and those a fit holds near nominal.
+    pub against_tolerances: Option<AgainstTolerances>,
+}
+
+/// What the data determine at a noise, against the tolerances (`cpm identifiability`).
+#[derive(Debug, Clone, serde::Serialize, PartialEq)]
+pub struct AgainstTolerances {
+    /// The noise, um (of the reference).
+    pub sigma_um: f64,
+    /// Directions determined better than their tolerance.
+    pub determined_dimensions: usize,
+    /// Directions held near nominal, weakest first, in words.
+    pub held_directions: Vec<crate::fit::prior::HeldDirectionReport>,
+}
+
+impl AgainstTolerances {
+    /// From the data's weighted Jacobian `j` (um per model unit), the prior standard
+    /// deviations and the noise.
+    pub fn new(j: &nalgebra::DMatrix<f64>, prior: &[f64], sigma_um: f64, names: &[String]) -> Self {
+        let p = cpm_calib::fit::prior::summarize(j, prior, sigma_um);
+        Self {
+            sigma_um,
+            determined_dimensions: p.determined_dimensions,
+            held_directions: p
+                .held_directions
+                .iter()
+                .map(|h| crate::fit::prior::HeldDirectionReport {
+                    data_std_in_tolerances: h.data_std_in_tolerances,
+                    description: crate::fit::prior::describe(names, &h.loadings),
+                })
+                .collect(),
+        }
+    }
 }

@@ -8,7 +8,8 @@
 //! (Förstner 1979; Koch, *Parameter Estimation and Hypothesis Testing in Linear Models*, 1999,
 //! ch. 3.6): the kind's weighted residual sum of squares over its share of the residual degrees
 //! of freedom, the sum of its observations' redundancy numbers `r_i = 1 - h_ii` (`h` the hat
-//! matrix of the weighted Jacobian in the identifiable subspace). The redundancies add up to
+//! matrix of the weighted Jacobian in the identifiable subspace; under a prior the regularised one,
+//! [`crate::fit::prior::leverages`]). The redundancies add up to
 //! `m - rank`, so the kinds' estimates together use every degree of freedom once.
 //!
 //! [`reweigh`] iterates: fit, estimate the noise of every kind whose noise was not declared,
@@ -27,9 +28,11 @@
 //! let kinds = noise::by_kind(&model, &data, &cal);
 //! assert_eq!(kinds.len(), 1); // one gauge, named as in the joint table
 //! assert_eq!(kinds[0].name, "gauge paper");
-//! // 36 readings less the identifiable combinations: the residual's degrees of freedom.
-//! let dof = 36.0 - cal.identifiability.rank as f64;
-//! assert!((kinds[0].redundancy - dof).abs() < 1e-6);
+//! // 36 readings less the effective number of parameters the fit used (the leverages' sum:
+//! // at most the rank, less what the prior holds): the residual's degrees of freedom.
+//! let p_eff: f64 = cal.leverages.iter().sum();
+//! assert!(p_eff <= cal.identifiability.rank as f64 + 1e-9);
+//! assert!((kinds[0].redundancy - (36.0 - p_eff)).abs() < 1e-6);
 //! // One kind alone: its estimate is the fit's own noise estimate.
 //! assert!((kinds[0].estimated.unwrap() - cal.sigma_um).abs() < 1e-9 * cal.sigma_um);
 //! ```

@@ -292,7 +292,7 @@ impl PriorSummary {
     /// least [`MIN_DATA_SHARE`]).
     pub fn determined(&self, k: usize) -> bool {
         match (self.prior_std[k], self.data_share[k]) {
-            (Some(p), _) if p == 0.0 => false,
+            (Some(0.0), _) => false,
             (Some(_), Some(s)) => s >= MIN_DATA_SHARE,
             (Some(_), None) => false,
             (None, _) => self.posterior_std[k].is_some(),

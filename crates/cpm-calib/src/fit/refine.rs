@@ -538,7 +538,7 @@ pub fn cross_validated_errors(
         kind: split.kind,
     };
     // The folds' fits are independent: in parallel, gathered in fold order.
-    let per_fold: Vec<Option<(Vec<f64>, Vec<usize>, usize)>> = (0..split.count)
+    let per_fold: Vec<Option<FoldErrors>> = (0..split.count)
         .into_par_iter()
         .map(|f| fold_errors(model, campaign, options, start, &|p| fold_of(p) == f))
         .collect::<Result<_, _>>()?;
@@ -551,17 +551,19 @@ pub fn cross_validated_errors(
     Ok(out)
 }
 
+/// A fold's squared errors, their poses (in the held-out campaign) and its number of poses.
+type FoldErrors = (Vec<f64>, Vec<usize>, usize);
+
 /// One fold of a cross-validation: fitted without the poses `held`, the squared weighted
 /// errors of the held-out observations and their poses (in the held-out campaign), and its
 /// number of poses; `None` for an empty fold.
-#[allow(clippy::type_complexity)]
 fn fold_errors(
     model: &MeasurementModel,
     campaign: &Campaign,
     options: &IdentifyOptions,
     start: &[f64],
     held: &(dyn Fn(usize) -> bool + Sync),
-) -> Result<Option<(Vec<f64>, Vec<usize>, usize)>, CalibError> {
+) -> Result<Option<FoldErrors>, CalibError> {
     {
         let train = campaign.filter_poses(|p| !held(p));
         let test = campaign.filter_poses(held);

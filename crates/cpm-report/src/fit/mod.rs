@@ -635,7 +635,7 @@ impl FitReport {
                 })
                 .collect(),
             prior: prior::PriorReport::new(model, cal),
-            tracker_residuals: (campaign.pose_measurements.len() > 0)
+            tracker_residuals: (!campaign.pose_measurements.is_empty())
                 .then(|| if cal.leg_space { "legs" } else { "pose" }.to_string()),
             warnings: warnings_md.iter().map(|w| w.replace("**", "")).collect(),
             text: fit_text(inputs, model, cal, formulation, warnings_md),

@@ -64,7 +64,7 @@ pub struct PriorReport {
 }
 
 /// Words for a direction: its largest loadings by parameter name.
-fn describe(names: &[String], loadings: &[(usize, f64)]) -> String {
+pub fn describe(names: &[String], loadings: &[(usize, f64)]) -> String {
     loadings
         .iter()
         .filter(|(_, c)| c.abs() >= 0.2)
@@ -155,6 +155,37 @@ impl PriorReport {
             ));
         }
         s.push('\n');
+        // Per parameter, how much of it the data determined (1 - posterior / prior variance),
+        // and what stayed at its nominal.
+        let stayed: Vec<&ParameterPrior> = self
+            .parameters
+            .iter()
+            .filter(|p| p.data_share.is_some_and(|x| x < 0.1))
+            .collect();
+        let shares: Vec<String> = self
+            .parameters
+            .iter()
+            .filter_map(|p| {
+                p.data_share
+                    .map(|x| format!("{} {}", p.name, crate::format::fixed(x, 2)))
+            })
+            .collect();
+        if !shares.is_empty() {
+            s.push_str(&format!(
+                "The data's share of each parameter's determination (1 = the data alone, 0 = its tolerance alone): {}.\n\n",
+                shares.join("; ")
+            ));
+        }
+        if !stayed.is_empty() {
+            s.push_str(&format!(
+                "Stayed at nominal (the data supply under a tenth of their determination): {}.\n\n",
+                stayed
+                    .iter()
+                    .map(|p| p.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
         if !self.held_directions.is_empty() {
             s.push_str("Held near nominal (the data see these less well than their tolerance; they are not measured):\n\n");
             for h in self.held_directions.iter().take(12) {
