@@ -104,6 +104,11 @@ impl FitArgs {
         )?;
         if self.noise_per_kind {
             ctx.stage("estimating the noise of each kind of observation");
+            // cpm-calib's variance components take undeclared gauges as the reference of
+            // the weights and estimate them from their residual.
+            if inputs.identify.sigma_um.is_none() {
+                inputs.merged.campaign.reading_sigma_um = 0.0;
+            }
             let campaign = &inputs.merged.campaign;
             let declared = crate::calib::noise::Declared::of(campaign, &inputs.identify);
             let r =
@@ -132,6 +137,7 @@ impl FitArgs {
             c.point_sigma_um = r.campaign.point_sigma_um;
             c.tilt_sigma_urad = r.campaign.tilt_sigma_urad;
             inputs.identify.sigma_um = r.options.sigma_um;
+            c.reading_sigma_um = r.options.sigma_um.unwrap_or(0.0);
         }
         Ok(inputs)
     }
@@ -210,6 +216,17 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     if let (Some(v), None) = (tilt, args.orientation_sigma_urad) {
         merged.campaign.tilt_sigma_urad = v;
     }
+    // The gauges keep their own noise (`--sigma-um`, `[calibration] sensor_noise_um`), never
+    // the tracker's: undeclared, next to other instruments, cpm-calib's default.
+    let c = &mut merged.campaign;
+    let others = c.len() > c.readings.len();
+    c.reading_sigma_um = match sigma {
+        Some(s) => s,
+        None if others && !c.readings.is_empty() => {
+            crate::calib::campaign::DEFAULT_READING_SIGMA_UM
+        }
+        None => 0.0,
+    };
     if merged.campaign.simulated {
         ctx.note("the measurements are SIMULATED; every output says so");
     }
@@ -233,6 +250,12 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     if let Some(m) = common::with_instruments(&robot, &model, &merged.campaign) {
         model = m;
         ctx.note(common::instruments_note(&model));
+    }
+    // `thermal_drift` over time counts hours from one origin for the whole fit (every
+    // subset refine tests, every file validate reads back): the description's, else the
+    // earliest time of these data, written into calibrated.toml.
+    if model.effect_settings.reference_time_s.is_none() {
+        model.effect_settings.reference_time_s = merged.campaign.first_time_s();
     }
     Ok(Inputs {
         data_paths: data.clone(),
@@ -412,6 +435,30 @@ pub fn stage_calibrated(
                 .to_string(),
         );
         c.simulated = cal.simulated;
+        // What the data left undetermined, for every command that uses the file (compensate
+        // warns that its commands cannot correct it).
+        c.undetermined = notes
+            .undetermined
+            .iter()
+            .chain(&notes.undetermined_effects)
+            .cloned()
+            .collect();
+        c.blind_directions = if c.undetermined.is_empty() {
+            Vec::new()
+        } else {
+            cal.identifiability
+                .blind_directions
+                .iter()
+                .map(|b| b.description.clone())
+                .collect()
+        };
+        // The time origin of a drift over time, so that its predictions do not depend on
+        // which part of a log is given.
+        let drift = crate::calib::Effect::ThermalDrift;
+        if model.effects.contains(&drift) || model.known_effects.iter().any(|k| k.effect == drift)
+        {
+            c.reference_time_s = model.effect_settings.reference_time_s;
+        }
         // The tracker noise the fit weighed its sessions with: held-out sessions are
         // registered with the same weights.
         if !inputs.merged.campaign.pose_measurements.is_empty() {
