@@ -668,6 +668,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     for w in report.fit.warnings.iter().filter(|w| {
         w.starts_with("Estimates move between sessions")
             || w.starts_with("Tracker frame held fixed")
+            || w.starts_with("Noise not as weighed")
     }) {
         ctx.note(w);
     }
