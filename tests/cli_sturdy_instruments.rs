@@ -268,7 +268,17 @@ fn points_in_metres_and_angles_in_radians_are_refused_with_a_units_hint() {
         );
     }
     // The files as simulated read.
-    validate_json(&robot, &[&pts, &tlt]);
+    ok(&[
+        "validate",
+        "--robot",
+        &p(&truth),
+        "--reference",
+        &p(&robot),
+        "--data",
+        &p(&pts),
+        "--data",
+        &p(&tlt),
+    ]);
 }
 
 /// The vendored real session (tests/data/jugglebot_tilt) passes every check of the tilt
@@ -343,7 +353,7 @@ fn target_sigma_and_pose_sigma_are_the_same_setting() {
         ["base", "platform"]
             .iter()
             .flat_map(|side| {
-                v["estimates_um"][side]
+                v["installation_errors_um"][side]
                     .as_array()
                     .unwrap()
                     .iter()
@@ -371,11 +381,12 @@ fn validate_gives_every_figure_in_its_unit_and_the_full_session_frame() {
     let (pt, t) = (dir.join("points.csv"), dir.join("tilts.csv"));
     points(&robot, &truth, &pt, 30, 31);
     tilts(&robot, &truth, &t, 150, 32);
+    // The truth as the calibrated robot: its mount known, the levelling is what is left.
     let out = dir.join("v");
     ok(&[
         "validate",
         "--robot",
-        &p(&robot),
+        &p(&truth),
         "--reference",
         &p(&robot),
         "--data",
@@ -403,7 +414,17 @@ fn validate_gives_every_figure_in_its_unit_and_the_full_session_frame() {
     assert!(!md.contains("NaN") && !md.contains("fitted frame t (um)"), "{md}");
     assert!(md.contains("| urad |") && md.contains("(in sigma)"), "{md}");
     // A point session: the full frame is the tracker's (1500, 200, -100 mm, 30 deg about z).
-    let v = validate_json(&robot, &[&pt]);
+    let v: serde_json::Value = serde_json::from_str(&ok(&[
+        "validate",
+        "--robot",
+        &p(&truth),
+        "--reference",
+        &p(&robot),
+        "--data",
+        &p(&pt),
+        "--json",
+    ]))
+    .unwrap();
     let s = &v["calibrated"]["sessions"][0];
     assert_eq!(s["kind"], "points", "{s}");
     let f = &s["full_frame"];
