@@ -179,7 +179,10 @@ fn an_impossible_inclinometer_angle_is_refused_naming_its_line_and_field() {
     let text = std::fs::read_to_string(&good).unwrap();
     let bad = dir.join("bad.csv");
     std::fs::write(&bad, with_cell(&text, 7, "angle_1_deg", "95")).unwrap();
-    for e in [validate_refused(&robot, &bad), calibrate_refused(&robot, &bad)] {
+    for e in [
+        validate_refused(&robot, &bad),
+        calibrate_refused(&robot, &bad),
+    ] {
         assert!(
             e.contains("bad.csv:7") && e.contains("angle_1_deg") && e.contains("90"),
             "{e}"
@@ -205,10 +208,7 @@ fn a_tilt_file_without_angle_1_deg_is_refused() {
     let text = std::fs::read_to_string(&good).unwrap();
     // The column dropped from the header and every row.
     let header = text.lines().find(|l| !l.starts_with('#')).unwrap();
-    let i = header
-        .split(',')
-        .position(|h| h == "angle_1_deg")
-        .unwrap();
+    let i = header.split(',').position(|h| h == "angle_1_deg").unwrap();
     let dropped: String = text
         .lines()
         .map(|l| {
@@ -222,7 +222,10 @@ fn a_tilt_file_without_angle_1_deg_is_refused() {
         .collect();
     let bad = dir.join("no_angle_1.csv");
     std::fs::write(&bad, dropped).unwrap();
-    for e in [validate_refused(&robot, &bad), calibrate_refused(&robot, &bad)] {
+    for e in [
+        validate_refused(&robot, &bad),
+        calibrate_refused(&robot, &bad),
+    ] {
         assert!(
             e.contains("no_angle_1.csv:2") && e.contains("angle_1_deg") && e.contains("missing"),
             "{e}"
@@ -348,7 +351,12 @@ fn target_sigma_and_pose_sigma_are_the_same_setting() {
     gauges(&robot, &truth, &g, 30, 21);
     points(&robot, &truth, &pt, 40, 22);
     let a = calibrate_json(&declared, &[&g, &pt], &[], &dir.join("a"));
-    let b = calibrate_json(&robot, &[&g, &pt], &["--pose-sigma-um", "5"], &dir.join("b"));
+    let b = calibrate_json(
+        &robot,
+        &[&g, &pt],
+        &["--pose-sigma-um", "5"],
+        &dir.join("b"),
+    );
     let flat = |v: &serde_json::Value| -> Vec<f64> {
         ["base", "platform"]
             .iter()
@@ -411,7 +419,10 @@ fn validate_gives_every_figure_in_its_unit_and_the_full_session_frame() {
     let angle = s["full_frame"]["rotation_angle_deg"].as_f64().unwrap();
     assert!((angle - 0.0447).abs() < 0.01, "{angle}");
     let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
-    assert!(!md.contains("NaN") && !md.contains("fitted frame t (um)"), "{md}");
+    assert!(
+        !md.contains("NaN") && !md.contains("fitted frame t (um)"),
+        "{md}"
+    );
     assert!(md.contains("| urad |") && md.contains("(in sigma)"), "{md}");
     // A point session: the full frame is the tracker's (1500, 200, -100 mm, 30 deg about z).
     let v: serde_json::Value = serde_json::from_str(&ok(&[
@@ -515,8 +526,17 @@ fn thermal_drift_over_time_predicts_the_same_on_any_part_of_a_log() {
     let robot = example("hexapod_66.toml");
     let sim = dir.join("poses.csv");
     ok(&[
-        "simulate", "--robot", &robot, "--random", "48", "--noise", "none", "--seed", "3",
-        "--out", &p(&sim),
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "48",
+        "--noise",
+        "none",
+        "--seed",
+        "3",
+        "--out",
+        &p(&sim),
     ]);
     // A plan of the simulated poses, one every 5 minutes from t = 1000 s.
     let text = std::fs::read_to_string(&sim).unwrap();

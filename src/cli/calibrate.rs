@@ -455,8 +455,7 @@ pub fn stage_calibrated(
         // The time origin of a drift over time, so that its predictions do not depend on
         // which part of a log is given.
         let drift = crate::calib::Effect::ThermalDrift;
-        if model.effects.contains(&drift) || model.known_effects.iter().any(|k| k.effect == drift)
-        {
+        if model.effects.contains(&drift) || model.known_effects.iter().any(|k| k.effect == drift) {
             c.reference_time_s = model.effect_settings.reference_time_s;
         }
         // The tracker noise the fit weighed its sessions with: held-out sessions are

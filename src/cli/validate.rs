@@ -22,11 +22,11 @@ use crate::calib::model::{predict, Prepared};
 use crate::calib::{Campaign, MeasurementModel};
 use crate::io::{FileKind, ReadOptions, Robot};
 use crate::output::OutputSet;
-pub use crate::report::validate::{SessionCheck, SessionFrame};
 use crate::report::validate::{
     rms, CompensationReport, GroupErrors as Errors, PredictionErrors as RobotErrors,
     ReachedSummary, TargetError, ValidateReport,
 };
+pub use crate::report::validate::{SessionCheck, SessionFrame};
 
 /// Arguments of `cpm validate`.
 #[derive(Debug, Clone, Args)]
@@ -232,7 +232,9 @@ fn errors_of(
                 pose_rows
                     .iter()
                     .flat_map(|rows| rows[3..].iter().flatten().copied())
-                    .chain(campaign.first_tilt_observation()..campaign.first_instrument_observation())
+                    .chain(
+                        campaign.first_tilt_observation()..campaign.first_instrument_observation(),
+                    )
                     .map(|k| (observed[k] - y[k]) * 1e3)
                     .collect()
             };
@@ -251,8 +253,8 @@ fn errors_of(
                     crate::geometry::Rotation3::identity(),
                 ),
             };
-            let tilts_only = campaign.pose_measurements.is_empty()
-                && campaign.point_measurements.is_empty();
+            let tilts_only =
+                campaign.pose_measurements.is_empty() && campaign.point_measurements.is_empty();
             let (kind, full_frame) = if tilts_only {
                 ("tilts", SessionFrame::tilt(&s.frame, &s.frame_sd))
             } else {

@@ -96,7 +96,9 @@ impl SessionFrame {
     /// The levelling of an inclinometer session: the base tilted by `rx`, `ry` urad
     /// (`frame[0..2]`), standard deviations `sd[0..2]`.
     pub fn tilt(frame: &[f64; 6], sd: &[f64; 6]) -> Self {
-        let r = cpm_geometry::Rotation3::new(cpm_geometry::Vector3::new(frame[0], frame[1], 0.0) * 1e-6);
+        let r = cpm_geometry::Rotation3::new(
+            cpm_geometry::Vector3::new(frame[0], frame[1], 0.0) * 1e-6,
+        );
         let (axis, angle) = axis_angle(&r);
         Self {
             translation_mm: None,
@@ -377,12 +379,13 @@ impl ValidateReport {
                 .join(", ")
         ));
         md.push_str("Every figure in its unit: um for readings and positions, urad for angles (tracker orientations, inclinometer angles).\n\n| group | observations | unit | calibrated RMS | calibrated max | reference RMS | reference max |\n|---|---|---|---|---|---|---|\n");
-        let row = |md: &mut String, name: &str, n: usize, unit: &str, c: (f64, f64), r: (f64, f64)| {
-            md.push_str(&format!(
-                "| {name} | {n} | {unit} | {:.3} | {:.3} | {:.3} | {:.3} |\n",
-                c.0, c.1, r.0, r.1
-            ));
-        };
+        let row =
+            |md: &mut String, name: &str, n: usize, unit: &str, c: (f64, f64), r: (f64, f64)| {
+                md.push_str(&format!(
+                    "| {name} | {n} | {unit} | {:.3} | {:.3} | {:.3} | {:.3} |\n",
+                    c.0, c.1, r.0, r.1
+                ));
+            };
         let nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
         for g in &self.groups {
             let (gc, gr) = (&g.calibrated, &g.reference);
@@ -423,8 +426,14 @@ impl ValidateReport {
                 "**all angles**",
                 self.text.0.angles,
                 "urad",
-                (nan(c.orientation_rms_urad), self.text.0.orientation_max_urad),
-                (nan(r.orientation_rms_urad), self.text.1.orientation_max_urad),
+                (
+                    nan(c.orientation_rms_urad),
+                    self.text.0.orientation_max_urad,
+                ),
+                (
+                    nan(r.orientation_rms_urad),
+                    self.text.1.orientation_max_urad,
+                ),
             );
         }
         self.session_markdown(&mut md);
