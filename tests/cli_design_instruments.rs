@@ -58,7 +58,9 @@ fn a_designed_mix_identifies_what_no_instrument_alone_does() {
     let d = json(&out.join("design.json"));
     let b = &d["bounds"];
     let per_pose = 3 + 9 + 2;
-    assert_eq!(b["poses"].as_u64().unwrap(), 300_u64.div_ceil(per_pose));
+    // The budget is a ceiling: as many whole poses as it holds.
+    assert_eq!(b["poses"].as_u64().unwrap(), 300 / per_pose);
+    assert!(b["observations"].as_u64().unwrap() <= 300);
     assert_eq!(b["joint_errors_determined"], 36);
     let alone: Vec<(&str, &serde_json::Value)> = d["alone"]
         .as_array()

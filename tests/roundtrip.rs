@@ -888,7 +888,9 @@ fn tracker_sessions_in_their_own_frames_round_trip() {
     assert!(c < 4.0, "held-out position error {c} um on 2 um noise");
     assert!(c < 0.2 * r);
     let s = &v["calibrated"]["sessions"][0];
-    assert!(s["rms_after_um"].as_f64().unwrap() <= s["rms_before_um"].as_f64().unwrap());
+    assert!(
+        s["weighted_rms_after"].as_f64().unwrap() <= s["weighted_rms_before"].as_f64().unwrap()
+    );
 }
 
 /// `compensate --from-home` then `validate --commands --from-home` against the simulated

@@ -157,6 +157,28 @@ fn outside_pose_map_range(robot: &io::Robot, pose: &crate::geometry::Pose) -> bo
     }
 }
 
+/// The warning of a compensation with a calibration that left `undetermined` parameters
+/// (and could not see `blind`, in words): the commands cannot correct them.
+pub fn undetermined_warning(file: &str, undetermined: &[String], blind: &[String]) -> String {
+    let shown: Vec<&str> = undetermined.iter().take(8).map(String::as_str).collect();
+    let more = undetermined.len().saturating_sub(shown.len());
+    format!(
+        "the calibration in {file} left {} parameter(s) undetermined by its data ({}{}){}: they stay at the fit's minimum-norm point, not measured values, and the commands cannot correct the machine's errors along them",
+        undetermined.len(),
+        shown.join(", "),
+        if more > 0 {
+            format!(", and {more} more")
+        } else {
+            String::new()
+        },
+        if blind.is_empty() {
+            String::new()
+        } else {
+            format!("; the data could not see: {}", blind.join("; "))
+        }
+    )
+}
+
 /// Runs `cpm compensate`.
 pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.json && args.out.as_deref().is_none_or(|o| o.as_os_str() == "-") {
@@ -251,6 +273,16 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
     let csv =
         crate::report::format::tidy_csv(&io::write_commands(&targets, &readings, &lengths, &note));
     ctx.finish();
+    let (undetermined, blind) = robot
+        .description
+        .calibration
+        .as_ref()
+        .map_or((Vec::new(), Vec::new()), |c| {
+            (c.undetermined.clone(), c.blind_directions.clone())
+        });
+    if !undetermined.is_empty() {
+        ctx.note(undetermined_warning(&robot.file, &undetermined, &blind));
+    }
     if !outside.is_empty() {
         ctx.note(format!(
             "{} target(s) lie outside the pose range the pose error map of {} was fitted on ([pose_map]); the map does not extrapolate, so their commands carry its error unknown: {}",
@@ -276,6 +308,8 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
                     outside_pose_map_range: outside.iter().map(|s| s.to_string()).collect(),
                     robot: robot.file.clone(),
                     targets: targets.len(),
+                    undetermined: undetermined.clone(),
+                    blind_directions: blind.clone(),
                 };
                 writeln!(ctx.out, "{}", summary.to_json())?;
             } else {

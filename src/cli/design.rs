@@ -475,7 +475,7 @@ fn limited_constraints(
 /// The limits of a design without a gauge: the description's `[limits]` overridden by
 /// `--cone-deg` and `--clearance-mm` (the defaults of [`LimitsSpec`] for what neither gives),
 /// with where they came from in words; `None` when none of them is given.
-fn plain_limits(
+pub(super) fn plain_limits(
     args: &DesignArgs,
     robot: &Robot,
 ) -> anyhow::Result<Option<(DesignLimits, String)>> {

@@ -8,7 +8,8 @@ use super::common;
 use super::design_args::{CriterionArg, DesignArgs};
 use super::{input_error, usage_error, Ctx, Outcome};
 use crate::calib::design::instruments::{InstrumentBounds, InstrumentNoise, Instruments};
-use crate::calib::design::{candidates, SelectOptions};
+use crate::calib::design::limits::{cone_angles_deg, gauge_clearance_mm};
+use crate::calib::design::{candidates, DesignLimits, SelectOptions};
 use crate::io::{self, Robot};
 use crate::output::OutputSet;
 use crate::report::format::{sig, tidy_csv};
@@ -32,6 +33,16 @@ pub struct InstrumentDesignReport {
     pub bounds: InstrumentBounds,
     /// Each instrument alone at the same poses.
     pub alone: Vec<AloneBounds>,
+    /// The limits every chosen pose honours (joint cones, link-link and, with gauges,
+    /// gauge-link clearance), `null` when none is given (`--cone-deg`, `--clearance-mm`,
+    /// `[limits]`).
+    pub limits: Option<DesignLimits>,
+    /// Where the limits come from, in words (`null` without limits).
+    pub limits_from: Option<String>,
+    /// Largest base and platform joint cone angles over the chosen poses, deg.
+    pub max_cone_deg: (f64, f64),
+    /// The observation budget (`--readings`).
+    pub max_observations: usize,
 }
 
 /// One instrument alone at the design's poses.
@@ -84,6 +95,23 @@ impl InstrumentDesignReport {
         ));
         for a in &self.alone {
             s.push_str(&row(&format!("{} alone", a.instrument), &a.bounds));
+        }
+        match (&self.limits, &self.limits_from) {
+            (Some(l), Some(from)) => s.push_str(&format!(
+                "\nLimits honoured at every chosen pose ({from}): joint cones base {} deg, platform {} deg (largest reached: {:.2} deg, {:.2} deg); gauge-link clearance {} mm{}.\n",
+                l.joints.base_cone_deg,
+                l.joints.platform_cone_deg,
+                self.max_cone_deg.0,
+                self.max_cone_deg.1,
+                l.clearance.gauge_link_mm,
+                l.clearance
+                    .link_link_mm
+                    .map_or(String::new(), |v| format!(", link-link clearance {v} mm"))
+            )),
+            _ => s.push_str(&format!(
+                "\nNo joint or clearance limits given (`--cone-deg`, `--clearance-mm`, `[limits]`): largest joint cones reached {:.2} deg (base), {:.2} deg (platform).\n",
+                self.max_cone_deg.0, self.max_cone_deg.1
+            )),
         }
         s.push_str("\n## Blind directions of the design\n\n");
         if self.bounds.blind_directions.is_empty() {
@@ -177,9 +205,16 @@ pub fn run(
         tilt_urad: tilt.or(rot).unwrap_or(default.tilt_urad),
     };
     let per_pose = ins.observations_per_pose(&model);
-    let n = args
-        .poses
-        .unwrap_or_else(|| args.readings.div_ceil(per_pose));
+    // The budget is a ceiling: as many whole poses as it holds.
+    let n = args.poses.unwrap_or(args.readings / per_pose);
+    if n == 0 {
+        return Err(usage_error(format!(
+            "--readings {}: fewer than the {per_pose} observations of one pose of {}: raise --readings",
+            args.readings,
+            names.join(" + ")
+        )));
+    }
+    let limits = super::design::plain_limits(args, robot)?;
     ctx.stage("candidate poses");
     let (cands, rejected) = candidates::default_candidates(
         &robot.table,
@@ -189,7 +224,50 @@ pub fn run(
         args.range_deg,
         args.seed,
     );
-    if n == 0 || n > cands.len() {
+    // Only poses within the limits (joint cones, link lengths and link-link clearance; the
+    // gauge-link clearance of every gauge read there).
+    let cands = match &limits {
+        None => cands,
+        Some((l, from)) => {
+            let c = l.constraints();
+            let sensors: Vec<&crate::geometry::Sensor> = ins
+                .gauges
+                .iter()
+                .map(|&s| &robot.table.sensors[s])
+                .collect();
+            let mut first = None;
+            let kept: Vec<crate::geometry::Pose> = cands
+                .into_iter()
+                .filter(|pose| {
+                    let r = c.check_pose(&robot.table, pose).and_then(|()| {
+                        sensors.iter().try_for_each(|s| {
+                            let d = gauge_clearance_mm(&robot.table, s, pose);
+                            if d >= l.clearance.gauge_link_mm {
+                                Ok(())
+                            } else {
+                                Err(format!(
+                                    "gauge {}: {d:.1} mm from a link < {} mm",
+                                    s.name, l.clearance.gauge_link_mm
+                                ))
+                            }
+                        })
+                    });
+                    if let Err(e) = &r {
+                        first.get_or_insert(e.clone());
+                    }
+                    r.is_ok()
+                })
+                .collect();
+            if kept.is_empty() {
+                return Err(usage_error(format!(
+                    "no candidate pose honours {from} (the first refused: {}): relax them, or try a smaller --range-mm or --range-deg",
+                    first.unwrap_or_default()
+                )));
+            }
+            kept
+        }
+    };
+    if n > cands.len() {
         return Err(usage_error(format!(
             "{n} poses asked ({per_pose} observations per pose) but {} admissible candidates ({} rejected): raise --candidates or lower --readings / --poses",
             cands.len(),
@@ -230,6 +308,14 @@ pub fn run(
         candidates: cands.len(),
         bounds,
         alone,
+        limits: limits.as_ref().map(|(l, _)| *l),
+        limits_from: limits.as_ref().map(|(_, f)| f.clone()),
+        max_cone_deg: chosen.iter().fold((0.0_f64, 0.0_f64), |m, pose| {
+            cone_angles_deg(&robot.table, pose)
+                .iter()
+                .fold(m, |(a, b), (x, y)| (a.max(*x), b.max(*y)))
+        }),
+        max_observations: args.readings,
     };
     ctx.stage("writing the design");
     let dir = &args.out;
@@ -249,17 +335,24 @@ pub fn run(
         writeln!(ctx.out, "{json}")?;
     } else {
         let b = &report.bounds;
+        let um = |v: f64| {
+            if v.is_finite() {
+                format!("{v:.3} um")
+            } else {
+                "n/a".to_string()
+            }
+        };
         writeln!(
             ctx.out,
-            "{} poses x {} observations ({}); rank {} of {}; {} of 36 joint errors determined, Cramér-Rao RMS {:.3} um; minimum-norm RMS {:.3} um",
+            "{} poses x {} observations ({}); rank {} of {}; {} of 36 joint errors determined, Cramér-Rao RMS {}; minimum-norm RMS {}",
             b.poses,
             per_pose,
             report.instruments.join(" + "),
             b.rank,
             b.parameters,
             b.joint_errors_determined,
-            b.joint_crb_rms_um,
-            b.joint_min_norm_rms_um
+            um(b.joint_crb_rms_um),
+            um(b.joint_min_norm_rms_um)
         )?;
         for w in &written {
             writeln!(ctx.out, "wrote {}", w.display())?;

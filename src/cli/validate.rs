@@ -22,11 +22,11 @@ use crate::calib::model::{predict, Prepared};
 use crate::calib::{Campaign, MeasurementModel};
 use crate::io::{FileKind, ReadOptions, Robot};
 use crate::output::OutputSet;
-pub use crate::report::validate::SessionCheck;
 use crate::report::validate::{
     rms, CompensationReport, GroupErrors as Errors, PredictionErrors as RobotErrors,
     ReachedSummary, TargetError, ValidateReport,
 };
+pub use crate::report::validate::{SessionCheck, SessionFrame};
 
 /// Arguments of `cpm validate`.
 #[derive(Debug, Clone, Args)]
@@ -228,27 +228,62 @@ fn errors_of(
                     .map(|k| (observed[k] - y[k]) * 1e3)
                     .collect()
             };
+            let angles = |y: &[f64]| -> Vec<f64> {
+                pose_rows
+                    .iter()
+                    .flat_map(|rows| rows[3..].iter().flatten().copied())
+                    .chain(
+                        campaign.first_tilt_observation()..campaign.first_instrument_observation(),
+                    )
+                    .map(|k| (observed[k] - y[k]) * 1e3)
+                    .collect()
+            };
+            let some = |v: Vec<f64>| (!v.is_empty()).then(|| rms(&v));
             let rough = file
                 .registration
                 .as_ref()
                 .and_then(|r| r.sessions.iter().find(|x| x.file == file.file))
                 .filter(|x| x.applied);
             // A point file's rough registration: the frame its reader applied.
-            let (rough_translation_mm, rough_rotation_deg) = match (&file.point_frame, rough) {
-                (Some(f), _) => (f.position_mm.into(), f.rotation.angle().to_degrees()),
-                (None, Some(x)) => (x.frame.translation_mm.into(), x.frame.rotation_angle_deg()),
-                (None, None) => ([0.0; 3], 0.0),
+            let (rough_t, rough_r) = match (&file.point_frame, rough) {
+                (Some(f), _) => (f.position_mm, f.rotation),
+                (None, Some(x)) => (x.frame.translation_mm, x.frame.rotation),
+                (None, None) => (
+                    crate::geometry::Vector3::zeros(),
+                    crate::geometry::Rotation3::identity(),
+                ),
             };
+            let tilts_only =
+                campaign.pose_measurements.is_empty() && campaign.point_measurements.is_empty();
+            let (kind, full_frame) = if tilts_only {
+                ("tilts", SessionFrame::tilt(&s.frame, &s.frame_sd))
+            } else {
+                let kind = if campaign.pose_measurements.is_empty() {
+                    "points"
+                } else {
+                    "tracker"
+                };
+                (
+                    kind,
+                    SessionFrame::rigid((rough_t, rough_r), &s.frame, &s.frame_sd),
+                )
+            };
+            // The frame fit weighs every kind against the tracker position noise.
+            let sigma_ref = campaign.pose_sigma();
             out.sessions.push(SessionCheck {
                 file: file.file.clone(),
-                rough_translation_mm,
-                rough_rotation_deg,
+                kind: kind.to_string(),
+                rough_translation_mm: rough_t.into(),
+                rough_rotation_deg: rough_r.angle().to_degrees(),
                 frame: s.frame,
                 frame_sd: s.frame_sd,
-                rms_before_um: s.rms_before_um,
-                rms_after_um: s.rms_after_um,
-                position_rms_before_um: rms(&positions(&before)),
-                position_rms_after_um: rms(&positions(&s.predicted)),
+                full_frame,
+                weighted_rms_before: s.rms_before_um / sigma_ref,
+                weighted_rms_after: s.rms_after_um / sigma_ref,
+                position_rms_before_um: some(positions(&before)),
+                position_rms_after_um: some(positions(&s.predicted)),
+                angle_rms_before_urad: some(angles(&before)),
+                angle_rms_after_urad: some(angles(&s.predicted)),
             });
             (s.predicted, Some(s.frame))
         };
@@ -667,11 +702,14 @@ pub fn file_reproduces_fit(
     })?;
     let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
     let e = errors_of(&robot, reference, data, false, tracker)?;
-    let sigma_ref = sigma_um.unwrap_or(campaign.pose_sigma());
+    // The fit's own reference and weights (each kind by its own noise, gauges included).
+    let _ = sigma_um;
+    let sigma_ref = cal.sigma_ref_um;
     let (wp, wr) = (
         sigma_ref / campaign.pose_sigma(),
         sigma_ref / campaign.orientation_sigma(),
     );
+    let wg = campaign.reading_sigma().map_or(1.0, |s| sigma_ref / s);
     let (mut sum, mut n) = (0.0, 0usize);
     for (name, g) in e.names.iter().zip(&e.groups) {
         let w = if name.ends_with("(tracker)") {
@@ -679,7 +717,7 @@ pub fn file_reproduces_fit(
         } else if name.ends_with("(points)") {
             sigma_ref / campaign.point_sigma()
         } else {
-            1.0
+            wg
         };
         sum += g.values_um.iter().map(|v| (w * v).powi(2)).sum::<f64>();
         // Orientations are a tracker's or, in a tilt file, an inclinometer's angles.

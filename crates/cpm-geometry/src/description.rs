@@ -425,6 +425,13 @@ pub struct CalibrationSpec {
     /// Reference temperature of `thermal_drift`, deg C. Default 20.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reference_temperature_c: Option<f64>,
+    /// Time origin of `thermal_drift` without temperatures, s (on the clock of the files'
+    /// `time_s`): the drift is proportional to the hours since it. `cpm calibrate` and `cpm
+    /// refine` write the origin they fitted with (the earliest time of their data) so that a
+    /// prediction does not depend on which part of a file is given. Default (when absent) the
+    /// earliest time of the data predicted.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference_time_s: Option<f64>,
     /// Length scale of `link_nonlinearity`'s polynomial variable, mm. Default 100.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nonlinearity_scale_mm: Option<f64>,
@@ -451,6 +458,17 @@ pub struct CalibrationSpec {
     /// take it as the reference by default. Optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibrated_from: Option<String>,
+    /// The installation-error components and effect parameters the calibration's data did
+    /// not determine on their own (written by `cpm calibrate` and `cpm refine` at the fit's
+    /// minimum-norm point): `cpm compensate` warns that its commands cannot correct them.
+    /// Default none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub undetermined: Vec<String>,
+    /// What the calibration's data could not see, in words (its blind directions, e.g. "all
+    /// base joints translated together": a base frame the instruments cannot fix). Default
+    /// none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub blind_directions: Vec<String>,
     /// True when the calibration was fitted to simulated data: every output made from this
     /// description (compensation commands, controller files) says so. Default false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -1145,6 +1163,14 @@ impl RobotDescription {
                             format!("must be finite and > 0, got {v}"),
                         ));
                     }
+                }
+            }
+            if let Some(t) = c.reference_time_s {
+                if !t.is_finite() {
+                    return Err(Problem::new(
+                        &[Key("calibration"), Key("reference_time_s")],
+                        format!("must be a finite time, s, got {t}"),
+                    ));
                 }
             }
             if let Some(t) = c.reference_temperature_c {

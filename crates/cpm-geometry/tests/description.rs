@@ -99,6 +99,7 @@ fn round_trip_with_every_section() {
         tracker_orientation_sigma_urad: None,
         screw_lead_mm: Some(4.0),
         reference_temperature_c: Some(21.5),
+        reference_time_s: Some(1000.0),
         nonlinearity_scale_mm: None,
         known_effects: [
             (
@@ -112,6 +113,8 @@ fn round_trip_with_every_section() {
         tolerances: [("link_scale".to_string(), 20_000.0)].into_iter().collect(),
         hold: vec!["installation_errors".into()],
         calibrated_from: Some("/work/robot.toml".into()),
+        undetermined: vec!["base 1 x".into()],
+        blind_directions: vec!["all base joints translated together".into()],
         simulated: true,
     });
     d.installation_errors_um = Some(InstallationErrorsSpec::from_errors(

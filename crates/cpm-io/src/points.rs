@@ -16,7 +16,7 @@ use crate::campaign::{
     check_pose_cell, link_reading_columns, link_readings, opt, simulated_header, too_many_rows,
     DataFile, ReadOptions,
 };
-use crate::table::{field, num, shorten, FileKind, Header, Row, Table};
+use crate::table::{field, num, shorten, show, FileKind, Header, Row, Table};
 use crate::{InputError, Robot};
 
 /// Columns of the commanded pose in a point file (the measured point takes `x_mm, y_mm,
@@ -75,6 +75,27 @@ fn agree(a: &PoseOf, b: &PoseOf) -> Option<String> {
 /// The most axes an inclinometer has (`angle_1_deg` .. `angle_3_deg`).
 pub const MAX_TILT_AXES: usize = 3;
 
+/// The largest inclinometer angle, deg: an angle is the elevation of an axis above the
+/// horizontal, within +-90 deg; a value beyond is refused as impossible (not flagged as a
+/// glitch for the fit).
+pub const MAX_TILT_DEG: f64 = 90.0;
+
+/// A tilt file whose angles spread less than this fraction of the spread the commanded poses
+/// give (over at least [`TILT_UNITS_MIN_DEG`]) is refused as radians: radians spread 57 times
+/// less than degrees, a real instrument follows the commanded tilts to a few per cent.
+pub const TILT_UNITS_RATIO: f64 = 0.1;
+
+/// The commanded spread of an angle, deg, from which [`TILT_UNITS_RATIO`] applies.
+pub const TILT_UNITS_MIN_DEG: f64 = 1.0;
+
+/// Measured points that spread less than this fraction of the spread of the nominal targets
+/// at the commanded poses (over at least [`POINT_UNITS_MIN_MM`]) are refused as metres; more
+/// than its inverse, as another unit (positions are in mm).
+pub const POINT_UNITS_RATIO: f64 = 0.01;
+
+/// The commanded spread of the targets, mm, from which [`POINT_UNITS_RATIO`] applies.
+pub const POINT_UNITS_MIN_MM: f64 = 1.0;
+
 /// What an instrument file holds: the name column, the instruments the description declares
 /// and the measured columns.
 struct Instrument<'a> {
@@ -116,10 +137,23 @@ pub(crate) fn read_tilt_measurements_table<R: Read>(
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
-    let axes = (1..=MAX_TILT_AXES)
+    let axes: Vec<String> = (1..=MAX_TILT_AXES)
         .map(|k| format!("angle_{k}_deg"))
         .filter(|c| t.has(c))
         .collect();
+    // The angles are numbered from 1 without a gap: angle_2_deg without angle_1_deg is a
+    // column lost (or misnamed), never a file whose first axis is simply not logged.
+    if let Some(k) = (1..=axes.len()).find(|k| !t.has(&format!("angle_{k}_deg"))) {
+        return Err(InputError::field(
+            &t.file,
+            t.header_line,
+            format!("angle_{k}_deg"),
+            format!(
+                "missing column: an inclinometer file gives angle_1_deg, angle_2_deg, ... in order (one per axis of its [[inclinometer]], degrees); it has {} but not angle_{k}_deg",
+                axes.join(", ")
+            ),
+        ));
+    }
     let instrument = Instrument {
         column: "inclinometer",
         table: "[[inclinometer]]",
@@ -237,6 +271,15 @@ fn read_instrument_table<R: Read>(
             };
             if let Some(v) = v {
                 check_pose_cell(t, &row, c, v)?;
+                if !instrument.points && !(v.abs() <= MAX_TILT_DEG) {
+                    return Err(t.err(
+                        &row,
+                        c,
+                        format!(
+                            "{v} degrees: an inclinometer angle (the elevation of its axis above the horizontal) is within [-{MAX_TILT_DEG}, {MAX_TILT_DEG}] degrees"
+                        ),
+                    ));
+                }
             }
             values.push(v);
         }
@@ -380,6 +423,11 @@ fn read_instrument_table<R: Read>(
     if has_readings {
         campaign.commanded_lengths_mm = Some(commanded);
     }
+    if instrument.points {
+        check_point_units(&t.file, robot, &campaign, &lines)?;
+    } else {
+        check_tilt_units(&t.file, robot, &campaign, &lines, &instrument.measured)?;
+    }
     let mut file = DataFile {
         file: t.file.clone(),
         kind: FileKind::TiltMeasurements,
@@ -399,6 +447,127 @@ fn read_instrument_table<R: Read>(
         file.point_frame = Some(frame);
     }
     Ok(file)
+}
+
+/// Largest minus smallest of `values` (0 for none).
+fn spread(values: impl Iterator<Item = f64>) -> f64 {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+        (a.min(v), b.max(v))
+    });
+    if hi >= lo {
+        hi - lo
+    } else {
+        0.0
+    }
+}
+
+/// Refuses a point file whose measured points spread a hundred times less (metres, most
+/// likely) or more than the nominal targets at the commanded poses ([`POINT_UNITS_RATIO`]).
+/// The tracker's frame may be anywhere, so only the spreads about the centroids are compared
+/// (RMS distances). The error names the row farthest from the centroid and its largest
+/// coordinate.
+fn check_point_units(
+    file: &str,
+    robot: &Robot,
+    campaign: &Campaign,
+    lines: &[usize],
+) -> Result<(), InputError> {
+    let targets: Vec<Vector3<f64>> = robot
+        .description
+        .targets
+        .iter()
+        .map(|s| Vector3::from(s.platform_mm))
+        .collect();
+    let m = &campaign.point_measurements;
+    let radius = |p: &[Vector3<f64>]| -> (f64, usize) {
+        let n = p.len().max(1) as f64;
+        let c = p.iter().fold(Vector3::zeros(), |a, v| a + v) / n;
+        let far = (0..p.len())
+            .max_by(|a, b| (p[*a] - c).norm().total_cmp(&(p[*b] - c).norm()))
+            .unwrap_or(0);
+        let r = (p.iter().map(|v| (v - c).norm_squared()).sum::<f64>() / n).sqrt();
+        (r, far)
+    };
+    let nominal: Vec<Vector3<f64>> = m
+        .iter()
+        .map(|q| campaign.poses[q.pose].transform_point(&targets[q.target]))
+        .collect();
+    let measured: Vec<Vector3<f64>> = m.iter().map(|q| q.measured_mm).collect();
+    let (commanded, _) = radius(&nominal);
+    let (got, far) = radius(&measured);
+    if !(commanded >= POINT_UNITS_MIN_MM) {
+        return Ok(());
+    }
+    let ratio = got / commanded;
+    let hint = if ratio < POINT_UNITS_RATIO {
+        "metres? Positions are in mm"
+    } else if ratio > 1.0 / POINT_UNITS_RATIO {
+        "micrometres, or not positions? Positions are in mm"
+    } else {
+        return Ok(());
+    };
+    let p = measured[far];
+    let k = p.iamax();
+    Err(InputError::field(
+        file,
+        lines.get(far).copied().unwrap_or(0),
+        ["x_mm", "y_mm", "z_mm"][k],
+        format!(
+            "the measured points spread {got:.4} mm (RMS about their centre) while the targets at the commanded poses spread {commanded:.3} mm: {hint}"
+        ),
+    ))
+}
+
+/// Refuses a tilt file whose angles spread much less than the commanded poses tilt the
+/// instruments' axes ([`TILT_UNITS_RATIO`]): radians, most likely. Each measured column is
+/// compared with the angle the nominal instrument would read at the commanded poses
+/// (`asin(up . R a)`); mount and levelling only add offsets, which a spread ignores. The error
+/// names the row of the largest angle of that column.
+fn check_tilt_units(
+    file: &str,
+    robot: &Robot,
+    campaign: &Campaign,
+    lines: &[usize],
+    columns: &[String],
+) -> Result<(), InputError> {
+    let specs = &robot.description.inclinometers;
+    for (axis, column) in columns.iter().enumerate() {
+        let rows: Vec<(usize, &TiltMeasurement)> = campaign
+            .tilt_measurements
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.axis == axis)
+            .collect();
+        let expected = rows.iter().filter_map(|(_, m)| {
+            let spec = &specs[m.inclinometer];
+            let a = spec.axes.get(axis)?;
+            let mount = cpm_geometry::Pose::from_xyz_rpy_deg([0.0; 3], spec.mount_rpy_deg);
+            let a = mount.rotation * Vector3::from(*a);
+            let a = campaign.poses[m.pose].rotation * a.try_normalize(1e-12)?;
+            Some(a.z.clamp(-1.0, 1.0).asin().to_degrees())
+        });
+        let commanded = spread(expected);
+        let measured = spread(rows.iter().map(|(_, m)| (m.angle_mrad * 1e-3).to_degrees()));
+        if !(commanded >= TILT_UNITS_MIN_DEG && measured < TILT_UNITS_RATIO * commanded) {
+            continue;
+        }
+        let (k, m) = rows
+            .iter()
+            .max_by(|a, b| a.1.angle_mrad.abs().total_cmp(&b.1.angle_mrad.abs()))
+            .expect("a spread needs rows");
+        let v = (m.angle_mrad * 1e-3).to_degrees();
+        return Err(InputError::field(
+            file,
+            lines.get(*k).copied().unwrap_or(0),
+            column.as_str(),
+            format!(
+                "the angles of {column} spread {measured:.4} degrees while the commanded poses tilt that axis over {commanded:.2} degrees: radians? Angles are in degrees ({} rad would be {:.3} deg)",
+                show(v, None),
+                v.to_degrees()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The rough registration of a point session: the frame that best takes the nominal targets

@@ -170,6 +170,9 @@ impl Robot {
             if let Some(v) = c.nonlinearity_scale_mm {
                 s.nonlinearity_scale_mm = v;
             }
+            if let Some(v) = c.reference_time_s {
+                s.reference_time_s = Some(v);
+            }
         }
         s
     }

@@ -35,6 +35,9 @@ pub struct SimulateSummary {
 /// `cpm compensate --json`: the command file written.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct CompensateSummary {
+    /// What the calibration's data could not see, in words (`[calibration]
+    /// blind_directions`).
+    pub blind_directions: Vec<String>,
     /// Joint clearance of the model, um.
     pub clearance_um: f64,
     /// Effects with known values applied, by name.
@@ -47,6 +50,10 @@ pub struct CompensateSummary {
     pub robot: String,
     /// Targets compensated.
     pub targets: usize,
+    /// What the calibration left undetermined (installation-error components and effect
+    /// parameters, `[calibration] undetermined` of the description): the commands cannot
+    /// correct it.
+    pub undetermined: Vec<String>,
 }
 
 impl SimulateSummary {
@@ -104,6 +111,8 @@ mod tests {
             outside_pose_map_range: vec!["p1".into()],
             robot: "r.toml".into(),
             targets: 1,
+            undetermined: vec!["base 1 x".into()],
+            blind_directions: vec![],
         };
         assert!(keys_sorted(&c.to_json()), "{}", c.to_json());
         assert!(!keys_sorted("{\n  \"b\": 1,\n  \"a\": 2\n}"));

@@ -48,30 +48,112 @@ pub fn mean_sd(v: &[f64]) -> (f64, f64) {
     (m, sd)
 }
 
-/// One held-out tracker file (a session) re-registered against one robot.
+/// The full frame of a session as fitted against one robot: the reader's rough registration
+/// composed with the increment fitted on top of it (`p_instrument = R p_base + t`), with the
+/// increment's standard deviations (the rough registration is held fixed). An inclinometer
+/// session's frame is the levelling of the base: a rotation about x and y, no translation.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SessionFrame {
+    /// Base origin in the instrument's frame, mm (`null` for an inclinometer session).
+    pub translation_mm: Option<[f64; 3]>,
+    /// Standard deviation of each translation component, um (`null` for an inclinometer
+    /// session).
+    pub translation_sd_um: Option<[f64; 3]>,
+    /// Unit axis of the rotation from base to instrument axes (`[0, 0, 1]` for none).
+    pub rotation_axis: [f64; 3],
+    /// Its angle, deg.
+    pub rotation_angle_deg: f64,
+    /// Standard deviation of each component of the rotation (small rotation about x, y, z),
+    /// urad.
+    pub rotation_sd_urad: [f64; 3],
+}
+
+impl SessionFrame {
+    /// The frame `rough ∘ increment` of a tracker or point session: `rough` as (translation
+    /// mm, rotation), `increment` and `sd` as fitted (tx ty tz um, rx ry rz urad).
+    pub fn rigid(
+        rough: (cpm_geometry::Vector3<f64>, cpm_geometry::Rotation3<f64>),
+        increment: &[f64; 6],
+        sd: &[f64; 6],
+    ) -> Self {
+        let (t0, r0) = rough;
+        let ti = cpm_geometry::Vector3::new(increment[0], increment[1], increment[2]) * 1e-3;
+        let ri = cpm_geometry::Rotation3::new(
+            cpm_geometry::Vector3::new(increment[3], increment[4], increment[5]) * 1e-6,
+        );
+        let r = r0 * ri;
+        let t = r0 * ti + t0;
+        let (axis, angle) = axis_angle(&r);
+        Self {
+            translation_mm: Some([t.x, t.y, t.z]),
+            translation_sd_um: Some([sd[0], sd[1], sd[2]]),
+            rotation_axis: axis,
+            rotation_angle_deg: angle,
+            rotation_sd_urad: [sd[3], sd[4], sd[5]],
+        }
+    }
+
+    /// The levelling of an inclinometer session: the base tilted by `rx`, `ry` urad
+    /// (`frame[0..2]`), standard deviations `sd[0..2]`.
+    pub fn tilt(frame: &[f64; 6], sd: &[f64; 6]) -> Self {
+        let r = cpm_geometry::Rotation3::new(
+            cpm_geometry::Vector3::new(frame[0], frame[1], 0.0) * 1e-6,
+        );
+        let (axis, angle) = axis_angle(&r);
+        Self {
+            translation_mm: None,
+            translation_sd_um: None,
+            rotation_axis: axis,
+            rotation_angle_deg: angle,
+            rotation_sd_urad: [sd[0], sd[1], 0.0],
+        }
+    }
+}
+
+fn axis_angle(r: &cpm_geometry::Rotation3<f64>) -> ([f64; 3], f64) {
+    match r.axis_angle() {
+        Some((axis, angle)) => ([axis.x, axis.y, axis.z], angle.to_degrees()),
+        None => ([0.0, 0.0, 1.0], 0.0),
+    }
+}
+
+/// One held-out session (a tracker, point or inclinometer file) registered afresh against one
+/// robot (held fixed).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SessionCheck {
     /// The file.
     pub file: String,
+    /// What it holds: `tracker` (6-D poses), `points` (targets) or `tilts` (inclinometer
+    /// angles).
+    pub kind: String,
     /// The rough registration the reader applied: translation (mm) and rotation angle (deg)
-    /// of the tracker frame from the base frame.
+    /// of the tracker frame from the base frame (zero for an inclinometer session).
     pub rough_translation_mm: [f64; 3],
     /// Its rotation angle, deg.
     pub rough_rotation_deg: f64,
-    /// The frame fitted on top of it with the machine held fixed (tx ty tz um, rx ry rz urad).
+    /// The increment fitted on top of it with the machine held fixed: tx ty tz um, rx ry rz
+    /// urad (a tracker or point session); the base tilt rx ry urad and four zeros (an
+    /// inclinometer session).
     pub frame: [f64; 6],
-    /// Standard deviations of `frame`.
+    /// Standard deviations of `frame`, in its units.
     pub frame_sd: [f64; 6],
-    /// RMS of the weighted residual (positions um, orientations at the tracker's position
-    /// over orientation noise, um per urad), the quantity the frame fit minimises, with the
-    /// rough registration only.
-    pub rms_before_um: f64,
+    /// The full frame: rough registration and increment together, with standard deviations.
+    pub full_frame: SessionFrame,
+    /// RMS of the weighted residual the frame fit minimises, in standard deviations of each
+    /// observation's noise (a mix of kinds: no unit), with the rough registration only.
+    pub weighted_rms_before: f64,
     /// The same with the session frame fitted.
-    pub rms_after_um: f64,
-    /// Position error RMS (um, per coordinate) with the rough registration only.
-    pub position_rms_before_um: f64,
+    pub weighted_rms_after: f64,
+    /// Position error RMS (um, per coordinate) with the rough registration only (`null`
+    /// without positions).
+    pub position_rms_before_um: Option<f64>,
     /// Position error RMS (um, per coordinate) with the session frame fitted.
-    pub position_rms_after_um: f64,
+    pub position_rms_after_um: Option<f64>,
+    /// Angle error RMS (urad: tracker orientation components or inclinometer angles) with the
+    /// rough registration only (`null` without angles).
+    pub angle_rms_before_urad: Option<f64>,
+    /// The same with the session frame fitted.
+    pub angle_rms_after_urad: Option<f64>,
 }
 
 /// What one robot predicts on the held-out files.
@@ -110,8 +192,10 @@ pub struct ErrorSummary {
     pub rms_um: f64,
     /// Its largest absolute value, um.
     pub max_um: f64,
-    /// Orientation error RMS, urad (`null` without orientations).
+    /// Orientation (or inclinometer angle) error RMS, urad (`null` without angles).
     pub orientation_rms_urad: Option<f64>,
+    /// Its largest absolute value, urad (`null` without angles).
+    pub orientation_max_urad: Option<f64>,
 }
 
 impl ErrorSummary {
@@ -120,6 +204,8 @@ impl ErrorSummary {
             rms_um: rms(&g.values_um),
             max_um: max_abs(&g.values_um),
             orientation_rms_urad: rms_of(&g.orientation_urad),
+            orientation_max_urad: (!g.orientation_urad.is_empty())
+                .then(|| max_abs(&g.orientation_urad)),
         }
     }
 }
@@ -129,8 +215,10 @@ impl ErrorSummary {
 pub struct GroupSummary {
     /// The group's name.
     pub name: String,
-    /// Its observations (readings or position coordinates).
+    /// Its length and position observations (readings or position coordinates), um.
     pub count: usize,
+    /// Its angle observations (tracker orientation components or inclinometer angles), urad.
+    pub angles: usize,
     /// The calibrated robot's errors.
     pub calibrated: ErrorSummary,
     /// The reference robot's errors.
@@ -259,6 +347,7 @@ impl ValidateReport {
                 .map(|(n, (c, r))| GroupSummary {
                     name: n.clone(),
                     count: c.values_um.len(),
+                    angles: c.orientation_urad.len(),
                     calibrated: ErrorSummary::new(c),
                     reference: ErrorSummary::new(r),
                 })
@@ -289,36 +378,63 @@ impl ValidateReport {
                 .collect::<Vec<_>>()
                 .join(", ")
         ));
-        md.push_str("| group | observations | calibrated RMS (um) | calibrated max (um) | reference RMS (um) | reference max (um) |\n|---|---|---|---|---|---|\n");
-        let row = |md: &mut String, name: &str, n: usize, c: (f64, f64), r: (f64, f64)| {
-            md.push_str(&format!(
-                "| {name} | {n} | {:.3} | {:.3} | {:.3} | {:.3} |\n",
-                c.0, c.1, r.0, r.1
-            ));
-        };
+        md.push_str("Every figure in its unit: um for readings and positions, urad for angles (tracker orientations, inclinometer angles).\n\n| group | observations | unit | calibrated RMS | calibrated max | reference RMS | reference max |\n|---|---|---|---|---|---|---|\n");
+        let row =
+            |md: &mut String, name: &str, n: usize, unit: &str, c: (f64, f64), r: (f64, f64)| {
+                md.push_str(&format!(
+                    "| {name} | {n} | {unit} | {:.3} | {:.3} | {:.3} | {:.3} |\n",
+                    c.0, c.1, r.0, r.1
+                ));
+            };
+        let nan = |v: Option<f64>| v.unwrap_or(f64::NAN);
         for g in &self.groups {
             let (gc, gr) = (&g.calibrated, &g.reference);
+            if g.count > 0 {
+                row(
+                    &mut md,
+                    &g.name,
+                    g.count,
+                    "um",
+                    (gc.rms_um, gc.max_um),
+                    (gr.rms_um, gr.max_um),
+                );
+            }
+            if g.angles > 0 {
+                row(
+                    &mut md,
+                    &g.name,
+                    g.angles,
+                    "urad",
+                    (nan(gc.orientation_rms_urad), nan(gc.orientation_max_urad)),
+                    (nan(gr.orientation_rms_urad), nan(gr.orientation_max_urad)),
+                );
+            }
+        }
+        if self.text.0.observations > 0 {
             row(
                 &mut md,
-                &g.name,
-                g.count,
-                (gc.rms_um, gc.max_um),
-                (gr.rms_um, gr.max_um),
+                "**all lengths and positions**",
+                self.text.0.observations,
+                "um",
+                (c.rms_um, c.max_um),
+                (r.rms_um, r.max_um),
             );
         }
-        row(
-            &mut md,
-            "**all**",
-            self.text.0.observations,
-            (c.rms_um, c.max_um),
-            (r.rms_um, r.max_um),
-        );
-        if let Some(co) = c.orientation_rms_urad {
-            md.push_str(&format!(
-                "\nTracker orientation error RMS: calibrated {:.2} urad, reference {:.2} urad.\n",
-                co,
-                r.orientation_rms_urad.unwrap_or(f64::NAN)
-            ));
+        if self.text.0.angles > 0 {
+            row(
+                &mut md,
+                "**all angles**",
+                self.text.0.angles,
+                "urad",
+                (
+                    nan(c.orientation_rms_urad),
+                    self.text.0.orientation_max_urad,
+                ),
+                (
+                    nan(r.orientation_rms_urad),
+                    self.text.1.orientation_max_urad,
+                ),
+            );
         }
         self.session_markdown(&mut md);
         if figure {
@@ -346,10 +462,19 @@ impl ValidateReport {
                 self.text.0.angles
             )
         } else {
-            format!(
+            let mut line = format!(
                 "{sim}held-out: calibrated RMS {:.3} um (max {:.3}), reference RMS {:.3} um (max {:.3}) over {} observations",
                 c.rms_um, c.max_um, r.rms_um, r.max_um, self.text.0.observations
-            )
+            );
+            if self.text.0.angles > 0 {
+                line.push_str(&format!(
+                    "; angles: calibrated RMS {:.3} urad, reference RMS {:.3} urad over {}",
+                    c.orientation_rms_urad.unwrap_or(f64::NAN),
+                    r.orientation_rms_urad.unwrap_or(f64::NAN),
+                    self.text.0.angles
+                ));
+            }
+            line
         }
     }
 
@@ -387,16 +512,28 @@ impl ValidateReport {
         if cal.sessions.is_empty() {
             return;
         }
-        md.push_str("\n## Sessions\n\nEach held-out tracker file is a session: its frame is registered afresh against each robot (held fixed), the rough registration of the reader first, then the six frame parameters through the prediction model. Frame: translation um, rotation urad, +- one standard deviation.\n\n| file | robot | rough frame (mm, deg) | fitted frame t (um) | fitted frame r (urad) | weighted RMS before (um) | after (um) | position RMS after (um) |\n|---|---|---|---|---|---|---|---|\n");
+        md.push_str("\n## Sessions\n\nEach held-out tracker, point or inclinometer file is a session: its frame is registered afresh against each robot (held fixed), the rough registration of the reader first, then the frame parameters through the prediction model (an inclinometer session: the base's levelling). Frame: translation mm, rotation axis and angle deg, +- one standard deviation (translation um, rotation urad). The weighted RMS is in standard deviations of each observation's noise.\n\n| file | kind | robot | translation (mm) | +- (um) | rotation axis | angle (deg) | +- (urad) | weighted RMS before (in sigma) | after (in sigma) | position RMS after (um) | angle RMS after (urad) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+        let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
         for (label, e) in [("calibrated", cal), ("reference", reference)] {
             for s in &e.sessions {
-                let t = s.rough_translation_mm;
-                let f = |a: usize| format!("{:.1}+-{:.1}", s.frame[a], s.frame_sd[a]);
+                let f = &s.full_frame;
+                let (t, tsd) = match (f.translation_mm, f.translation_sd_um) {
+                    (Some(t), Some(sd)) => (
+                        format!("({:.4}, {:.4}, {:.4})", t[0], t[1], t[2]),
+                        format!("{:.1}, {:.1}, {:.1}", sd[0], sd[1], sd[2]),
+                    ),
+                    _ => ("-".to_string(), "-".to_string()),
+                };
+                let a = f.rotation_axis;
+                let rsd = f.rotation_sd_urad;
                 md.push_str(&format!(
-                    "| {} | {label} | ({:.3}, {:.3}, {:.3}), {:.4} | {}, {}, {} | {}, {}, {} | {:.3} | {:.3} | {:.3} |\n",
-                    s.file, t[0], t[1], t[2], s.rough_rotation_deg, f(0), f(1), f(2), f(3), f(4), f(5), s.rms_before_um, s.rms_after_um, s.position_rms_after_um
+                    "| {} | {} | {label} | {t} | {tsd} | ({:.4}, {:.4}, {:.4}) | {:.6} | {:.1}, {:.1}, {:.1} | {:.3} | {:.3} | {} | {} |\n",
+                    s.file, s.kind, a[0], a[1], a[2], f.rotation_angle_deg, rsd[0], rsd[1], rsd[2], s.weighted_rms_before, s.weighted_rms_after, opt(s.position_rms_after_um), opt(s.angle_rms_after_urad)
                 ));
             }
+        }
+        if cal.position_error_mean_um.is_none() && cal.link_rms_mm.is_none() {
+            return;
         }
         md.push_str("\n| figure | calibrated | reference |\n|---|---|---|\n");
         if let Some(link) = cal.link_rms_mm {

@@ -105,6 +105,11 @@ pub enum ObservationKind {
     Instrument(usize, usize),
 }
 
+/// The gauges' noise a command-line fit assumes when a campaign mixes gauge readings with
+/// other instruments and the gauges' noise is not declared, um (the tracker's default: a
+/// campaign of defaults weighs as before); `--noise-per-kind` estimates it instead.
+pub const DEFAULT_READING_SIGMA_UM: f64 = 10.0;
+
 /// A measurement campaign: commanded poses and readings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 pub struct Campaign {
@@ -118,6 +123,11 @@ pub struct Campaign {
     /// Tracker pose measurements (6 observations each), if any.
     #[serde(default)]
     pub pose_measurements: Vec<PoseMeasurement>,
+    /// Standard deviation of a length (gauge) reading, um: the gauges' own noise, whatever
+    /// the other instruments' (`[calibration] sensor_noise_um`, `--sigma-um`). Default
+    /// (when 0) the reference noise of the weights (a reading weighs 1).
+    #[serde(default)]
+    pub reading_sigma_um: f64,
     /// Standard deviation of a tracker position coordinate, um. Default (when 0) 10.
     #[serde(default)]
     pub pose_sigma_um: f64,
@@ -399,11 +409,41 @@ impl Campaign {
         }
     }
 
-    /// Weight of each observation so that all residuals share the noise `sigma_ref_um` of a
-    /// length reading: 1 for readings, `sigma_ref / pose_sigma` for tracker positions and
-    /// `sigma_ref / orientation_sigma` (um per urad) for tracker orientations.
+    /// The earliest logged time of the length readings, s (`None` when none is logged): the
+    /// clock origin of `thermal_drift` when the model declares none
+    /// ([`EffectSettings::reference_time_s`](crate::EffectSettings::reference_time_s)).
+    pub fn first_time_s(&self) -> Option<f64> {
+        self.readings
+            .iter()
+            .filter_map(|r| r.time_s)
+            .reduce(f64::min)
+    }
+
+    /// The gauges' noise, um, when declared ([`reading_sigma_um`](Self::reading_sigma_um)
+    /// set): `None` when the readings are the reference of the weights.
+    pub fn reading_sigma(&self) -> Option<f64> {
+        (self.reading_sigma_um > 0.0).then_some(self.reading_sigma_um)
+    }
+
+    /// The reference noise of the weights, um, for a fit given the gauge noise `sigma_um`
+    /// (`IdentifyOptions::sigma_um`): that, else the gauges' declared noise, else the tracker
+    /// position noise. Weighed with it (see [`observation_weights`](Self::observation_weights))
+    /// every kind of observation keeps its own noise.
+    pub fn reference_sigma(&self, sigma_um: Option<f64>) -> f64 {
+        sigma_um
+            .or(self.reading_sigma())
+            .unwrap_or(self.pose_sigma())
+    }
+
+    /// Weight of each observation so that all residuals share the noise `sigma_ref_um`:
+    /// `sigma_ref / reading_sigma` for readings (1 when the readings' noise is not declared:
+    /// they are the reference), `sigma_ref / pose_sigma` for tracker positions and
+    /// `sigma_ref / orientation_sigma` (um per urad) for tracker orientations, and so on for
+    /// points, tilts and one's own instruments. Every kind is weighed by its own noise: the
+    /// gauges never take the tracker's.
     pub fn observation_weights(&self, sigma_ref_um: f64) -> Vec<f64> {
-        let mut w = vec![1.0; self.readings.len()];
+        let reading = self.reading_sigma().map_or(1.0, |s| sigma_ref_um / s);
+        let mut w = vec![reading; self.readings.len()];
         for q in 0..self.pose_measurements.len() {
             for a in 0..6 {
                 if self.is_measured(q, a) {

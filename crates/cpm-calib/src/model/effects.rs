@@ -450,6 +450,10 @@ pub struct EffectSettings {
     pub reference_temperature_c: f64,
     /// Length scale of `link_nonlinearity`'s polynomial variable, mm. Default 100.
     pub nonlinearity_scale_mm: f64,
+    /// Time origin of `thermal_drift` without temperatures, s: hours are counted from it.
+    /// Default `None`: from the earliest logged time of the campaign predicted (which then
+    /// depends on the part of a log given; a calibrated description declares it).
+    pub reference_time_s: Option<f64>,
 }
 
 impl Default for EffectSettings {
@@ -458,6 +462,7 @@ impl Default for EffectSettings {
             screw_lead_mm: 5.0,
             reference_temperature_c: 20.0,
             nonlinearity_scale_mm: 100.0,
+            reference_time_s: None,
         }
     }
 }

@@ -210,6 +210,7 @@ impl MeasurementModel {
                 .reference_temperature_c
                 .unwrap_or(s.reference_temperature_c);
             s.nonlinearity_scale_mm = c.nonlinearity_scale_mm.unwrap_or(s.nonlinearity_scale_mm);
+            s.reference_time_s = c.reference_time_s.or(s.reference_time_s);
             for (name, values) in &c.known_effects {
                 let effect = Effect::parse(name).map_err(|why| {
                     CalibError::invalid(format!("calibration.known_effects.{name}"), why)
@@ -1028,7 +1029,7 @@ impl Prepared {
         // The known link effects depend on the pose context only: applied here, once.
         let mut lengths_mm = lengths_mm;
         if !model.known_effects.is_empty() {
-            let t0 = campaign_t0_s(campaign);
+            let t0 = campaign_t0_s(model, campaign);
             for ((l, ctx), pose) in lengths_mm.iter_mut().zip(&contexts).zip(&campaign.poses) {
                 for (a, d) in l.iter_mut().zip(model.known_link_shift_at(ctx, pose, t0)) {
                     *a += d;
@@ -1038,7 +1039,7 @@ impl Prepared {
         let mut prepared = Prepared {
             lengths_mm,
             contexts,
-            t0_s: campaign_t0_s(campaign),
+            t0_s: campaign_t0_s(model, campaign),
             by_pose,
             measurements_by_pose,
             points_by_pose,
@@ -1062,18 +1063,15 @@ impl Prepared {
     }
 }
 
-/// Start of the campaign's clock, s: the earliest logged reading time, else 0.
-fn campaign_t0_s(campaign: &Campaign) -> f64 {
-    let t0 = campaign
-        .readings
-        .iter()
-        .filter_map(|r| r.time_s)
-        .fold(f64::INFINITY, f64::min);
-    if t0.is_finite() {
-        t0
-    } else {
-        0.0
-    }
+/// Start of the campaign's clock, s: the model's declared time origin
+/// ([`EffectSettings::reference_time_s`](crate::EffectSettings::reference_time_s)), else the
+/// earliest logged time of the campaign ([`Campaign::first_time_s`]), else 0.
+fn campaign_t0_s(model: &MeasurementModel, campaign: &Campaign) -> f64 {
+    model
+        .effect_settings
+        .reference_time_s
+        .or_else(|| campaign.first_time_s())
+        .unwrap_or(0.0)
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {

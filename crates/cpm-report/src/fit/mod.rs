@@ -285,11 +285,32 @@ pub struct NoiseKindReport {
     pub estimated: Option<f64>,
 }
 
-/// The warning when a kind of observation's residual says a noise more than 3 times above or
-/// below the one the fit weighed it with (at least 10 degrees of freedom).
+/// The warning when the kinds of observation are weighed against each other wrongly: a kind's
+/// residual says a noise more than 3 times above or below the one the fit weighed it with,
+/// relative to what the kind with the most degrees of freedom says (at least 10 each). Kinds all
+/// off by one factor (the gauges of a fit whose noise is estimated from the residual, weighed
+/// with a placeholder) are weighed rightly against each other: no warning.
 pub fn noise_warning(kinds: &[cpm_calib::noise::KindNoise]) -> Option<String> {
     let off = cpm_calib::noise::mismatched(kinds, 3.0);
     if off.is_empty() || kinds.len() < 2 {
+        return None;
+    }
+    let min = cpm_calib::noise::MIN_REDUNDANCY;
+    let scale = kinds
+        .iter()
+        .filter(|k| k.redundancy >= min)
+        .filter_map(|k| k.ratio().map(|r| (k.redundancy, r)))
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map_or(1.0, |(_, r)| r);
+    let off: Vec<_> = kinds
+        .iter()
+        .filter(|k| k.redundancy >= min)
+        .filter(|k| {
+            k.ratio()
+                .is_some_and(|r| r / scale > 3.0 || r / scale < 1.0 / 3.0)
+        })
+        .collect();
+    if off.is_empty() {
         return None;
     }
     let list: Vec<String> = off
