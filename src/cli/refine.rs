@@ -16,7 +16,7 @@ use crate::report::refine::{RefineDoc, RefineReport};
 /// Arguments of `cpm refine`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --out refined/\n  cpm refine --robot robot.toml --data data.csv --candidates link_offset,link_scale,backlash --max-steps 2 --out refined/ --json"
+    after_help = "Examples:\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --out refined/\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --candidates link_offset,link_scale,backlash --max-steps 2 --out refined/ --json"
 )]
 pub struct RefineArgs {
     /// Robot, data, effects, noise, solver and output: as for `cpm calibrate`.

@@ -31,7 +31,7 @@ use crate::report::validate::{
 /// Arguments of `cpm validate`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm validate --robot cal/calibrated.toml --reference examples/hexapod_66.toml --data held_out.csv\n  cpm validate --robot cal/calibrated.toml --reference robot.toml --data a.csv --data b.csv --out validation/ --json"
+    after_help = "Examples:\n  cpm validate --robot cal/calibrated.toml --reference examples/hexapod_66.toml --data held_out.csv\n  cpm validate --robot cal/calibrated.toml --reference examples/hexapod_66.toml --data held_out.csv --data tracker.csv --out validation/ --json\n  cpm validate --reference examples/hexapod_66.toml --commands commands.csv --truth examples/hexapod_66_truth.toml --out compensation/"
 )]
 pub struct ValidateArgs {
     /// The calibrated robot description (`calibrated.toml` of `cpm calibrate` or `cpm refine`);
@@ -62,6 +62,11 @@ pub struct ValidateArgs {
     /// and `[calibration.known_effects]`), e.g. the `--truth` of `cpm simulate`.
     #[arg(long, value_name = "TRUTH.toml", requires = "commands")]
     pub truth: Option<PathBuf>,
+    /// With `--commands`: true values of an effect of the machine, on top of `--truth`'s
+    /// `[calibration.known_effects]`, as `cpm simulate --truth-effect` takes them (e.g.
+    /// backlash=-8,6,-10,5,-7,9); repeatable.
+    #[arg(long, value_name = "EFFECT=V1,V2,..", requires = "commands")]
+    pub truth_effect: Vec<String>,
     /// With `--commands`: the machine comes to the first target from its home pose (as
     /// `cpm compensate --from-home` assumed), so the first target's backlash is known.
     #[arg(long, requires = "commands")]
@@ -443,7 +448,8 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
         ));
     };
     let reference = common::load_robot(reference, ctx)?;
-    let truth = common::load_robot(truth, ctx)?;
+    let mut truth = common::load_robot(truth, ctx)?;
+    super::simulate::add_truth_effects(&mut truth, &args.truth_effect)?;
     if truth.num_links() != reference.num_links() {
         return Err(super::input_error(format!(
             "{} has {} links, the reference {} has {}",
