@@ -451,12 +451,10 @@ pub fn stage_calibrated(
     {
         let c = desc.calibration.get_or_insert_with(Default::default);
         let from = std::path::Path::new(&inputs.robot.file);
-        c.calibrated_from = Some(
-            std::fs::canonicalize(from)
-                .unwrap_or_else(|_| from.to_path_buf())
-                .display()
-                .to_string(),
-        );
+        c.calibrated_from = Some(common::relative_to_dir(from, dir).display().to_string());
+        c.calibrated_from_fnv1a64 = std::fs::read(from)
+            .ok()
+            .map(|b| format!("{:016x}", crate::output::fingerprint(&b)));
         c.simulated = cal.simulated;
         // The tracker noise the fit weighed its sessions with: held-out sessions are
         // registered with the same weights.

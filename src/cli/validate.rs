@@ -84,7 +84,9 @@ pub struct ValidateArgs {
     /// tracker_orientation_sigma_urad` of `--robot`, else cpm-calib's 20 urad).
     #[arg(long, value_name = "URAD")]
     pub orientation_sigma_urad: Option<f64>,
-    /// Also write validation.json, validation.md and validation.svg into this directory.
+    /// Also write validation.json, report.md, report.html (figure inline), validation.svg
+    /// and residuals.csv into this directory (with `--commands`: compensation.json,
+    /// report.md and report.html).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Print a JSON summary on stdout.
@@ -511,7 +513,9 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
     if let Some(dir) = &args.out {
         let mut set = OutputSet::new();
         set.add(dir.join("compensation.json"), report.to_json()?);
-        set.add(dir.join("compensation.md"), report.markdown());
+        let markdown = report.markdown();
+        set.add(dir.join("report.md"), markdown.as_str());
+        common::stage_report_html(&mut set, dir, "cpm compensation check", &markdown);
         written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }
     if args.json {
@@ -527,7 +531,7 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
 
 /// The reference robot: `--reference`, else the description the calibrated robot records
 /// it came from (`[calibration] calibrated_from`).
-fn reference_path(args: &ValidateArgs, robot: &Robot) -> anyhow::Result<PathBuf> {
+fn reference_path(args: &ValidateArgs, robot: &Robot, ctx: &Ctx<'_>) -> anyhow::Result<PathBuf> {
     if let Some(r) = &args.reference {
         return Ok(r.clone());
     }
@@ -536,16 +540,47 @@ fn reference_path(args: &ValidateArgs, robot: &Robot) -> anyhow::Result<PathBuf>
         .calibration
         .as_ref()
         .and_then(|c| c.calibrated_from.clone());
-    match recorded {
-        Some(p) if std::path::Path::new(&p).exists() => Ok(PathBuf::from(p)),
+    // Recorded relative to the calibrated file's folder (older files: an absolute path).
+    let here = std::path::Path::new(&robot.file)
+        .parent()
+        .unwrap_or(std::path::Path::new(""));
+    match recorded.map(|p| here.join(p)) {
+        Some(p) if p.exists() => {
+            reference_changed(robot, &p, ctx);
+            Ok(p)
+        }
         Some(p) => Err(super::usage_error(format!(
-            "{} records that it was calibrated from {p}, which does not exist here: give --reference",
-            robot.file
+            "{} records that it was calibrated from {}, which does not exist here (moved, or \
+             not copied with it): give the nominal description it was fitted from with --reference",
+            robot.file,
+            p.display()
         ))),
         None => Err(super::usage_error(format!(
             "--reference is required: {} does not record the description it was calibrated from",
             robot.file
         ))),
+    }
+}
+
+/// A note when the recorded reference `path` is no longer the file `robot` was calibrated
+/// from (its fingerprint `[calibration] calibrated_from_fnv1a64` differs).
+fn reference_changed(robot: &Robot, path: &std::path::Path, ctx: &Ctx<'_>) {
+    let recorded = robot
+        .description
+        .calibration
+        .as_ref()
+        .and_then(|c| c.calibrated_from_fnv1a64.clone());
+    let now = std::fs::read(path)
+        .ok()
+        .map(|b| format!("{:016x}", crate::output::fingerprint(&b)));
+    if let (Some(recorded), Some(now)) = (recorded, now) {
+        if recorded != now {
+            ctx.note(format!(
+                "{} changed since {} was calibrated from it (fingerprint {now}, recorded {recorded}); it is the reference as it is now: give --reference to choose another",
+                path.display(),
+                robot.file
+            ));
+        }
     }
 }
 
@@ -564,7 +599,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         ));
     };
     let robot = common::load_robot(robot, ctx)?;
-    let reference_path = reference_path(args, &robot)?;
+    let reference_path = reference_path(args, &robot, ctx)?;
     let reference = common::load_robot(&reference_path, ctx)?;
     let sensors = |r: &Robot| {
         r.table
@@ -627,8 +662,10 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         let svg = report.figure().map_err(|e| super::trouble(e.to_string()))?;
         let mut set = OutputSet::new();
         set.add(dir.join("validation.json"), report.to_json()?);
-        set.add(dir.join("validation.md"), report.markdown(true));
+        let markdown = report.markdown(true);
+        set.add(dir.join("report.md"), markdown.as_str());
         set.add(dir.join("validation.svg"), svg);
+        common::stage_report_html(&mut set, dir, "cpm validation report", &markdown);
         set.add(dir.join("residuals.csv"), cal_errors.residuals_csv.clone());
         written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }

@@ -109,7 +109,8 @@ fn round_trip_with_every_section() {
         ]
         .into_iter()
         .collect(),
-        calibrated_from: Some("/work/robot.toml".into()),
+        calibrated_from: Some("../robot.toml".into()),
+        calibrated_from_fnv1a64: Some("0123456789abcdef".into()),
         simulated: true,
     });
     d.installation_errors_um = Some(InstallationErrorsSpec::from_errors(
