@@ -49,12 +49,16 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.folds < 2 || args.folds > 1000 {
         return Err(usage_error("--folds must be between 2 and 1000"));
     }
-    let candidates = match &args.candidates {
-        Some(list) => parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
-        None => Effect::ALL.to_vec(),
-    };
     let inputs = args.fit.load(ctx)?;
     let campaign = &inputs.merged.campaign;
+    // The library's effects that can act on these data (an explicit list is taken as given).
+    let (candidates, not_applicable) = match &args.candidates {
+        Some(list) => (
+            parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
+            Vec::new(),
+        ),
+        None => applicable(campaign),
+    };
     // An explicit --candidates list is the whole candidate set: the pose map scan joins it
     // only when --pose-map-degree asks for it.
     let pose_map_degree = match (args.pose_map_degree, &args.candidates) {
@@ -97,7 +101,14 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let dir = &args.fit.out;
     let cal = &r.calibration;
     let mut set = OutputSet::new();
-    let doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
+    let mut doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
+    doc.not_applicable = not_applicable
+        .iter()
+        .map(|(e, why)| crate::report::refine::NotApplicable {
+            effect: e.name().to_string(),
+            why: why.to_string(),
+        })
+        .collect();
     set.add(dir.join("refine.json"), doc.to_json()?);
     let mut fit = FitReport::new(&inputs.report_inputs(), &r.model, cal, None);
     calibrate::add_session_warnings(&mut fit, &inputs, &r.model)?;
@@ -202,4 +213,35 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             cal.solver.termination
         )))
     }
+}
+
+/// The library's effects split into those that can act on `campaign` and those that cannot,
+/// with why: a tracker frame without tracker poses, a thermal drift without a logged
+/// temperature, the sensors' effects without gauge readings.
+fn applicable(campaign: &crate::calib::Campaign) -> (Vec<Effect>, Vec<(Effect, &'static str)>) {
+    let temperatures = campaign.readings.iter().any(|r| r.temperature_c.is_some())
+        || campaign
+            .pose_measurements
+            .iter()
+            .any(|p| p.temperature_c.is_some());
+    let (mut yes, mut no) = (Vec::new(), Vec::new());
+    for e in Effect::ALL {
+        let why = match e {
+            Effect::TrackerFrame if campaign.pose_measurements.is_empty() => {
+                Some("no tracker poses in the data")
+            }
+            Effect::ThermalDrift if !temperatures => Some("no temperature logged"),
+            Effect::SensorOffset | Effect::SensorScale | Effect::SocketError
+                if campaign.readings.is_empty() =>
+            {
+                Some("no gauge readings")
+            }
+            _ => None,
+        };
+        match why {
+            Some(w) => no.push((e, w)),
+            None => yes.push(e),
+        }
+    }
+    (yes, no)
 }

@@ -119,6 +119,15 @@ pub struct Final {
     pub robust_failed: bool,
 }
 
+/// A library effect that was not a candidate because it cannot act on these data.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct NotApplicable {
+    /// The effect.
+    pub effect: String,
+    /// Why it does not apply (`no tracker poses in the data`).
+    pub why: String,
+}
+
 /// An effect that passed the F-test and BIC but not cross-validation.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct RejectedByCv {
@@ -182,6 +191,9 @@ pub struct RefineDoc {
     pub rejected_by_cross_validation: Vec<RejectedByCv>,
     /// Plain calibration against the refined model, on data the fits did not see.
     pub against_calibrate: AgainstCalibrate,
+    /// Library effects left out of the candidates because they cannot act on these data
+    /// (set by the caller that chose the candidates).
+    pub not_applicable: Vec<NotApplicable>,
 }
 
 impl RefineDoc {
@@ -293,6 +305,7 @@ impl RefineDoc {
                 })
                 .collect(),
             against_calibrate: r.against_calibrate,
+            not_applicable: Vec::new(),
         }
     }
 
@@ -398,6 +411,17 @@ impl RefineReport {
             sig(d.initial.rms_um, 3),
             yes_no(d.initial.residual_white)
         ));
+        if !d.not_applicable.is_empty() {
+            let list: Vec<String> = d
+                .not_applicable
+                .iter()
+                .map(|n| format!("`{}` ({})", n.effect, n.why))
+                .collect();
+            s.push_str(&format!(
+                "Not candidates, as they do not apply to these data: {}.\n\n",
+                list.join(", ")
+            ));
+        }
         if !self.significant_pose_structure.is_empty() {
             let terms: Vec<String> = self
                 .significant_pose_structure
