@@ -250,3 +250,87 @@ fn refine_offers_only_candidates_that_apply() {
     assert!(md.contains("do not apply to these data"), "{md}");
     assert!(!stderr(&o).contains("tracker_frame"), "{}", stderr(&o));
 }
+
+/// The most significant digits of any numeric field of a CSV text (comments left out).
+fn max_digits(csv: &str) -> (usize, String) {
+    let mut worst = (0, String::new());
+    for line in csv.lines().filter(|l| !l.starts_with('#')) {
+        for f in line.split(',') {
+            if f.parse::<f64>().is_err() || f.chars().any(|c| c.is_ascii_alphabetic() && c != 'e') {
+                continue;
+            }
+            let d = f
+                .split(['e', 'E'])
+                .next()
+                .unwrap()
+                .trim_start_matches(['-', '+', '0', '.'])
+                .bytes()
+                .filter(u8::is_ascii_digit)
+                .count();
+            if d > worst.0 {
+                worst = (d, f.to_string());
+            }
+        }
+    }
+    worst
+}
+
+/// Numbers as docs/cli.md promises: the CSV files of `design` and `compensate` carry at most
+/// 12 significant digits; `simulate` writes a plan's angles as the plan gives them; the
+/// export's comments carry no full-precision float.
+#[test]
+fn numbers_in_files_are_as_documented() {
+    let dir = scratch("numbers");
+    let robot = examples("hexapod_66.toml");
+    std::fs::write(
+        dir.join("plan.csv"),
+        "pose,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n1,1.5,-2,300,3.30054776056,-1.25,0.1\n2,0,0,310,0,2.2,-3.30054776056\n",
+    )
+    .unwrap();
+    let truth = examples("hexapod_66_truth.toml");
+    cpm(
+        &dir,
+        &[
+            "simulate", "--robot", &robot, "--plan", "plan.csv", "--truth", &truth, "--out",
+            "data.csv",
+        ],
+    );
+    let data = std::fs::read_to_string(dir.join("data.csv")).unwrap();
+    assert!(
+        data.contains(",3.30054776056,") && data.contains(",-3.30054776056,"),
+        "{data}"
+    );
+    cpm(
+        &dir,
+        &[
+            "design", "--robot", &robot, "--readings", "60", "--candidates", "100", "--out",
+            "design",
+        ],
+    );
+    simulate(&dir, "fit.csv", true, "9");
+    cpm(
+        &dir,
+        &[
+            "calibrate", "--robot", &robot, "--data", "fit.csv", "--effects", "backlash",
+            "--out", "cal",
+        ],
+    );
+    let targets = examples("targets.csv");
+    cpm(
+        &dir,
+        &[
+            "compensate", "--robot", "cal/calibrated.toml", "--poses", &targets, "--out",
+            "commands.csv",
+        ],
+    );
+    for f in ["design/poses.csv", "design/sockets.csv", "commands.csv"] {
+        let (d, field) = max_digits(&std::fs::read_to_string(dir.join(f)).unwrap());
+        assert!(d <= 12, "{f}: {field} has {d} significant digits");
+    }
+    let o = cpm(
+        &dir,
+        &["export", "--format", "linuxcnc", "--robot", "cal/calibrated.toml"],
+    );
+    let hal = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(cpm::report::format::find_artefact(&hal), None, "{hal}");
+}
