@@ -846,7 +846,12 @@ impl PaperReport {
                 .join(", "),
         );
         s.push_str("\n\n### Why the rank is so low (blind directions in physical terms)\n\n");
-        s.push_str(&tx.blind_summary.replace("\n  - ", "\n- "));
+        // Its first line is a sentence of its own (a paragraph), then the list.
+        s.push_str(
+            &tx.blind_summary
+                .replacen('\n', ".\n\n", 1)
+                .replace("\n  - ", "\n- "),
+        );
         let per_link: usize = p
             .blind_directions
             .iter()
