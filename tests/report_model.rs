@@ -437,6 +437,10 @@ fn reproduce_paper_summary_keeps_its_keys() {
         let json = std::fs::read_to_string(dir.join("summary.json")).unwrap();
         assert!(!json.contains(&elapsed) && !md.contains(&elapsed), "{elapsed}");
     }
+    // The blind-direction summary's first line does not run into the next in HTML.
+    assert!(!md.contains("determined on their own\n"), "{md}");
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert_eq!(html.matches(">Figures</h2>").count(), 1, "two Figures sections");
     assert_eq!(md, report.report_md());
     assert_eq!(md, cpm::paper_report::report_md(&r));
     assert!(
