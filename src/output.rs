@@ -472,7 +472,7 @@ fn take_lock(lock_path: &Path, waited: &mut bool) -> Result<std::fs::File, Outpu
             }
             Err(std::fs::TryLockError::Error(e)) => return Err(io_at(lock_path)(e)),
         }
-        if same_file(&lock, lock_path) {
+        if locked_file_is_at(&lock, lock_path) {
             return Ok(lock);
         }
     }
@@ -480,7 +480,7 @@ fn take_lock(lock_path: &Path, waited: &mut bool) -> Result<std::fs::File, Outpu
 
 /// True when `path` names the open file `file` (same device and inode).
 #[cfg(unix)]
-fn same_file(file: &std::fs::File, path: &Path) -> bool {
+fn locked_file_is_at(file: &std::fs::File, path: &Path) -> bool {
     use std::os::unix::fs::MetadataExt;
     match (file.metadata(), std::fs::metadata(path)) {
         (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
@@ -490,6 +490,6 @@ fn same_file(file: &std::fs::File, path: &Path) -> bool {
 
 /// Without inodes to compare, the lock file is trusted as it is.
 #[cfg(not(unix))]
-fn same_file(_file: &std::fs::File, _path: &Path) -> bool {
+fn locked_file_is_at(_file: &std::fs::File, _path: &Path) -> bool {
     true
 }

@@ -135,10 +135,18 @@ fn readme_walk_through_runs_as_written() {
     assert!(block.contains("cpm validate") && block.contains("cpm export"));
     run_block(&top, &block);
     // Everything went into the scratch folder, which git ignores, and no lock is left.
-    assert_eq!(entries(&top), ["examples", "scratch"], "written beside scratch/");
+    assert_eq!(
+        entries(&top),
+        ["examples", "scratch"],
+        "written beside scratch/"
+    );
     let ignore = std::fs::read_to_string(root().join(".gitignore")).unwrap();
     assert!(ignore.lines().any(|l| l == "/scratch/"), "{ignore}");
-    assert_eq!(locks(&top), Vec::<PathBuf>::new(), "locks left after clean runs");
+    assert_eq!(
+        locks(&top),
+        Vec::<PathBuf>::new(),
+        "locks left after clean runs"
+    );
     let dir = top.join("scratch/tour");
     for f in [
         "design/robot.toml",
@@ -213,8 +221,16 @@ fn cli_md_walk_through_runs_as_written() {
     let top = scratch("cli-md");
     let block = block_after("docs/cli.md", "## Walk-through on the 6-6 hexapod");
     let stdout = run_block(&top, &block);
-    assert_eq!(entries(&top), ["examples", "scratch"], "written beside scratch/");
-    assert_eq!(locks(&top), Vec::<PathBuf>::new(), "locks left after clean runs");
+    assert_eq!(
+        entries(&top),
+        ["examples", "scratch"],
+        "written beside scratch/"
+    );
+    assert_eq!(
+        locks(&top),
+        Vec::<PathBuf>::new(),
+        "locks left after clean runs"
+    );
     let dir = top.join("scratch/walk");
     assert!(dir.join("cal/calibrated.toml").is_file());
     assert!(dir.join("commands.csv").is_file());

@@ -101,20 +101,46 @@ fn validation_report_html_is_self_contained_and_renders() {
         cpm(
             &dir,
             &[
-                "simulate", "--robot", &r, "--truth", &t, "--random", n, "--seed", seed,
-                "--noise", "gaussian:1", "--out", out,
+                "simulate",
+                "--robot",
+                &r,
+                "--truth",
+                &t,
+                "--random",
+                n,
+                "--seed",
+                seed,
+                "--noise",
+                "gaussian:1",
+                "--out",
+                out,
             ],
         );
     }
     cpm(
         &dir,
-        &["calibrate", "--robot", &r, "--data", "data.csv", "--out", "cal"],
+        &[
+            "calibrate",
+            "--robot",
+            &r,
+            "--data",
+            "data.csv",
+            "--out",
+            "cal",
+        ],
     );
     cpm(
         &dir,
         &[
-            "validate", "--robot", "cal/calibrated.toml", "--reference", &r, "--data",
-            "held_out.csv", "--out", "val",
+            "validate",
+            "--robot",
+            "cal/calibrated.toml",
+            "--reference",
+            &r,
+            "--data",
+            "held_out.csv",
+            "--out",
+            "val",
         ],
     );
     assert!(dir.join("val/report.md").is_file() && dir.join("val/validation.json").is_file());

@@ -420,27 +420,44 @@ fn reproduce_paper_summary_keeps_its_keys() {
             r.designed.calibration.estimate_um[k],
             "{c}"
         );
-        assert_eq!(c["designed_std_um"].as_f64(), r.designed.calibration.std_um[k]);
-        assert_eq!(c["paper_design_um"].as_f64(), r.paper.calibration.estimate_um[k]);
+        assert_eq!(
+            c["designed_std_um"].as_f64(),
+            r.designed.calibration.std_um[k]
+        );
+        assert_eq!(
+            c["paper_design_um"].as_f64(),
+            r.paper.calibration.estimate_um[k]
+        );
         assert!(c["table2_um"].is_f64() && c["name"].is_string(), "{c}");
     }
     let combos = written["paper_design"]["identifiable_combinations"]
         .as_array()
         .unwrap();
     assert_eq!(combos.len(), r.paper.calibration.combinations.len());
-    assert!(!combos.is_empty() && combos[0]["std_um"].is_f64(), "{}", combos[0]);
+    assert!(
+        !combos.is_empty() && combos[0]["std_um"].is_f64(),
+        "{}",
+        combos[0]
+    );
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
     // No wall time in the results (they are the same on every run; xtask writes the times
     // to timings.json).
     for solver in [&r.paper.calibration.solver, &r.designed.calibration.solver] {
         let elapsed = format!("{:.3?}", solver.elapsed);
         let json = std::fs::read_to_string(dir.join("summary.json")).unwrap();
-        assert!(!json.contains(&elapsed) && !md.contains(&elapsed), "{elapsed}");
+        assert!(
+            !json.contains(&elapsed) && !md.contains(&elapsed),
+            "{elapsed}"
+        );
     }
     // The blind-direction summary's first line does not run into the next in HTML.
     assert!(!md.contains("determined on their own\n"), "{md}");
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    assert_eq!(html.matches(">Figures</h2>").count(), 1, "two Figures sections");
+    assert_eq!(
+        html.matches(">Figures</h2>").count(),
+        1,
+        "two Figures sections"
+    );
     assert_eq!(md, report.report_md());
     assert_eq!(md, cpm::paper_report::report_md(&r));
     assert!(

@@ -268,10 +268,7 @@ pub fn grouped_bars_with_errors(
             })
             .collect();
         if any_missing {
-            entries.push((
-                format!("{NOT_DETERMINED} = not determined"),
-                Key::Note,
-            ));
+            entries.push((format!("{NOT_DETERMINED} = not determined"), Key::Note));
         }
         let area = split_with_legend(&root, title, &entries)?;
         let n = categories.len();
@@ -699,7 +696,10 @@ mod tests {
         .unwrap();
         assert!(!svg.contains("..."), "a cut legend");
         assert!(svg.contains("designed (16 sensors,") && svg.contains("orientation changes)"));
-        assert!(!svg.contains(">5.0<") && !svg.contains(">0.0<"), "fractional index labels");
+        assert!(
+            !svg.contains(">5.0<") && !svg.contains(">0.0<"),
+            "fractional index labels"
+        );
         assert_eq!(wrap("a bb ccc", 4), ["a bb", "ccc"]);
         assert_eq!(wrap("", 4), [""]);
     }
@@ -718,7 +718,10 @@ mod tests {
         )
         .unwrap();
         // The report's words: n.d., not determined.
-        assert!(svg.contains(">n.d.<") && svg.contains("not determined"), "{svg}");
+        assert!(
+            svg.contains(">n.d.<") && svg.contains("not determined"),
+            "{svg}"
+        );
         assert!(!svg.contains("n.i.") && !svg.contains("not identifiable"));
         assert!(svg.contains("est (+-2 sd)"));
     }
