@@ -125,7 +125,7 @@ def test_the_cpm_module_runs_the_command(in_root, tmp_path, capfd):
     code = _cpm.main(["cpm", "compensate", "--robot", HEX, "--poses", "examples/targets.csv",
                       "--out", str(out)])
     assert code == 0 and out.read_text().count("\n") > 5
-    assert "wrote" in capfd.readouterr().out
+    assert str(out) in capfd.readouterr().out
     assert _cpm.main(["cpm", "compensate", "--robot", HEX, "--nosuch"]) == 2
     assert _cpm.main(["cpm", "compensate", "--robot", "nosuch.toml", "--poses",
                       "examples/targets.csv"]) == 4
