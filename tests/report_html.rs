@@ -177,7 +177,7 @@ fn check_page(dir: &Path, out: &str, heading: &str) {
         return;
     };
     // The browser's DOM holds every figure as an SVG element, with its text.
-    let dom = headless(&dir, &["--dump-dom".to_string()], &page);
+    let dom = headless(dir, &["--dump-dom".to_string()], &page);
     let dom = String::from_utf8_lossy(&dom.stdout);
     assert_eq!(
         dom.matches("<svg").count(),
@@ -187,7 +187,7 @@ fn check_page(dir: &Path, out: &str, heading: &str) {
     assert!(dom.contains(heading), "{heading}");
     let shot = dir.join(format!("{out}.png"));
     let o = headless(
-        &dir,
+        dir,
         &[
             "--window-size=1200,2400".to_string(),
             format!("--screenshot={}", shot.display()),

@@ -689,7 +689,7 @@ mod tests {
             "s",
             &[(
                 "designed (16 sensors, orientation changes)".to_string(),
-                (1..=36).map(|k| 10f64.powi(-(k as i32) / 6)).collect(),
+                (1..=36i32).map(|k| 10f64.powi(-k / 6)).collect(),
             )],
             Some(("paper-design rank threshold".to_string(), 1e-3)),
         )
