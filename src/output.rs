@@ -372,21 +372,8 @@ pub fn commit_dir(
     }
     // The lock.
     let (lock_path, stage_prefix, old_prefix) = dir_siblings(parent, &name);
-    let lock = std::fs::OpenOptions::new()
-        .create(true)
-        .truncate(false)
-        .write(true)
-        .open(&lock_path)
-        .map_err(io_at(&lock_path))?;
     let mut done = Committed::default();
-    match lock.try_lock() {
-        Ok(()) => {}
-        Err(std::fs::TryLockError::WouldBlock) => {
-            done.waited = true;
-            lock.lock().map_err(io_at(&lock_path))?;
-        }
-        Err(std::fs::TryLockError::Error(e)) => return Err(io_at(&lock_path)(e)),
-    }
+    let lock = take_lock(&lock_path, &mut done.waited)?;
     fault_point("locked");
     done.recovered = recover(parent, &name, &absolute)?;
     fault_point("recovered");
@@ -453,8 +440,56 @@ pub fn commit_dir(
     // The stage now holds the previous result (or, after a failure, the partial new one).
     let _ = std::fs::remove_dir_all(&stage);
     fault_point("cleaned");
+    // The lock file goes while it is held: a run waiting on it finds it gone (or replaced)
+    // once it has the lock, and takes the lock again on a new file (`take_lock`; where files
+    // have no inode to compare, the lock file stays).
+    if cfg!(unix) {
+        let _ = std::fs::remove_file(&lock_path);
+    }
+    drop(lock);
     result?;
     done.written = rels.into_iter().map(|(r, _)| dir.join(r)).collect();
-    drop(lock);
     Ok(done)
+}
+
+/// Takes the lock `lock_path` (creating the file), waiting for another run that holds it
+/// (`waited` is then set). The lock counts only when the file locked is still the one at
+/// `lock_path` (the run before may have removed it after its commit): otherwise it is taken
+/// again.
+fn take_lock(lock_path: &Path, waited: &mut bool) -> Result<std::fs::File, OutputError> {
+    loop {
+        let lock = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(lock_path)
+            .map_err(io_at(lock_path))?;
+        match lock.try_lock() {
+            Ok(()) => {}
+            Err(std::fs::TryLockError::WouldBlock) => {
+                *waited = true;
+                lock.lock().map_err(io_at(lock_path))?;
+            }
+            Err(std::fs::TryLockError::Error(e)) => return Err(io_at(lock_path)(e)),
+        }
+        if locked_file_is_at(&lock, lock_path) {
+            return Ok(lock);
+        }
+    }
+}
+
+/// True when `path` names the open file `file` (same device and inode).
+#[cfg(unix)]
+fn locked_file_is_at(file: &std::fs::File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+/// Without inodes to compare, the lock file is trusted as it is.
+#[cfg(not(unix))]
+fn locked_file_is_at(_file: &std::fs::File, _path: &Path) -> bool {
+    true
 }

@@ -87,9 +87,72 @@ fn calibration_report_html_is_self_contained_and_renders() {
             "cal",
         ],
     );
-    let page = dir.join("cal/report.html");
+    check_page(&dir, "cal", "Calibration report");
+}
+
+/// `validate`'s report is named and built as every other: report.md and report.html.
+#[test]
+fn validation_report_html_is_self_contained_and_renders() {
+    let dir = scratch("validate");
+    let robot = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/hexapod_66.toml");
+    let truth = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/hexapod_66_truth.toml");
+    let (r, t) = (robot.display().to_string(), truth.display().to_string());
+    for (n, seed, out) in [("30", "1", "data.csv"), ("10", "2", "held_out.csv")] {
+        cpm(
+            &dir,
+            &[
+                "simulate",
+                "--robot",
+                &r,
+                "--truth",
+                &t,
+                "--random",
+                n,
+                "--seed",
+                seed,
+                "--noise",
+                "gaussian:1",
+                "--out",
+                out,
+            ],
+        );
+    }
+    cpm(
+        &dir,
+        &[
+            "calibrate",
+            "--robot",
+            &r,
+            "--data",
+            "data.csv",
+            "--out",
+            "cal",
+        ],
+    );
+    cpm(
+        &dir,
+        &[
+            "validate",
+            "--robot",
+            "cal/calibrated.toml",
+            "--reference",
+            &r,
+            "--data",
+            "held_out.csv",
+            "--out",
+            "val",
+        ],
+    );
+    assert!(dir.join("val/report.md").is_file() && dir.join("val/validation.json").is_file());
+    check_page(&dir, "val", "Validation");
+}
+
+/// `out/report.html`: every figure of `out` inline once, nothing fetched, rendered by the
+/// browser with `heading` and every figure, and a screenshot that is not blank.
+fn check_page(dir: &Path, out: &str, heading: &str) {
+    let page = dir.join(out).join("report.html");
     let html = std::fs::read_to_string(&page).unwrap();
-    let svgs: Vec<String> = std::fs::read_dir(dir.join("cal"))
+    let svgs: Vec<String> = std::fs::read_dir(dir.join(out))
         .unwrap()
         .filter_map(|e| {
             let n = e.unwrap().file_name().to_string_lossy().to_string();
@@ -114,17 +177,17 @@ fn calibration_report_html_is_self_contained_and_renders() {
         return;
     };
     // The browser's DOM holds every figure as an SVG element, with its text.
-    let dom = headless(&dir, &["--dump-dom".to_string()], &page);
+    let dom = headless(dir, &["--dump-dom".to_string()], &page);
     let dom = String::from_utf8_lossy(&dom.stdout);
     assert_eq!(
         dom.matches("<svg").count(),
         svgs.len(),
         "figures in the DOM"
     );
-    assert!(dom.contains("Calibration report"));
-    let shot = dir.join("report.png");
+    assert!(dom.contains(heading), "{heading}");
+    let shot = dir.join(format!("{out}.png"));
     let o = headless(
-        &dir,
+        dir,
         &[
             "--window-size=1200,2400".to_string(),
             format!("--screenshot={}", shot.display()),

@@ -410,7 +410,50 @@ fn reproduce_paper_summary_keeps_its_keys() {
         written["designed"]["monte_carlo"]["runs"],
         serde_json::json!(2)
     );
+    // The whole result is in the JSON: the 36 estimates with their standard deviations on
+    // both campaigns, and what the paper's design identifies.
+    let comps = written["components"].as_array().unwrap();
+    assert_eq!(comps.len(), 36);
+    // (serde_json reads a float back to within an ulp or so.)
+    let same = |a: Option<f64>, b: Option<f64>| match (a, b) {
+        (Some(a), Some(b)) => (a - b).abs() <= 1e-12 * b.abs().max(1e-300),
+        (a, b) => a.is_none() && b.is_none(),
+    };
+    for (k, c) in comps.iter().enumerate() {
+        let (d, p) = (&r.designed.calibration, &r.paper.calibration);
+        assert!(same(c["designed_um"].as_f64(), d.estimate_um[k]), "{c}");
+        assert!(same(c["designed_std_um"].as_f64(), d.std_um[k]), "{c}");
+        assert!(same(c["paper_design_um"].as_f64(), p.estimate_um[k]), "{c}");
+        assert!(c["table2_um"].is_f64() && c["name"].is_string(), "{c}");
+    }
+    let combos = written["paper_design"]["identifiable_combinations"]
+        .as_array()
+        .unwrap();
+    assert_eq!(combos.len(), r.paper.calibration.combinations.len());
+    assert!(
+        !combos.is_empty() && combos[0]["std_um"].is_f64(),
+        "{}",
+        combos[0]
+    );
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    // No wall time in the results (they are the same on every run; xtask writes the times
+    // to timings.json).
+    for solver in [&r.paper.calibration.solver, &r.designed.calibration.solver] {
+        let elapsed = format!("{:.3?}", solver.elapsed);
+        let json = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+        assert!(
+            !json.contains(&elapsed) && !md.contains(&elapsed),
+            "{elapsed}"
+        );
+    }
+    // The blind-direction summary's first line does not run into the next in HTML.
+    assert!(!md.contains("determined on their own\n"), "{md}");
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert_eq!(
+        html.matches(">Figures</h2>").count(),
+        1,
+        "two Figures sections"
+    );
     assert_eq!(md, report.report_md());
     assert_eq!(md, cpm::paper_report::report_md(&r));
     assert!(

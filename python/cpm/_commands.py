@@ -415,8 +415,7 @@ class ValidationResult(_Files):
 
     @property
     def markdown(self) -> str:
-        name = "validation.md" if "validation.md" in self.files else "compensation.md"
-        return self.text(name)
+        return self.text("report.md")
 
     @property
     def html(self) -> str:

@@ -114,3 +114,18 @@ def test_export_linuxcnc(in_root):
 def test_effect_names():
     names = cpm.effect_names()
     assert "link_offset" in names and "backlash" in names and len(names) == len(set(names))
+
+
+def test_the_cpm_module_runs_the_command(in_root, tmp_path, capfd):
+    """`cpm._main` (the `cpm` script of the wheel) is the command: same output and exit codes
+    as the binary, no Rust toolchain."""
+    from cpm import _cpm
+
+    out = tmp_path / "commands.csv"
+    code = _cpm.main(["cpm", "compensate", "--robot", HEX, "--poses", "examples/targets.csv",
+                      "--out", str(out)])
+    assert code == 0 and out.read_text().count("\n") > 5
+    assert str(out) in capfd.readouterr().out
+    assert _cpm.main(["cpm", "compensate", "--robot", HEX, "--nosuch"]) == 2
+    assert _cpm.main(["cpm", "compensate", "--robot", "nosuch.toml", "--poses",
+                      "examples/targets.csv"]) == 4

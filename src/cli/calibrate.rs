@@ -19,7 +19,7 @@ pub use crate::report::residuals::residuals_csv;
 /// Arguments of `cpm calibrate`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm calibrate --robot examples/hexapod_66.toml --data data.csv --out cal/\n  cpm calibrate --robot robot.toml --data lengths.csv --data tracker.csv --effects link_offset,link_scale,tracker_frame --out cal/ --json"
+    after_help = "Examples:\n  cpm calibrate --robot examples/hexapod_66.toml --data data.csv --out cal/\n  cpm calibrate --robot examples/hexapod_66.toml --data data.csv --data tracker.csv --effects link_offset,link_scale,tracker_frame --out cal_both/ --json"
 )]
 pub struct CalibrateArgs {
     /// Robot, data, effects, noise, solver and output: as for `cpm refine`.
@@ -435,6 +435,52 @@ pub fn add_session_warnings(
     Ok(())
 }
 
+/// The start of the warning of a residual that is not white ([`whiteness_warning`]).
+pub const NOT_WHITE: &str = "**The residual is not white**";
+
+/// A warning when the residual of `cal` (its flagged outliers left out), in acquisition order,
+/// fails the whiteness test `cpm refine` runs (the runs test on its signs and the Ljung-Box
+/// test over lags 1 to 10, both at refine's default level 0.01): it follows the order of the
+/// observations, structure the model lacks, and its RMS is then not the noise. Names the
+/// residual against the declared noise when there is one, and points to `cpm refine`.
+pub fn whiteness_warning(cal: &Calibration) -> Option<String> {
+    let alpha = crate::calib::RefineOptions::default().alpha;
+    let r: Vec<f64> = cal
+        .residuals_um
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !cal.outliers.contains(k))
+        .map(|(_, r)| *r)
+        .collect();
+    let dof = r.len().saturating_sub(cal.identifiability.rank);
+    if dof < 10 {
+        return None;
+    }
+    let d = crate::calib::diagnostics::diagnose(&r, dof, None, &[], alpha);
+    if d.white {
+        return None;
+    }
+    use crate::report::format::{p_value, sig};
+    let f = |x: f64| sig(x, 3);
+    let noise = match (cal.sigma_estimated, cal.sigma_um) {
+        (false, s) if s > 0.0 => format!(
+            "residual RMS {} um against the declared noise {} um",
+            f(d.rms_um),
+            f(s)
+        ),
+        _ => format!(
+            "residual RMS {} um, which is then not the noise it is taken for",
+            f(d.rms_um)
+        ),
+    };
+    Some(format!(
+        "{NOT_WHITE} (runs test p = {}, Ljung-Box p = {}, lag-1 autocorrelation {}; {noise}): it follows the order of the observations, an effect the model lacks. `cpm refine` tests the candidate effects (link offsets, backlash, ...) against it.",
+        p_value(d.runs_p),
+        p_value(d.ljung_box_p),
+        sig(d.lag1_autocorrelation, 2)
+    ))
+}
+
 /// A warning when the sessions (files) of the campaign, each fitted on its own, estimate the
 /// machine differently by more than their standard deviations allow.
 pub fn session_warning(inputs: &Inputs) -> anyhow::Result<Option<String>> {
@@ -552,12 +598,25 @@ pub fn stage_calibrated(
     {
         let c = desc.calibration.get_or_insert_with(Default::default);
         let from = std::path::Path::new(&inputs.robot.file);
-        c.calibrated_from = Some(
+        // Relative to the result's folder when the description lies near it (the two then
+        // move together, as in a project folder); far away (a shared library of
+        // descriptions), absolute, so that the result alone can move.
+        let relative = common::relative_to_dir(from, dir);
+        let ups = relative
+            .components()
+            .take_while(|c| matches!(c, std::path::Component::ParentDir))
+            .count();
+        c.calibrated_from = Some(if relative.is_relative() && ups <= 2 {
+            relative.display().to_string()
+        } else {
             std::fs::canonicalize(from)
                 .unwrap_or_else(|_| from.to_path_buf())
                 .display()
-                .to_string(),
-        );
+                .to_string()
+        });
+        c.calibrated_from_fnv1a64 = std::fs::read(from)
+            .ok()
+            .map(|b| format!("{:016x}", crate::output::fingerprint(&b)));
         c.simulated = cal.simulated;
         // What the data left undetermined, for every command that uses the file (compensate
         // warns that its commands cannot correct it).
@@ -749,6 +808,10 @@ pub fn fit_with(
     let mut set = OutputSet::new();
     let mut fit = FitReport::new(&inputs.report_inputs(), model, &cal, Some(formulation));
     add_session_warnings(&mut fit, inputs, model)?;
+    if let Some(w) = whiteness_warning(&cal) {
+        fit.warnings.push(w.replace("**", ""));
+        fit.text.warnings.push(w);
+    }
     set.add(dir.join("calibration.json"), fit.to_json()?);
     stage_residuals(&mut set, dir, inputs, &cal);
     let figures = stage_figures(&mut set, dir, &inputs.robot, model, campaign, &cal)?;
@@ -807,6 +870,8 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         w.starts_with("Estimates move between sessions")
             || w.starts_with("Tracker frame held fixed")
             || w.starts_with("Noise not as weighed")
+            || w.starts_with("Held near nominal")
+            || w.starts_with(&NOT_WHITE.replace("**", ""))
     }) {
         ctx.note(w);
     }

@@ -221,10 +221,47 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
     })
 }
 
+/// `file` as a path relative to the directory `dir` (which need not exist yet), through
+/// `..` where needed; `file` made absolute when the two share no root.
+pub fn relative_to_dir(file: &Path, dir: &Path) -> PathBuf {
+    let absolute = |p: &Path| -> Option<PathBuf> {
+        if let Ok(c) = std::fs::canonicalize(p) {
+            return Some(c);
+        }
+        let parent = p.parent().filter(|q| !q.as_os_str().is_empty());
+        let parent = std::fs::canonicalize(parent.unwrap_or(Path::new("."))).ok()?;
+        Some(parent.join(p.file_name()?))
+    };
+    let (Some(f), Some(d)) = (absolute(file), absolute(dir)) else {
+        return file.to_path_buf();
+    };
+    let (fc, dc): (Vec<_>, Vec<_>) = (f.components().collect(), d.components().collect());
+    let common = fc.iter().zip(&dc).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return f;
+    }
+    let mut rel = PathBuf::new();
+    for _ in common..dc.len() {
+        rel.push("..");
+    }
+    for c in &fc[common..] {
+        rel.push(c);
+    }
+    rel
+}
+
 /// Loads the robot description.
 pub fn load_robot(path: &Path, ctx: &Ctx<'_>) -> anyhow::Result<Robot> {
     let robot = Robot::load(path)?;
-    if robot.errors_applied {
+    // A calibration result (`calibrated.toml`, which records `calibrated_from`) is the joints
+    // plus the errors by design: said once, in its header. Another description with errors
+    // written in (a simulation truth used as the nominal robot, say) is worth a note.
+    let calibrated = robot
+        .description
+        .calibration
+        .as_ref()
+        .is_some_and(|c| c.calibrated_from.is_some());
+    if robot.errors_applied && !calibrated {
         ctx.note(format!(
             "{} has [installation_errors_um]: its geometry is the joints plus those errors",
             robot.file

@@ -29,7 +29,7 @@ use crate::output::Target;
 /// Arguments of `cpm compensate`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm compensate --robot cal/calibrated.toml --poses targets.csv --out commands.csv\n  cpm compensate --robot cal/calibrated.toml --poses targets.csv   # CSV on stdout"
+    after_help = "Examples:\n  cpm compensate --robot cal/calibrated.toml --poses examples/targets.csv --out commands.csv\n  cpm compensate --robot cal/calibrated.toml --poses examples/targets.csv   # CSV on stdout"
 )]
 pub struct CompensateArgs {
     /// The robot description.

@@ -41,7 +41,7 @@ pub enum GaugeArg {
 /// Arguments of `cpm design`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm design --robot examples/hexapod_66.toml --base-sockets 3 --platform-sockets 3 --readings 360 --out design/\n  cpm design --robot robot.toml --sockets candidate_sockets.csv --readings 2000 --criterion d --out design/"
+    after_help = "Examples:\n  cpm design --robot examples/hexapod_66.toml --base-sockets 3 --platform-sockets 3 --readings 360 --out design/\n  cpm design --robot examples/hexapod_66.toml --sockets design/sockets.csv --readings 600 --criterion d --out design_d/"
 )]
 pub struct DesignArgs {
     /// The robot description.

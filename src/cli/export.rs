@@ -237,7 +237,8 @@ pub fn linuxcnc_ini(robot: &Robot, units: Units) -> String {
                 s.push_str(&format!("BACKLASH = {}\n", num(lash_mm / k, 6)));
             } else {
                 s.push_str(&format!(
-                    "; backlash {b} um: the link overshoots; LinuxCNC's BACKLASH cannot hold it (`cpm compensate` applies it)\n"
+                    "; backlash {} um: the link overshoots; LinuxCNC's BACKLASH cannot hold it (`cpm compensate` applies it)\n",
+                    crate::report::format::sig(*b, 3)
                 ));
             }
         }

@@ -137,7 +137,7 @@ data determine and how precisely.\n\nUnits: mm and degrees in files, um for inst
 File formats: docs/formats.md. Exit codes: 0 ok, 1 computation trouble (e.g. no convergence), \
 2 usage error, 3 bad input file, 4 I/O error.",
     arg_required_else_help = true,
-    after_help = "Examples:\n  cpm simulate --robot examples/hexapod_66.toml --random 40 --truth truth.toml --out data.csv\n  cpm identifiability --robot examples/hexapod_66.toml --data data.csv\n  cpm calibrate --robot examples/hexapod_66.toml --data data.csv --out cal/\n  cpm compensate --robot cal/calibrated.toml --poses targets.csv --out commands.csv\n  cpm export --format linuxcnc --robot cal/calibrated.toml\n  cpm design --robot examples/hexapod_66.toml --readings 360 --out design/"
+    after_help = "Examples:\n  cpm simulate --robot examples/hexapod_66.toml --random 40 --truth examples/hexapod_66_truth.toml --out data.csv\n  cpm identifiability --robot examples/hexapod_66.toml --data data.csv\n  cpm calibrate --robot examples/hexapod_66.toml --data data.csv --out cal/\n  cpm compensate --robot cal/calibrated.toml --poses examples/targets.csv --out commands.csv\n  cpm export --format linuxcnc --robot cal/calibrated.toml\n  cpm design --robot examples/hexapod_66.toml --readings 360 --out design/"
 )]
 pub struct Cli {
     /// No progress display and no notes on stderr (results and errors are still printed).

@@ -16,7 +16,7 @@ use crate::report::refine::{RefineDoc, RefineReport};
 /// Arguments of `cpm refine`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --out refined/\n  cpm refine --robot robot.toml --data data.csv --candidates link_offset,link_scale,backlash --max-steps 2 --out refined/ --json"
+    after_help = "Examples:\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --out refined/\n  cpm refine --robot examples/hexapod_66.toml --data data.csv --candidates link_offset,link_scale,backlash --max-steps 2 --out refined/ --json"
 )]
 pub struct RefineArgs {
     /// Robot, data, effects, noise, solver and output: as for `cpm calibrate`.
@@ -49,34 +49,39 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.folds < 2 || args.folds > 1000 {
         return Err(usage_error("--folds must be between 2 and 1000"));
     }
-    let candidates = match &args.candidates {
-        Some(list) => parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
-        None => Effect::ALL.to_vec(),
-    };
     let inputs = args.fit.load(ctx)?;
     let campaign = &inputs.merged.campaign;
+    // The library's effects that can act on these data (an explicit list is taken as given).
+    let (candidates, not_applicable) = match &args.candidates {
+        Some(list) => (
+            parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
+            Vec::new(),
+        ),
+        None => applicable(campaign),
+    };
     // No hidden load: without a declared [load], the effects whose direction the link
     // forces set are not candidates (an explicit --candidates naming one is an error).
-    let candidates = if inputs.robot.description.load.is_none() {
+    let (candidates, not_applicable) = if inputs.robot.description.load.is_none() {
         let (skip, keep): (Vec<Effect>, Vec<Effect>) = candidates
             .into_iter()
             .partition(|e| calibrate::needs_load(*e));
-        if !skip.is_empty() {
-            if args.candidates.is_some() {
-                return Err(super::input_error(format!(
-                    "{}: --candidates names {}, which needs the platform's load, and the description declares none: add a [load] table (docs/formats.md) or leave it out",
-                    inputs.robot.file,
-                    skip.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
-                )));
-            }
-            ctx.note(format!(
-                "{} not tried: the description declares no [load], and the link forces that give these effects their direction need one",
+        if !skip.is_empty() && args.candidates.is_some() {
+            return Err(super::input_error(format!(
+                "{}: --candidates names {}, which needs the platform's load, and the description declares none: add a [load] table (docs/formats.md) or leave it out",
+                inputs.robot.file,
                 skip.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
-            ));
+            )));
         }
-        keep
+        let mut not_applicable = not_applicable;
+        not_applicable.extend(skip.into_iter().map(|e| {
+            (
+                e,
+                "no [load] declared (the link forces that give it its direction need one)",
+            )
+        }));
+        (keep, not_applicable)
     } else {
-        candidates
+        (candidates, not_applicable)
     };
     // An explicit --candidates list is the whole candidate set: the pose map scan joins it
     // only when --pose-map-degree asks for it.
@@ -120,7 +125,14 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let dir = &args.fit.out;
     let cal = &r.calibration;
     let mut set = OutputSet::new();
-    let doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
+    let mut doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
+    doc.not_applicable = not_applicable
+        .iter()
+        .map(|(e, why)| crate::report::refine::NotApplicable {
+            effect: e.name().to_string(),
+            why: why.to_string(),
+        })
+        .collect();
     set.add(dir.join("refine.json"), doc.to_json()?);
     let mut fit = FitReport::new(&inputs.report_inputs(), &r.model, cal, None);
     calibrate::add_session_warnings(&mut fit, &inputs, &r.model)?;
@@ -225,4 +237,35 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             cal.solver.termination
         )))
     }
+}
+
+/// The library's effects split into those that can act on `campaign` and those that cannot,
+/// with why: a tracker frame without tracker poses, a thermal drift without a logged
+/// temperature, the sensors' effects without gauge readings.
+fn applicable(campaign: &crate::calib::Campaign) -> (Vec<Effect>, Vec<(Effect, &'static str)>) {
+    let temperatures = campaign.readings.iter().any(|r| r.temperature_c.is_some())
+        || campaign
+            .pose_measurements
+            .iter()
+            .any(|p| p.temperature_c.is_some());
+    let (mut yes, mut no) = (Vec::new(), Vec::new());
+    for e in Effect::ALL {
+        let why = match e {
+            Effect::TrackerFrame if campaign.pose_measurements.is_empty() => {
+                Some("no tracker poses in the data")
+            }
+            Effect::ThermalDrift if !temperatures => Some("no temperature logged"),
+            Effect::SensorOffset | Effect::SensorScale | Effect::SocketError
+                if campaign.readings.is_empty() =>
+            {
+                Some("no gauge readings")
+            }
+            _ => None,
+        };
+        match why {
+            Some(w) => no.push((e, w)),
+            None => yes.push(e),
+        }
+    }
+    (yes, no)
 }

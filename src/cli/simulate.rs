@@ -33,7 +33,7 @@ pub enum Measure {
 /// Arguments of `cpm simulate`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm simulate --robot examples/paper_cubic.toml --circle --paper-table2 --noise uniform:10 --out paper.csv\n  cpm simulate --robot examples/hexapod_66.toml --random 40 --truth truth.toml --effects link_offset --noise gaussian:2 --seed 7 --out data.csv\n  cpm simulate --robot examples/hexapod_66.toml --random 30 --truth truth.toml --measure poses --out tracker.csv"
+    after_help = "Examples:\n  cpm simulate --robot examples/paper_cubic.toml --circle --paper-table2 --noise uniform:10 --out paper.csv\n  cpm simulate --robot examples/hexapod_66.toml --random 40 --truth examples/hexapod_66_truth.toml --effects link_offset --noise gaussian:2 --seed 7 --out data.csv\n  cpm simulate --robot examples/hexapod_66.toml --random 20 --truth examples/hexapod_66_truth.toml --noise gaussian:2 --seed 8 --out held_out.csv\n  cpm simulate --robot examples/hexapod_66.toml --random 30 --truth examples/hexapod_66_truth.toml --measure poses --out tracker.csv"
 )]
 pub struct SimulateArgs {
     /// The robot description.
@@ -193,6 +193,33 @@ fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
         })
         .collect::<Result<Vec<f64>, String>>()?;
     Ok((effect, values))
+}
+
+/// Adds `--truth-effect` values (`EFFECT=V1,V2,..`) to `robot`'s
+/// `[calibration.known_effects]`, replacing a value of the same effect: the machine of
+/// `cpm validate --commands --truth T.toml --truth-effect ...` is the one
+/// `cpm simulate --truth T.toml --truth-effect ...` simulated.
+pub fn add_truth_effects(robot: &mut Robot, specs: &[String]) -> anyhow::Result<()> {
+    for s in specs {
+        let (e, v) =
+            parse_truth_effect(s).map_err(|m| usage_error(format!("--truth-effect {m}")))?;
+        let need = e.num_params(robot.num_links(), robot.table.sensors.len());
+        if v.len() != need {
+            return Err(usage_error(format!(
+                "--truth-effect {s:?}: {} has {need} parameters here ({}), got {} values",
+                e.name(),
+                e.unit(),
+                v.len()
+            )));
+        }
+        robot
+            .description
+            .calibration
+            .get_or_insert_with(Default::default)
+            .known_effects
+            .insert(e.name().to_string(), v);
+    }
+    Ok(())
 }
 
 /// The truth: model effects and the full true parameter vector.

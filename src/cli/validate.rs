@@ -31,7 +31,7 @@ pub use crate::report::validate::{SessionCheck, SessionFrame};
 /// Arguments of `cpm validate`.
 #[derive(Debug, Clone, Args)]
 #[command(
-    after_help = "Examples:\n  cpm validate --robot cal/calibrated.toml --reference examples/hexapod_66.toml --data held_out.csv\n  cpm validate --robot cal/calibrated.toml --reference robot.toml --data a.csv --data b.csv --out validation/ --json"
+    after_help = "Examples:\n  cpm validate --robot cal/calibrated.toml --reference examples/hexapod_66.toml --data held_out.csv\n  cpm validate --robot cal/calibrated.toml --reference examples/hexapod_66.toml --data held_out.csv --data tracker.csv --out validation/ --json\n  cpm validate --reference examples/hexapod_66.toml --commands commands.csv --truth examples/hexapod_66_truth.toml --out compensation/"
 )]
 pub struct ValidateArgs {
     /// The calibrated robot description (`calibrated.toml` of `cpm calibrate` or `cpm refine`);
@@ -62,6 +62,11 @@ pub struct ValidateArgs {
     /// and `[calibration.known_effects]`), e.g. the `--truth` of `cpm simulate`.
     #[arg(long, value_name = "TRUTH.toml", requires = "commands")]
     pub truth: Option<PathBuf>,
+    /// With `--commands`: true values of an effect of the machine, on top of `--truth`'s
+    /// `[calibration.known_effects]`, as `cpm simulate --truth-effect` takes them (e.g.
+    /// backlash=-8,6,-10,5,-7,9); repeatable.
+    #[arg(long, value_name = "EFFECT=V1,V2,..", requires = "commands")]
+    pub truth_effect: Vec<String>,
     /// With `--commands`: the machine comes to the first target from its home pose (as
     /// `cpm compensate --from-home` assumed), so the first target's backlash is known.
     #[arg(long, requires = "commands")]
@@ -79,7 +84,9 @@ pub struct ValidateArgs {
     /// tracker_orientation_sigma_urad` of `--robot`, else cpm-calib's 20 urad).
     #[arg(long, value_name = "URAD")]
     pub orientation_sigma_urad: Option<f64>,
-    /// Also write validation.json, validation.md and validation.svg into this directory.
+    /// Also write validation.json, report.md, report.html (figure inline), validation.svg
+    /// and residuals.csv into this directory (with `--commands`: compensation.json,
+    /// report.md and report.html).
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Print a JSON summary on stdout.
@@ -478,7 +485,8 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
         ));
     };
     let reference = common::load_robot(reference, ctx)?;
-    let truth = common::load_robot(truth, ctx)?;
+    let mut truth = common::load_robot(truth, ctx)?;
+    super::simulate::add_truth_effects(&mut truth, &args.truth_effect)?;
     if truth.num_links() != reference.num_links() {
         return Err(super::input_error(format!(
             "{} has {} links, the reference {} has {}",
@@ -540,7 +548,9 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
     if let Some(dir) = &args.out {
         let mut set = OutputSet::new();
         set.add(dir.join("compensation.json"), report.to_json()?);
-        set.add(dir.join("compensation.md"), report.markdown());
+        let markdown = report.markdown();
+        set.add(dir.join("report.md"), markdown.as_str());
+        common::stage_report_html(&mut set, dir, "cpm compensation check", &markdown);
         written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }
     if args.json {
@@ -556,7 +566,7 @@ fn run_commands(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcom
 
 /// The reference robot: `--reference`, else the description the calibrated robot records
 /// it came from (`[calibration] calibrated_from`).
-fn reference_path(args: &ValidateArgs, robot: &Robot) -> anyhow::Result<PathBuf> {
+fn reference_path(args: &ValidateArgs, robot: &Robot, ctx: &Ctx<'_>) -> anyhow::Result<PathBuf> {
     if let Some(r) = &args.reference {
         return Ok(r.clone());
     }
@@ -565,16 +575,47 @@ fn reference_path(args: &ValidateArgs, robot: &Robot) -> anyhow::Result<PathBuf>
         .calibration
         .as_ref()
         .and_then(|c| c.calibrated_from.clone());
-    match recorded {
-        Some(p) if std::path::Path::new(&p).exists() => Ok(PathBuf::from(p)),
+    // Recorded relative to the calibrated file's folder (older files: an absolute path).
+    let here = std::path::Path::new(&robot.file)
+        .parent()
+        .unwrap_or(std::path::Path::new(""));
+    match recorded.map(|p| here.join(p)) {
+        Some(p) if p.exists() => {
+            reference_changed(robot, &p, ctx);
+            Ok(p)
+        }
         Some(p) => Err(super::usage_error(format!(
-            "{} records that it was calibrated from {p}, which does not exist here: give --reference",
-            robot.file
+            "{} records that it was calibrated from {}, which does not exist here (moved, or \
+             not copied with it): give the nominal description it was fitted from with --reference",
+            robot.file,
+            p.display()
         ))),
         None => Err(super::usage_error(format!(
             "--reference is required: {} does not record the description it was calibrated from",
             robot.file
         ))),
+    }
+}
+
+/// A note when the recorded reference `path` is no longer the file `robot` was calibrated
+/// from (its fingerprint `[calibration] calibrated_from_fnv1a64` differs).
+fn reference_changed(robot: &Robot, path: &std::path::Path, ctx: &Ctx<'_>) {
+    let recorded = robot
+        .description
+        .calibration
+        .as_ref()
+        .and_then(|c| c.calibrated_from_fnv1a64.clone());
+    let now = std::fs::read(path)
+        .ok()
+        .map(|b| format!("{:016x}", crate::output::fingerprint(&b)));
+    if let (Some(recorded), Some(now)) = (recorded, now) {
+        if recorded != now {
+            ctx.note(format!(
+                "{} changed since {} was calibrated from it (fingerprint {now}, recorded {recorded}); it is the reference as it is now: give --reference to choose another",
+                path.display(),
+                robot.file
+            ));
+        }
     }
 }
 
@@ -593,7 +634,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         ));
     };
     let robot = common::load_robot(robot, ctx)?;
-    let reference_path = reference_path(args, &robot)?;
+    let reference_path = reference_path(args, &robot, ctx)?;
     let reference = common::load_robot(&reference_path, ctx)?;
     let sensors = |r: &Robot| {
         r.table
@@ -656,8 +697,10 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         let svg = report.figure().map_err(|e| super::trouble(e.to_string()))?;
         let mut set = OutputSet::new();
         set.add(dir.join("validation.json"), report.to_json()?);
-        set.add(dir.join("validation.md"), report.markdown(true));
+        let markdown = report.markdown(true);
+        set.add(dir.join("report.md"), markdown.as_str());
         set.add(dir.join("validation.svg"), svg);
+        common::stage_report_html(&mut set, dir, "cpm validation report", &markdown);
         set.add(dir.join("residuals.csv"), cal_errors.residuals_csv.clone());
         written = common::commit_dir(set, dir, &args.inputs(), "validate", ctx)?;
     }

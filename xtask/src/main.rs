@@ -255,8 +255,11 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
         }
     }
     let t0 = Instant::now();
+    let mut stages: Vec<serde_json::Value> = Vec::new();
     let result = cpm_calib::paper::reproduce(&options, |stage| {
-        eprintln!("[{:6.1} s] {stage}", t0.elapsed().as_secs_f64());
+        let s = t0.elapsed().as_secs_f64();
+        eprintln!("[{s:6.1} s] {stage}");
+        stages.push(serde_json::json!({ "stage": stage.to_string(), "started_s": s }));
     });
     let r = match result {
         Ok(r) => r,
@@ -281,6 +284,22 @@ fn reproduce_paper(args: &[String]) -> ExitCode {
             return ExitCode::FAILURE;
         }
     }
+    // The wall times, apart from the results (summary.json and report.md are the same on
+    // every run with the same options; this file is not).
+    let timings = serde_json::json!({
+        "note": "wall-clock times of this run (they vary from run to run and with the machine's load; the results in summary.json do not)",
+        "total_seconds": t0.elapsed().as_secs_f64(),
+        "cpu_seconds": cpu_seconds(),
+        "stages": stages,
+        "solver_seconds": {
+            "paper_design": r.paper.calibration.solver.elapsed.as_secs_f64(),
+            "designed": r.designed.calibration.solver.elapsed.as_secs_f64(),
+        },
+    });
+    files.add(
+        out.join("timings.json"),
+        serde_json::to_string_pretty(&timings).unwrap_or_default(),
+    );
     match files.commit() {
         Ok(written) => {
             let summary = cpm_report::paper_files::summary_json(&r);

@@ -454,8 +454,9 @@ pub struct CalibrationSpec {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub hold: Vec<String>,
     /// The description this calibration started from (written by `cpm calibrate` and
-    /// `cpm refine`: the path as given to them, made absolute), so that `cpm validate` can
-    /// take it as the reference by default. Optional.
+    /// `cpm refine`: its path relative to the folder of the calibrated file, so that the two
+    /// can move together; older files hold an absolute path), so that `cpm validate` can take
+    /// it as the reference by default. Optional.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibrated_from: Option<String>,
     /// The installation-error components and effect parameters the calibration's data did
@@ -469,6 +470,11 @@ pub struct CalibrationSpec {
     /// none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub blind_directions: Vec<String>,
+    /// The FNV-1a (64-bit, hex) fingerprint of that description's bytes when the calibration
+    /// was made: `cpm validate` says when the file found there is no longer the same.
+    /// Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated_from_fnv1a64: Option<String>,
     /// True when the calibration was fitted to simulated data: every output made from this
     /// description (compensation commands, controller files) says so. Default false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]

@@ -112,9 +112,10 @@ fn round_trip_with_every_section() {
         .collect(),
         tolerances: [("link_scale".to_string(), 20_000.0)].into_iter().collect(),
         hold: vec!["installation_errors".into()],
-        calibrated_from: Some("/work/robot.toml".into()),
         undetermined: vec!["base 1 x".into()],
         blind_directions: vec!["all base joints translated together".into()],
+        calibrated_from: Some("../robot.toml".into()),
+        calibrated_from_fnv1a64: Some("0123456789abcdef".into()),
         simulated: true,
     });
     d.installation_errors_um = Some(InstallationErrorsSpec::from_errors(

@@ -1658,15 +1658,26 @@ pub(crate) fn simulated_header(note: &str) -> String {
 
 pub(crate) fn pose_fields(p: &Pose) -> String {
     let [r, pi, y] = p.rpy_deg();
+    // The angles come back from radians: 15 significant digits drop the conversion's last
+    // bits (a plan's 3.30054776056 deg is written as such, not 3.3005477605599998).
+    let deg = |a: f64| num(round15(a) + 0.0);
     format!(
         "{},{},{},{},{},{}",
         num(p.position_mm.x),
         num(p.position_mm.y),
         num(p.position_mm.z),
-        num(r + 0.0),
-        num(pi + 0.0),
-        num(y + 0.0)
+        deg(r),
+        deg(pi),
+        deg(y)
     )
+}
+
+/// `v` rounded to 15 significant digits (the nearest `f64` to its 15-digit decimal).
+fn round15(v: f64) -> f64 {
+    if !v.is_finite() || v == 0.0 {
+        return v;
+    }
+    format!("{v:.14e}").parse().unwrap_or(v)
 }
 
 pub(crate) fn opt(v: Option<f64>) -> String {

@@ -209,11 +209,17 @@ impl Report {
         self.iterations.len()
     }
 
-    /// One-line summary.
+    /// One-line summary: [`Report::brief_without_time`] and the wall time.
     pub fn brief(&self) -> String {
+        format!("{}, {:.3?}", self.brief_without_time(), self.elapsed)
+    }
+
+    /// One-line summary without the wall time: how the solve ended, the costs and the counts,
+    /// which a rerun reproduces exactly (for files that must not differ between runs).
+    pub fn brief_without_time(&self) -> String {
         format!(
             "{}: cost {:.6e} -> {:.6e} in {} iterations ({} accepted, {} rejected), \
-             {} residual / {} Jacobian evaluations, {:.3?}",
+             {} residual / {} Jacobian evaluations",
             self.termination,
             self.initial_cost,
             self.final_cost,
@@ -222,7 +228,6 @@ impl Report {
             self.rejected_steps,
             self.residual_evaluations,
             self.jacobian_evaluations,
-            self.elapsed
         )
     }
 

@@ -57,6 +57,16 @@ pub fn run_command(py: Python<'_>, argv: Vec<String>) -> PyResult<Ran> {
     r.map_err(|e| crate::errors::to_py(py, &e))
 }
 
+/// The `cpm` command itself: runs `argv` (the program name first) exactly as the binary
+/// does, printing to the process's standard output and error, and returns the exit code. The
+/// `cpm` script a `pip install` puts on the PATH calls it (`cpm._main`), so the command comes
+/// with the wheel, without a Rust toolchain.
+#[pyfunction]
+pub fn main(py: Python<'_>, argv: Vec<String>) -> i32 {
+    cli::record_stdout_at_start();
+    py.allow_threads(move || cli::run(argv))
+}
+
 /// The names of the effects `--effects` knows (the library's, without pose map terms).
 #[pyfunction]
 pub fn effect_names() -> Vec<&'static str> {

@@ -37,6 +37,7 @@ fn _cpm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(data::gauge_csv, m)?)?;
     m.add_function(wrap_pyfunction!(data::tracker_csv, m)?)?;
     m.add_function(wrap_pyfunction!(commands::run_command, m)?)?;
+    m.add_function(wrap_pyfunction!(commands::main, m)?)?;
     m.add_function(wrap_pyfunction!(commands::calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(commands::effect_names, m)?)?;
     m.add_function(wrap_pyfunction!(commands::render_html, m)?)?;

@@ -130,9 +130,9 @@ pub fn yes_no(b: bool) -> &'static str {
 }
 
 /// A CSV text as cpm writes it for people and controllers: a numeric field that is a
-/// negative zero (`-0.000`) loses its sign, and one printed at full `f64` precision
-/// (`3.0000000000000004`, 16 or more significant digits) is rounded to 12 significant
-/// digits (far below any uncertainty of a length in mm or an angle in deg). Other fields,
+/// negative zero (`-0.000`) loses its sign, and one with more than 12 significant digits
+/// (`3.0000000000000004`, `331.739672003852`) is rounded to 12 significant digits (1e-9 mm
+/// on a length of 1 m, far below any uncertainty of a length in mm or an angle in deg). Other fields,
 /// comments (`#` lines) and the line structure are kept.
 pub fn tidy_csv(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
@@ -172,7 +172,7 @@ fn tidy_field(f: &str) -> String {
         .bytes()
         .filter(u8::is_ascii_digit)
         .count();
-    if digits >= 16 && v.is_finite() {
+    if digits > 12 && v.is_finite() {
         let a = v.abs();
         let s = if (1e-4..1e12).contains(&a) {
             let e = a.log10().floor() as i64;

@@ -76,9 +76,18 @@ pub fn report_page(title: &str, markdown: &str, figures: &[(String, String)]) ->
         .filter(|n| !md.contains(&format!("]({n})")))
         .collect();
     if !others.is_empty() {
-        md.push_str("\n## Figures\n\n");
-        for n in others {
-            md.push_str(&format!("![{n}]({n})\n\n"));
+        let images: String = others.iter().map(|n| format!("![{n}]({n})\n\n")).collect();
+        // Into the report's own "Figures" section when it has one (at its end), else a new one.
+        match md.find("\n## Figures\n") {
+            Some(at) => {
+                let body = at + "\n## Figures\n".len();
+                let end = md[body..].find("\n## ").map_or(md.len(), |e| body + e);
+                md.insert_str(end, &format!("\n{images}"));
+            }
+            None => {
+                md.push_str("\n## Figures\n\n");
+                md.push_str(&images);
+            }
         }
     }
     render(title, &md, |name| {
@@ -130,5 +139,18 @@ mod tests {
         for tag in ["<img", "<script", "<link", "src=", "href=\"http"] {
             assert!(!html.contains(tag), "{tag} in {html}");
         }
+    }
+
+    #[test]
+    fn one_figures_section() {
+        let svg = |n: &str| (n.to_string(), "<svg width=\"1\"></svg>".to_string());
+        let md = "# R\n\n## Figures\n\n- `a.svg`: a.\n\n## Notes\n\nEnd.\n";
+        let html = report_page("R", md, &[svg("a.svg"), svg("b.svg")]);
+        assert_eq!(html.matches(">Figures</h2>").count(), 1, "{html}");
+        assert_eq!(html.matches("<svg").count(), 2);
+        // The figures sit in that section, before the next one.
+        assert!(html.find("<svg").unwrap() < html.find(">Notes</h2>").unwrap());
+        let html = report_page("R", "# R\n", &[svg("a.svg")]);
+        assert_eq!(html.matches(">Figures</h2>").count(), 1);
     }
 }

@@ -39,6 +39,10 @@ pub struct PaperSummary {
     pub designed: DesignedSummary,
     /// The campaign under an instrument's limits, when it was run.
     pub limited: Option<LimitedSummary>,
+    /// The 36 installation error components, um: the truth (Table 2), the paper's estimate
+    /// (Table 3), and cpm's estimate with its standard deviation on the paper's design and on
+    /// the designed campaign (`null`: not determined by that campaign).
+    pub components: Vec<ComponentRow>,
 }
 
 /// An RMS and a maximum, um.
@@ -100,8 +104,12 @@ pub struct PaperDesignSummary {
     pub residual_rms_um: f64,
     /// Residual RMS at the start, um.
     pub initial_residual_rms_um: f64,
-    /// The solver, in brief.
+    /// The solver, in brief (its wall time is in `timings.json`, so that this file is the same
+    /// on every run).
     pub solver: String,
+    /// What the paper's design determines: each identifiable combination of the 36
+    /// components (a right singular vector), its estimate and Cramér-Rao standard deviation.
+    pub identifiable_combinations: Vec<CombinationRow>,
     /// RMS difference of the readings predicted with Table 3 and Table 2, um.
     pub table3_sensor_rms_diff_um: PlusMinus,
     /// Share of Table 3 - Table 2 in the identifiable subspace.
@@ -458,7 +466,7 @@ pub struct LimitedSummary {
 }
 
 /// An identifiable combination of the paper's design.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct CombinationRow {
     /// Its singular value.
     pub singular_value: f64,
@@ -466,26 +474,32 @@ pub struct CombinationRow {
     pub estimate_um: f64,
     /// Cramér-Rao standard deviation, um.
     pub std_um: f64,
-    /// Largest loadings (component name, weight).
+    /// Largest loadings (component name, weight), largest first.
     pub loadings: Vec<(String, f64)>,
 }
 
 /// One installation error component in the side-by-side table, um.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct ComponentRow {
     /// Component name.
     pub name: String,
     /// Table 2 (true).
+    #[serde(rename = "table2_um")]
     pub table2: f64,
     /// Table 3 (the paper's estimate).
+    #[serde(rename = "table3_um")]
     pub table3: f64,
     /// cpm on the paper's design (none: not determined).
+    #[serde(rename = "paper_design_um")]
     pub paper: Option<f64>,
     /// Its standard deviation.
+    #[serde(rename = "paper_design_std_um")]
     pub paper_std: Option<f64>,
     /// cpm on the designed campaign.
+    #[serde(rename = "designed_um")]
     pub designed: Option<f64>,
     /// Its standard deviation.
+    #[serde(rename = "designed_std_um")]
     pub designed_std: Option<f64>,
 }
 
@@ -622,6 +636,31 @@ impl PaperReport {
         let t2 = InstallationErrors::paper_table2().to_vec_um();
         let t3 = InstallationErrors::paper_table3().to_vec_um();
         let cands = cpm_calib::design::SocketCandidates::paper_cubic();
+        let combinations: Vec<CombinationRow> = p
+            .combinations
+            .iter()
+            .map(|c| CombinationRow {
+                singular_value: c.singular_value,
+                estimate_um: c.estimate_um,
+                std_um: c.std_um,
+                loadings: c
+                    .loadings
+                    .iter()
+                    .map(|(k, w)| (InstallationErrors::component_name(*k).to_string(), *w))
+                    .collect(),
+            })
+            .collect();
+        let components: Vec<ComponentRow> = (0..36)
+            .map(|k| ComponentRow {
+                name: InstallationErrors::component_name(k).to_string(),
+                table2: t2[k],
+                table3: t3[k],
+                paper: p.estimate_um[k],
+                paper_std: p.std_um[k],
+                designed: d.estimate_um[k],
+                designed_std: d.std_um[k],
+            })
+            .collect();
         let summary = PaperSummary {
             simulated: true,
             note: "All readings are simulated from the paper's Table 2 with the paper's clearance and noise model.".into(),
@@ -649,7 +688,8 @@ impl PaperReport {
                 unexplained_null_dimensions: p.identifiability.unexplained_null_dimensions,
                 residual_rms_um: p.residual_rms_um,
                 initial_residual_rms_um: p.initial_rms_um,
-                solver: p.solver.brief(),
+                solver: p.solver.brief_without_time(),
+                identifiable_combinations: combinations.clone(),
                 table3_sensor_rms_diff_um: PlusMinus {
                     plus: r.table3.plus,
                     minus: r.table3.minus,
@@ -675,7 +715,7 @@ impl PaperReport {
                 crlb_rms_um: r.designed_identifiability.crlb_rms_um(),
                 crlb_max_um: r.designed_identifiability.crlb_max_um(),
                 residual_rms_um: d.residual_rms_um,
-                solver: d.solver.brief(),
+                solver: d.solver.brief_without_time(),
                 accuracy: accuracy(&r.designed),
                 design: DesignSummary {
                     criterion: format!("{}-optimal", dz.criterion.name()),
@@ -715,41 +755,19 @@ impl PaperReport {
                 .limited
                 .as_ref()
                 .map(|l| limited(l, r.options.design.max_readings)),
+            components: components.clone(),
         };
         let text = PaperText {
             noise: r.options.noise.to_string(),
             sigma_um: r.options.noise.sigma_um(),
             blind_summary: p.identifiability.summary(),
-            combinations: p
-                .combinations
-                .iter()
-                .map(|c| CombinationRow {
-                    singular_value: c.singular_value,
-                    estimate_um: c.estimate_um,
-                    std_um: c.std_um,
-                    loadings: c
-                        .loadings
-                        .iter()
-                        .map(|(k, w)| (InstallationErrors::component_name(*k).to_string(), *w))
-                        .collect(),
-                })
-                .collect(),
+            combinations,
             max_readings: r.options.design.max_readings,
             designed_range_mm: r.options.designed_range_mm,
             designed_range_deg: r.options.designed_range_deg,
             socket_candidates: (cands.base.len(), cands.platform.len()),
             compensation_max_std_um: cpm_calib::paper::COMPENSATION_MAX_STD_UM,
-            components: (0..36)
-                .map(|k| ComponentRow {
-                    name: InstallationErrors::component_name(k).to_string(),
-                    table2: t2[k],
-                    table3: t3[k],
-                    paper: p.estimate_um[k],
-                    paper_std: p.std_um[k],
-                    designed: d.estimate_um[k],
-                    designed_std: d.std_um[k],
-                })
-                .collect(),
+            components,
             designed_singular_values: d.identifiability.singular_values.clone(),
             rank_threshold: p.identifiability.threshold,
         };
@@ -828,7 +846,12 @@ impl PaperReport {
                 .join(", "),
         );
         s.push_str("\n\n### Why the rank is so low (blind directions in physical terms)\n\n");
-        s.push_str(&tx.blind_summary.replace("\n  - ", "\n- "));
+        // Its first line is a sentence of its own (a paragraph), then the list.
+        s.push_str(
+            &tx.blind_summary
+                .replacen('\n', ".\n\n", 1)
+                .replace("\n  - ", "\n- "),
+        );
         let per_link: usize = p
             .blind_directions
             .iter()

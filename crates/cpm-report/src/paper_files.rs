@@ -23,7 +23,7 @@ fn norms(v: &[f64], side: usize) -> Vec<f64> {
 
 /// Per-joint error norms with their standard deviation (first order, components taken as
 /// independent: sd(|e|) = sqrt(sum (e_a / |e|)^2 sd_a^2)); a joint with a component the data
-/// do not determine has no norm (NaN: drawn "n.i.", not identifiable).
+/// do not determine has no norm (NaN: drawn "n.d.", not determined).
 fn joint_norms(est: &[(Option<f64>, Option<f64>)], side: usize) -> (Vec<f64>, Vec<f64>) {
     (0..est.len() / 6)
         .map(|i| {

@@ -119,6 +119,15 @@ pub struct Final {
     pub robust_failed: bool,
 }
 
+/// A library effect that was not a candidate because it cannot act on these data.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct NotApplicable {
+    /// The effect.
+    pub effect: String,
+    /// Why it does not apply (`no tracker poses in the data`).
+    pub why: String,
+}
+
 /// An effect that passed the F-test and BIC but not cross-validation.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct RejectedByCv {
@@ -186,6 +195,9 @@ pub struct RefineDoc {
     pub hold_trials: Vec<cpm_calib::refine::HoldTrial>,
     /// The groups the final model holds at nominal (declared or chosen).
     pub held_groups: Vec<String>,
+    /// Library effects left out of the candidates because they cannot act on these data
+    /// (set by the caller that chose the candidates).
+    pub not_applicable: Vec<NotApplicable>,
 }
 
 impl RefineDoc {
@@ -299,6 +311,7 @@ impl RefineDoc {
             against_calibrate: r.against_calibrate,
             hold_trials: r.hold_trials.clone(),
             held_groups: r.held_groups.clone(),
+            not_applicable: Vec::new(),
         }
     }
 
@@ -404,6 +417,17 @@ impl RefineReport {
             sig(d.initial.rms_um, 3),
             yes_no(d.initial.residual_white)
         ));
+        if !d.not_applicable.is_empty() {
+            let list: Vec<String> = d
+                .not_applicable
+                .iter()
+                .map(|n| format!("`{}` ({})", n.effect, n.why))
+                .collect();
+            s.push_str(&format!(
+                "Not candidates, as they do not apply to these data: {}.\n\n",
+                list.join(", ")
+            ));
+        }
         if !self.significant_pose_structure.is_empty() {
             let terms: Vec<String> = self
                 .significant_pose_structure

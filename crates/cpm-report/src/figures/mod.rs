@@ -2,6 +2,8 @@
 //! fit in [`fit`].
 use plotters::prelude::*;
 
+use crate::format::NOT_DETERMINED;
+
 pub mod fit;
 
 /// A plotting failure (plotters' drawing error, as text).
@@ -141,11 +143,7 @@ fn split_with_legend<'a, DB: DrawingBackend + 'a>(
     let font = ("sans-serif", 14).into_font();
     let mut y = 50;
     for (label, key) in entries {
-        let text: String = if label.chars().count() > 34 {
-            format!("{}...", label.chars().take(33).collect::<String>())
-        } else {
-            label.clone()
-        };
+        let lines = wrap(label, LEGEND_CHARS);
         let mx = 14;
         match *key {
             Key::Marker(c, m) => legend.draw(&marker_element(m, (mx, y), 4, c)),
@@ -156,22 +154,51 @@ fn split_with_legend<'a, DB: DrawingBackend + 'a>(
             Key::Note => Ok(()),
         }
         .map_err(|e| err(title, e))?;
-        legend
-            .draw(&Text::new(text, (32, y - 7), font.clone()))
-            .map_err(|e| err(title, e))?;
-        y += 22;
+        for (k, line) in lines.iter().enumerate() {
+            legend
+                .draw(&Text::new(
+                    line.clone(),
+                    (32, y - 7 + 16 * k as i32),
+                    font.clone(),
+                ))
+                .map_err(|e| err(title, e))?;
+        }
+        y += 22 + 16 * (lines.len().max(1) as i32 - 1);
     }
     Ok(plot)
 }
 
+/// The characters of a legend line that fit beside the plot.
+const LEGEND_CHARS: usize = 30;
+
+/// `text` in lines of at most `width` characters, broken between words (a longer word
+/// stands alone on its line): a legend entry is never cut.
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(word);
+    }
+    if !line.is_empty() || lines.is_empty() {
+        lines.push(line);
+    }
+    lines
+}
+
 /// A series of a grouped bar chart: a value per category, optionally a standard deviation
 /// (drawn as a +-2 sigma error bar). A NaN value is a bar that does not exist: the chart
-/// marks it "n.i." (not identifiable), and the legend says so.
+/// marks it "n.d." (not determined, as the reports say), and the legend says so.
 #[derive(Debug, Clone, Default)]
 pub struct BarSeries {
     /// Legend text.
     pub name: String,
-    /// One value per category (NaN: not identifiable / no estimate).
+    /// One value per category (NaN: not determined / no estimate).
     pub values: Vec<f64>,
     /// Standard deviations per category, when known.
     pub std: Option<Vec<f64>>,
@@ -198,8 +225,8 @@ pub fn grouped_bars(
     grouped_bars_with_errors(title, y_label, categories, &s)
 }
 
-/// Grouped bars with +-2 sigma error bars where a series has standard deviations, and "n.i."
-/// where a value is NaN (not identifiable). The legend is outside the plot, on the right.
+/// Grouped bars with +-2 sigma error bars where a series has standard deviations, and "n.d."
+/// where a value is NaN (not determined). The legend is outside the plot, on the right.
 pub fn grouped_bars_with_errors(
     title: &str,
     y_label: &str,
@@ -241,7 +268,7 @@ pub fn grouped_bars_with_errors(
             })
             .collect();
         if any_missing {
-            entries.push(("n.i. = not identifiable".into(), Key::Note));
+            entries.push((format!("{NOT_DETERMINED} = not determined"), Key::Note));
         }
         let area = split_with_legend(&root, title, &entries)?;
         let n = categories.len();
@@ -311,7 +338,7 @@ pub fn grouped_bars_with_errors(
                 .draw_series(s.values.iter().enumerate().filter(|(_, v)| v.is_nan()).map(
                     |(i, _)| {
                         Text::new(
-                            "n.i.",
+                            NOT_DETERMINED,
                             (x_of(i), ymax * 0.02),
                             ("sans-serif", 11).into_font().color(&c),
                         )
@@ -366,7 +393,15 @@ pub fn spectrum(
             .map_err(|e| err(title, e))?;
         chart
             .configure_mesh()
-            .x_desc("index")
+            .x_desc("index (largest first)")
+            .x_label_formatter(&|x| {
+                // The index is a whole number: no 0.0, 2.5, ... labels.
+                if (x - x.round()).abs() < 1e-9 {
+                    format!("{}", x.round() as i64)
+                } else {
+                    String::new()
+                }
+            })
             .y_desc("singular value")
             .y_label_formatter(&|y| format!("{y:.0e}"))
             .draw()
@@ -649,7 +684,28 @@ mod tests {
     }
 
     #[test]
-    fn missing_bars_are_marked_not_identifiable() {
+    fn long_legends_wrap_and_an_index_axis_has_whole_numbers() {
+        let svg = spectrum(
+            "s",
+            &[(
+                "designed (16 sensors, orientation changes)".to_string(),
+                (1..=36i32).map(|k| 10f64.powi(-k / 6)).collect(),
+            )],
+            Some(("paper-design rank threshold".to_string(), 1e-3)),
+        )
+        .unwrap();
+        assert!(!svg.contains("..."), "a cut legend");
+        assert!(svg.contains("designed (16 sensors,") && svg.contains("orientation changes)"));
+        assert!(
+            !svg.contains(">5.0<") && !svg.contains(">0.0<"),
+            "fractional index labels"
+        );
+        assert_eq!(wrap("a bb ccc", 4), ["a bb", "ccc"]);
+        assert_eq!(wrap("", 4), [""]);
+    }
+
+    #[test]
+    fn missing_bars_are_marked_not_determined() {
         let svg = grouped_bars_with_errors(
             "t",
             "um",
@@ -661,8 +717,12 @@ mod tests {
             }],
         )
         .unwrap();
-        assert!(svg.contains("n.i."));
-        assert!(svg.contains("not identifiable"));
+        // The report's words: n.d., not determined.
+        assert!(
+            svg.contains(">n.d.<") && svg.contains("not determined"),
+            "{svg}"
+        );
+        assert!(!svg.contains("n.i.") && !svg.contains("not identifiable"));
         assert!(svg.contains("est (+-2 sd)"));
     }
 }
