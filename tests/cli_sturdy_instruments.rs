@@ -418,7 +418,7 @@ fn validate_gives_every_figure_in_its_unit_and_the_full_session_frame() {
     // The levelling found is the simulated one (0.04, -0.02 deg), as an angle.
     let angle = s["full_frame"]["rotation_angle_deg"].as_f64().unwrap();
     assert!((angle - 0.0447).abs() < 0.01, "{angle}");
-    let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(
         !md.contains("NaN") && !md.contains("fitted frame t (um)"),
         "{md}"

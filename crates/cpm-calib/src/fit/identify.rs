@@ -575,7 +575,7 @@ pub fn identify(
     let m = campaign.len();
     let prior = prior_std(model, &options.tolerances)?;
     let with_prior = prior.iter().any(|p| p.is_finite());
-    let sigma_ref = options.sigma_um.unwrap_or(campaign.pose_sigma());
+    let sigma_ref = campaign.reference_sigma(options.sigma_um);
     let weights = campaign.observation_weights(sigma_ref);
     let weigh = |mut j: DMatrix<f64>| {
         for (r, w) in weights.iter().enumerate() {

@@ -314,7 +314,7 @@ pub fn reweigh(
 /// The noise a kind was weighed with, native unit.
 fn assumed_sigma(campaign: &Campaign, kind: Kind, sigma_ref: f64) -> f64 {
     match kind {
-        Kind::Gauge(_) => sigma_ref,
+        Kind::Gauge(_) => campaign.reading_sigma().unwrap_or(sigma_ref),
         Kind::TrackerPositions => campaign.pose_sigma(),
         Kind::TrackerOrientations => campaign.orientation_sigma(),
         Kind::Points => campaign.point_sigma(),

@@ -590,7 +590,7 @@ fn fold_errors(
             let prepared = Prepared::new(model, &test)?;
             predict(model, &prepared, &test, &cal.minimum_norm_um, None)?
         };
-        let w = test.observation_weights(options.sigma_um.unwrap_or(test.pose_sigma()));
+        let w = test.observation_weights(test.reference_sigma(options.sigma_um));
         let mut sq = Vec::with_capacity(y.len());
         let mut pose = Vec::with_capacity(y.len());
         for (k, ((yk, mk), wk)) in y.iter().zip(test.observations()).zip(w).enumerate() {
