@@ -719,7 +719,7 @@ mod tests {
         .unwrap();
         // The report's words: n.d., not determined.
         assert!(
-            svg.contains(">n.d.<") && svg.contains("not determined"),
+            svg.contains("\nn.d.\n") && svg.contains("n.d. = not determined"),
             "{svg}"
         );
         assert!(!svg.contains("n.i.") && !svg.contains("not identifiable"));
