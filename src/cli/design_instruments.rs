@@ -214,7 +214,7 @@ pub fn run(
             names.join(" + ")
         )));
     }
-    let limits = super::design::plain_limits(args, robot)?;
+    let limits = super::design_args::plain_limits(args, robot)?;
     ctx.stage("candidate poses");
     let (cands, rejected) = candidates::default_candidates(
         &robot.table,
