@@ -793,14 +793,15 @@ pub fn identify(
     ident.unexplained_null_dimensions = (ident.num_params - ident.rank)
         .saturating_sub(first.blind_directions.iter().map(|b| b.dimensions).sum());
     // A parameter is reported as measured when the data determine it on its own and, under a
-    // prior, supply at least half of its determination; its standard deviation is then the
-    // posterior one (equal to the Cramér-Rao bound when the prior is far looser).
+    // prior, supply at least half of its determination; its standard deviation is the
+    // Cramér-Rao bound of the data (the posterior one, the prior's share included, is in
+    // `prior.posterior_std`).
     let measured =
         |k: usize| ident.determined[k] && prior_summary.as_ref().is_none_or(|p| p.determined(k));
     let estimate_um: Vec<Option<f64>> = (0..np).map(|k| measured(k).then_some(e_hat[k])).collect();
     let std_um: Vec<Option<f64>> = (0..np)
         .map(|k| match &prior_summary {
-            Some(p) if measured(k) => p.posterior_std[k].or(ident.crlb_std_um[k]),
+            Some(_) if measured(k) => ident.crlb_std_um[k],
             Some(_) => None,
             None => ident.crlb_std_um[k],
         })
