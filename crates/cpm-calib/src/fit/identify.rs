@@ -355,7 +355,7 @@ impl DenseJacobian for Subspace<'_> {
 }
 
 /// The weighted residuals (um of the reference) of predictions `y` against the campaign.
-fn r0_of(_j: &DMatrix<f64>, y: &[f64], campaign: &Campaign, weights: &[f64]) -> Vec<f64> {
+fn r0_of(y: &[f64], campaign: &Campaign, weights: &[f64]) -> Vec<f64> {
     y.iter()
         .zip(campaign.observations())
         .zip(weights)
@@ -370,7 +370,7 @@ fn r0_of(_j: &DMatrix<f64>, y: &[f64], campaign: &Campaign, weights: &[f64]) -> 
 /// below `rtol` of the largest singular value, or below 1/2 (a prior row alone gives 1), are
 /// left out: those are blind free directions.
 fn prior_basis(j: &DMatrix<f64>, prior: &[f64], sigma: f64, rtol: f64) -> DMatrix<f64> {
-    let (m, np) = (j.nrows(), prior.len());
+    let np = prior.len();
     let mut d = vec![0.0; np];
     let mut norms = Vec::new();
     for k in 0..np {
@@ -395,7 +395,6 @@ fn prior_basis(j: &DMatrix<f64>, prior: &[f64], sigma: f64, rtol: f64) -> DMatri
     for k in 0..np {
         jd.column_mut(k).scale_mut(d[k]);
     }
-    let _ = m;
     let mut ata = jd.transpose() * &jd;
     for k in 0..np {
         if prior[k].is_finite() && prior[k] > 0.0 {
@@ -434,7 +433,6 @@ const NOISE_SETTLED: f64 = 0.02;
 fn noise_of_fit(
     problem: &Subspace<'_>,
     campaign: &Campaign,
-    loss: &cpm_lm::Loss,
     robust: bool,
 ) -> Result<f64, CalibError> {
     let r: Vec<f64> = if problem.leg {
@@ -453,7 +451,6 @@ fn noise_of_fit(
     } else {
         Vec::new()
     };
-    let _ = loss;
     let (ssr, count) = r
         .iter()
         .enumerate()
@@ -586,7 +583,7 @@ pub fn identify(
     };
     let mut j0 = DMatrix::zeros(m, np);
     let y0 = predict(model, &prepared, campaign, &start, Some(&mut j0))?;
-    let r0_pose = r0_of(&j0, &y0, campaign, &weights);
+    let r0_pose = r0_of(&y0, campaign, &weights);
     let patterns = physical_patterns(model, campaign);
     // Held parameters take no part in the fit: their columns are left out of the directions
     // the fit moves along.
@@ -616,7 +613,7 @@ pub fn identify(
         let sigma0 = options
             .sigma_um
             .or(options.prior_noise_um)
-            .unwrap_or_else(|| rms(&r0_of(&j_free, &y0, campaign, &weights)).max(1e-9 * sigma_ref));
+            .unwrap_or_else(|| rms(&r0_pose).max(1e-9 * sigma_ref));
         prior_basis(&j_free, &prior, sigma0, options.rank.rank_rtol)
     } else {
         first.row_space()
@@ -689,7 +686,7 @@ pub fn identify(
                 } else {
                     problem.evaluate(&theta)?;
                 }
-                let s = noise_of_fit(&problem, campaign, &options.lm.loss, robust)?;
+                let s = noise_of_fit(&problem, campaign, robust)?;
                 let settled =
                     (s - problem.prior_sigma).abs() <= NOISE_SETTLED * problem.prior_sigma;
                 problem.prior_sigma = s;

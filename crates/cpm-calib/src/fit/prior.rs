@@ -39,7 +39,7 @@
 //! `[calibration.tolerances]` or on the command line (`--tolerance GROUP=VALUE`).
 use std::collections::BTreeMap;
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 
 use crate::model::Block;
@@ -414,7 +414,6 @@ pub fn summarize(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> PriorSummary
         .iter()
         .filter(|&&k| posterior_std[k].is_some())
         .count();
-    let _ = DVector::<f64>::zeros(0);
     PriorSummary {
         prior_std: prior.iter().map(|p| p.is_finite().then_some(*p)).collect(),
         posterior_std,
