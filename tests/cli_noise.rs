@@ -56,20 +56,28 @@ fn noise_per_kind_is_estimated_written_and_read_back() {
     let tracker = dir.join("tracker.csv");
     simulate(&tracker, "poses", 2.0, &["--orientation-noise-urad", "500"]);
     let robot = Path::new(&example("hexapod_66.toml")).to_path_buf();
-    // Weighed by the defaults (10 um, 20 urad): said, and the positions' residual is far
-    // above their noise.
-    let plain = calibrate_json(&robot, &[&tracker], &[], &dir.join("plain"));
+    // Weighed by the defaults (10 um, 20 urad; `--noise-per-kind off`): said, and the
+    // positions' residual is far above their noise.
+    let plain = calibrate_json(
+        &robot,
+        &[&tracker],
+        &["--noise-per-kind", "off"],
+        &dir.join("plain"),
+    );
     assert!(warned(&plain), "{}", plain["warnings"]);
     let pos_plain = kind(&plain, "tracker positions")["estimated"]
         .as_f64()
         .unwrap();
-    // Estimated per kind.
-    let cal = calibrate_json(
+    // Estimated per kind: the default, since two kinds have no declared noise; the bare
+    // flag asks for the same.
+    let cal = calibrate_json(&robot, &[&tracker], &[], &dir.join("per-kind"));
+    let flagged = calibrate_json(
         &robot,
         &[&tracker],
         &["--noise-per-kind"],
-        &dir.join("per-kind"),
+        &dir.join("flagged"),
     );
+    assert_eq!(cal["noise_by_kind"], flagged["noise_by_kind"]);
     assert!(!warned(&cal), "{}", cal["warnings"]);
     let pos = kind(&cal, "tracker positions")["estimated"]
         .as_f64()

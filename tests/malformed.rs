@@ -1202,7 +1202,7 @@ fn a_5_mm_spike_is_flagged_with_its_line_and_a_robust_loss_resists_it() {
     let spiked = d.join("spiked.csv");
     std::fs::write(&spiked, lines.join("\n") + "\n").unwrap();
     let truth = cpm::geometry::InstallationErrors::paper_table2().to_vec_um();
-    let fit = |name: &str, robust: Option<&str>| -> serde_json::Value {
+    let fit = |name: &str, extra: &[&str]| -> serde_json::Value {
         let out = d.join(name);
         let mut args = vec![
             "calibrate",
@@ -1213,9 +1213,7 @@ fn a_5_mm_spike_is_flagged_with_its_line_and_a_robust_loss_resists_it() {
             "--out",
             out.to_str().unwrap(),
         ];
-        if let Some(r) = robust {
-            args.extend(["--robust", r]);
-        }
+        args.extend_from_slice(extra);
         let o = cpm(&args);
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         let report = std::fs::read_to_string(out.join("report.md")).unwrap();
@@ -1241,17 +1239,29 @@ fn a_5_mm_spike_is_flagged_with_its_line_and_a_robust_loss_resists_it() {
         }
         (sq / n).sqrt()
     };
-    let plain = fit("plain", None);
-    let robust = fit("huber", Some("huber:3"));
+    // Least squares sets the spike aside by default; `--keep-outliers` fits it.
+    let plain = fit("plain", &[]);
+    let kept = fit("kept", &["--keep-outliers"]);
+    let robust = fit("huber", &["--robust", "huber:3"]);
+    let aside = plain["outliers"].as_array().unwrap();
+    assert_eq!(aside.len(), 1, "{aside:?}");
+    assert_eq!(aside[0]["set_aside"], true);
+    assert_eq!(kept["outliers"][0]["set_aside"], false);
     let flagged = robust["outliers"].as_array().unwrap();
     assert_eq!(flagged.len(), 1, "{flagged:?}");
     assert_eq!(flagged[0]["line"], 21);
     assert!(flagged[0]["residual_um"].as_f64().unwrap().abs() > 4000.0);
     assert_eq!(robust["robust_loss"], "Huber, K = 3 um");
-    let (e_plain, e_robust) = (error_rms(&plain), error_rms(&robust));
+    let (e_plain, e_kept, e_robust) = (error_rms(&plain), error_rms(&kept), error_rms(&robust));
     assert!(
-        e_robust < 60.0 && e_robust * 10.0 < e_plain,
-        "error vs truth: robust {e_robust} um, least squares {e_plain} um"
+        e_robust < 60.0 && e_plain < 60.0 && e_robust * 10.0 < e_kept && e_plain * 5.0 < e_kept,
+        "error vs truth: robust {e_robust} um, set aside {e_plain} um, fitted {e_kept} um"
+    );
+    // Set aside, the spike leaves the noise estimate too.
+    assert!(
+        plain["sigma_um"].as_f64().unwrap() < 2.0,
+        "{}",
+        plain["sigma_um"]
     );
     // The standard deviations come from the inliers' noise (1 um), not the spike.
     assert!(

@@ -85,10 +85,17 @@ fn validate(calibrated: &Path, data: &Path) -> serde_json::Value {
 
 /// A validation's calibrated error weighted as the fit weighs tracker observations: positions
 /// at 1, orientations at pose sigma / orientation sigma (10 um / 20 urad).
-fn weighted_rms_um(v: &serde_json::Value) -> f64 {
+/// The weighted RMS (um of the position noise) of `validate`'s JSON `v` of `calibrated`: its
+/// position and orientation RMS weighed by the tracker noise the file declares (the fit's,
+/// estimated per kind or the defaults 10 um and 20 urad).
+fn weighted_rms_um(v: &serde_json::Value, calibrated: &Path) -> f64 {
+    let desc = cpm::geometry::RobotDescription::load(calibrated).unwrap();
+    let c = desc.calibration.unwrap_or_default();
+    let ws = c.tracker_position_sigma_um.unwrap_or(10.0);
+    let wr = c.tracker_orientation_sigma_urad.unwrap_or(20.0);
     let pos = v["calibrated"]["rms_um"].as_f64().unwrap();
     let rot = v["calibrated"]["orientation_rms_urad"].as_f64().unwrap();
-    ((pos * pos + (0.5 * rot).powi(2)) / 2.0).sqrt()
+    ((pos * pos + (ws / wr * rot).powi(2)) / 2.0).sqrt()
 }
 
 /// `calibrate` with `effects` on `data`, then `validate` of its calibrated.toml on the same
@@ -739,7 +746,10 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     );
     assert_eq!(fit["simulated"], false);
     let fit_rms = fit["residual_rms_um"].as_f64().unwrap();
-    let combined = weighted_rms_um(&validate(&cal.join("calibrated.toml"), &first));
+    let combined = weighted_rms_um(
+        &validate(&cal.join("calibrated.toml"), &first),
+        &cal.join("calibrated.toml"),
+    );
     assert!(
         (combined - fit_rms).abs() <= 1e-9 * fit_rms,
         "fit {fit_rms} um, calibrated.toml {combined} um"
@@ -797,7 +807,10 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     let fit2 = calibrate(&cal2, &robot, &first, effects, &[])["residual_rms_um"]
         .as_f64()
         .unwrap();
-    let combined2 = weighted_rms_um(&validate(&cal2.join("calibrated.toml"), &first));
+    let combined2 = weighted_rms_um(
+        &validate(&cal2.join("calibrated.toml"), &first),
+        &cal2.join("calibrated.toml"),
+    );
     assert!(
         (combined2 - fit2).abs() <= 1e-9 * fit2,
         "with compliance and a pose map: fit {fit2} um, calibrated.toml {combined2} um"
@@ -848,7 +861,10 @@ fn tracker_sessions_in_their_own_frames_round_trip() {
         ["residual_rms_um"]
         .as_f64()
         .unwrap();
-    let file = weighted_rms_um(&validate(&cal.join("calibrated.toml"), &data));
+    let file = weighted_rms_um(
+        &validate(&cal.join("calibrated.toml"), &data),
+        &cal.join("calibrated.toml"),
+    );
     assert!(
         (file - fit).abs() <= 1e-9 * fit,
         "fit {fit} um, calibrated.toml {file} um"
@@ -1919,7 +1935,10 @@ fn refine_on_the_real_session_is_judged_on_data_it_did_not_see() {
     assert!(cv_ref <= cv_cal, "{against}");
     // The file is the fit.
     let fit = r["final"]["rms_um"].as_f64().unwrap();
-    let file = weighted_rms_um(&validate(&out.join("calibrated.toml"), &first));
+    let file = weighted_rms_um(
+        &validate(&out.join("calibrated.toml"), &first),
+        &out.join("calibrated.toml"),
+    );
     assert!(
         (fit - file).abs() <= 1e-9 * fit,
         "refine fit {fit} um, calibrated.toml {file} um"

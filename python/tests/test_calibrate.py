@@ -225,17 +225,18 @@ def test_ctrl_c_interrupts_a_long_command(in_root, tmp_path):
 
 
 def test_noise_per_kind_reaches_the_fit(in_root, tmp_path):
-    """A simulated tracker with orientations 25 times noisier than the default weighs them:
-    the result says so, and ``noise_per_kind=True`` weighs each kind by its own residual."""
+    """A simulated tracker with orientations 25 times noisier than the default: weighed by
+    the defaults (``noise_per_kind="off"``) the result says so; by default (two kinds, no
+    declared noise) each kind is weighed by its own residual."""
     data = tmp_path / "tracker.csv"
     cpm.simulate(HEXAPOD, random=60, truth="examples/hexapod_66_truth.toml", measure="poses",
                  noise="gaussian:2", orientation_noise_urad=500, seed=3, out=data)
-    plain = cpm.calibrate(HEXAPOD, data)
+    plain = cpm.calibrate(HEXAPOD, data, noise_per_kind="off")
     kinds = {k["kind"]: k for k in plain.noise_by_kind}
     assert set(kinds) == {"tracker positions", "tracker orientations"}
     assert kinds["tracker orientations"]["estimated"] > 10 * kinds["tracker orientations"]["assumed"]
     assert any(w.startswith("Noise not as weighed") for w in plain.warnings)
-    weighed = cpm.calibrate(HEXAPOD, data, noise_per_kind=True)
+    weighed = cpm.calibrate(HEXAPOD, data)
     kinds = {k["kind"]: k for k in weighed.noise_by_kind}
     assert abs(kinds["tracker positions"]["estimated"] / 2.0 - 1.0) < 0.15
     assert abs(kinds["tracker orientations"]["estimated"] / 500.0 - 1.0) < 0.15

@@ -67,6 +67,12 @@ pub struct FitArgs {
     /// flagged in report.md and calibration.json either way.
     #[arg(long, value_name = "LOSS:K")]
     pub robust: Option<String>,
+    /// Fit the gross outliers too. By default a least-squares fit sets the observations more
+    /// than 10 robust standard deviations off (per kind of observation) aside, continues
+    /// without them and lists them under "Outliers" (one glitch in a log never drags the
+    /// machine); with a robust loss they are down-weighted instead.
+    #[arg(long)]
+    pub keep_outliers: bool,
     /// Most iterations of the least-squares solver per fit (default 1000); a fit stopped by
     /// it has not converged (exit code 1, the outputs say so).
     #[arg(long, value_name = "N")]
@@ -80,10 +86,20 @@ pub struct FitArgs {
     /// Weigh each kind of observation whose noise is not declared (the gauges, tracker
     /// positions, tracker orientations, point targets, inclinometer angles) by the noise its
     /// own residual shows, estimated per kind and never pooled (variance components,
-    /// iterated; cpm_calib::noise). The estimates are written to calibrated.toml's
-    /// `[calibration]` for the tracker kinds.
-    #[arg(long)]
-    pub noise_per_kind: bool,
+    /// iterated; cpm_calib::noise): `auto` (the default) does so whenever the data hold two
+    /// or more kinds and one of them has no declared noise; `on` (or the bare flag) always;
+    /// `off` weighs undeclared kinds by cpm-calib's defaults (10 um, 20 urad) and estimates
+    /// one common scale. The estimates are written to calibrated.toml's `[calibration]` for
+    /// the tracker kinds, so validate weighs as the fit did.
+    #[arg(
+        long,
+        value_enum,
+        num_args = 0..=1,
+        default_value_t = NoisePerKind::Auto,
+        default_missing_value = "on",
+        value_name = "auto|on|off"
+    )]
+    pub noise_per_kind: NoisePerKind,
     /// A-priori tolerance of a group of parameters, GROUP=VALUE in the group's unit
     /// (`installation_errors=2000` um, `link_scale=50000` ppm, `compliance=...` um/kN, `inf`
     /// frees the group); repeatable. A direction the data see less well than its tolerance
@@ -106,6 +122,17 @@ pub struct FitArgs {
     /// poses better, judged by cross-validation in acquisition order; the report says which).
     #[arg(long, value_enum, default_value_t = TrackerResiduals::Auto)]
     pub tracker_residuals: TrackerResiduals,
+}
+
+/// `--noise-per-kind`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum NoisePerKind {
+    /// Per kind when two or more kinds are present and one of them is undeclared.
+    Auto,
+    /// Always per kind.
+    On,
+    /// Defaults for undeclared kinds, one common scale.
+    Off,
 }
 
 /// `--tracker-residuals`.
@@ -139,13 +166,17 @@ impl FitArgs {
             self.robust.as_deref(),
             self.max_iterations,
         )?;
-        if self.noise_per_kind {
+        inputs.identify.keep_outliers = self.keep_outliers;
+        let per_kind = match self.noise_per_kind {
+            NoisePerKind::On => true,
+            NoisePerKind::Off => false,
+            NoisePerKind::Auto => crate::calib::noise::needs_reweighing(
+                &inputs.merged.campaign,
+                crate::calib::noise::Declared::of(&inputs.merged.campaign, &inputs.identify),
+            ),
+        };
+        if per_kind {
             ctx.stage("estimating the noise of each kind of observation");
-            // cpm-calib's variance components take undeclared gauges as the reference of
-            // the weights and estimate them from their residual.
-            if inputs.identify.sigma_um.is_none() {
-                inputs.merged.campaign.reading_sigma_um = 0.0;
-            }
             let campaign = &inputs.merged.campaign;
             let declared = crate::calib::noise::Declared::of(campaign, &inputs.identify);
             let r =
@@ -174,7 +205,7 @@ impl FitArgs {
             c.point_sigma_um = r.campaign.point_sigma_um;
             c.tilt_sigma_urad = r.campaign.tilt_sigma_urad;
             inputs.identify.sigma_um = r.options.sigma_um;
-            c.reading_sigma_um = r.options.sigma_um.unwrap_or(0.0);
+            c.reading_sigma_um = r.campaign.reading_sigma_um;
         }
         // Full tracker poses: pose or leg residuals, whichever predicts held-out poses better
         // (after the noise per kind, which weighs the pose residuals).
@@ -442,8 +473,9 @@ pub const NOT_WHITE: &str = "**The residual is not white**";
 /// fails the whiteness test `cpm refine` runs (the runs test on its signs and the Ljung-Box
 /// test over lags 1 to 10, both at refine's default level 0.01): it follows the order of the
 /// observations, structure the model lacks, and its RMS is then not the noise. Names the
-/// residual against the declared noise when there is one, and points to `cpm refine`.
-pub fn whiteness_warning(cal: &Calibration) -> Option<String> {
+/// residual against the declared noise when there is one (a weighted figure, in sigma, when
+/// `weighted`: the residual mixes kinds weighed differently), and points to `cpm refine`.
+pub fn whiteness_warning(cal: &Calibration, weighted: bool) -> Option<String> {
     let alpha = crate::calib::RefineOptions::default().alpha;
     let r: Vec<f64> = cal
         .residuals_um
@@ -463,6 +495,15 @@ pub fn whiteness_warning(cal: &Calibration) -> Option<String> {
     use crate::report::format::{p_value, sig};
     let f = |x: f64| sig(x, 3);
     let noise = match (cal.sigma_estimated, cal.sigma_um) {
+        _ if weighted => format!(
+            "weighted residual RMS {} in sigma (each residual over its kind's noise at the fit's noise scale){}",
+            f(d.rms_um / cal.sigma_um),
+            if cal.sigma_estimated {
+                ", which is then not the noise it is taken for"
+            } else {
+                ""
+            }
+        ),
         (false, s) if s > 0.0 => format!(
             "residual RMS {} um against the declared noise {} um",
             f(d.rms_um),
@@ -808,7 +849,7 @@ pub fn fit_with(
     let mut set = OutputSet::new();
     let mut fit = FitReport::new(&inputs.report_inputs(), model, &cal, Some(formulation));
     add_session_warnings(&mut fit, inputs, model)?;
-    if let Some(w) = whiteness_warning(&cal) {
+    if let Some(w) = whiteness_warning(&cal, fit.residual_weighted) {
         fit.warnings.push(w.replace("**", ""));
         fit.text.warnings.push(w);
     }
@@ -880,9 +921,24 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         let summary = report.summary(dir.display().to_string(), files);
         writeln!(ctx.out, "{}", summary.to_json()?)?;
     } else {
+        let residual = if report.fit.residual_weighted {
+            let kinds: Vec<String> = report
+                .fit
+                .noise_by_kind
+                .iter()
+                .map(|k| format!("{} {:.3} {}", k.kind, k.rms, k.unit))
+                .collect();
+            format!(
+                "weighted residual RMS {:.3} in sigma (RMS per kind: {})",
+                report.fit.weighted_rms_in_sigma,
+                kinds.join(", ")
+            )
+        } else {
+            format!("residual RMS {:.3} um", cal.residual_rms_um)
+        };
         writeln!(
             ctx.out,
-            "{}rank {} of {}, {} parameters determined, residual RMS {:.3} um; solver: {}",
+            "{}rank {} of {}, {} parameters determined, {residual}; solver: {}",
             if cal.simulated {
                 "SIMULATED data: "
             } else {
@@ -891,7 +947,6 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             cal.identifiability.rank,
             cal.identifiability.num_params,
             cal.identifiability.num_determined(),
-            cal.residual_rms_um,
             cal.solver.termination
         )?;
         for w in &written {

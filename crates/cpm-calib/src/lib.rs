@@ -105,7 +105,7 @@ pub use error::CalibError;
 pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
 pub use identify::{
     identifiability, identification_jacobian, identify, Calibration, IdentifyOptions, Tolerances,
-    DOWNWEIGHT_LEVEL, MAX_DOWNWEIGHTED_SHARE,
+    DOWNWEIGHT_LEVEL, MAX_DOWNWEIGHTED_SHARE, MAX_SET_ASIDE_ROUNDS, SET_ASIDE_SIGMAS,
 };
 pub use instruments::{Instrument, InstrumentInput};
 pub use model::{MeasurementModel, ModelKind};

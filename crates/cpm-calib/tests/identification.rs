@@ -261,8 +261,32 @@ fn a_spike_is_flagged_and_a_robust_loss_contains_it() {
             .sqrt()
             / 6.0
     };
-    let plain = identify(&model, &data, &IdentifyOptions::default()).unwrap();
+    // Least squares that keeps the spike follows it.
+    let plain = identify(
+        &model,
+        &data,
+        &IdentifyOptions {
+            keep_outliers: true,
+            ..IdentifyOptions::default()
+        },
+    )
+    .unwrap();
     assert!(plain.outliers.contains(&100), "{:?}", plain.outliers);
+    assert!(plain.set_aside.is_empty());
+    // By default least squares sets it aside (far beyond 10 robust standard deviations) and
+    // continues without it: as good as the robust loss, the noise estimate clean.
+    let aside = identify(&model, &data, &IdentifyOptions::default()).unwrap();
+    assert_eq!(aside.set_aside, vec![100]);
+    assert!(aside.outliers.contains(&100));
+    assert!(err(&aside) < 2.0, "set-aside fit rms error {}", err(&aside));
+    assert!(aside.sigma_excludes_outliers);
+    assert!((aside.sigma_um - 2.0).abs() < 0.3, "{} um", aside.sigma_um);
+    // Its residual stays the spike's, at full weight.
+    assert!(
+        aside.residuals_um[100].abs() > 4000.0,
+        "{}",
+        aside.residuals_um[100]
+    );
     let mut robust_opts = IdentifyOptions::default();
     robust_opts.lm.loss = cpm_lm::Loss::Huber(10.0);
     let robust = identify(&model, &data, &robust_opts).unwrap();

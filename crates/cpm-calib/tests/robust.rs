@@ -36,6 +36,15 @@ fn fit(c: &Campaign, loss: Loss) -> Calibration {
     identify(&model(), c, &o).unwrap()
 }
 
+/// Least squares that keeps its gross outliers (no setting aside).
+fn fit_keeping(c: &Campaign) -> Calibration {
+    let o = IdentifyOptions {
+        keep_outliers: true,
+        ..IdentifyOptions::default()
+    };
+    identify(&model(), c, &o).unwrap()
+}
+
 fn worst_error_um(cal: &Calibration) -> f64 {
     let truth = InstallationErrors::paper_table2().to_vec_um();
     cal.minimum_norm_um
@@ -103,9 +112,13 @@ fn a_robust_fit_follows_the_data_not_the_spikes() {
     for k in [7, 40, 93] {
         c.readings[k].length_mm += 2.0; // 2 mm spikes
     }
-    let ls = fit(&c, Loss::Squared);
+    let ls = fit_keeping(&c);
+    let aside = fit(&c, Loss::Squared);
     let tukey = fit(&c, Loss::Tukey(3.0 * SIGMA));
     assert!(tukey.succeeded(), "{:?}", tukey.robust_failure());
+    // Least squares by default sets the three spikes aside, and is then as good as Tukey's.
+    assert_eq!(aside.set_aside, vec![7, 40, 93]);
+    let e_aside = worst_error_um(&aside);
     // Gaussian noise alone puts ~10 % beyond Tukey's half-weight point (1.6 sigma at K = 3 sigma).
     assert!(
         tukey.downweighted_share < 0.2,
@@ -117,8 +130,8 @@ fn a_robust_fit_follows_the_data_not_the_spikes() {
     }
     let (e_ls, e_t) = (worst_error_um(&ls), worst_error_um(&tukey));
     assert!(
-        e_t < 5.0 && e_t < 0.2 * e_ls,
-        "Tukey {e_t} um, LS {e_ls} um"
+        e_t < 5.0 && e_t < 0.2 * e_ls && e_aside < 5.0 && e_aside < 0.2 * e_ls,
+        "Tukey {e_t} um, set aside {e_aside} um, LS keeping them {e_ls} um"
     );
 }
 

@@ -187,6 +187,21 @@ pub fn outliers_by_kind(
     campaign: &Campaign,
     sigma_um: Option<f64>,
 ) -> Vec<usize> {
+    outliers_by_kind_beyond(residuals_um, campaign, sigma_um, OUTLIER_SIGMAS)
+}
+
+/// Robust standard deviations beyond which [`outliers`] flags a residual.
+pub const OUTLIER_SIGMAS: f64 = 5.0;
+
+/// [`outliers_by_kind`] with the line at `sigmas` robust standard deviations of each kind
+/// instead of [`OUTLIER_SIGMAS`] (the floor stays [`OUTLIER_FLOOR_SIGMAS`] noise standard
+/// deviations).
+pub fn outliers_by_kind_beyond(
+    residuals_um: &[f64],
+    campaign: &Campaign,
+    sigma_um: Option<f64>,
+    sigmas: f64,
+) -> Vec<usize> {
     let kind = |k: usize| -> usize {
         match campaign.observation_kind(k) {
             crate::ObservationKind::Reading(i) => campaign.readings[i].sensor,
@@ -202,7 +217,7 @@ pub fn outliers_by_kind(
     let mut kinds: Vec<usize> = (0..residuals_um.len()).map(kind).collect();
     kinds.sort_unstable();
     kinds.dedup();
-    let pooled = outliers(residuals_um);
+    let pooled = outliers_beyond(residuals_um, sigmas);
     let floor = OUTLIER_FLOOR_SIGMAS
         * sigma_um
             .filter(|s| *s > 0.0)
@@ -218,7 +233,10 @@ pub fn outliers_by_kind(
                 .filter(|k| pooled.binary_search(k).is_ok())
                 .collect()
         } else {
-            outliers(&r).into_iter().map(|i| idx[i]).collect()
+            outliers_beyond(&r, sigmas)
+                .into_iter()
+                .map(|i| idx[i])
+                .collect()
         };
         out.extend(
             flagged
@@ -247,11 +265,16 @@ fn robust_spread(residuals_um: &[f64]) -> (f64, f64) {
 /// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
 /// deviation) from the median.
 pub fn outliers(residuals_um: &[f64]) -> Vec<usize> {
+    outliers_beyond(residuals_um, OUTLIER_SIGMAS)
+}
+
+/// [`outliers`] beyond `sigmas` robust standard deviations.
+pub fn outliers_beyond(residuals_um: &[f64], sigmas: f64) -> Vec<usize> {
     let (median, mad) = robust_spread(residuals_um);
     residuals_um
         .iter()
         .enumerate()
-        .filter(|(_, r)| mad > 0.0 && (**r - median).abs() > 5.0 * mad)
+        .filter(|(_, r)| mad > 0.0 && (**r - median).abs() > sigmas * mad)
         .map(|(k, _)| k)
         .collect()
 }

@@ -695,6 +695,7 @@ pub fn identify_implicit_calibration(
         downweighted_share: 0.0,
         robust_failed: false,
         outliers,
+        set_aside: Vec::new(),
         initial_rms_um: imp.initial_reading_rms_um,
         residual_rms_um: imp.reading_rms_um,
         residuals_um: imp.reading_residuals_um,

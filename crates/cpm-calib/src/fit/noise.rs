@@ -106,6 +106,12 @@ pub struct KindNoise {
     pub assumed: f64,
     /// The noise its residual says (native unit); `None` below one degree of freedom.
     pub estimated: Option<f64>,
+    /// The RMS of its residuals after the fit (native unit: um or urad, not weighted), the
+    /// observations set aside left out.
+    pub rms: f64,
+    /// Its observations the fit set aside as gross outliers ([`Calibration::set_aside`]):
+    /// left out of `rms`, `estimated` and `redundancy`.
+    pub set_aside: usize,
 }
 
 impl KindNoise {
@@ -140,23 +146,67 @@ pub fn by_kind(model: &MeasurementModel, campaign: &Campaign, cal: &Calibration)
     distinct
         .into_iter()
         .map(|kind| {
-            let (mut ssr, mut red, mut n) = (0.0, 0.0, 0);
+            let (mut ssr, mut red, mut n, mut aside) = (0.0, 0.0, 0, 0);
             for (i, _) in kinds.iter().enumerate().filter(|(_, k)| **k == kind) {
+                if cal.set_aside.binary_search(&i).is_ok() {
+                    aside += 1;
+                    continue;
+                }
                 ssr += cal.residuals_um[i].powi(2);
                 red += (1.0 - h(i)).max(0.0);
                 n += 1;
             }
             let assumed = assumed_sigma(campaign, kind, sigma_ref);
             let estimated = (red >= 1.0).then(|| (ssr / red).sqrt() * assumed / sigma_ref);
+            let rms = (ssr / n.max(1) as f64).sqrt() * assumed / sigma_ref;
             KindNoise {
                 kind,
                 name: name(model, kind),
                 unit: kind.unit(model),
-                observations: n,
+                observations: n + aside,
                 redundancy: red,
                 assumed,
                 estimated,
+                rms,
+                set_aside: aside,
             }
+        })
+        .collect()
+}
+
+/// Whether the residual vector of a fit mixes kinds of observation weighed differently (an
+/// angle beside a length, or two lengths of different noise): its RMS is then a weighted
+/// figure, in um of the reference noise, not a length.
+pub fn residual_is_weighted(kinds: &[KindNoise]) -> bool {
+    let um: Vec<&KindNoise> = kinds.iter().filter(|k| k.unit == "um").collect();
+    um.len() < kinds.len()
+        || um
+            .windows(2)
+            .any(|w| (w[0].assumed - w[1].assumed).abs() > 1e-12 * w[0].assumed.abs())
+}
+
+/// The native values and units of residuals `ks` of a fit (`residuals_um`, weighed in um of
+/// the reference noise `sigma_ref_um`): um for lengths, urad for angles; `None` for an index
+/// past the campaign's observations.
+pub fn native_residuals(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    sigma_ref_um: f64,
+    residuals_um: &[f64],
+    ks: &[usize],
+) -> Vec<Option<(f64, String)>> {
+    if ks.is_empty() {
+        return Vec::new();
+    }
+    let kinds = campaign.observation_kinds();
+    ks.iter()
+        .map(|&k| {
+            let kind = Kind::of(campaign, *kinds.get(k)?);
+            let assumed = assumed_sigma(campaign, kind, sigma_ref_um);
+            Some((
+                residuals_um.get(k)? * assumed / sigma_ref_um,
+                kind.unit(model),
+            ))
         })
         .collect()
 }
@@ -197,6 +247,33 @@ impl Declared {
             tilts: campaign.tilt_sigma_urad > 0.0,
         }
     }
+}
+
+/// Whether [`reweigh`] has work: the campaign holds two or more kinds of observation (all
+/// gauges count as one kind: they share one noise) and at least one of them has no declared
+/// noise. Then one common noise scale cannot weigh the kinds against each other, and the
+/// command-line fit estimates each kind's noise by default.
+///
+/// ```
+/// use cpm_calib::{noise, Campaign};
+/// let empty = Campaign::default();
+/// assert!(!noise::needs_reweighing(&empty, noise::Declared::default()));
+/// ```
+pub fn needs_reweighing(campaign: &Campaign, declared: Declared) -> bool {
+    let rows = campaign.pose_observation_rows();
+    let positions = rows.iter().any(|r| r[..3].iter().any(Option::is_some));
+    let orientations = rows.iter().any(|r| r[3..].iter().any(Option::is_some));
+    let present = [
+        (!campaign.readings.is_empty(), declared.gauges),
+        (positions, declared.tracker_positions),
+        (orientations, declared.tracker_orientations),
+        (!campaign.point_measurements.is_empty(), declared.points),
+        (!campaign.tilt_measurements.is_empty(), declared.tilts),
+        // One's own instruments declare their noise with every measurement.
+        (!campaign.instrument_measurements.is_empty(), true),
+    ];
+    let kinds = present.iter().filter(|(p, _)| *p).count();
+    kinds >= 2 && present.iter().any(|(p, d)| *p && !*d)
 }
 
 /// The outcome of [`reweigh`].
@@ -286,9 +363,14 @@ pub fn reweigh(
             }
             if red >= MIN_REDUNDANCY {
                 let e = (ssr / red).sqrt().max(1e-6);
-                let current = options.sigma_um.unwrap_or(cal.sigma_ref_um);
+                let current = options
+                    .sigma_um
+                    .or(campaign.reading_sigma())
+                    .unwrap_or(cal.sigma_ref_um);
                 if (e / current - 1.0).abs() > 0.01 {
+                    // The reference of the weights and the gauges' own noise, both.
                     options.sigma_um = Some(e);
+                    campaign.reading_sigma_um = e;
                     moved = true;
                 }
             }

@@ -136,8 +136,15 @@ pub struct Outlier {
     pub line: Option<usize>,
     /// What it is.
     pub what: Option<String>,
-    /// Its residual, um.
+    /// Its residual as weighed by the fit, um of the reference noise (a length for lengths
+    /// of the reference noise; see `residual` for its own unit).
     pub residual_um: Option<f64>,
+    /// Its residual in its own unit (`unit`).
+    pub residual: Option<f64>,
+    /// The unit of `residual`: `um` or `urad`.
+    pub unit: Option<String>,
+    /// The fit set it aside (weight zero) rather than follow it.
+    pub set_aside: bool,
 }
 
 /// `calibration.json`'s `misfit` object.
@@ -283,6 +290,12 @@ pub struct NoiseKindReport {
     pub assumed: f64,
     /// The noise its residual says (`null` below one degree of freedom).
     pub estimated: Option<f64>,
+    /// The RMS of its residuals after the fit, in `unit` (not weighted), those set aside
+    /// left out.
+    pub rms: f64,
+    /// Its observations the fit set aside as gross outliers (weight zero; listed under
+    /// `outliers` with `set_aside: true`).
+    pub set_aside: usize,
 }
 
 /// The warning when the kinds of observation are weighed against each other wrongly: a kind's
@@ -362,11 +375,20 @@ pub struct FitReport {
     pub effects: Vec<EffectEstimates>,
     /// Known values applied in every prediction (the estimates are on top of them).
     pub known_effects: Vec<KnownEffectValues>,
-    /// Residual RMS, um.
+    /// Residual RMS, um (of the reference noise when `residual_weighted`).
     pub residual_rms_um: f64,
-    /// Residual RMS at the start, um.
+    /// Residual RMS at the start, um (of the reference noise when `residual_weighted`).
     pub initial_rms_um: f64,
-    /// The noise, um.
+    /// The residual mixes kinds of observation weighed differently (angles beside lengths,
+    /// or lengths of different noise): `residual_rms_um` is then a weighted figure, and each
+    /// kind's RMS in its own unit is `noise_by_kind[].rms`.
+    pub residual_weighted: bool,
+    /// Weighted residual RMS in sigma: each residual over its kind's noise, scaled by the
+    /// fit's noise (`sigma_um`, declared or estimated; about 1 when the noise is as taken).
+    pub weighted_rms_in_sigma: f64,
+    /// Weighted residual RMS in sigma at the start.
+    pub initial_weighted_rms_in_sigma: f64,
+    /// The noise, um (of the reference when `residual_weighted`).
     pub sigma_um: f64,
     /// The noise was estimated from the residual.
     pub sigma_estimated: bool,
@@ -455,10 +477,18 @@ fn effect_estimates(model: &MeasurementModel, cal: &Calibration) -> Vec<EffectEs
 }
 
 /// The flagged outliers with the file, line and what each observed.
-fn outliers(inputs: &FitInputs<'_>, cal: &Calibration) -> Vec<Outlier> {
+fn outliers(inputs: &FitInputs<'_>, model: &MeasurementModel, cal: &Calibration) -> Vec<Outlier> {
+    let native = cpm_calib::noise::native_residuals(
+        model,
+        &inputs.merged.campaign,
+        cal.sigma_ref_um,
+        &cal.residuals_um,
+        &cal.outliers,
+    );
     cal.outliers
         .iter()
-        .map(|&k| {
+        .zip(native)
+        .map(|(&k, native)| {
             let o = observation_origin(inputs.robot, inputs.merged, k);
             Outlier {
                 observation: k + 1,
@@ -466,6 +496,9 @@ fn outliers(inputs: &FitInputs<'_>, cal: &Calibration) -> Vec<Outlier> {
                 line: o.as_ref().map(|o| o.line),
                 what: o.as_ref().map(|o| o.what.clone()),
                 residual_um: finite(cal.residuals_um.get(k).copied()),
+                residual: finite(native.as_ref().map(|n| n.0)),
+                unit: native.map(|n| n.1),
+                set_aside: cal.set_aside.binary_search(&k).is_ok(),
             }
         })
         .collect()
@@ -625,6 +658,9 @@ impl FitReport {
                 .collect(),
             residual_rms_um: cal.residual_rms_um,
             initial_rms_um: cal.initial_rms_um,
+            residual_weighted: cpm_calib::noise::residual_is_weighted(&kinds),
+            weighted_rms_in_sigma: cal.residual_rms_um / cal.sigma_um,
+            initial_weighted_rms_in_sigma: cal.initial_rms_um / cal.sigma_um,
             sigma_um: cal.sigma_um,
             sigma_estimated: cal.sigma_estimated,
             sigma_excludes_outliers: cal.sigma_excludes_outliers,
@@ -641,7 +677,7 @@ impl FitReport {
                 max_downweighted_share: cpm_calib::MAX_DOWNWEIGHTED_SHARE,
                 failed: cal.robust_failed,
             }),
-            outliers: outliers(inputs, cal),
+            outliers: outliers(inputs, model, cal),
             registration: registration(inputs.merged, model, cal),
             misfit: misfit_report(cal),
             noise_by_kind: kinds
@@ -653,6 +689,8 @@ impl FitReport {
                     degrees_of_freedom: k.redundancy,
                     assumed: k.assumed,
                     estimated: k.estimated,
+                    rms: k.rms,
+                    set_aside: k.set_aside,
                 })
                 .collect(),
             prior: prior::PriorReport::new(model, cal),
@@ -704,40 +742,77 @@ impl FitReport {
         ));
         s.push_str(&format!("- Model: {}.\n", t.model));
         s.push_str(&format!("- Loss: {}.\n", self.robust_loss));
-        s.push_str(&format!(
-            "- Residual RMS {} um (at the start {} um); noise {} {} um.\n",
-            sig(self.residual_rms_um, 3),
-            sig(self.initial_rms_um, 3),
-            if self.sigma_estimated {
-                "estimated from the residual:"
-            } else {
-                "declared:"
-            },
-            if self.sigma_estimated {
-                sig(self.sigma_um, 3)
-            } else {
-                short(self.sigma_um)
-            }
-        ));
-        if self.noise_by_kind.len() > 1 {
+        if self.residual_weighted {
+            // Kinds weighed differently: the RMS of the mix is weighted; each kind in its unit.
             let list: Vec<String> = self
                 .noise_by_kind
                 .iter()
                 .map(|k| {
                     format!(
-                        "{} {} -> {} {} ({} degrees of freedom)",
+                        "{} RMS {} {}{} (weighed as {} {}, its own residual says {}; {} degrees of freedom)",
                         k.kind,
-                        sig(k.assumed, 3),
-                        k.estimated.map_or("n/a".to_string(), |e| sig(e, 3)),
+                        sig(k.rms, 3),
                         k.unit,
+                        if k.set_aside > 0 {
+                            format!(" without the {} set aside", k.set_aside)
+                        } else {
+                            String::new()
+                        },
+                        sig(k.assumed, 3),
+                        k.unit,
+                        k.estimated
+                            .map_or("n/a".to_string(), |e| format!("{} {}", sig(e, 3), k.unit)),
                         fixed(k.degrees_of_freedom, 1)
                     )
                 })
                 .collect();
             s.push_str(&format!(
-                "- Noise per kind of observation, weighed as -> from its own residual: {}.\n",
+                "- Weighted residual RMS {} (in sigma: each residual over its kind's noise at the fit's noise scale; at the start {}); noise scale {}.\n- Residual per kind of observation, in its own unit: {}.\n",
+                sig(self.weighted_rms_in_sigma, 3),
+                sig(self.initial_weighted_rms_in_sigma, 3),
+                if self.sigma_estimated {
+                    "estimated from the residual"
+                } else {
+                    "declared"
+                },
                 list.join("; ")
             ));
+        } else {
+            s.push_str(&format!(
+                "- Residual RMS {} um (at the start {} um); noise {} {} um.\n",
+                sig(self.residual_rms_um, 3),
+                sig(self.initial_rms_um, 3),
+                if self.sigma_estimated {
+                    "estimated from the residual:"
+                } else {
+                    "declared:"
+                },
+                if self.sigma_estimated {
+                    sig(self.sigma_um, 3)
+                } else {
+                    short(self.sigma_um)
+                }
+            ));
+            if self.noise_by_kind.len() > 1 {
+                let list: Vec<String> = self
+                    .noise_by_kind
+                    .iter()
+                    .map(|k| {
+                        format!(
+                            "{} {} -> {} {} ({} degrees of freedom)",
+                            k.kind,
+                            sig(k.assumed, 3),
+                            k.estimated.map_or("n/a".to_string(), |e| sig(e, 3)),
+                            k.unit,
+                            fixed(k.degrees_of_freedom, 1)
+                        )
+                    })
+                    .collect();
+                s.push_str(&format!(
+                    "- Noise per kind of observation, weighed as -> from its own residual: {}.\n",
+                    list.join("; ")
+                ));
+            }
         }
         s.push_str(&format!(
             "- Solver: {}{}.\n\n",
@@ -805,12 +880,28 @@ impl FitReport {
         if self.outliers.is_empty() {
             return;
         }
-        s.push_str("## Outliers\n\nObservations whose residual is more than 5 robust standard deviations (1.4826 x MAD) from the median. With `--robust` their influence on the fit is limited; without it they pull on every estimate. Check the instrument log at these lines.\n\n| file:line | observation | residual (um) |\n|---|---|---|\n");
+        let aside = self.outliers.iter().filter(|o| o.set_aside).count();
+        s.push_str("## Outliers\n\nObservations whose residual is more than 5 robust standard deviations (1.4826 x MAD) from the median. ");
+        if aside > 0 {
+            s.push_str(&format!("The least-squares fit set {aside} of them, those more than 10 robust standard deviations off, aside (weight zero; `--keep-outliers` fits them) and continued without them; their residuals are those of the fit without them, and the noise estimate leaves them out. "));
+        } else {
+            s.push_str("With `--robust` their influence on the fit is limited. ");
+        }
+        s.push_str("Check the instrument log at these lines.\n\n| file:line | observation | residual | set aside |\n|---|---|---|---|\n");
         for o in &self.outliers {
-            let r = opt_fixed(o.residual_um, 3);
+            let set = if o.set_aside { "yes" } else { "no" };
+            let r = match (o.residual, &o.unit) {
+                (Some(v), Some(u)) => format!("{} {u}", fixed(v, 3)),
+                _ => format!("{} um (weighted)", opt_fixed(o.residual_um, 3)),
+            };
             match (&o.file, o.line, &o.what) {
-                (Some(f), Some(l), Some(w)) => s.push_str(&format!("| {f}:{l} | {w} | {r} |\n")),
-                _ => s.push_str(&format!("| ? | observation {} | {r} |\n", o.observation)),
+                (Some(f), Some(l), Some(w)) => {
+                    s.push_str(&format!("| {f}:{l} | {w} | {r} | {set} |\n"))
+                }
+                _ => s.push_str(&format!(
+                    "| ? | observation {} | {r} | {set} |\n",
+                    o.observation
+                )),
             }
         }
         s.push('\n');
@@ -928,6 +1019,9 @@ mod tests {
                 line: None,
                 what: None,
                 residual_um: Some(-0.00001),
+                residual: None,
+                unit: None,
+                set_aside: false,
             }],
             text: FitText {
                 clearance_um: 10.000000000000002,
@@ -951,7 +1045,7 @@ mod tests {
             "| 3 | d [um] | 0.300 | n.d. |",
             "Residual RMS 3.00 um (at the start 0.300 um); noise declared: 1 um",
             "clearance 10 um",
-            "| ? | observation 7 | 0.000 |",
+            "| ? | observation 7 | 0.000 um (weighted) | no |",
             "1 blind direction:",
         ] {
             assert!(s.contains(want), "{want:?} not in\n{s}");

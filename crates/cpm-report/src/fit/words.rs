@@ -119,9 +119,16 @@ pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     }
     if !cal.outliers.is_empty() {
         w.push(format!(
-            "**{} outlier observation{}** (more than 5 robust standard deviations off): listed under \"Outliers\".",
+            "**{} outlier observation{}** (more than 5 robust standard deviations off){}: listed under \"Outliers\".",
             cal.outliers.len(),
-            if cal.outliers.len() == 1 { "" } else { "s" }
+            if cal.outliers.len() == 1 { "" } else { "s" },
+            match cal.set_aside.len() {
+                0 => String::new(),
+                n if n == cal.outliers.len() => {
+                    ", set aside by the fit (`--keep-outliers` fits them)".to_string()
+                }
+                n => format!(", {n} set aside by the fit (`--keep-outliers` fits them)"),
+            }
         ));
     }
     if let Some(m) = misfit(cal).filter(|m| m.inconsistent()) {
