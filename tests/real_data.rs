@@ -240,6 +240,14 @@ fn refine_on_the_real_tilt_session_finds_a_load_dependent_leg_effect() {
         joints_mm < 5.0 && scale_pct < 10.0,
         "{joints_mm} mm, {scale_pct} %"
     );
+    // Angles have no length unit: the figures of a fit to them are called weighted.
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(
+        md.contains("Residual RMS") && md.contains("(weighted, um of the reference noise), white"),
+        "{md}"
+    );
+    assert!(md.contains("Weighted residual RMS"), "{md}");
+    assert!(md.contains("inclinometer angles RMS"), "{md}");
 }
 
 /// The motion-capture session: its robot, the rows 1-72 and 73-108 written to `dir`.

@@ -210,9 +210,14 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.fit.json {
         writeln!(ctx.out, "{}", report.doc.to_json()?)?;
     } else {
+        let u = if report.fit.residual_weighted {
+            " (weighted, um of the reference noise)"
+        } else {
+            " um"
+        };
         writeln!(
             ctx.out,
-            "{}added {} effect(s): {}; RMS {:.3} -> {:.3} um, cross-validated {:.3} um; unexplained structure: {}",
+            "{}added {} effect(s): {}; RMS {:.3} -> {:.3}{u}, cross-validated {:.3}{u}; unexplained structure: {}",
             if campaign.simulated { "SIMULATED data: " } else { "" },
             r.steps.len(),
             if r.steps.is_empty() { "none".to_string() } else { r.steps.iter().map(|s| s.effect.name()).collect::<Vec<_>>().join(", ") },

@@ -400,6 +400,13 @@ impl RefineReport {
     /// report.md.
     pub fn markdown(&self) -> String {
         let d = &self.doc;
+        // A residual that mixes kinds weighed differently (angles, or lengths of different
+        // noise) has no length unit: its figures are weighted, in um of the reference noise.
+        let u = if self.fit.residual_weighted {
+            " (weighted, um of the reference noise)"
+        } else {
+            " um"
+        };
         let mut s = String::from("# Refinement report\n\n");
         if d.simulated {
             s.push_str("**The measurements are SIMULATED.**\n\n");
@@ -412,7 +419,7 @@ impl RefineReport {
             s.push_str(&format!("- {w}\n"));
         }
         s.push_str(&format!(
-            "\nStarting model: {}. Residual RMS {} um, white: {}.\n\n## Steps\n\n",
+            "\nStarting model: {}. Residual RMS {}{u}, white: {}.\n\n## Steps\n\n",
             self.starting_model,
             sig(d.initial.rms_um, 3),
             yes_no(d.initial.residual_white)
@@ -454,7 +461,7 @@ impl RefineReport {
         }
         for x in &d.rejected_by_cross_validation {
             s.push_str(&format!(
-                "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {} -> {} um (no better).\n",
+                "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {} -> {}{u} (no better).\n",
                 x.effect,
                 sig(x.cv_rms_before_um, 4),
                 sig(x.cv_rms_with_um, 4)
@@ -472,7 +479,7 @@ impl RefineReport {
         }
         for (i, st) in d.steps.iter().enumerate() {
             s.push_str(&format!(
-                "### {}. `{}`\n\n- F-test p-value {}, BIC change {}\n- RMS {} -> {} um; cross-validated {} -> {} um\n\n| parameter | estimate | std |\n|---|---|---|\n",
+                "### {}. `{}`\n\n- F-test p-value {}, BIC change {}\n- RMS {} -> {}{u}; cross-validated {} -> {}{u}\n\n| parameter | estimate | std |\n|---|---|---|\n",
                 i + 1,
                 st.effect,
                 st.p_value.map_or("n.d.".into(), p_value),
@@ -492,7 +499,7 @@ impl RefineReport {
             s.push_str(&format!("The last round added nothing. {m}\n\n"));
         }
         s.push_str(&format!(
-            "## Final\n\n- Effects: {}\n- RMS {} um, cross-validated {} um, residual white: {}\n- Unexplained structure: {}\n- Against plain calibration, on the whole campaign with blocked folds (data each fit did not see): {} um calibrated, {} um refined\n\n",
+            "## Final\n\n- Effects: {}\n- RMS {}{u}, cross-validated {}{u}, residual white: {}\n- Unexplained structure: {}\n- Against plain calibration, on the whole campaign with blocked folds (data each fit did not see): {}{u} calibrated, {}{u} refined\n\n",
             self.final_effects,
             sig(d.final_.rms_um, 3),
             sig(d.final_.cv_rms_um, 3),
