@@ -135,12 +135,16 @@ fn commanded_lengths(
 /// Each tracker file is a session: its frame is fitted afresh with the robot held fixed.
 /// `tracker` is the tracker's noise (position um, orientation urad; 0: cpm-calib's default),
 /// the weights with which each tracker session is registered.
+///
+/// With `residuals`, `residuals.csv` of the files too (one numbering over the files, in the
+/// order given), its rows written as they are made; without, none of its text is made.
 fn errors_of(
     robot: &Robot,
     controller: &Robot,
     paths: &[PathBuf],
     strict: bool,
     tracker: (f64, f64),
+    residuals: bool,
 ) -> anyhow::Result<RobotErrors> {
     let model: MeasurementModel = robot.model(&[]);
     // The machine is held fixed: the readers register the frame, never the link zeros. Not
@@ -177,11 +181,15 @@ fn errors_of(
         }) => Some(crate::calib::refine::PoseRange { min, max }),
         _ => None,
     };
-    let mut residual_rows: Vec<String> = Vec::new();
+    let mut residuals_csv: Vec<u8> = Vec::new();
+    if residuals {
+        residuals_csv.extend_from_slice(crate::report::residuals::RESIDUALS_HEADER.as_bytes());
+    }
+    let mut written = 0;
+    // The group of each sensor, once it has one.
+    let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
     for path in paths {
         let mut file = crate::io::read_data_file(path, robot, &options)?;
-        // Where each observation comes from, as the file was read.
-        let origins = crate::io::merge(vec![file.clone()], robot);
         if file.kind == FileKind::Poses {
             return Err(super::usage_error(format!(
                 "{}: a pose list has no measurements to validate against",
@@ -295,16 +303,14 @@ fn errors_of(
             (s.predicted, Some(s.frame))
         };
         let observed = campaign.observations();
-        let native: Vec<f64> = observed
-            .iter()
-            .zip(&predicted)
-            .map(|(o, p)| (o - p) * 1e3)
-            .collect();
-        let csv = crate::report::residuals::residuals_csv(robot, &origins, &native);
-        residual_rows.extend(csv.lines().skip(1).map(str::to_string));
         for (k, r) in campaign.readings.iter().enumerate() {
-            let name = robot.table.sensors[r.sensor].name.clone();
-            let g = group_of(name, &mut out);
+            let g = match sensor_group[r.sensor] {
+                Some(g) => g,
+                None => {
+                    let name = robot.table.sensors[r.sensor].name.clone();
+                    *sensor_group[r.sensor].insert(group_of(name, &mut out))
+                }
+            };
             out.groups[g]
                 .values_um
                 .push((observed[k] - predicted[k]) * 1e3);
@@ -386,13 +392,25 @@ fn errors_of(
                 }
             }
         }
+        if residuals {
+            let native: Vec<f64> = observed
+                .iter()
+                .zip(&predicted)
+                .map(|(o, p)| (o - p) * 1e3)
+                .collect();
+            // Where each observation comes from, as the file was read.
+            let origins = crate::io::merge(vec![file], robot);
+            crate::report::residuals::write_residual_rows(
+                &mut residuals_csv,
+                robot,
+                &origins,
+                &native,
+                written + 1,
+            )?;
+            written += native.len();
+        }
     }
-    // One numbering over the files, in the order given.
-    out.residuals_csv = String::from("observation,file,line,what,unit,residual\n");
-    for (k, row) in residual_rows.iter().enumerate() {
-        let rest = row.split_once(',').map_or("", |(_, r)| r);
-        out.residuals_csv.push_str(&format!("{},{rest}\n", k + 1));
-    }
+    out.residuals_csv = String::from_utf8(residuals_csv).expect("UTF-8 rows");
     Ok(out)
 }
 
@@ -668,8 +686,15 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         }
     }
     ctx.stage("predicting the held-out measurements");
-    let cal_errors = errors_of(&robot, &reference, &args.data, true, tracker)?;
-    let ref_errors = errors_of(&reference, &reference, &args.data, true, tracker).map_err(|e| {
+    let cal_errors = errors_of(
+        &robot,
+        &reference,
+        &args.data,
+        true,
+        tracker,
+        args.out.is_some(),
+    )?;
+    let ref_errors = errors_of(&reference, &reference, &args.data, true, tracker, false).map_err(|e| {
         e.context(format!(
             "reading the held-out data against the reference {} (its sensors: {})",
             reference.file,
@@ -744,7 +769,7 @@ pub fn file_reproduces_fit(
         ))
     })?;
     let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
-    let e = errors_of(&robot, reference, data, false, tracker)?;
+    let e = errors_of(&robot, reference, data, false, tracker, false)?;
     // The fit's own reference and weights (each kind by its own noise, gauges included).
     let _ = sigma_um;
     let sigma_ref = cal.sigma_ref_um;

@@ -137,32 +137,47 @@ pub fn yes_no(b: bool) -> &'static str {
 pub fn tidy_csv(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for line in text.split_inclusive('\n') {
-        let (body, end) = match line.strip_suffix('\n') {
-            Some(b) => (b, "\n"),
-            None => (line, ""),
-        };
-        if body.starts_with('#') {
-            out.push_str(line);
-            continue;
-        }
-        let fields: Vec<String> = body.split(',').map(tidy_field).collect();
-        out.push_str(&fields.join(","));
-        out.push_str(end);
+        tidy_csv_line_into(line, &mut out);
     }
     out
 }
 
-fn tidy_field(f: &str) -> String {
+/// [`tidy_csv`] of one line (with or without its `\n`), appended to `out`: the way to tidy a
+/// CSV text while it is written, without a copy of it or a string per field.
+pub fn tidy_csv_line_into(line: &str, out: &mut String) {
+    let (body, end) = match line.strip_suffix('\n') {
+        Some(b) => (b, "\n"),
+        None => (line, ""),
+    };
+    if body.starts_with('#') {
+        out.push_str(line);
+        return;
+    }
+    for (i, f) in body.split(',').enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        tidy_field_into(f, out);
+    }
+    out.push_str(end);
+}
+
+/// One field of [`tidy_csv`], appended to `out`.
+fn tidy_field_into(f: &str, out: &mut String) {
+    use std::fmt::Write as _;
     let t = f.trim_end_matches('\r');
     let cr = &f[t.len()..];
     let numeric = !t.is_empty()
         && t.bytes()
             .all(|b| b.is_ascii_digit() || matches!(b, b'-' | b'+' | b'.' | b'e' | b'E'));
     let Some(v) = numeric.then(|| t.parse::<f64>().ok()).flatten() else {
-        return f.to_string();
+        out.push_str(f);
+        return;
     };
     if v == 0.0 && t.starts_with('-') {
-        return format!("{}{cr}", &t[1..]);
+        out.push_str(&t[1..]);
+        out.push_str(cr);
+        return;
     }
     let digits = t
         .split(['e', 'E'])
@@ -174,21 +189,23 @@ fn tidy_field(f: &str) -> String {
         .count();
     if digits > 12 && v.is_finite() {
         let a = v.abs();
-        let s = if (1e-4..1e12).contains(&a) {
+        // Writing into a String cannot fail.
+        if (1e-4..1e12).contains(&a) {
             let e = a.log10().floor() as i64;
             let d = (11 - e).clamp(0, 17) as usize;
-            let s = format!("{v:.d$}");
-            if s.contains('.') {
-                s.trim_end_matches('0').trim_end_matches('.').to_string()
-            } else {
-                s
+            let start = out.len();
+            let _ = write!(out, "{v:.d$}");
+            if out[start..].contains('.') {
+                let kept = out[start..].trim_end_matches('0').trim_end_matches('.').len();
+                out.truncate(start + kept);
             }
         } else {
-            format!("{v:.11e}")
-        };
-        return format!("{s}{cr}");
+            let _ = write!(out, "{v:.11e}");
+        }
+        out.push_str(cr);
+        return;
     }
-    f.to_string()
+    out.push_str(f);
 }
 
 /// The artefacts no user text may contain: a negative zero, a float printed at full

@@ -1,8 +1,18 @@
 //! `residuals.csv` of `cpm calibrate`, `cpm refine` and `cpm validate`: every observation's
 //! residual in its own unit, with the file, line and what was observed.
+//!
+//! The rows are written one after the other into any writer ([`write_residual_rows`]): the
+//! texts of an observation (file, line, what) exist only while its row is written, in
+//! buffers reused from row to row; the residuals stay numbers until then.
+use std::borrow::Cow;
+use std::fmt::Write as _;
+
 use cpm_io::{Merged, Robot};
 
-use crate::fit::observation_origin;
+use crate::fit::write_observation_origin;
+
+/// The header row of `residuals.csv`.
+pub const RESIDUALS_HEADER: &str = "observation,file,line,what,unit,residual\n";
 
 /// `residuals.csv`: every observation's residual (measured minus predicted, in its own unit:
 /// um for lengths, positions and points, urad for orientations and angles) with the file,
@@ -12,8 +22,73 @@ use crate::fit::observation_origin;
 /// axes (the rough registration the reader applied undone): the same whatever registration a
 /// command started from.
 pub fn residuals_csv(robot: &Robot, merged: &Merged, residuals: &[f64]) -> String {
-    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    let mut out = Vec::with_capacity(RESIDUALS_HEADER.len() + 64 * residuals.len());
+    out.extend_from_slice(RESIDUALS_HEADER.as_bytes());
+    write_residual_rows(&mut out, robot, merged, residuals, 1).expect("writing to memory");
+    String::from_utf8(out).expect("UTF-8 rows")
+}
+
+/// The rows of [`residuals_csv`] (no header), numbered from `first`, written to `out` as they
+/// are made (several campaigns' rows follow each other in one file with `first` continuing
+/// the numbering).
+pub fn write_residual_rows<W: std::io::Write>(
+    out: &mut W,
+    robot: &Robot,
+    merged: &Merged,
+    residuals: &[f64],
+    first: usize,
+) -> std::io::Result<()> {
+    let residuals = in_tracker_axes(merged, residuals);
     let c = &merged.campaign;
+    let (mut what, mut row, mut chunk) = (String::new(), String::new(), String::new());
+    // The quoted file name of the previous row (rows of one file follow each other).
+    let (mut file_of_quoted, mut quoted) = (None::<&str>, String::new());
+    for (k, r) in residuals.iter().enumerate() {
+        let origin = write_observation_origin(robot, merged, k, &mut what);
+        let (file, line) = origin.unwrap_or(("", 0));
+        if file_of_quoted != Some(file) {
+            quoted.clear();
+            push_quoted(&mut quoted, file);
+            file_of_quoted = Some(file);
+        }
+        let unit = match c.observation_kind(k) {
+            cpm_calib::ObservationKind::TrackerOrientation(..)
+            | cpm_calib::ObservationKind::Tilt(..) => "urad",
+            _ => "um",
+        };
+        row.clear();
+        // Writing into a String cannot fail.
+        let _ = write!(row, "{},{quoted},{line},", k + first);
+        push_quoted(&mut row, &what);
+        let _ = writeln!(row, ",{unit},{r}");
+        crate::format::tidy_csv_line_into(&row, &mut chunk);
+        if chunk.len() >= 1 << 16 {
+            out.write_all(chunk.as_bytes())?;
+            chunk.clear();
+        }
+    }
+    out.write_all(chunk.as_bytes())
+}
+
+/// `s` as a quoted CSV field (`"` doubled inside), appended to `out`.
+fn push_quoted(out: &mut String, s: &str) {
+    out.push('"');
+    for (i, part) in s.split('"').enumerate() {
+        if i > 0 {
+            out.push_str("\"\"");
+        }
+        out.push_str(part);
+    }
+    out.push('"');
+}
+
+/// The residuals with tracker positions, orientations and point coordinates turned into
+/// the tracker's own axes (borrowed as they are when nothing turns).
+fn in_tracker_axes<'a>(merged: &Merged, residuals: &'a [f64]) -> Cow<'a, [f64]> {
+    let c = &merged.campaign;
+    if c.pose_measurements.is_empty() && c.point_measurements.is_empty() {
+        return Cow::Borrowed(residuals);
+    }
     let mut residuals = residuals.to_vec();
     let mut to_tracker = |rows: &[Option<usize>], file: &str| {
         let Some(r) = merged.tracker_axes(file) else {
@@ -40,22 +115,20 @@ pub fn residuals_csv(robot: &Robot, merged: &Merged, residuals: &[f64]) -> Strin
         let o = p0 + 3 * q;
         to_tracker(&[Some(o), Some(o + 1), Some(o + 2)], file);
     }
-    let mut out = String::from("observation,file,line,what,unit,residual\n");
-    for (k, r) in residuals.iter().enumerate() {
-        let o = observation_origin(robot, merged, k);
-        let unit = match merged.campaign.observation_kind(k) {
-            cpm_calib::ObservationKind::TrackerOrientation(..)
-            | cpm_calib::ObservationKind::Tilt(..) => "urad",
-            _ => "um",
-        };
-        out.push_str(&format!(
-            "{},{},{},{},{unit},{}\n",
-            k + 1,
-            quote(o.as_ref().map_or("", |o| o.file.as_str())),
-            o.as_ref().map_or(0, |o| o.line),
-            quote(o.as_ref().map_or("", |o| o.what.as_str())),
-            r,
-        ));
+    Cow::Owned(residuals)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::push_quoted;
+
+    #[test]
+    fn quotes_are_doubled_inside_a_quoted_field() {
+        let mut s = String::new();
+        push_quoted(&mut s, r#"sensor s1 at pose "3""#);
+        assert_eq!(s, r#""sensor s1 at pose ""3""""#);
+        s.clear();
+        push_quoted(&mut s, "m.csv");
+        assert_eq!(s, "\"m.csv\"");
     }
-    crate::format::tidy_csv(&out)
 }
