@@ -162,8 +162,8 @@ pub fn tidy_csv_line_into(line: &str, out: &mut String) {
     out.push_str(end);
 }
 
-/// One field of [`tidy_csv`], appended to `out`.
-fn tidy_field_into(f: &str, out: &mut String) {
+/// One field of [`tidy_csv`] (a piece of a line between commas), appended to `out`.
+pub(crate) fn tidy_field_into(f: &str, out: &mut String) {
     use std::fmt::Write as _;
     let t = f.trim_end_matches('\r');
     let cr = &f[t.len()..];

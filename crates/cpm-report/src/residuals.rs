@@ -40,34 +40,51 @@ pub fn write_residual_rows<W: std::io::Write>(
 ) -> std::io::Result<()> {
     let residuals = in_tracker_axes(merged, residuals);
     let c = &merged.campaign;
-    let (mut what, mut row, mut chunk) = (String::new(), String::new(), String::new());
-    // The quoted file name of the previous row (rows of one file follow each other).
-    let (mut file_of_quoted, mut quoted) = (None::<&str>, String::new());
+    let (mut what, mut field, mut chunk) = (String::new(), String::new(), String::new());
+    // The file field of the previous row, as written (rows of one file follow each other).
+    let (mut file_of_field, mut file_field) = (None::<&str>, String::new());
     for (k, r) in residuals.iter().enumerate() {
         let origin = write_observation_origin(robot, merged, k, &mut what);
         let (file, line) = origin.unwrap_or(("", 0));
-        if file_of_quoted != Some(file) {
-            quoted.clear();
-            push_quoted(&mut quoted, file);
-            file_of_quoted = Some(file);
+        if file_of_field != Some(file) {
+            file_field.clear();
+            push_tidy_quoted(&mut file_field, file, &mut field);
+            file_of_field = Some(file);
         }
         let unit = match c.observation_kind(k) {
             cpm_calib::ObservationKind::TrackerOrientation(..)
             | cpm_calib::ObservationKind::Tilt(..) => "urad",
             _ => "um",
         };
-        row.clear();
+        // The row as `tidy_csv` would leave it: the numbering, the line and the unit are
+        // left as they are, the residual is rounded to 12 significant digits.
         // Writing into a String cannot fail.
-        let _ = write!(row, "{},{quoted},{line},", k + first);
-        push_quoted(&mut row, &what);
-        let _ = writeln!(row, ",{unit},{r}");
-        crate::format::tidy_csv_line_into(&row, &mut chunk);
+        let _ = write!(chunk, "{},{file_field},{line},", k + first);
+        push_tidy_quoted(&mut chunk, &what, &mut field);
+        let _ = write!(chunk, ",{unit},");
+        field.clear();
+        let _ = write!(field, "{r}");
+        crate::format::tidy_field_into(&field, &mut chunk);
+        chunk.push('\n');
         if chunk.len() >= 1 << 16 {
             out.write_all(chunk.as_bytes())?;
             chunk.clear();
         }
     }
     out.write_all(chunk.as_bytes())
+}
+
+/// `s` as a quoted CSV field, tidied as [`crate::format::tidy_csv`] tidies it in its line
+/// (which splits at every comma, quoted or not), appended to `out`; `work` is scratch.
+fn push_tidy_quoted(out: &mut String, s: &str, work: &mut String) {
+    if s.contains(',') {
+        work.clear();
+        push_quoted(work, s);
+        crate::format::tidy_csv_line_into(work, out);
+    } else {
+        // One piece that starts with a quote: not a number, kept.
+        push_quoted(out, s);
+    }
 }
 
 /// `s` as a quoted CSV field (`"` doubled inside), appended to `out`.
@@ -121,6 +138,22 @@ fn in_tracker_axes<'a>(merged: &Merged, residuals: &'a [f64]) -> Cow<'a, [f64]> 
 #[cfg(test)]
 mod tests {
     use super::push_quoted;
+
+    /// A row written field by field is the row `tidy_csv` makes of the plain row, even when
+    /// a quoted text holds commas and pieces that look like numbers.
+    #[test]
+    fn fields_are_tidied_as_the_whole_line_would_be() {
+        for s in ["m.csv", "a,-0,b", "x,1.0000000000000002,\"q\"", ",", "plain"] {
+            let (mut direct, mut work) = (String::new(), String::new());
+            super::push_tidy_quoted(&mut direct, s, &mut work);
+            let mut quoted = String::new();
+            push_quoted(&mut quoted, s);
+            assert_eq!(direct, crate::format::tidy_csv(&quoted), "{s}");
+        }
+        let mut s = String::new();
+        super::push_tidy_quoted(&mut s, "a,-0,b", &mut String::new());
+        assert_eq!(s, "\"a,0,b\"");
+    }
 
     #[test]
     fn quotes_are_doubled_inside_a_quoted_field() {

@@ -199,18 +199,21 @@ pub fn outliers_by_kind(
             }
         }
     };
-    let mut kinds: Vec<usize> = (0..residuals_um.len()).map(kind).collect();
-    kinds.sort_unstable();
-    kinds.dedup();
+    // The observations of each kind, in one pass (kinds in ascending order).
+    let mut by_kind: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for k in 0..residuals_um.len() {
+        by_kind.entry(kind(k)).or_default().push(k);
+    }
     let pooled = outliers(residuals_um);
     let floor = OUTLIER_FLOOR_SIGMAS
         * sigma_um
             .filter(|s| *s > 0.0)
             .unwrap_or_else(|| robust_spread(residuals_um).1);
     let mut out = Vec::new();
-    for g in kinds {
-        let idx: Vec<usize> = (0..residuals_um.len()).filter(|&k| kind(k) == g).collect();
-        let r: Vec<f64> = idx.iter().map(|&k| residuals_um[k]).collect();
+    let mut r: Vec<f64> = Vec::new();
+    for idx in by_kind.into_values() {
+        r.clear();
+        r.extend(idx.iter().map(|&k| residuals_um[k]));
         let (median, _) = robust_spread(&r);
         let flagged: Vec<usize> = if idx.len() < MIN_KIND_OBSERVATIONS {
             idx.iter()
@@ -230,18 +233,25 @@ pub fn outliers_by_kind(
     out
 }
 
+/// The element `n / 2` of `values` in ascending order (`total_cmp`), found in linear time:
+/// the upper median, what a sort would give at `n / 2`. `values` is reordered.
+fn upper_median(values: &mut [f64]) -> f64 {
+    let n = values.len();
+    *values.select_nth_unstable_by(n / 2, f64::total_cmp).1
+}
+
 /// Median and robust standard deviation (1.4826 x the median absolute deviation).
 fn robust_spread(residuals_um: &[f64]) -> (f64, f64) {
     let n = residuals_um.len();
     if n == 0 {
         return (0.0, 0.0);
     }
-    let mut sorted = residuals_um.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[n / 2];
-    let mut dev: Vec<f64> = residuals_um.iter().map(|r| (r - median).abs()).collect();
-    dev.sort_by(f64::total_cmp);
-    (median, dev[n / 2] * 1.4826)
+    let mut work = residuals_um.to_vec();
+    let median = upper_median(&mut work);
+    for (d, r) in work.iter_mut().zip(residuals_um) {
+        *d = (r - median).abs();
+    }
+    (median, upper_median(&mut work) * 1.4826)
 }
 
 /// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
@@ -283,9 +293,11 @@ pub fn diagnose(
         _ => (None, None),
     };
     // Runs test on signs about the median.
-    let mut sorted = residuals_um.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let median = if n == 0 { 0.0 } else { sorted[n / 2] };
+    let median = if n == 0 {
+        0.0
+    } else {
+        upper_median(&mut residuals_um.to_vec())
+    };
     let signs: Vec<bool> = residuals_um.iter().map(|r| *r > median).collect();
     let n1 = signs.iter().filter(|s| **s).count() as f64;
     let n2 = n as f64 - n1;
