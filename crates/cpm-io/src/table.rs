@@ -658,6 +658,20 @@ mod tests {
         assert_eq!(r[1].fields[1], "4");
     }
 
+    /// Plain lines (split in one pass) and lines with quoted fields (the general splitting)
+    /// give the same trimmed fields, in any order, through one reused row.
+    #[test]
+    fn plain_and_quoted_lines_agree() {
+        let (_, r) =
+            rows(b"a,b,c\n 1 ,\t2\t,\n\"1\", \"2\" ,\"\"\n3,\"x,y\",z\"q\n\t4,5 ,6\n").unwrap();
+        let fields: Vec<&[String]> = r.iter().map(|r| r.fields.as_slice()).collect();
+        assert_eq!(fields[0], ["1", "2", ""]);
+        assert_eq!(fields[1], ["1", "2", ""]);
+        assert_eq!(fields[2], ["3", "x,y", "z\"q"]);
+        assert_eq!(fields[3], ["4", "5", "6"]);
+        assert_eq!(r.iter().map(|r| r.line).collect::<Vec<_>>(), [2, 3, 4, 5]);
+    }
+
     #[test]
     fn located_errors() {
         let e = rows(b"").unwrap_err();

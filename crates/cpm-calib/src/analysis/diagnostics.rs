@@ -471,3 +471,63 @@ pub fn pose_map_scan(
     });
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The linear-time median is the element a sort puts at `n / 2`, ties, signed zeros and
+    /// all; the robust spread follows it.
+    #[test]
+    fn the_upper_median_is_the_sorted_middle() {
+        let mut state = 7u64;
+        for n in [1usize, 2, 3, 10, 101, 1000] {
+            let v: Vec<f64> = (0..n)
+                .map(|_| {
+                    state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    ((state >> 40) % 21) as f64 - 10.0
+                })
+                .chain([-0.0, 0.0])
+                .collect();
+            let mut sorted = v.clone();
+            sorted.sort_by(f64::total_cmp);
+            let m = upper_median(&mut v.clone());
+            assert_eq!(m.to_bits(), sorted[v.len() / 2].to_bits(), "n = {n}");
+            let (median, spread) = robust_spread(&v);
+            let mut dev: Vec<f64> = v.iter().map(|r| (r - median).abs()).collect();
+            dev.sort_by(f64::total_cmp);
+            assert_eq!(spread, dev[v.len() / 2] * 1.4826);
+        }
+    }
+
+    /// Outliers are judged within their kind: a residual ordinary for a noisy sensor is an
+    /// outlier for a quiet one.
+    #[test]
+    fn outliers_are_judged_within_their_kind() {
+        let poses = vec![cpm_geometry::Pose::identity(); 200];
+        let readings = (0..400)
+            .map(|k| crate::Reading {
+                pose: k / 2,
+                sensor: k % 2,
+                length_mm: 0.0,
+                time_s: None,
+                temperature_c: None,
+            })
+            .collect();
+        let c = Campaign {
+            poses,
+            readings,
+            ..Campaign::default()
+        };
+        // Sensor 0 quiet (+-0.1 um), sensor 1 noisy (+-10 um).
+        let mut r: Vec<f64> = (0..400)
+            .map(|k| {
+                let s = if k % 2 == 0 { 0.1 } else { 10.0 };
+                s * (((k * 37) % 11) as f64 - 5.0) / 5.0
+            })
+            .collect();
+        r[10] = 9.0; // sensor 0: 90 of its spreads off
+        r[11] = 9.0; // sensor 1: within its spread
+        assert_eq!(outliers_by_kind(&r, &c, Some(0.1)), vec![10]);
+    }
+}
