@@ -110,11 +110,9 @@ fn stages(c: &mut Criterion) {
     use cpm::calib::fit::formulation::{identify_with, Formulation};
     use cpm::io::{merge, read_data, write_readings, ReadOptions, Robot};
     use cpm::report::fit::{FitInputs, FitReport};
-    let mut robot = Robot::from_description(
-        cpm::geometry::RobotDescription::paper_cubic(),
-        "cube.toml",
-    )
-    .expect("the paper's cube");
+    let mut robot =
+        Robot::from_description(cpm::geometry::RobotDescription::paper_cubic(), "cube.toml")
+            .expect("the paper's cube");
     robot.table.sensors = designed_sensors();
     let (model, data) = campaign(62_500);
     let text = write_readings(&data, &robot, "benchmark");
@@ -162,5 +160,11 @@ fn stages(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, formulations, implicit_solvers, real_session, stages);
+criterion_group!(
+    benches,
+    formulations,
+    implicit_solvers,
+    real_session,
+    stages
+);
 criterion_main!(benches);

@@ -694,13 +694,14 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         tracker,
         args.out.is_some(),
     )?;
-    let ref_errors = errors_of(&reference, &reference, &args.data, true, tracker, false).map_err(|e| {
-        e.context(format!(
-            "reading the held-out data against the reference {} (its sensors: {})",
-            reference.file,
-            sensors(&reference).join(", ")
-        ))
-    })?;
+    let ref_errors =
+        errors_of(&reference, &reference, &args.data, true, tracker, false).map_err(|e| {
+            e.context(format!(
+                "reading the held-out data against the reference {} (its sensors: {})",
+                reference.file,
+                sensors(&reference).join(", ")
+            ))
+        })?;
     let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
     if names != ref_names {
         return Err(super::input_error(format!(

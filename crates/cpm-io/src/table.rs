@@ -189,7 +189,10 @@ impl<R: Read> Table<R> {
         // At most one byte past the longest line: enough to tell that it is too long, without
         // reading all of a file that is not CSV.
         let limit = MAX_LINE_BYTES as u64 + 1;
-        if let Err(e) = (&mut self.reader).take(limit).read_until(b'\n', &mut self.buf) {
+        if let Err(e) = (&mut self.reader)
+            .take(limit)
+            .read_until(b'\n', &mut self.buf)
+        {
             let err = InputError::line(
                 &self.header.file,
                 self.line + 1,

@@ -196,7 +196,10 @@ pub(crate) fn tidy_field_into(f: &str, out: &mut String) {
             let start = out.len();
             let _ = write!(out, "{v:.d$}");
             if out[start..].contains('.') {
-                let kept = out[start..].trim_end_matches('0').trim_end_matches('.').len();
+                let kept = out[start..]
+                    .trim_end_matches('0')
+                    .trim_end_matches('.')
+                    .len();
                 out.truncate(start + kept);
             }
         } else {

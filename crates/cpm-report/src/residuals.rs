@@ -143,7 +143,13 @@ mod tests {
     /// a quoted text holds commas and pieces that look like numbers.
     #[test]
     fn fields_are_tidied_as_the_whole_line_would_be() {
-        for s in ["m.csv", "a,-0,b", "x,1.0000000000000002,\"q\"", ",", "plain"] {
+        for s in [
+            "m.csv",
+            "a,-0,b",
+            "x,1.0000000000000002,\"q\"",
+            ",",
+            "plain",
+        ] {
             let (mut direct, mut work) = (String::new(), String::new());
             super::push_tidy_quoted(&mut direct, s, &mut work);
             let mut quoted = String::new();

@@ -484,7 +484,9 @@ mod tests {
         for n in [1usize, 2, 3, 10, 101, 1000] {
             let v: Vec<f64> = (0..n)
                 .map(|_| {
-                    state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
                     ((state >> 40) % 21) as f64 - 10.0
                 })
                 .chain([-0.0, 0.0])
