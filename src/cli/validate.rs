@@ -654,13 +654,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let robot = common::load_robot(robot, ctx)?;
     let reference_path = reference_path(args, &robot, ctx)?;
     let reference = common::load_robot(&reference_path, ctx)?;
-    let sensors = |r: &Robot| {
-        r.table
-            .sensors
-            .iter()
-            .map(|s| s.name.clone())
-            .collect::<Vec<_>>()
-    };
+    let sensors = sensor_names;
     if robot.num_links() != reference.num_links() {
         return Err(super::input_error(format!(
             "{} has {} links, the reference {} has {}",
@@ -741,6 +735,64 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     Ok(Outcome::Done)
 }
 
+/// The names of a robot's sensors, in its order.
+fn sensor_names(r: &Robot) -> Vec<String> {
+    r.table.sensors.iter().map(|s| s.name.clone()).collect()
+}
+
+/// [`errors_of`] the fit's own data for the read-back check, predicted from the campaign in
+/// memory instead of the files read again, when nothing of the campaign depends on the robot
+/// that reads it: gauge readings alone (no sessions to register), without logged link
+/// readings (the commanded lengths are the controller's, made here as [`errors_of`] makes
+/// them). `None` otherwise (the files are read again).
+fn readings_in_memory(
+    robot: &Robot,
+    controller: &Robot,
+    campaign: &Campaign,
+) -> anyhow::Result<Option<RobotErrors>> {
+    let readings_alone = campaign.pose_measurements.is_empty()
+        && campaign.point_measurements.is_empty()
+        && campaign.tilt_measurements.is_empty()
+        && campaign.instrument_measurements.is_empty();
+    // The readings name their sensors by index: the same sensors in the same order, else
+    // the files are read again (by name), as before.
+    if !readings_alone
+        || campaign.commanded_lengths_mm.is_some()
+        || sensor_names(robot) != sensor_names(controller)
+    {
+        return Ok(None);
+    }
+    let model: MeasurementModel = robot.model(&[]);
+    let mut c = Campaign {
+        poses: campaign.poses.clone(),
+        readings: campaign.readings.clone(),
+        session_starts: campaign.session_starts.clone(),
+        simulated: campaign.simulated,
+        ..Campaign::default()
+    };
+    c.commanded_lengths_mm = Some(commanded_lengths(robot, controller, &c.poses));
+    let fail = |e: crate::calib::CalibError| {
+        super::trouble(format!("predicting with {}: {e}", robot.file))
+    };
+    let prepared = Prepared::new(&model, &c).map_err(fail)?;
+    let predicted =
+        predict(&model, &prepared, &c, &vec![0.0; model.num_params()], None).map_err(fail)?;
+    let observed = c.observations();
+    let mut out = RobotErrors::default();
+    let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
+    for (k, r) in c.readings.iter().enumerate() {
+        let g = *sensor_group[r.sensor].get_or_insert_with(|| {
+            out.names.push(robot.table.sensors[r.sensor].name.clone());
+            out.groups.push(Errors::default());
+            out.names.len() - 1
+        });
+        out.groups[g]
+            .values_um
+            .push((observed[k] - predicted[k]) * 1e3);
+    }
+    Ok(Some(out))
+}
+
 /// The check every fitting command makes before it writes: the calibrated description it
 /// staged (`text`), read back and predicted on the fit's own data files as `cpm validate`
 /// predicts them (tracker sessions re-registered), gives the fit's residual RMS.
@@ -770,7 +822,10 @@ pub fn file_reproduces_fit(
         ))
     })?;
     let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
-    let e = errors_of(&robot, reference, data, false, tracker, false)?;
+    let e = match readings_in_memory(&robot, reference, campaign)? {
+        Some(e) => e,
+        None => errors_of(&robot, reference, data, false, tracker, false)?,
+    };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
     let _ = sigma_um;
     let sigma_ref = cal.sigma_ref_um;
@@ -803,4 +858,48 @@ pub fn file_reproduces_fit(
         n += g.values_um.len() + g.orientation_urad.len();
     }
     Ok(Some((cal.residual_rms_um, (sum / n.max(1) as f64).sqrt())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The read-back check predicts the fit's gauge readings from the campaign in memory as
+    /// reading the files again does (the same errors, number for number), and a description
+    /// with a joint moved by 2 mm predicts them worse: the check still sees it.
+    #[test]
+    fn the_read_back_in_memory_is_the_read_back_of_the_files() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let path = root.join("examples/hexapod_66_readings.csv");
+        let text = std::fs::read_to_string(root.join("examples/hexapod_66.toml")).unwrap();
+        let reference = Robot::from_toml(&text, "hexapod_66.toml").unwrap();
+        let file = crate::io::read_data_file(&path, &reference, &ReadOptions::default()).unwrap();
+        let campaign = crate::io::merge(vec![file], &reference).campaign;
+        let joint = "base_mm = [193.185165258, -51.763809021, 0.0]";
+        assert!(text.contains(joint));
+        let moved = text.replacen(joint, "base_mm = [195.185165258, -51.763809021, 0.0]", 1);
+        let mut rms = Vec::new();
+        for t in [&text, &moved] {
+            let robot = Robot::from_toml(t, "calibrated.toml").unwrap();
+            let memory = readings_in_memory(&robot, &reference, &campaign)
+                .unwrap()
+                .expect("gauge readings alone are predicted in memory");
+            let files = errors_of(
+                &robot,
+                &reference,
+                std::slice::from_ref(&path),
+                false,
+                (campaign.pose_sigma(), campaign.orientation_sigma()),
+                false,
+            )
+            .unwrap();
+            assert_eq!(memory.names, files.names);
+            let values = |e: &RobotErrors| -> Vec<f64> {
+                e.groups.iter().flat_map(|g| g.values_um.clone()).collect()
+            };
+            assert_eq!(values(&memory), values(&files));
+            rms.push(crate::report::validate::rms(&values(&memory)));
+        }
+        assert!(rms[1] > rms[0] + 1.0, "{rms:?}");
+    }
 }
