@@ -62,9 +62,7 @@ pub fn write_residual_rows<W: std::io::Write>(
         let _ = write!(chunk, "{},{file_field},{line},", k + first);
         push_tidy_quoted(&mut chunk, &what, &mut field);
         let _ = write!(chunk, ",{unit},");
-        field.clear();
-        let _ = write!(field, "{r}");
-        crate::format::tidy_field_into(&field, &mut chunk);
+        crate::format::push_tidy_number(&mut chunk, *r);
         chunk.push('\n');
         if chunk.len() >= 1 << 16 {
             out.write_all(chunk.as_bytes())?;
@@ -143,6 +141,19 @@ mod tests {
     /// a quoted text holds commas and pieces that look like numbers.
     #[test]
     fn fields_are_tidied_as_the_whole_line_would_be() {
+        for v in [
+            0.1 + 0.2,
+            -0.0,
+            0.0,
+            331.739672003852,
+            1e-7 / 3.0,
+            -2.5e13 / 3.0,
+            f64::NAN,
+        ] {
+            let mut direct = String::new();
+            crate::format::push_tidy_number(&mut direct, v);
+            assert_eq!(direct, crate::format::tidy_csv(&format!("{v}")), "{v}");
+        }
         for s in [
             "m.csv",
             "a,-0,b",
