@@ -2,6 +2,10 @@
 //! paper's cube with 16 socket pairs: nested (forward kinematics in every residual, dense QR)
 //! against implicit-loop (pose unknowns, Schur complement). `cargo xtask scale --sweep` runs
 //! the same comparison up to 10^5 poses with peak memory.
+//!
+//! `stages`: `cpm calibrate`'s work on 10^6 readings (62,500 poses x 16 sensors) stage by
+//! stage, so that a regression shows in one place: reading the file, the fit, the statistics
+//! of its residuals, writing residuals.csv, building and rendering the report.
 use std::hint::black_box;
 
 use cpm::calib::implicit::{identify_implicit, ImplicitOptions};
@@ -99,5 +103,68 @@ fn real_session(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, formulations, implicit_solvers, real_session);
+/// `cpm calibrate` on 10^6 readings, stage by stage (each stage on the previous one's
+/// output, made once outside the timing).
+fn stages(c: &mut Criterion) {
+    use cpm::calib::diagnostics::{diagnose, outliers_by_kind};
+    use cpm::calib::fit::formulation::{identify_with, Formulation};
+    use cpm::io::{merge, read_data, write_readings, ReadOptions, Robot};
+    use cpm::report::fit::{FitInputs, FitReport};
+    let mut robot =
+        Robot::from_description(cpm::geometry::RobotDescription::paper_cubic(), "cube.toml")
+            .expect("the paper's cube");
+    robot.table.sensors = designed_sensors();
+    let (model, data) = campaign(62_500);
+    let text = write_readings(&data, &robot, "benchmark");
+    let read = || read_data(&text, "readings.csv", &robot, &ReadOptions::default());
+    let merged = merge(vec![read().expect("read")], &robot);
+    let options = IdentifyOptions::default();
+    let fit = || identify_with(Formulation::Implicit, &model, &merged.campaign, &options);
+    let cal = fit().expect("fit");
+    let mut group = c.benchmark_group("stages");
+    group.sample_size(10);
+    group.bench_function("read", |b| b.iter(|| read().expect("read")));
+    group.bench_function("fit", |b| b.iter(|| fit().expect("fit")));
+    let r = &cal.residuals_um;
+    group.bench_function("statistics", |b| {
+        b.iter(|| {
+            let outliers = outliers_by_kind(black_box(r), &merged.campaign, Some(1.0));
+            let d = diagnose(black_box(r), r.len() - 36, Some(1.0), &[], 0.01);
+            let noise = cpm::calib::noise::by_kind(&model, &merged.campaign, &cal);
+            (outliers, d, noise)
+        })
+    });
+    let w = merged.campaign.observation_weights(cal.sigma_ref_um);
+    let native: Vec<f64> = r.iter().zip(&w).map(|(r, w)| -r / w).collect();
+    group.bench_function("residuals_csv", |b| {
+        b.iter(|| cpm::report::residuals::residuals_csv(&robot, &merged, black_box(&native)))
+    });
+    let provenance = cpm::io::Provenance {
+        robot: "cube.toml".into(),
+        data: vec!["readings.csv".into()],
+    };
+    let inputs = FitInputs {
+        robot: &robot,
+        merged: &merged,
+        provenance: &provenance,
+        loss: &options.lm.loss,
+    };
+    group.bench_function("report", |b| {
+        b.iter(|| {
+            let report = FitReport::new(&inputs, &model, black_box(&cal), None);
+            let mut markdown = String::new();
+            report.markdown_sections(&mut markdown);
+            (report.to_json().expect("json"), markdown)
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    formulations,
+    implicit_solvers,
+    real_session,
+    stages
+);
 criterion_main!(benches);

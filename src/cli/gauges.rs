@@ -84,8 +84,7 @@ pub fn check_readings(robot: &Robot, merged: &Merged) -> Result<(), InputError> 
         let (file, line) = merged
             .reading_origin
             .get(k)
-            .cloned()
-            .unwrap_or_else(|| ("<data>".into(), 0));
+            .map_or(("<data>", 0), |(f, l)| (&**f, *l));
         let l = r.length_mm;
         let (lo, hi) = w.window_mm;
         if !(l >= lo - WINDOW_TOLERANCE_MM && l <= hi + WINDOW_TOLERANCE_MM) {

@@ -135,12 +135,16 @@ fn commanded_lengths(
 /// Each tracker file is a session: its frame is fitted afresh with the robot held fixed.
 /// `tracker` is the tracker's noise (position um, orientation urad; 0: cpm-calib's default),
 /// the weights with which each tracker session is registered.
+///
+/// With `residuals`, `residuals.csv` of the files too (one numbering over the files, in the
+/// order given), its rows written as they are made; without, none of its text is made.
 fn errors_of(
     robot: &Robot,
     controller: &Robot,
     paths: &[PathBuf],
     strict: bool,
     tracker: (f64, f64),
+    residuals: bool,
 ) -> anyhow::Result<RobotErrors> {
     let model: MeasurementModel = robot.model(&[]);
     // The machine is held fixed: the readers register the frame, never the link zeros. Not
@@ -177,11 +181,15 @@ fn errors_of(
         }) => Some(crate::calib::refine::PoseRange { min, max }),
         _ => None,
     };
-    let mut residual_rows: Vec<String> = Vec::new();
+    let mut residuals_csv: Vec<u8> = Vec::new();
+    if residuals {
+        residuals_csv.extend_from_slice(crate::report::residuals::RESIDUALS_HEADER.as_bytes());
+    }
+    let mut written = 0;
+    // The group of each sensor, once it has one.
+    let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
     for path in paths {
         let mut file = crate::io::read_data_file(path, robot, &options)?;
-        // Where each observation comes from, as the file was read.
-        let origins = crate::io::merge(vec![file.clone()], robot);
         if file.kind == FileKind::Poses {
             return Err(super::usage_error(format!(
                 "{}: a pose list has no measurements to validate against",
@@ -295,16 +303,14 @@ fn errors_of(
             (s.predicted, Some(s.frame))
         };
         let observed = campaign.observations();
-        let native: Vec<f64> = observed
-            .iter()
-            .zip(&predicted)
-            .map(|(o, p)| (o - p) * 1e3)
-            .collect();
-        let csv = crate::report::residuals::residuals_csv(robot, &origins, &native);
-        residual_rows.extend(csv.lines().skip(1).map(str::to_string));
         for (k, r) in campaign.readings.iter().enumerate() {
-            let name = robot.table.sensors[r.sensor].name.clone();
-            let g = group_of(name, &mut out);
+            let g = match sensor_group[r.sensor] {
+                Some(g) => g,
+                None => {
+                    let name = robot.table.sensors[r.sensor].name.clone();
+                    *sensor_group[r.sensor].insert(group_of(name, &mut out))
+                }
+            };
             out.groups[g]
                 .values_um
                 .push((observed[k] - predicted[k]) * 1e3);
@@ -386,13 +392,25 @@ fn errors_of(
                 }
             }
         }
+        if residuals {
+            let native: Vec<f64> = observed
+                .iter()
+                .zip(&predicted)
+                .map(|(o, p)| (o - p) * 1e3)
+                .collect();
+            // Where each observation comes from, as the file was read.
+            let origins = crate::io::merge(vec![file], robot);
+            crate::report::residuals::write_residual_rows(
+                &mut residuals_csv,
+                robot,
+                &origins,
+                &native,
+                written + 1,
+            )?;
+            written += native.len();
+        }
     }
-    // One numbering over the files, in the order given.
-    out.residuals_csv = String::from("observation,file,line,what,unit,residual\n");
-    for (k, row) in residual_rows.iter().enumerate() {
-        let rest = row.split_once(',').map_or("", |(_, r)| r);
-        out.residuals_csv.push_str(&format!("{},{rest}\n", k + 1));
-    }
+    out.residuals_csv = String::from_utf8(residuals_csv).expect("UTF-8 rows");
     Ok(out)
 }
 
@@ -636,13 +654,7 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let robot = common::load_robot(robot, ctx)?;
     let reference_path = reference_path(args, &robot, ctx)?;
     let reference = common::load_robot(&reference_path, ctx)?;
-    let sensors = |r: &Robot| {
-        r.table
-            .sensors
-            .iter()
-            .map(|s| s.name.clone())
-            .collect::<Vec<_>>()
-    };
+    let sensors = sensor_names;
     if robot.num_links() != reference.num_links() {
         return Err(super::input_error(format!(
             "{} has {} links, the reference {} has {}",
@@ -668,14 +680,22 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         }
     }
     ctx.stage("predicting the held-out measurements");
-    let cal_errors = errors_of(&robot, &reference, &args.data, true, tracker)?;
-    let ref_errors = errors_of(&reference, &reference, &args.data, true, tracker).map_err(|e| {
-        e.context(format!(
-            "reading the held-out data against the reference {} (its sensors: {})",
-            reference.file,
-            sensors(&reference).join(", ")
-        ))
-    })?;
+    let cal_errors = errors_of(
+        &robot,
+        &reference,
+        &args.data,
+        true,
+        tracker,
+        args.out.is_some(),
+    )?;
+    let ref_errors =
+        errors_of(&reference, &reference, &args.data, true, tracker, false).map_err(|e| {
+            e.context(format!(
+                "reading the held-out data against the reference {} (its sensors: {})",
+                reference.file,
+                sensors(&reference).join(", ")
+            ))
+        })?;
     let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
     if names != ref_names {
         return Err(super::input_error(format!(
@@ -715,6 +735,64 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     Ok(Outcome::Done)
 }
 
+/// The names of a robot's sensors, in its order.
+fn sensor_names(r: &Robot) -> Vec<String> {
+    r.table.sensors.iter().map(|s| s.name.clone()).collect()
+}
+
+/// [`errors_of`] the fit's own data for the read-back check, predicted from the campaign in
+/// memory instead of the files read again, when nothing of the campaign depends on the robot
+/// that reads it: gauge readings alone (no sessions to register), without logged link
+/// readings (the commanded lengths are the controller's, made here as [`errors_of`] makes
+/// them). `None` otherwise (the files are read again).
+fn readings_in_memory(
+    robot: &Robot,
+    controller: &Robot,
+    campaign: &Campaign,
+) -> anyhow::Result<Option<RobotErrors>> {
+    let readings_alone = campaign.pose_measurements.is_empty()
+        && campaign.point_measurements.is_empty()
+        && campaign.tilt_measurements.is_empty()
+        && campaign.instrument_measurements.is_empty();
+    // The readings name their sensors by index: the same sensors in the same order, else
+    // the files are read again (by name), as before.
+    if !readings_alone
+        || campaign.commanded_lengths_mm.is_some()
+        || sensor_names(robot) != sensor_names(controller)
+    {
+        return Ok(None);
+    }
+    let model: MeasurementModel = robot.model(&[]);
+    let mut c = Campaign {
+        poses: campaign.poses.clone(),
+        readings: campaign.readings.clone(),
+        session_starts: campaign.session_starts.clone(),
+        simulated: campaign.simulated,
+        ..Campaign::default()
+    };
+    c.commanded_lengths_mm = Some(commanded_lengths(robot, controller, &c.poses));
+    let fail = |e: crate::calib::CalibError| {
+        super::trouble(format!("predicting with {}: {e}", robot.file))
+    };
+    let prepared = Prepared::new(&model, &c).map_err(fail)?;
+    let predicted =
+        predict(&model, &prepared, &c, &vec![0.0; model.num_params()], None).map_err(fail)?;
+    let observed = c.observations();
+    let mut out = RobotErrors::default();
+    let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
+    for (k, r) in c.readings.iter().enumerate() {
+        let g = *sensor_group[r.sensor].get_or_insert_with(|| {
+            out.names.push(robot.table.sensors[r.sensor].name.clone());
+            out.groups.push(Errors::default());
+            out.names.len() - 1
+        });
+        out.groups[g]
+            .values_um
+            .push((observed[k] - predicted[k]) * 1e3);
+    }
+    Ok(Some(out))
+}
+
 /// The check every fitting command makes before it writes: the calibrated description it
 /// staged (`text`), read back and predicted on the fit's own data files as `cpm validate`
 /// predicts them (tracker sessions re-registered), gives the fit's residual RMS.
@@ -744,7 +822,10 @@ pub fn file_reproduces_fit(
         ))
     })?;
     let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
-    let e = errors_of(&robot, reference, data, false, tracker)?;
+    let e = match readings_in_memory(&robot, reference, campaign)? {
+        Some(e) => e,
+        None => errors_of(&robot, reference, data, false, tracker, false)?,
+    };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
     let _ = sigma_um;
     let sigma_ref = cal.sigma_ref_um;
@@ -777,4 +858,48 @@ pub fn file_reproduces_fit(
         n += g.values_um.len() + g.orientation_urad.len();
     }
     Ok(Some((cal.residual_rms_um, (sum / n.max(1) as f64).sqrt())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The read-back check predicts the fit's gauge readings from the campaign in memory as
+    /// reading the files again does (the same errors, number for number), and a description
+    /// with a joint moved by 2 mm predicts them worse: the check still sees it.
+    #[test]
+    fn the_read_back_in_memory_is_the_read_back_of_the_files() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let path = root.join("examples/hexapod_66_readings.csv");
+        let text = std::fs::read_to_string(root.join("examples/hexapod_66.toml")).unwrap();
+        let reference = Robot::from_toml(&text, "hexapod_66.toml").unwrap();
+        let file = crate::io::read_data_file(&path, &reference, &ReadOptions::default()).unwrap();
+        let campaign = crate::io::merge(vec![file], &reference).campaign;
+        let joint = "base_mm = [193.185165258, -51.763809021, 0.0]";
+        assert!(text.contains(joint));
+        let moved = text.replacen(joint, "base_mm = [195.185165258, -51.763809021, 0.0]", 1);
+        let mut rms = Vec::new();
+        for t in [&text, &moved] {
+            let robot = Robot::from_toml(t, "calibrated.toml").unwrap();
+            let memory = readings_in_memory(&robot, &reference, &campaign)
+                .unwrap()
+                .expect("gauge readings alone are predicted in memory");
+            let files = errors_of(
+                &robot,
+                &reference,
+                std::slice::from_ref(&path),
+                false,
+                (campaign.pose_sigma(), campaign.orientation_sigma()),
+                false,
+            )
+            .unwrap();
+            assert_eq!(memory.names, files.names);
+            let values = |e: &RobotErrors| -> Vec<f64> {
+                e.groups.iter().flat_map(|g| g.values_um.clone()).collect()
+            };
+            assert_eq!(values(&memory), values(&files));
+            rms.push(crate::report::validate::rms(&values(&memory)));
+        }
+        assert!(rms[1] > rms[0] + 1.0, "{rms:?}");
+    }
 }

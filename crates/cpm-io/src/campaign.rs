@@ -1499,8 +1499,9 @@ pub struct Merged {
     pub campaign: Campaign,
     /// Per campaign pose: (file, first line, label).
     pub pose_origin: Vec<(String, usize, String)>,
-    /// Per reading: (file, line).
-    pub reading_origin: Vec<(String, usize)>,
+    /// Per reading: (file, line); the file's name is shared by its readings (no string of
+    /// its own per reading).
+    pub reading_origin: Vec<(std::sync::Arc<str>, usize)>,
     /// Per point measurement: (file, line).
     pub point_origin: Vec<(String, usize)>,
     /// Per tilt measurement: (file, line).
@@ -1631,7 +1632,8 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
         for (line, label) in f.pose_lines.iter().zip(&f.pose_labels) {
             pose_origin.push((f.file.clone(), *line, label.clone()));
         }
-        reading_origin.extend(f.reading_lines.iter().map(|l| (f.file.clone(), *l)));
+        let file: std::sync::Arc<str> = f.file.as_str().into();
+        reading_origin.extend(f.reading_lines.iter().map(|l| (file.clone(), *l)));
     }
     if any_commanded {
         out.commanded_lengths_mm = Some(commanded);

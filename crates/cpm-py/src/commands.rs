@@ -98,7 +98,11 @@ fn rename(inputs: &mut cal_cli::Inputs, names: &HashMap<String, String>) {
     inputs.provenance.data.iter_mut().for_each(name);
     let m = &mut inputs.merged;
     m.pose_origin.iter_mut().for_each(|o| name(&mut o.0));
-    m.reading_origin.iter_mut().for_each(|o| name(&mut o.0));
+    for o in m.reading_origin.iter_mut() {
+        if let Some(n) = names.get(&*o.0) {
+            o.0 = n.as_str().into();
+        }
+    }
     if let Some(r) = m.registration.as_mut() {
         r.sessions.iter_mut().for_each(|s| name(&mut s.file));
     }

@@ -137,58 +137,106 @@ pub fn yes_no(b: bool) -> &'static str {
 pub fn tidy_csv(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for line in text.split_inclusive('\n') {
-        let (body, end) = match line.strip_suffix('\n') {
-            Some(b) => (b, "\n"),
-            None => (line, ""),
-        };
-        if body.starts_with('#') {
-            out.push_str(line);
-            continue;
-        }
-        let fields: Vec<String> = body.split(',').map(tidy_field).collect();
-        out.push_str(&fields.join(","));
-        out.push_str(end);
+        tidy_csv_line_into(line, &mut out);
     }
     out
 }
 
-fn tidy_field(f: &str) -> String {
+/// [`tidy_csv`] of one line (with or without its `\n`), appended to `out`: the way to tidy a
+/// CSV text while it is written, without a copy of it or a string per field.
+pub fn tidy_csv_line_into(line: &str, out: &mut String) {
+    let (body, end) = match line.strip_suffix('\n') {
+        Some(b) => (b, "\n"),
+        None => (line, ""),
+    };
+    if body.starts_with('#') {
+        out.push_str(line);
+        return;
+    }
+    for (i, f) in body.split(',').enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        tidy_field_into(f, out);
+    }
+    out.push_str(end);
+}
+
+/// One field of [`tidy_csv`] (a piece of a line between commas), appended to `out`.
+fn tidy_field_into(f: &str, out: &mut String) {
     let t = f.trim_end_matches('\r');
     let cr = &f[t.len()..];
     let numeric = !t.is_empty()
         && t.bytes()
             .all(|b| b.is_ascii_digit() || matches!(b, b'-' | b'+' | b'.' | b'e' | b'E'));
     let Some(v) = numeric.then(|| t.parse::<f64>().ok()).flatten() else {
-        return f.to_string();
+        out.push_str(f);
+        return;
     };
     if v == 0.0 && t.starts_with('-') {
-        return format!("{}{cr}", &t[1..]);
+        out.push_str(&t[1..]);
+        out.push_str(cr);
+        return;
     }
-    let digits = t
-        .split(['e', 'E'])
+    if significant_digits(t) > 12 && v.is_finite() {
+        push_twelve_digits(out, v);
+        out.push_str(cr);
+        return;
+    }
+    out.push_str(f);
+}
+
+/// The significant digits of a number as written (its mantissa without leading zeros).
+fn significant_digits(t: &str) -> usize {
+    t.split(['e', 'E'])
         .next()
         .unwrap_or("")
         .trim_start_matches(['-', '+', '0', '.'])
         .bytes()
         .filter(u8::is_ascii_digit)
-        .count();
-    if digits > 12 && v.is_finite() {
-        let a = v.abs();
-        let s = if (1e-4..1e12).contains(&a) {
-            let e = a.log10().floor() as i64;
-            let d = (11 - e).clamp(0, 17) as usize;
-            let s = format!("{v:.d$}");
-            if s.contains('.') {
-                s.trim_end_matches('0').trim_end_matches('.').to_string()
-            } else {
-                s
-            }
-        } else {
-            format!("{v:.11e}")
-        };
-        return format!("{s}{cr}");
+        .count()
+}
+
+/// A finite `v` rounded to 12 significant digits, as [`tidy_csv`] writes it, appended.
+fn push_twelve_digits(out: &mut String, v: f64) {
+    use std::fmt::Write as _;
+    let a = v.abs();
+    // Writing into a String cannot fail.
+    if (1e-4..1e12).contains(&a) {
+        let e = a.log10().floor() as i64;
+        let d = (11 - e).clamp(0, 17) as usize;
+        let start = out.len();
+        let _ = write!(out, "{v:.d$}");
+        if out[start..].contains('.') {
+            let kept = out[start..]
+                .trim_end_matches('0')
+                .trim_end_matches('.')
+                .len();
+            out.truncate(start + kept);
+        }
+    } else {
+        let _ = write!(out, "{v:.11e}");
     }
-    f.to_string()
+}
+
+/// The field `{v}` as [`tidy_csv`] leaves it (negative zero unsigned, more than 12
+/// significant digits rounded), appended to `out`, without reading the number back.
+pub(crate) fn push_tidy_number(out: &mut String, v: f64) {
+    use std::fmt::Write as _;
+    let start = out.len();
+    // Writing into a String cannot fail; a finite f64 is written in digits, `-` and `.`.
+    let _ = write!(out, "{v}");
+    if !v.is_finite() {
+        return;
+    }
+    if v == 0.0 {
+        if out[start..].starts_with('-') {
+            out.remove(start);
+        }
+    } else if significant_digits(&out[start..]) > 12 {
+        out.truncate(start);
+        push_twelve_digits(out, v);
+    }
 }
 
 /// The artefacts no user text may contain: a negative zero, a float printed at full

@@ -1,8 +1,18 @@
 //! `residuals.csv` of `cpm calibrate`, `cpm refine` and `cpm validate`: every observation's
 //! residual in its own unit, with the file, line and what was observed.
+//!
+//! The rows are written one after the other into any writer ([`write_residual_rows`]): the
+//! texts of an observation (file, line, what) exist only while its row is written, in
+//! buffers reused from row to row; the residuals stay numbers until then.
+use std::borrow::Cow;
+use std::fmt::Write as _;
+
 use cpm_io::{Merged, Robot};
 
-use crate::fit::observation_origin;
+use crate::fit::write_observation_origin;
+
+/// The header row of `residuals.csv`.
+pub const RESIDUALS_HEADER: &str = "observation,file,line,what,unit,residual\n";
 
 /// `residuals.csv`: every observation's residual (measured minus predicted, in its own unit:
 /// um for lengths, positions and points, urad for orientations and angles) with the file,
@@ -12,8 +22,88 @@ use crate::fit::observation_origin;
 /// axes (the rough registration the reader applied undone): the same whatever registration a
 /// command started from.
 pub fn residuals_csv(robot: &Robot, merged: &Merged, residuals: &[f64]) -> String {
-    let quote = |s: &str| format!("\"{}\"", s.replace('"', "\"\""));
+    let mut out = Vec::with_capacity(RESIDUALS_HEADER.len() + 64 * residuals.len());
+    out.extend_from_slice(RESIDUALS_HEADER.as_bytes());
+    write_residual_rows(&mut out, robot, merged, residuals, 1).expect("writing to memory");
+    String::from_utf8(out).expect("UTF-8 rows")
+}
+
+/// The rows of [`residuals_csv`] (no header), numbered from `first`, written to `out` as they
+/// are made (several campaigns' rows follow each other in one file with `first` continuing
+/// the numbering).
+pub fn write_residual_rows<W: std::io::Write>(
+    out: &mut W,
+    robot: &Robot,
+    merged: &Merged,
+    residuals: &[f64],
+    first: usize,
+) -> std::io::Result<()> {
+    let residuals = in_tracker_axes(merged, residuals);
     let c = &merged.campaign;
+    let (mut what, mut field, mut chunk) = (String::new(), String::new(), String::new());
+    // The file field of the previous row, as written (rows of one file follow each other).
+    let (mut file_of_field, mut file_field) = (None::<&str>, String::new());
+    for (k, r) in residuals.iter().enumerate() {
+        let origin = write_observation_origin(robot, merged, k, &mut what);
+        let (file, line) = origin.unwrap_or(("", 0));
+        if file_of_field != Some(file) {
+            file_field.clear();
+            push_tidy_quoted(&mut file_field, file, &mut field);
+            file_of_field = Some(file);
+        }
+        let unit = match c.observation_kind(k) {
+            cpm_calib::ObservationKind::TrackerOrientation(..)
+            | cpm_calib::ObservationKind::Tilt(..) => "urad",
+            _ => "um",
+        };
+        // The row as `tidy_csv` would leave it: the numbering, the line and the unit are
+        // left as they are, the residual is rounded to 12 significant digits.
+        // Writing into a String cannot fail.
+        let _ = write!(chunk, "{},{file_field},{line},", k + first);
+        push_tidy_quoted(&mut chunk, &what, &mut field);
+        let _ = write!(chunk, ",{unit},");
+        crate::format::push_tidy_number(&mut chunk, *r);
+        chunk.push('\n');
+        if chunk.len() >= 1 << 16 {
+            out.write_all(chunk.as_bytes())?;
+            chunk.clear();
+        }
+    }
+    out.write_all(chunk.as_bytes())
+}
+
+/// `s` as a quoted CSV field, tidied as [`crate::format::tidy_csv`] tidies it in its line
+/// (which splits at every comma, quoted or not), appended to `out`; `work` is scratch.
+fn push_tidy_quoted(out: &mut String, s: &str, work: &mut String) {
+    if s.contains(',') {
+        work.clear();
+        push_quoted(work, s);
+        crate::format::tidy_csv_line_into(work, out);
+    } else {
+        // One piece that starts with a quote: not a number, kept.
+        push_quoted(out, s);
+    }
+}
+
+/// `s` as a quoted CSV field (`"` doubled inside), appended to `out`.
+fn push_quoted(out: &mut String, s: &str) {
+    out.push('"');
+    for (i, part) in s.split('"').enumerate() {
+        if i > 0 {
+            out.push_str("\"\"");
+        }
+        out.push_str(part);
+    }
+    out.push('"');
+}
+
+/// The residuals with tracker positions, orientations and point coordinates turned into
+/// the tracker's own axes (borrowed as they are when nothing turns).
+fn in_tracker_axes<'a>(merged: &Merged, residuals: &'a [f64]) -> Cow<'a, [f64]> {
+    let c = &merged.campaign;
+    if c.pose_measurements.is_empty() && c.point_measurements.is_empty() {
+        return Cow::Borrowed(residuals);
+    }
     let mut residuals = residuals.to_vec();
     let mut to_tracker = |rows: &[Option<usize>], file: &str| {
         let Some(r) = merged.tracker_axes(file) else {
@@ -40,22 +130,55 @@ pub fn residuals_csv(robot: &Robot, merged: &Merged, residuals: &[f64]) -> Strin
         let o = p0 + 3 * q;
         to_tracker(&[Some(o), Some(o + 1), Some(o + 2)], file);
     }
-    let mut out = String::from("observation,file,line,what,unit,residual\n");
-    for (k, r) in residuals.iter().enumerate() {
-        let o = observation_origin(robot, merged, k);
-        let unit = match merged.campaign.observation_kind(k) {
-            cpm_calib::ObservationKind::TrackerOrientation(..)
-            | cpm_calib::ObservationKind::Tilt(..) => "urad",
-            _ => "um",
-        };
-        out.push_str(&format!(
-            "{},{},{},{},{unit},{}\n",
-            k + 1,
-            quote(o.as_ref().map_or("", |o| o.file.as_str())),
-            o.as_ref().map_or(0, |o| o.line),
-            quote(o.as_ref().map_or("", |o| o.what.as_str())),
-            r,
-        ));
+    Cow::Owned(residuals)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::push_quoted;
+
+    /// A row written field by field is the row `tidy_csv` makes of the plain row, even when
+    /// a quoted text holds commas and pieces that look like numbers.
+    #[test]
+    fn fields_are_tidied_as_the_whole_line_would_be() {
+        for v in [
+            0.1 + 0.2,
+            -0.0,
+            0.0,
+            331.739672003852,
+            1e-7 / 3.0,
+            -2.5e13 / 3.0,
+            f64::NAN,
+        ] {
+            let mut direct = String::new();
+            crate::format::push_tidy_number(&mut direct, v);
+            assert_eq!(direct, crate::format::tidy_csv(&format!("{v}")), "{v}");
+        }
+        for s in [
+            "m.csv",
+            "a,-0,b",
+            "x,1.0000000000000002,\"q\"",
+            ",",
+            "plain",
+        ] {
+            let (mut direct, mut work) = (String::new(), String::new());
+            super::push_tidy_quoted(&mut direct, s, &mut work);
+            let mut quoted = String::new();
+            push_quoted(&mut quoted, s);
+            assert_eq!(direct, crate::format::tidy_csv(&quoted), "{s}");
+        }
+        let mut s = String::new();
+        super::push_tidy_quoted(&mut s, "a,-0,b", &mut String::new());
+        assert_eq!(s, "\"a,0,b\"");
     }
-    crate::format::tidy_csv(&out)
+
+    #[test]
+    fn quotes_are_doubled_inside_a_quoted_field() {
+        let mut s = String::new();
+        push_quoted(&mut s, r#"sensor s1 at pose "3""#);
+        assert_eq!(s, r#""sensor s1 at pose ""3""""#);
+        s.clear();
+        push_quoted(&mut s, "m.csv");
+        assert_eq!(s, "\"m.csv\"");
+    }
 }

@@ -214,18 +214,21 @@ pub fn outliers_by_kind_beyond(
             }
         }
     };
-    let mut kinds: Vec<usize> = (0..residuals_um.len()).map(kind).collect();
-    kinds.sort_unstable();
-    kinds.dedup();
+    // The observations of each kind, in one pass (kinds in ascending order).
+    let mut by_kind: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for k in 0..residuals_um.len() {
+        by_kind.entry(kind(k)).or_default().push(k);
+    }
     let pooled = outliers_beyond(residuals_um, sigmas);
     let floor = OUTLIER_FLOOR_SIGMAS
         * sigma_um
             .filter(|s| *s > 0.0)
             .unwrap_or_else(|| robust_spread(residuals_um).1);
     let mut out = Vec::new();
-    for g in kinds {
-        let idx: Vec<usize> = (0..residuals_um.len()).filter(|&k| kind(k) == g).collect();
-        let r: Vec<f64> = idx.iter().map(|&k| residuals_um[k]).collect();
+    let mut r: Vec<f64> = Vec::new();
+    for idx in by_kind.into_values() {
+        r.clear();
+        r.extend(idx.iter().map(|&k| residuals_um[k]));
         let (median, _) = robust_spread(&r);
         let flagged: Vec<usize> = if idx.len() < MIN_KIND_OBSERVATIONS {
             idx.iter()
@@ -248,18 +251,25 @@ pub fn outliers_by_kind_beyond(
     out
 }
 
+/// The element `n / 2` of `values` in ascending order (`total_cmp`), found in linear time:
+/// the upper median, what a sort would give at `n / 2`. `values` is reordered.
+fn upper_median(values: &mut [f64]) -> f64 {
+    let n = values.len();
+    *values.select_nth_unstable_by(n / 2, f64::total_cmp).1
+}
+
 /// Median and robust standard deviation (1.4826 x the median absolute deviation).
 fn robust_spread(residuals_um: &[f64]) -> (f64, f64) {
     let n = residuals_um.len();
     if n == 0 {
         return (0.0, 0.0);
     }
-    let mut sorted = residuals_um.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[n / 2];
-    let mut dev: Vec<f64> = residuals_um.iter().map(|r| (r - median).abs()).collect();
-    dev.sort_by(f64::total_cmp);
-    (median, dev[n / 2] * 1.4826)
+    let mut work = residuals_um.to_vec();
+    let median = upper_median(&mut work);
+    for (d, r) in work.iter_mut().zip(residuals_um) {
+        *d = (r - median).abs();
+    }
+    (median, upper_median(&mut work) * 1.4826)
 }
 
 /// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
@@ -306,9 +316,11 @@ pub fn diagnose(
         _ => (None, None),
     };
     // Runs test on signs about the median.
-    let mut sorted = residuals_um.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let median = if n == 0 { 0.0 } else { sorted[n / 2] };
+    let median = if n == 0 {
+        0.0
+    } else {
+        upper_median(&mut residuals_um.to_vec())
+    };
     let signs: Vec<bool> = residuals_um.iter().map(|r| *r > median).collect();
     let n1 = signs.iter().filter(|s| **s).count() as f64;
     let n2 = n as f64 - n1;
@@ -481,4 +493,66 @@ pub fn pose_map_scan(
             .then(b.explained_share.total_cmp(&a.explained_share))
     });
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The linear-time median is the element a sort puts at `n / 2`, ties, signed zeros and
+    /// all; the robust spread follows it.
+    #[test]
+    fn the_upper_median_is_the_sorted_middle() {
+        let mut state = 7u64;
+        for n in [1usize, 2, 3, 10, 101, 1000] {
+            let v: Vec<f64> = (0..n)
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    ((state >> 40) % 21) as f64 - 10.0
+                })
+                .chain([-0.0, 0.0])
+                .collect();
+            let mut sorted = v.clone();
+            sorted.sort_by(f64::total_cmp);
+            let m = upper_median(&mut v.clone());
+            assert_eq!(m.to_bits(), sorted[v.len() / 2].to_bits(), "n = {n}");
+            let (median, spread) = robust_spread(&v);
+            let mut dev: Vec<f64> = v.iter().map(|r| (r - median).abs()).collect();
+            dev.sort_by(f64::total_cmp);
+            assert_eq!(spread, dev[v.len() / 2] * 1.4826);
+        }
+    }
+
+    /// Outliers are judged within their kind: a residual ordinary for a noisy sensor is an
+    /// outlier for a quiet one.
+    #[test]
+    fn outliers_are_judged_within_their_kind() {
+        let poses = vec![cpm_geometry::Pose::identity(); 200];
+        let readings = (0..400)
+            .map(|k| crate::Reading {
+                pose: k / 2,
+                sensor: k % 2,
+                length_mm: 0.0,
+                time_s: None,
+                temperature_c: None,
+            })
+            .collect();
+        let c = Campaign {
+            poses,
+            readings,
+            ..Campaign::default()
+        };
+        // Sensor 0 quiet (+-0.1 um), sensor 1 noisy (+-10 um).
+        let mut r: Vec<f64> = (0..400)
+            .map(|k| {
+                let s = if k % 2 == 0 { 0.1 } else { 10.0 };
+                s * (((k * 37) % 11) as f64 - 5.0) / 5.0
+            })
+            .collect();
+        r[10] = 9.0; // sensor 0: 90 of its spreads off
+        r[11] = 9.0; // sensor 1: within its spread
+        assert_eq!(outliers_by_kind(&r, &c, Some(0.1)), vec![10]);
+    }
 }

@@ -20,7 +20,7 @@ pub mod prior;
 mod words;
 pub use words::{
     describe_loss, describe_model, effect_list, misfit, misfit_message, observation_origin,
-    warnings, Formulation, ObservationOrigin,
+    warnings, write_observation_origin, Formulation, ObservationOrigin,
 };
 
 /// What a fit's report needs besides the model and the calibration: the robot, the merged

@@ -149,56 +149,70 @@ pub struct ObservationOrigin {
 
 /// The origin of observation `k` (readings first, then 6 per pose measurement).
 pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<ObservationOrigin> {
+    let mut what = String::new();
+    let (file, line) = write_observation_origin(robot, merged, k, &mut what)?;
+    Some(ObservationOrigin {
+        file: file.to_string(),
+        line,
+        what,
+    })
+}
+
+/// [`observation_origin`] without a string of its own: what was observed is written into
+/// `what` (cleared first; a buffer reused from observation to observation), the file and the
+/// line are returned (the file borrowed from `merged`). `None` when `k` has no origin
+/// (`what` is then left empty).
+pub fn write_observation_origin<'m>(
+    robot: &Robot,
+    merged: &'m Merged,
+    k: usize,
+    what: &mut String,
+) -> Option<(&'m str, usize)> {
+    use std::fmt::Write as _;
+    what.clear();
     let c = &merged.campaign;
     let m = c.readings.len();
+    // Writing into a String cannot fail.
     if k < m {
         let r = &c.readings[k];
-        let (file, line) = merged.reading_origin.get(k)?.clone();
+        let (file, line) = merged.reading_origin.get(k)?;
         let label = merged.pose_origin.get(r.pose).map_or("?", |o| o.2.as_str());
         let sensor = robot
             .table
             .sensors
             .get(r.sensor)
             .map_or("?", |s| s.name.as_str());
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!("sensor {sensor} at pose {label:?}"),
-        })
+        let _ = write!(what, "sensor {sensor} at pose {label:?}");
+        Some((file, *line))
     } else if k >= c.first_tilt_observation() {
         let q = k - c.first_tilt_observation();
         let t = c.tilt_measurements.get(q)?;
-        let (file, line, label) = merged.pose_origin.get(t.pose)?.clone();
-        let line = merged.tilt_origin.get(q).map_or(line, |o| o.1);
+        let (file, line, label) = merged.pose_origin.get(t.pose)?;
+        let line = merged.tilt_origin.get(q).map_or(*line, |o| o.1);
         let name = robot
             .description
             .inclinometers
             .get(t.inclinometer)
             .map_or("?", |c| c.name.as_str());
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!(
-                "inclinometer {name} angle_{}_deg at pose {label:?}",
-                t.axis + 1
-            ),
-        })
+        let _ = write!(
+            what,
+            "inclinometer {name} angle_{}_deg at pose {label:?}",
+            t.axis + 1
+        );
+        Some((file, line))
     } else if k >= c.first_point_observation() {
         let q = (k - c.first_point_observation()) / 3;
         let pm = c.point_measurements.get(q)?;
-        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
-        let line = merged.point_origin.get(q).map_or(line, |o| o.1);
+        let (file, line, label) = merged.pose_origin.get(pm.pose)?;
+        let line = merged.point_origin.get(q).map_or(*line, |o| o.1);
         let target = robot
             .description
             .targets
             .get(pm.target)
             .map_or("?", |t| t.name.as_str());
         let comp = ["x", "y", "z"][(k - c.first_point_observation()) % 3];
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!("target {target} {comp} at pose {label:?}"),
-        })
+        let _ = write!(what, "target {target} {comp} at pose {label:?}");
+        Some((file, line))
     } else {
         let (q, a) = match c.observation_kind(k) {
             cpm_calib::ObservationKind::TrackerPosition(q, a) => (q, a),
@@ -206,12 +220,9 @@ pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<Ob
             _ => return None,
         };
         let pm = c.pose_measurements.get(q)?;
-        let (file, line, label) = merged.pose_origin.get(pm.pose)?.clone();
+        let (file, line, label) = merged.pose_origin.get(pm.pose)?;
         let comp = ["x", "y", "z", "rotation x", "rotation y", "rotation z"][a];
-        Some(ObservationOrigin {
-            file,
-            line,
-            what: format!("tracker {comp} of pose {label:?}"),
-        })
+        let _ = write!(what, "tracker {comp} of pose {label:?}");
+        Some((file, *line))
     }
 }
