@@ -91,6 +91,19 @@ fn robot() -> String {
     p(&tilt_dir().join("robot.toml"))
 }
 
+/// `cpm refine --robot robot --data data --out out` (exit 0).
+fn refine(robot: &str, data: &Path, out: &Path) {
+    ok(&[
+        "refine",
+        "--robot",
+        robot,
+        "--data",
+        &p(data),
+        "--out",
+        &p(out),
+    ]);
+}
+
 #[test]
 fn the_real_tilt_session_calibrates_to_a_plausible_machine() {
     let dir = scratch("real", "tilt-whole");
@@ -135,15 +148,7 @@ fn the_real_tilt_session_predicts_positions_it_never_saw() {
     assert_eq!(write_rows(&train, training_position), 9 * 17 - 4);
     assert_eq!(write_rows(&test, |xy| !training_position(xy)), 8 * 17);
     let refined = dir.join("refined");
-    ok(&[
-        "refine",
-        "--robot",
-        &robot(),
-        "--data",
-        &p(&train),
-        "--out",
-        &p(&refined),
-    ]);
+    refine(&robot(), &train, &refined);
     let cal = dir.join("cal");
     calibrate_json(
         Path::new(&robot()),
@@ -211,15 +216,7 @@ fn refine_on_the_real_tilt_session_finds_a_load_dependent_leg_effect() {
     let dir = scratch("real", "tilt-refine");
     let data = tilt_dir().join("session_1.csv");
     let out = dir.join("refined");
-    ok(&[
-        "refine",
-        "--robot",
-        &robot(),
-        "--data",
-        &p(&data),
-        "--out",
-        &p(&out),
-    ]);
+    refine(&robot(), &data, &out);
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("refine.json")).unwrap()).unwrap();
     let added: Vec<String> = doc["steps"]
@@ -448,15 +445,7 @@ fn motion_capture_calibrate_generalises_as_well_as_an_independent_leg_fit() {
     assert_eq!(fit["simulated"], false);
     let calibrated = link_rms_mm(&cal.join("calibrated.toml"), &robot, &last);
     let refined_dir = dir.join("refined");
-    ok(&[
-        "refine",
-        "--robot",
-        &p(&robot),
-        "--data",
-        &p(&first),
-        "--out",
-        &p(&refined_dir),
-    ]);
+    refine(&p(&robot), &first, &refined_dir);
     let refined = link_rms_mm(&refined_dir.join("calibrated.toml"), &robot, &last);
     eprintln!(
         "motion capture, rows 73-108 held out (frame re-registered), leg RMS: independent leg fit {reference:.4} mm, cpm calibrate {calibrated:.4} mm, cpm refine {refined:.4} mm"
@@ -522,15 +511,7 @@ fn simulated_tilts_on_the_real_grid_with_an_undeclared_effect() {
     assert!(joints_mm <= 2.0 * tolerance_mm, "{joints_mm} mm");
     assert!(scale_pct < 10.0);
     let out = dir.join("refined");
-    ok(&[
-        "refine",
-        "--robot",
-        &robot(),
-        "--data",
-        &p(&data),
-        "--out",
-        &p(&out),
-    ]);
+    refine(&robot(), &data, &out);
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap())
             .unwrap();
