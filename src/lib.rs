@@ -73,7 +73,12 @@ pub use cpm_report as report;
 pub mod cli;
 #[cfg(feature = "cli")]
 pub mod fuzzing;
+/// The jobs as library functions (the [`cpm-workflow`](cpm_workflow) crate): calibrate,
+/// refine, validate with typed options, progress and cancellation.
 #[cfg(feature = "cli")]
-pub mod output;
+pub use cpm_workflow as workflow;
+/// Outputs that never destroy (the workflow layer's [`cpm_workflow::output`]).
+#[cfg(feature = "cli")]
+pub use cpm_workflow::output;
 #[cfg(feature = "cli")]
 pub mod paper_report;

@@ -1,13 +1,16 @@
-//! What the commands share: loading the robot and the data, choosing the effects, building a
-//! plan, the output directory, and locating solver failures in the input files.
+//! What the commands' arguments share: the robot and effects options, building a plan, and
+//! single-file outputs; loading and the rest live in the workflow layer
+//! ([`cpm_workflow::load`], re-exported here).
 use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 use clap::Args;
 
 use super::{input_error, usage_error, Ctx};
-use crate::calib::{campaign::circle, CalibError, Effect, MeasurementModel, Plan};
-use crate::io::{self, merge, Merged, ReadOptions, Robot};
+use crate::calib::{campaign::circle, Effect, Plan};
+use crate::io::{self, ReadOptions, Robot};
+use cpm_workflow::fit::{FitOptions, Inputs, NoisePerKind, TrackerResiduals};
+pub use cpm_workflow::load::*;
 
 /// The robot description argument.
 #[derive(Debug, Clone, Args)]
@@ -30,13 +33,7 @@ pub struct EffectsArg {
 impl EffectsArg {
     /// The effects: the command line's, else the description's.
     pub fn resolve(&self, robot: &Robot) -> anyhow::Result<Vec<Effect>> {
-        match self.effects.as_deref().map(str::trim) {
-            Some("none") | Some("") => Ok(Vec::new()),
-            Some(list) => {
-                io::parse_effects(list).map_err(|m| usage_error(format!("--effects: {m}")))
-            }
-            None => Ok(robot.declared_effects()?),
-        }
+        resolve_effects(self.effects.as_deref(), robot)
     }
 }
 
@@ -221,221 +218,8 @@ pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow:
     })
 }
 
-/// `file` as a path relative to the directory `dir` (which need not exist yet), through
-/// `..` where needed; `file` made absolute when the two share no root.
-pub fn relative_to_dir(file: &Path, dir: &Path) -> PathBuf {
-    let absolute = |p: &Path| -> Option<PathBuf> {
-        if let Ok(c) = std::fs::canonicalize(p) {
-            return Some(c);
-        }
-        let parent = p.parent().filter(|q| !q.as_os_str().is_empty());
-        let parent = std::fs::canonicalize(parent.unwrap_or(Path::new("."))).ok()?;
-        Some(parent.join(p.file_name()?))
-    };
-    let (Some(f), Some(d)) = (absolute(file), absolute(dir)) else {
-        return file.to_path_buf();
-    };
-    let (fc, dc): (Vec<_>, Vec<_>) = (f.components().collect(), d.components().collect());
-    let common = fc.iter().zip(&dc).take_while(|(a, b)| a == b).count();
-    if common == 0 {
-        return f;
-    }
-    let mut rel = PathBuf::new();
-    for _ in common..dc.len() {
-        rel.push("..");
-    }
-    for c in &fc[common..] {
-        rel.push(c);
-    }
-    rel
-}
-
-/// Loads the robot description.
-pub fn load_robot(path: &Path, ctx: &Ctx<'_>) -> anyhow::Result<Robot> {
-    let robot = Robot::load(path)?;
-    // A calibration result (`calibrated.toml`, which records `calibrated_from`) is the joints
-    // plus the errors by design: said once, in its header. Another description with errors
-    // written in (a simulation truth used as the nominal robot, say) is worth a note.
-    let calibrated = robot
-        .description
-        .calibration
-        .as_ref()
-        .is_some_and(|c| c.calibrated_from.is_some());
-    if robot.errors_applied && !calibrated {
-        ctx.note(format!(
-            "{} has [installation_errors_um]: its geometry is the joints plus those errors",
-            robot.file
-        ));
-    }
-    Ok(robot)
-}
-
-/// Checks that the robot has six links (what the identification handles).
-pub fn require_six_links(robot: &Robot) -> anyhow::Result<()> {
-    if robot.num_links() != 6 {
-        return Err(input_error(format!(
-            "{}: has {} links; calibration in cpm handles six-link machines",
-            robot.file,
-            robot.num_links()
-        )));
-    }
-    Ok(())
-}
-
-/// Reads and merges measurement files.
-pub fn load_data(
-    paths: &[PathBuf],
-    robot: &Robot,
-    options: &ReadOptions,
-) -> anyhow::Result<Merged> {
-    let files = io::read_data_files(paths, robot, options)?;
-    let merged = merge(files, robot);
-    if options.check_sensor_lengths {
-        super::gauges::check_readings(robot, &merged)?;
-    }
-    Ok(merged)
-}
-
-/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;
-/// tracker files are registered with the model's known `tracker_frame` taken out.
-pub fn read_options(model: &MeasurementModel) -> ReadOptions {
-    ReadOptions {
-        check_sensor_lengths: !model.effects.contains(&Effect::SensorOffset),
-        known_tracker_frame: model
-            .known(Effect::TrackerFrame)
-            .and_then(|q| <[f64; 6]>::try_from(q).ok()),
-        ..ReadOptions::default()
-    }
-}
-
-/// The campaign pose a calibration error is about, also when the least-squares solver
-/// stopped on it (the model's error inside [`cpm_lm::LmError::Model`]).
-pub fn error_pose(err: &CalibError) -> Option<usize> {
-    match err {
-        CalibError::Kinematics { pose, .. } | CalibError::Clearance { pose, .. } => Some(*pose),
-        CalibError::Solver(cpm_lm::LmError::Model { source, .. }) => {
-            source.downcast_ref::<CalibError>().and_then(error_pose)
-        }
-        _ => None,
-    }
-}
-
-/// Turns a calibration error at a campaign pose into one that names the file and line.
-pub fn locate(err: CalibError, merged: &Merged) -> anyhow::Error {
-    match error_pose(&err).and_then(|p| merged.pose_location(p)) {
-        Some(loc) => anyhow::Error::new(err).context(loc),
-        None => anyhow::Error::new(err),
-    }
-}
-
 /// The largest number of poses of `--circle --count` and `--random`.
 pub const MAX_PLAN_POSES: usize = 1_000_000;
-
-/// A robust loss from `huber:K`, `cauchy:K`, `tukey:K` (K in um of reading, > 0) or `none`.
-pub fn parse_loss(spec: &str) -> Result<cpm_lm::Loss, String> {
-    let spec = spec.trim();
-    if spec == "none" || spec == "squared" {
-        return Ok(cpm_lm::Loss::Squared);
-    }
-    let (kind, value) = spec.split_once(':').ok_or_else(|| {
-        format!("{spec:?}: expected huber:K, cauchy:K or tukey:K (K in um, > 0) or none")
-    })?;
-    let k: f64 = value
-        .trim()
-        .parse()
-        .ok()
-        .filter(|v: &f64| v.is_finite() && *v > 0.0)
-        .ok_or_else(|| format!("{spec:?}: K = {value:?} must be a number of um > 0"))?;
-    match kind.trim() {
-        "huber" => Ok(cpm_lm::Loss::Huber(k)),
-        "cauchy" => Ok(cpm_lm::Loss::Cauchy(k)),
-        "tukey" => Ok(cpm_lm::Loss::Tukey(k)),
-        other => Err(format!(
-            "{spec:?}: unknown loss {other:?} (huber, cauchy, tukey, none)"
-        )),
-    }
-}
-
-pub use crate::report::fit::{describe_loss, describe_model, effect_list};
-
-/// Stages `report.html` of `markdown` (the `report.md` staged in `set` under `dir`), with
-/// the SVG figures staged in the same directory inlined ([`crate::report::html::report_page`]).
-pub fn stage_report_html(
-    set: &mut crate::output::OutputSet,
-    dir: &Path,
-    title: &str,
-    markdown: &str,
-) {
-    let figures: Vec<(String, String)> = set
-        .paths()
-        .filter(|p| p.parent() == Some(dir) && p.extension().is_some_and(|e| e == "svg"))
-        .filter_map(|p| {
-            let name = p.file_name()?.to_string_lossy().to_string();
-            let svg = String::from_utf8_lossy(set.contents(p)?).to_string();
-            Some((name, svg))
-        })
-        .collect();
-    set.add(
-        dir.join("report.html"),
-        crate::report::html::report_page(title, markdown, &figures),
-    );
-}
-
-/// The noise standard deviation for the fit: `--sigma-um`, else the description's.
-pub fn sigma(arg: Option<f64>, robot: &Robot) -> anyhow::Result<Option<f64>> {
-    match arg {
-        Some(s) if !(s.is_finite() && s > 0.0) => {
-            Err(usage_error(format!("--sigma-um must be > 0, got {s}")))
-        }
-        Some(s) => Ok(Some(s)),
-        None => Ok(robot.sensor_noise_um()),
-    }
-}
-
-/// Checks that the output directory can be used (not an existing file, not a link to one).
-pub fn check_out_dir(dir: &Path) -> anyhow::Result<()> {
-    if std::fs::symlink_metadata(dir).is_ok() && !dir.is_dir() {
-        return Err(usage_error(format!(
-            "--out {}: exists and is not a directory",
-            dir.display()
-        )));
-    }
-    Ok(())
-}
-
-/// Commits a result directory as one step (`crate::output::commit_dir`: staged, swapped in,
-/// under a lock), refusing output names that are `inputs`; notes a wait for another run and
-/// any leftovers of an interrupted run it cleaned up.
-pub fn commit_dir(
-    set: crate::output::OutputSet,
-    dir: &Path,
-    inputs: &[&Path],
-    command: &str,
-    ctx: &Ctx<'_>,
-) -> anyhow::Result<Vec<PathBuf>> {
-    let done = crate::output::commit_dir(set, dir, inputs, command)
-        .with_context(|| format!("writing {}", dir.display()))?;
-    if done.waited {
-        ctx.note(format!(
-            "waited for another cpm run writing {} to finish; its result was replaced by this one",
-            dir.display()
-        ));
-    }
-    for r in &done.recovered {
-        ctx.note(r);
-    }
-    Ok(done.written)
-}
-
-/// Checks a single-file output (`-` for standard output) before any work: never a device,
-/// FIFO, socket or directory, never one of `inputs` (exit 2).
-pub fn out_target(
-    option: &str,
-    path: &Path,
-    inputs: &[&Path],
-) -> anyhow::Result<crate::output::Target> {
-    Ok(crate::output::output_target(option, path, inputs)?)
-}
 
 /// Writes a single-file output to its checked target (re-checked now), atomically.
 pub fn write_out(
@@ -454,58 +238,125 @@ pub fn write_out(
     Ok(target)
 }
 
-/// The model for a campaign with point target or inclinometer measurements: `model` with the
-/// instruments' own unknowns estimated (each target's platform position and a tracker frame
-/// per point session: `target_position`, `point_frame`; each inclinometer's mount and the
-/// base's tilt per inclinometer session: `inclinometer_mount`, `base_tilt`), sized for
-/// `campaign`. `None` when the campaign has neither.
-pub fn with_instruments(
-    robot: &Robot,
-    model: &MeasurementModel,
-    campaign: &crate::calib::Campaign,
-) -> Option<MeasurementModel> {
-    let points = !campaign.point_measurements.is_empty();
-    let tilts = !campaign.tilt_measurements.is_empty();
-    if !points && !tilts {
-        return None;
-    }
-    let mut e = model.effects.clone();
-    let wanted = [
-        (Effect::TargetPosition, points),
-        (Effect::PointFrame, points),
-        (Effect::InclinometerMount, tilts),
-        (Effect::BaseTilt, tilts),
-    ];
-    for (x, want) in wanted {
-        if want && !e.contains(&x) {
-            e.push(x);
-        }
-    }
-    let mut m = robot.model(&e);
-    m.point_sessions = campaign.point_sessions();
-    m.tilt_sessions = campaign.tilt_sessions();
-    Some(m)
+/// The arguments every fit (`cpm calibrate`, `cpm refine`) takes.
+#[derive(Debug, Clone, Args)]
+pub struct FitArgs {
+    /// The robot description.
+    #[command(flatten)]
+    pub robot: RobotArg,
+    /// Measurement files (length readings or tracker poses, docs/formats.md); repeatable.
+    #[arg(long, value_name = "DATA.csv", required = true)]
+    pub data: Vec<PathBuf>,
+    /// The effects modelled.
+    #[command(flatten)]
+    pub effects: EffectsArg,
+    /// Sensor noise standard deviation, um (default: `[calibration] sensor_noise_um` of the
+    /// description, else estimated from the residual).
+    #[arg(long, value_name = "UM")]
+    pub sigma_um: Option<f64>,
+    /// Tracker position noise, um (standard deviation per coordinate, of pose measurements and
+    /// of point targets; default cpm-calib's).
+    #[arg(long, value_name = "UM")]
+    pub pose_sigma_um: Option<f64>,
+    /// Tracker orientation noise, urad, and the noise of an inclinometer angle (default
+    /// cpm-calib's).
+    #[arg(long, value_name = "URAD")]
+    pub orientation_sigma_urad: Option<f64>,
+    /// Robust loss against outlier readings: huber:K, cauchy:K or tukey:K with K in um of
+    /// reading (where the loss departs from the square; e.g. 3 x the noise), or none (least
+    /// squares, the default). Readings more than 5 robust standard deviations off are
+    /// flagged in report.md and calibration.json either way.
+    #[arg(long, value_name = "LOSS:K")]
+    pub robust: Option<String>,
+    /// Fit the gross outliers too. By default a least-squares fit sets the observations more
+    /// than 10 robust standard deviations off (per kind of observation) aside, continues
+    /// without them and lists them under "Outliers" (one glitch in a log never drags the
+    /// machine); with a robust loss they are down-weighted instead.
+    #[arg(long)]
+    pub keep_outliers: bool,
+    /// Most iterations of the least-squares solver per fit (default 1000); a fit stopped by
+    /// it has not converged (exit code 1, the outputs say so).
+    #[arg(long, value_name = "N")]
+    pub max_iterations: Option<usize>,
+    /// Output directory (created; existing files of the same names are replaced).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Weigh each kind of observation whose noise is not declared (the gauges, tracker
+    /// positions, tracker orientations, point targets, inclinometer angles) by the noise its
+    /// own residual shows, estimated per kind and never pooled (variance components,
+    /// iterated; cpm_calib::noise): `auto` (the default) does so whenever the data hold two
+    /// or more kinds and one of them has no declared noise; `on` (or the bare flag) always;
+    /// `off` weighs undeclared kinds by cpm-calib's defaults (10 um, 20 urad) and estimates
+    /// one common scale. The estimates are written to calibrated.toml's `[calibration]` for
+    /// the tracker kinds, so validate weighs as the fit did.
+    #[arg(
+        long,
+        value_enum,
+        num_args = 0..=1,
+        default_value_t = NoisePerKind::Auto,
+        default_missing_value = "on",
+        value_name = "auto|on|off"
+    )]
+    pub noise_per_kind: NoisePerKind,
+    /// A-priori tolerance of a group of parameters, GROUP=VALUE in the group's unit
+    /// (`installation_errors=2000` um, `link_scale=50000` ppm, `compliance=...` um/kN, `inf`
+    /// frees the group); repeatable. A direction the data see less well than its tolerance
+    /// is held near nominal and named in the report (a maximum a posteriori fit; see
+    /// docs/estimation.md). Default: `[calibration.tolerances]` of the description, else
+    /// cpm-calib's defaults scaled to the machine.
+    #[arg(long = "tolerance", value_name = "GROUP=VALUE")]
+    pub tolerance: Vec<String>,
+    /// Groups of parameters held at nominal and not fitted (comma-separated group names,
+    /// e.g. `installation_errors` to fit only the effects). Default: `[calibration] hold`.
+    #[arg(long, value_delimiter = ',', value_name = "GROUP")]
+    pub hold: Vec<String>,
+    /// No prior: the plain least-squares fit in every direction the data see at all (the fit
+    /// may then run off along directions the noise hides).
+    #[arg(long)]
+    pub no_prior: bool,
+    /// Residuals of 6-D tracker poses: `pose` (position and orientation), `legs` (each link's
+    /// length against the length the joints need for the measured pose: the
+    /// inverse-kinematics formulation), or `auto` (the default: whichever predicts held-out
+    /// poses better, judged by cross-validation in acquisition order; the report says which).
+    #[arg(long, value_enum, default_value_t = TrackerResiduals::Auto)]
+    pub tracker_residuals: TrackerResiduals,
 }
 
-/// What [`with_instruments`] estimates, for a note.
-pub fn instruments_note(m: &MeasurementModel) -> String {
-    let mut v = Vec::new();
-    if m.point_sessions > 0 {
-        v.push(format!(
-            "the {} targets' platform positions and a tracker frame per point session ({} sessions; target_position, point_frame)",
-            m.targets.len(),
-            m.point_sessions
-        ));
+impl FitArgs {
+    /// The workflow's options of these arguments.
+    pub fn options(&self) -> FitOptions {
+        FitOptions {
+            robot: self.robot.robot.clone(),
+            data: self.data.clone(),
+            effects: self.effects.effects.clone(),
+            sigma_um: self.sigma_um,
+            pose_sigma_um: self.pose_sigma_um,
+            orientation_sigma_urad: self.orientation_sigma_urad,
+            robust: self.robust.clone(),
+            keep_outliers: self.keep_outliers,
+            max_iterations: self.max_iterations,
+            out: self.out.clone(),
+            noise_per_kind: self.noise_per_kind,
+            tolerance: self.tolerance.clone(),
+            hold: self.hold.clone(),
+            no_prior: self.no_prior,
+            tracker_residuals: self.tracker_residuals,
+        }
     }
-    if m.tilt_sessions > 0 {
-        v.push(format!(
-            "the {} inclinometers' mount rotations and the base's tilt per inclinometer session ({} sessions; inclinometer_mount, base_tilt)",
-            m.inclinometers.len(),
-            m.tilt_sessions
-        ));
+
+    /// Checks the options, then loads and checks the robot, the effects and the data
+    /// ([`FitOptions::load`]).
+    pub fn load(&self, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
+        self.options().load(ctx)
     }
-    format!(
-        "instruments: {} are estimated with the machine",
-        v.join("; ")
-    )
+
+    /// The input files (an output may not replace one).
+    pub fn input_paths(&self) -> Vec<&Path> {
+        std::iter::once(self.robot.robot.as_path())
+            .chain(self.data.iter().map(PathBuf::as_path))
+            .collect()
+    }
 }

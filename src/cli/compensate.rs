@@ -262,7 +262,7 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
         .collect();
     let note = format!(
         "{}robot {}, targets {}; readings to command (length = length_at_zero_mm + mm_per_unit * reading)",
-        if super::export::simulated(&robot) {
+        if common::simulated(&robot) {
             "SIMULATED calibration (fitted to simulated data), "
         } else {
             ""

@@ -194,14 +194,7 @@ pub fn linuxcnc_in(robot: &Robot, units: Units) -> String {
     s
 }
 
-/// True when the robot's calibration was fitted to simulated data (`[calibration] simulated`).
-pub fn simulated(robot: &Robot) -> bool {
-    robot
-        .description
-        .calibration
-        .as_ref()
-        .is_some_and(|c| c.simulated)
-}
+pub use cpm_workflow::load::simulated;
 
 /// The INI snippet of [`linuxcnc_in`]: one `[JOINT_n]` section per link with `HOME_OFFSET`,
 /// `SCALE` and, where a backlash is known, `BACKLASH`, in `units`.

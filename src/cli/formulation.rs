@@ -1,32 +1,3 @@
-//! `--formulation` of `cpm calibrate`: the argument, resolved to one of cpm-calib's
-//! formulations ([`cpm_calib::fit::formulation`], where the choice and the fit live).
-pub use crate::calib::fit::formulation::{
-    choose, identify_with, Formulation, IMPLICIT_FROM_READINGS,
-};
-use crate::calib::{Campaign, IdentifyOptions, MeasurementModel};
-
-/// `--formulation` of `cpm calibrate`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
-pub enum FormulationArg {
-    /// Implicit from [`IMPLICIT_FROM_READINGS`] readings when it applies, nested otherwise.
-    #[default]
-    Auto,
-    /// Always nested.
-    Nested,
-    /// Always implicit (an error when the campaign or the options need the nested one).
-    Implicit,
-}
-
-/// The formulation `--formulation` asks for.
-pub fn resolve(
-    arg: FormulationArg,
-    model: &MeasurementModel,
-    campaign: &Campaign,
-    options: &IdentifyOptions,
-) -> Formulation {
-    match arg {
-        FormulationArg::Auto => choose(model, campaign, options),
-        FormulationArg::Nested => Formulation::Nested,
-        FormulationArg::Implicit => Formulation::Implicit,
-    }
-}
+//! `--formulation` of `cpm calibrate`: the workflow layer's choice
+//! ([`cpm_workflow::formulation`]).
+pub use cpm_workflow::formulation::*;

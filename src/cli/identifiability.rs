@@ -102,7 +102,7 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
     };
     let ident = crate::calib::identifiability(&model, &campaign, sigma, &options)?;
     // Against the tolerances at this noise: what a fit determines, what it holds.
-    let tolerances = super::calibrate::tolerances_of(&robot, &args.tolerance, &args.hold, false)?;
+    let tolerances = cpm_workflow::fit::tolerances_of(&robot, &args.tolerance, &args.hold, false)?;
     let prior = crate::calib::prior::prior_std(&model, &tolerances)
         .map_err(|e| usage_error(format!("tolerances: {e}")))?;
     let names = model.parameter_names();

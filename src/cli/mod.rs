@@ -24,11 +24,10 @@ pub mod calibrate;
 pub mod common;
 pub mod compensate;
 pub mod design;
-pub mod design_args;
-pub mod design_instruments;
 pub mod export;
 pub mod formulation;
-pub mod gauges;
+/// Readings against the declared gauges (the workflow layer's).
+pub use cpm_workflow::gauges;
 pub mod identifiability;
 /// The figures of a fit (moved to [`crate::report::figures::fit`]).
 pub use crate::report::figures::fit as plots;
@@ -36,93 +35,11 @@ pub mod refine;
 pub mod simulate;
 pub mod validate;
 
-/// Exit codes of `cpm`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ExitKind {
-    /// 0: success.
-    Success = 0,
-    /// 1: the computation failed or reported trouble.
-    Trouble = 1,
-    /// 2: usage error.
-    Usage = 2,
-    /// 3: bad input file.
-    Input = 3,
-    /// 4: I/O error.
-    Io = 4,
-}
-
-/// An error with its exit code.
-#[derive(Debug, thiserror::Error)]
-#[error("{message}")]
-pub struct CliError {
-    /// Which exit code it gives.
-    pub kind: ExitKind,
-    /// What went wrong.
-    pub message: String,
-}
-
-/// A usage error (exit code 2).
-pub fn usage_error(message: impl Into<String>) -> anyhow::Error {
-    CliError {
-        kind: ExitKind::Usage,
-        message: message.into(),
-    }
-    .into()
-}
-
-/// A bad-input error without a file position (exit code 3).
-pub fn input_error(message: impl Into<String>) -> anyhow::Error {
-    CliError {
-        kind: ExitKind::Input,
-        message: message.into(),
-    }
-    .into()
-}
-
-/// A computation error (exit code 1).
-pub fn trouble(message: impl Into<String>) -> anyhow::Error {
-    CliError {
-        kind: ExitKind::Trouble,
-        message: message.into(),
-    }
-    .into()
-}
-
-/// The exit code an error gives: the first cause in its chain that says.
-pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
-    use crate::calib::CalibError;
-    use crate::io::{InputError, ReadError};
-    for cause in err.chain() {
-        if let Some(c) = cause.downcast_ref::<CliError>() {
-            return c.kind;
-        }
-        if let Some(o) = cause.downcast_ref::<crate::output::OutputError>() {
-            return match o {
-                crate::output::OutputError::Refused(_) => ExitKind::Usage,
-                crate::output::OutputError::Io { .. } => ExitKind::Io,
-            };
-        }
-        if cause.is::<InputError>() || cause.is::<crate::geometry::GeometryError>() {
-            return ExitKind::Input;
-        }
-        if let Some(r) = cause.downcast_ref::<ReadError>() {
-            return match r {
-                ReadError::Input(_) => ExitKind::Input,
-                ReadError::Io { .. } => ExitKind::Io,
-            };
-        }
-        if cause.is::<std::io::Error>() {
-            return ExitKind::Io;
-        }
-        if let Some(c) = cause.downcast_ref::<CalibError>() {
-            return match c {
-                CalibError::Invalid { .. } | CalibError::Geometry(_) => ExitKind::Input,
-                _ => ExitKind::Trouble,
-            };
-        }
-    }
-    ExitKind::Trouble
-}
+/// Exit codes, the errors of the commands and their rendering: the workflow layer's.
+pub use cpm_workflow::error::{
+    exit_kind, input_error, render_error, trouble, usage_error, ExitKind, JobError,
+    JobError as CliError,
+};
 
 /// `cpm`: calibration of parallel manipulators.
 #[derive(Debug, Parser)]
@@ -247,6 +164,16 @@ impl<'a> Ctx<'a> {
     }
 }
 
+/// The command line shows a job's progress: its stage on the spinner, its notes on stderr.
+impl cpm_workflow::Progress for Ctx<'_> {
+    fn stage(&self, message: &str) {
+        Ctx::stage(self, message);
+    }
+    fn note(&self, message: &str) {
+        Ctx::note(self, message);
+    }
+}
+
 impl Drop for Ctx<'_> {
     fn drop(&mut self) {
         self.finish();
@@ -314,19 +241,6 @@ where
             exit_kind(&e) as i32
         }
     }
-}
-
-/// An error and its causes on one line, `outer: inner: ...`, leaving out a cause whose text
-/// the message before it already shows (many errors quote their source).
-pub fn render_error(err: &anyhow::Error) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    for cause in err.chain() {
-        let s = cause.to_string();
-        if !parts.iter().any(|p| p.contains(&s)) {
-            parts.push(s);
-        }
-    }
-    parts.join(": ")
 }
 
 /// Whether descriptor 1 was open when the process started, as recorded by

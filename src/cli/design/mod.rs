@@ -13,7 +13,9 @@ use crate::io::{self, table::Table, InputError, Robot};
 use crate::output::OutputSet;
 use crate::report::format::tidy_csv;
 
-pub use super::design_args::{CriterionArg, DesignArgs, GaugeArg};
+pub mod args;
+pub mod instruments;
+pub use args::{CriterionArg, DesignArgs, GaugeArg};
 
 /// The most candidate sockets a `--sockets` file may list.
 pub const MAX_SOCKETS: usize = 10_000;
@@ -205,7 +207,7 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             Some(s) => common::sigma(Some(s), &robot)?.unwrap_or(1.0),
             None => robot.sensor_noise_um().unwrap_or(1.0),
         };
-        return super::design_instruments::run(args, list, &robot, sigma, ctx);
+        return instruments::run(args, list, &robot, sigma, ctx);
     }
     let sockets = match &args.sockets {
         Some(p) => read_sockets_from(io::campaign::open(p)?, &p.display().to_string())?,
@@ -280,7 +282,7 @@ pub fn run(args: &DesignArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             &gauge_name,
         );
     }
-    let plain = super::design_args::plain_limits(args, &robot)?;
+    let plain = args::plain_limits(args, &robot)?;
     let options = DesignOptions {
         limits: plain.as_ref().map(|(l, _)| *l),
         max_readings: args.readings,

@@ -4,9 +4,9 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::common::RobotArg;
-use super::usage_error;
 use crate::calib::design::{Clearance, Criterion, DesignLimits, JointLimits};
+use crate::cli::common::RobotArg;
+use crate::cli::usage_error;
 use crate::io::Robot;
 
 /// Optimality criterion of the pose selection.

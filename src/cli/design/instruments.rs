@@ -4,12 +4,12 @@
 //! instrument alone at the chosen poses.
 use serde::Serialize;
 
-use super::common;
-use super::design_args::{CriterionArg, DesignArgs};
-use super::{input_error, usage_error, Ctx, Outcome};
+use super::args::{CriterionArg, DesignArgs};
 use crate::calib::design::instruments::{InstrumentBounds, InstrumentNoise, Instruments};
 use crate::calib::design::limits::{cone_angles_deg, gauge_clearance_mm};
 use crate::calib::design::{candidates, DesignLimits, SelectOptions};
+use crate::cli::common;
+use crate::cli::{input_error, usage_error, Ctx, Outcome};
 use crate::io::{self, Robot};
 use crate::output::OutputSet;
 use crate::report::format::{sig, tidy_csv};
@@ -214,7 +214,7 @@ pub fn run(
             names.join(" + ")
         )));
     }
-    let limits = super::design_args::plain_limits(args, robot)?;
+    let limits = super::args::plain_limits(args, robot)?;
     ctx.stage("candidate poses");
     let (cands, rejected) = candidates::default_candidates(
         &robot.table,

@@ -1,0 +1,301 @@
+//! Loading what a job works on (the robot description, the measurement files, the effects)
+//! and what every job shares: read options for a model, the model for a campaign's
+//! instruments, locating a solver failure in the input files, staging `report.html`, and
+//! committing a result directory.
+use std::path::{Path, PathBuf};
+
+use anyhow::Context as _;
+
+use crate::calib::{CalibError, Effect, MeasurementModel};
+use crate::error::{input_error, usage_error};
+use crate::io::{self, merge, Merged, ReadOptions, Robot};
+use crate::progress::Progress;
+
+/// The effects modelled beside the installation errors: `list` (comma-separated names,
+/// `none` or empty for none; a usage error naming `--effects` when unknown), else the
+/// description's `[calibration] effects`.
+pub fn resolve_effects(list: Option<&str>, robot: &Robot) -> anyhow::Result<Vec<Effect>> {
+    match list.map(str::trim) {
+        Some("none") | Some("") => Ok(Vec::new()),
+        Some(list) => io::parse_effects(list).map_err(|m| usage_error(format!("--effects: {m}"))),
+        None => Ok(robot.declared_effects()?),
+    }
+}
+
+/// `file` as a path relative to the directory `dir` (which need not exist yet), through
+/// `..` where needed; `file` made absolute when the two share no root.
+pub fn relative_to_dir(file: &Path, dir: &Path) -> PathBuf {
+    let absolute = |p: &Path| -> Option<PathBuf> {
+        if let Ok(c) = std::fs::canonicalize(p) {
+            return Some(c);
+        }
+        let parent = p.parent().filter(|q| !q.as_os_str().is_empty());
+        let parent = std::fs::canonicalize(parent.unwrap_or(Path::new("."))).ok()?;
+        Some(parent.join(p.file_name()?))
+    };
+    let (Some(f), Some(d)) = (absolute(file), absolute(dir)) else {
+        return file.to_path_buf();
+    };
+    let (fc, dc): (Vec<_>, Vec<_>) = (f.components().collect(), d.components().collect());
+    let common = fc.iter().zip(&dc).take_while(|(a, b)| a == b).count();
+    if common == 0 {
+        return f;
+    }
+    let mut rel = PathBuf::new();
+    for _ in common..dc.len() {
+        rel.push("..");
+    }
+    for c in &fc[common..] {
+        rel.push(c);
+    }
+    rel
+}
+
+/// Loads the robot description.
+pub fn load_robot(path: &Path, progress: &dyn Progress) -> anyhow::Result<Robot> {
+    let robot = Robot::load(path)?;
+    // A calibration result (`calibrated.toml`, which records `calibrated_from`) is the joints
+    // plus the errors by design: said once, in its header. Another description with errors
+    // written in (a simulation truth used as the nominal robot, say) is worth a note.
+    let calibrated = robot
+        .description
+        .calibration
+        .as_ref()
+        .is_some_and(|c| c.calibrated_from.is_some());
+    if robot.errors_applied && !calibrated {
+        progress.note(&format!(
+            "{} has [installation_errors_um]: its geometry is the joints plus those errors",
+            robot.file
+        ));
+    }
+    Ok(robot)
+}
+
+/// Checks that the robot has six links (what the identification handles).
+pub fn require_six_links(robot: &Robot) -> anyhow::Result<()> {
+    if robot.num_links() != 6 {
+        return Err(input_error(format!(
+            "{}: has {} links; calibration in cpm handles six-link machines",
+            robot.file,
+            robot.num_links()
+        )));
+    }
+    Ok(())
+}
+
+/// Reads and merges measurement files.
+pub fn load_data(
+    paths: &[PathBuf],
+    robot: &Robot,
+    options: &ReadOptions,
+) -> anyhow::Result<Merged> {
+    let files = io::read_data_files(paths, robot, options)?;
+    let merged = merge(files, robot);
+    if options.check_sensor_lengths {
+        crate::gauges::check_readings(robot, &merged)?;
+    }
+    Ok(merged)
+}
+
+/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;
+/// tracker files are registered with the model's known `tracker_frame` taken out.
+pub fn read_options(model: &MeasurementModel) -> ReadOptions {
+    ReadOptions {
+        check_sensor_lengths: !model.effects.contains(&Effect::SensorOffset),
+        known_tracker_frame: model
+            .known(Effect::TrackerFrame)
+            .and_then(|q| <[f64; 6]>::try_from(q).ok()),
+        ..ReadOptions::default()
+    }
+}
+
+/// The campaign pose a calibration error is about, also when the least-squares solver
+/// stopped on it (the model's error inside [`cpm_lm::LmError::Model`]).
+pub fn error_pose(err: &CalibError) -> Option<usize> {
+    match err {
+        CalibError::Kinematics { pose, .. } | CalibError::Clearance { pose, .. } => Some(*pose),
+        CalibError::Solver(cpm_lm::LmError::Model { source, .. }) => {
+            source.downcast_ref::<CalibError>().and_then(error_pose)
+        }
+        _ => None,
+    }
+}
+
+/// Turns a calibration error at a campaign pose into one that names the file and line.
+pub fn locate(err: CalibError, merged: &Merged) -> anyhow::Error {
+    match error_pose(&err).and_then(|p| merged.pose_location(p)) {
+        Some(loc) => anyhow::Error::new(err).context(loc),
+        None => anyhow::Error::new(err),
+    }
+}
+
+/// A robust loss from `huber:K`, `cauchy:K`, `tukey:K` (K in um of reading, > 0) or `none`.
+pub fn parse_loss(spec: &str) -> Result<cpm_lm::Loss, String> {
+    let spec = spec.trim();
+    if spec == "none" || spec == "squared" {
+        return Ok(cpm_lm::Loss::Squared);
+    }
+    let (kind, value) = spec.split_once(':').ok_or_else(|| {
+        format!("{spec:?}: expected huber:K, cauchy:K or tukey:K (K in um, > 0) or none")
+    })?;
+    let k: f64 = value
+        .trim()
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v > 0.0)
+        .ok_or_else(|| format!("{spec:?}: K = {value:?} must be a number of um > 0"))?;
+    match kind.trim() {
+        "huber" => Ok(cpm_lm::Loss::Huber(k)),
+        "cauchy" => Ok(cpm_lm::Loss::Cauchy(k)),
+        "tukey" => Ok(cpm_lm::Loss::Tukey(k)),
+        other => Err(format!(
+            "{spec:?}: unknown loss {other:?} (huber, cauchy, tukey, none)"
+        )),
+    }
+}
+
+pub use crate::report::fit::{describe_loss, describe_model, effect_list};
+
+/// Stages `report.html` of `markdown` (the `report.md` staged in `set` under `dir`), with
+/// the SVG figures staged in the same directory inlined ([`crate::report::html::report_page`]).
+pub fn stage_report_html(
+    set: &mut crate::output::OutputSet,
+    dir: &Path,
+    title: &str,
+    markdown: &str,
+) {
+    let figures: Vec<(String, String)> = set
+        .paths()
+        .filter(|p| p.parent() == Some(dir) && p.extension().is_some_and(|e| e == "svg"))
+        .filter_map(|p| {
+            let name = p.file_name()?.to_string_lossy().to_string();
+            let svg = String::from_utf8_lossy(set.contents(p)?).to_string();
+            Some((name, svg))
+        })
+        .collect();
+    set.add(
+        dir.join("report.html"),
+        crate::report::html::report_page(title, markdown, &figures),
+    );
+}
+
+/// The noise standard deviation for the fit: `--sigma-um`, else the description's.
+pub fn sigma(arg: Option<f64>, robot: &Robot) -> anyhow::Result<Option<f64>> {
+    match arg {
+        Some(s) if !(s.is_finite() && s > 0.0) => {
+            Err(usage_error(format!("--sigma-um must be > 0, got {s}")))
+        }
+        Some(s) => Ok(Some(s)),
+        None => Ok(robot.sensor_noise_um()),
+    }
+}
+
+/// Checks that the output directory can be used (not an existing file, not a link to one).
+pub fn check_out_dir(dir: &Path) -> anyhow::Result<()> {
+    if std::fs::symlink_metadata(dir).is_ok() && !dir.is_dir() {
+        return Err(usage_error(format!(
+            "--out {}: exists and is not a directory",
+            dir.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Commits a result directory as one step (`crate::output::commit_dir`: staged, swapped in,
+/// under a lock), refusing output names that are `inputs`; notes a wait for another run and
+/// any leftovers of an interrupted run it cleaned up.
+pub fn commit_dir(
+    set: crate::output::OutputSet,
+    dir: &Path,
+    inputs: &[&Path],
+    command: &str,
+    progress: &dyn Progress,
+) -> anyhow::Result<Vec<PathBuf>> {
+    let done = crate::output::commit_dir(set, dir, inputs, command)
+        .with_context(|| format!("writing {}", dir.display()))?;
+    if done.waited {
+        progress.note(&format!(
+            "waited for another cpm run writing {} to finish; its result was replaced by this one",
+            dir.display()
+        ));
+    }
+    for r in &done.recovered {
+        progress.note(r);
+    }
+    Ok(done.written)
+}
+
+/// Checks a single-file output (`-` for standard output) before any work: never a device,
+/// FIFO, socket or directory, never one of `inputs` (exit 2).
+pub fn out_target(
+    option: &str,
+    path: &Path,
+    inputs: &[&Path],
+) -> anyhow::Result<crate::output::Target> {
+    Ok(crate::output::output_target(option, path, inputs)?)
+}
+
+/// The model for a campaign with point target or inclinometer measurements: `model` with the
+/// instruments' own unknowns estimated (each target's platform position and a tracker frame
+/// per point session: `target_position`, `point_frame`; each inclinometer's mount and the
+/// base's tilt per inclinometer session: `inclinometer_mount`, `base_tilt`), sized for
+/// `campaign`. `None` when the campaign has neither.
+pub fn with_instruments(
+    robot: &Robot,
+    model: &MeasurementModel,
+    campaign: &crate::calib::Campaign,
+) -> Option<MeasurementModel> {
+    let points = !campaign.point_measurements.is_empty();
+    let tilts = !campaign.tilt_measurements.is_empty();
+    if !points && !tilts {
+        return None;
+    }
+    let mut e = model.effects.clone();
+    let wanted = [
+        (Effect::TargetPosition, points),
+        (Effect::PointFrame, points),
+        (Effect::InclinometerMount, tilts),
+        (Effect::BaseTilt, tilts),
+    ];
+    for (x, want) in wanted {
+        if want && !e.contains(&x) {
+            e.push(x);
+        }
+    }
+    let mut m = robot.model(&e);
+    m.point_sessions = campaign.point_sessions();
+    m.tilt_sessions = campaign.tilt_sessions();
+    Some(m)
+}
+
+/// What [`with_instruments`] estimates, for a note.
+pub fn instruments_note(m: &MeasurementModel) -> String {
+    let mut v = Vec::new();
+    if m.point_sessions > 0 {
+        v.push(format!(
+            "the {} targets' platform positions and a tracker frame per point session ({} sessions; target_position, point_frame)",
+            m.targets.len(),
+            m.point_sessions
+        ));
+    }
+    if m.tilt_sessions > 0 {
+        v.push(format!(
+            "the {} inclinometers' mount rotations and the base's tilt per inclinometer session ({} sessions; inclinometer_mount, base_tilt)",
+            m.inclinometers.len(),
+            m.tilt_sessions
+        ));
+    }
+    format!(
+        "instruments: {} are estimated with the machine",
+        v.join("; ")
+    )
+}
+
+/// True when the robot's calibration was fitted to simulated data (`[calibration] simulated`).
+pub fn simulated(robot: &Robot) -> bool {
+    robot
+        .description
+        .calibration
+        .as_ref()
+        .is_some_and(|c| c.simulated)
+}

@@ -1,0 +1,289 @@
+//! `cpm refine` as a library function: calibrate, then add the effects that the residual
+//! asks for, one at a time, each with an F-test, its BIC change and cross-validation
+//! (cpm_calib::refine), staging `refine.json`, `report.md`, `calibration.json`, figures and
+//! `calibrated.toml`.
+use crate::calib::{Effect, RefineOptions as CalibRefineOptions};
+use crate::error::{input_error, trouble, usage_error};
+use crate::fit::{provenance_lines, stage_calibrated, stage_figures, FitOptions, Inputs};
+use crate::io::parse_effects;
+use crate::output::OutputSet;
+use crate::progress::{check_cancelled, Progress};
+use crate::report::calibrate::CalibratedFile;
+use crate::report::fit::FitReport;
+use crate::report::refine::{RefineDoc, RefineReport};
+
+/// The options of `cpm refine`. [`RefineOptions::new`] gives the defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RefineOptions {
+    /// Robot, data, effects, noise, solver and output directory: as for calibrate.
+    pub fit: FitOptions,
+    /// Candidate effects, comma-separated; default `None`: every effect of the library that
+    /// can act on the data.
+    pub candidates: Option<String>,
+    /// Most effects added; default 4.
+    pub max_steps: usize,
+    /// Significance level of the F-test (before the Bonferroni correction); default 0.01.
+    pub alpha: f64,
+    /// Folds of the cross-validation over poses; default 5.
+    pub folds: usize,
+    /// Highest degree of the pose error map terms (0 to 3); default `None`: 0 with
+    /// `candidates`, else `[pose_map] degree` of the description, else 2.
+    pub pose_map_degree: Option<u8>,
+}
+
+impl RefineOptions {
+    /// The options with every default, for `robot`, `data` and the output directory `out`.
+    pub fn new(
+        robot: impl Into<std::path::PathBuf>,
+        data: Vec<std::path::PathBuf>,
+        out: impl Into<std::path::PathBuf>,
+    ) -> Self {
+        Self {
+            fit: FitOptions::new(robot, data, out),
+            candidates: None,
+            max_steps: 4,
+            alpha: 0.01,
+            folds: 5,
+            pose_map_degree: None,
+        }
+    }
+
+    /// Checks what needs no file (usage errors): the output directory, the level, the folds.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        crate::load::check_out_dir(&self.fit.out)?;
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return Err(usage_error("--alpha must be in (0, 1)"));
+        }
+        if self.folds < 2 || self.folds > 1000 {
+            return Err(usage_error("--folds must be between 2 and 1000"));
+        }
+        Ok(())
+    }
+}
+
+/// What [`refine`] gives: the inputs, the refinement, its report and every output staged.
+pub struct Refined {
+    /// The inputs as loaded.
+    pub inputs: Inputs,
+    /// The refinement (the final calibration is `result.calibration`).
+    pub result: crate::calib::refine::Refinement,
+    /// The staged outputs for `fit.out`.
+    pub set: OutputSet,
+    /// The report (`report.md` renders it, `refine.json` is its `doc`).
+    pub report: RefineReport,
+    /// What the last round of the search concluded, when it says something.
+    pub last_round: Option<String>,
+}
+
+impl Refined {
+    /// The trouble the final fit reports with its outputs written (exit code 1), if any.
+    pub fn trouble(&self) -> Option<String> {
+        let cal = &self.result.calibration;
+        if let Some(why) = cal.robust_failure() {
+            Some(format!(
+                "the final fit failed: {why}; the outputs were written and say so"
+            ))
+        } else if cal.solver.was_successful() {
+            None
+        } else {
+            Some(format!(
+                "the final fit did not converge ({})",
+                cal.solver.termination
+            ))
+        }
+    }
+}
+
+/// `cpm refine` as a function: checks the options, loads the robot and the data, refines, and
+/// stages every output for `options.fit.out` (nothing is written: commit the set). Refused
+/// (an error, nothing staged) when the refined model predicts held-out data worse than plain
+/// calibration.
+pub fn refine(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Result<Refined> {
+    options.validate()?;
+    let args = options;
+    let inputs = args.fit.load(progress)?;
+    check_cancelled(progress)?;
+    let campaign = &inputs.merged.campaign;
+    // The library's effects that can act on these data (an explicit list is taken as given).
+    let (candidates, not_applicable) = match &args.candidates {
+        Some(list) => (
+            parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
+            Vec::new(),
+        ),
+        None => applicable(campaign),
+    };
+    // No hidden load: without a declared [load], the effects whose direction the link
+    // forces set are not candidates (an explicit --candidates naming one is an error).
+    let (candidates, not_applicable) = if inputs.robot.description.load.is_none() {
+        let (skip, keep): (Vec<Effect>, Vec<Effect>) = candidates
+            .into_iter()
+            .partition(|e| crate::fit::needs_load(*e));
+        if !skip.is_empty() && args.candidates.is_some() {
+            return Err(input_error(format!(
+                "{}: --candidates names {}, which needs the platform's load, and the description declares none: add a [load] table (docs/formats.md) or leave it out",
+                inputs.robot.file,
+                skip.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
+            )));
+        }
+        let mut not_applicable = not_applicable;
+        not_applicable.extend(skip.into_iter().map(|e| {
+            (
+                e,
+                "no [load] declared (the link forces that give it its direction need one)",
+            )
+        }));
+        (keep, not_applicable)
+    } else {
+        (candidates, not_applicable)
+    };
+    // An explicit --candidates list is the whole candidate set: the pose map scan joins it
+    // only when --pose-map-degree asks for it.
+    let pose_map_degree = match (args.pose_map_degree, &args.candidates) {
+        (Some(d), _) => d,
+        (None, Some(_)) => 0,
+        (None, None) => inputs
+            .robot
+            .description
+            .pose_map
+            .and_then(|p| p.degree)
+            .unwrap_or(2),
+    };
+    if pose_map_degree > 3 {
+        return Err(usage_error("--pose-map-degree must be 0 to 3"));
+    }
+    progress.stage(&format!(
+        "refining: {} to {} observations, up to {} effects from {} candidates (each round fits every candidate)",
+        crate::load::describe_model(&inputs.model),
+        campaign.len(),
+        args.max_steps,
+        candidates.len()
+    ));
+    let refine_options = CalibRefineOptions {
+        candidates,
+        alpha: args.alpha,
+        max_steps: args.max_steps,
+        folds: args.folds,
+        pose_map_degree,
+        identify: inputs.identify.clone(),
+        ..CalibRefineOptions::default()
+    };
+    let options = refine_options;
+    let r = crate::calib::refine(&inputs.model, campaign, &options)
+        .map_err(|e| crate::load::locate(e, &inputs.merged))?;
+    // Never worse than plain calibration on data the fits did not see: otherwise an error,
+    // and nothing written.
+    if let Some(why) = r.against_calibrate.refusal() {
+        return Err(trouble(format!("{why}; nothing was written")));
+    }
+    progress.stage("writing the results");
+    let dir = &args.fit.out;
+    let cal = &r.calibration;
+    let mut set = OutputSet::new();
+    let mut doc = RefineDoc::new(&r, campaign.simulated, options.min_novelty);
+    doc.not_applicable = not_applicable
+        .iter()
+        .map(|(e, why)| crate::report::refine::NotApplicable {
+            effect: e.name().to_string(),
+            why: why.to_string(),
+        })
+        .collect();
+    set.add(dir.join("refine.json"), doc.to_json()?);
+    let mut fit = FitReport::new(&inputs.report_inputs(), &r.model, cal, None);
+    crate::fit::add_session_warnings(&mut fit, &inputs, &r.model)?;
+    set.add(dir.join("calibration.json"), fit.to_json()?);
+    crate::fit::stage_residuals(&mut set, dir, &inputs, cal);
+    let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;
+    set.add(
+        dir.join("residuals_before_after.svg"),
+        crate::report::figures::fit::residuals_before_after(
+            &format!(
+                "Residual before and after refinement{}",
+                if campaign.simulated {
+                    " (SIMULATED)"
+                } else {
+                    ""
+                }
+            ),
+            campaign,
+            &r.initial_residuals_um,
+            &cal.residuals_um,
+        )?,
+    );
+    figures.push("residuals_before_after.svg");
+    let notes = stage_calibrated(
+        &mut set,
+        dir,
+        &inputs,
+        &r.model,
+        cal,
+        false,
+        Some(&r.model.effects),
+        "Refined",
+        true,
+    )?;
+    let last = doc.last_round_message();
+    let report = RefineReport {
+        provenance: provenance_lines(&inputs.provenance, campaign.simulated, "Refined"),
+        starting_model: crate::load::describe_model(&inputs.model),
+        final_effects: crate::load::effect_list(&r.model.effects),
+        calibrated: CalibratedFile {
+            minimum_norm: false,
+            undetermined: notes.undetermined.len(),
+            known_effects: notes.known_effects.clone(),
+        },
+        figures: figures.iter().map(|f| f.to_string()).collect(),
+        significant_pose_structure: {
+            let alpha_scan = options.alpha / r.initial_pose_structure.len().max(1) as f64;
+            doc.pose_structure
+                .iter()
+                .filter(|p| p.p_value < alpha_scan)
+                .take(3)
+                .cloned()
+                .collect()
+        },
+        fit,
+        doc,
+    };
+    let markdown = report.markdown();
+    set.add(dir.join("report.md"), markdown.as_str());
+    crate::load::stage_report_html(&mut set, dir, "cpm refinement report", &markdown);
+    check_cancelled(progress)?;
+    Ok(Refined {
+        inputs,
+        result: r,
+        set,
+        report,
+        last_round: last,
+    })
+}
+
+/// The library's effects split into those that can act on `campaign` and those that cannot,
+/// with why: a tracker frame without tracker poses, a thermal drift without a logged
+/// temperature, the sensors' effects without gauge readings.
+fn applicable(campaign: &crate::calib::Campaign) -> (Vec<Effect>, Vec<(Effect, &'static str)>) {
+    let temperatures = campaign.readings.iter().any(|r| r.temperature_c.is_some())
+        || campaign
+            .pose_measurements
+            .iter()
+            .any(|p| p.temperature_c.is_some());
+    let (mut yes, mut no) = (Vec::new(), Vec::new());
+    for e in Effect::ALL {
+        let why = match e {
+            Effect::TrackerFrame if campaign.pose_measurements.is_empty() => {
+                Some("no tracker poses in the data")
+            }
+            Effect::ThermalDrift if !temperatures => Some("no temperature logged"),
+            Effect::SensorOffset | Effect::SensorScale | Effect::SocketError
+                if campaign.readings.is_empty() =>
+            {
+                Some("no gauge readings")
+            }
+            _ => None,
+        };
+        match why {
+            Some(w) => no.push((e, w)),
+            None => yes.push(e),
+        }
+    }
+    (yes, no)
+}

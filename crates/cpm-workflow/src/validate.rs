@@ -1,0 +1,993 @@
+//! `cpm validate` as library functions: a calibrated robot checked on measurements the fit
+//! did not use, against a reference (the nominal robot, or any other description)
+//! ([`validate`]); a compensation checked end to end on a simulated machine
+//! ([`check_compensation`]); and the read-back check of every fitting command
+//! ([`file_reproduces_fit`]).
+//!
+//! Each held-out file is read against each robot (logged link readings become lengths through
+//! that robot's reading models), predicted by that robot's measurement model with every known
+//! effect applied and nothing estimated, and compared with what was measured: gauge readings
+//! as reading errors (um), tracker poses as position errors (um) and orientation errors
+//! (urad), point targets as coordinate errors (um) with each file's session frame fitted
+//! afresh, inclinometer angles as angle errors (urad) with each file's base re-levelled. The
+//! figures are given per sensor (gauge) or per file (tracker, points, tilts), and in all.
+//!
+//! A file without logged link readings (`reading_k`) was driven by the controller's inverse
+//! kinematics of its commanded poses; `cpm validate` takes that controller to be the
+//! reference robot's (the nominal description the machine ran with), for both predictions.
+use std::path::{Path, PathBuf};
+
+use crate::calib::model::{predict, Prepared};
+use crate::calib::{Campaign, MeasurementModel};
+use crate::error::{input_error, trouble, usage_error};
+use crate::io::{FileKind, ReadOptions, Robot};
+use crate::output::OutputSet;
+use crate::progress::{check_cancelled, Progress};
+use crate::report::validate::{
+    rms, CompensationReport, GroupErrors as Errors, PredictionErrors as RobotErrors,
+    ReachedSummary, TargetError, ValidateReport,
+};
+pub use crate::report::validate::{SessionCheck, SessionFrame};
+
+/// The options of `cpm validate`. [`ValidateOptions::new`] gives the defaults.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ValidateOptions {
+    /// The calibrated robot description; not used with `commands`.
+    pub robot: Option<PathBuf>,
+    /// The reference robot; default `None`: the description `robot` records it was
+    /// calibrated from (`[calibration] calibrated_from`).
+    pub reference: Option<PathBuf>,
+    /// Held-out measurement files.
+    pub data: Vec<PathBuf>,
+    /// Check a compensation instead: the commands file of `cpm compensate`.
+    pub commands: Option<PathBuf>,
+    /// The true machine for `commands`.
+    pub truth: Option<PathBuf>,
+    /// With `commands`: true effect values on top of `truth`'s (`EFFECT=V1,V2,..`).
+    pub truth_effect: Vec<String>,
+    /// With `commands`: the machine comes to the first target from its home pose.
+    pub from_home: bool,
+    /// With `commands`: the temperature the machine runs at, deg C.
+    pub temperature_c: Option<f64>,
+    /// Tracker position noise, um; default `None`: the calibrated description's, else
+    /// cpm-calib's.
+    pub pose_sigma_um: Option<f64>,
+    /// Tracker orientation noise, urad; default `None`: as for the position.
+    pub orientation_sigma_urad: Option<f64>,
+    /// Stage the files of a result directory (`validation.json`, `report.md`, `report.html`,
+    /// `validation.svg`, `residuals.csv`) for this directory; default `None`: none.
+    pub out: Option<PathBuf>,
+}
+
+impl ValidateOptions {
+    /// The options for checking the calibrated `robot` on held-out `data`, every other option
+    /// at its default.
+    pub fn new(robot: impl Into<PathBuf>, data: Vec<PathBuf>) -> Self {
+        Self {
+            robot: Some(robot.into()),
+            data,
+            ..Self::default()
+        }
+    }
+
+    /// Every input file (an output may not replace one).
+    pub fn inputs(&self) -> Vec<&Path> {
+        self.robot
+            .iter()
+            .chain(self.reference.iter())
+            .chain(self.data.iter())
+            .chain(self.commands.iter())
+            .chain(self.truth.iter())
+            .map(|p| p.as_path())
+            .collect()
+    }
+
+    /// Checks what needs no file: the output directory and the noises (usage errors).
+    pub fn validate(&self) -> anyhow::Result<()> {
+        if let Some(out) = &self.out {
+            crate::load::check_out_dir(out)?;
+        }
+        Ok(())
+    }
+}
+
+/// What [`validate`] gives: the report, and the files of `--out` staged when asked for.
+pub struct Validated {
+    /// The report (validation.json and report.md are renderings of it).
+    pub report: ValidateReport,
+    /// The staged result directory, with `out`.
+    pub set: Option<OutputSet>,
+}
+
+/// What [`check_compensation`] gives: the report, and the files of `--out` staged when asked
+/// for.
+pub struct CompensationChecked {
+    /// The report (compensation.json and report.md are renderings of it).
+    pub report: CompensationReport,
+    /// The staged result directory, with `out`.
+    pub set: Option<OutputSet>,
+}
+
+/// The readings a controller sent for a file without logged link readings: its own inverse
+/// kinematics of the commanded poses through its own reading models. The machine `robot`
+/// turns them into lengths through *its* reading models, as the real machine does.
+fn commanded_lengths(
+    robot: &Robot,
+    controller: &Robot,
+    poses: &[crate::geometry::Pose],
+) -> Vec<Vec<f64>> {
+    poses
+        .iter()
+        .map(|p| {
+            crate::kinematics::ik::inverse_lengths(&controller.table, p)
+                .iter()
+                .enumerate()
+                .map(|(i, l)| robot.length_mm(i, controller.reading(i, *l)))
+                .collect()
+        })
+        .collect()
+}
+
+/// The read options of held-out data: the machine is held fixed (the readers register the
+/// frame, never the link zeros). Not `strict` (the fit's own data read back): no reachability
+/// or sensor-length checks, which the data passed when they were fitted.
+fn held_out_read_options(strict: bool) -> ReadOptions {
+    ReadOptions {
+        register_link_offsets: false,
+        max_condition_ratio: if strict {
+            ReadOptions::default().max_condition_ratio
+        } else {
+            f64::INFINITY
+        },
+        check_sensor_lengths: strict,
+        // Held-out data were commanded by the reference: a calibrated robot whose joints
+        // would need a link a few microns past its limit at such a pose still predicts it.
+        link_limit_margin_mm: crate::io::campaign::CONSISTENCY_MM,
+        ..ReadOptions::default()
+    }
+}
+
+/// The range of poses a robot's pose error map was fitted on, if it has one.
+fn fitted_pose_map_range(robot: &Robot) -> Option<crate::calib::refine::PoseRange> {
+    match robot.description.pose_map {
+        Some(crate::geometry::description::PoseMapSpec {
+            fitted_min: Some(min),
+            fitted_max: Some(max),
+            ..
+        }) => Some(crate::calib::refine::PoseRange { min, max }),
+        _ => None,
+    }
+}
+
+/// One held-out file read against `robot`: commanded lengths from `controller` where the file
+/// logged none, the tracker weights `tracker` (position um, orientation urad; 0: default).
+fn read_held_out(
+    path: &std::path::Path,
+    robot: &Robot,
+    controller: &Robot,
+    options: &ReadOptions,
+    tracker: (f64, f64),
+) -> anyhow::Result<crate::io::DataFile> {
+    let mut file = crate::io::read_data_file(path, robot, options)?;
+    if file.kind == FileKind::Poses {
+        return Err(usage_error(format!(
+            "{}: a pose list has no measurements to validate against",
+            file.file
+        )));
+    }
+    if file.campaign.commanded_lengths_mm.is_none() {
+        file.campaign.commanded_lengths_mm =
+            Some(commanded_lengths(robot, controller, &file.campaign.poses));
+    }
+    (
+        file.campaign.pose_sigma_um,
+        file.campaign.orientation_sigma_urad,
+    ) = tracker;
+    Ok(file)
+}
+
+/// A file with sessions (tracker poses, points, tilts): its frame (or levelling) fitted
+/// afresh with the machine held, the predictions after it, and the session's check.
+fn register_held_out(
+    model: &MeasurementModel,
+    prepared: &Prepared,
+    file: &crate::io::DataFile,
+    fail: &dyn Fn(crate::calib::CalibError) -> anyhow::Error,
+) -> anyhow::Result<(Vec<f64>, [f64; 6], SessionCheck)> {
+    let campaign = &file.campaign;
+    let s = crate::calib::session::register_session(model, campaign).map_err(fail)?;
+    let before = predict(
+        model,
+        prepared,
+        campaign,
+        &vec![0.0; model.num_params()],
+        None,
+    )
+    .map_err(fail)?;
+    let observed = campaign.observations();
+    let p0 = campaign.first_point_observation();
+    let pose_rows = campaign.pose_observation_rows();
+    let positions = |y: &[f64]| -> Vec<f64> {
+        pose_rows
+            .iter()
+            .flat_map(|rows| rows[..3].iter().flatten().copied())
+            .chain(p0..campaign.first_tilt_observation())
+            .map(|k| (observed[k] - y[k]) * 1e3)
+            .collect()
+    };
+    let angles = |y: &[f64]| -> Vec<f64> {
+        pose_rows
+            .iter()
+            .flat_map(|rows| rows[3..].iter().flatten().copied())
+            .chain(campaign.first_tilt_observation()..campaign.first_instrument_observation())
+            .map(|k| (observed[k] - y[k]) * 1e3)
+            .collect()
+    };
+    let some = |v: Vec<f64>| (!v.is_empty()).then(|| rms(&v));
+    let rough = file
+        .registration
+        .as_ref()
+        .and_then(|r| r.sessions.iter().find(|x| x.file == file.file))
+        .filter(|x| x.applied);
+    // A point file's rough registration: the frame its reader applied.
+    let (rough_t, rough_r) = match (&file.point_frame, rough) {
+        (Some(f), _) => (f.position_mm, f.rotation),
+        (None, Some(x)) => (x.frame.translation_mm, x.frame.rotation),
+        (None, None) => (
+            crate::geometry::Vector3::zeros(),
+            crate::geometry::Rotation3::identity(),
+        ),
+    };
+    let tilts_only =
+        campaign.pose_measurements.is_empty() && campaign.point_measurements.is_empty();
+    let (kind, full_frame) = if tilts_only {
+        ("tilts", SessionFrame::tilt(&s.frame, &s.frame_sd))
+    } else {
+        let kind = if campaign.pose_measurements.is_empty() {
+            "points"
+        } else {
+            "tracker"
+        };
+        (
+            kind,
+            SessionFrame::rigid((rough_t, rough_r), &s.frame, &s.frame_sd),
+        )
+    };
+    // The frame fit weighs every kind against the tracker position noise.
+    let sigma_ref = campaign.pose_sigma();
+    let check = SessionCheck {
+        file: file.file.clone(),
+        kind: kind.to_string(),
+        rough_translation_mm: rough_t.into(),
+        rough_rotation_deg: rough_r.angle().to_degrees(),
+        frame: s.frame,
+        frame_sd: s.frame_sd,
+        full_frame,
+        weighted_rms_before: s.rms_before_um / sigma_ref,
+        weighted_rms_after: s.rms_after_um / sigma_ref,
+        position_rms_before_um: some(positions(&before)),
+        position_rms_after_um: some(positions(&s.predicted)),
+        angle_rms_before_urad: some(angles(&before)),
+        angle_rms_after_urad: some(angles(&s.predicted)),
+    };
+    Ok((s.predicted, s.frame, check))
+}
+
+/// The errors of one robot, gathered file by file into named groups.
+struct Gather {
+    out: RobotErrors,
+    /// The group of each sensor, once it has one.
+    sensor_group: Vec<Option<usize>>,
+}
+
+impl Gather {
+    /// The group named `name`, made when new.
+    fn group(&mut self, name: String) -> usize {
+        let out = &mut self.out;
+        match out.names.iter().position(|n| *n == name) {
+            Some(i) => i,
+            None => {
+                out.names.push(name);
+                out.groups.push(Errors::default());
+                out.names.len() - 1
+            }
+        }
+    }
+
+    /// Gauge readings: each sensor's reading errors (um).
+    fn readings(
+        &mut self,
+        robot: &Robot,
+        campaign: &Campaign,
+        observed: &[f64],
+        predicted: &[f64],
+    ) {
+        for (k, r) in campaign.readings.iter().enumerate() {
+            let g = match self.sensor_group[r.sensor] {
+                Some(g) => g,
+                None => {
+                    let name = robot.table.sensors[r.sensor].name.clone();
+                    let g = self.group(name);
+                    *self.sensor_group[r.sensor].insert(g)
+                }
+            };
+            self.out.groups[g]
+                .values_um
+                .push((observed[k] - predicted[k]) * 1e3);
+        }
+    }
+
+    /// Point targets (each coordinate's error, um, the session's frame fitted afresh, the
+    /// targets held at the robot's) and inclinometer angles (urad, the session re-levelled,
+    /// the mounts held).
+    fn instruments(
+        &mut self,
+        file: &str,
+        campaign: &Campaign,
+        observed: &[f64],
+        predicted: &[f64],
+    ) {
+        if !campaign.point_measurements.is_empty() {
+            let g = self.group(format!("{file} (points)"));
+            for k in campaign.first_point_observation()..campaign.first_tilt_observation() {
+                self.out.groups[g]
+                    .values_um
+                    .push((observed[k] - predicted[k]) * 1e3);
+            }
+        }
+        if !campaign.tilt_measurements.is_empty() {
+            let g = self.group(format!("{file} (tilts)"));
+            for k in campaign.first_tilt_observation()..campaign.first_instrument_observation() {
+                self.out.groups[g]
+                    .orientation_urad
+                    .push((observed[k] - predicted[k]) * 1e3);
+            }
+        }
+    }
+
+    /// Tracker poses: position (um) and orientation (urad) errors, the position norm and the
+    /// link lengths the model needs for each fully measured pose.
+    #[allow(clippy::too_many_arguments)]
+    fn tracker(
+        &mut self,
+        robot: &Robot,
+        model: &MeasurementModel,
+        prepared: &Prepared,
+        file: &str,
+        campaign: &Campaign,
+        observed: &[f64],
+        predicted: &[f64],
+        frame: &[f64; 6],
+        pose_map_range: Option<&crate::calib::refine::PoseRange>,
+    ) {
+        let g = self.group(format!("{file} (tracker)"));
+        let out = &mut self.out;
+        let (t, rot) = crate::calib::effects::tracker_registration(frame);
+        let commanded = campaign.commanded_lengths_mm.as_ref();
+        let pose_rows = campaign.pose_observation_rows();
+        for (pm, rows) in campaign.pose_measurements.iter().zip(&pose_rows) {
+            // Components not measured are skipped.
+            let d: Vec<f64> = rows[..3]
+                .iter()
+                .flatten()
+                .map(|&k| (observed[k] - predicted[k]) * 1e3)
+                .collect();
+            out.groups[g].values_um.extend(&d);
+            for &k in rows[3..].iter().flatten() {
+                // Orientation observations are mrad.
+                out.groups[g]
+                    .orientation_urad
+                    .push((observed[k] - predicted[k]) * 1e3);
+            }
+            if rows.iter().any(Option::is_none) {
+                // A pose not measured in full: no position norm, no link lengths.
+                continue;
+            }
+            out.position_norm_um
+                .push((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt());
+            // The link lengths the model needs for the measured pose (base frame): inverse
+            // kinematics minus the shifts the model adds to a commanded length.
+            let m = pm.measured;
+            let base = crate::geometry::Pose::new(
+                rot.inverse() * (m.position_mm - t),
+                rot.inverse() * m.rotation,
+            );
+            if let Some(c) = commanded {
+                let j = pm.pose;
+                // A pose map moves the platform after forward kinematics: the lengths are
+                // those of the pose before it.
+                let map = model.known_pose_twist(
+                    &prepared.contexts[j],
+                    &campaign.poses[j],
+                    prepared.t0_s,
+                );
+                let base = base.perturbed(&-map);
+                let needed = crate::kinematics::ik::inverse_lengths(&robot.table, &base);
+                for i in 0..needed.len() {
+                    let shift = prepared.lengths_mm[j][i] - c[j][i];
+                    out.link_mm.push(c[j][i] - (needed[i] - shift));
+                }
+            }
+            out.tracker_poses += 1;
+            if pose_map_range.is_some_and(|r| !r.contains(&campaign.poses[pm.pose], 1e-6)) {
+                out.outside_pose_map += 1;
+            }
+        }
+    }
+}
+
+/// The groups (sensor names, or `file (tracker)`) and their errors for one robot.
+///
+/// A file without logged link readings was driven by the controller's inverse kinematics of
+/// the commanded poses: that of `controller` (the reference robot), whichever robot predicts.
+/// Each tracker file is a session: its frame is fitted afresh with the robot held fixed.
+/// `tracker` is the tracker's noise (position um, orientation urad; 0: cpm-calib's default),
+/// the weights with which each tracker session is registered.
+///
+/// With `residuals`, `residuals.csv` of the files too (one numbering over the files, in the
+/// order given), its rows written as they are made; without, none of its text is made.
+fn errors_of(
+    robot: &Robot,
+    controller: &Robot,
+    paths: &[PathBuf],
+    strict: bool,
+    tracker: (f64, f64),
+    residuals: bool,
+) -> anyhow::Result<RobotErrors> {
+    let model: MeasurementModel = robot.model(&[]);
+    let options = held_out_read_options(strict);
+    let pose_map_range = fitted_pose_map_range(robot);
+    let mut gather = Gather {
+        out: RobotErrors::default(),
+        sensor_group: vec![None; robot.table.sensors.len()],
+    };
+    let mut residuals_csv: Vec<u8> = Vec::new();
+    if residuals {
+        residuals_csv.extend_from_slice(crate::report::residuals::RESIDUALS_HEADER.as_bytes());
+    }
+    let mut written = 0;
+    for path in paths {
+        let file = read_held_out(path, robot, controller, &options, tracker)?;
+        let campaign: &Campaign = &file.campaign;
+        gather.out.simulated |= campaign.simulated;
+        let fail = |e: crate::calib::CalibError| {
+            trouble(format!(
+                "{}: predicting with {}: {e}",
+                file.file, robot.file
+            ))
+        };
+        let prepared = Prepared::new(&model, campaign).map_err(fail)?;
+        let (predicted, frame) = if campaign.pose_measurements.is_empty()
+            && campaign.point_measurements.is_empty()
+            && campaign.tilt_measurements.is_empty()
+        {
+            let zeros = vec![0.0; model.num_params()];
+            (
+                predict(&model, &prepared, campaign, &zeros, None).map_err(fail)?,
+                None,
+            )
+        } else {
+            let (predicted, frame, check) = register_held_out(&model, &prepared, &file, &fail)?;
+            gather.out.sessions.push(check);
+            (predicted, Some(frame))
+        };
+        let observed = campaign.observations();
+        gather.readings(robot, campaign, &observed, &predicted);
+        gather.instruments(&file.file, campaign, &observed, &predicted);
+        if let Some(frame) = frame.filter(|_| !campaign.pose_measurements.is_empty()) {
+            gather.tracker(
+                robot,
+                &model,
+                &prepared,
+                &file.file,
+                campaign,
+                &observed,
+                &predicted,
+                &frame,
+                pose_map_range.as_ref(),
+            );
+        }
+        if residuals {
+            let native: Vec<f64> = observed
+                .iter()
+                .zip(&predicted)
+                .map(|(o, p)| (o - p) * 1e3)
+                .collect();
+            // Where each observation comes from, as the file was read.
+            let origins = crate::io::merge(vec![file], robot);
+            crate::report::residuals::write_residual_rows(
+                &mut residuals_csv,
+                robot,
+                &origins,
+                &native,
+                written + 1,
+            )?;
+            written += native.len();
+        }
+    }
+    let mut out = gather.out;
+    out.residuals_csv = String::from_utf8(residuals_csv).expect("UTF-8 rows");
+    Ok(out)
+}
+
+/// Pose errors (position um per target, orientation urad per target) the machine `truth`
+/// reaches when it executes link `readings` (its own reading models turn them into lengths,
+/// its known effects apply) aiming at `targets`.
+///
+/// `from_home`: the machine comes to the first target from its home pose (commanded with its
+/// own inverse kinematics there), so each link's last motion direction is known;
+/// `temperature_c`: the temperature the machine runs at (for a known `thermal_drift`).
+fn reached_errors(
+    truth: &Robot,
+    targets: &[crate::io::PoseRow],
+    readings: &[Vec<f64>],
+    from_home: bool,
+    temperature_c: Option<f64>,
+) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+    let links = &truth.description.links;
+    let home = usize::from(from_home);
+    let mut poses: Vec<crate::geometry::Pose> = Vec::new();
+    let mut lengths: Vec<Vec<f64>> = Vec::new();
+    if from_home {
+        poses.push(truth.table.home);
+        lengths.push(crate::kinematics::ik::inverse_lengths(
+            &truth.table,
+            &truth.table.home,
+        ));
+    }
+    poses.extend(targets.iter().map(|t| t.pose));
+    lengths.extend(readings.iter().map(|u| {
+        u.iter()
+            .zip(links)
+            .map(|(u, l)| l.length_at_zero_mm + l.mm_per_unit * u)
+            .collect::<Vec<f64>>()
+    }));
+    let campaign = Campaign {
+        poses,
+        commanded_lengths_mm: Some(lengths),
+        pose_measurements: targets
+            .iter()
+            .enumerate()
+            .map(|(j, t)| crate::calib::campaign::PoseMeasurement {
+                pose: j + home,
+                measured: t.pose,
+                time_s: t.time_s,
+                temperature_c,
+            })
+            .collect(),
+        simulated: true,
+        ..Campaign::default()
+    };
+    let model = truth.model(&[]);
+    let prepared = Prepared::new(&model, &campaign).map_err(|e| {
+        trouble(format!(
+            "the machine {} executing the commands: {e}",
+            truth.file
+        ))
+    })?;
+    let predicted = predict(
+        &model,
+        &prepared,
+        &campaign,
+        &vec![0.0; model.num_params()],
+        None,
+    )
+    .map_err(|e| {
+        trouble(format!(
+            "the machine {} executing the commands: {e}",
+            truth.file
+        ))
+    })?;
+    let observed = campaign.observations();
+    let (mut position_um, mut orientation_urad) = (Vec::new(), Vec::new());
+    for q in 0..targets.len() {
+        let d = |a: usize| (predicted[6 * q + a] - observed[6 * q + a]) * 1e3;
+        position_um.push((d(0).powi(2) + d(1).powi(2) + d(2).powi(2)).sqrt());
+        orientation_urad.push((d(3).powi(2) + d(4).powi(2) + d(5).powi(2)).sqrt());
+    }
+    Ok((position_um, orientation_urad))
+}
+
+/// The reference robot: `--reference`, else the description the calibrated robot records
+/// it came from (`[calibration] calibrated_from`).
+fn reference_path(
+    reference: Option<&std::path::Path>,
+    robot: &Robot,
+    progress: &dyn Progress,
+) -> anyhow::Result<PathBuf> {
+    if let Some(r) = reference {
+        return Ok(r.to_path_buf());
+    }
+    let recorded = robot
+        .description
+        .calibration
+        .as_ref()
+        .and_then(|c| c.calibrated_from.clone());
+    // Recorded relative to the calibrated file's folder (older files: an absolute path).
+    let here = std::path::Path::new(&robot.file)
+        .parent()
+        .unwrap_or(std::path::Path::new(""));
+    match recorded.map(|p| here.join(p)) {
+        Some(p) if p.exists() => {
+            reference_changed(robot, &p, progress);
+            Ok(p)
+        }
+        Some(p) => Err(usage_error(format!(
+            "{} records that it was calibrated from {}, which does not exist here (moved, or \
+             not copied with it): give the nominal description it was fitted from with --reference",
+            robot.file,
+            p.display()
+        ))),
+        None => Err(usage_error(format!(
+            "--reference is required: {} does not record the description it was calibrated from",
+            robot.file
+        ))),
+    }
+}
+
+/// A note when the recorded reference `path` is no longer the file `robot` was calibrated
+/// from (its fingerprint `[calibration] calibrated_from_fnv1a64` differs).
+fn reference_changed(robot: &Robot, path: &std::path::Path, progress: &dyn Progress) {
+    let recorded = robot
+        .description
+        .calibration
+        .as_ref()
+        .and_then(|c| c.calibrated_from_fnv1a64.clone());
+    let now = std::fs::read(path)
+        .ok()
+        .map(|b| format!("{:016x}", crate::output::fingerprint(&b)));
+    if let (Some(recorded), Some(now)) = (recorded, now) {
+        if recorded != now {
+            progress.note(&format!(
+                "{} changed since {} was calibrated from it (fingerprint {now}, recorded {recorded}); it is the reference as it is now: give --reference to choose another",
+                path.display(),
+                robot.file
+            ));
+        }
+    }
+}
+
+/// `cpm validate --commands`: a compensation checked end to end on a simulated machine.
+pub fn check_compensation(
+    options: &ValidateOptions,
+    progress: &dyn Progress,
+) -> anyhow::Result<CompensationChecked> {
+    let (Some(commands), Some(truth)) = (&options.commands, &options.truth) else {
+        return Err(usage_error("--commands needs --truth"));
+    };
+    let Some(reference) = &options.reference else {
+        return Err(usage_error(
+            "--commands needs --reference (the robot whose inverse kinematics commands the uncompensated machine)",
+        ));
+    };
+    let reference = crate::load::load_robot(reference, progress)?;
+    let mut truth = crate::load::load_robot(truth, progress)?;
+    crate::truth::add_truth_effects(&mut truth, &options.truth_effect)?;
+    if truth.num_links() != reference.num_links() {
+        return Err(input_error(format!(
+            "{} has {} links, the reference {} has {}",
+            truth.file,
+            truth.num_links(),
+            reference.file,
+            reference.num_links()
+        )));
+    }
+    let rows = crate::io::read_commands_file(commands, truth.num_links())?;
+    let targets: Vec<crate::io::PoseRow> = rows.iter().map(|r| r.0.clone()).collect();
+    let compensated: Vec<Vec<f64>> = rows.iter().map(|r| r.1.clone()).collect();
+    // The same targets commanded with the reference robot's inverse kinematics.
+    let nominal: Vec<Vec<f64>> = targets
+        .iter()
+        .map(|t| {
+            crate::kinematics::ik::inverse_lengths(&reference.table, &t.pose)
+                .iter()
+                .zip(&reference.description.links)
+                .map(|(l, m)| (l - m.length_at_zero_mm) / m.mm_per_unit)
+                .collect()
+        })
+        .collect();
+    check_cancelled(progress)?;
+    let (pos, rot) = reached_errors(
+        &truth,
+        &targets,
+        &compensated,
+        options.from_home,
+        options.temperature_c,
+    )?;
+    let (pos_ref, rot_ref) = reached_errors(
+        &truth,
+        &targets,
+        &nominal,
+        options.from_home,
+        options.temperature_c,
+    )?;
+    let report = CompensationReport {
+        simulated: true,
+        truth: truth.file.clone(),
+        reference_robot: reference.file.clone(),
+        commands: commands.display().to_string(),
+        targets: targets.len(),
+        compensated: ReachedSummary::new(&pos, &rot),
+        reference: ReachedSummary::new(&pos_ref, &rot_ref),
+        per_target: targets
+            .iter()
+            .enumerate()
+            .map(|(j, t)| TargetError {
+                pose: t.label.clone(),
+                position_um: pos[j],
+                orientation_urad: rot[j],
+                reference_position_um: pos_ref[j],
+            })
+            .collect(),
+    };
+    let set = match &options.out {
+        Some(dir) => {
+            let mut set = OutputSet::new();
+            set.add(dir.join("compensation.json"), report.to_json()?);
+            let markdown = report.markdown();
+            set.add(dir.join("report.md"), markdown.as_str());
+            crate::load::stage_report_html(&mut set, dir, "cpm compensation check", &markdown);
+            Some(set)
+        }
+        None => None,
+    };
+    Ok(CompensationChecked { report, set })
+}
+
+/// `cpm validate`: the calibrated robot and the reference predict the held-out data; the
+/// report compares them. With `options.out`, the result directory is staged (not written).
+pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::Result<Validated> {
+    options.validate()?;
+    progress.stage("reading the robot descriptions");
+    let Some(robot) = &options.robot else {
+        return Err(usage_error(
+            "--robot is required (unless --commands is given)",
+        ));
+    };
+    let robot = crate::load::load_robot(robot, progress)?;
+    let reference_path = reference_path(options.reference.as_deref(), &robot, progress)?;
+    let reference = crate::load::load_robot(&reference_path, progress)?;
+    if robot.num_links() != reference.num_links() {
+        return Err(input_error(format!(
+            "{} has {} links, the reference {} has {}",
+            robot.file,
+            robot.num_links(),
+            reference.file,
+            reference.num_links()
+        )));
+    }
+    // The tracker's noise: the options, else what the calibrated description declares (the
+    // weights its fit used), else cpm-calib's defaults; both robots are registered alike.
+    let declared = robot.tracker_sigmas();
+    let tracker = (
+        options.pose_sigma_um.or(declared.0).unwrap_or(0.0),
+        options.orientation_sigma_urad.or(declared.1).unwrap_or(0.0),
+    );
+    for (v, name) in [
+        (options.pose_sigma_um, "--pose-sigma-um"),
+        (options.orientation_sigma_urad, "--orientation-sigma-urad"),
+    ] {
+        if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+            return Err(usage_error(format!("{name} must be > 0")));
+        }
+    }
+    check_cancelled(progress)?;
+    progress.stage("predicting the held-out measurements");
+    let data = &options.data;
+    let cal_errors = errors_of(
+        &robot,
+        &reference,
+        data,
+        true,
+        tracker,
+        options.out.is_some(),
+    )?;
+    check_cancelled(progress)?;
+    let ref_errors =
+        errors_of(&reference, &reference, data, true, tracker, false).map_err(|e| {
+            e.context(format!(
+                "reading the held-out data against the reference {} (its sensors: {})",
+                reference.file,
+                sensor_names(&reference).join(", ")
+            ))
+        })?;
+    let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
+    if names != ref_names {
+        return Err(input_error(format!(
+            "the robot and the reference name different sensors ({} / {})",
+            names.join(", "),
+            ref_names.join(", ")
+        )));
+    }
+    let report = ValidateReport::new(
+        &robot.file,
+        &reference.file,
+        data.iter().map(|p| p.display().to_string()).collect(),
+        &cal_errors,
+        &ref_errors,
+    );
+    let set = match &options.out {
+        Some(dir) => {
+            let svg = report.figure().map_err(|e| trouble(e.to_string()))?;
+            let mut set = OutputSet::new();
+            set.add(dir.join("validation.json"), report.to_json()?);
+            let markdown = report.markdown(true);
+            set.add(dir.join("report.md"), markdown.as_str());
+            set.add(dir.join("validation.svg"), svg);
+            crate::load::stage_report_html(&mut set, dir, "cpm validation report", &markdown);
+            set.add(dir.join("residuals.csv"), cal_errors.residuals_csv);
+            Some(set)
+        }
+        None => None,
+    };
+    check_cancelled(progress)?;
+    Ok(Validated { report, set })
+}
+
+/// The names of a robot's sensors, in its order.
+fn sensor_names(r: &Robot) -> Vec<String> {
+    r.table.sensors.iter().map(|s| s.name.clone()).collect()
+}
+
+/// [`errors_of`] the fit's own data for the read-back check, predicted from the campaign in
+/// memory instead of the files read again, when nothing of the campaign depends on the robot
+/// that reads it: gauge readings alone (no sessions to register), without logged link
+/// readings (the commanded lengths are the controller's, made here as [`errors_of`] makes
+/// them). `None` otherwise (the files are read again).
+fn readings_in_memory(
+    robot: &Robot,
+    controller: &Robot,
+    campaign: &Campaign,
+) -> anyhow::Result<Option<RobotErrors>> {
+    let readings_alone = campaign.pose_measurements.is_empty()
+        && campaign.point_measurements.is_empty()
+        && campaign.tilt_measurements.is_empty()
+        && campaign.instrument_measurements.is_empty();
+    // The readings name their sensors by index: the same sensors in the same order, else
+    // the files are read again (by name), as before.
+    if !readings_alone
+        || campaign.commanded_lengths_mm.is_some()
+        || sensor_names(robot) != sensor_names(controller)
+    {
+        return Ok(None);
+    }
+    let model: MeasurementModel = robot.model(&[]);
+    let mut c = Campaign {
+        poses: campaign.poses.clone(),
+        readings: campaign.readings.clone(),
+        session_starts: campaign.session_starts.clone(),
+        simulated: campaign.simulated,
+        ..Campaign::default()
+    };
+    c.commanded_lengths_mm = Some(commanded_lengths(robot, controller, &c.poses));
+    let fail =
+        |e: crate::calib::CalibError| trouble(format!("predicting with {}: {e}", robot.file));
+    let prepared = Prepared::new(&model, &c).map_err(fail)?;
+    let predicted =
+        predict(&model, &prepared, &c, &vec![0.0; model.num_params()], None).map_err(fail)?;
+    let observed = c.observations();
+    let mut out = RobotErrors::default();
+    let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
+    for (k, r) in c.readings.iter().enumerate() {
+        let g = *sensor_group[r.sensor].get_or_insert_with(|| {
+            out.names.push(robot.table.sensors[r.sensor].name.clone());
+            out.groups.push(Errors::default());
+            out.names.len() - 1
+        });
+        out.groups[g]
+            .values_um
+            .push((observed[k] - predicted[k]) * 1e3);
+    }
+    Ok(Some(out))
+}
+
+/// The check every fitting command makes before it writes: the calibrated description it
+/// staged (`text`), read back and predicted on the fit's own data files as `cpm validate`
+/// predicts them (tracker sessions re-registered), gives the fit's residual RMS.
+///
+/// Returns `(fit RMS, file RMS)` in um (the fit's weighting: positions at
+/// `sigma_ref / pose_sigma`, orientations at `sigma_ref / orientation_sigma`, points at
+/// `sigma_ref / point_sigma`), or `None` when
+/// the check does not apply: tracker data fitted without `tracker_frame` (the fit keeps the
+/// rough registration, which a later reading improves on).
+pub fn file_reproduces_fit(
+    text: &str,
+    reference: &Robot,
+    data: &[PathBuf],
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    cal: &crate::calib::Calibration,
+    sigma_um: Option<f64>,
+) -> anyhow::Result<Option<(f64, f64)>> {
+    if !campaign.pose_measurements.is_empty()
+        && !model.effects.contains(&crate::calib::Effect::TrackerFrame)
+    {
+        return Ok(None);
+    }
+    let robot = Robot::from_toml(text, "calibrated.toml").map_err(|e| {
+        trouble(format!(
+            "the calibrated description does not load back: {e}"
+        ))
+    })?;
+    let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
+    let e = match readings_in_memory(&robot, reference, campaign)? {
+        Some(e) => e,
+        None => errors_of(&robot, reference, data, false, tracker, false)?,
+    };
+    // The fit's own reference and weights (each kind by its own noise, gauges included).
+    let _ = sigma_um;
+    let sigma_ref = cal.sigma_ref_um;
+    let (wp, wr) = (
+        sigma_ref / campaign.pose_sigma(),
+        sigma_ref / campaign.orientation_sigma(),
+    );
+    let wg = campaign.reading_sigma().map_or(1.0, |s| sigma_ref / s);
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (name, g) in e.names.iter().zip(&e.groups) {
+        let w = if name.ends_with("(tracker)") {
+            wp
+        } else if name.ends_with("(points)") {
+            sigma_ref / campaign.point_sigma()
+        } else {
+            wg
+        };
+        sum += g.values_um.iter().map(|v| (w * v).powi(2)).sum::<f64>();
+        // Orientations are a tracker's or, in a tilt file, an inclinometer's angles.
+        let wo = if name.ends_with("(tilts)") {
+            sigma_ref / campaign.tilt_sigma()
+        } else {
+            wr
+        };
+        sum += g
+            .orientation_urad
+            .iter()
+            .map(|v| (wo * v).powi(2))
+            .sum::<f64>();
+        n += g.values_um.len() + g.orientation_urad.len();
+    }
+    Ok(Some((cal.residual_rms_um, (sum / n.max(1) as f64).sqrt())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The read-back check predicts the fit's gauge readings from the campaign in memory as
+    /// reading the files again does (the same errors, number for number), and a description
+    /// with a joint moved by 2 mm predicts them worse: the check still sees it.
+    #[test]
+    fn the_read_back_in_memory_is_the_read_back_of_the_files() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let path = root.join("examples/hexapod_66_readings.csv");
+        let text = std::fs::read_to_string(root.join("examples/hexapod_66.toml")).unwrap();
+        let reference = Robot::from_toml(&text, "hexapod_66.toml").unwrap();
+        let file = crate::io::read_data_file(&path, &reference, &ReadOptions::default()).unwrap();
+        let campaign = crate::io::merge(vec![file], &reference).campaign;
+        let joint = "base_mm = [193.185165258, -51.763809021, 0.0]";
+        assert!(text.contains(joint));
+        let moved = text.replacen(joint, "base_mm = [195.185165258, -51.763809021, 0.0]", 1);
+        let mut rms = Vec::new();
+        for t in [&text, &moved] {
+            let robot = Robot::from_toml(t, "calibrated.toml").unwrap();
+            let memory = readings_in_memory(&robot, &reference, &campaign)
+                .unwrap()
+                .expect("gauge readings alone are predicted in memory");
+            let files = errors_of(
+                &robot,
+                &reference,
+                std::slice::from_ref(&path),
+                false,
+                (campaign.pose_sigma(), campaign.orientation_sigma()),
+                false,
+            )
+            .unwrap();
+            assert_eq!(memory.names, files.names);
+            let values = |e: &RobotErrors| -> Vec<f64> {
+                e.groups.iter().flat_map(|g| g.values_um.clone()).collect()
+            };
+            assert_eq!(values(&memory), values(&files));
+            rms.push(crate::report::validate::rms(&values(&memory)));
+        }
+        assert!(rms[1] > rms[0] + 1.0, "{rms:?}");
+    }
+}

@@ -1,0 +1,129 @@
+//! The workflow layer (crates/cpm-workflow) does what the commands do: `calibrate` then
+//! `validate` as library calls give what `cpm calibrate` then `cpm validate` give, to 1e-12;
+//! a cancelled job writes nothing and says so in its error.
+#[path = "common/cli.rs"]
+mod cli;
+use cli::{example, ok, p, scratch};
+
+use cpm::workflow::{fit, load, validate, Collect, Silent};
+use std::path::{Path, PathBuf};
+
+/// Every number of a JSON value, in order, with its path (timings left out).
+fn numbers(v: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
+    match v {
+        serde_json::Value::Number(n) if !path.contains("time") && !path.contains("seconds") => {
+            out.push((path.to_string(), n.as_f64().unwrap()));
+        }
+        serde_json::Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                numbers(x, &format!("{path}[{i}]"), out);
+            }
+        }
+        serde_json::Value::Object(o) => {
+            for (k, x) in o {
+                numbers(x, &format!("{path}.{k}"), out);
+            }
+        }
+        _ => {}
+    }
+}
+
+fn same_numbers(a: &serde_json::Value, b: &serde_json::Value, what: &str) {
+    let (mut x, mut y) = (Vec::new(), Vec::new());
+    numbers(a, "", &mut x);
+    numbers(b, "", &mut y);
+    assert_eq!(x.len(), y.len(), "{what}: as many numbers");
+    assert!(x.len() > 20, "{what}: {} numbers", x.len());
+    for ((pa, va), (pb, vb)) in x.iter().zip(&y) {
+        assert_eq!(pa, pb, "{what}");
+        assert!(
+            (va - vb).abs() <= 1e-12 * va.abs().max(1.0),
+            "{what}: {pa}: {va} (command) vs {vb} (library)"
+        );
+    }
+}
+
+#[test]
+fn the_library_calibrates_and_validates_as_the_commands_do() {
+    let d = scratch("workflow", "same");
+    let (robot, data, later) = (
+        example("hexapod_66.toml"),
+        example("hexapod_66_readings.csv"),
+        example("hexapod_66_later.csv"),
+    );
+    // The commands.
+    let by_command = d.join("command");
+    ok(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &data,
+        "--out",
+        &p(&by_command),
+    ]);
+    let cal_toml = p(&by_command.join("calibrated.toml"));
+    let validated: serde_json::Value = serde_json::from_str(&ok(&[
+        "validate", "--robot", &cal_toml, "--data", &later, "--json",
+    ]))
+    .unwrap();
+    // The library.
+    let by_library = d.join("library");
+    let options = fit::CalibrateOptions::new(&robot, vec![PathBuf::from(&data)], &by_library);
+    let job = fit::calibrate(&options, &Silent).unwrap();
+    assert!(job.trouble().is_none());
+    let inputs = [Path::new(&robot), Path::new(&data)];
+    load::commit_dir(job.fitted.set, &by_library, &inputs, "calibrate", &Silent).unwrap();
+    let v = validate::validate(
+        &validate::ValidateOptions::new(by_library.join("calibrated.toml"), vec![later.into()]),
+        &Silent,
+    )
+    .unwrap();
+    // calibrated.toml alike byte for byte; calibration.json and the validation number for
+    // number (timings aside).
+    let read = |dir: &Path, f: &str| std::fs::read_to_string(dir.join(f)).unwrap();
+    assert_eq!(
+        read(&by_command, "calibrated.toml"),
+        read(&by_library, "calibrated.toml")
+    );
+    let json = |dir: &Path| -> serde_json::Value {
+        serde_json::from_str(&read(dir, "calibration.json")).unwrap()
+    };
+    same_numbers(&json(&by_command), &json(&by_library), "calibration.json");
+    let library_validated = serde_json::from_str(&v.report.to_json().unwrap()).unwrap();
+    same_numbers(&validated, &library_validated, "validation");
+    assert!(v.report.calibrated.rms_um < v.report.reference.rms_um / 5.0);
+}
+
+#[test]
+fn a_cancelled_job_writes_nothing_and_says_so() {
+    let d = scratch("workflow", "cancel");
+    let out = d.join("never");
+    let progress = Collect::default();
+    progress
+        .cancel
+        .store(true, std::sync::atomic::Ordering::Relaxed);
+    let options = fit::CalibrateOptions::new(
+        example("hexapod_66.toml"),
+        vec![example("hexapod_66_readings.csv").into()],
+        &out,
+    );
+    let err = fit::calibrate(&options, &progress)
+        .err()
+        .expect("cancelled");
+    assert!(err.is::<cpm::workflow::Cancelled>(), "{err}");
+    assert_eq!(
+        cpm::workflow::error::exit_kind(&err),
+        cpm::workflow::ExitKind::Trouble
+    );
+    assert!(!out.exists());
+    // Not cancelled: the stages are reported as the job goes.
+    let progress = Collect::default();
+    let job = fit::calibrate(&options, &progress).unwrap();
+    let stages = progress.stages.lock().unwrap().clone();
+    assert!(
+        stages.iter().any(|s| s.starts_with("fitting")),
+        "{stages:?}"
+    );
+    assert!(job.fitted.cal.simulated);
+}
