@@ -954,7 +954,7 @@ impl RobotDescription {
 
     /// Semantic checks; the first problem found.
     fn check(&self) -> Result<(), Problem> {
-        use Seg::{Index, Key, Name};
+        use Seg::Key;
         if let Some(p) = &self.pose_map {
             p.check()?;
         }
@@ -968,6 +968,22 @@ impl RobotDescription {
             ));
         }
         let home = self.home.pose();
+        self.check_links(&home)?;
+        singular_at_home(self, &home)?;
+        self.check_instrument_tables()?;
+        self.check_clearance_and_load(&home)?;
+        if let Some(c) = &self.calibration {
+            check_calibration(c)?;
+        }
+        self.check_installation_errors(n)?;
+        self.check_instruments()?;
+        Ok(())
+    }
+
+    /// [[link]] tables: positions, length limits, reading scale, and a plausible length at
+    /// the home pose.
+    fn check_links(&self, home: &Pose) -> Result<(), Problem> {
+        use Seg::{Index, Key};
         for (i, l) in self.links.iter().enumerate() {
             let at = |k: &'static str| [Key("link"), Index(i), Key(k)];
             position3(&l.base_mm, &at("base_mm"))?;
@@ -1028,7 +1044,13 @@ impl RobotDescription {
                 }
             }
         }
-        singular_at_home(self, &home)?;
+        Ok(())
+    }
+
+    /// [[sensor]], [[target]] and [[inclinometer]] tables: unique names, positions, axes,
+    /// one noise per kind.
+    fn check_instrument_tables(&self) -> Result<(), Problem> {
+        use Seg::{Index, Key};
         let mut names = HashSet::new();
         for (i, s) in self.sensors.iter().enumerate() {
             let at = |k: &'static str| [Key("sensor"), Index(i), Key(k)];
@@ -1079,6 +1101,12 @@ impl RobotDescription {
                 &at("sigma_urad"),
             )?;
         }
+        Ok(())
+    }
+
+    /// [clearance] and [load]: non-negative sizes, a finite weight and wrench at home.
+    fn check_clearance_and_load(&self, home: &Pose) -> Result<(), Problem> {
+        use Seg::Key;
         if let Some(c) = &self.clearance {
             non_negative(c.radius_um, &[Key("clearance"), Key("radius_um")])?;
             if c.radius_um > MAX_CLEARANCE_UM {
@@ -1103,7 +1131,7 @@ impl RobotDescription {
             finite3(&l.external_force_n, &at("external_force_n"))?;
             finite3(&l.external_moment_nmm, &at("external_moment_nmm"))?;
             // Derived quantities: the weight and the wrench at home must be finite too.
-            let w = l.wrench(&home);
+            let w = l.wrench(home);
             if !(l.total_mass_kg().is_finite() && w.iter().all(|x| x.is_finite())) {
                 let key = if l.payload_mass_kg > l.platform_mass_kg {
                     "payload_mass_kg"
@@ -1119,94 +1147,12 @@ impl RobotDescription {
                 ));
             }
         }
-        if let Some(c) = &self.calibration {
-            for (v, key) in [
-                (c.tracker_position_sigma_um, "tracker_position_sigma_um"),
-                (
-                    c.tracker_orientation_sigma_urad,
-                    "tracker_orientation_sigma_urad",
-                ),
-            ] {
-                if let Some(v) = v {
-                    if !(v.is_finite() && v > 0.0) {
-                        return Err(Problem::new(
-                            &[Key("calibration"), Key(key)],
-                            format!("must be > 0, got {v} (leave it out for the default)"),
-                        ));
-                    }
-                }
-            }
-            if let Some(v) = c.sensor_noise_um {
-                // Like `--sigma-um`: a declared noise must be > 0 (leave the key out to have
-                // the noise estimated from the residual).
-                if !(v.is_finite() && v > 0.0) {
-                    return Err(Problem::new(
-                        &[Key("calibration"), Key("sensor_noise_um")],
-                        format!(
-                            "must be > 0, got {v} (leave it out to estimate the noise from the residual)"
-                        ),
-                    ));
-                }
-            }
-            let mut seen = HashSet::new();
-            for (i, e) in c.effects.iter().enumerate() {
-                let at = [Key("calibration"), Key("effects"), Index(i)];
-                if e.trim().is_empty() {
-                    return Err(Problem::new(&at, "must not be empty"));
-                }
-                if !seen.insert(e.as_str()) {
-                    return Err(Problem::new(&at, format!("duplicate effect `{e}`")));
-                }
-            }
-            for (key, v) in [
-                ("screw_lead_mm", c.screw_lead_mm),
-                ("nonlinearity_scale_mm", c.nonlinearity_scale_mm),
-            ] {
-                if let Some(v) = v {
-                    if !(v.is_finite() && v > 0.0) {
-                        return Err(Problem::new(
-                            &[Key("calibration"), Key(key)],
-                            format!("must be finite and > 0, got {v}"),
-                        ));
-                    }
-                }
-            }
-            if let Some(t) = c.reference_time_s {
-                if !t.is_finite() {
-                    return Err(Problem::new(
-                        &[Key("calibration"), Key("reference_time_s")],
-                        format!("must be a finite time, s, got {t}"),
-                    ));
-                }
-            }
-            if let Some(t) = c.reference_temperature_c {
-                if !(t.is_finite() && (-273.15..=1000.0).contains(&t)) {
-                    return Err(Problem::new(
-                        &[Key("calibration"), Key("reference_temperature_c")],
-                        format!("must be a temperature between -273.15 and 1000 deg C, got {t}"),
-                    ));
-                }
-            }
-            for (name, values) in &c.known_effects {
-                let at = |i: usize| {
-                    [
-                        Key("calibration"),
-                        Key("known_effects"),
-                        Name(name.clone()),
-                        Index(i),
-                    ]
-                };
-                if values.is_empty() {
-                    return Err(Problem::new(&at(0)[..3], "has no values"));
-                }
-                if let Some(i) = values.iter().position(|v| !v.is_finite()) {
-                    return Err(Problem::new(
-                        &at(i),
-                        format!("must be finite, got {}", values[i]),
-                    ));
-                }
-            }
-        }
+        Ok(())
+    }
+
+    /// [installation_errors_um]: one finite, plausible row per link (`n` links).
+    fn check_installation_errors(&self, n: usize) -> Result<(), Problem> {
+        use Seg::{Index, Key};
         if let Some(e) = &self.installation_errors_um {
             for (key, rows) in [("base", &e.base), ("platform", &e.platform)] {
                 if rows.len() != n {
@@ -1235,9 +1181,101 @@ impl RobotDescription {
                 }
             }
         }
-        self.check_instruments()?;
         Ok(())
     }
+}
+
+/// [calibration]: positive noises and scales, unique non-empty effects, finite reference
+/// time and temperature, finite known effects.
+fn check_calibration(c: &CalibrationSpec) -> Result<(), Problem> {
+    use Seg::{Index, Key, Name};
+    for (v, key) in [
+        (c.tracker_position_sigma_um, "tracker_position_sigma_um"),
+        (
+            c.tracker_orientation_sigma_urad,
+            "tracker_orientation_sigma_urad",
+        ),
+    ] {
+        if let Some(v) = v {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Problem::new(
+                    &[Key("calibration"), Key(key)],
+                    format!("must be > 0, got {v} (leave it out for the default)"),
+                ));
+            }
+        }
+    }
+    if let Some(v) = c.sensor_noise_um {
+        // Like `--sigma-um`: a declared noise must be > 0 (leave the key out to have
+        // the noise estimated from the residual).
+        if !(v.is_finite() && v > 0.0) {
+            return Err(Problem::new(
+                &[Key("calibration"), Key("sensor_noise_um")],
+                format!(
+                    "must be > 0, got {v} (leave it out to estimate the noise from the residual)"
+                ),
+            ));
+        }
+    }
+    let mut seen = HashSet::new();
+    for (i, e) in c.effects.iter().enumerate() {
+        let at = [Key("calibration"), Key("effects"), Index(i)];
+        if e.trim().is_empty() {
+            return Err(Problem::new(&at, "must not be empty"));
+        }
+        if !seen.insert(e.as_str()) {
+            return Err(Problem::new(&at, format!("duplicate effect `{e}`")));
+        }
+    }
+    for (key, v) in [
+        ("screw_lead_mm", c.screw_lead_mm),
+        ("nonlinearity_scale_mm", c.nonlinearity_scale_mm),
+    ] {
+        if let Some(v) = v {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Problem::new(
+                    &[Key("calibration"), Key(key)],
+                    format!("must be finite and > 0, got {v}"),
+                ));
+            }
+        }
+    }
+    if let Some(t) = c.reference_time_s {
+        if !t.is_finite() {
+            return Err(Problem::new(
+                &[Key("calibration"), Key("reference_time_s")],
+                format!("must be a finite time, s, got {t}"),
+            ));
+        }
+    }
+    if let Some(t) = c.reference_temperature_c {
+        if !(t.is_finite() && (-273.15..=1000.0).contains(&t)) {
+            return Err(Problem::new(
+                &[Key("calibration"), Key("reference_temperature_c")],
+                format!("must be a temperature between -273.15 and 1000 deg C, got {t}"),
+            ));
+        }
+    }
+    for (name, values) in &c.known_effects {
+        let at = |i: usize| {
+            [
+                Key("calibration"),
+                Key("known_effects"),
+                Name(name.clone()),
+                Index(i),
+            ]
+        };
+        if values.is_empty() {
+            return Err(Problem::new(&at(0)[..3], "has no values"));
+        }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(Problem::new(
+                &at(i),
+                format!("must be finite, got {}", values[i]),
+            ));
+        }
+    }
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -420,28 +420,7 @@ pub fn design(
 ) -> Result<Design, CalibError> {
     let (nb_all, np_all) = (sockets.base.len(), sockets.platform.len());
     let (nb, np) = (options.base_sockets, options.platform_sockets);
-    if nb == 0 || np == 0 || nb > nb_all || np > np_all {
-        return Err(CalibError::invalid(
-            "sockets",
-            format!(
-                "{nb} base and {np} platform sockets asked for, {nb_all} and {np_all} candidates given (at least one each)"
-            ),
-        ));
-    }
-    let pairs = nb * np;
-    let n_poses = options.poses.unwrap_or(options.max_readings / pairs);
-    if n_poses == 0 || n_poses * pairs > options.max_readings {
-        return Err(CalibError::invalid(
-            "poses",
-            format!(
-                "{n_poses} poses x {pairs} socket pairs does not fit {} readings (and at least one pose is needed)",
-                options.max_readings
-            ),
-        ));
-    }
-    if !(options.sigma_um.is_finite() && options.sigma_um > 0.0) {
-        return Err(CalibError::invalid("sigma_um", "must be finite and > 0"));
-    }
+    let n_poses = check_design(nb_all, np_all, options)?;
     let mut log = Vec::new();
     // The joint limits: candidates beyond them are dropped.
     let constraints = options.limits.map(|l| l.constraints());
@@ -472,17 +451,7 @@ pub fn design(
         nb_all * np_all
     ));
     let all_pairs = sockets.all_pairs();
-    let raw = sockets::pose_blocks(model, &candidates, &all_pairs);
-    let mut poses = Vec::with_capacity(candidates.len());
-    let mut blocks = Vec::with_capacity(candidates.len());
-    for (p, b) in candidates.iter().zip(raw) {
-        if let Some(b) = b {
-            if b.iter().all(|v| v.is_finite()) {
-                poses.push(*p);
-                blocks.push(b);
-            }
-        }
-    }
+    let (poses, blocks) = usable_blocks(model, &candidates, &all_pairs);
     if blocks.len() < n_poses {
         return Err(CalibError::invalid(
             "candidates",
@@ -514,152 +483,19 @@ pub fn design(
             })
             .collect()
     });
-    let clear = |r: usize, c: usize| {
-        clear_sets
-            .as_ref()
-            .is_none_or(|sets| sets[r][c / 64] >> (c % 64) & 1 == 1)
-    };
-    // Candidates every pair of a layout clears.
-    let eligible = |b: &[usize], p: &[usize]| -> Vec<usize> {
-        let rows = pair_rows(b, p, np_all);
-        (0..blocks.len())
-            .filter(|&c| rows.iter().all(|&r| clear(r, c)))
-            .collect()
-    };
-    let eligible_count = |b: &[usize], p: &[usize]| -> usize {
-        match &clear_sets {
-            None => blocks.len(),
-            Some(sets) => {
-                let rows = pair_rows(b, p, np_all);
-                (0..sets[0].len())
-                    .map(|w| {
-                        rows.iter()
-                            .fold(u64::MAX, |acc, &r| acc & sets[r][w])
-                            .count_ones() as usize
-                    })
-                    .sum()
-            }
-        }
-    };
-    let criterion = options.select.criterion;
-    let info_per_pair = |chosen: Option<&[usize]>| -> Vec<DMatrix<f64>> {
-        let n = blocks[0].ncols();
-        use rayon::prelude::*;
-        (0..nb_all * np_all)
-            .into_par_iter()
-            .map(|r| {
-                // All candidates: those the pair clears; chosen poses: all of them (the
-                // layouts that do not clear them are not feasible).
-                let idx: Vec<usize> = match chosen {
-                    Some(c) => c.to_vec(),
-                    None => (0..blocks.len()).filter(|&c| clear(r, c)).collect(),
-                };
-                let a = DMatrix::from_fn(idx.len(), n, |i, c| blocks[idx[i]][(r, c)]);
-                a.tr_mul(&a)
-            })
-            .collect()
-    };
-    let no_layout = || {
-        CalibError::invalid(
-            "limits.gauge_link_mm",
-            format!(
-                "no layout of {nb} base and {np} platform sockets keeps every gauge axis {} mm from the link axes at {n_poses} poses (of {} candidates)",
-                min_clear.unwrap_or(0.0),
-                blocks.len()
-            ),
-        )
-    };
-    let first: Vec<usize> = (0..nb).collect();
-    let firstp: Vec<usize> = (0..np).collect();
-    let enough = |b: &[usize], p: &[usize]| eligible_count(b, p) >= n_poses;
-    let (mut sb, mut sp, _) = choose_sockets(
-        &info_per_pair(None),
+    let layouts = Layouts {
+        blocks: &blocks,
+        clear_sets,
+        min_clear,
         nb_all,
         np_all,
         nb,
         np,
-        (&first, &firstp),
-        criterion,
-        &enough,
-    );
-    if !enough(&sb, &sp) {
-        return Err(no_layout());
-    }
-    // Poses for sockets `b / p`: among the candidates they clear, from `start` when given
-    // (candidate indices); the chosen candidate indices and the selection.
-    let select_for = |b: &[usize], p: &[usize], start: Option<&[usize]>| {
-        let rows = pair_rows(b, p, np_all);
-        let el = eligible(b, p);
-        if el.len() < n_poses {
-            return Err(no_layout());
-        }
-        let sub: Vec<DMatrix<f64>> = el.iter().map(|&c| blocks[c].select_rows(&rows)).collect();
-        let start: Option<Vec<usize>> =
-            start.and_then(|s| s.iter().map(|c| el.binary_search(c).ok()).collect());
-        let sel = select_blocks(&sub, n_poses, None, start.as_deref(), &options.select)?;
-        let info = select::information(&sub, &sel.chosen);
-        let chosen: Vec<usize> = sel.chosen.iter().map(|&i| el[i]).collect();
-        Ok::<_, CalibError>((chosen, sel, info))
+        n_poses,
+        options,
     };
-    let mut chosen: Option<Vec<usize>> = None;
-    for round in 0..options.socket_rounds.max(1) {
-        progress(&format!(
-            "design round {}: {}-optimal selection of {n_poses} poses for sockets {} / {}",
-            round + 1,
-            criterion.name(),
-            names(&sockets.base, &sb),
-            names(&sockets.platform, &sp)
-        ));
-        let (now, sel, info) = select_for(&sb, &sp, chosen.as_deref())?;
-        let ix = indices::indices_from_information(&info, n_poses * pairs, options.sigma_um);
-        log.push(format!(
-            "round {}: sockets {} / {}; {n_poses} poses, {}-criterion {:.4} after greedy, {:.4} after {} exchanges: Cramér-Rao RMS {:.3} um, max {:.3} um",
-            round + 1,
-            names(&sockets.base, &sb),
-            names(&sockets.platform, &sp),
-            criterion.name(),
-            sel.greedy_value,
-            sel.value,
-            sel.exchanges,
-            ix.crlb_rms_um,
-            ix.crlb_max_um
-        ));
-        // Layouts whose pairs all clear the chosen poses.
-        let clears_chosen = |b: &[usize], p: &[usize]| {
-            let rows = pair_rows(b, p, np_all);
-            now.iter().all(|&c| rows.iter().all(|&r| clear(r, c)))
-        };
-        let (nb2, np2, _) = choose_sockets(
-            &info_per_pair(Some(&now)),
-            nb_all,
-            np_all,
-            nb,
-            np,
-            (&sb, &sp),
-            criterion,
-            &clears_chosen,
-        );
-        chosen = Some(now);
-        if nb2 == sb && np2 == sp {
-            break;
-        }
-        sb = nb2;
-        sp = np2;
-        if round + 1 == options.socket_rounds.max(1) {
-            // Sockets changed on the last round: choose the poses for them once more.
-            let (now, sel, _) = select_for(&sb, &sp, chosen.as_deref())?;
-            log.push(format!(
-                "final: sockets {} / {}; poses re-chosen for them, {}-criterion {:.4} after {} exchanges",
-                names(&sockets.base, &sb),
-                names(&sockets.platform, &sp),
-                criterion.name(),
-                sel.value,
-                sel.exchanges
-            ));
-            chosen = Some(now);
-        }
-    }
-    let chosen = chosen.unwrap_or_default();
+    let (sb, sp) = layouts.first_sockets()?;
+    let (sb, sp, chosen) = layouts.alternate(sb, sp, sockets, progress, &mut log)?;
     let base_sockets: Vec<Socket> = sb.iter().map(|&i| sockets.base[i].clone()).collect();
     let platform_sockets: Vec<Socket> = sp.iter().map(|&i| sockets.platform[i].clone()).collect();
     let sensors = sockets::pair_sensors(&base_sockets, &platform_sockets);
@@ -677,7 +513,7 @@ pub fn design(
         base_sockets,
         platform_sockets,
         sensors,
-        criterion,
+        criterion: options.select.criterion,
         candidates: blocks.len(),
         indices: observability_indices(&j, options.sigma_um),
         sensor_lengths_mm: Vec::new(),
@@ -687,26 +523,7 @@ pub fn design(
         max_cone_deg: (0.0, 0.0),
         min_clearance_mm: f64::INFINITY,
     };
-    for p in &d.poses {
-        for (b, q) in limits::cone_angles_deg(table, p) {
-            d.max_cone_deg = (d.max_cone_deg.0.max(b), d.max_cone_deg.1.max(q));
-        }
-        for s in &d.sensors {
-            d.min_clearance_mm = d
-                .min_clearance_mm
-                .min(limits::gauge_clearance_mm(table, s, p));
-        }
-    }
-    d.sensor_lengths_mm = d
-        .sensors
-        .iter()
-        .map(|s| {
-            d.poses.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), p| {
-                let l = s.length_mm(p);
-                (lo.min(l), hi.max(l))
-            })
-        })
-        .collect();
+    d.measure_reach(table);
     // Gauge freedoms: one pair, then k x k sockets, then the layout itself.
     let mut layouts: Vec<(usize, usize)> = (1..nb.min(np)).map(|k| (k, k)).collect();
     layouts.push((nb, np));
@@ -721,6 +538,304 @@ pub fn design(
         d.gauge.push(gauge_freedoms(&dm, &plan)?);
     }
     Ok(d)
+}
+
+/// The checks of [`design`]'s options against `nb_all` base and `np_all` platform socket
+/// candidates; the number of poses to choose.
+fn check_design(
+    nb_all: usize,
+    np_all: usize,
+    options: &DesignOptions,
+) -> Result<usize, CalibError> {
+    let (nb, np) = (options.base_sockets, options.platform_sockets);
+    if nb == 0 || np == 0 || nb > nb_all || np > np_all {
+        return Err(CalibError::invalid(
+            "sockets",
+            format!(
+                "{nb} base and {np} platform sockets asked for, {nb_all} and {np_all} candidates given (at least one each)"
+            ),
+        ));
+    }
+    let pairs = nb * np;
+    let n_poses = options.poses.unwrap_or(options.max_readings / pairs);
+    if n_poses == 0 || n_poses * pairs > options.max_readings {
+        return Err(CalibError::invalid(
+            "poses",
+            format!(
+                "{n_poses} poses x {pairs} socket pairs does not fit {} readings (and at least one pose is needed)",
+                options.max_readings
+            ),
+        ));
+    }
+    if !(options.sigma_um.is_finite() && options.sigma_um > 0.0) {
+        return Err(CalibError::invalid("sigma_um", "must be finite and > 0"));
+    }
+    Ok(n_poses)
+}
+
+/// The candidates whose Jacobian block (one row per pair of `all_pairs`) is finite, and
+/// their blocks.
+fn usable_blocks(
+    model: &MeasurementModel,
+    candidates: &[Pose],
+    all_pairs: &[Sensor],
+) -> (Vec<Pose>, Vec<DMatrix<f64>>) {
+    let raw = sockets::pose_blocks(model, candidates, all_pairs);
+    let mut poses = Vec::with_capacity(candidates.len());
+    let mut blocks = Vec::with_capacity(candidates.len());
+    for (p, b) in candidates.iter().zip(raw) {
+        if let Some(b) = b {
+            if b.iter().all(|v| v.is_finite()) {
+                poses.push(*p);
+                blocks.push(b);
+            }
+        }
+    }
+    (poses, blocks)
+}
+
+/// What the alternation of [`design`] chooses from: the usable candidates' Jacobian blocks
+/// (a row per socket pair, pair `r` = base `r / np_all`, platform `r % np_all`) and which
+/// pairs clear which candidates.
+struct Layouts<'a> {
+    blocks: &'a [DMatrix<f64>],
+    /// Per socket pair, the candidates at which its axis clears every link axis (bit sets);
+    /// `None` without limits (every pair clears every candidate).
+    clear_sets: Option<Vec<Vec<u64>>>,
+    /// The gauge-link clearance asked for, mm.
+    min_clear: Option<f64>,
+    nb_all: usize,
+    np_all: usize,
+    /// Base and platform sockets to choose, and poses.
+    nb: usize,
+    np: usize,
+    n_poses: usize,
+    options: &'a DesignOptions,
+}
+
+impl Layouts<'_> {
+    /// Whether pair `r` clears candidate `c`.
+    fn clear(&self, r: usize, c: usize) -> bool {
+        self.clear_sets
+            .as_ref()
+            .is_none_or(|sets| sets[r][c / 64] >> (c % 64) & 1 == 1)
+    }
+
+    /// Candidates every pair of a layout clears.
+    fn eligible(&self, b: &[usize], p: &[usize]) -> Vec<usize> {
+        let rows = pair_rows(b, p, self.np_all);
+        (0..self.blocks.len())
+            .filter(|&c| rows.iter().all(|&r| self.clear(r, c)))
+            .collect()
+    }
+
+    /// How many candidates every pair of a layout clears.
+    fn eligible_count(&self, b: &[usize], p: &[usize]) -> usize {
+        match &self.clear_sets {
+            None => self.blocks.len(),
+            Some(sets) => {
+                let rows = pair_rows(b, p, self.np_all);
+                (0..sets[0].len())
+                    .map(|w| {
+                        rows.iter()
+                            .fold(u64::MAX, |acc, &r| acc & sets[r][w])
+                            .count_ones() as usize
+                    })
+                    .sum()
+            }
+        }
+    }
+
+    /// Per socket pair, the information of the candidates it clears (`None`) or of the
+    /// chosen poses (all of them: the layouts that do not clear them are not feasible).
+    fn info_per_pair(&self, chosen: Option<&[usize]>) -> Vec<DMatrix<f64>> {
+        let blocks = self.blocks;
+        let n = blocks[0].ncols();
+        use rayon::prelude::*;
+        (0..self.nb_all * self.np_all)
+            .into_par_iter()
+            .map(|r| {
+                let idx: Vec<usize> = match chosen {
+                    Some(c) => c.to_vec(),
+                    None => (0..blocks.len()).filter(|&c| self.clear(r, c)).collect(),
+                };
+                let a = DMatrix::from_fn(idx.len(), n, |i, c| blocks[idx[i]][(r, c)]);
+                a.tr_mul(&a)
+            })
+            .collect()
+    }
+
+    /// The error when no layout clears enough candidates.
+    fn no_layout(&self) -> CalibError {
+        let (nb, np, n_poses) = (self.nb, self.np, self.n_poses);
+        CalibError::invalid(
+            "limits.gauge_link_mm",
+            format!(
+                "no layout of {nb} base and {np} platform sockets keeps every gauge axis {} mm from the link axes at {n_poses} poses (of {} candidates)",
+                self.min_clear.unwrap_or(0.0),
+                self.blocks.len()
+            ),
+        )
+    }
+
+    /// The first sockets: the best for all the candidate poses they clear at once, among
+    /// the layouts that clear enough of them.
+    fn first_sockets(&self) -> Result<(Vec<usize>, Vec<usize>), CalibError> {
+        let first: Vec<usize> = (0..self.nb).collect();
+        let firstp: Vec<usize> = (0..self.np).collect();
+        let enough = |b: &[usize], p: &[usize]| self.eligible_count(b, p) >= self.n_poses;
+        let (sb, sp, _) = choose_sockets(
+            &self.info_per_pair(None),
+            self.nb_all,
+            self.np_all,
+            self.nb,
+            self.np,
+            (&first, &firstp),
+            self.options.select.criterion,
+            &enough,
+        );
+        if !enough(&sb, &sp) {
+            return Err(self.no_layout());
+        }
+        Ok((sb, sp))
+    }
+
+    /// Poses for sockets `b / p`: among the candidates they clear, from `start` when given
+    /// (candidate indices); the chosen candidate indices, the selection and its information.
+    fn select_for(
+        &self,
+        b: &[usize],
+        p: &[usize],
+        start: Option<&[usize]>,
+    ) -> Result<(Vec<usize>, Selection, DMatrix<f64>), CalibError> {
+        let rows = pair_rows(b, p, self.np_all);
+        let el = self.eligible(b, p);
+        if el.len() < self.n_poses {
+            return Err(self.no_layout());
+        }
+        let sub: Vec<DMatrix<f64>> = el
+            .iter()
+            .map(|&c| self.blocks[c].select_rows(&rows))
+            .collect();
+        let start: Option<Vec<usize>> =
+            start.and_then(|s| s.iter().map(|c| el.binary_search(c).ok()).collect());
+        let sel = select_blocks(
+            &sub,
+            self.n_poses,
+            None,
+            start.as_deref(),
+            &self.options.select,
+        )?;
+        let info = select::information(&sub, &sel.chosen);
+        let chosen: Vec<usize> = sel.chosen.iter().map(|&i| el[i]).collect();
+        Ok((chosen, sel, info))
+    }
+
+    /// The alternation from sockets `sb / sp`: poses for the current sockets, then the best
+    /// sockets for those poses, until the sockets no longer change (at most
+    /// `options.socket_rounds` rounds; poses chosen once more when the last round changed
+    /// them). Returns the sockets and the chosen candidate indices.
+    #[allow(clippy::type_complexity)]
+    fn alternate(
+        &self,
+        mut sb: Vec<usize>,
+        mut sp: Vec<usize>,
+        sockets: &SocketCandidates,
+        progress: &dyn Fn(&str),
+        log: &mut Vec<String>,
+    ) -> Result<(Vec<usize>, Vec<usize>, Vec<usize>), CalibError> {
+        let (options, n_poses, np_all) = (self.options, self.n_poses, self.np_all);
+        let criterion = options.select.criterion;
+        let pairs = self.nb * self.np;
+        let mut chosen: Option<Vec<usize>> = None;
+        for round in 0..options.socket_rounds.max(1) {
+            progress(&format!(
+                "design round {}: {}-optimal selection of {n_poses} poses for sockets {} / {}",
+                round + 1,
+                criterion.name(),
+                names(&sockets.base, &sb),
+                names(&sockets.platform, &sp)
+            ));
+            let (now, sel, info) = self.select_for(&sb, &sp, chosen.as_deref())?;
+            let ix = indices::indices_from_information(&info, n_poses * pairs, options.sigma_um);
+            log.push(format!(
+                "round {}: sockets {} / {}; {n_poses} poses, {}-criterion {:.4} after greedy, {:.4} after {} exchanges: Cramér-Rao RMS {:.3} um, max {:.3} um",
+                round + 1,
+                names(&sockets.base, &sb),
+                names(&sockets.platform, &sp),
+                criterion.name(),
+                sel.greedy_value,
+                sel.value,
+                sel.exchanges,
+                ix.crlb_rms_um,
+                ix.crlb_max_um
+            ));
+            // Layouts whose pairs all clear the chosen poses.
+            let clears_chosen = |b: &[usize], p: &[usize]| {
+                let rows = pair_rows(b, p, np_all);
+                now.iter().all(|&c| rows.iter().all(|&r| self.clear(r, c)))
+            };
+            let (nb2, np2, _) = choose_sockets(
+                &self.info_per_pair(Some(&now)),
+                self.nb_all,
+                np_all,
+                self.nb,
+                self.np,
+                (&sb, &sp),
+                criterion,
+                &clears_chosen,
+            );
+            chosen = Some(now);
+            if nb2 == sb && np2 == sp {
+                break;
+            }
+            sb = nb2;
+            sp = np2;
+            if round + 1 == options.socket_rounds.max(1) {
+                // Sockets changed on the last round: choose the poses for them once more.
+                let (now, sel, _) = self.select_for(&sb, &sp, chosen.as_deref())?;
+                log.push(format!(
+                    "final: sockets {} / {}; poses re-chosen for them, {}-criterion {:.4} after {} exchanges",
+                    names(&sockets.base, &sb),
+                    names(&sockets.platform, &sp),
+                    criterion.name(),
+                    sel.value,
+                    sel.exchanges
+                ));
+                chosen = Some(now);
+            }
+        }
+        Ok((sb, sp, chosen.unwrap_or_default()))
+    }
+}
+
+impl Design {
+    /// The largest cone angles, the smallest sensor-link clearance and each sensor's length
+    /// range over the design's poses, on the nominal `table`.
+    fn measure_reach(&mut self, table: &cpm_geometry::JointTable) {
+        for p in &self.poses {
+            for (b, q) in limits::cone_angles_deg(table, p) {
+                self.max_cone_deg = (self.max_cone_deg.0.max(b), self.max_cone_deg.1.max(q));
+            }
+            for s in &self.sensors {
+                self.min_clearance_mm = self
+                    .min_clearance_mm
+                    .min(limits::gauge_clearance_mm(table, s, p));
+            }
+        }
+        self.sensor_lengths_mm = self
+            .sensors
+            .iter()
+            .map(|s| {
+                self.poses
+                    .iter()
+                    .fold((f64::INFINITY, 0.0f64), |(lo, hi), p| {
+                        let l = s.length_mm(p);
+                        (lo.min(l), hi.max(l))
+                    })
+            })
+            .collect();
+    }
 }
 
 /// The candidates within the joint limits of `c` (cones, link-link clearance); `Err` naming

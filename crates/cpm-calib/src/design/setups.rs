@@ -40,7 +40,7 @@ use serde::{Deserialize, Serialize};
 use super::candidates::Workspace;
 use super::indices::{observability_indices, Criterion, ObservabilityIndices};
 use super::limits::{cone_angles_deg, gauge_clearance_mm, Constraints};
-use super::select::{select_blocks, SelectOptions};
+use super::select::{select_blocks, SelectOptions, Selection};
 use super::sockets::{pose_blocks, Socket, SocketCandidates};
 use crate::{identification_jacobian, CalibError, Campaign, MeasurementModel, Reading};
 
@@ -536,6 +536,119 @@ pub fn design_setups(
     options: &SetupOptions,
     progress: &dyn Fn(&str),
 ) -> Result<SetupDesign, CalibError> {
+    check_setup_options(sockets, constraints, options)?;
+    let table = &model.nominal;
+    let mut model = model.clone();
+    model.effects.clear();
+    let model = &model;
+    let ctx = Ctx {
+        model,
+        constraints,
+        options,
+    };
+    let mut log = Vec::new();
+    progress("design under limits: candidate poses within the joint limits");
+    let (poses, sens) = ctx.poses_within_limits(candidates)?;
+    let n = model.num_params();
+    let pairs = sockets.all_pairs();
+    let np_all = sockets.platform.len();
+    log.push(format!(
+        "{} of {} candidate poses within the joint limits (cones <= {} / {} deg{}); {} x {} candidate sockets",
+        poses.len(),
+        candidates.len(),
+        constraints.joints.base_cone_deg,
+        constraints.joints.platform_cone_deg,
+        if table.links.iter().any(|l| l.length_limits_mm.is_some()) { ", link length limits" } else { "" },
+        sockets.base.len(),
+        np_all
+    ));
+    progress(&format!(
+        "design under limits: lengths and clearances of {} poses x {} socket pairs",
+        poses.len(),
+        pairs.len()
+    ));
+    let natural = ctx.natural_readings(&pairs, &poses);
+    let cands = Readings {
+        poses,
+        sens,
+        pairs,
+        natural,
+    };
+    // Screening sample of poses for projections.
+    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
+    let screen_poses = sample(&mut rng, &cands.poses, options.screening_projections);
+    let setups = ctx.screen_setups(&cands, &screen_poses, n, progress)?;
+    let criterion = options.select.criterion;
+    let scale = setups.iter().map(|s| s.info.trace()).sum::<f64>() / (setups.len() * n) as f64;
+    let info = SetupInformation {
+        setups: &setups,
+        ridge: DMatrix::<f64>::identity(n, n)
+            * (options.select.ridge * scale.max(f64::MIN_POSITIVE)),
+        criterion,
+        n,
+    };
+    let choice = info.choose(options);
+    let chosen = choice.chosen;
+    if !choice.minimax.is_empty() {
+        log.push(format!(
+            "setup minimax rounds (worst parameter bound of the budget shares, per unit noise): {}",
+            choice.minimax.join(", ")
+        ));
+    }
+    log.push(format!(
+        "{} candidate setups (socket pair x {} mm window); {} chosen: {}-criterion of their budget shares {:.4} greedy, {:.4} after {} swaps",
+        setups.len(),
+        constraints.gauge.stroke_mm,
+        chosen.len(),
+        criterion.name(),
+        choice.greedy_value,
+        choice.value,
+        choice.swaps
+    ));
+    // Reading candidates of the chosen setups.
+    progress(&format!(
+        "design under limits: candidate readings of {} setups",
+        chosen.len()
+    ));
+    let pool = ctx.reading_pool(&cands, &setups, &chosen, &mut rng);
+    let sel = select_readings(&pool, n, constraints, options, progress, &mut log)?;
+    let ordered = mounting_order(assemble_setups(
+        &pool, &sel, &chosen, &setups, sockets, table,
+    ));
+    let mut d = SetupDesign {
+        setups: ordered,
+        constraints: constraints.clone(),
+        criterion,
+        candidate_poses: cands.poses.len(),
+        candidate_setups: setups.len(),
+        candidate_readings: pool.len(),
+        indices: observability_indices(&DMatrix::zeros(0, n), constraints.gauge.sigma_um),
+        log,
+    };
+    progress("design under limits: indices of the chosen readings");
+    let dm = d.model(model);
+    let j = identification_jacobian(&dm, &d.campaign(), &vec![0.0; n])?;
+    d.indices = observability_indices(&j, constraints.gauge.sigma_um);
+    let (moves, bars) = d.remounts();
+    d.log.push(format!(
+        "{} setups, {} readings: Cramér-Rao RMS {:.3} um, max {:.3} um (noise {:.2} um); largest travel {:.1} mm, smallest clearance {:.1} mm; {moves} socket moves and {bars} bar changes between setups",
+        d.setups.len(),
+        d.num_readings(),
+        d.indices.crlb_rms_um,
+        d.indices.crlb_max_um,
+        constraints.gauge.sigma_um,
+        d.max_travel_mm(),
+        d.min_clearance_mm()
+    ));
+    Ok(d)
+}
+
+/// The checks of [`design_setups`]'s inputs.
+fn check_setup_options(
+    sockets: &SocketCandidates,
+    constraints: &Constraints,
+    options: &SetupOptions,
+) -> Result<(), CalibError> {
     constraints.validate()?;
     if options.max_readings == 0 || options.max_setups == 0 {
         return Err(CalibError::invalid(
@@ -555,269 +668,305 @@ pub fn design_setups(
             "must be finite and >= 0",
         ));
     }
-    // Readings are admitted in the window shrunk by the edge margin.
-    let edge = options
-        .edge_margin_mm
-        .min(0.25 * constraints.gauge.stroke_mm);
-    let inner = |w: (f64, f64)| (w.0 + edge, w.1 - edge);
-    let table = &model.nominal;
-    let mut model = model.clone();
-    model.effects.clear();
-    let model = &model;
-    let ctx = Ctx {
-        model,
-        constraints,
-        options,
-    };
-    let mut log = Vec::new();
-    progress("design under limits: candidate poses within the joint limits");
-    let within: Vec<Pose> = candidates
-        .par_iter()
-        .filter(|p| constraints.check_pose(table, p).is_ok())
-        .copied()
-        .collect();
-    let sens = pose_sensitivities(model, &within);
-    let (poses, sens): (Vec<Pose>, Vec<DMatrix<f64>>) = within
-        .iter()
-        .zip(sens)
-        .filter_map(|(p, s)| s.map(|s| (*p, s)))
-        .unzip();
-    if poses.is_empty() {
-        return Err(CalibError::invalid(
-            "candidates",
-            format!(
-                "none of the {} candidate poses is within the joint limits",
-                candidates.len()
-            ),
-        ));
+    Ok(())
+}
+
+/// What the setups and readings of [`design_setups`] are chosen from: the candidate poses
+/// within the joint limits with their sensitivities, the socket pairs, and per pair its
+/// natural readings (pose index, length, clearance) that clear the links.
+struct Readings {
+    poses: Vec<Pose>,
+    sens: Vec<DMatrix<f64>>,
+    pairs: Vec<Sensor>,
+    natural: Vec<Vec<(usize, f64, f64)>>,
+}
+
+/// A candidate setup: a socket pair, a bar, its window, and the information of its share of
+/// the reading budget.
+struct CandSetup {
+    pair: usize,
+    bar: f64,
+    window: (f64, f64),
+    info: DMatrix<f64>,
+}
+
+/// `k` of `poses` drawn at random (a partial shuffle of their indices).
+fn sample(rng: &mut rand::rngs::StdRng, poses: &[Pose], k: usize) -> Vec<Pose> {
+    let mut idx: Vec<usize> = (0..poses.len()).collect();
+    let k = k.min(idx.len());
+    for i in 0..k {
+        let j = rng.random_range(i..idx.len());
+        idx.swap(i, j);
     }
-    let n = model.num_params();
-    let pairs = sockets.all_pairs();
-    let np_all = sockets.platform.len();
-    log.push(format!(
-        "{} of {} candidate poses within the joint limits (cones <= {} / {} deg{}); {} x {} candidate sockets",
-        poses.len(),
-        candidates.len(),
-        constraints.joints.base_cone_deg,
-        constraints.joints.platform_cone_deg,
-        if table.links.iter().any(|l| l.length_limits_mm.is_some()) { ", link length limits" } else { "" },
-        sockets.base.len(),
-        np_all
-    ));
-    progress(&format!(
-        "design under limits: lengths and clearances of {} poses x {} socket pairs",
-        poses.len(),
-        pairs.len()
-    ));
-    // Per pair: the natural readings (pose index, length, clearance) that clear the links.
-    let natural: Vec<Vec<(usize, f64, f64)>> = pairs
-        .par_iter()
-        .map(|s| {
-            poses
-                .iter()
-                .enumerate()
-                .filter_map(|(c, p)| {
-                    let cl = gauge_clearance_mm(table, s, p);
-                    (cl >= constraints.clearance.gauge_link_mm).then(|| (c, s.length_mm(p), cl))
+    idx[..k].iter().map(|&i| poses[i]).collect()
+}
+
+impl Ctx<'_> {
+    /// The window in which readings are admitted: `w` shrunk by the edge margin.
+    fn inner(&self, w: (f64, f64)) -> (f64, f64) {
+        let edge = self
+            .options
+            .edge_margin_mm
+            .min(0.25 * self.constraints.gauge.stroke_mm);
+        (w.0 + edge, w.1 - edge)
+    }
+
+    /// The candidates within the joint limits whose sensitivities could be computed, with
+    /// them; `Err` when none is.
+    fn poses_within_limits(
+        &self,
+        candidates: &[Pose],
+    ) -> Result<(Vec<Pose>, Vec<DMatrix<f64>>), CalibError> {
+        let table = &self.model.nominal;
+        let within: Vec<Pose> = candidates
+            .par_iter()
+            .filter(|p| self.constraints.check_pose(table, p).is_ok())
+            .copied()
+            .collect();
+        let sens = pose_sensitivities(self.model, &within);
+        let (poses, sens): (Vec<Pose>, Vec<DMatrix<f64>>) = within
+            .iter()
+            .zip(sens)
+            .filter_map(|(p, s)| s.map(|s| (*p, s)))
+            .unzip();
+        if poses.is_empty() {
+            return Err(CalibError::invalid(
+                "candidates",
+                format!(
+                    "none of the {} candidate poses is within the joint limits",
+                    candidates.len()
+                ),
+            ));
+        }
+        Ok((poses, sens))
+    }
+
+    /// Per pair: the natural readings (pose index, length, clearance) that clear the links.
+    fn natural_readings(&self, pairs: &[Sensor], poses: &[Pose]) -> Vec<Vec<(usize, f64, f64)>> {
+        let table = &self.model.nominal;
+        pairs
+            .par_iter()
+            .map(|s| {
+                poses
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(c, p)| {
+                        let cl = gauge_clearance_mm(table, s, p);
+                        (cl >= self.constraints.clearance.gauge_link_mm)
+                            .then(|| (c, s.length_mm(p), cl))
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The candidate setups (per pair, the gauge's windows over its lengths), each screened
+    /// on its natural readings and projections of `screen_poses`: those with any admissible
+    /// reading, with the information of their share of the budget (`n` parameters).
+    fn screen_setups(
+        &self,
+        cands: &Readings,
+        screen_poses: &[Pose],
+        n: usize,
+        progress: &dyn Fn(&str),
+    ) -> Result<Vec<CandSetup>, CalibError> {
+        let (options, constraints) = (self.options, self.constraints);
+        let (poses, pairs, natural) = (&cands.poses, &cands.pairs, &cands.natural);
+        let share = (options.max_readings as f64 / options.max_setups as f64).max(1.0);
+        let mut specs = Vec::new();
+        for (r, nat) in natural.iter().enumerate() {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for (_, l, _) in nat {
+                lo = lo.min(*l);
+                hi = hi.max(*l);
+            }
+            if !lo.is_finite() {
+                // No admissible natural reading: use the lengths over all poses.
+                for p in poses {
+                    let l = pairs[r].length_mm(p);
+                    lo = lo.min(l);
+                    hi = hi.max(l);
+                }
+            }
+            for (bar, wlo, whi) in
+                constraints
+                    .gauge
+                    .windows(lo, hi, options.windows_per_pair.max(1))
+            {
+                specs.push((r, bar, (wlo, whi)));
+            }
+        }
+        progress(&format!(
+            "design under limits: screening {} candidate setups",
+            specs.len()
+        ));
+        let setups: Vec<CandSetup> = specs
+            .par_iter()
+            .enumerate()
+            .filter_map(|(k, &(r, bar, window))| {
+                let s = &pairs[r];
+                let w = self.inner(window);
+                let mut rows: Vec<RowDVector<f64>> = natural[r]
+                    .iter()
+                    .filter(|(_, l, _)| *l >= w.0 && *l <= w.1)
+                    .map(|(c, _, _)| row(s, &poses[*c], &cands.sens[*c]))
+                    .collect();
+                rows.extend(
+                    self.projected(s, w, screen_poses, options.seed ^ (k as u64 + 1))
+                        .into_iter()
+                        .map(|c| c.row),
+                );
+                if rows.is_empty() {
+                    return None;
+                }
+                let refs: Vec<&RowDVector<f64>> = rows.iter().collect();
+                let scale = (share / rows.len() as f64).min(1.0);
+                Some(CandSetup {
+                    pair: r,
+                    bar,
+                    window,
+                    info: information(&refs, n) * scale,
                 })
-                .collect()
-        })
-        .collect();
-    // Screening sample of poses for projections.
-    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
-    let sample = |rng: &mut rand::rngs::StdRng, k: usize| -> Vec<Pose> {
-        let mut idx: Vec<usize> = (0..poses.len()).collect();
-        let k = k.min(idx.len());
-        for i in 0..k {
-            let j = rng.random_range(i..idx.len());
-            idx.swap(i, j);
-        }
-        idx[..k].iter().map(|&i| poses[i]).collect()
-    };
-    let screen_poses = sample(&mut rng, options.screening_projections);
-    // Candidate setups.
-    struct CandSetup {
-        pair: usize,
-        bar: f64,
-        window: (f64, f64),
-        info: DMatrix<f64>,
-    }
-    let share = (options.max_readings as f64 / options.max_setups as f64).max(1.0);
-    let mut specs = Vec::new();
-    for (r, nat) in natural.iter().enumerate() {
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for (_, l, _) in nat {
-            lo = lo.min(*l);
-            hi = hi.max(*l);
-        }
-        if !lo.is_finite() {
-            // No admissible natural reading: use the lengths over all poses.
-            for p in &poses {
-                let l = pairs[r].length_mm(p);
-                lo = lo.min(l);
-                hi = hi.max(l);
-            }
-        }
-        for (bar, wlo, whi) in constraints
-            .gauge
-            .windows(lo, hi, options.windows_per_pair.max(1))
-        {
-            specs.push((r, bar, (wlo, whi)));
-        }
-    }
-    progress(&format!(
-        "design under limits: screening {} candidate setups",
-        specs.len()
-    ));
-    let setups: Vec<CandSetup> = specs
-        .par_iter()
-        .enumerate()
-        .filter_map(|(k, &(r, bar, window))| {
-            let s = &pairs[r];
-            let w = inner(window);
-            let mut rows: Vec<RowDVector<f64>> = natural[r]
-                .iter()
-                .filter(|(_, l, _)| *l >= w.0 && *l <= w.1)
-                .map(|(c, _, _)| row(s, &poses[*c], &sens[*c]))
-                .collect();
-            rows.extend(
-                ctx.projected(s, w, &screen_poses, options.seed ^ (k as u64 + 1))
-                    .into_iter()
-                    .map(|c| c.row),
-            );
-            if rows.is_empty() {
-                return None;
-            }
-            let refs: Vec<&RowDVector<f64>> = rows.iter().collect();
-            let scale = (share / rows.len() as f64).min(1.0);
-            Some(CandSetup {
-                pair: r,
-                bar,
-                window,
-                info: information(&refs, n) * scale,
             })
-        })
-        .collect();
-    if setups.is_empty() {
-        return Err(CalibError::NoInformation(
-            "no socket pair has an admissible reading under the limits: allow more sockets, a longer stroke or less clearance".into(),
-        ));
+            .collect();
+        if setups.is_empty() {
+            return Err(CalibError::NoInformation(
+                "no socket pair has an admissible reading under the limits: allow more sockets, a longer stroke or less clearance".into(),
+            ));
+        }
+        Ok(setups)
     }
-    let criterion = options.select.criterion;
-    let scale = setups.iter().map(|s| s.info.trace()).sum::<f64>() / (setups.len() * n) as f64;
-    let ridge =
-        DMatrix::<f64>::identity(n, n) * (options.select.ridge * scale.max(f64::MIN_POSITIVE));
-    let value = |chosen: &[usize]| {
-        let mut m = ridge.clone();
+
+    /// The candidate readings of the `chosen` setups (with the index of their setup among
+    /// the chosen): the natural readings in each window, then projections of poses drawn
+    /// from `rng`.
+    fn reading_pool(
+        &self,
+        cands: &Readings,
+        setups: &[CandSetup],
+        chosen: &[usize],
+        rng: &mut rand::rngs::StdRng,
+    ) -> Vec<(usize, Cand)> {
+        let (options, poses) = (self.options, &cands.poses);
+        let mut pool: Vec<(usize, Cand)> = Vec::new();
+        for (k, &c) in chosen.iter().enumerate() {
+            let cs = &setups[c];
+            let s = &cands.pairs[cs.pair];
+            let w = self.inner(cs.window);
+            for (pi, l, cl) in &cands.natural[cs.pair] {
+                if *l >= w.0 && *l <= w.1 {
+                    pool.push((
+                        k,
+                        Cand {
+                            pose: poses[*pi],
+                            length: *l,
+                            clearance: *cl,
+                            row: row(s, &poses[*pi], &cands.sens[*pi]),
+                        },
+                    ));
+                }
+            }
+            let extra = sample(rng, poses, options.projections);
+            for cand in self.projected(s, w, &extra, options.seed.wrapping_mul(31) ^ (c as u64 + 7))
+            {
+                pool.push((k, cand));
+            }
+        }
+        pool
+    }
+}
+
+/// The setups chosen: their indices among the candidates, the criterion after the greedy
+/// choice and after the swaps, and the setup-level minimax rounds (worst bound before ->
+/// after).
+struct SetupChoice {
+    chosen: Vec<usize>,
+    greedy_value: f64,
+    value: f64,
+    swaps: usize,
+    minimax: Vec<String>,
+}
+
+/// The candidate setups' information and the ridge that regularises its sums (`n`
+/// parameters).
+struct SetupInformation<'a> {
+    setups: &'a [CandSetup],
+    ridge: DMatrix<f64>,
+    criterion: Criterion,
+    n: usize,
+}
+
+impl SetupInformation<'_> {
+    /// The ridge plus the information of the `chosen` setups.
+    fn sum(&self, chosen: &[usize]) -> DMatrix<f64> {
+        let mut m = self.ridge.clone();
         for &c in chosen {
-            m += &setups[c].info;
+            m += &self.setups[c].info;
         }
-        criterion.value(&m)
-    };
-    let k_setups = options.max_setups.min(setups.len());
-    let mut chosen: Vec<usize> = Vec::with_capacity(k_setups);
-    for _ in 0..k_setups {
-        let best = (0..setups.len())
+        m
+    }
+
+    /// The criterion of the `chosen` setups.
+    fn value(&self, chosen: &[usize]) -> f64 {
+        self.criterion.value(&self.sum(chosen))
+    }
+
+    /// The parameters' variances under the `chosen` setups.
+    fn variances(&self, chosen: &[usize]) -> Option<Vec<f64>> {
+        let inv = self.sum(chosen).cholesky()?.inverse();
+        Some((0..self.n).map(|k| inv[(k, k)]).collect())
+    }
+
+    /// Minus the variances under the `chosen` setups weighted by `w`.
+    fn weighted(&self, chosen: &[usize], w: &[f64]) -> f64 {
+        self.variances(chosen).map_or(f64::NEG_INFINITY, |v| {
+            -v.iter().zip(w).map(|(a, b)| a * b).sum::<f64>()
+        })
+    }
+
+    /// The best setup not in `taken` by `score` (largest, ties to the lower index).
+    fn best(
+        &self,
+        taken: &[usize],
+        score: impl Fn(usize) -> f64 + Sync + Send,
+    ) -> Option<(f64, usize)> {
+        (0..self.setups.len())
             .into_par_iter()
-            .filter(|c| !chosen.contains(c))
-            .map(|c| {
-                let mut t = chosen.clone();
-                t.push(c);
-                (value(&t), c)
-            })
+            .filter(|c| !taken.contains(c))
+            .map(|c| (score(c), c))
             .reduce_with(|a, b| {
                 if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
                     b
                 } else {
                     a
                 }
-            });
-        match best {
-            Some((_, c)) => chosen.push(c),
-            None => break,
-        }
+            })
     }
-    let greedy_value = value(&chosen);
-    let mut current = greedy_value;
-    let mut swaps = 0;
-    for _pass in 0..3 {
-        let mut improved = false;
-        for i in 0..chosen.len() {
-            let best = (0..setups.len())
-                .into_par_iter()
-                .filter(|c| !chosen.contains(c))
-                .map(|c| {
-                    let mut t = chosen.clone();
-                    t[i] = c;
-                    (value(&t), c)
-                })
-                .reduce_with(|a, b| {
-                    if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
-                        b
-                    } else {
-                        a
-                    }
-                });
-            if let Some((v, c)) = best {
-                if v > current + options.select.tolerance * current.abs() {
-                    chosen[i] = c;
-                    current = v;
-                    swaps += 1;
-                    improved = true;
-                }
-            }
-        }
-        if !improved {
-            break;
-        }
-    }
-    // Minimax at the setup level: weight the parameters by their variance under the chosen
-    // setups and choose again; keep when the largest variance falls.
-    let variances_of = |chosen: &[usize]| -> Option<Vec<f64>> {
-        let mut m = ridge.clone();
-        for &c in chosen {
-            m += &setups[c].info;
-        }
-        let inv = m.cholesky()?.inverse();
-        Some((0..n).map(|k| inv[(k, k)]).collect())
-    };
-    let weighted = |chosen: &[usize], w: &[f64]| -> f64 {
-        variances_of(chosen).map_or(f64::NEG_INFINITY, |v| {
-            -v.iter().zip(w).map(|(a, b)| a * b).sum::<f64>()
-        })
-    };
-    let mut setup_minimax = Vec::new();
-    for _ in 0..options.minimax_rounds {
-        let Some(v) = variances_of(&chosen) else {
-            break;
-        };
-        let worst = v.iter().copied().fold(0.0, f64::max);
-        let mean = v.iter().sum::<f64>() / n as f64;
-        let w: Vec<f64> = v.iter().map(|x| x / mean).collect();
-        let mut trial = chosen.clone();
-        let mut cur = weighted(&trial, &w);
+
+    /// Exchange passes (at most three) on `chosen` from the objective `current`: each place
+    /// takes the setup that raises `objective` most when it does by more than the
+    /// tolerance. Returns the objective reached and the swaps made.
+    fn exchange(
+        &self,
+        chosen: &mut [usize],
+        mut current: f64,
+        tolerance: f64,
+        objective: &(dyn Fn(&[usize]) -> f64 + Sync),
+    ) -> (f64, usize) {
+        let mut swaps = 0;
         for _pass in 0..3 {
             let mut improved = false;
-            for i in 0..trial.len() {
-                let best = (0..setups.len())
-                    .into_par_iter()
-                    .filter(|c| !trial.contains(c))
-                    .map(|c| {
-                        let mut t = trial.clone();
-                        t[i] = c;
-                        (weighted(&t, &w), c)
-                    })
-                    .reduce_with(|a, b| {
-                        if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
-                            b
-                        } else {
-                            a
-                        }
-                    });
+            for i in 0..chosen.len() {
+                let best = self.best(chosen, |c| {
+                    let mut t = chosen.to_vec();
+                    t[i] = c;
+                    objective(&t)
+                });
                 if let Some((v, c)) = best {
-                    if v > cur + options.select.tolerance * cur.abs() {
-                        trial[i] = c;
-                        cur = v;
+                    if v > current + tolerance * current.abs() {
+                        chosen[i] = c;
+                        current = v;
+                        swaps += 1;
                         improved = true;
                     }
                 }
@@ -826,62 +975,75 @@ pub fn design_setups(
                 break;
             }
         }
-        let Some(v2) = variances_of(&trial) else {
-            break;
-        };
-        let worst2 = v2.iter().copied().fold(0.0, f64::max);
-        setup_minimax.push(format!("{:.3} -> {:.3}", worst.sqrt(), worst2.sqrt()));
-        if worst2 < worst {
-            chosen = trial;
-            current = value(&chosen);
-        } else {
-            break;
-        }
+        (current, swaps)
     }
-    if !setup_minimax.is_empty() {
-        log.push(format!(
-            "setup minimax rounds (worst parameter bound of the budget shares, per unit noise): {}",
-            setup_minimax.join(", ")
-        ));
-    }
-    log.push(format!(
-        "{} candidate setups (socket pair x {} mm window); {} chosen: {}-criterion of their budget shares {:.4} greedy, {:.4} after {} swaps",
-        setups.len(),
-        constraints.gauge.stroke_mm,
-        chosen.len(),
-        criterion.name(),
-        greedy_value,
-        current,
-        swaps
-    ));
-    // Reading candidates of the chosen setups.
-    progress(&format!(
-        "design under limits: candidate readings of {} setups",
-        chosen.len()
-    ));
-    let mut pool: Vec<(usize, Cand)> = Vec::new();
-    for (k, &c) in chosen.iter().enumerate() {
-        let cs = &setups[c];
-        let s = &pairs[cs.pair];
-        let w = inner(cs.window);
-        for (pi, l, cl) in &natural[cs.pair] {
-            if *l >= w.0 && *l <= w.1 {
-                pool.push((
-                    k,
-                    Cand {
-                        pose: poses[*pi],
-                        length: *l,
-                        clearance: *cl,
-                        row: row(s, &poses[*pi], &sens[*pi]),
-                    },
-                ));
+
+    /// The setups: greedy up to `options.max_setups`, exchanges, then minimax at the setup
+    /// level (the parameters weighted by their variance under the chosen setups and chosen
+    /// again; kept when the largest variance falls).
+    fn choose(&self, options: &SetupOptions) -> SetupChoice {
+        let (n, tolerance) = (self.n, options.select.tolerance);
+        let k_setups = options.max_setups.min(self.setups.len());
+        let mut chosen: Vec<usize> = Vec::with_capacity(k_setups);
+        for _ in 0..k_setups {
+            let best = self.best(&chosen, |c| {
+                let mut t = chosen.clone();
+                t.push(c);
+                self.value(&t)
+            });
+            match best {
+                Some((_, c)) => chosen.push(c),
+                None => break,
             }
         }
-        let extra = sample(&mut rng, options.projections);
-        for cand in ctx.projected(s, w, &extra, options.seed.wrapping_mul(31) ^ (c as u64 + 7)) {
-            pool.push((k, cand));
+        let greedy_value = self.value(&chosen);
+        let (mut current, swaps) =
+            self.exchange(&mut chosen, greedy_value, tolerance, &|t| self.value(t));
+        let mut minimax = Vec::new();
+        for _ in 0..options.minimax_rounds {
+            let Some(v) = self.variances(&chosen) else {
+                break;
+            };
+            let worst = v.iter().copied().fold(0.0, f64::max);
+            let mean = v.iter().sum::<f64>() / n as f64;
+            let w: Vec<f64> = v.iter().map(|x| x / mean).collect();
+            let mut trial = chosen.clone();
+            let cur = self.weighted(&trial, &w);
+            self.exchange(&mut trial, cur, tolerance, &|t| self.weighted(t, &w));
+            let Some(v2) = self.variances(&trial) else {
+                break;
+            };
+            let worst2 = v2.iter().copied().fold(0.0, f64::max);
+            minimax.push(format!("{:.3} -> {:.3}", worst.sqrt(), worst2.sqrt()));
+            if worst2 < worst {
+                chosen = trial;
+                current = self.value(&chosen);
+            } else {
+                break;
+            }
+        }
+        SetupChoice {
+            chosen,
+            greedy_value,
+            value: current,
+            swaps,
+            minimax,
         }
     }
+}
+
+/// The readings: the criterion-optimal selection of at most `options.max_readings` from
+/// `pool` (`n` parameters), then minimax reweighting rounds (each parameter weighted by its
+/// variance, exchanged again; the selection of the smallest worst variance kept).
+fn select_readings(
+    pool: &[(usize, Cand)],
+    n: usize,
+    constraints: &Constraints,
+    options: &SetupOptions,
+    progress: &dyn Fn(&str),
+    log: &mut Vec<String>,
+) -> Result<Selection, CalibError> {
+    let criterion = options.select.criterion;
     let n_read = options.max_readings.min(pool.len());
     progress(&format!(
         "design under limits: {}-optimal selection of {n_read} of {} candidate readings",
@@ -963,7 +1125,20 @@ pub fn design_setups(
         }
         current = next;
     }
-    // Assemble the setups.
+    Ok(sel)
+}
+
+/// The chosen setups with their selected readings (those with any), each's poses ordered as
+/// a short path from home (nearest neighbour, position mm + 5 mm per deg).
+fn assemble_setups(
+    pool: &[(usize, Cand)],
+    sel: &Selection,
+    chosen: &[usize],
+    setups: &[CandSetup],
+    sockets: &SocketCandidates,
+    table: &JointTable,
+) -> Vec<Setup> {
+    let np_all = sockets.platform.len();
     let mut groups: Vec<Vec<&Cand>> = vec![Vec::new(); chosen.len()];
     for &i in &sel.chosen {
         groups[pool[i].0].push(&pool[i].1);
@@ -1004,8 +1179,13 @@ pub fn design_setups(
             clearances_mm: order.iter().map(|c| c.clearance).collect(),
         });
     }
-    // Mounting order: start with the setup of most readings, then always the setup that
-    // changes least (socket moves count 2, a bar change 1), ties to more readings.
+    built
+}
+
+/// Mounting order: start with the setup of most readings, then always the setup that
+/// changes least (socket moves count 2, a bar change 1), ties to more readings; each named
+/// after its place and sockets.
+fn mounting_order(mut built: Vec<Setup>) -> Vec<Setup> {
     let mut ordered: Vec<Setup> = Vec::with_capacity(built.len());
     if !built.is_empty() {
         let first = (0..built.len())
@@ -1028,32 +1208,7 @@ pub fn design_setups(
     for (k, s) in ordered.iter_mut().enumerate() {
         s.name = format!("s{:02}_{}{}", k + 1, s.base.name, s.platform.name);
     }
-    let mut d = SetupDesign {
-        setups: ordered,
-        constraints: constraints.clone(),
-        criterion,
-        candidate_poses: poses.len(),
-        candidate_setups: setups.len(),
-        candidate_readings: pool.len(),
-        indices: observability_indices(&DMatrix::zeros(0, n), constraints.gauge.sigma_um),
-        log,
-    };
-    progress("design under limits: indices of the chosen readings");
-    let dm = d.model(model);
-    let j = identification_jacobian(&dm, &d.campaign(), &vec![0.0; n])?;
-    d.indices = observability_indices(&j, constraints.gauge.sigma_um);
-    let (moves, bars) = d.remounts();
-    d.log.push(format!(
-        "{} setups, {} readings: Cramér-Rao RMS {:.3} um, max {:.3} um (noise {:.2} um); largest travel {:.1} mm, smallest clearance {:.1} mm; {moves} socket moves and {bars} bar changes between setups",
-        d.setups.len(),
-        d.num_readings(),
-        d.indices.crlb_rms_um,
-        d.indices.crlb_max_um,
-        constraints.gauge.sigma_um,
-        d.max_travel_mm(),
-        d.min_clearance_mm()
-    ));
-    Ok(d)
+    ordered
 }
 
 #[cfg(test)]

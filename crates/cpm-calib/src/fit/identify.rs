@@ -587,71 +587,28 @@ pub fn identify(
 ) -> Result<Calibration, CalibError> {
     options.lm.validate()?;
     let np = model.num_params();
-    let start = options.start_um.clone().unwrap_or_else(|| vec![0.0; np]);
-    if start.len() != np {
-        return Err(CalibError::invalid(
-            "start_um",
-            format!("{} values, expected {np}", start.len()),
-        ));
-    }
-    if let Some(s) = options.sigma_um {
-        if !(s.is_finite() && s > 0.0) {
-            return Err(CalibError::invalid(
-                "sigma_um",
-                format!("{s} must be finite and > 0"),
-            ));
-        }
-    }
+    let start = checked_start(np, options)?;
     let prepared = Prepared::new(model, campaign)?;
     let m = campaign.len();
     let prior = prior_std(model, &options.tolerances)?;
-    let with_prior = prior.iter().any(|p| p.is_finite());
     let sigma_ref = campaign.reference_sigma(options.sigma_um);
-    let weights = campaign.observation_weights(sigma_ref);
-    let weigh = |mut j: DMatrix<f64>| {
-        for (r, w) in weights.iter().enumerate() {
-            let mut row = j.row_mut(r);
-            row *= 1e3 * w;
-        }
-        j
+    let w = Weighing {
+        with_prior: prior.iter().any(|p| p.is_finite()),
+        prior,
+        weights: campaign.observation_weights(sigma_ref),
+        sigma_ref,
     };
     let mut j0 = DMatrix::zeros(m, np);
     let y0 = predict(model, &prepared, campaign, &start, Some(&mut j0))?;
-    let r0_pose = r0_of(&y0, campaign, &weights);
-    let patterns = physical_patterns(model, campaign);
-    // Held parameters take no part in the fit: their columns are left out of the directions
-    // the fit moves along.
-    let mut j_free = weigh(j0.clone());
-    for (k, p) in prior.iter().enumerate() {
-        if *p == 0.0 {
-            j_free.column_mut(k).fill(0.0);
-        }
-    }
-    let first = try_analyze(&j_free, 1.0, &options.rank, &patterns)?;
-    if first.rank == 0 {
-        return Err(CalibError::NoInformation(
-            "the identification Jacobian is zero: the readings do not depend on any installation error".into(),
-        ));
-    }
-    let prior_rows: Vec<(usize, f64)> = prior
+    let r0_pose = r0_of(&y0, campaign, &w.weights);
+    let (first, basis) = fit_directions(model, campaign, &j0, &w, &r0_pose, options)?;
+    let prior_rows: Vec<(usize, f64)> = w
+        .prior
         .iter()
         .enumerate()
         .filter(|(_, p)| p.is_finite() && **p > 0.0)
         .map(|(k, p)| (k, 1.0 / p))
         .collect();
-    // Under a prior the fit moves in the directions of the tolerance-scaled problem (the
-    // data's Jacobian in tolerances, with the prior's rows): every direction with a tolerance
-    // takes part (the prior holds what the data do not see), and a free parameter's blind
-    // directions stay out. Without one, in the identifiable subspace of the data alone.
-    let basis = if with_prior {
-        let sigma0 = options
-            .sigma_um
-            .or(options.prior_noise_um)
-            .unwrap_or_else(|| rms(&r0_pose).max(1e-9 * sigma_ref));
-        prior_basis(&j_free, &prior, sigma0, options.rank.rank_rtol)
-    } else {
-        first.row_space()
-    };
     let rank = basis.ncols();
     let leg_space = options.leg_space && crate::model::leg_space_applies(campaign);
     let mut problem = Subspace {
@@ -661,7 +618,7 @@ pub fn identify(
         start_um: DVector::from_vec(start),
         basis,
         measured_mm: campaign.observations(),
-        weights: weights.clone(),
+        weights: w.weights.clone(),
         // The start (theta = 0) is evaluated already.
         full_jac: j0,
         cached_theta: vec![0.0; rank],
@@ -679,190 +636,38 @@ pub fn identify(
         .residuals(&theta, &mut r0)
         .map_err(|e| CalibError::invalid("model at the start", e.to_string()))?;
     r0.truncate(m);
-    // A robust (above all a redescending) loss started far from the solution sees every
-    // residual beyond its scale and down-weights everything: start it from least squares,
-    // and a redescending one from Huber's solution at the same scale.
-    let robust = !options.lm.loss.is_squared();
-    let solve =
-        |problem: &mut Subspace<'_>, theta: &mut Vec<f64>| -> Result<cpm_lm::Report, CalibError> {
-            Ok(if robust {
-                let stage = |loss| cpm_lm::Options {
-                    loss,
-                    ..options.lm.clone()
-                };
-                cpm_lm::minimize(problem, theta, &stage(cpm_lm::Loss::Squared))?;
-                if let cpm_lm::Loss::Tukey(k) | cpm_lm::Loss::Cauchy(k) = options.lm.loss {
-                    cpm_lm::minimize(problem, theta, &stage(cpm_lm::Loss::Huber(k)))?;
-                }
-                cpm_lm::minimize(problem, theta, &options.lm)?
-            } else {
-                cpm_lm::minimize(problem, theta, &options.lm)?
-            })
-        };
     // The prior is weighed against the noise: the declared one, else the residual's,
     // estimated with the fit (from the nominal's residual down, until it settles).
     let estimate_noise =
-        with_prior && options.sigma_um.is_none() && options.prior_noise_um.is_none();
-    problem.prior_sigma = match (with_prior, options.sigma_um) {
+        w.with_prior && options.sigma_um.is_none() && options.prior_noise_um.is_none();
+    problem.prior_sigma = match (w.with_prior, options.sigma_um) {
         (false, _) => 0.0,
         (true, Some(s)) => s,
         (true, None) => options
             .prior_noise_um
-            .unwrap_or_else(|| rms(&r0).max(1e-9 * sigma_ref)),
+            .unwrap_or_else(|| rms(&r0).max(1e-9 * w.sigma_ref)),
     };
-    let fit =
-        |problem: &mut Subspace<'_>, theta: &mut Vec<f64>| -> Result<cpm_lm::Report, CalibError> {
-            let mut report = solve(problem, theta)?;
-            if estimate_noise {
-                for _ in 0..MAX_NOISE_ROUNDS {
-                    if problem.leg {
-                        problem.leg_r = problem.leg_at(&problem.errors(theta))?;
-                    } else {
-                        problem.evaluate(theta)?;
-                    }
-                    let s = noise_of_fit(problem, campaign, robust)?;
-                    let settled =
-                        (s - problem.prior_sigma).abs() <= NOISE_SETTLED * problem.prior_sigma;
-                    problem.prior_sigma = s;
-                    if settled {
-                        break;
-                    }
-                    report = solve(problem, theta)?;
-                }
-            }
-            Ok(report)
-        };
-    let mut solver = fit(&mut problem, &mut theta)?;
-    // Gross outliers of a least-squares fit set aside (weight zero) and the fit continued
-    // from where it stands, until the set settles.
-    let mut set_aside: Vec<usize> = Vec::new();
-    if !robust && !problem.leg && !options.keep_outliers {
-        for _ in 0..MAX_SET_ASIDE_ROUNDS {
-            problem.evaluate(&theta)?;
-            let r = r0_of(&problem.cached_y, campaign, &weights);
-            let flagged = crate::analysis::diagnostics::outliers_by_kind_beyond(
-                &r,
-                campaign,
-                options.sigma_um,
-                SET_ASIDE_SIGMAS,
-            );
-            if flagged == set_aside {
-                break;
-            }
-            set_aside = flagged;
-            problem.weights.clone_from(&weights);
-            for &k in &set_aside {
-                problem.weights[k] = 0.0;
-            }
-            solver = fit(&mut problem, &mut theta)?;
-        }
-    }
-    let mut e_hat = problem.errors(&theta);
-    // The weights the fit used (zero for what it set aside), for the statistics; the
-    // sessions' frames are registered again on every observation, as `validate` registers
-    // a session, so that the written description reproduces the fit.
-    let fit_weights = problem.weights.clone();
-    problem.weights.clone_from(&weights);
-    if problem.leg || (with_prior && options.lm.loss.is_squared()) {
-        // The sessions' own parameters (tracker and point frames, base tilts) registered
-        // again in pose space with the machine held fixed, as `validate` registers a session:
-        // the written machine then reproduces the fit to the solver's precision, whatever
-        // the prior did to the rest.
-        e_hat = reregister_frames(&mut problem, e_hat, &options.lm)?;
-        theta = vec![0.0; problem.basis.ncols()];
-    }
-    problem.evaluate(&theta)?;
-    let (e_hat, y, jf) = match base_frame_gauge(model, campaign, &e_hat)? {
-        // The same fit, told in the base joints' own frame: predicted again there (equal to
-        // rounding, the move being a symmetry of the data).
-        Some(e) => {
-            let mut j = DMatrix::zeros(m, np);
-            let y = predict(model, &prepared, campaign, &e, Some(&mut j))?;
-            (e, y, j)
-        }
-        None => (
-            e_hat,
-            std::mem::take(&mut problem.cached_y),
-            std::mem::replace(&mut problem.full_jac, DMatrix::zeros(0, 0)),
-        ),
-    };
-    let residuals_um: Vec<f64> = y
-        .iter()
-        .zip(&problem.measured_mm)
-        .zip(&weights)
-        .map(|((a, b), w)| (a - b) * 1e3 * w)
-        .collect();
-    // The statistics see what the fit saw: the set-aside observations at weight zero.
-    let mut jf = jf;
-    for (r, w) in fit_weights.iter().enumerate() {
-        let mut row = jf.row_mut(r);
-        row *= 1e3 * w;
-    }
-    for (k, p) in prior.iter().enumerate() {
-        if *p == 0.0 {
-            jf.column_mut(k).fill(0.0);
-        }
-    }
-    // What the fit set aside is an outlier by its rule; the frames registered again on every
-    // observation may move a few more across the line.
-    let mut outliers =
-        crate::analysis::diagnostics::outliers_by_kind(&residuals_um, campaign, options.sigma_um);
-    if !set_aside.is_empty() {
-        outliers.extend_from_slice(&set_aside);
-        outliers.sort_unstable();
-        outliers.dedup();
-    }
-    let downweighted_share = if robust && !residuals_um.is_empty() {
-        residuals_um
-            .iter()
-            .filter(|r| options.lm.loss.evaluate(*r * *r)[1] < DOWNWEIGHT_LEVEL)
-            .count() as f64
-            / residuals_um.len() as f64
-    } else {
-        0.0
-    };
-    let sigma_excludes_outliers =
-        options.sigma_um.is_none() && ((robust && !outliers.is_empty()) || !set_aside.is_empty());
-    // Residuals the noise estimate uses: all, or without the outliers of a robust fit and
-    // those set aside.
-    let left_out = |k: usize| {
-        (robust && sigma_excludes_outliers && outliers.binary_search(&k).is_ok())
-            || set_aside.binary_search(&k).is_ok()
-    };
-    let (ssr, count) = residuals_um
-        .iter()
-        .enumerate()
-        .filter(|(k, _)| !left_out(*k))
-        .fold((0.0, 0usize), |(s, n), (_, r)| (s + r * r, n + 1));
-    // Under a prior, the leverages of the regularised hat matrix (at the noise the prior was
-    // weighed against): they add up to the effective number of parameters.
-    let prior_leverages = with_prior.then(|| {
-        crate::fit::prior::leverages(&jf, &prior, options.sigma_um.unwrap_or(problem.prior_sigma))
-    });
-    let (sigma_um, sigma_estimated) = match options.sigma_um {
-        Some(s) => (s, false),
-        None if with_prior => {
-            // The residual's degrees of freedom: the observations less the effective number
-            // of parameters the fit used (the prior takes the rest), counted over the
-            // observations the estimate uses.
-            let h = prior_leverages.as_deref().unwrap_or(&[]);
-            let p_eff: f64 = h
-                .iter()
-                .enumerate()
-                .filter(|(k, _)| !left_out(*k))
-                .map(|(_, x)| x)
-                .sum();
-            let dof = (count as f64 - p_eff).max(1.0);
-            ((ssr / dof).sqrt(), true)
-        }
-        None => {
-            let dof = count.saturating_sub(first.rank).max(1);
-            ((ssr / dof as f64).sqrt(), true)
-        }
-    };
+    let (solver, set_aside) = fit_setting_aside(
+        &mut problem,
+        &mut theta,
+        &w.weights,
+        estimate_noise,
+        options,
+    )?;
+    let end = fit_end(&mut problem, theta, set_aside, &w, options)?;
+    let noise = noise_estimate(&end, &w, problem.prior_sigma, first.rank, options);
+    let FitEnd {
+        e_hat,
+        residuals_um,
+        jf,
+        set_aside,
+        outliers,
+        downweighted_share,
+    } = end;
+    let sigma_um = noise.sigma_um;
     let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
-    let prior_summary = with_prior.then(|| summarize(&jf, &prior, sigma_um));
-    let leverages = match prior_leverages {
+    let prior_summary = w.with_prior.then(|| summarize(&jf, &w.prior, sigma_um));
+    let leverages = match noise.prior_leverages {
         Some(h) => h,
         None => crate::analysis::identifiability::leverages(&jf, &ident),
     };
@@ -885,20 +690,7 @@ pub fn identify(
             None => ident.crlb_std_um[k],
         })
         .collect();
-    let combinations = (0..ident.rank)
-        .map(|c| {
-            let v = ident.v.column(c);
-            let mut load: Vec<(usize, f64)> = v.iter().copied().enumerate().collect();
-            load.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-            load.truncate(4);
-            Combination {
-                singular_value: ident.singular_values[c],
-                estimate_um: v.dot(&DVector::from_column_slice(&e_hat)),
-                std_um: ident.combination_std_um[c],
-                loadings: load,
-            }
-        })
-        .collect();
+    let combinations = combinations(&ident, &e_hat);
     Ok(Calibration {
         simulated: campaign.simulated,
         estimate_um,
@@ -907,8 +699,8 @@ pub fn identify(
         combinations,
         identifiability: ident,
         sigma_um,
-        sigma_estimated,
-        sigma_excludes_outliers,
+        sigma_estimated: noise.sigma_estimated,
+        sigma_excludes_outliers: noise.sigma_excludes_outliers,
         outliers,
         set_aside,
         initial_rms_um: rms(&r0_pose),
@@ -917,12 +709,377 @@ pub fn identify(
         solver,
         downweighted_share,
         robust_failed: downweighted_share > MAX_DOWNWEIGHTED_SHARE,
-        sigma_ref_um: sigma_ref,
+        sigma_ref_um: w.sigma_ref,
         leverages,
         prior: prior_summary,
-        prior_std: prior,
+        prior_std: w.prior,
         leg_space,
     })
+}
+
+/// How a fit weighs the observations and the parameters.
+struct Weighing {
+    /// The parameters' prior standard deviations (0: held; infinite: free).
+    prior: Vec<f64>,
+    /// Whether any parameter has a finite prior.
+    with_prior: bool,
+    /// The reference noise the weights are relative to, um.
+    sigma_ref: f64,
+    /// The observations' weights.
+    weights: Vec<f64>,
+}
+
+/// The start of a fit of `np` parameters (zero unless given), and the checks of the options
+/// that are not the solver's.
+fn checked_start(np: usize, options: &IdentifyOptions) -> Result<Vec<f64>, CalibError> {
+    let start = options.start_um.clone().unwrap_or_else(|| vec![0.0; np]);
+    if start.len() != np {
+        return Err(CalibError::invalid(
+            "start_um",
+            format!("{} values, expected {np}", start.len()),
+        ));
+    }
+    if let Some(s) = options.sigma_um {
+        if !(s.is_finite() && s > 0.0) {
+            return Err(CalibError::invalid(
+                "sigma_um",
+                format!("{s} must be finite and > 0"),
+            ));
+        }
+    }
+    Ok(start)
+}
+
+/// The directions the fit moves along, from the Jacobian `j0` at the start (residuals
+/// `r0_pose`): the analysis of the free parameters' weighted Jacobian (held parameters' columns
+/// left out), and the basis. Under a prior the fit moves in the directions of the
+/// tolerance-scaled problem (the data's Jacobian in tolerances, with the prior's rows): every
+/// direction with a tolerance takes part (the prior holds what the data do not see), and a
+/// free parameter's blind directions stay out. Without one, in the identifiable subspace of
+/// the data alone.
+fn fit_directions(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    j0: &DMatrix<f64>,
+    w: &Weighing,
+    r0_pose: &[f64],
+    options: &IdentifyOptions,
+) -> Result<(Identifiability, DMatrix<f64>), CalibError> {
+    let patterns = physical_patterns(model, campaign);
+    // Held parameters take no part in the fit: their columns are left out of the directions
+    // the fit moves along.
+    let mut j_free = j0.clone();
+    for (r, wr) in w.weights.iter().enumerate() {
+        let mut row = j_free.row_mut(r);
+        row *= 1e3 * wr;
+    }
+    for (k, p) in w.prior.iter().enumerate() {
+        if *p == 0.0 {
+            j_free.column_mut(k).fill(0.0);
+        }
+    }
+    let first = try_analyze(&j_free, 1.0, &options.rank, &patterns)?;
+    if first.rank == 0 {
+        return Err(CalibError::NoInformation(
+            "the identification Jacobian is zero: the readings do not depend on any installation error".into(),
+        ));
+    }
+    let basis = if w.with_prior {
+        let sigma0 = options
+            .sigma_um
+            .or(options.prior_noise_um)
+            .unwrap_or_else(|| rms(r0_pose).max(1e-9 * w.sigma_ref));
+        prior_basis(&j_free, &w.prior, sigma0, options.rank.rank_rtol)
+    } else {
+        first.row_space()
+    };
+    Ok((first, basis))
+}
+
+/// One solve from `theta`. A robust (above all a redescending) loss started far from the
+/// solution sees every residual beyond its scale and down-weights everything: it is started
+/// from least squares, and a redescending one from Huber's solution at the same scale.
+fn solve_staged(
+    problem: &mut Subspace<'_>,
+    theta: &mut Vec<f64>,
+    options: &IdentifyOptions,
+) -> Result<cpm_lm::Report, CalibError> {
+    let robust = !options.lm.loss.is_squared();
+    Ok(if robust {
+        let stage = |loss| cpm_lm::Options {
+            loss,
+            ..options.lm.clone()
+        };
+        cpm_lm::minimize(problem, theta, &stage(cpm_lm::Loss::Squared))?;
+        if let cpm_lm::Loss::Tukey(k) | cpm_lm::Loss::Cauchy(k) = options.lm.loss {
+            cpm_lm::minimize(problem, theta, &stage(cpm_lm::Loss::Huber(k)))?;
+        }
+        cpm_lm::minimize(problem, theta, &options.lm)?
+    } else {
+        cpm_lm::minimize(problem, theta, &options.lm)?
+    })
+}
+
+/// The fit ([`solve_staged`]); with `estimate_noise`, the noise the prior is weighed
+/// against estimated from the residual and the fit solved again, until it settles.
+fn solve_with_noise(
+    problem: &mut Subspace<'_>,
+    theta: &mut Vec<f64>,
+    estimate_noise: bool,
+    options: &IdentifyOptions,
+) -> Result<cpm_lm::Report, CalibError> {
+    let robust = !options.lm.loss.is_squared();
+    let campaign = problem.campaign;
+    let mut report = solve_staged(problem, theta, options)?;
+    if estimate_noise {
+        for _ in 0..MAX_NOISE_ROUNDS {
+            if problem.leg {
+                problem.leg_r = problem.leg_at(&problem.errors(theta))?;
+            } else {
+                problem.evaluate(theta)?;
+            }
+            let s = noise_of_fit(problem, campaign, robust)?;
+            let settled = (s - problem.prior_sigma).abs() <= NOISE_SETTLED * problem.prior_sigma;
+            problem.prior_sigma = s;
+            if settled {
+                break;
+            }
+            report = solve_staged(problem, theta, options)?;
+        }
+    }
+    Ok(report)
+}
+
+/// The fit ([`solve_with_noise`]), then the gross outliers of a least-squares fit set aside
+/// (weight zero, the others at `weights`) and the fit continued from where it stands, until
+/// the set settles. Returns the last solve's report and the observations set aside.
+fn fit_setting_aside(
+    problem: &mut Subspace<'_>,
+    theta: &mut Vec<f64>,
+    weights: &[f64],
+    estimate_noise: bool,
+    options: &IdentifyOptions,
+) -> Result<(cpm_lm::Report, Vec<usize>), CalibError> {
+    let robust = !options.lm.loss.is_squared();
+    let campaign = problem.campaign;
+    let mut solver = solve_with_noise(problem, theta, estimate_noise, options)?;
+    let mut set_aside: Vec<usize> = Vec::new();
+    if !robust && !problem.leg && !options.keep_outliers {
+        for _ in 0..MAX_SET_ASIDE_ROUNDS {
+            problem.evaluate(theta)?;
+            let r = r0_of(&problem.cached_y, campaign, weights);
+            let flagged = crate::analysis::diagnostics::outliers_by_kind_beyond(
+                &r,
+                campaign,
+                options.sigma_um,
+                SET_ASIDE_SIGMAS,
+            );
+            if flagged == set_aside {
+                break;
+            }
+            set_aside = flagged;
+            problem.weights.clear();
+            problem.weights.extend_from_slice(weights);
+            for &k in &set_aside {
+                problem.weights[k] = 0.0;
+            }
+            solver = solve_with_noise(problem, theta, estimate_noise, options)?;
+        }
+    }
+    Ok((solver, set_aside))
+}
+
+/// What a fit ended with, told on every observation.
+struct FitEnd {
+    /// The errors at the solution, um.
+    e_hat: Vec<f64>,
+    /// The weighted residuals of every observation, um of the reference.
+    residuals_um: Vec<f64>,
+    /// The weighted Jacobian as the fit saw it: the set-aside observations' rows at weight
+    /// zero, the held parameters' columns zero.
+    jf: DMatrix<f64>,
+    /// The observations the fit set aside.
+    set_aside: Vec<usize>,
+    /// The outliers: flagged by their rule at the solution, and those set aside.
+    outliers: Vec<usize>,
+    /// The share of observations a robust loss down-weighted below [`DOWNWEIGHT_LEVEL`].
+    downweighted_share: f64,
+}
+
+/// The end of the fit at `theta`: the sessions' frames registered again on every
+/// observation, as `validate` registers a session, so that the written description
+/// reproduces the fit; the base frame made the base joints' own; the residuals, the
+/// Jacobian and the outliers there.
+fn fit_end(
+    problem: &mut Subspace<'_>,
+    mut theta: Vec<f64>,
+    set_aside: Vec<usize>,
+    w: &Weighing,
+    options: &IdentifyOptions,
+) -> Result<FitEnd, CalibError> {
+    let (model, campaign) = (problem.model, problem.campaign);
+    let (m, np) = (campaign.len(), model.num_params());
+    let robust = !options.lm.loss.is_squared();
+    let mut e_hat = problem.errors(&theta);
+    // The weights the fit used (zero for what it set aside), for the statistics.
+    let fit_weights = problem.weights.clone();
+    problem.weights.clone_from(&w.weights);
+    if problem.leg || (w.with_prior && options.lm.loss.is_squared()) {
+        // The sessions' own parameters (tracker and point frames, base tilts) registered
+        // again in pose space with the machine held fixed, as `validate` registers a session:
+        // the written machine then reproduces the fit to the solver's precision, whatever
+        // the prior did to the rest.
+        e_hat = reregister_frames(problem, e_hat, &options.lm)?;
+        theta = vec![0.0; problem.basis.ncols()];
+    }
+    problem.evaluate(&theta)?;
+    let (e_hat, y, jf) = match base_frame_gauge(model, campaign, &e_hat)? {
+        // The same fit, told in the base joints' own frame: predicted again there (equal to
+        // rounding, the move being a symmetry of the data).
+        Some(e) => {
+            let mut j = DMatrix::zeros(m, np);
+            let y = predict(model, problem.prepared, campaign, &e, Some(&mut j))?;
+            (e, y, j)
+        }
+        None => (
+            e_hat,
+            std::mem::take(&mut problem.cached_y),
+            std::mem::replace(&mut problem.full_jac, DMatrix::zeros(0, 0)),
+        ),
+    };
+    let residuals_um: Vec<f64> = y
+        .iter()
+        .zip(&problem.measured_mm)
+        .zip(&w.weights)
+        .map(|((a, b), w)| (a - b) * 1e3 * w)
+        .collect();
+    // The statistics see what the fit saw: the set-aside observations at weight zero.
+    let mut jf = jf;
+    for (r, wr) in fit_weights.iter().enumerate() {
+        let mut row = jf.row_mut(r);
+        row *= 1e3 * wr;
+    }
+    for (k, p) in w.prior.iter().enumerate() {
+        if *p == 0.0 {
+            jf.column_mut(k).fill(0.0);
+        }
+    }
+    // What the fit set aside is an outlier by its rule; the frames registered again on every
+    // observation may move a few more across the line.
+    let mut outliers =
+        crate::analysis::diagnostics::outliers_by_kind(&residuals_um, campaign, options.sigma_um);
+    if !set_aside.is_empty() {
+        outliers.extend_from_slice(&set_aside);
+        outliers.sort_unstable();
+        outliers.dedup();
+    }
+    let downweighted_share = if robust && !residuals_um.is_empty() {
+        residuals_um
+            .iter()
+            .filter(|r| options.lm.loss.evaluate(*r * *r)[1] < DOWNWEIGHT_LEVEL)
+            .count() as f64
+            / residuals_um.len() as f64
+    } else {
+        0.0
+    };
+    Ok(FitEnd {
+        e_hat,
+        residuals_um,
+        jf,
+        set_aside,
+        outliers,
+        downweighted_share,
+    })
+}
+
+/// The noise of a fit: declared, or estimated from the residual.
+struct NoiseEstimate {
+    sigma_um: f64,
+    sigma_estimated: bool,
+    /// Whether the estimate leaves out the outliers of a robust fit or those set aside.
+    sigma_excludes_outliers: bool,
+    /// Under a prior, the leverages of the regularised hat matrix.
+    prior_leverages: Option<Vec<f64>>,
+}
+
+/// The noise of the fit that ended at `end`: the declared one, else the residual's over its
+/// degrees of freedom (the observations less the parameters used: the rank `first_rank` of
+/// the start, or under a prior the effective number, at the noise `prior_sigma` the prior was
+/// weighed against).
+fn noise_estimate(
+    end: &FitEnd,
+    w: &Weighing,
+    prior_sigma: f64,
+    first_rank: usize,
+    options: &IdentifyOptions,
+) -> NoiseEstimate {
+    let robust = !options.lm.loss.is_squared();
+    let (outliers, set_aside) = (&end.outliers, &end.set_aside);
+    let sigma_excludes_outliers =
+        options.sigma_um.is_none() && ((robust && !outliers.is_empty()) || !set_aside.is_empty());
+    // Residuals the noise estimate uses: all, or without the outliers of a robust fit and
+    // those set aside.
+    let left_out = |k: usize| {
+        (robust && sigma_excludes_outliers && outliers.binary_search(&k).is_ok())
+            || set_aside.binary_search(&k).is_ok()
+    };
+    let (ssr, count) = end
+        .residuals_um
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| !left_out(*k))
+        .fold((0.0, 0usize), |(s, n), (_, r)| (s + r * r, n + 1));
+    // Under a prior, the leverages of the regularised hat matrix (at the noise the prior was
+    // weighed against): they add up to the effective number of parameters.
+    let prior_leverages = w.with_prior.then(|| {
+        crate::fit::prior::leverages(&end.jf, &w.prior, options.sigma_um.unwrap_or(prior_sigma))
+    });
+    let (sigma_um, sigma_estimated) = match options.sigma_um {
+        Some(s) => (s, false),
+        None if w.with_prior => {
+            // The residual's degrees of freedom: the observations less the effective number
+            // of parameters the fit used (the prior takes the rest), counted over the
+            // observations the estimate uses.
+            let h = prior_leverages.as_deref().unwrap_or(&[]);
+            let p_eff: f64 = h
+                .iter()
+                .enumerate()
+                .filter(|(k, _)| !left_out(*k))
+                .map(|(_, x)| x)
+                .sum();
+            let dof = (count as f64 - p_eff).max(1.0);
+            ((ssr / dof).sqrt(), true)
+        }
+        None => {
+            let dof = count.saturating_sub(first_rank).max(1);
+            ((ssr / dof as f64).sqrt(), true)
+        }
+    };
+    NoiseEstimate {
+        sigma_um,
+        sigma_estimated,
+        sigma_excludes_outliers,
+        prior_leverages,
+    }
+}
+
+/// The identifiable combinations of the errors `e_hat`: each with its singular value,
+/// estimate, standard deviation and four largest loadings.
+fn combinations(ident: &Identifiability, e_hat: &[f64]) -> Vec<Combination> {
+    (0..ident.rank)
+        .map(|c| {
+            let v = ident.v.column(c);
+            let mut load: Vec<(usize, f64)> = v.iter().copied().enumerate().collect();
+            load.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            load.truncate(4);
+            Combination {
+                singular_value: ident.singular_values[c],
+                estimate_um: v.dot(&DVector::from_column_slice(e_hat)),
+                std_um: ident.combination_std_um[c],
+                loadings: load,
+            }
+        })
+        .collect()
 }
 
 /// The base frame of a fit to tracker poses alone, made the base joints' own.

@@ -792,62 +792,31 @@ fn refine_effects(
         outliers_or_signal(model, campaign, options, &first)?;
     let full = campaign;
     let reduced = without_observations(campaign, &outliers_before);
-    let campaign = &reduced;
-    let m = campaign.len();
-    let sigma = options.identify.sigma_um;
-    let diag_of =
-        |mdl: &MeasurementModel, cal: &Calibration| -> Result<ResidualDiagnostics, CalibError> {
-            let prepared = Prepared::new(mdl, campaign)?;
-            let regs = regressors(mdl, &prepared, campaign);
-            Ok(diagnose(
-                &cal.residuals_um,
-                m.saturating_sub(cal.identifiability.rank),
-                sigma,
-                &regs,
-                options.alpha,
-            ))
-        };
+    let rounds = Rounds {
+        campaign: &reduced,
+        options,
+        m: reduced.len(),
+    };
     let mut current = model.clone();
     let mut cal = if outliers_before.is_empty() {
         first.clone()
     } else {
-        identify(&current, campaign, &options.identify)?
+        identify(&current, &reduced, &options.identify)?
     };
     let initial_residuals_um = first.residuals_um.clone();
-    let initial_diagnostics = diag_of(&current, &cal)?;
+    let initial_diagnostics = rounds.diagnostics(&current, &cal)?;
     let mut diag = initial_diagnostics.clone();
-    // The fits inside the folds weigh the prior against the whole campaign's noise (not
-    // estimated again on each fold).
-    let cv_opts = |c: &Calibration| IdentifyOptions {
-        prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
-        ..options.identify.clone()
-    };
     let mut cv_err = cross_validated_errors(
         &current,
-        campaign,
-        &cv_opts(&cal),
+        &reduced,
+        &cv_options(options, &cal),
         options.folds,
         &cal.minimum_norm_um,
     )?;
     let mut cv = cv_err.rms();
     let initial_cv = cv;
     let mut rejected_by_cv = Vec::new();
-    let scan = |mdl: &MeasurementModel, cal: &Calibration| {
-        if options.pose_map_degree == 0 {
-            return Ok(Vec::new());
-        }
-        crate::analysis::diagnostics::pose_map_scan(
-            mdl,
-            campaign,
-            &cal.minimum_norm_um,
-            &cal.residuals_um,
-            sigma,
-            options.pose_map_degree,
-            options.identify.rank.rank_rtol,
-            options.min_novelty,
-        )
-    };
-    let initial_pose_structure = scan(&current, &cal)?;
+    let initial_pose_structure = rounds.scan(&current, &cal)?;
     let mut pose_structure = initial_pose_structure.clone();
     let mut steps = Vec::new();
     let mut last_round = Vec::new();
@@ -855,13 +824,155 @@ fn refine_effects(
         if diag.white && diag.consistent_with_noise == Some(true) && diag.significant.is_empty() {
             break;
         }
+        let (remaining, level) = rounds.proposals(&current, &pose_structure);
+        if remaining.is_empty() {
+            break;
+        }
+        let (mut scores, eligible) = rounds.screen(&current, &cal, remaining, level)?;
+        let best = rounds.judge(&mut scores, eligible, &cv_err, cv, &mut rejected_by_cv)?;
+        let Some((i, aug, c1, cv1, e1)) = best else {
+            last_round = scores;
+            break;
+        };
+        steps.push(refine_step(&aug, &c1, i, scores, &cal, cv, cv1));
+        current = aug;
+        cal = c1;
+        cv = cv1;
+        cv_err = e1;
+        diag = rounds.diagnostics(&current, &cal)?;
+        pose_structure = rounds.scan(&current, &cal)?;
+    }
+    let unexplained_structure = unexplained_structure(&diag, &pose_structure, options.alpha);
+    // The final model on the whole campaign (residuals and outliers for every observation),
+    // its noise estimated with it.
+    let cal = if outliers_before.is_empty() && steps.is_empty() {
+        cal
+    } else {
+        let opts = IdentifyOptions {
+            start_um: Some(cal.minimum_norm_um.clone()),
+            ..options.identify.clone()
+        };
+        identify(&current, full, &opts)?
+    };
+    // Plain calibration against the refined model on the whole campaign, as a user's next
+    // session would judge them (the rounds above scored the campaign without its outliers).
+    let against_calibrate = if outliers_before.is_empty() {
+        AgainstCalibrate {
+            calibrate_cv_rms_um: initial_cv,
+            refined_cv_rms_um: cv,
+        }
+    } else {
+        against_calibrate_on(
+            model,
+            &first,
+            &current,
+            &cal,
+            steps.is_empty(),
+            full,
+            options,
+        )?
+    };
+    Ok(Refinement {
+        steps,
+        model: current,
+        calibration: cal,
+        initial_diagnostics,
+        final_diagnostics: diag,
+        final_cv_rms_um: cv,
+        unexplained_structure,
+        initial_residuals_um,
+        last_round,
+        outliers_before,
+        outliers_explained,
+        rejected_by_cv,
+        initial_pose_structure,
+        pose_range: PoseRange::of(full),
+        against_calibrate,
+        hold_trials: Vec::new(),
+        held_groups: Vec::new(),
+    })
+}
+
+/// The options of the fits inside the folds: the prior weighed against the noise of `c`,
+/// the whole campaign's (not estimated again on each fold).
+fn cv_options(options: &RefineOptions, c: &Calibration) -> IdentifyOptions {
+    IdentifyOptions {
+        prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
+        ..options.identify.clone()
+    }
+}
+
+/// A candidate that passed the screening: its index in the round's scores, the augmented
+/// model and its fit.
+type Eligible = (usize, MeasurementModel, Calibration);
+
+/// The candidate a round adds: its index in the scores, the augmented model, its fit, its
+/// cross-validated RMS and errors.
+type Chosen = (usize, MeasurementModel, Calibration, f64, CvErrors);
+
+/// What the rounds of [`refine_effects`] work on: the campaign without the first fit's
+/// outliers (`m` observations) and the options.
+struct Rounds<'a> {
+    campaign: &'a Campaign,
+    options: &'a RefineOptions,
+    m: usize,
+}
+
+impl Rounds<'_> {
+    /// The residual diagnostics of the fit `cal` of `mdl`.
+    fn diagnostics(
+        &self,
+        mdl: &MeasurementModel,
+        cal: &Calibration,
+    ) -> Result<ResidualDiagnostics, CalibError> {
+        let prepared = Prepared::new(mdl, self.campaign)?;
+        let regs = regressors(mdl, &prepared, self.campaign);
+        Ok(diagnose(
+            &cal.residuals_um,
+            self.m.saturating_sub(cal.identifiability.rank),
+            self.options.identify.sigma_um,
+            &regs,
+            self.options.alpha,
+        ))
+    }
+
+    /// The pose map scan of the residual of `cal` (none when pose maps are off).
+    fn scan(
+        &self,
+        mdl: &MeasurementModel,
+        cal: &Calibration,
+    ) -> Result<Vec<crate::analysis::diagnostics::PoseStructure>, CalibError> {
+        let options = self.options;
+        if options.pose_map_degree == 0 {
+            return Ok(Vec::new());
+        }
+        crate::analysis::diagnostics::pose_map_scan(
+            mdl,
+            self.campaign,
+            &cal.minimum_norm_um,
+            &cal.residuals_um,
+            options.identify.sigma_um,
+            options.pose_map_degree,
+            options.identify.rank.rank_rtol,
+            options.min_novelty,
+        )
+    }
+
+    /// The round's candidates: the library's effects not in `current`, then the pose map
+    /// terms the scan finds significant (Bonferroni over every scanned term); and the
+    /// round's significance level (Bonferroni over library and scanned terms).
+    fn proposals(
+        &self,
+        current: &MeasurementModel,
+        pose_structure: &[crate::analysis::diagnostics::PoseStructure],
+    ) -> (Vec<Effect>, f64) {
+        let options = self.options;
         let mut remaining: Vec<Effect> = options
             .candidates
             .iter()
             .copied()
             .filter(|e| !current.effects.contains(e))
             .collect();
-        // Pose map terms the scan finds significant (Bonferroni over every scanned term).
         let scanned = pose_structure.len();
         let library = remaining.len();
         for s in pose_structure
@@ -873,20 +984,30 @@ fn refine_effects(
                 remaining.push(s.effect);
             }
         }
-        if remaining.is_empty() {
-            break;
-        }
-        let level = options.alpha / (library + scanned).max(1) as f64;
+        (remaining, options.alpha / (library + scanned).max(1) as f64)
+    }
+
+    /// Screens the candidates `remaining` against the current fit `cal` of `current`:
+    /// novelty, fit, F-test and BIC at `level`, the determined parameters kept. Returns every
+    /// candidate's score and those eligible for the cross-validation.
+    fn screen(
+        &self,
+        current: &MeasurementModel,
+        cal: &Calibration,
+        remaining: Vec<Effect>,
+        level: f64,
+    ) -> Result<(Vec<CandidateScore>, Vec<Eligible>), CalibError> {
+        let (options, campaign, m) = (self.options, self.campaign, self.m);
         let rss0 = rss(&cal.residuals_um);
-        let k0 = params_used(&cal);
+        let k0 = params_used(cal);
         let bic0 = bic(rss0, m, k0);
         let mut scores = Vec::new();
-        let mut eligible: Vec<(usize, MeasurementModel, Calibration)> = Vec::new();
+        let mut eligible: Vec<Eligible> = Vec::new();
         // Every candidate's novelty and fit, in parallel (independent), then judged in order.
         let tried: Vec<(f64, Option<Calibration>)> = remaining
             .par_iter()
             .map(|&e| -> Result<(f64, Option<Calibration>), CalibError> {
-                let aug = with_effect(&current, e);
+                let aug = with_effect(current, e);
                 let start = extend_start(&cal.minimum_norm_um, &aug);
                 let nov = novelty(
                     &aug,
@@ -895,12 +1016,7 @@ fn refine_effects(
                     current.num_params(),
                     options.identify.rank.rank_rtol,
                 )?;
-                let threshold = if matches!(e, Effect::PoseMap(_)) {
-                    options.min_novelty
-                } else {
-                    options.min_novelty * PHYSICAL_NOVELTY_FRACTION
-                };
-                if nov < threshold {
+                if nov < novelty_threshold(options, e) {
                     return Ok((nov, None));
                 }
                 // Screened with the prior weighed against the current fit's noise (the
@@ -914,7 +1030,7 @@ fn refine_effects(
             })
             .collect::<Result<_, _>>()?;
         for (e, (nov, fitted)) in remaining.into_iter().zip(tried) {
-            let aug = with_effect(&current, e);
+            let aug = with_effect(current, e);
             let mut score = CandidateScore {
                 effect: e,
                 novelty: nov,
@@ -924,14 +1040,7 @@ fn refine_effects(
                 cv_rms_um: None,
                 determined_lost: None,
             };
-            // A physical effect with a small novelty is tried with care (only a numerically
-            // confounded one is skipped); a pose map term must be clearly new.
-            let threshold = if matches!(e, Effect::PoseMap(_)) {
-                options.min_novelty
-            } else {
-                options.min_novelty * PHYSICAL_NOVELTY_FRACTION
-            };
-            if nov < threshold {
+            if nov < novelty_threshold(options, e) {
                 scores.push(score);
                 continue;
             }
@@ -962,9 +1071,9 @@ fn refine_effects(
                         .filter(|d| **d)
                         .count()
                 };
-                let loses = determined(&c1) < determined(&cal);
+                let loses = determined(&c1) < determined(cal);
                 if loses {
-                    score.determined_lost = Some(determined(&cal) - determined(&c1));
+                    score.determined_lost = Some(determined(cal) - determined(&c1));
                 }
                 // A residual at rounding level has nothing left to explain: the F-test on it
                 // measures floating-point noise.
@@ -977,6 +1086,23 @@ fn refine_effects(
             }
             scores.push(score);
         }
+        Ok((scores, eligible))
+    }
+
+    /// Out of sample decides: every eligible candidate of a family (physical effects first,
+    /// in order of BIC, pose map terms only when no physical effect helps) is
+    /// cross-validated, and the one that predicts held-out poses best is chosen if it beats
+    /// the current model (errors `cv_err`, RMS `cv`) clearly (by more than a standard error
+    /// of the difference). The others judged go to `rejected_by_cv`.
+    fn judge(
+        &self,
+        scores: &mut [CandidateScore],
+        mut eligible: Vec<Eligible>,
+        cv_err: &CvErrors,
+        cv: f64,
+        rejected_by_cv: &mut Vec<(Effect, f64, f64)>,
+    ) -> Result<Option<Chosen>, CalibError> {
+        let options = self.options;
         // Physics first: every physical effect (in order of BIC) before any pose map term,
         // which fits anything smooth and extrapolates nothing.
         eligible.sort_by(|a, b| {
@@ -989,10 +1115,6 @@ fn refine_effects(
             let (ka, kb) = (key(a.0), key(b.0));
             ka.0.cmp(&kb.0).then(ka.1.total_cmp(&kb.1))
         });
-        // Out of sample decides: every eligible candidate of a family (physical effects
-        // first, pose map terms only when no physical effect helps) is cross-validated, and
-        // the one that predicts held-out poses best is added if it beats the current model
-        // clearly (by more than a standard error of the difference).
         let mut best = None;
         let (physical, maps): (Vec<_>, Vec<_>) = eligible
             .into_iter()
@@ -1008,8 +1130,8 @@ fn refine_effects(
                 .map(|(_, aug, c1)| {
                     cross_validated_errors(
                         aug,
-                        campaign,
-                        &cv_opts(c1),
+                        self.campaign,
+                        &cv_options(options, c1),
                         options.folds,
                         &c1.minimum_norm_um,
                     )
@@ -1034,118 +1156,109 @@ fn refine_effects(
                 }
             }
         }
-        let Some((i, aug, c1, cv1, e1)) = best else {
-            last_round = scores;
-            break;
-        };
-        let names = aug.parameter_names();
-        let block = *aug.blocks().last().expect("augmented block");
-        let parameters = (block.offset..block.offset + block.len)
-            .map(|k| (names[k].clone(), c1.estimate_um[k], c1.std_um[k]))
-            .collect();
-        steps.push(RefineStep {
-            effect: scores[i].effect,
-            p_value: scores[i].p_value.unwrap_or(f64::NAN),
-            delta_bic: scores[i].delta_bic.unwrap_or(f64::NAN),
-            rms_before_um: cal.residual_rms_um,
-            rms_after_um: c1.residual_rms_um,
-            cv_rms_before_um: cv,
-            cv_rms_after_um: cv1,
-            parameters,
-            candidates: scores,
-        });
-        current = aug;
-        cal = c1;
-        cv = cv1;
-        cv_err = e1;
-        diag = diag_of(&current, &cal)?;
-        pose_structure = scan(&current, &cal)?;
+        Ok(best)
     }
-    let unexplained_structure = if diag.consistent_with_noise == Some(true) && diag.white {
-        Vec::new()
+}
+
+/// The novelty below which a candidate is not fitted: a physical effect with a small novelty
+/// is tried with care (only a numerically confounded one is skipped); a pose map term must be
+/// clearly new.
+fn novelty_threshold(options: &RefineOptions, e: Effect) -> f64 {
+    if matches!(e, Effect::PoseMap(_)) {
+        options.min_novelty
     } else {
-        let mut u = diag.significant.clone();
-        // Pose map terms the final residual still follows (not added: steps exhausted, or
-        // they did not pass the tests).
-        let scanned = pose_structure.len().max(1) as f64;
-        u.extend(
-            pose_structure
-                .iter()
-                .filter(|s| s.p_value < options.alpha / scanned)
-                .map(|s| format!("pose map {}", s.effect.name())),
-        );
-        if u.is_empty() && !diag.white {
-            u.push("acquisition order".to_string());
-        }
-        u
-    };
-    // The final model on the whole campaign (residuals and outliers for every observation),
-    // its noise estimated with it.
-    let cal = if outliers_before.is_empty() {
-        if steps.is_empty() {
-            cal
+        options.min_novelty * PHYSICAL_NOVELTY_FRACTION
+    }
+}
+
+/// The step that adds candidate `i` (model `aug`, fit `c1`, cross-validated RMS `cv1`) to
+/// the current fit `cal` (cross-validated RMS `cv`).
+fn refine_step(
+    aug: &MeasurementModel,
+    c1: &Calibration,
+    i: usize,
+    scores: Vec<CandidateScore>,
+    cal: &Calibration,
+    cv: f64,
+    cv1: f64,
+) -> RefineStep {
+    let names = aug.parameter_names();
+    let block = *aug.blocks().last().expect("augmented block");
+    let parameters = (block.offset..block.offset + block.len)
+        .map(|k| (names[k].clone(), c1.estimate_um[k], c1.std_um[k]))
+        .collect();
+    RefineStep {
+        effect: scores[i].effect,
+        p_value: scores[i].p_value.unwrap_or(f64::NAN),
+        delta_bic: scores[i].delta_bic.unwrap_or(f64::NAN),
+        rms_before_um: cal.residual_rms_um,
+        rms_after_um: c1.residual_rms_um,
+        cv_rms_before_um: cv,
+        cv_rms_after_um: cv1,
+        parameters,
+        candidates: scores,
+    }
+}
+
+/// What the final residual still follows, by name: the diagnostics' significant regressors
+/// and the pose map terms significant at `alpha` (Bonferroni over the scanned terms), or the
+/// acquisition order when only whiteness fails; nothing when the residual is white and
+/// consistent with the noise.
+fn unexplained_structure(
+    diag: &ResidualDiagnostics,
+    pose_structure: &[crate::analysis::diagnostics::PoseStructure],
+    alpha: f64,
+) -> Vec<String> {
+    if diag.consistent_with_noise == Some(true) && diag.white {
+        return Vec::new();
+    }
+    let mut u = diag.significant.clone();
+    // Pose map terms the final residual still follows (not added: steps exhausted, or
+    // they did not pass the tests).
+    let scanned = pose_structure.len().max(1) as f64;
+    u.extend(
+        pose_structure
+            .iter()
+            .filter(|s| s.p_value < alpha / scanned)
+            .map(|s| format!("pose map {}", s.effect.name())),
+    );
+    if u.is_empty() && !diag.white {
+        u.push("acquisition order".to_string());
+    }
+    u
+}
+
+/// Plain calibration (`model`, its fit `first`) against the refined model (`current`, its
+/// fit `cal`; the same when no step was taken) cross-validated on the whole campaign `full`.
+fn against_calibrate_on(
+    model: &MeasurementModel,
+    first: &Calibration,
+    current: &MeasurementModel,
+    cal: &Calibration,
+    no_steps: bool,
+    full: &Campaign,
+    options: &RefineOptions,
+) -> Result<AgainstCalibrate, CalibError> {
+    let calibrate_cv_rms_um = cross_validated_rms(
+        model,
+        full,
+        &cv_options(options, first),
+        options.folds,
+        &first.minimum_norm_um,
+    )?;
+    Ok(AgainstCalibrate {
+        calibrate_cv_rms_um,
+        refined_cv_rms_um: if no_steps {
+            calibrate_cv_rms_um
         } else {
-            let opts = IdentifyOptions {
-                start_um: Some(cal.minimum_norm_um.clone()),
-                ..options.identify.clone()
-            };
-            identify(&current, full, &opts)?
-        }
-    } else {
-        let opts = IdentifyOptions {
-            start_um: Some(cal.minimum_norm_um.clone()),
-            ..options.identify.clone()
-        };
-        identify(&current, full, &opts)?
-    };
-    // Plain calibration against the refined model on the whole campaign, as a user's next
-    // session would judge them (the rounds above scored the campaign without its outliers).
-    let against_calibrate = if outliers_before.is_empty() {
-        AgainstCalibrate {
-            calibrate_cv_rms_um: initial_cv,
-            refined_cv_rms_um: cv,
-        }
-    } else {
-        let calibrate_cv_rms_um = cross_validated_rms(
-            model,
-            full,
-            &cv_opts(&first),
-            options.folds,
-            &first.minimum_norm_um,
-        )?;
-        AgainstCalibrate {
-            calibrate_cv_rms_um,
-            refined_cv_rms_um: if steps.is_empty() {
-                calibrate_cv_rms_um
-            } else {
-                cross_validated_rms(
-                    &current,
-                    full,
-                    &cv_opts(&cal),
-                    options.folds,
-                    &cal.minimum_norm_um,
-                )?
-            },
-        }
-    };
-    Ok(Refinement {
-        steps,
-        model: current,
-        calibration: cal,
-        initial_diagnostics,
-        final_diagnostics: diag,
-        final_cv_rms_um: cv,
-        unexplained_structure,
-        initial_residuals_um,
-        last_round,
-        outliers_before,
-        outliers_explained,
-        rejected_by_cv,
-        initial_pose_structure,
-        pose_range: PoseRange::of(full),
-        against_calibrate,
-        hold_trials: Vec::new(),
-        held_groups: Vec::new(),
+            cross_validated_rms(
+                current,
+                full,
+                &cv_options(options, cal),
+                options.folds,
+                &cal.minimum_norm_um,
+            )?
+        },
     })
 }
 
