@@ -293,6 +293,7 @@ fn load_inputs(args: &FitArgs, ctx: &Ctx<'_>) -> anyhow::Result<Inputs> {
     }
     ctx.stage("reading the measurements");
     let mut merged = common::load_data(data, &robot, &common::read_options(&model))?;
+    common::warn_excluded(ctx, &merged.excluded);
     if let Some(v) = pose_sigma_um {
         merged.campaign.pose_sigma_um = v;
         merged.campaign.point_sigma_um = v;
@@ -821,6 +822,8 @@ pub struct Fitted {
     pub set: OutputSet,
     /// The report (`calibration.json`, report.md and report.html are renderings of it).
     pub report: crate::report::calibrate::CalibrateReport,
+    /// The poses the fit left out because it could not start there (see [`leaving_out`]).
+    pub excluded: Vec<crate::io::ExcludedPose>,
 }
 
 /// Fits the inputs and stages every output of `cpm calibrate` in memory, for `dir`: nothing
@@ -841,11 +844,22 @@ pub fn fit_with(
     minimum_norm: bool,
     formulation: super::formulation::FormulationArg,
 ) -> anyhow::Result<Fitted> {
+    // A pose where the fit cannot start (forward kinematics does not converge there) is
+    // left out, with its observations, and the fit run again (see `leaving_out`).
+    let ((cal, formulation), excluded) = leaving_out(inputs, |merged| {
+        let (model, campaign) = (&inputs.model, &merged.campaign);
+        let f = super::formulation::resolve(formulation, model, campaign, &inputs.identify);
+        super::formulation::identify_with(f, model, campaign, &inputs.identify).map(|c| (c, f))
+    })?;
+    let left_out;
+    let inputs = if excluded.is_empty() {
+        inputs
+    } else {
+        left_out = inputs.without_poses(&excluded);
+        &left_out
+    };
     let campaign = &inputs.merged.campaign;
     let model = &inputs.model;
-    let formulation = super::formulation::resolve(formulation, model, campaign, &inputs.identify);
-    let cal = super::formulation::identify_with(formulation, model, campaign, &inputs.identify)
-        .map_err(|e| common::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
     let mut fit = FitReport::new(&inputs.report_inputs(), model, &cal, Some(formulation));
     add_session_warnings(&mut fit, inputs, model)?;
@@ -880,7 +894,70 @@ pub fn fit_with(
     let markdown = report.markdown();
     set.add(dir.join("report.md"), markdown.as_str());
     common::stage_report_html(&mut set, dir, "cpm calibration report", &markdown);
-    Ok(Fitted { cal, set, report })
+    Ok(Fitted {
+        cal,
+        set,
+        report,
+        excluded: excluded.into_iter().map(|(_, e)| e).collect(),
+    })
+}
+
+/// Runs `fit` (a fit of the merged data) on `inputs`' data; when it fails at one pose
+/// (forward kinematics does not converge or the statics fail there, [`common::error_pose`]),
+/// leaves that pose out with all its observations and runs it again, for at most one pose in
+/// [`crate::io::campaign::POSES_PER_EXCLUDED_POSE`] of the campaign (then the error, naming
+/// file and line, as before). Returns its result and the poses left out (each with its index
+/// in the campaign as it was then, and what to record).
+pub fn leaving_out<T>(
+    inputs: &Inputs,
+    mut fit: impl FnMut(&Merged) -> Result<T, crate::calib::CalibError>,
+) -> anyhow::Result<(T, Vec<(usize, crate::io::ExcludedPose)>)> {
+    let budget = crate::io::campaign::max_excluded_poses(inputs.merged.campaign.poses.len());
+    let mut excluded: Vec<(usize, crate::io::ExcludedPose)> = Vec::new();
+    let mut merged = std::borrow::Cow::Borrowed(&inputs.merged);
+    loop {
+        let e = match fit(&merged) {
+            Ok(r) => return Ok((r, excluded)),
+            Err(e) => e,
+        };
+        let pose = common::error_pose(&e)
+            .filter(|_| excluded.len() < budget && merged.campaign.poses.len() > 1);
+        let Some((pose, (file, line, label))) =
+            pose.and_then(|p| merged.pose_origin.get(p).cloned().map(|o| (p, o)))
+        else {
+            return Err(common::locate(e, &merged));
+        };
+        excluded.push((
+            pose,
+            crate::io::ExcludedPose {
+                file,
+                line,
+                label,
+                reason: format!("the fit cannot start there: {e}"),
+            },
+        ));
+        merged = std::borrow::Cow::Owned(merged.without_pose(pose));
+    }
+}
+
+impl Inputs {
+    /// The inputs without the poses [`leaving_out`] left out (in its order), recorded in
+    /// the merged data's `excluded`.
+    pub fn without_poses(&self, excluded: &[(usize, crate::io::ExcludedPose)]) -> Inputs {
+        let mut merged = self.merged.clone();
+        for (pose, e) in excluded {
+            merged = merged.without_pose(*pose);
+            merged.excluded.push(e.clone());
+        }
+        Inputs {
+            robot: self.robot.clone(),
+            model: self.model.clone(),
+            merged,
+            identify: self.identify.clone(),
+            provenance: self.provenance.clone(),
+            data_paths: self.data_paths.clone(),
+        }
+    }
 }
 
 /// Runs `cpm calibrate`.
@@ -892,8 +969,13 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         common::describe_model(model),
         inputs.merged.campaign.len()
     ));
-    let Fitted { cal, set, report } =
-        fit_with(&inputs, &args.fit.out, args.minimum_norm, args.formulation)?;
+    let Fitted {
+        cal,
+        set,
+        report,
+        excluded,
+    } = fit_with(&inputs, &args.fit.out, args.minimum_norm, args.formulation)?;
+    common::warn_excluded(ctx, &excluded);
     ctx.stage("writing the results");
     let dir = &args.fit.out;
     let inputs_paths: Vec<&Path> = std::iter::once(args.fit.robot.robot.as_path())

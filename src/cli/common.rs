@@ -296,6 +296,14 @@ pub fn load_data(
     Ok(merged)
 }
 
+/// Warns on stderr (`warning: FILE:LINE: pose "LABEL" excluded: REASON`) of each pose left
+/// out of the data (see [`io::campaign::POSES_PER_EXCLUDED_POSE`]).
+pub fn warn_excluded(ctx: &super::Ctx<'_>, excluded: &[io::ExcludedPose]) {
+    for e in excluded {
+        ctx.status(format!("warning: {e}"));
+    }
+}
+
 /// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;
 /// tracker files are registered with the model's known `tracker_frame` taken out.
 pub fn read_options(model: &MeasurementModel) -> ReadOptions {

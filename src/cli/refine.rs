@@ -114,8 +114,20 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         identify: inputs.identify.clone(),
         ..RefineOptions::default()
     };
-    let r =
-        refine(&inputs.model, campaign, &options).map_err(|e| common::locate(e, &inputs.merged))?;
+    // A pose where the fit cannot start is left out (see `calibrate::leaving_out`).
+    let (r, excluded) = calibrate::leaving_out(&inputs, |merged| {
+        refine(&inputs.model, &merged.campaign, &options)
+    })?;
+    common::warn_excluded(
+        ctx,
+        &excluded.iter().map(|(_, e)| e.clone()).collect::<Vec<_>>(),
+    );
+    let inputs = if excluded.is_empty() {
+        inputs
+    } else {
+        inputs.without_poses(&excluded)
+    };
+    let campaign = &inputs.merged.campaign;
     // Never worse than plain calibration on data the fits did not see: otherwise an error,
     // and nothing written.
     if let Some(why) = r.against_calibrate.refusal() {

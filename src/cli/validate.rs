@@ -190,6 +190,7 @@ fn errors_of(
     let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
     for path in paths {
         let mut file = crate::io::read_data_file(path, robot, &options)?;
+        out.excluded.extend(file.excluded.iter().cloned());
         if file.kind == FileKind::Poses {
             return Err(super::usage_error(format!(
                 "{}: a pose list has no measurements to validate against",
@@ -696,6 +697,16 @@ pub fn run(args: &ValidateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 sensors(&reference).join(", ")
             ))
         })?;
+    // The poses left out by either robot's reading (most often the same).
+    let mut excluded = cal_errors.excluded.clone();
+    excluded.extend(
+        ref_errors
+            .excluded
+            .iter()
+            .filter(|e| !cal_errors.excluded.contains(e))
+            .cloned(),
+    );
+    common::warn_excluded(ctx, &excluded);
     let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
     if names != ref_names {
         return Err(super::input_error(format!(

@@ -67,10 +67,11 @@ pub struct Provenance {
     pub data: Vec<String>,
 }
 pub use campaign::{
-    merge, read_commands_file, read_pose_list, read_pose_list_file, read_pose_list_from,
-    read_pose_measurements, read_readings, register_tracker_files, write_commands, write_pose_list,
-    write_pose_measurements, write_readings, DataFile, Merged, PoseRow, ReadOptions,
-    RegistrationReport, SessionRegistration, TrackerRow, MAX_ROWS, REGISTRATION_APPLY_MM,
+    max_excluded_poses, merge, read_commands_file, read_pose_list, read_pose_list_file,
+    read_pose_list_from, read_pose_measurements, read_readings, register_tracker_files,
+    write_commands, write_pose_list, write_pose_measurements, write_readings, DataFile,
+    ExcludedPose, Merged, PoseRow, ReadOptions, RegistrationReport, SessionRegistration,
+    TrackerRow, MAX_ROWS, POSES_PER_EXCLUDED_POSE, REGISTRATION_APPLY_MM,
 };
 pub use error::{read_text, InputError, ReadError};
 pub use read::{read_data, read_data_file, read_data_files, read_data_from};

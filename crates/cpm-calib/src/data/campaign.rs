@@ -598,12 +598,7 @@ impl Campaign {
         let instruments: Vec<InstrumentMeasurement> = self
             .instrument_measurements
             .iter()
-            .filter_map(|m| {
-                map(m.pose).map(|pose| InstrumentMeasurement {
-                    pose,
-                    ..m.clone()
-                })
-            })
+            .filter_map(|m| map(m.pose).map(|pose| InstrumentMeasurement { pose, ..m.clone() }))
             .collect();
         let session = renumber(instruments.iter().map(|m| m.session).collect());
         c.instrument_measurements = instruments
@@ -735,7 +730,16 @@ mod tests {
         let left: Vec<(usize, f64)> = d.readings.iter().map(|r| (r.pose, r.length_mm)).collect();
         assert_eq!(
             left,
-            [(0, 0.0), (0, 0.0), (1, 1.0), (1, 1.0), (2, 3.0), (2, 3.0), (3, 4.0), (3, 4.0)]
+            [
+                (0, 0.0),
+                (0, 0.0),
+                (1, 1.0),
+                (1, 1.0),
+                (2, 3.0),
+                (2, 3.0),
+                (3, 4.0),
+                (3, 4.0)
+            ]
         );
         // The session of pose 2 is gone: the next starts where it started.
         assert_eq!(d.session_starts, [2]);
