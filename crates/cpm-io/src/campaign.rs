@@ -5,6 +5,9 @@
 //! finite, sensor names known, rows of one pose agreeing) and every pose (reachable where it
 //! is: length limits, J1's condition, forward kinematics returning it; link readings and sensor lengths consistent with it, which
 //! catches a file in the wrong units); each failure names the file, the line and the field.
+//! The one exception: a long file may lose one pose in [`POSES_PER_EXCLUDED_POSE`] that is not
+//! reachable where it is; such a pose is left out with all its rows and recorded
+//! ([`DataFile::excluded`], [`ExcludedPose`]) instead of refusing the file.
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::Path;
@@ -879,7 +882,10 @@ pub(crate) fn too_many_rows(t: &Header, row: &Row, max: usize) -> InputError {
     )
 }
 
-/// Reads length-sensor readings (see `docs/formats.md`).
+/// Reads length-sensor readings (see `docs/formats.md`). A pose that is not reachable where
+/// it is ([`check_reachable`]) is left out with all its rows and recorded in
+/// [`DataFile::excluded`], for at most one pose in [`POSES_PER_EXCLUDED_POSE`] of the file
+/// ([`max_excluded_poses`]); more refuse the file with the first one's error.
 pub fn read_readings(
     text: &str,
     file: &str,
@@ -1147,7 +1153,8 @@ pub(crate) fn read_readings_table<R: Read>(
     Ok(f)
 }
 
-/// Reads tracker pose measurements (see `docs/formats.md`).
+/// Reads tracker pose measurements (see `docs/formats.md`); unreachable measured poses are
+/// left out as in [`read_readings`], after the registration.
 pub fn read_pose_measurements(
     text: &str,
     file: &str,

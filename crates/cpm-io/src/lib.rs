@@ -11,7 +11,8 @@
 //! Every reader names the file, the line and the field of the first problem it finds
 //! ([`InputError`]), e.g. `data.csv:17: field length_mm: "abc" is not a number`; a file that
 //! cannot be read at all is a [`ReadError::Io`]. Readers stream a file row by row and stop at
-//! the first bad row.
+//! the first bad row, except that a long file may lose one pose in
+//! [`POSES_PER_EXCLUDED_POSE`] the machine cannot reach, recorded in [`DataFile::excluded`].
 //!
 //! One's own robot from files: a description and a readings file (`examples/` ships a 6-6
 //! hexapod and 90 simulated readings of it), read and fitted:
