@@ -45,7 +45,9 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let job = cpm_workflow::fit::calibrate(&args.options(), &*ctx)?;
     let trouble = job.trouble();
     let Calibrated { inputs, fitted } = job;
-    let Fitted { cal, set, report } = fitted;
+    let Fitted {
+        cal, set, report, ..
+    } = fitted;
     let model = &inputs.model;
     ctx.stage("writing the results");
     let dir = &args.fit.out;

@@ -63,6 +63,7 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
             }
             ctx.stage("reading the measurements");
             let merged = common::load_data(&args.data, &robot, &common::read_options(&model))?;
+            common::warn_excluded(ctx, &merged.excluded);
             let names: Vec<String> = args.data.iter().map(|p| p.display().to_string()).collect();
             (merged.campaign, names.join(", "))
         }

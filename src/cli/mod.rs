@@ -172,6 +172,9 @@ impl cpm_workflow::Progress for Ctx<'_> {
     fn note(&self, message: &str) {
         Ctx::note(self, message);
     }
+    fn warn(&self, message: &str) {
+        Ctx::status(self, format!("warning: {message}"));
+    }
 }
 
 impl Drop for Ctx<'_> {

@@ -5,6 +5,9 @@
 //! finite, sensor names known, rows of one pose agreeing) and every pose (reachable where it
 //! is: length limits, J1's condition, forward kinematics returning it; link readings and sensor lengths consistent with it, which
 //! catches a file in the wrong units); each failure names the file, the line and the field.
+//! The one exception: a long file may lose one pose in [`POSES_PER_EXCLUDED_POSE`] that is not
+//! reachable where it is; such a pose is left out with all its rows and recorded
+//! ([`DataFile::excluded`], [`ExcludedPose`]) instead of refusing the file.
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::Path;
@@ -121,6 +124,9 @@ pub struct DataFile {
     /// Point files: the rough registration the reader applied to the measured points (the
     /// base frame's pose in the tracker's coordinates, `p_tracker = R p_base + t`).
     pub point_frame: Option<Pose>,
+    /// The poses left out of the campaign, with all their rows, because the machine cannot
+    /// be there (at most one in [`POSES_PER_EXCLUDED_POSE`]; more refuse the file).
+    pub excluded: Vec<ExcludedPose>,
 }
 
 /// One row of a tracker file as logged.
@@ -545,13 +551,27 @@ fn condition_bound(
 fn check_reachable_within(
     table: &JointTable,
     pose: &Pose,
-    (bound, c0): (f64, f64),
+    bound: (f64, f64),
     file: &str,
     line: usize,
     label: &str,
 ) -> Result<(), InputError> {
+    match unreachable_why(table, pose, bound) {
+        None => Ok(()),
+        Some(what) => Err(unreachable_error(file, line, label, &what)),
+    }
+}
+
+/// The error of an unreachable pose: `pose "LABEL" ` then what [`unreachable_why`] says.
+fn unreachable_error(file: &str, line: usize, label: &str, what: &str) -> InputError {
+    InputError::line(file, line, format!("pose {:?} {what}", shorten(label)))
+}
+
+/// Why `pose` is not reachable (see [`check_reachable`]), `None` when it is: where it is and
+/// the reason, e.g. `(x 1 mm, ..., yaw 0.0000 deg) is not reachable: link 3 would be ...`.
+fn unreachable_why(table: &JointTable, pose: &Pose, (bound, c0): (f64, f64)) -> Option<String> {
     let why = match reachable_at(table, pose, bound) {
-        Ok(()) => return Ok(()),
+        Ok(()) => return None,
         Err(Unreachable::LengthLimit {
             link,
             length_mm,
@@ -582,14 +602,157 @@ fn check_reachable_within(
     let [x, y, z] =
         [pose.position_mm.x, pose.position_mm.y, pose.position_mm.z].map(|v| show(v, None));
     let [r, p, w] = pose.rpy_deg();
-    let label = shorten(label);
-    Err(InputError::line(
-        file,
-        line,
-        format!(
-            "pose {label:?} (x {x} mm, y {y} mm, z {z} mm, roll {r:.4} deg, pitch {p:.4} deg, yaw {w:.4} deg) is not reachable: {why} (positions are in mm, angles in degrees)"
-        ),
+    Some(format!(
+        "(x {x} mm, y {y} mm, z {z} mm, roll {r:.4} deg, pitch {p:.4} deg, yaw {w:.4} deg) is not reachable: {why} (positions are in mm, angles in degrees)"
     ))
+}
+
+/// A file may lose one pose in this many (5 %) to exclusion: a pose the machine cannot be
+/// at (see [`check_reachable`]), or whose logged link readings give no pose (forward
+/// kinematics does not converge), is then left out with all its rows and recorded
+/// ([`ExcludedPose`], [`DataFile::excluded`]) rather than refusing the file. A file with more
+/// such poses than [`max_excluded_poses`] allows is refused with the first one's error: so a
+/// file of fewer than 20 poses loses none, one of 40 poses at most two.
+pub const POSES_PER_EXCLUDED_POSE: usize = 20;
+
+/// The most poses a file of `poses` poses may lose to exclusion: `poses /`
+/// [`POSES_PER_EXCLUDED_POSE`], rounded down (so at least one pose is always left).
+pub fn max_excluded_poses(poses: usize) -> usize {
+    poses / POSES_PER_EXCLUDED_POSE
+}
+
+/// A pose left out of a measurement file because the machine cannot be there (see
+/// [`POSES_PER_EXCLUDED_POSE`]), or of a fit because forward kinematics did not converge at
+/// it: its rows were not used.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ExcludedPose {
+    /// The file.
+    pub file: String,
+    /// The pose's first line (1-based).
+    pub line: usize,
+    /// Its `pose` label.
+    pub label: String,
+    /// Why (the words of the error that refuses it in a smaller file).
+    pub reason: String,
+}
+
+impl std::fmt::Display for ExcludedPose {
+    /// `FILE:LINE: pose "LABEL" excluded: REASON` (what the commands warn with).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}:{}: pose {:?} excluded: {}",
+            self.file,
+            self.line,
+            shorten(&self.label),
+            self.reason
+        )
+    }
+}
+
+/// A pose of a file found unreachable while reading it, to exclude (or to refuse the file
+/// with, see [`exclude_poses`]).
+pub(crate) struct Unusable {
+    /// Its index among the file's campaign poses.
+    pub pose: usize,
+    /// What is wrong, after `pose "LABEL" ` ([`unreachable_why`]).
+    pub what: String,
+    /// Appended to the error only (not to the exclusion's reason).
+    pub note: String,
+    /// The error's field, if any.
+    pub field: Option<String>,
+}
+
+/// Excludes the poses `unusable` from `f` (see [`POSES_PER_EXCLUDED_POSE`]) and records them
+/// in [`DataFile::excluded`], or, when they are too many, returns the first one's error.
+pub(crate) fn exclude_poses(f: &mut DataFile, unusable: Vec<Unusable>) -> Result<(), InputError> {
+    let Some(first) = unusable.first() else {
+        return Ok(());
+    };
+    let poses = f.campaign.poses.len();
+    let label = |j: usize| f.pose_labels.get(j).map_or("", String::as_str);
+    let line = |j: usize| f.pose_lines.get(j).copied().unwrap_or(0);
+    if unusable.len() > max_excluded_poses(poses) {
+        let mut e = unreachable_error(&f.file, line(first.pose), label(first.pose), &first.what);
+        e.field.clone_from(&first.field);
+        if max_excluded_poses(poses) > 0 {
+            e.message.push_str(&format!(
+                " ({} of the file's {poses} poses are so: more than one in {POSES_PER_EXCLUDED_POSE}, which would be left out, so the file is refused)",
+                unusable.len()
+            ));
+        }
+        e.message.push_str(&first.note);
+        return Err(e);
+    }
+    let mut drop = vec![false; poses];
+    for u in &unusable {
+        if let Some(d) = drop.get_mut(u.pose) {
+            *d = true;
+        }
+        f.excluded.push(ExcludedPose {
+            file: f.file.clone(),
+            line: line(u.pose),
+            label: label(u.pose).to_string(),
+            reason: u.what.clone(),
+        });
+    }
+    *f = f.without_poses(&drop);
+    Ok(())
+}
+
+impl DataFile {
+    /// The file without the campaign poses `j` with `drop[j]`, all their rows (readings,
+    /// tracker rows, points, angles) and their lines left out, the poses left renumbered
+    /// ([`Campaign::without_poses`]).
+    pub fn without_poses(&self, drop: &[bool]) -> DataFile {
+        let dropped = |j: usize| drop.get(j).copied().unwrap_or(false);
+        let keep_lines = |lines: &[usize], poses: &mut dyn Iterator<Item = usize>| -> Vec<usize> {
+            lines
+                .iter()
+                .zip(poses)
+                .filter(|(_, j)| !dropped(*j))
+                .map(|(l, _)| *l)
+                .collect()
+        };
+        let c = &self.campaign;
+        let point_lines = if self.kind == FileKind::TiltMeasurements {
+            keep_lines(
+                &self.point_lines,
+                &mut c.tilt_measurements.iter().map(|m| m.pose),
+            )
+        } else {
+            keep_lines(
+                &self.point_lines,
+                &mut c.point_measurements.iter().map(|m| m.pose),
+            )
+        };
+        DataFile {
+            file: self.file.clone(),
+            kind: self.kind,
+            campaign: c.without_poses(dropped),
+            pose_labels: self
+                .pose_labels
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| !dropped(*j))
+                .map(|(_, l)| l.clone())
+                .collect(),
+            pose_lines: keep_lines(&self.pose_lines, &mut (0..self.pose_lines.len())),
+            reading_lines: keep_lines(&self.reading_lines, &mut c.readings.iter().map(|r| r.pose)),
+            registration: self.registration.clone(),
+            tracker_rows: self
+                .tracker_rows
+                .iter()
+                .zip(&c.pose_measurements)
+                .filter(|(_, m)| !dropped(m.pose))
+                .map(|(r, _)| r.clone())
+                .collect(),
+            checked: self.checked,
+            point_lines,
+            point_frame: self.point_frame,
+            excluded: self.excluded.clone(),
+        }
+    }
 }
 
 /// Opens a file for reading; failures are [`ReadError::Io`].
@@ -719,7 +882,10 @@ pub(crate) fn too_many_rows(t: &Header, row: &Row, max: usize) -> InputError {
     )
 }
 
-/// Reads length-sensor readings (see `docs/formats.md`).
+/// Reads length-sensor readings (see `docs/formats.md`). A pose that is not reachable where
+/// it is ([`check_reachable`]) is left out with all its rows and recorded in
+/// [`DataFile::excluded`], for at most one pose in [`POSES_PER_EXCLUDED_POSE`] of the file
+/// ([`max_excluded_poses`]); more refuse the file with the first one's error.
 pub fn read_readings(
     text: &str,
     file: &str,
@@ -767,6 +933,9 @@ pub(crate) fn read_readings_table<R: Read>(
     let mut limits_table: Option<JointTable> = None;
     // The pose of the previous row (rows of one pose usually follow each other).
     let mut previous: Option<usize> = None;
+    // The poses found unreachable, and per pose whether it is one of them.
+    let mut unusable: Vec<Unusable> = Vec::new();
+    let mut excluding: Vec<bool> = Vec::new();
     // One row after the other, its strings reused.
     let mut next = Row {
         line: 0,
@@ -889,20 +1058,38 @@ pub(crate) fn read_readings_table<R: Read>(
                     };
                     let table = limits_table
                         .get_or_insert_with(|| widened(&robot.table, options.link_limit_margin_mm));
-                    check_reachable_within(table, &pose, b, &t.file, row.line, label)?;
+                    // An unreachable pose is excluded at the end (its rows unchecked), or
+                    // refuses the file when there are too many.
+                    if let Some(what) = unreachable_why(table, &pose, b) {
+                        unusable.push(Unusable {
+                            pose: j,
+                            what,
+                            note: String::new(),
+                            field: None,
+                        });
+                    }
                 }
+                let usable = unusable.last().is_none_or(|u| u.pose != j);
                 if let Some(u) = &link {
-                    commanded.push(check_link_readings(
-                        &t.file,
-                        row.line,
-                        robot,
-                        &pose,
-                        u,
-                        None,
-                        "commanded pose",
-                        "",
-                    )?);
+                    commanded.push(if usable {
+                        check_link_readings(
+                            &t.file,
+                            row.line,
+                            robot,
+                            &pose,
+                            u,
+                            None,
+                            "commanded pose",
+                            "",
+                        )?
+                    } else {
+                        u.iter()
+                            .enumerate()
+                            .map(|(i, v)| robot.length_mm(i, *v))
+                            .collect()
+                    });
                 }
+                excluding.push(!usable);
                 by_label.insert(label.to_string(), j);
                 entries.push(PoseEntry {
                     raw,
@@ -915,7 +1102,7 @@ pub(crate) fn read_readings_table<R: Read>(
             }
         };
         previous = Some(j);
-        if options.check_sensor_lengths {
+        if options.check_sensor_lengths && !excluding[j] {
             let s = &robot.table.sensors[sensor];
             let nominal = s.length_mm(&campaign.poses[j]);
             if !((length_mm - nominal).abs() <= tolerance_mm(nominal)) {
@@ -948,7 +1135,7 @@ pub(crate) fn read_readings_table<R: Read>(
     if logged {
         campaign.commanded_lengths_mm = Some(commanded);
     }
-    Ok(DataFile {
+    let mut f = DataFile {
         file: t.file.clone(),
         kind: FileKind::Readings,
         pose_lines: entries.iter().map(|e| e.line).collect(),
@@ -960,10 +1147,14 @@ pub(crate) fn read_readings_table<R: Read>(
         checked: true,
         point_lines: Vec::new(),
         point_frame: None,
-    })
+        excluded: Vec::new(),
+    };
+    exclude_poses(&mut f, unusable)?;
+    Ok(f)
 }
 
-/// Reads tracker pose measurements (see `docs/formats.md`).
+/// Reads tracker pose measurements (see `docs/formats.md`); unreachable measured poses are
+/// left out as in [`read_readings`], after the registration.
 pub fn read_pose_measurements(
     text: &str,
     file: &str,
@@ -1110,6 +1301,7 @@ pub(crate) fn read_pose_measurements_table<R: Read>(
         checked: false,
         point_lines: Vec::new(),
         point_frame: None,
+        excluded: Vec::new(),
     })
 }
 
@@ -1389,6 +1581,7 @@ pub fn register_tracker_files(
             .filter(|r| r.offsets_applied)
             .map(|r| r.link_offset_mm.clone());
         let known = known_shifts(f);
+        let mut unusable = Vec::new();
         for (q, row) in f.tracker_rows.iter().enumerate() {
             let pose = f.campaign.poses[f.campaign.pose_measurements[q].pose];
             // The registration's reading offsets and the robot's known link effects.
@@ -1401,18 +1594,23 @@ pub fn register_tracker_files(
                 ),
             };
             if options.max_condition_ratio.is_finite() {
-                check_reachable(
+                let bound = condition_bound(
                     &measured_table,
-                    &pose,
                     options.max_condition_ratio,
                     &f.file,
                     row.line,
-                    &row.label,
-                )
-                .map_err(|mut e| {
-                    e.message.push_str(&note);
-                    e
-                })?;
+                )?;
+                // An unreachable pose is excluded after the file's checks (its link readings
+                // unchecked), or refuses the file when there are too many.
+                if let Some(what) = unreachable_why(&measured_table, &pose, bound) {
+                    unusable.push(Unusable {
+                        pose: f.campaign.pose_measurements[q].pose,
+                        what,
+                        note: note.clone(),
+                        field: None,
+                    });
+                    continue;
+                }
             }
             check_link_readings(
                 &f.file,
@@ -1425,6 +1623,7 @@ pub fn register_tracker_files(
                 &note,
             )?;
         }
+        exclude_poses(f, unusable)?;
         f.checked = true;
     }
     // The commanded pose of a tracker row (what the link effects and a pose map read, where
@@ -1510,6 +1709,10 @@ pub struct Merged {
     pub registration: Option<RegistrationReport>,
     /// Per point file: (file, the rough frame its reader applied, `p_tracker = R p_base + t`).
     pub point_frames: Vec<(String, Pose)>,
+    /// The poses left out (with all their rows), file after file: by the readers because
+    /// the machine cannot be there ([`POSES_PER_EXCLUDED_POSE`]), and those a command left
+    /// out after (see [`Merged::without_pose`]).
+    pub excluded: Vec<ExcludedPose>,
 }
 
 impl Merged {
@@ -1529,6 +1732,44 @@ impl Merged {
                 .find(|(f, _)| f == file)
                 .map(|(_, p)| p.rotation)
         })
+    }
+
+    /// The merged data without campaign pose `pose` and every observation taken at it, the
+    /// poses after it renumbered: the campaign ([`Campaign::without_poses`]) and the origins
+    /// of what is left stay aligned (each remaining pose keeps its file, line and label).
+    /// [`excluded`](Self::excluded) is unchanged: record why the pose was left out there.
+    pub fn without_pose(&self, pose: usize) -> Merged {
+        let c = &self.campaign;
+        fn kept<T: Clone>(origin: &[T], poses: impl Iterator<Item = usize>, pose: usize) -> Vec<T> {
+            origin
+                .iter()
+                .zip(poses)
+                .filter(|(_, p)| *p != pose)
+                .map(|(o, _)| o.clone())
+                .collect()
+        }
+        Merged {
+            campaign: c.without_poses(|j| j == pose),
+            pose_origin: kept(&self.pose_origin, 0..c.poses.len(), pose),
+            reading_origin: kept(
+                &self.reading_origin,
+                c.readings.iter().map(|r| r.pose),
+                pose,
+            ),
+            point_origin: kept(
+                &self.point_origin,
+                c.point_measurements.iter().map(|m| m.pose),
+                pose,
+            ),
+            tilt_origin: kept(
+                &self.tilt_origin,
+                c.tilt_measurements.iter().map(|m| m.pose),
+                pose,
+            ),
+            registration: self.registration.clone(),
+            point_frames: self.point_frames.clone(),
+            excluded: self.excluded.clone(),
+        }
     }
 
     /// `file:line` of a campaign pose, for messages.
@@ -1553,6 +1794,7 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
     let mut point_origin = Vec::new();
     let mut tilt_origin = Vec::new();
     let mut tilt_sessions = 0;
+    let mut excluded = Vec::new();
     let mut registration: Option<RegistrationReport> = None;
     let point_frames: Vec<(String, Pose)> = files
         .iter()
@@ -1634,6 +1876,7 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
         }
         let file: std::sync::Arc<str> = f.file.as_str().into();
         reading_origin.extend(f.reading_lines.iter().map(|l| (file.clone(), *l)));
+        excluded.extend(f.excluded);
     }
     if any_commanded {
         out.commanded_lengths_mm = Some(commanded);
@@ -1646,6 +1889,7 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
         tilt_origin,
         registration,
         point_frames,
+        excluded,
     }
 }
 

@@ -11,7 +11,8 @@
 //! Every reader names the file, the line and the field of the first problem it finds
 //! ([`InputError`]), e.g. `data.csv:17: field length_mm: "abc" is not a number`; a file that
 //! cannot be read at all is a [`ReadError::Io`]. Readers stream a file row by row and stop at
-//! the first bad row.
+//! the first bad row, except that a long file may lose one pose in
+//! [`POSES_PER_EXCLUDED_POSE`] the machine cannot reach, recorded in [`DataFile::excluded`].
 //!
 //! One's own robot from files: a description and a readings file (`examples/` ships a 6-6
 //! hexapod and 90 simulated readings of it), read and fitted:
@@ -67,10 +68,11 @@ pub struct Provenance {
     pub data: Vec<String>,
 }
 pub use campaign::{
-    merge, read_commands_file, read_pose_list, read_pose_list_file, read_pose_list_from,
-    read_pose_measurements, read_readings, register_tracker_files, write_commands, write_pose_list,
-    write_pose_measurements, write_readings, DataFile, Merged, PoseRow, ReadOptions,
-    RegistrationReport, SessionRegistration, TrackerRow, MAX_ROWS, REGISTRATION_APPLY_MM,
+    max_excluded_poses, merge, read_commands_file, read_pose_list, read_pose_list_file,
+    read_pose_list_from, read_pose_measurements, read_readings, register_tracker_files,
+    write_commands, write_pose_list, write_pose_measurements, write_readings, DataFile,
+    ExcludedPose, Merged, PoseRow, ReadOptions, RegistrationReport, SessionRegistration,
+    TrackerRow, MAX_ROWS, POSES_PER_EXCLUDED_POSE, REGISTRATION_APPLY_MM,
 };
 pub use error::{read_text, InputError, ReadError};
 pub use read::{read_data, read_data_file, read_data_files, read_data_from};

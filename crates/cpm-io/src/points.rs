@@ -13,8 +13,8 @@ use cpm_calib::{Campaign, PointMeasurement, TiltMeasurement};
 use cpm_geometry::{Pose, Vector3};
 
 use crate::campaign::{
-    check_pose_cell, link_reading_columns, link_readings, opt, simulated_header, too_many_rows,
-    DataFile, ReadOptions,
+    check_pose_cell, exclude_poses, link_reading_columns, link_readings, opt, simulated_header,
+    too_many_rows, DataFile, ReadOptions, Unusable,
 };
 use crate::table::{field, num, shorten, show, FileKind, Header, Row, Table};
 use crate::{InputError, Robot};
@@ -380,6 +380,8 @@ fn read_instrument_table<R: Read>(
     // (the commanded pose, or forward kinematics of the nominal lengths, starts forward
     // kinematics); without readings the controller's inverse kinematics of the commanded pose.
     let mut commanded = Vec::new();
+    // Poses whose link readings give none: excluded, or the file refused when too many.
+    let mut unusable = Vec::new();
     for (j, p) in poses.iter().enumerate() {
         let pose = match (&p.commanded, &p.readings) {
             (Some(c), _) => *c,
@@ -389,24 +391,25 @@ fn read_instrument_table<R: Read>(
                     .enumerate()
                     .map(|(i, v)| robot.length_mm(i, *v))
                     .collect();
-                cpm_kinematics::forward(
+                match cpm_kinematics::forward(
                     &robot.table,
                     &l,
                     &robot.table.home,
                     &cpm_kinematics::ForwardOptions::default(),
-                )
-                .map_err(|e| {
-                    InputError::field(
-                        &t.file,
-                        p.line,
-                        "reading_1",
-                        format!(
-                            "the link readings of pose {:?} give no pose (forward kinematics: {e}): wrong units or link mapping?",
-                            shorten(&labels[j])
-                        ),
-                    )
-                })?
-                .0
+                ) {
+                    Ok((pose, _)) => pose,
+                    Err(e) => {
+                        unusable.push(Unusable {
+                            pose: j,
+                            what: format!(
+                                "gives no pose: forward kinematics of its link readings: {e} (wrong units or link mapping?)"
+                            ),
+                            note: String::new(),
+                            field: Some("reading_1".to_string()),
+                        });
+                        robot.table.home
+                    }
+                }
             }
             (None, None) => unreachable!("checked with the header"),
         };
@@ -423,14 +426,13 @@ fn read_instrument_table<R: Read>(
     if has_readings {
         campaign.commanded_lengths_mm = Some(commanded);
     }
-    if instrument.points {
-        check_point_units(&t.file, robot, &campaign, &lines)?;
-    } else {
-        check_tilt_units(&t.file, robot, &campaign, &lines, &instrument.measured)?;
-    }
     let mut file = DataFile {
         file: t.file.clone(),
-        kind: FileKind::TiltMeasurements,
+        kind: if instrument.points {
+            FileKind::PointMeasurements
+        } else {
+            FileKind::TiltMeasurements
+        },
         campaign,
         pose_labels: labels,
         pose_lines: poses.iter().map(|p| p.line).collect(),
@@ -440,11 +442,21 @@ fn read_instrument_table<R: Read>(
         checked: true,
         point_lines: lines,
         point_frame: None,
+        excluded: Vec::new(),
     };
+    exclude_poses(&mut file, unusable)?;
     if instrument.points {
-        file.kind = FileKind::PointMeasurements;
+        check_point_units(&t.file, robot, &file.campaign, &file.point_lines)?;
         let frame = register_points(&t.file, robot, &mut file.campaign)?;
         file.point_frame = Some(frame);
+    } else {
+        check_tilt_units(
+            &t.file,
+            robot,
+            &file.campaign,
+            &file.point_lines,
+            &instrument.measured,
+        )?;
     }
     Ok(file)
 }

@@ -273,6 +273,7 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
     }
     progress.stage("reading the measurements");
     let mut merged = crate::load::load_data(data, &robot, &crate::load::read_options(&model))?;
+    crate::load::warn_excluded(progress, &merged.excluded);
     if let Some(v) = pose_sigma_um {
         merged.campaign.pose_sigma_um = v;
         merged.campaign.point_sigma_um = v;
@@ -801,6 +802,8 @@ pub struct Fitted {
     pub set: OutputSet,
     /// The report (`calibration.json`, report.md and report.html are renderings of it).
     pub report: crate::report::calibrate::CalibrateReport,
+    /// The poses the fit left out because it could not start there (see [`leaving_out`]).
+    pub excluded: Vec<crate::io::ExcludedPose>,
 }
 
 /// Fits the inputs and stages every output of `cpm calibrate` in memory, for `dir`: nothing
@@ -821,11 +824,22 @@ pub fn fit_with(
     minimum_norm: bool,
     formulation: crate::formulation::FormulationArg,
 ) -> anyhow::Result<Fitted> {
+    // A pose where the fit cannot start (forward kinematics does not converge there) is
+    // left out, with its observations, and the fit run again (see `leaving_out`).
+    let ((cal, formulation), excluded) = leaving_out(inputs, |merged| {
+        let (model, campaign) = (&inputs.model, &merged.campaign);
+        let f = crate::formulation::resolve(formulation, model, campaign, &inputs.identify);
+        crate::formulation::identify_with(f, model, campaign, &inputs.identify).map(|c| (c, f))
+    })?;
+    let left_out;
+    let inputs = if excluded.is_empty() {
+        inputs
+    } else {
+        left_out = inputs.without_poses(&excluded);
+        &left_out
+    };
     let campaign = &inputs.merged.campaign;
     let model = &inputs.model;
-    let formulation = crate::formulation::resolve(formulation, model, campaign, &inputs.identify);
-    let cal = crate::formulation::identify_with(formulation, model, campaign, &inputs.identify)
-        .map_err(|e| crate::load::locate(e, &inputs.merged))?;
     let mut set = OutputSet::new();
     let mut fit = FitReport::new(&inputs.report_inputs(), model, &cal, Some(formulation));
     add_session_warnings(&mut fit, inputs, model)?;
@@ -860,7 +874,71 @@ pub fn fit_with(
     let markdown = report.markdown();
     set.add(dir.join("report.md"), markdown.as_str());
     crate::load::stage_report_html(&mut set, dir, "cpm calibration report", &markdown);
-    Ok(Fitted { cal, set, report })
+    Ok(Fitted {
+        cal,
+        set,
+        report,
+        excluded: excluded.into_iter().map(|(_, e)| e).collect(),
+    })
+}
+
+/// Runs `fit` (a fit of the merged data) on `inputs`' data; when it fails at one pose
+/// (forward kinematics does not converge or the statics fail there,
+/// [`error_pose`](crate::load::error_pose)), leaves that pose out with all its observations
+/// and runs it again, for at most one pose in
+/// [`POSES_PER_EXCLUDED_POSE`](crate::io::campaign::POSES_PER_EXCLUDED_POSE) of the campaign
+/// (then the error, naming file and line, as before). Returns its result and the poses left
+/// out (each with its index in the campaign as it was then, and what to record).
+pub fn leaving_out<T>(
+    inputs: &Inputs,
+    mut fit: impl FnMut(&Merged) -> Result<T, crate::calib::CalibError>,
+) -> anyhow::Result<(T, Vec<(usize, crate::io::ExcludedPose)>)> {
+    let budget = crate::io::campaign::max_excluded_poses(inputs.merged.campaign.poses.len());
+    let mut excluded: Vec<(usize, crate::io::ExcludedPose)> = Vec::new();
+    let mut merged = std::borrow::Cow::Borrowed(&inputs.merged);
+    loop {
+        let e = match fit(&merged) {
+            Ok(r) => return Ok((r, excluded)),
+            Err(e) => e,
+        };
+        let pose = crate::load::error_pose(&e)
+            .filter(|_| excluded.len() < budget && merged.campaign.poses.len() > 1);
+        let Some((pose, (file, line, label))) =
+            pose.and_then(|p| merged.pose_origin.get(p).cloned().map(|o| (p, o)))
+        else {
+            return Err(crate::load::locate(e, &merged));
+        };
+        excluded.push((
+            pose,
+            crate::io::ExcludedPose {
+                file,
+                line,
+                label,
+                reason: format!("the fit cannot start there: {e}"),
+            },
+        ));
+        merged = std::borrow::Cow::Owned(merged.without_pose(pose));
+    }
+}
+
+impl Inputs {
+    /// The inputs without the poses [`leaving_out`] left out (in its order), recorded in
+    /// the merged data's `excluded`.
+    pub fn without_poses(&self, excluded: &[(usize, crate::io::ExcludedPose)]) -> Inputs {
+        let mut merged = self.merged.clone();
+        for (pose, e) in excluded {
+            merged = merged.without_pose(*pose);
+            merged.excluded.push(e.clone());
+        }
+        Inputs {
+            robot: self.robot.clone(),
+            model: self.model.clone(),
+            merged,
+            identify: self.identify.clone(),
+            provenance: self.provenance.clone(),
+            data_paths: self.data_paths.clone(),
+        }
+    }
 }
 
 /// The options of `cpm calibrate`: the fit's, the formulation, and the write-back.
@@ -945,6 +1023,7 @@ pub fn calibrate(
         options.minimum_norm,
         options.formulation,
     )?;
+    crate::load::warn_excluded(progress, &fitted.excluded);
     check_cancelled(progress)?;
     Ok(Calibrated { inputs, fitted })
 }

@@ -97,6 +97,14 @@ pub fn load_data(
     Ok(merged)
 }
 
+/// Warns (`FILE:LINE: pose "LABEL" excluded: REASON`) of each pose left out of the data (see
+/// [`io::campaign::POSES_PER_EXCLUDED_POSE`]).
+pub fn warn_excluded(progress: &dyn Progress, excluded: &[io::ExcludedPose]) {
+    for e in excluded {
+        progress.warn(&e.to_string());
+    }
+}
+
 /// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;
 /// tracker files are registered with the model's known `tracker_frame` taken out.
 pub fn read_options(model: &MeasurementModel) -> ReadOptions {

@@ -22,6 +22,11 @@ pub trait Progress {
     fn note(&self, message: &str) {
         let _ = message;
     }
+    /// A warning for the user (an input row left out, ...); the command line prints it on
+    /// stderr as `warning: ...` unless `--quiet`.
+    fn warn(&self, message: &str) {
+        let _ = message;
+    }
     /// True when the caller wants the job stopped.
     fn cancelled(&self) -> bool {
         false
@@ -56,6 +61,9 @@ impl Progress for Collect {
         if let Ok(mut n) = self.notes.lock() {
             n.push(message.to_string());
         }
+    }
+    fn warn(&self, message: &str) {
+        self.note(&format!("warning: {message}"));
     }
     fn cancelled(&self) -> bool {
         self.cancel.load(std::sync::atomic::Ordering::Relaxed)

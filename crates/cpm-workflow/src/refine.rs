@@ -168,8 +168,20 @@ pub fn refine(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Resul
         ..CalibRefineOptions::default()
     };
     let options = refine_options;
-    let r = crate::calib::refine(&inputs.model, campaign, &options)
-        .map_err(|e| crate::load::locate(e, &inputs.merged))?;
+    // A pose where the fit cannot start is left out (see `crate::fit::leaving_out`).
+    let (r, excluded) = crate::fit::leaving_out(&inputs, |merged| {
+        crate::calib::refine(&inputs.model, &merged.campaign, &options)
+    })?;
+    crate::load::warn_excluded(
+        progress,
+        &excluded.iter().map(|(_, e)| e.clone()).collect::<Vec<_>>(),
+    );
+    let inputs = if excluded.is_empty() {
+        inputs
+    } else {
+        inputs.without_poses(&excluded)
+    };
+    let campaign = &inputs.merged.campaign;
     // Never worse than plain calibration on data the fits did not see: otherwise an error,
     // and nothing written.
     if let Some(why) = r.against_calibrate.refusal() {

@@ -448,6 +448,7 @@ fn errors_of(
     let mut written = 0;
     for path in paths {
         let file = read_held_out(path, robot, controller, &options, tracker)?;
+        gather.out.excluded.extend(file.excluded.iter().cloned());
         let campaign: &Campaign = &file.campaign;
         gather.out.simulated |= campaign.simulated;
         let fail = |e: crate::calib::CalibError| {
@@ -791,6 +792,16 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
                 sensor_names(&reference).join(", ")
             ))
         })?;
+    // The poses left out by either robot's reading (most often the same).
+    let mut excluded = cal_errors.excluded.clone();
+    excluded.extend(
+        ref_errors
+            .excluded
+            .iter()
+            .filter(|e| !cal_errors.excluded.contains(e))
+            .cloned(),
+    );
+    crate::load::warn_excluded(progress, &excluded);
     let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
     if names != ref_names {
         return Err(input_error(format!(

@@ -513,6 +513,115 @@ impl Campaign {
         c.instrument_measurements.retain(|p| keep(p.pose));
         c
     }
+
+    /// The campaign without the configurations for which `drop(pose)` holds, and without
+    /// every observation taken at them; unlike [`filter_poses`](Self::filter_poses) the
+    /// poses left are renumbered (in order), so the campaign is the one the files would give
+    /// without those poses' rows: commanded lengths, session starts and the sessions of the
+    /// point, tilt and instrument measurements (renumbered in order when one is left empty)
+    /// follow.
+    pub fn without_poses(&self, drop: impl Fn(usize) -> bool) -> Campaign {
+        let mut new_index = Vec::with_capacity(self.poses.len());
+        let mut kept = 0;
+        for j in 0..self.poses.len() {
+            if drop(j) {
+                new_index.push(None);
+            } else {
+                new_index.push(Some(kept));
+                kept += 1;
+            }
+        }
+        let map = |j: usize| new_index.get(j).copied().flatten();
+        // The sessions left, renumbered in order.
+        fn renumber(mut used: Vec<usize>) -> impl Fn(usize) -> usize {
+            used.sort_unstable();
+            used.dedup();
+            move |s| used.partition_point(|u| *u < s)
+        }
+        let mut c = self.clone();
+        c.poses = self
+            .poses
+            .iter()
+            .enumerate()
+            .filter(|(j, _)| map(*j).is_some())
+            .map(|(_, p)| *p)
+            .collect();
+        c.commanded_lengths_mm = self.commanded_lengths_mm.as_ref().map(|l| {
+            l.iter()
+                .enumerate()
+                .filter(|(j, _)| map(*j).is_some())
+                .map(|(_, l)| l.clone())
+                .collect()
+        });
+        c.readings = self
+            .readings
+            .iter()
+            .filter_map(|r| map(r.pose).map(|pose| Reading { pose, ..*r }))
+            .collect();
+        let measured: Vec<bool> = self
+            .pose_measurements
+            .iter()
+            .map(|m| map(m.pose).is_some())
+            .collect();
+        c.retain_pose_measurements(&measured);
+        c.pose_measurements = c
+            .pose_measurements
+            .iter()
+            .filter_map(|m| map(m.pose).map(|pose| PoseMeasurement { pose, ..*m }))
+            .collect();
+        let points: Vec<PointMeasurement> = self
+            .point_measurements
+            .iter()
+            .filter_map(|m| map(m.pose).map(|pose| PointMeasurement { pose, ..*m }))
+            .collect();
+        let session = renumber(points.iter().map(|m| m.session).collect());
+        c.point_measurements = points
+            .into_iter()
+            .map(|m| PointMeasurement {
+                session: session(m.session),
+                ..m
+            })
+            .collect();
+        let tilts: Vec<TiltMeasurement> = self
+            .tilt_measurements
+            .iter()
+            .filter_map(|m| map(m.pose).map(|pose| TiltMeasurement { pose, ..*m }))
+            .collect();
+        let session = renumber(tilts.iter().map(|m| m.session).collect());
+        c.tilt_measurements = tilts
+            .into_iter()
+            .map(|m| TiltMeasurement {
+                session: session(m.session),
+                ..m
+            })
+            .collect();
+        let instruments: Vec<InstrumentMeasurement> = self
+            .instrument_measurements
+            .iter()
+            .filter_map(|m| map(m.pose).map(|pose| InstrumentMeasurement { pose, ..m.clone() }))
+            .collect();
+        let session = renumber(instruments.iter().map(|m| m.session).collect());
+        c.instrument_measurements = instruments
+            .into_iter()
+            .map(|m| InstrumentMeasurement {
+                session: session(m.session),
+                ..m
+            })
+            .collect();
+        // A session starts at its first pose left (none when it has none left); the first
+        // pose starts one anyway.
+        c.session_starts = Vec::new();
+        for &s in &self.session_starts {
+            let start = new_index[..s.min(new_index.len())]
+                .iter()
+                .filter(|k| k.is_some())
+                .count();
+            if start > 0 && start < kept && c.session_starts.last() != Some(&start) {
+                c.session_starts.push(start);
+            }
+        }
+        c
+    }
 }
 
 /// A plan: poses to drive and sensors to read at each (every sensor at every pose).
@@ -572,4 +681,74 @@ pub fn circle(centre: &Pose, radius_mm: f64, n: usize) -> Vec<Pose> {
             p
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reading(pose: usize) -> Reading {
+        Reading {
+            pose,
+            sensor: 0,
+            length_mm: pose as f64,
+            time_s: None,
+            temperature_c: None,
+        }
+    }
+
+    /// Dropping a pose renumbers the poses after it, takes its observations along, and
+    /// keeps session starts and sessions in order.
+    #[test]
+    fn without_poses_renumbers_what_is_left() {
+        let poses: Vec<Pose> = (0..5)
+            .map(|k| Pose::from_xyz_rpy_deg([k as f64, 0.0, 0.0], [0.0; 3]))
+            .collect();
+        let c = Campaign {
+            poses: poses.clone(),
+            commanded_lengths_mm: Some((0..5).map(|k| vec![k as f64]).collect()),
+            readings: (0..5).flat_map(|j| [reading(j), reading(j)]).collect(),
+            session_starts: vec![2, 3],
+            tilt_measurements: (0..5)
+                .map(|j| TiltMeasurement {
+                    pose: j,
+                    inclinometer: 0,
+                    axis: 0,
+                    session: usize::from(j >= 2) + usize::from(j >= 3),
+                    angle_mrad: j as f64,
+                    time_s: None,
+                })
+                .collect(),
+            ..Campaign::default()
+        };
+        let d = c.without_poses(|j| j == 2);
+        assert_eq!(d.poses, [poses[0], poses[1], poses[3], poses[4]]);
+        assert_eq!(
+            d.commanded_lengths_mm,
+            Some(vec![vec![0.0], vec![1.0], vec![3.0], vec![4.0]])
+        );
+        let left: Vec<(usize, f64)> = d.readings.iter().map(|r| (r.pose, r.length_mm)).collect();
+        assert_eq!(
+            left,
+            [
+                (0, 0.0),
+                (0, 0.0),
+                (1, 1.0),
+                (1, 1.0),
+                (2, 3.0),
+                (2, 3.0),
+                (3, 4.0),
+                (3, 4.0)
+            ]
+        );
+        // The session of pose 2 is gone: the next starts where it started.
+        assert_eq!(d.session_starts, [2]);
+        let tilts: Vec<(usize, usize)> = d
+            .tilt_measurements
+            .iter()
+            .map(|t| (t.pose, t.session))
+            .collect();
+        assert_eq!(tilts, [(0, 0), (1, 0), (2, 1), (3, 1)]);
+        assert_eq!(c.without_poses(|_| false), c);
+    }
 }

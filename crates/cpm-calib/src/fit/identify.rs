@@ -801,7 +801,7 @@ fn fit_directions(
 /// from least squares, and a redescending one from Huber's solution at the same scale.
 fn solve_staged(
     problem: &mut Subspace<'_>,
-    theta: &mut Vec<f64>,
+    theta: &mut [f64],
     options: &IdentifyOptions,
 ) -> Result<cpm_lm::Report, CalibError> {
     let robust = !options.lm.loss.is_squared();
@@ -824,7 +824,7 @@ fn solve_staged(
 /// against estimated from the residual and the fit solved again, until it settles.
 fn solve_with_noise(
     problem: &mut Subspace<'_>,
-    theta: &mut Vec<f64>,
+    theta: &mut [f64],
     estimate_noise: bool,
     options: &IdentifyOptions,
 ) -> Result<cpm_lm::Report, CalibError> {
@@ -855,7 +855,7 @@ fn solve_with_noise(
 /// the set settles. Returns the last solve's report and the observations set aside.
 fn fit_setting_aside(
     problem: &mut Subspace<'_>,
-    theta: &mut Vec<f64>,
+    theta: &mut [f64],
     weights: &[f64],
     estimate_noise: bool,
     options: &IdentifyOptions,

@@ -147,6 +147,21 @@ pub struct Outlier {
     pub set_aside: bool,
 }
 
+/// A pose left out of the fit with all its observations (`calibration.json`'s
+/// `excluded_poses`): the machine cannot be there, or forward kinematics did not converge at
+/// it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ExcludedPoseReport {
+    /// Its file.
+    pub file: String,
+    /// Its first line.
+    pub line: usize,
+    /// Its `pose` label.
+    pub label: String,
+    /// Why.
+    pub reason: String,
+}
+
 /// `calibration.json`'s `misfit` object.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct MisfitReport {
@@ -408,6 +423,9 @@ pub struct FitReport {
     pub robust: Option<RobustReport>,
     /// Flagged outliers.
     pub outliers: Vec<Outlier>,
+    /// The poses left out with all their observations (absent when none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub excluded_poses: Vec<ExcludedPoseReport>,
     /// The tracker registration (`null` without tracker files).
     pub registration: Option<RegistrationSummary>,
     /// The chi-square test against the declared noise (`null` when estimated).
@@ -678,6 +696,17 @@ impl FitReport {
                 failed: cal.robust_failed,
             }),
             outliers: outliers(inputs, model, cal),
+            excluded_poses: inputs
+                .merged
+                .excluded
+                .iter()
+                .map(|e| ExcludedPoseReport {
+                    file: e.file.clone(),
+                    line: e.line,
+                    label: e.label.clone(),
+                    reason: e.reason.clone(),
+                })
+                .collect(),
             registration: registration(inputs.merged, model, cal),
             misfit: misfit_report(cal),
             noise_by_kind: kinds
@@ -872,8 +901,27 @@ impl FitReport {
             s.push_str(&format!("| {num} | {} | {v} | {sd} |\n", p.name));
         }
         s.push('\n');
+        self.markdown_excluded(s);
         self.markdown_outliers(s);
         self.markdown_registration(s);
+    }
+
+    /// The poses left out, when any.
+    fn markdown_excluded(&self, s: &mut String) {
+        if self.excluded_poses.is_empty() {
+            return;
+        }
+        s.push_str("## Poses left out\n\nThese poses were left out with all their observations: the machine cannot be there, or forward kinematics did not converge at them (at most one pose in 20 of a file, or of the fit, is left out so; more refuse the data). Check the log at these lines.\n\n| file:line | pose | why |\n|---|---|---|\n");
+        for e in &self.excluded_poses {
+            s.push_str(&format!(
+                "| {}:{} | {} | {} |\n",
+                e.file,
+                e.line,
+                e.label.replace('|', "\\|"),
+                e.reason.replace('|', "\\|")
+            ));
+        }
+        s.push('\n');
     }
 
     fn markdown_outliers(&self, s: &mut String) {
