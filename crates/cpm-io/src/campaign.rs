@@ -1015,26 +1015,7 @@ pub(crate) fn read_readings_table<R: Read>(
         let j = match known {
             Some(j) => {
                 let e = &entries[j];
-                for ((name, a), (_, b)) in raw.iter().zip(e.raw.iter()) {
-                    if !close(*a, *b) {
-                        return Err(t.err(
-                            row,
-                            name,
-                            format!("{} differs from {} given for pose {:?} on line {}: rows of one pose share one commanded pose (a repeated pose label?)", show(*a, None), show(*b, None), shorten(label), e.line),
-                        ));
-                    }
-                }
-                if let (Some(a), Some(b)) = (&link, &e.readings) {
-                    for (k, (x, y)) in a.iter().zip(b).enumerate() {
-                        if !close(*x, *y) {
-                            return Err(t.err(
-                                row,
-                                &format!("reading_{}", k + 1),
-                                format!("{x} differs from {y} given for pose {:?} on line {}: rows of one pose share one command", shorten(label), e.line),
-                            ));
-                        }
-                    }
-                }
+                same_pose_as_before(t, row, label, (&raw, &link), (&e.raw, &e.readings), e.line)?;
                 j
             }
             None => {
@@ -1151,6 +1132,39 @@ pub(crate) fn read_readings_table<R: Read>(
     };
     exclude_poses(&mut f, unusable)?;
     Ok(f)
+}
+
+/// Checks that a row of a pose already given (on line `line`) repeats its commanded pose and
+/// link readings (`now` against `before`), naming the field that differs.
+fn same_pose_as_before(
+    t: &Header,
+    row: &Row,
+    label: &str,
+    now: (&RawPose, &Option<Vec<f64>>),
+    before: (&RawPose, &Option<Vec<f64>>),
+    line: usize,
+) -> Result<(), InputError> {
+    for ((name, a), (_, b)) in now.0.iter().zip(before.0.iter()) {
+        if !close(*a, *b) {
+            return Err(t.err(
+                row,
+                name,
+                format!("{} differs from {} given for pose {:?} on line {}: rows of one pose share one commanded pose (a repeated pose label?)", show(*a, None), show(*b, None), shorten(label), line),
+            ));
+        }
+    }
+    if let (Some(a), Some(b)) = (now.1, before.1) {
+        for (k, (x, y)) in a.iter().zip(b).enumerate() {
+            if !close(*x, *y) {
+                return Err(t.err(
+                    row,
+                    &format!("reading_{}", k + 1),
+                    format!("{x} differs from {y} given for pose {:?} on line {}: rows of one pose share one command", shorten(label), line),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Reads tracker pose measurements (see `docs/formats.md`); unreachable measured poses are
@@ -1517,50 +1531,15 @@ pub fn register_tracker_files(
                     });
                 }
                 for (s, &k) in report.sessions.iter().zip(&idx) {
-                    let f = &mut files[k];
-                    if s.applied {
-                        let mut unmeasured = f.campaign.unmeasured.clone();
-                        for (q, row) in f.tracker_rows.iter().enumerate() {
-                            let base = s.frame.to_base(&unknown(&row.measured));
-                            f.campaign.pose_measurements[q].measured = known_applied(&base);
-                            if row.complete() {
-                                f.campaign.poses[f.campaign.pose_measurements[q].pose] = base;
-                            } else if row.mask[..3].contains(&true)
-                                && row.mask[..3].contains(&false)
-                            {
-                                // The frame's rotation mixes the coordinates: a position
-                                // measured in part is not known in the base frame.
-                                unmeasured.extend((0..3).map(|a| (q, a)));
-                            }
-                        }
-                        unmeasured.sort_unstable();
-                        unmeasured.dedup();
-                        f.campaign.unmeasured = unmeasured;
-                    }
-                    if offsets_applied {
-                        if let Some(c) = &mut f.campaign.commanded_lengths_mm {
-                            for l in c.iter_mut() {
-                                for (a, o) in l.iter_mut().zip(&report.link_offset_mm) {
-                                    *a += o;
-                                }
-                            }
-                        }
-                    }
+                    let offsets = offsets_applied.then_some(report.link_offset_mm.as_slice());
+                    apply_registration(&mut files[k], s, offsets, &unknown, &known_applied);
                 }
                 for &k in &idx {
                     files[k].registration = Some(report.clone());
                 }
             }
             Err(why) => {
-                let report = RegistrationReport {
-                    sessions: Vec::new(),
-                    link_offset_mm: Vec::new(),
-                    link_offset_sd_mm: Vec::new(),
-                    offsets_estimated: false,
-                    offsets_applied: false,
-                    variance_factor: f64::NAN,
-                    failure: Some(why),
-                };
+                let report = RegistrationReport::failed(why);
                 for &k in &idx {
                     files[k].registration = Some(report.clone());
                 }
@@ -1626,35 +1605,89 @@ pub fn register_tracker_files(
         exclude_poses(f, unusable)?;
         f.checked = true;
     }
-    // The commanded pose of a tracker row (what the link effects and a pose map read, where
-    // the link forces are computed): the forward kinematics of its commanded lengths on the
-    // design geometry, started from the registered measured pose. It depends on the logged
-    // readings and the design only, never on the robot that registers the session, so that
-    // every command that reads the file sees the same poses as the fit did.
-    {
-        let model = robot.model(&[]);
-        let design = model.statics_table();
-        let fk = cpm_kinematics::ForwardOptions::default();
-        for &k in &idx {
-            let f = &mut files[k];
-            let Some(commanded) = f.campaign.commanded_lengths_mm.clone() else {
-                continue;
-            };
-            for q in 0..f.campaign.pose_measurements.len() {
-                let j = f.campaign.pose_measurements[q].pose;
-                if let Ok((p, _)) =
-                    cpm_kinematics::forward(design, &commanded[j], &f.campaign.poses[j], &fk)
-                {
-                    if p.is_finite()
-                        && (p.position_mm - f.campaign.poses[j].position_mm).norm() < 1e3
-                    {
-                        f.campaign.poses[j] = p;
-                    }
+    commanded_poses_of_tracker_rows(files, &idx, robot);
+    Ok(())
+}
+
+/// The commanded pose of each tracker row of `files[idx]` (what the link effects and a pose
+/// map read, where the link forces are computed): the forward kinematics of its commanded
+/// lengths on the design geometry, started from the registered measured pose. It depends on
+/// the logged readings and the design only, never on the robot that registers the session,
+/// so that every command that reads the file sees the same poses as the fit did.
+fn commanded_poses_of_tracker_rows(files: &mut [DataFile], idx: &[usize], robot: &Robot) {
+    let model = robot.model(&[]);
+    let design = model.statics_table();
+    let fk = cpm_kinematics::ForwardOptions::default();
+    for &k in idx {
+        let f = &mut files[k];
+        let Some(commanded) = f.campaign.commanded_lengths_mm.clone() else {
+            continue;
+        };
+        for q in 0..f.campaign.pose_measurements.len() {
+            let j = f.campaign.pose_measurements[q].pose;
+            if let Ok((p, _)) =
+                cpm_kinematics::forward(design, &commanded[j], &f.campaign.poses[j], &fk)
+            {
+                if p.is_finite() && (p.position_mm - f.campaign.poses[j].position_mm).norm() < 1e3 {
+                    f.campaign.poses[j] = p;
                 }
             }
         }
     }
-    Ok(())
+}
+
+/// A session's registration applied to its file: each measured pose (the known frame
+/// `unknown` taken out, put back by `known_applied`) in the base frame, the commanded pose of a
+/// row measured in full moved there too, and with `offsets`, the registration's reading
+/// offsets added to the commanded lengths.
+fn apply_registration(
+    f: &mut DataFile,
+    s: &SessionRegistration,
+    offsets: Option<&[f64]>,
+    unknown: &dyn Fn(&Pose) -> Pose,
+    known_applied: &dyn Fn(&Pose) -> Pose,
+) {
+    if s.applied {
+        let mut unmeasured = f.campaign.unmeasured.clone();
+        for (q, row) in f.tracker_rows.iter().enumerate() {
+            let base = s.frame.to_base(&unknown(&row.measured));
+            f.campaign.pose_measurements[q].measured = known_applied(&base);
+            if row.complete() {
+                f.campaign.poses[f.campaign.pose_measurements[q].pose] = base;
+            } else if row.mask[..3].contains(&true) && row.mask[..3].contains(&false) {
+                // The frame's rotation mixes the coordinates: a position measured in part is
+                // not known in the base frame.
+                unmeasured.extend((0..3).map(|a| (q, a)));
+            }
+        }
+        unmeasured.sort_unstable();
+        unmeasured.dedup();
+        f.campaign.unmeasured = unmeasured;
+    }
+    if let Some(offsets) = offsets {
+        if let Some(c) = &mut f.campaign.commanded_lengths_mm {
+            for l in c.iter_mut() {
+                for (a, o) in l.iter_mut().zip(offsets) {
+                    *a += o;
+                }
+            }
+        }
+    }
+}
+
+impl RegistrationReport {
+    /// The report of a registration that failed (`why`), with nothing estimated.
+    fn failed(why: String) -> Self {
+        RegistrationReport {
+            sessions: Vec::new(),
+            link_offset_mm: Vec::new(),
+            link_offset_sd_mm: Vec::new(),
+            offsets_estimated: false,
+            offsets_applied: false,
+            variance_factor: f64::NAN,
+            failure: Some(why),
+        }
+    }
 }
 
 /// What a consistency error of a tracker file says about its registration.
