@@ -718,42 +718,6 @@ pub(crate) fn run<M: Model>(
     mut callback: Callback<'_, '_>,
 ) -> Result<Report, LmError> {
     let start = Instant::now();
-    let (n, m) = check_start(&backend, x, options)?;
-    let bounds = Bounds::new(n, options.lower.as_deref(), options.upper.as_deref());
-    if let Some(b) = &bounds {
-        b.project(x);
-    }
-    backend.setup(options, m, n)?;
-    // Residual evaluations after which plain steps switch to geodesic acceleration.
-    let crawl_limit = match backend {
-        Backend::Stored(_) => crawl_limit(options, n),
-        Backend::Normal(_) => None,
-    };
-    // The parameter-sized vectors share one allocation (small problems spend a fair part
-    // of their time in the allocator).
-    let track = options.evaporation_restart.is_some() || abandon.is_some();
-    let mut nbuf = vec![0.0; if track { 8 * n } else { 7 * n }];
-    let mut state = Solve::new(&mut nbuf, options, bounds, abandon, crawl_limit, m, start);
-    let mut termination = state.start(&mut backend, x)?;
-    while termination.is_none() {
-        if state.need_jac {
-            termination = state.linearise(&mut backend, x)?;
-            if termination.is_some() {
-                break;
-            }
-        }
-        termination = state.step(&mut backend, x, &mut callback)?;
-    }
-    state.finish(backend, x, termination)
-}
-
-/// The checks of a solve's start: sizes, options, a finite start. Returns the number of
-/// parameters and of residuals.
-fn check_start<M: Model>(
-    backend: &Backend<'_, M>,
-    x: &[f64],
-    options: &Options,
-) -> Result<(usize, usize), LmError> {
     let (n, m) = backend.dims();
     if n == 0 || m == 0 {
         return Err(LmError::EmptyProblem {
@@ -778,356 +742,205 @@ fn check_start<M: Model>(
             value: x[index],
         });
     }
-    Ok((n, m))
-}
-
-/// The damping after the first linearisation: `tau` times the largest scaled squared column
-/// norm (`tau` itself when that is not a positive number), and for the trust region its
-/// first radius.
-fn initial_damping(
-    options: &Options,
-    x: &[f64],
-    g: &[f64],
-    norms2: &[f64],
-    d: &[f64],
-) -> DampingState {
-    let mut mu0 = 0.0f64;
-    for j in 0..x.len() {
-        mu0 = mu0.max(norms2[j] / (d[j] * d[j]));
+    let bounds = Bounds::new(n, options.lower.as_deref(), options.upper.as_deref());
+    if let Some(b) = &bounds {
+        b.project(x);
     }
-    mu0 *= options.tau;
-    if !(mu0.is_finite() && mu0 > 0.0) {
-        mu0 = options.tau;
-    }
-    let mut damping = DampingState::new(options.damping, mu0);
-    if damping.is_trust_region() {
-        let xn = x
-            .iter()
-            .zip(d.iter())
-            .map(|(a, b)| (a * b) * (a * b))
-            .sum::<f64>()
-            .sqrt();
-        // Bound on ||D h|| of the step damped with mu0: ||D^-1 g|| / mu0.
-        let gn = g
-            .iter()
-            .zip(d.iter())
-            .map(|(a, b)| (a / b) * (a / b))
-            .sum::<f64>()
-            .sqrt();
-        damping.init_radius(xn, gn / mu0);
-    }
-    damping
-}
+    backend.setup(options, m, n)?;
 
-/// The gradient test's figures: the largest gradient component and the largest cosine
-/// between the residual (norm `rnorm`) and a column.
-fn gradient_figures(g: &[f64], norms2: &[f64], rnorm: f64) -> (f64, f64) {
-    let mut gnorm = 0.0f64;
-    let mut grad_inf = 0.0f64;
-    for j in 0..g.len() {
-        grad_inf = grad_inf.max(g[j].abs());
-        if norms2[j] > 0.0 && rnorm > 0.0 {
-            gnorm = gnorm.max(g[j].abs() / (norms2[j].sqrt() * rnorm));
-        }
+    let mut timings = Timings {
+        phases_timed: true,
+        ..Timings::default()
+    };
+    let cubic = options.damping == Damping::CubicInterpolation;
+    let mut accel = options.acceleration;
+    // Residual evaluations after which plain steps switch to geodesic acceleration.
+    let crawl_limit = match backend {
+        Backend::Stored(_) => crawl_limit(options, n),
+        Backend::Normal(_) => None,
+    };
+    // The parameter-sized vectors share one allocation (small problems spend a fair part
+    // of their time in the allocator).
+    let watch = options.evaporation_restart;
+    let track = watch.is_some() || abandon.is_some();
+    let mut nbuf = vec![0.0; if track { 8 * n } else { 7 * n }];
+    let (peak2, nbuf7) = nbuf.split_at_mut(if track { n } else { 0 });
+    let (wa, rest) = nbuf7.split_at_mut(n);
+    let (x_trial, rest) = rest.split_at_mut(n);
+    let (h, rest) = rest.split_at_mut(n);
+    let (step, rest) = rest.split_at_mut(n);
+    let (g, rest) = rest.split_at_mut(n);
+    let (norms2, d) = rest.split_at_mut(n);
+    let mut frozen = if bounds.is_some() {
+        vec![false; n]
+    } else {
+        Vec::new()
+    };
+    let mut any_frozen = false;
+    let mut records: Vec<IterationRecord> = Vec::with_capacity(options.max_iterations.min(32));
+    let (mut residual_evaluations, mut jacobian_evaluations) = (0usize, 0usize);
+    let (mut accepted_steps, mut rejected_steps) = (0usize, 0usize);
+
+    let mut damping = DampingState::new(options.damping, 1.0);
+    let mut clock = Clock::new(start);
+    let mut cost = backend.start(options, x, damping.mu(), g, norms2, d)?;
+    match backend {
+        Backend::Stored(_) => timings.residuals += clock.lap(),
+        Backend::Normal(_) => timings.jacobian += clock.lap(),
     }
-    (grad_inf, gnorm)
-}
+    residual_evaluations += 1;
+    let initial_cost = cost;
 
-impl Abandon {
-    /// Whether the restart is on the plateau of the plain solve (see [`Abandon`]), at
-    /// `cost` with squared column norms `norms2` (peaks `peak2`).
-    fn reached(&self, cost: f64, norms2: &[f64], peak2: &[f64]) -> bool {
-        cost >= self.cost
-            && cost <= self.cost * (1.0 + ABANDON_BAND)
-            && self
-                .evaporated
-                .iter()
-                .all(|&j| norms2[j] < self.threshold * peak2[j])
-    }
-}
+    let mut termination = if !cost.is_finite() {
+        Some(TerminationReason::NonFinite)
+    } else if cost == 0.0 {
+        Some(TerminationReason::ZeroResidual)
+    } else {
+        None
+    };
+    let mut first = true;
+    let mut need_jac = true;
+    let mut grad_inf = 0.0;
+    // Relative rounding level of a computed cost (sum of m squares, each residual usually a
+    // difference of larger numbers, hence the margin over eps).
+    let noise = 32.0 * f64::EPSILON * (m as f64).sqrt();
 
-/// The state of one solve between its stages (argmin's iteration state): the counters, the
-/// damping, the clock, the records and the parameter-sized vectors, which are slices of one
-/// allocation.
-struct Solve<'a> {
-    options: &'a Options,
-    n: usize,
-    m: usize,
-    bounds: Option<Bounds>,
-    abandon: Option<Abandon>,
-    cubic: bool,
-    accel: Option<crate::GeodesicAcceleration>,
-    /// Residual evaluations after which plain steps switch to geodesic acceleration.
-    crawl_limit: Option<usize>,
-    /// Relative rounding level of a computed cost (sum of m squares, each residual usually
-    /// a difference of larger numbers, hence the margin over eps).
-    noise: f64,
-    /// Peak squared column norms (empty unless evaporation is watched).
-    peak2: &'a mut [f64],
-    wa: &'a mut [f64],
-    x_trial: &'a mut [f64],
-    h: &'a mut [f64],
-    step: &'a mut [f64],
-    g: &'a mut [f64],
-    norms2: &'a mut [f64],
-    d: &'a mut [f64],
-    frozen: Vec<bool>,
-    any_frozen: bool,
-    records: Vec<IterationRecord>,
-    residual_evaluations: usize,
-    jacobian_evaluations: usize,
-    accepted_steps: usize,
-    rejected_steps: usize,
-    damping: DampingState,
-    clock: Clock,
-    timings: Timings,
-    cost: f64,
-    initial_cost: f64,
-    first: bool,
-    need_jac: bool,
-    grad_inf: f64,
-}
-
-impl<'a> Solve<'a> {
-    /// The state before the start is evaluated (`nbuf`: `8 n` values when the evaporation
-    /// of parameters is tracked, else `7 n`; the solve started at `start`).
-    fn new(
-        nbuf: &'a mut [f64],
-        options: &'a Options,
-        bounds: Option<Bounds>,
-        abandon: Option<Abandon>,
-        crawl_limit: Option<usize>,
-        m: usize,
-        start: Instant,
-    ) -> Self {
-        let track = options.evaporation_restart.is_some() || abandon.is_some();
-        let n = nbuf.len() / if track { 8 } else { 7 };
-        let (peak2, nbuf7) = nbuf.split_at_mut(if track { n } else { 0 });
-        let (wa, rest) = nbuf7.split_at_mut(n);
-        let (x_trial, rest) = rest.split_at_mut(n);
-        let (h, rest) = rest.split_at_mut(n);
-        let (step, rest) = rest.split_at_mut(n);
-        let (g, rest) = rest.split_at_mut(n);
-        let (norms2, d) = rest.split_at_mut(n);
-        let frozen = if bounds.is_some() {
-            vec![false; n]
-        } else {
-            Vec::new()
-        };
-        Self {
-            options,
-            n,
-            m,
-            bounds,
-            abandon,
-            cubic: options.damping == Damping::CubicInterpolation,
-            accel: options.acceleration,
-            crawl_limit,
-            noise: 32.0 * f64::EPSILON * (m as f64).sqrt(),
-            peak2,
-            wa,
-            x_trial,
-            h,
-            step,
-            g,
-            norms2,
-            d,
-            frozen,
-            any_frozen: false,
-            records: Vec::with_capacity(options.max_iterations.min(32)),
-            residual_evaluations: 0,
-            jacobian_evaluations: 0,
-            accepted_steps: 0,
-            rejected_steps: 0,
-            damping: DampingState::new(options.damping, 1.0),
-            clock: Clock::new(start),
-            timings: Timings {
-                phases_timed: true,
-                ..Timings::default()
-            },
-            cost: f64::NAN,
-            initial_cost: f64::NAN,
-            first: true,
-            need_jac: true,
-            grad_inf: 0.0,
-        }
-    }
-
-    /// Evaluates the start; the termination when its cost is already final (not finite, or
-    /// zero).
-    fn start<M: Model>(
-        &mut self,
-        backend: &mut Backend<'_, M>,
-        x: &[f64],
-    ) -> Result<Option<TerminationReason>, LmError> {
-        self.cost = backend.start(
-            self.options,
-            x,
-            self.damping.mu(),
-            self.g,
-            self.norms2,
-            self.d,
-        )?;
-        match backend {
-            Backend::Stored(_) => self.timings.residuals += self.clock.lap(),
-            Backend::Normal(_) => self.timings.jacobian += self.clock.lap(),
-        }
-        self.residual_evaluations += 1;
-        self.initial_cost = self.cost;
-        Ok(if !self.cost.is_finite() {
-            Some(TerminationReason::NonFinite)
-        } else if self.cost == 0.0 {
-            Some(TerminationReason::ZeroResidual)
-        } else {
-            None
-        })
-    }
-
-    /// Linearises at the current point: gradient, scales, the restart's early stop, the
-    /// first damping (or the cubic control's new slope), and the gradient test.
-    fn linearise<M: Model>(
-        &mut self,
-        backend: &mut Backend<'_, M>,
-        x: &[f64],
-    ) -> Result<Option<TerminationReason>, LmError> {
-        let rnorm = backend.linearise(
-            self.options,
-            x,
-            self.records.len(),
-            self.first,
-            self.damping.mu(),
-            self.bounds.as_ref(),
-            &mut self.frozen,
-            &mut self.any_frozen,
-            self.g,
-            self.norms2,
-            self.d,
-            &mut self.timings,
-            &mut self.clock,
-        )?;
-        self.jacobian_evaluations += 1;
-        let Some(rnorm) = rnorm else {
-            return Ok(Some(TerminationReason::NonFinite));
-        };
-        for (p, &c) in self.peak2.iter_mut().zip(self.norms2.iter()) {
-            *p = p.max(c);
-        }
-        if let Some(a) = &self.abandon {
-            if a.reached(self.cost, self.norms2, self.peak2) {
-                return Ok(Some(TerminationReason::UserStop));
+    while termination.is_none() {
+        if need_jac {
+            let rnorm = backend.linearise(
+                options,
+                x,
+                records.len(),
+                first,
+                damping.mu(),
+                bounds.as_ref(),
+                &mut frozen,
+                &mut any_frozen,
+                g,
+                norms2,
+                d,
+                &mut timings,
+                &mut clock,
+            )?;
+            jacobian_evaluations += 1;
+            let Some(rnorm) = rnorm else {
+                termination = Some(TerminationReason::NonFinite);
+                break;
+            };
+            for (p, &c) in peak2.iter_mut().zip(norms2.iter()) {
+                *p = p.max(c);
+            }
+            if let Some(a) = &abandon {
+                if cost >= a.cost
+                    && cost <= a.cost * (1.0 + ABANDON_BAND)
+                    && a.evaporated
+                        .iter()
+                        .all(|&j| norms2[j] < a.threshold * peak2[j])
+                {
+                    termination = Some(TerminationReason::UserStop);
+                    break;
+                }
+            }
+            if first {
+                clock.settle(&mut timings);
+                let mut mu0 = 0.0f64;
+                for j in 0..n {
+                    mu0 = mu0.max(norms2[j] / (d[j] * d[j]));
+                }
+                mu0 *= options.tau;
+                if !(mu0.is_finite() && mu0 > 0.0) {
+                    mu0 = options.tau;
+                }
+                damping = DampingState::new(options.damping, mu0);
+                if damping.is_trust_region() {
+                    let xn = x
+                        .iter()
+                        .zip(d.iter())
+                        .map(|(a, b)| (a * b) * (a * b))
+                        .sum::<f64>()
+                        .sqrt();
+                    // Bound on ||D h|| of the step damped with mu0: ||D^-1 g|| / mu0.
+                    let gn = g
+                        .iter()
+                        .zip(d.iter())
+                        .map(|(a, b)| (a / b) * (a / b))
+                        .sum::<f64>()
+                        .sqrt();
+                    damping.init_radius(xn, gn / mu0);
+                }
+                first = false;
+            } else if damping.needs_slope() {
+                damping.new_slope(2.0 * dot(g, h));
+            }
+            // Gradient test (cosine between the residual and each column).
+            let mut gnorm = 0.0f64;
+            grad_inf = 0.0f64;
+            for j in 0..n {
+                grad_inf = grad_inf.max(g[j].abs());
+                if norms2[j] > 0.0 && rnorm > 0.0 {
+                    gnorm = gnorm.max(g[j].abs() / (norms2[j].sqrt() * rnorm));
+                }
+            }
+            need_jac = false;
+            if gnorm <= options.gtol {
+                termination = Some(TerminationReason::ConvergedGtol);
+                break;
             }
         }
-        if self.first {
-            self.clock.settle(&mut self.timings);
-            self.damping = initial_damping(self.options, x, self.g, self.norms2, self.d);
-            self.first = false;
-        } else if self.damping.needs_slope() {
-            self.damping.new_slope(2.0 * dot(self.g, self.h));
+        if records.len() >= options.max_iterations {
+            termination = Some(TerminationReason::MaxIterations);
+            break;
         }
-        // Gradient test (cosine between the residual and each column).
-        let (grad_inf, gnorm) = gradient_figures(self.g, self.norms2, rnorm);
-        self.grad_inf = grad_inf;
-        self.need_jac = false;
-        Ok((gnorm <= self.options.gtol).then_some(TerminationReason::ConvergedGtol))
-    }
-
-    /// One trial from the linearised current point: the budget tests, the switch to
-    /// acceleration of a crawling solve, the damped solve, the acceleration, then the trial
-    /// step ([`Self::take_step`]).
-    fn step<M: Model>(
-        &mut self,
-        backend: &mut Backend<'_, M>,
-        x: &mut [f64],
-        callback: &mut Callback<'_, '_>,
-    ) -> Result<Option<TerminationReason>, LmError> {
-        if self.records.len() >= self.options.max_iterations {
-            return Ok(Some(TerminationReason::MaxIterations));
+        if residual_evaluations >= options.max_evaluations {
+            termination = Some(TerminationReason::MaxEvaluations);
+            break;
         }
-        if self.residual_evaluations >= self.options.max_evaluations {
-            return Ok(Some(TerminationReason::MaxEvaluations));
-        }
-        if self.accel.is_none()
-            && self
-                .crawl_limit
-                .is_some_and(|k| self.residual_evaluations >= k)
-        {
-            if let Backend::Stored(s) = backend {
-                s.enable_acceleration(self.m, self.n);
-                self.accel = Some(crate::GeodesicAcceleration::default());
+        if accel.is_none() && crawl_limit.is_some_and(|k| residual_evaluations >= k) {
+            if let Backend::Stored(s) = &mut backend {
+                s.enable_acceleration(m, n);
+                accel = Some(crate::GeodesicAcceleration::default());
             }
         }
-        let iteration = self.records.len() + 1;
+        let iteration = records.len() + 1;
         let (solved, mu) = backend.solve(
             x,
             iteration,
-            &mut self.damping,
-            self.d,
-            self.g,
-            self.h,
-            self.wa,
-            &mut self.timings,
-            &mut self.clock,
+            &mut damping,
+            d,
+            g,
+            h,
+            wa,
+            &mut timings,
+            &mut clock,
         )?;
-        if !solved {
-            self.timings.linear_solver += self.clock.lap();
-            self.rejected_steps += 1;
-            self.damping.singular();
-            let rec = self.failed_record(iteration, mu, 0.0, 0.0);
-            return Ok(record_failed_trial(
-                &mut self.records,
-                rec,
-                &self.damping,
-                callback,
-            ));
-        }
-        let alpha = self.damping.step_length();
-        let accelerated = match self.accelerate(backend, x, iteration, mu, alpha, callback)? {
-            ControlFlow::Continue(accelerated) => accelerated,
-            ControlFlow::Break(termination) => return Ok(termination),
-        };
-        self.take_step(backend, x, iteration, mu, alpha, accelerated, callback)
-    }
-
-    /// The record of a trial that produced no evaluated point.
-    fn failed_record(
-        &self,
-        iteration: usize,
-        mu: f64,
-        step_length: f64,
-        step_norm: f64,
-    ) -> IterationRecord {
-        IterationRecord {
+        let failed_record = |step_length: f64, step_norm: f64, clock: &Clock| IterationRecord {
             iteration,
-            cost: self.cost,
+            cost,
             trial_cost: f64::NAN,
             damping: mu,
             step_length,
             step_norm,
             gain_ratio: f64::NAN,
             accepted: false,
-            gradient_norm: self.grad_inf,
-            elapsed: self.clock.elapsed(),
+            gradient_norm: grad_inf,
+            elapsed: clock.elapsed(),
+        };
+        if !solved {
+            timings.linear_solver += clock.lap();
+            rejected_steps += 1;
+            damping.singular();
+            let rec = failed_record(0.0, 0.0, &clock);
+            termination = record_failed_trial(&mut records, rec, &damping, &mut callback);
+            continue;
         }
-    }
-
-    /// Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
-    /// 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial
-    /// (`Break` with the termination it leads to). Not for a velocity below sqrt(eps) of the
-    /// scaled parameters: there the finite difference r_vv is rounding noise (its error
-    /// grows as 1 / ||v||, so each rejection, shortening v, would make the next ratio
-    /// larger), and the plain step is taken. `Continue(true)`: `h` now holds v + a / 2.
-    fn accelerate<M: Model>(
-        &mut self,
-        backend: &mut Backend<'_, M>,
-        x: &[f64],
-        iteration: usize,
-        mu: f64,
-        alpha: f64,
-        callback: &mut Callback<'_, '_>,
-    ) -> Result<ControlFlow<Option<TerminationReason>, bool>, LmError> {
-        let n = self.n;
-        let resolvable = self.accel.is_some() && {
-            let (d, h) = (&*self.d, &*self.h);
+        let alpha = damping.step_length();
+        // Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
+        // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial. Not for a
+        // velocity below sqrt(eps) of the scaled parameters: there the finite difference
+        // r_vv is rounding noise (its error grows as 1 / ||v||, so each rejection, shortening
+        // v, would make the next ratio larger), and the plain step is taken.
+        let mut accelerated = false;
+        let resolvable = accel.is_some() && {
             let (mut dv2, mut dx2) = (0.0, 0.0);
             for j in 0..n {
                 dv2 += (d[j] * h[j]).powi(2);
@@ -1135,65 +948,51 @@ impl<'a> Solve<'a> {
             }
             dv2 > f64::EPSILON * dx2
         };
-        let (Some(ga), Backend::Stored(s), true) = (self.accel, backend, resolvable) else {
-            return Ok(ControlFlow::Continue(false));
-        };
-        self.timings.linear_solver += self.clock.lap();
-        let ratio = s.accelerate(x, self.x_trial, self.h, ga.fd_step, mu, self.d, iteration)?;
-        self.timings.residuals += self.clock.lap();
-        self.residual_evaluations += 1;
-        if !(ratio <= ga.max_ratio) {
-            // The velocity is not to be trusted this far: a rejected trial (the cost at
-            // the step is not evaluated; the damping grows as after a failed step).
-            self.timings.linear_solver += self.clock.lap();
-            self.rejected_steps += 1;
-            let dv = self
-                .d
-                .iter()
-                .zip(self.h.iter())
-                .map(|(a, b)| (a * b) * (a * b))
-                .sum::<f64>()
-                .sqrt();
-            self.damping.rejected(
-                -1.0,
-                LineInfo {
-                    f0: 2.0 * self.cost,
-                    slope0: 0.0,
-                    alpha,
-                    f_trial: 2.0 * self.cost,
-                    est_sum: 0.0,
-                    scaled_step: dv,
-                    gs: dot(self.g, self.h),
-                },
-            );
-            let rec = self.failed_record(iteration, mu, alpha, norm2(self.h).sqrt());
-            return Ok(ControlFlow::Break(record_failed_trial(
-                &mut self.records,
-                rec,
-                &self.damping,
-                callback,
-            )));
+        if let (Some(ga), Backend::Stored(s), true) = (accel, &mut backend, resolvable) {
+            timings.linear_solver += clock.lap();
+            let ratio = s.accelerate(x, x_trial, h, ga.fd_step, mu, d, iteration)?;
+            timings.residuals += clock.lap();
+            residual_evaluations += 1;
+            accelerated = true;
+            if !(ratio <= ga.max_ratio) {
+                // The velocity is not to be trusted this far: a rejected trial (the cost at
+                // the step is not evaluated; the damping grows as after a failed step).
+                timings.linear_solver += clock.lap();
+                rejected_steps += 1;
+                let dv = d
+                    .iter()
+                    .zip(h.iter())
+                    .map(|(a, b)| (a * b) * (a * b))
+                    .sum::<f64>()
+                    .sqrt();
+                damping.rejected(
+                    -1.0,
+                    LineInfo {
+                        f0: 2.0 * cost,
+                        slope0: 0.0,
+                        alpha,
+                        f_trial: 2.0 * cost,
+                        est_sum: 0.0,
+                        scaled_step: dv,
+                        gs: dot(g, h),
+                    },
+                );
+                let rec = failed_record(alpha, norm2(h).sqrt(), &clock);
+                termination = record_failed_trial(&mut records, rec, &damping, &mut callback);
+                continue;
+            }
+            for j in 0..n {
+                h[j] += 0.5 * s.acc[j];
+            }
         }
-        for j in 0..n {
-            self.h[j] += 0.5 * s.acc[j];
-        }
-        Ok(ControlFlow::Continue(true))
-    }
-
-    /// The trial point `x + alpha h`, projected onto the bounds, and the step to it in
-    /// `step`: whether the bounds clipped it, `||D s||^2`, `||D x||^2` and `||s||^2`.
-    fn trial_point(&mut self, x: &[f64], alpha: f64) -> (bool, f64, f64, f64) {
-        let n = self.n;
-        let (x_trial, h) = (&mut *self.x_trial, &*self.h);
         for j in 0..n {
             x_trial[j] = x[j] + alpha * h[j];
         }
         let mut clipped = false;
-        if let Some(b) = &self.bounds {
+        if let Some(b) = &bounds {
             b.project(x_trial);
             clipped = (0..n).any(|j| x_trial[j] != x[j] + alpha * h[j]);
         }
-        let (step, d) = (&mut *self.step, &*self.d);
         let (mut dx2, mut xn2, mut s2) = (0.0, 0.0, 0.0);
         for j in 0..n {
             step[j] = x_trial[j] - x[j];
@@ -1201,55 +1000,49 @@ impl<'a> Solve<'a> {
             xn2 += (d[j] * x[j]).powi(2);
             s2 += step[j] * step[j];
         }
-        (clipped, dx2, xn2, s2)
-    }
-
-    /// `||J s||^2` and `g^T s` of the linear model's prediction. With acceleration the
-    /// prediction is the linear model's for the velocity (GSL's convention): the
-    /// acceleration is a correction the model does not see.
-    fn prediction<M: Model>(
-        &mut self,
-        backend: &mut Backend<'_, M>,
-        alpha: f64,
-        accelerated: bool,
-    ) -> (f64, f64) {
-        match (backend, accelerated) {
-            (Backend::Stored(s), true) => {
-                for j in 0..self.n {
-                    self.wa[j] = self.step[j] - 0.5 * alpha * s.acc[j];
-                }
-                (
-                    s.jac.product_norm2(self.wa, jstep(&mut s.rbuf, s.m)),
-                    dot(self.g, self.wa),
-                )
-            }
-            (backend, _) => (backend.step_norm2(self.step, alpha), dot(self.g, self.step)),
+        if dx2.sqrt() <= options.xtol * (xn2.sqrt() + options.xtol) {
+            termination = Some(TerminationReason::ConvergedXtol);
+            break;
         }
-    }
+        // With acceleration the prediction is the linear model's for the velocity (GSL's
+        // convention): the acceleration is a correction the model does not see.
+        let (js2, gs) = match (&mut backend, accelerated) {
+            (Backend::Stored(s), true) => {
+                for j in 0..n {
+                    wa[j] = step[j] - 0.5 * alpha * s.acc[j];
+                }
+                (s.jac.product_norm2(wa, jstep(&mut s.rbuf, s.m)), dot(g, wa))
+            }
+            _ => (backend.step_norm2(step, alpha), dot(g, step)),
+        };
+        let pred = -gs - 0.5 * js2;
 
-    /// What the damping schedule is told of a trial (the cubic control's line figures for
-    /// a stored problem).
-    #[allow(clippy::too_many_arguments)]
-    fn line_info<M: Model>(
-        &mut self,
-        backend: &mut Backend<'_, M>,
-        alpha: f64,
-        clipped: bool,
-        js2: f64,
-        gs: f64,
-        cost_trial: f64,
-        dx2: f64,
-    ) -> LineInfo {
-        let cost = self.cost;
-        match (backend, self.cubic) {
+        // The linear solver's time includes forming the step and its predicted reduction.
+        timings.linear_solver += clock.lap();
+        let unmodified = alpha == 1.0 && !clipped && !accelerated;
+        let mut cost_trial = backend.trial_cost(options, x_trial, unmodified, iteration)?;
+        timings.residuals += clock.lap();
+        residual_evaluations += 1;
+        if !cost_trial.is_finite() {
+            cost_trial = f64::INFINITY;
+        }
+        let actred = cost - cost_trial;
+        let rho = if pred > 0.0 {
+            actred / pred
+        } else if actred > 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        let line = match (&mut backend, cubic) {
             (Backend::Stored(s), true) => {
                 let jh2 = if alpha == 1.0 && !clipped {
                     js2
                 } else {
-                    s.jac.mul(self.h, &mut s.jdir);
+                    s.jac.mul(h, &mut s.jdir);
                     norm2(&s.jdir)
                 };
-                let gh = dot(self.g, self.h);
+                let gh = dot(g, h);
                 LineInfo {
                     f0: 2.0 * cost,
                     slope0: 2.0 * gh,
@@ -1269,194 +1062,127 @@ impl<'a> Solve<'a> {
                 scaled_step: dx2.sqrt(),
                 gs,
             },
-        }
-    }
-
-    /// The trial step `alpha h` (`h` accelerated or not): the step test, the prediction,
-    /// the evaluation, the gain ratio, accept or reject, the record and the cost test.
-    #[allow(clippy::too_many_arguments)]
-    fn take_step<M: Model>(
-        &mut self,
-        backend: &mut Backend<'_, M>,
-        x: &mut [f64],
-        iteration: usize,
-        mu: f64,
-        alpha: f64,
-        accelerated: bool,
-        callback: &mut Callback<'_, '_>,
-    ) -> Result<Option<TerminationReason>, LmError> {
-        let options = self.options;
-        let (clipped, dx2, xn2, s2) = self.trial_point(x, alpha);
-        if dx2.sqrt() <= options.xtol * (xn2.sqrt() + options.xtol) {
-            return Ok(Some(TerminationReason::ConvergedXtol));
-        }
-        let (js2, gs) = self.prediction(backend, alpha, accelerated);
-        let pred = -gs - 0.5 * js2;
-
-        // The linear solver's time includes forming the step and its predicted reduction.
-        self.timings.linear_solver += self.clock.lap();
-        let unmodified = alpha == 1.0 && !clipped && !accelerated;
-        let mut cost_trial = backend.trial_cost(options, self.x_trial, unmodified, iteration)?;
-        self.timings.residuals += self.clock.lap();
-        self.residual_evaluations += 1;
-        if !cost_trial.is_finite() {
-            cost_trial = f64::INFINITY;
-        }
-        let cost_before = self.cost;
-        let actred = cost_before - cost_trial;
-        let rho = if pred > 0.0 {
-            actred / pred
-        } else if actred > 0.0 {
-            1.0
-        } else {
-            -1.0
         };
-        let line = self.line_info(backend, alpha, clipped, js2, gs, cost_trial, dx2);
-        let accept = self.damping.accepts(rho, cost_trial < cost_before);
+        let cost_before = cost;
+        let accept = damping.accepts(rho, cost_trial < cost);
         if accept {
-            x.copy_from_slice(self.x_trial);
-            self.cost = cost_trial;
-            self.need_jac = true;
+            x.copy_from_slice(x_trial);
+            cost = cost_trial;
+            need_jac = true;
             // A step below sqrt(eps) of the scaled parameters leaves the Jacobian as it was
             // to about 1e-8: good enough for the statistics (with the plain loss, whose
             // Jacobian is not reweighted).
             backend.accept(dx2 <= f64::EPSILON * xn2);
-            self.accepted_steps += 1;
-            self.damping.accepted(rho, line);
+            accepted_steps += 1;
+            damping.accepted(rho, line);
         } else {
-            self.rejected_steps += 1;
-            self.damping.rejected(rho, line);
+            rejected_steps += 1;
+            damping.rejected(rho, line);
         }
         let rec = IterationRecord {
             iteration,
-            cost: self.cost,
+            cost,
             trial_cost: cost_trial,
             damping: mu,
             step_length: alpha,
             step_norm: s2.sqrt(),
             gain_ratio: rho,
             accepted: accept,
-            gradient_norm: self.grad_inf,
-            elapsed: self.clock.elapsed(),
+            gradient_norm: grad_inf,
+            elapsed: clock.elapsed(),
         };
-        self.records.push(rec);
-        Ok(if self.cost == 0.0 {
-            Some(TerminationReason::ZeroResidual)
+        records.push(rec);
+        if cost == 0.0 {
+            termination = Some(TerminationReason::ZeroResidual);
         } else if pred <= options.ftol * cost_before
             && ((actred.abs() <= options.ftol * cost_before && rho <= 2.0)
-                || actred.abs() <= self.noise * cost_before
+                || actred.abs() <= noise * cost_before
                 || actred <= 0.0)
         {
-            Some(TerminationReason::ConvergedFtol)
+            termination = Some(TerminationReason::ConvergedFtol);
         } else if let Some(cb) = callback.as_mut() {
-            cb(&rec).is_break().then_some(TerminationReason::UserStop)
-        } else {
-            None
-        })
-    }
-
-    /// The parameters that evaporated (squared column norm below the threshold times its
-    /// peak, not held at a bound), when evaporation is watched.
-    fn evaporated(&self) -> Vec<usize> {
-        match self.options.evaporation_restart {
-            Some(e) if self.jacobian_evaluations > 0 => (0..self.peak2.len())
-                .filter(|&j| {
-                    self.norms2[j] < e.threshold * self.peak2[j]
-                        && !self.frozen.get(j).copied().unwrap_or(false)
-                })
-                .collect(),
-            _ => Vec::new(),
-        }
-    }
-
-    /// The Jacobian and residuals at the solution of a stored problem (the Jacobian
-    /// evaluated again when the last one is not the current point's), and the statistics
-    /// when asked for at the end.
-    fn fit_at_solution<M: Model>(
-        &mut self,
-        mut s: Stored<'_, M>,
-        x: &[f64],
-        statistics: &OnceLock<crate::stats::Statistics>,
-    ) -> Result<FitAtSolution, LmError> {
-        let options = self.options;
-        if !s.jac_current || self.any_frozen {
-            s.model
-                .jacobian(x, &mut s.jac)
-                .map_err(model_error(self.records.len(), EvalStage::Jacobian))?;
-            self.jacobian_evaluations += 1;
-            if s.robust {
-                let r = slot(&s.rbuf, s.cur, s.m);
-                weigh(options, r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+            if cb(&rec).is_break() {
+                termination = Some(TerminationReason::UserStop);
             }
         }
-        let residuals = if s.robust {
-            s.rw
-        } else {
-            // The current residuals moved to the front of their buffer (no copy into a
-            // new allocation).
-            let mut r = s.rbuf;
-            if s.cur != 0 {
-                r.copy_within(s.cur * s.m..(s.cur + 1) * s.m, 0);
-            }
-            r.truncate(s.m);
-            r
-        };
-        let fit = FitAtSolution {
-            jacobian: s.jac,
-            residuals,
-            rank_tol: options.rank_tol,
-        };
-        if options.statistics == StatisticsMode::AtEnd {
-            let _ = statistics.set(fit.statistics());
-        }
-        // The clock was read at the end of the loop.
-        self.timings.statistics = self.clock.lap();
-        Ok(fit)
     }
+    // What the last lap left (a preparation not followed by a solve).
+    match backend {
+        Backend::Stored(_) => timings.linear_solver += clock.lap(),
+        Backend::Normal(_) => timings.jacobian += clock.lap(),
+    }
+    let termination = termination.unwrap_or(TerminationReason::MaxIterations);
+    let evaporated: Vec<usize> = match watch {
+        Some(e) if jacobian_evaluations > 0 => (0..peak2.len())
+            .filter(|&j| {
+                norms2[j] < e.threshold * peak2[j] && !frozen.get(j).copied().unwrap_or(false)
+            })
+            .collect(),
+        _ => Vec::new(),
+    };
 
-    /// The report of the solve that ended with `termination` (none: the iteration limit).
-    fn finish<M: Model>(
-        mut self,
-        backend: Backend<'_, M>,
-        x: &[f64],
-        termination: Option<TerminationReason>,
-    ) -> Result<Report, LmError> {
-        let options = self.options;
-        // What the last lap left (a preparation not followed by a solve).
-        match backend {
-            Backend::Stored(_) => self.timings.linear_solver += self.clock.lap(),
-            Backend::Normal(_) => self.timings.jacobian += self.clock.lap(),
+    let keep = options.statistics != StatisticsMode::Off
+        && n <= options.statistics_max_params
+        && termination != TerminationReason::NonFinite;
+    let statistics = OnceLock::new();
+    let fit = match backend {
+        Backend::Stored(mut s) if keep => {
+            if !s.jac_current || any_frozen {
+                s.model
+                    .jacobian(x, &mut s.jac)
+                    .map_err(model_error(records.len(), EvalStage::Jacobian))?;
+                jacobian_evaluations += 1;
+                if s.robust {
+                    let r = slot(&s.rbuf, s.cur, s.m);
+                    weigh(options, r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+                }
+            }
+            let residuals = if s.robust {
+                s.rw
+            } else {
+                // The current residuals moved to the front of their buffer (no copy into a
+                // new allocation).
+                let mut r = s.rbuf;
+                if s.cur != 0 {
+                    r.copy_within(s.cur * s.m..(s.cur + 1) * s.m, 0);
+                }
+                r.truncate(s.m);
+                r
+            };
+            let fit = FitAtSolution {
+                jacobian: s.jac,
+                residuals,
+                rank_tol: options.rank_tol,
+            };
+            if options.statistics == StatisticsMode::AtEnd {
+                let _ = statistics.set(fit.statistics());
+            }
+            // The clock was read at the end of the loop.
+            timings.statistics = clock.lap();
+            Some(fit)
         }
-        let termination = termination.unwrap_or(TerminationReason::MaxIterations);
-        let evaporated = self.evaporated();
-        let keep = options.statistics != StatisticsMode::Off
-            && self.n <= options.statistics_max_params
-            && termination != TerminationReason::NonFinite;
-        let statistics = OnceLock::new();
-        let fit = match backend {
-            Backend::Stored(s) if keep => Some(self.fit_at_solution(s, x, &statistics)?),
-            _ => None,
-        };
-        Ok(Report {
-            termination,
-            initial_cost: self.initial_cost,
-            final_cost: self.cost,
-            iterations: self.records,
-            accepted_steps: self.accepted_steps,
-            rejected_steps: self.rejected_steps,
-            residual_evaluations: self.residual_evaluations,
-            jacobian_evaluations: self.jacobian_evaluations,
-            // The last lap ended the solve (the report's assembly is not timed).
-            elapsed: self.clock.elapsed(),
-            timings: self.timings,
-            num_params: self.n,
-            num_residuals: self.m,
-            damping: options.damping.name(),
-            linear_solver: options.linear_solver.name(),
-            evaporated,
-            restarts: 0,
-            statistics,
-            fit,
-        })
-    }
+        _ => None,
+    };
+
+    Ok(Report {
+        termination,
+        initial_cost,
+        final_cost: cost,
+        iterations: records,
+        accepted_steps,
+        rejected_steps,
+        residual_evaluations,
+        jacobian_evaluations,
+        // The last lap ended the solve (the report's assembly is not timed).
+        elapsed: clock.elapsed(),
+        timings,
+        num_params: n,
+        num_residuals: m,
+        damping: options.damping.name(),
+        linear_solver: options.linear_solver.name(),
+        evaporated,
+        restarts: 0,
+        statistics,
+        fit,
+    })
 }
