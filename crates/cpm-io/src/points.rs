@@ -169,14 +169,16 @@ pub(crate) fn read_tilt_measurements_table<R: Read>(
     read_instrument_table(t, robot, options, &instrument)
 }
 
-fn read_instrument_table<R: Read>(
+/// Checks the header of an instrument file: the required and known columns, an angle
+/// column for a tilt file, the commanded configuration (link readings or all six commanded
+/// pose columns), instruments declared. Returns whether the link readings are logged.
+fn check_instrument_header<R: Read>(
     t: &mut Table<R>,
     robot: &Robot,
-    options: &ReadOptions,
     instrument: &Instrument,
-) -> Result<DataFile, InputError> {
+    what: &str,
+) -> Result<bool, InputError> {
     let n = robot.num_links();
-    let what = if instrument.points { "point" } else { "tilt" };
     let mut required = vec!["pose", instrument.column];
     if instrument.points {
         required.extend(["x_mm", "y_mm", "z_mm"]);
@@ -225,6 +227,75 @@ fn read_instrument_table<R: Read>(
             ),
         ));
     }
+    Ok(has_readings)
+}
+
+/// The commanded configuration of each pose, pushed to `campaign.poses`: the logged link
+/// readings drive the machine (the commanded pose, or forward kinematics of the nominal
+/// lengths, starts forward kinematics); without readings the controller's inverse kinematics
+/// of the commanded pose. Returns the commanded lengths and the poses whose link readings give
+/// none (excluded, or the file refused when too many).
+fn commanded_configurations(
+    poses: &[PoseOf],
+    robot: &Robot,
+    campaign: &mut Campaign,
+) -> (Vec<Vec<f64>>, Vec<Unusable>) {
+    let mut commanded: Vec<Vec<f64>> = Vec::new();
+    // Poses whose link readings give none: excluded, or the file refused when too many.
+    let mut unusable = Vec::new();
+    for (j, p) in poses.iter().enumerate() {
+        let pose = match (&p.commanded, &p.readings) {
+            (Some(c), _) => *c,
+            (None, Some(u)) => {
+                let l: Vec<f64> = u
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| robot.length_mm(i, *v))
+                    .collect();
+                match cpm_kinematics::forward(
+                    &robot.table,
+                    &l,
+                    &robot.table.home,
+                    &cpm_kinematics::ForwardOptions::default(),
+                ) {
+                    Ok((pose, _)) => pose,
+                    Err(e) => {
+                        unusable.push(Unusable {
+                            pose: j,
+                            what: format!(
+                                "gives no pose: forward kinematics of its link readings: {e} (wrong units or link mapping?)"
+                            ),
+                            note: String::new(),
+                            field: Some("reading_1".to_string()),
+                        });
+                        robot.table.home
+                    }
+                }
+            }
+            (None, None) => unreachable!("checked with the header"),
+        };
+        campaign.poses.push(pose);
+        if let Some(u) = &p.readings {
+            commanded.push(
+                u.iter()
+                    .enumerate()
+                    .map(|(i, v)| robot.length_mm(i, *v))
+                    .collect::<Vec<f64>>(),
+            );
+        }
+    }
+    (commanded, unusable)
+}
+
+fn read_instrument_table<R: Read>(
+    t: &mut Table<R>,
+    robot: &Robot,
+    options: &ReadOptions,
+    instrument: &Instrument,
+) -> Result<DataFile, InputError> {
+    let n = robot.num_links();
+    let what = if instrument.points { "point" } else { "tilt" };
+    let has_readings = check_instrument_header(t, robot, instrument, what)?;
     let index_of: HashMap<&str, usize> = instrument
         .names
         .iter()
@@ -376,53 +447,8 @@ fn read_instrument_table<R: Read>(
             format!("no {what} measurements: the file has a header but no rows"),
         ));
     }
-    // The commanded configuration of each pose: the logged link readings drive the machine
-    // (the commanded pose, or forward kinematics of the nominal lengths, starts forward
-    // kinematics); without readings the controller's inverse kinematics of the commanded pose.
-    let mut commanded = Vec::new();
-    // Poses whose link readings give none: excluded, or the file refused when too many.
-    let mut unusable = Vec::new();
-    for (j, p) in poses.iter().enumerate() {
-        let pose = match (&p.commanded, &p.readings) {
-            (Some(c), _) => *c,
-            (None, Some(u)) => {
-                let l: Vec<f64> = u
-                    .iter()
-                    .enumerate()
-                    .map(|(i, v)| robot.length_mm(i, *v))
-                    .collect();
-                match cpm_kinematics::forward(
-                    &robot.table,
-                    &l,
-                    &robot.table.home,
-                    &cpm_kinematics::ForwardOptions::default(),
-                ) {
-                    Ok((pose, _)) => pose,
-                    Err(e) => {
-                        unusable.push(Unusable {
-                            pose: j,
-                            what: format!(
-                                "gives no pose: forward kinematics of its link readings: {e} (wrong units or link mapping?)"
-                            ),
-                            note: String::new(),
-                            field: Some("reading_1".to_string()),
-                        });
-                        robot.table.home
-                    }
-                }
-            }
-            (None, None) => unreachable!("checked with the header"),
-        };
-        campaign.poses.push(pose);
-        if let Some(u) = &p.readings {
-            commanded.push(
-                u.iter()
-                    .enumerate()
-                    .map(|(i, v)| robot.length_mm(i, *v))
-                    .collect::<Vec<f64>>(),
-            );
-        }
-    }
+    // The commanded configuration of each pose; those whose readings give none.
+    let (commanded, unusable) = commanded_configurations(&poses, robot, &mut campaign);
     if has_readings {
         campaign.commanded_lengths_mm = Some(commanded);
     }
