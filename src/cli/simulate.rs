@@ -155,7 +155,7 @@ fn blame_truth(args: &SimulateArgs, e: impl Into<anyhow::Error>) -> anyhow::Erro
 }
 
 pub use cpm_workflow::truth::{
-    add_truth_effects, parse_truth_effect, MAX_TRUTH_COMPLIANCE, MAX_TRUTH_EFFECT,
+    add_truth_effects, parse_truth_effect, truth_effect_for, MAX_TRUTH_COMPLIANCE, MAX_TRUTH_EFFECT,
 };
 
 /// The truth: model effects and the full true parameter vector.
@@ -295,17 +295,7 @@ fn truth(args: &SimulateArgs, robot: &Robot, declared: Vec<Effect>) -> anyhow::R
         };
     }
     for s in &args.truth_effect {
-        let (e, v) =
-            parse_truth_effect(s).map_err(|m| usage_error(format!("--truth-effect {m}")))?;
-        let need = e.num_params(n, robot.table.sensors.len());
-        if v.len() != need {
-            return Err(usage_error(format!(
-                "--truth-effect {s:?}: {} has {need} parameters here ({}), got {} values",
-                e.name(),
-                e.unit(),
-                v.len()
-            )));
-        }
+        let (e, v) = truth_effect_for(s, robot)?;
         values.retain(|(x, _)| *x != e);
         values.push((e, v));
     }

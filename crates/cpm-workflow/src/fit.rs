@@ -135,12 +135,7 @@ impl FitOptions {
     /// Checks the options (usage errors before any file is read), then loads and checks the
     /// robot, the effects and the data.
     pub fn load(&self, progress: &dyn Progress) -> anyhow::Result<Inputs> {
-        crate::load::check_out_dir(&self.out)?;
-        solver_options(
-            &mut IdentifyOptions::default(),
-            self.robust.as_deref(),
-            self.max_iterations,
-        )?;
+        self.validate()?;
         let mut inputs = load_inputs(self, progress)?;
         solver_options(
             &mut inputs.identify,

@@ -47,23 +47,29 @@ pub fn parse_truth_effect(s: &str) -> Result<(Effect, Vec<f64>), String> {
     Ok((effect, values))
 }
 
+/// One `--truth-effect` value ([`parse_truth_effect`]) with as many values as the effect has
+/// parameters on `robot` (usage errors naming `--truth-effect`).
+pub fn truth_effect_for(s: &str, robot: &Robot) -> anyhow::Result<(Effect, Vec<f64>)> {
+    let (e, v) = parse_truth_effect(s).map_err(|m| usage_error(format!("--truth-effect {m}")))?;
+    let need = e.num_params(robot.num_links(), robot.table.sensors.len());
+    if v.len() != need {
+        return Err(usage_error(format!(
+            "--truth-effect {s:?}: {} has {need} parameters here ({}), got {} values",
+            e.name(),
+            e.unit(),
+            v.len()
+        )));
+    }
+    Ok((e, v))
+}
+
 /// Adds `--truth-effect` values (`EFFECT=V1,V2,..`) to `robot`'s
 /// `[calibration.known_effects]`, replacing a value of the same effect: the machine of
 /// `cpm validate --commands --truth T.toml --truth-effect ...` is the one
 /// `cpm simulate --truth T.toml --truth-effect ...` simulated.
 pub fn add_truth_effects(robot: &mut Robot, specs: &[String]) -> anyhow::Result<()> {
     for s in specs {
-        let (e, v) =
-            parse_truth_effect(s).map_err(|m| usage_error(format!("--truth-effect {m}")))?;
-        let need = e.num_params(robot.num_links(), robot.table.sensors.len());
-        if v.len() != need {
-            return Err(usage_error(format!(
-                "--truth-effect {s:?}: {} has {need} parameters here ({}), got {} values",
-                e.name(),
-                e.unit(),
-                v.len()
-            )));
-        }
+        let (e, v) = truth_effect_for(s, robot)?;
         robot
             .description
             .calibration
