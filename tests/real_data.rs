@@ -460,6 +460,57 @@ fn motion_capture_calibrate_generalises_as_well_as_an_independent_leg_fit() {
     );
 }
 
+/// The whole motion-capture session: the rigid body the motion capture tracks is not the
+/// design's platform frame. Without `marker_frame` its offset went into every platform joint
+/// (a common dz of -7.8 mm, the largest component 10.2 mm); with it the body's frame takes
+/// it, written to `calibrated.toml`, and the platform joints keep no common rigid motion.
+#[test]
+fn the_motion_capture_body_is_placed_by_the_marker_frame_not_the_joints() {
+    let dir = scratch("real", "mocap-marker");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot");
+    let out = dir.join("cal");
+    let fit = calibrate_json(
+        &src.join("robot.toml"),
+        &[&src.join("session_108.csv")],
+        &[],
+        &out,
+    );
+    let marker = &fit["registration"]["refined_by_fit"]["marker_frame"];
+    let value = |k: usize| marker[k]["value"].as_f64().unwrap();
+    let gauge = fit["registration"]["refined_by_fit"]["gauge_freedoms"].to_string();
+    assert!(
+        gauge.contains("platform joints and the marker frame"),
+        "{gauge}"
+    );
+    let robot = cpm::io::Robot::load(&out.join("calibrated.toml")).unwrap();
+    let d = &robot.description;
+    let written = &d.calibration.as_ref().unwrap().known_effects["marker_frame"];
+    for k in 0..6 {
+        assert!(
+            (written[k] - value(k)).abs() < 1e-6,
+            "{k}: {written:?} vs {marker}"
+        );
+    }
+    let e = d.installation_errors_um.as_ref().unwrap();
+    let platform = e
+        .platform
+        .iter()
+        .flatten()
+        .fold(0.0_f64, |m, v| m.max(v.abs()));
+    let mean_dz = e.platform.iter().map(|p| p[2]).sum::<f64>() / 6.0;
+    eprintln!(
+        "motion capture, whole session: marker frame {:.0} {:.0} {:.0} um, {:.0} {:.0} {:.0} urad; largest platform joint component {platform:.0} um, mean platform dz {mean_dz:.1} um",
+        value(0), value(1), value(2), value(3), value(4), value(5)
+    );
+    // The body sits millimetres above the joints' plane; the joints keep no common offset.
+    assert!(value(2).abs() > 5000.0, "{marker}");
+    assert!(mean_dz.abs() < 1.0, "{mean_dz}");
+    assert!(
+        platform < 3000.0,
+        "largest platform joint component {platform} um"
+    );
+}
+
 /// SIMULATED data on the real session's pose grid (17 XY positions at one height), at the real
 /// angle noise (1300 urad), from a truth outside the declared model: every leg 3.5 % long in
 /// scale and compliant (1.5 mm per N of the description's assumed 1 kg load... in um/kN).

@@ -140,3 +140,88 @@ fn refine_finds_an_undeclared_actuator_nonlinearity_on_a_hexapod() {
         r.final_cv_rms_um
     );
 }
+
+/// The marker frame (`marker_frame`: the body a tracker measures, placed on the platform):
+/// its Jacobian against central differences at a large frame (15 mm, 10 mrad), with a
+/// tracker frame and joint errors beside it.
+#[test]
+fn the_marker_frame_jacobian_matches_finite_differences() {
+    let model = hexapod_model(&[
+        Effect::TrackerFrame,
+        Effect::MarkerFrame,
+        Effect::LinkOffset,
+    ]);
+    let mut x = truth_for(&model);
+    let b = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(Effect::MarkerFrame))
+        .unwrap();
+    x[b.offset..b.offset + 6].copy_from_slice(&[3000.0, -2000.0, 15000.0, 1000.0, -9500.0, 2000.0]);
+    let data = tracker_campaign(&model, &x, 12, 5);
+    let mut problem = cpm_calib::model::Predictions::new(&model, &data).unwrap();
+    let check = cpm_lm::check_jacobian(&mut problem, &x, 0.025).unwrap();
+    assert!(check.is_consistent(1e-5), "{check}");
+}
+
+/// SIMULATED, with an independent model of the body: the tracker reports a rigid body 15 mm
+/// above the platform and turned by 10 mrad (composed here with nalgebra on the forward
+/// kinematics of the nominal machine without joint clearance, not through `marker_frame`). A fit with `marker_frame`
+/// puts that body into the marker frame, not into the platform joints, and the six gauge
+/// freedoms it shares with them are named.
+#[test]
+fn a_body_offset_goes_into_the_marker_frame_not_the_joints() {
+    let machine = hexapod_model(&[]);
+    let mut data = tracker_campaign(&machine, &vec![0.0; 36], 40, 9);
+    let body_t = nalgebra::Vector3::new(3.0, -2.0, 15.0);
+    let body_r = nalgebra::Rotation3::new(nalgebra::Vector3::new(1e-3, -9.5e-3, 2e-3));
+    for pm in &mut data.pose_measurements {
+        let reached = cpm_kinematics::forward(
+            &machine.nominal,
+            &cpm_kinematics::inverse_lengths(&machine.nominal, &data.poses[pm.pose]),
+            &data.poses[pm.pose],
+            &Default::default(),
+        )
+        .unwrap()
+        .0;
+        pm.measured = cpm_geometry::Pose::new(
+            reached.position_mm + reached.rotation * body_t,
+            reached.rotation * body_r,
+        );
+    }
+    let mut model = hexapod_model(&[Effect::TrackerFrame, Effect::MarkerFrame]);
+    // The body's model above has no joint clearance: nor has this one.
+    model.clearance = cpm_clearance::ClearanceModel::none();
+    let opts = IdentifyOptions {
+        sigma_um: Some(POS_SIGMA),
+        ..IdentifyOptions::default()
+    };
+    let cal = identify(&model, &data, &opts).unwrap();
+    let text = cal.identifiability.summary();
+    assert!(
+        text.contains("platform joints and the marker frame translated together"),
+        "{text}"
+    );
+    assert!(
+        text.contains("platform joints and the marker frame rotated together"),
+        "{text}"
+    );
+    let e = &cal.minimum_norm_um;
+    let b = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(Effect::MarkerFrame))
+        .unwrap();
+    let (t, r) = cpm_calib::effects::tracker_registration(&e[b.offset..b.offset + 6]);
+    assert!(
+        (t - body_t).norm() < 1e-3,
+        "marker at {t} mm, body at {body_t}"
+    );
+    assert!(
+        (r.inverse() * body_r).angle() < 5e-6,
+        "marker turned {} rad off the body",
+        (r.inverse() * body_r).angle()
+    );
+    let joints = e[..36].iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    assert!(joints < 1.0, "joints moved {joints} um");
+}

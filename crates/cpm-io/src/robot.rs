@@ -525,6 +525,22 @@ pub fn calibrated_description(
             Effect::TrackerFrame | Effect::PointFrame | Effect::BaseTilt => {
                 notes.session_effects.push(effect.name().to_string())
             }
+            Effect::MarkerFrame => {
+                // The marker frame composes (the known one, then the fitted correction in
+                // it), so that the written values give exactly the fitted frame.
+                let known = d
+                    .calibration
+                    .get_or_insert_with(CalibrationSpec::default)
+                    .known_effects
+                    .entry(effect.name().to_string())
+                    .or_insert_with(|| vec![0.0; 6]);
+                if known.len() == 6 && values.len() == 6 {
+                    let (kt, kr) = cpm_calib::effects::tracker_registration(known);
+                    let (te, re) = cpm_calib::effects::tracker_registration(values);
+                    *known = cpm_calib::effects::frame_params(&(kt + kr * te), &(kr * re)).to_vec();
+                }
+                notes.known_effects.push(effect.name().to_string());
+            }
             Effect::InclinometerMount => {
                 for (i, c) in d.inclinometers.iter_mut().enumerate() {
                     let Some(m) = values.get(3 * i..3 * i + 3) else {
@@ -563,7 +579,9 @@ pub fn calibrated_description(
     if let Some(effects) = declare {
         let names: Vec<String> = effects
             .iter()
-            .filter(|e| **e != Effect::TrackerFrame && !e.is_instrument())
+            .filter(|e| {
+                !matches!(e, Effect::TrackerFrame | Effect::MarkerFrame) && !e.is_instrument()
+            })
             .map(|e| e.name().to_string())
             .collect();
         match &mut d.calibration {

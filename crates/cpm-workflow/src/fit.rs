@@ -309,8 +309,11 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
     {
         let mut e = model.effects.clone();
         e.push(crate::calib::Effect::TrackerFrame);
+        if !e.contains(&crate::calib::Effect::MarkerFrame) {
+            e.push(crate::calib::Effect::MarkerFrame);
+        }
         model = robot.model(&e);
-        progress.note("tracker data: the tracker frame is refined in the fit (tracker_frame added; its gauge freedoms with the base joints are reported); give --effects to choose the effects yourself");
+        progress.note("tracker data: the tracker frame and the marker frame (the body the tracker measures, on the platform) are refined in the fit (tracker_frame, marker_frame added; their gauge freedoms with the base and platform joints are reported); give --effects to choose the effects yourself");
     }
     // Every tracker file is a session with its own set-up: one frame each.
     model.tracker_frame_sessions = tracker_sessions(&merged.campaign);

@@ -363,6 +363,13 @@ impl Gather {
         let g = self.group(format!("{file} (tracker)"));
         let out = &mut self.out;
         let (t, rot) = crate::calib::effects::tracker_registration(frame);
+        // The body the tracker measures sits on the platform in the known marker frame.
+        let (tm, rm) = crate::calib::effects::tracker_registration(
+            model
+                .known(crate::calib::Effect::MarkerFrame)
+                .filter(|q| q.len() == 6)
+                .unwrap_or(&[0.0; 6]),
+        );
         let commanded = campaign.commanded_lengths_mm.as_ref();
         let pose_rows = campaign.pose_observation_rows();
         for (pm, rows) in campaign.pose_measurements.iter().zip(&pose_rows) {
@@ -388,9 +395,10 @@ impl Gather {
             // The link lengths the model needs for the measured pose (base frame): inverse
             // kinematics minus the shifts the model adds to a commanded length.
             let m = pm.measured;
+            let platform = rot.inverse() * m.rotation * rm.inverse();
             let base = crate::geometry::Pose::new(
-                rot.inverse() * (m.position_mm - t),
-                rot.inverse() * m.rotation,
+                rot.inverse() * (m.position_mm - t) - platform * tm,
+                platform,
             );
             if let Some(c) = commanded {
                 let j = pm.pose;

@@ -282,6 +282,50 @@ pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<P
             vectors: rot,
         });
     }
+    if let Some(b) = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(crate::Effect::MarkerFrame))
+    {
+        // Moving every platform joint by v moves the platform frame by -v under the legs; a
+        // marker frame moved by v keeps the measured body where it was. Likewise for a
+        // rotation about the platform origin.
+        let trans = (0..3)
+            .map(|a| {
+                let mut v = DVector::zeros(np);
+                for i in 0..n {
+                    v[6 * i + 3 + a] = 1.0;
+                }
+                v[b.offset + a] = 1.0;
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description: "all platform joints and the marker frame translated together".into(),
+            vectors: trans,
+        });
+        let rot = (0..3)
+            .map(|a| {
+                let mut w = nalgebra::Vector3::zeros();
+                w[a] = 1.0;
+                let mut v = DVector::zeros(np);
+                for (i, l) in table.links.iter().enumerate() {
+                    let d = w.cross(&l.platform_mm) * 1e-3;
+                    for c in 0..3 {
+                        v[6 * i + 3 + c] = d[c];
+                    }
+                }
+                v[b.offset + 3 + a] = 1.0;
+                v
+            })
+            .collect();
+        out.push(Pattern {
+            description:
+                "all platform joints and the marker frame rotated together about the platform origin"
+                    .into(),
+            vectors: rot,
+        });
+    }
     out.extend(crate::model::points::patterns(model));
     out.extend(crate::model::tilts::patterns(model));
     let mut used = Vec::new();

@@ -933,7 +933,9 @@ fn fit_end(
         theta = vec![0.0; problem.basis.ncols()];
     }
     problem.evaluate(&theta)?;
-    let (e_hat, y, jf) = match base_frame_gauge(model, campaign, &e_hat)? {
+    let based = base_frame_gauge(model, campaign, &e_hat)?;
+    let moved = platform_frame_gauge(model, campaign, based.as_deref().unwrap_or(&e_hat))?;
+    let (e_hat, y, jf) = match moved.or(based) {
         // The same fit, told in the base joints' own frame: predicted again there (equal to
         // rounding, the move being a symmetry of the data).
         Some(e) => {
@@ -1082,6 +1084,105 @@ fn combinations(ident: &Identifiability, e_hat: &[f64]) -> Vec<Combination> {
         .collect()
 }
 
+/// The least-squares rigid motion (translation mm, small rotation rad) that takes the
+/// `centres` (mm) to the same points moved by `moves` (um, one 3-vector each), `None` when
+/// it is nil.
+fn rigid_part(
+    centres: &[nalgebra::Vector3<f64>],
+    moves: impl Fn(usize) -> nalgebra::Vector3<f64>,
+) -> Option<(nalgebra::Vector3<f64>, nalgebra::Vector3<f64>)> {
+    let n = centres.len();
+    let mut a = nalgebra::DMatrix::zeros(3 * n, 6);
+    let mut y = nalgebra::DVector::zeros(3 * n);
+    for (i, b) in centres.iter().enumerate() {
+        let d = moves(i);
+        for ax in 0..3 {
+            let mut unit = nalgebra::Vector3::zeros();
+            unit[ax] = 1.0;
+            a[(3 * i + ax, ax)] = 1.0;
+            let c = b.cross(&unit);
+            for k in 0..3 {
+                a[(3 * i + ax, 3 + k)] = c[k];
+            }
+            y[3 * i + ax] = d[ax] * 1e-3;
+        }
+    }
+    // The crate's accurate SVD (faer, exactly scaled), singular values below 1e-12 of the
+    // largest dropped.
+    let svd = cpm_kinematics::linalg::Svd::new(&a).ok()?;
+    let c = svd.solve(&y, 1e-12);
+    let (t, w) = (
+        nalgebra::Vector3::new(c[0], c[1], c[2]),
+        nalgebra::Vector3::new(c[3], c[4], c[5]),
+    );
+    (t.norm() >= 1e-9 || w.norm() >= 1e-12).then_some((t, w))
+}
+
+/// The platform frame of a fit to tracker poses alone, made the platform joints' own.
+///
+/// Tracker poses see the body the tracker measures (`marker_frame`), not the platform frame
+/// the joints are given in: moving every platform joint rigidly and the marker frame with
+/// them predicts the same data (six gauge freedoms). The convention, as for the base
+/// ([`base_frame_gauge`]): the platform joints' installation errors have no common rigid
+/// motion (about the platform origin), the marker frame takes the rest; the move is exact.
+///
+/// Applies to a model that estimates `marker_frame` without a known one, on a campaign of
+/// tracker poses alone, with no load-dependent term (joint clearance, an effect that reads
+/// the link forces: the platform frame places the load); `None` otherwise.
+fn platform_frame_gauge(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    e: &[f64],
+) -> Result<Option<Vec<f64>>, CalibError> {
+    let Some(marker) = model
+        .blocks()
+        .into_iter()
+        .find(|b| b.effect == Some(Effect::MarkerFrame))
+    else {
+        return Ok(None);
+    };
+    let loaded = model.clearance.radius_um != 0.0
+        || model
+            .effects
+            .iter()
+            .chain(model.known_effects.iter().map(|k| &k.effect))
+            .any(|e| e.model().needs_forces());
+    if loaded
+        || campaign.pose_measurements.is_empty()
+        || !campaign.readings.is_empty()
+        || !campaign.point_measurements.is_empty()
+        || !campaign.tilt_measurements.is_empty()
+        || !campaign.instrument_measurements.is_empty()
+        || model.known(Effect::MarkerFrame).is_some()
+    {
+        return Ok(None);
+    }
+    let n = model.nominal.num_links();
+    let platform: Vec<nalgebra::Vector3<f64>> =
+        (0..n).map(|i| model.nominal.links[i].platform_mm).collect();
+    let v3 = |k: usize| nalgebra::Vector3::new(e[k], e[k + 1], e[k + 2]);
+    let Some((t, w)) = rigid_part(&platform, |i| v3(6 * i + 3)) else {
+        return Ok(None);
+    };
+    // Undo that motion exactly: every platform joint q' = R^T (q - t); the marker frame
+    // (t_m, R_m) becomes (R^T (t_m - t), R^T R_m).
+    let r = cpm_geometry::rotation::exp(&w);
+    let mut out = e.to_vec();
+    for (i, p) in platform.iter().enumerate() {
+        let back = r.inverse() * (p + v3(6 * i + 3) * 1e-3 - t) - p;
+        for ax in 0..3 {
+            out[6 * i + 3 + ax] = back[ax] * 1e3;
+        }
+    }
+    let o = marker.offset;
+    let (tm, rm) = crate::model::effects::tracker_registration(&e[o..o + 6]);
+    out[o..o + 6].copy_from_slice(&crate::model::effects::frame_params(
+        &(r.inverse() * (tm - t)),
+        &(r.inverse() * rm),
+    ));
+    Ok(Some(out))
+}
+
 /// The base frame of a fit to tracker poses alone, made the base joints' own.
 ///
 /// Tracker poses cannot tell the machine's base frame from the tracker's: moving every base
@@ -1124,33 +1225,11 @@ fn base_frame_gauge(
     // mm, small rotation rad) from the nominal ones.
     let base: Vec<nalgebra::Vector3<f64>> =
         (0..n).map(|i| model.nominal.links[i].base_mm).collect();
-    let mut a = nalgebra::DMatrix::zeros(3 * n, 6);
-    let mut y = nalgebra::DVector::zeros(3 * n);
-    for (i, b) in base.iter().enumerate() {
-        for ax in 0..3 {
-            let mut unit = nalgebra::Vector3::zeros();
-            unit[ax] = 1.0;
-            a[(3 * i + ax, ax)] = 1.0;
-            let c = b.cross(&unit);
-            for k in 0..3 {
-                a[(3 * i + ax, 3 + k)] = c[k];
-            }
-            y[3 * i + ax] = e[6 * i + ax] * 1e-3;
-        }
-    }
-    // The crate's accurate SVD (faer, exactly scaled), singular values below 1e-12 of the
-    // largest dropped.
-    let Ok(svd) = cpm_kinematics::linalg::Svd::new(&a) else {
+    let Some((t, w)) = rigid_part(&base, |i| {
+        nalgebra::Vector3::new(e[6 * i], e[6 * i + 1], e[6 * i + 2])
+    }) else {
         return Ok(None);
     };
-    let c = svd.solve(&y, 1e-12);
-    let (t, w) = (
-        nalgebra::Vector3::new(c[0], c[1], c[2]),
-        nalgebra::Vector3::new(c[3], c[4], c[5]),
-    );
-    if t.norm() < 1e-9 && w.norm() < 1e-12 {
-        return Ok(None);
-    }
     // Undo that motion exactly: every base joint b' = R^T (b - t), every tracker frame
     // (p_tracker = R_f p + t_f) composed with it: R_f' = R_f R, t_f' = t_f + R_f t.
     let r = cpm_geometry::rotation::exp(&w);
@@ -1165,16 +1244,10 @@ fn base_frame_gauge(
     for f in 0..frame.len / 6 {
         let o = frame.offset + 6 * f;
         let (tf, rf) = crate::model::effects::tracker_registration(&e[o..o + 6]);
-        let (tn, rn) = (tf + rf * t, rf * r);
-        let wn = cpm_geometry::rotation::log(&rn);
-        out[o..o + 6].copy_from_slice(&[
-            tn.x * 1e3,
-            tn.y * 1e3,
-            tn.z * 1e3,
-            wn.x * 1e6,
-            wn.y * 1e6,
-            wn.z * 1e6,
-        ]);
+        out[o..o + 6].copy_from_slice(&crate::model::effects::frame_params(
+            &(tf + rf * t),
+            &(rf * r),
+        ));
     }
     Ok(Some(out))
 }

@@ -382,6 +382,7 @@ pub fn supported(model: &MeasurementModel, campaign: &Campaign) -> Result<(), Ca
             e,
             Effect::SocketError
                 | Effect::TrackerFrame
+                | Effect::MarkerFrame
                 | Effect::TargetPosition
                 | Effect::PointFrame
                 | Effect::InclinometerMount

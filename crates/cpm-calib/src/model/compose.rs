@@ -35,6 +35,8 @@ pub(crate) struct Channels<'a> {
     /// (one per session with a frame of its own, else one).
     tracker: TrackerPoses,
     tracker_block: Option<(usize, &'a [f64])>,
+    /// The block of the estimated marker frame (`marker_frame`), when estimated.
+    marker_block: Option<(usize, &'a [f64])>,
     sensor_gain: Vec<f64>,
     sensor_offset_mm: Vec<f64>,
     sensor_corr: f64,
@@ -170,6 +172,12 @@ impl<'a> Channels<'a> {
         if let Some(a) = estimated {
             tracker.frame = a.model;
         }
+        if let Some(a) = known(Channel::MarkerFrame).first() {
+            tracker.marker = crate::model::effects::tracker_registration(a.values);
+        }
+        let marker_block = active(model, params, Channel::MarkerFrame)
+            .first()
+            .map(|a| (a.offset, a.values));
         // Known sensor offsets (mm) and gains per sensor; the estimated ones add on top.
         let s = model.nominal.sensors.len();
         let mut sensor_offset_mm = vec![0.0; s];
@@ -224,6 +232,7 @@ impl<'a> Channels<'a> {
             known_pose: known(Channel::PlatformPose),
             tracker,
             tracker_block: estimated.map(|a| (a.offset, a.values)),
+            marker_block,
             sensor_gain,
             sensor_offset_mm,
             sensor_corr: model.sensor_correction_mm(),
@@ -281,11 +290,22 @@ impl<'a> Channels<'a> {
         self.tracker
     }
 
-    /// A tracker instrument bound to the estimated frames (a session each: the frame index).
+    /// The estimated marker frame's parameters (tx ty tz um, rx ry rz urad), zero when it
+    /// is not estimated.
+    pub fn marker_params(&self) -> [f64; 6] {
+        let mut q = [0.0; 6];
+        if let Some((_, v)) = self.marker_block {
+            q.copy_from_slice(&v[..6]);
+        }
+        q
+    }
+
+    /// A tracker instrument bound to the estimated marker frame and session frames (a
+    /// session each: the frame index).
     pub fn tracker<'b>(&'b self, instrument: &'b TrackerPoses) -> Bound<'b> {
         Bound {
             instrument,
-            own: None,
+            own: self.marker_block,
             sessions: self.tracker_block,
         }
     }

@@ -31,7 +31,12 @@
 //! `tracker_frame` (6 parameters: translation um, rotation urad) registers a tracker's frame in
 //! the base frame; it acts on pose measurements only and brings 6 gauge freedoms with it (the
 //! whole machine and the tracker frame moved or rotated together), which the identifiability
-//! analysis names.
+//! analysis names. `marker_frame` (the same six parameters, in the platform frame) places the
+//! body the tracker measures on the platform (a motion-capture rigid body's origin sits
+//! wherever its markers put it, millimetres from the design's platform frame); it brings the
+//! six gauge freedoms of the platform joints moved or rotated together with it, and a fit to
+//! tracker poses alone keeps that motion out of the joints (it is the marker's, not the
+//! machine's).
 //!
 //! ## Effects as a trait
 //! Every effect is a type implementing [`EffectModel`]: its name, parameter names and units,
@@ -115,6 +120,10 @@ pub enum Channel {
     /// The tracker frame: six parameters, translation (um) then rotation vector (urad), through
     /// [`EffectModel::tracker_registration`]; acts on pose measurements only.
     TrackerFrame,
+    /// The frame the tracker measures on the platform (a motion-capture rigid body, a 6-D
+    /// probe), in the platform frame: six parameters in the convention of
+    /// [`TrackerFrame`](Channel::TrackerFrame); acts on pose measurements only.
+    MarkerFrame,
 }
 
 /// What an effect may know about a pose.
@@ -209,6 +218,11 @@ pub enum Effect {
     /// Registration of the tracker frame in the base frame: translation (um) and small
     /// rotation (urad); acts on pose measurements only.
     TrackerFrame,
+    /// The frame a tracker measures on the platform (a motion-capture rigid body, a 6-D
+    /// probe) in the platform frame: translation (um) and small rotation (urad); acts on pose
+    /// measurements only. Not among [`Effect::ALL`]: a tracker fit adds it with
+    /// `tracker_frame` (see [`Effect::TRACKER`]).
+    MarkerFrame,
     /// The platform positions of the model's point targets (3 per target, um), sized by
     /// [`MeasurementModel::targets`](crate::MeasurementModel::targets); acts on point
     /// measurements only.
@@ -258,6 +272,10 @@ impl Effect {
         Effect::TrackerFrame,
     ];
 
+    /// The tracker's own unknowns that describe the machine's set-up rather than an effect:
+    /// the measured body's frame on the platform ([`Effect::MarkerFrame`]).
+    pub const TRACKER: [Effect; 1] = [Effect::MarkerFrame];
+
     /// The blocks of the instruments' own unknowns (sized by the model, not by the machine's
     /// links and sensors): point targets ([`Effect::TargetPosition`], [`Effect::PointFrame`])
     /// and inclinometers ([`Effect::InclinometerMount`], [`Effect::BaseTilt`]).
@@ -294,6 +312,7 @@ impl Effect {
         if Effect::ALL
             .iter()
             .chain(&Effect::INSTRUMENTS)
+            .chain(&Effect::TRACKER)
             .any(|e| e.name() == name)
             || PoseTerm::parse(&name).is_some()
         {
@@ -328,6 +347,7 @@ impl Effect {
             Effect::ScrewPeriodic => &ScrewPeriodic,
             Effect::SocketError => &SocketError,
             Effect::TrackerFrame => &TrackerFrame,
+            Effect::MarkerFrame => &MarkerFrame,
             Effect::TargetPosition => &TargetPosition,
             Effect::PointFrame => &PointFrame,
             Effect::InclinometerMount => &InclinometerMount,
@@ -366,6 +386,7 @@ impl Effect {
         if let Some(e) = Effect::ALL
             .iter()
             .chain(&Effect::INSTRUMENTS)
+            .chain(&Effect::TRACKER)
             .copied()
             .find(|e| e.name() == name)
         {
@@ -380,7 +401,7 @@ impl Effect {
             }
         }
         Err(format!(
-            "unknown effect `{name}` (known: {}, and pose map terms pose_map_<monomial> such as pose_map_y, pose_map_y2, pose_map_x_roll)",
+            "unknown effect `{name}` (known: {}, marker_frame, and pose map terms pose_map_<monomial> such as pose_map_y, pose_map_y2, pose_map_x_roll)",
             Effect::ALL.map(|e| e.name()).join(", ")
         ))
     }
@@ -530,6 +551,20 @@ pub fn tracker_registration(q: &[f64]) -> (Vector3<f64>, Rotation3<f64>) {
         Vector3::new(q[0], q[1], q[2]) * 1e-3,
         Rotation3::new(Vector3::new(q[3], q[4], q[5]) * 1e-6),
     )
+}
+
+/// The parameters (tx, ty, tz um; rx, ry, rz urad) of a frame `(t mm, R)`: the inverse of
+/// [`tracker_registration`].
+pub fn frame_params(t: &Vector3<f64>, r: &Rotation3<f64>) -> [f64; 6] {
+    let w = cpm_geometry::rotation::log(r);
+    [
+        t.x * 1e3,
+        t.y * 1e3,
+        t.z * 1e3,
+        w.x * 1e6,
+        w.y * 1e6,
+        w.z * 1e6,
+    ]
 }
 
 /// True when the effect acts through the link channel.

@@ -670,16 +670,8 @@ impl MeasurementModel {
                     // p -> R_e (R_k p + t_k) + t_e.
                     let (tk, rk) = crate::model::effects::tracker_registration(&k.values);
                     let (te, re) = crate::model::effects::tracker_registration(v);
-                    let (t, r) = (re * tk + te, re * rk);
-                    let w = cpm_geometry::rotation::log(&r);
-                    k.values = vec![
-                        t.x * 1e3,
-                        t.y * 1e3,
-                        t.z * 1e3,
-                        w.x * 1e6,
-                        w.y * 1e6,
-                        w.z * 1e6,
-                    ];
+                    k.values =
+                        crate::model::effects::frame_params(&(re * tk + te), &(re * rk)).to_vec();
                 }
                 Some(k) => {
                     for (a, b) in k.values.iter_mut().zip(v) {
@@ -1363,6 +1355,7 @@ pub fn leg_residuals(
     let mut out = Vec::with_capacity(n * campaign.pose_measurements.len());
     let mut at = AtPose::new(n);
     let mut needed = vec![0.0; n];
+    let (tm, rm) = tracker.marker_frame(&channels.marker_params());
     for pm in &campaign.pose_measurements {
         let j = pm.pose;
         let input = EffectInput {
@@ -1384,9 +1377,13 @@ pub fn leg_residuals(
             None => (nalgebra::Vector3::zeros(), nalgebra::Rotation3::identity()),
         };
         let m = &pm.measured;
+        // The measured body in the base frame, then the platform under it: (p, R) with
+        // (p + R t_m, R R_m) the body's pose.
+        let body_rotation = kr.inverse() * rr.inverse() * m.rotation;
+        let rotation = body_rotation * rm.inverse();
         let base = Pose::new(
-            kr.inverse() * (rr.inverse() * (m.position_mm - rt) - kt),
-            kr.inverse() * rr.inverse() * m.rotation,
+            kr.inverse() * (rr.inverse() * (m.position_mm - rt) - kt) - rotation * tm,
+            rotation,
         );
         let base = if at.twist == nalgebra::Vector6::zeros() {
             base

@@ -228,6 +228,12 @@ pub struct RefinedByFit {
     pub tracker_frame: Option<Vec<NamedEstimate>>,
     /// `link_offset` parameters (when modelled).
     pub link_offset: Option<Vec<NamedEstimate>>,
+    /// `marker_frame` (when modelled): the tracked body's frame on the platform as written to
+    /// `calibrated.toml` (`value`: the point the fit ended at, under the convention that the
+    /// platform joints have no common rigid motion on tracker data alone; `std` where the
+    /// data determine a parameter on its own).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub marker_frame: Option<Vec<NamedEstimate>>,
     /// Gauge freedoms of the refinement.
     pub gauge_freedoms: Vec<String>,
 }
@@ -563,11 +569,21 @@ fn registration(
         refined_by_fit: RefinedByFit {
             tracker_frame: named_block(model, cal, Effect::TrackerFrame),
             link_offset: named_block(model, cal, Effect::LinkOffset),
+            marker_frame: named_block(model, cal, Effect::MarkerFrame).map(|mut v| {
+                let b = model
+                    .blocks()
+                    .into_iter()
+                    .find(|b| b.effect == Some(Effect::MarkerFrame));
+                for (k, p) in v.iter_mut().enumerate() {
+                    p.value = b.and_then(|b| cal.minimum_norm_um.get(b.offset + k).copied());
+                }
+                v
+            }),
             gauge_freedoms: cal
                 .identifiability
                 .blind_directions
                 .iter()
-                .filter(|b| b.description.contains("tracker"))
+                .filter(|b| b.description.contains("tracker") || b.description.contains("marker"))
                 .map(|b| b.description.clone())
                 .collect(),
         },
@@ -1031,6 +1047,22 @@ impl FitReport {
                         .join(", ")
                 ));
             }
+        }
+        if let Some(v) = &r.refined_by_fit.marker_frame {
+            s.push_str(&format!(
+                "The body the tracker measures, on the platform (`marker_frame`, written to `calibrated.toml`; the platform joints keep no common rigid motion when only tracker poses are fitted): {}.\n\n",
+                v.iter()
+                    .map(|p| match (p.value, p.std) {
+                        (Some(v), Some(sd)) => {
+                            let (v, sd) = with_sd(v, sd);
+                            format!("{} {v} +- {sd}", p.name)
+                        }
+                        (Some(v), None) => format!("{} {v:.0} (by that convention)", p.name),
+                        _ => format!("{} not determined", p.name),
+                    })
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
         }
         let gauge = &r.refined_by_fit.gauge_freedoms;
         if !gauge.is_empty() {

@@ -308,3 +308,30 @@ impl EffectModel for TrackerFrame {
         &[Channel::TrackerFrame]
     }
 }
+
+/// `marker_frame`: the frame a tracker measures on the platform (a motion-capture rigid body,
+/// a 6-D probe) in the platform frame, translation um, rotation urad: the measured pose is the
+/// platform's composed with it. Its six parameters and the platform joints moved or rotated
+/// together are the same data (six gauge freedoms, named by the identifiability analysis).
+#[derive(Debug, Clone, Copy)]
+pub struct MarkerFrame;
+impl EffectModel for MarkerFrame {
+    fn name(&self) -> &str {
+        "marker_frame"
+    }
+    fn num_params(&self, _: usize, _: usize) -> usize {
+        6
+    }
+    fn param_name(&self, k: usize, _: &[String]) -> String {
+        ["tx", "ty", "tz", "rx", "ry", "rz"][k % 6].to_string()
+    }
+    fn unit(&self) -> &str {
+        FRAME_UNIT
+    }
+    fn param_unit(&self, k: usize) -> &str {
+        frame_param_unit(k)
+    }
+    fn channels(&self) -> &[Channel] {
+        &[Channel::MarkerFrame]
+    }
+}
