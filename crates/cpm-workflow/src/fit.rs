@@ -726,6 +726,7 @@ pub fn stage_calibrated(
             &inputs.merged.campaign,
             cal,
             inputs.identify.sigma_um,
+            &inputs.merged.excluded,
         )? {
             if !reproduces(fit, file) {
                 return Err(trouble(format!(

@@ -186,6 +186,23 @@ fn read_held_out(
     Ok(file)
 }
 
+/// `file` without the poses `leave_out` names (by file and label), with all their rows.
+fn without_left_out(
+    file: crate::io::DataFile,
+    leave_out: &[crate::io::ExcludedPose],
+) -> crate::io::DataFile {
+    let drop: Vec<bool> = file
+        .pose_labels
+        .iter()
+        .map(|l| leave_out.iter().any(|e| e.file == file.file && e.label == *l))
+        .collect();
+    if drop.contains(&true) {
+        file.without_poses(&drop)
+    } else {
+        file
+    }
+}
+
 /// A file with sessions (tracker poses, points, tilts): its frame (or levelling) fitted
 /// afresh with the machine held, the predictions after it, and the session's check.
 fn register_held_out(
@@ -426,6 +443,9 @@ impl Gather {
 ///
 /// With `residuals`, `residuals.csv` of the files too (one numbering over the files, in the
 /// order given), its rows written as they are made; without, none of its text is made.
+///
+/// The poses `leave_out` names (file and label) are left out of the files as read, with all
+/// their rows, as the fit left them out (those the reading leaves out itself are gone already).
 fn errors_of(
     robot: &Robot,
     controller: &Robot,
@@ -433,6 +453,7 @@ fn errors_of(
     strict: bool,
     tracker: (f64, f64),
     residuals: bool,
+    leave_out: &[crate::io::ExcludedPose],
 ) -> anyhow::Result<RobotErrors> {
     let model: MeasurementModel = robot.model(&[]);
     let options = held_out_read_options(strict);
@@ -447,7 +468,10 @@ fn errors_of(
     }
     let mut written = 0;
     for path in paths {
-        let file = read_held_out(path, robot, controller, &options, tracker)?;
+        let file = without_left_out(
+            read_held_out(path, robot, controller, &options, tracker)?,
+            leave_out,
+        );
         gather.out.excluded.extend(file.excluded.iter().cloned());
         let campaign: &Campaign = &file.campaign;
         gather.out.simulated |= campaign.simulated;
@@ -782,10 +806,11 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
         true,
         tracker,
         options.out.is_some(),
+        &[],
     )?;
     check_cancelled(progress)?;
     let ref_errors =
-        errors_of(&reference, &reference, data, true, tracker, false).map_err(|e| {
+        errors_of(&reference, &reference, data, true, tracker, false, &[]).map_err(|e| {
             e.context(format!(
                 "reading the held-out data against the reference {} (its sensors: {})",
                 reference.file,
@@ -901,6 +926,10 @@ fn readings_in_memory(
 /// `sigma_ref / point_sigma`), or `None` when
 /// the check does not apply: tracker data fitted without `tracker_frame` (the fit keeps the
 /// rough registration, which a later reading improves on).
+///
+/// `excluded` are the poses the fit left out (`Merged::excluded`): read again, the files
+/// lose them too, so that the read-back predicts the fit's own data.
+#[allow(clippy::too_many_arguments)]
 pub fn file_reproduces_fit(
     text: &str,
     reference: &Robot,
@@ -909,6 +938,7 @@ pub fn file_reproduces_fit(
     campaign: &Campaign,
     cal: &crate::calib::Calibration,
     sigma_um: Option<f64>,
+    excluded: &[crate::io::ExcludedPose],
 ) -> anyhow::Result<Option<(f64, f64)>> {
     if !campaign.pose_measurements.is_empty()
         && !model.effects.contains(&crate::calib::Effect::TrackerFrame)
@@ -923,7 +953,7 @@ pub fn file_reproduces_fit(
     let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
     let e = match readings_in_memory(&robot, reference, campaign)? {
         Some(e) => e,
-        None => errors_of(&robot, reference, data, false, tracker, false)?,
+        None => errors_of(&robot, reference, data, false, tracker, false, excluded)?,
     };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
     let _ = sigma_um;
@@ -990,6 +1020,7 @@ mod tests {
                 false,
                 (campaign.pose_sigma(), campaign.orientation_sigma()),
                 false,
+                &[],
             )
             .unwrap();
             assert_eq!(memory.names, files.names);
