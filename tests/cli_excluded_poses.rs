@@ -148,3 +148,213 @@ fn calibrate_leaves_out_one_unreachable_pose_in_forty_with_a_warning() {
     assert!(!plain.contains("Poses left out"));
     assert!(Path::new(&out).join("calibrated.toml").exists());
 }
+
+const INSTRUMENTS: &str = "
+[[inclinometer]]
+name = \"scl3300\"
+axes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]
+
+[[target]]
+name = \"smr1\"
+platform_mm = [90.0, 10.0, 30.0]
+
+[[target]]
+name = \"smr2\"
+platform_mm = [-50.0, 80.0, 25.0]
+
+[[target]]
+name = \"smr3\"
+platform_mm = [-40.0, -85.0, 35.0]
+";
+
+/// The example hexapod with an inclinometer and three reflectors, and its truth (the
+/// inclinometer mounted 0.1-0.3 deg off).
+fn instrument_robots(d: &Path) -> (String, String) {
+    let (robot, truth) = (d.join("robot.toml"), d.join("truth.toml"));
+    let r = std::fs::read_to_string(example("hexapod_66.toml")).unwrap();
+    std::fs::write(&robot, r + INSTRUMENTS).unwrap();
+    let t = std::fs::read_to_string(example("hexapod_66_truth.toml")).unwrap();
+    let mounted = INSTRUMENTS.replacen(
+        "axes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]\n",
+        "axes = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]\nmount_rpy_deg = [0.15, -0.1, 0.3]\n",
+        1,
+    );
+    std::fs::write(&truth, t + &mounted).unwrap();
+    (p(&robot), p(&truth))
+}
+
+/// `text` (an instrument file as `cpm simulate` writes it) with pose `label`'s `reading_1`
+/// 1000 mm longer on each of its rows (no pose of the machine has such link lengths), and
+/// the same file without that pose's rows; the columns `drop` left out of both. Returns the
+/// two texts and the pose's first line (1-based).
+fn glitch(text: &str, label: &str, drop: &[&str]) -> (String, String, usize) {
+    let header: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (pose, reading) = (col("pose"), col("reading_1"));
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|&i| !drop.contains(&header[i]))
+        .collect();
+    let (mut bad, mut without, mut first) = (String::new(), String::new(), None);
+    for (k, l) in text.lines().enumerate() {
+        let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+        if k >= 1 {
+            let this = k >= 2 && f[pose] == label;
+            if this {
+                first.get_or_insert(k + 1);
+                f[reading] = (f[reading].parse::<f64>().unwrap() + 1000.0).to_string();
+            }
+            f = keep.iter().map(|&i| f[i].clone()).collect();
+            if !this {
+                without.push_str(&f.join(","));
+                without.push('\n');
+            }
+        } else {
+            without.push_str(l);
+            without.push('\n');
+        }
+        bad.push_str(&f.join(","));
+        bad.push('\n');
+    }
+    (bad, without, first.expect("the pose"))
+}
+
+/// `cpm calibrate` of a tilt or point file with one pose whose link readings give no pose
+/// (40 poses): exit 0, the warning `FILE:LINE: pose "17" excluded: ...` on stderr, the pose in
+/// `calibration.json`'s `excluded_poses`, and the estimates of the file without its rows.
+/// `why`: the start of the reason (after `excluded: `).
+fn instrument_pose_left_out(
+    d: &Path,
+    robot: &str,
+    text: &str,
+    name: &str,
+    drop: &[&str],
+    why: &str,
+) -> serde_json::Value {
+    let (bad, without, line) = glitch(text, "17", drop);
+    let (bad_path, cut) = (d.join(format!("{name}.csv")), d.join(format!("{name}-cut.csv")));
+    std::fs::write(&bad_path, bad).unwrap();
+    std::fs::write(&cut, without).unwrap();
+    let out = d.join(format!("{name}.out"));
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        robot,
+        "--data",
+        &p(&bad_path),
+        "--out",
+        &p(&out),
+    ]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(0), "{name}: {stderr}");
+    let warning = format!(
+        "warning: {}:{line}: pose \"17\" excluded: {why}",
+        p(&bad_path)
+    );
+    assert!(stderr.contains(&warning), "{name}: {stderr}");
+    assert!(
+        stderr.contains("forward kinematics did not converge"),
+        "{stderr}"
+    );
+    let read = |dir: &Path, file: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(file)).unwrap()).unwrap()
+    };
+    let json = read(&out, "calibration.json");
+    let excluded = json["excluded_poses"].as_array().expect("excluded_poses");
+    assert_eq!(excluded.len(), 1, "{name}");
+    assert_eq!(excluded[0]["file"], p(&bad_path));
+    assert_eq!(excluded[0]["line"], line);
+    assert_eq!(excluded[0]["label"], "17");
+    assert!(excluded[0]["reason"].as_str().unwrap().starts_with(why));
+    let cut_out = d.join(format!("{name}-cut.out"));
+    ok(&[
+        "calibrate",
+        "--robot",
+        robot,
+        "--data",
+        &p(&cut),
+        "--out",
+        &p(&cut_out),
+    ]);
+    let reference = read(&cut_out, "calibration.json");
+    assert!(reference.get("excluded_poses").is_none());
+    for key in [
+        "installation_errors_um",
+        "std_um",
+        "effects",
+        "residual_rms_um",
+        "poses",
+        "readings",
+        "noise_by_kind",
+    ] {
+        assert_close(&json[key], &reference[key], 1e-9, &format!("{name}: {key}"));
+    }
+    json
+}
+
+#[test]
+fn calibrate_leaves_out_a_tilt_or_point_pose_whose_link_readings_give_no_pose() {
+    let d = scratch("excluded", "instruments");
+    let (robot, truth) = instrument_robots(&d);
+    let sim = |measure: &str, extra: &[&str]| -> String {
+        let out = d.join(format!("{measure}.csv"));
+        let mut args = vec![
+            "simulate",
+            "--robot",
+            &robot,
+            "--truth",
+            &truth,
+            "--random",
+            "40",
+            "--measure",
+            measure,
+            "--seed",
+            "1",
+        ];
+        args.extend_from_slice(extra);
+        let o = p(&out);
+        args.extend_from_slice(&["--out", &o]);
+        ok(&args);
+        std::fs::read_to_string(&out).unwrap()
+    };
+    let tilts = sim(
+        "tilts",
+        &[
+            "--range-deg",
+            "10",
+            "--noise",
+            "gaussian:20",
+            "--base-tilt-deg",
+            "0.04,-0.02",
+        ],
+    );
+    let points = sim(
+        "points",
+        &[
+            "--noise",
+            "gaussian:5",
+            "--tracker-frame",
+            "1500,200,-100,0,0,30",
+        ],
+    );
+    let commanded = [
+        "cmd_x_mm",
+        "cmd_y_mm",
+        "cmd_z_mm",
+        "cmd_roll_deg",
+        "cmd_pitch_deg",
+        "cmd_yaw_deg",
+    ];
+    // Files with the commanded pose beside the link readings (as `cpm simulate` writes them):
+    // the reader takes the commanded pose, and the fit, which starts forward kinematics of
+    // the logged lengths there, cannot start at pose 17; it leaves it out and fits again.
+    let fit = "the fit cannot start there: forward kinematics did not converge";
+    let t = instrument_pose_left_out(&d, &robot, &tilts, "tilts-commanded", &[], fit);
+    // 39 poses of two angles each are fitted.
+    assert_eq!(t["poses"], 39);
+    assert_eq!(t["noise_by_kind"][0]["observations"], 78, "{}", t["noise_by_kind"]);
+    instrument_pose_left_out(&d, &robot, &points, "points-commanded", &[], fit);
+    // A point file with link readings alone: the reader's forward kinematics of pose 17's
+    // readings gives no pose, and the reader leaves it out.
+    let reader = "gives no pose: forward kinematics of its link readings";
+    instrument_pose_left_out(&d, &robot, &points, "points-readings", &commanded, reader);
+}
