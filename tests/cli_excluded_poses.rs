@@ -231,7 +231,10 @@ fn instrument_pose_left_out(
     why: &str,
 ) -> serde_json::Value {
     let (bad, without, line) = glitch(text, "17", drop);
-    let (bad_path, cut) = (d.join(format!("{name}.csv")), d.join(format!("{name}-cut.csv")));
+    let (bad_path, cut) = (
+        d.join(format!("{name}.csv")),
+        d.join(format!("{name}-cut.csv")),
+    );
     std::fs::write(&bad_path, bad).unwrap();
     std::fs::write(&cut, without).unwrap();
     let out = d.join(format!("{name}.out"));
@@ -351,10 +354,50 @@ fn calibrate_leaves_out_a_tilt_or_point_pose_whose_link_readings_give_no_pose() 
     let t = instrument_pose_left_out(&d, &robot, &tilts, "tilts-commanded", &[], fit);
     // 39 poses of two angles each are fitted.
     assert_eq!(t["poses"], 39);
-    assert_eq!(t["noise_by_kind"][0]["observations"], 78, "{}", t["noise_by_kind"]);
+    assert_eq!(
+        t["noise_by_kind"][0]["observations"], 78,
+        "{}",
+        t["noise_by_kind"]
+    );
     instrument_pose_left_out(&d, &robot, &points, "points-commanded", &[], fit);
     // A point file with link readings alone: the reader's forward kinematics of pose 17's
     // readings gives no pose, and the reader leaves it out.
     let reader = "gives no pose: forward kinematics of its link readings";
     instrument_pose_left_out(&d, &robot, &points, "points-readings", &commanded, reader);
+
+    // `cpm refine` lists the poses left out in refine.json as calibrate does in
+    // calibration.json (the fit's and the reader's alike); for a clean file, not at all.
+    for (name, why) in [("tilts-commanded", fit), ("points-readings", reader)] {
+        let refine = |data: &Path| -> serde_json::Value {
+            let out = data.with_extension("refine");
+            ok(&[
+                "refine",
+                "--robot",
+                &robot,
+                "--data",
+                &p(data),
+                "--out",
+                &p(&out),
+            ]);
+            serde_json::from_str(&std::fs::read_to_string(out.join("refine.json")).unwrap())
+                .unwrap()
+        };
+        let bad = d.join(format!("{name}.csv"));
+        let doc = refine(&bad);
+        let calibration: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(d.join(format!("{name}.out/calibration.json"))).unwrap(),
+        )
+        .unwrap();
+        let excluded = doc["excluded_poses"].as_array().expect("excluded_poses");
+        assert_eq!(excluded.len(), 1, "{name}");
+        assert_eq!(excluded[0]["file"], p(&bad));
+        assert_eq!(excluded[0]["label"], "17");
+        assert!(excluded[0]["reason"].as_str().unwrap().starts_with(why));
+        assert_eq!(
+            doc["excluded_poses"], calibration["excluded_poses"],
+            "{name}"
+        );
+        let clean = refine(&d.join(format!("{name}-cut.csv")));
+        assert!(clean.get("excluded_poses").is_none(), "{name}");
+    }
 }

@@ -194,7 +194,11 @@ fn without_left_out(
     let drop: Vec<bool> = file
         .pose_labels
         .iter()
-        .map(|l| leave_out.iter().any(|e| e.file == file.file && e.label == *l))
+        .map(|l| {
+            leave_out
+                .iter()
+                .any(|e| e.file == file.file && e.label == *l)
+        })
         .collect();
     if drop.contains(&true) {
         file.without_poses(&drop)

@@ -7,7 +7,9 @@
 use std::path::Path;
 
 use cpm_workflow::calib::paper::random_workspace_poses;
-use cpm_workflow::calib::{identify, simulate, CalibError, IdentifyOptions, Plan, SimulationOptions};
+use cpm_workflow::calib::{
+    identify, simulate, CalibError, IdentifyOptions, Plan, SimulationOptions,
+};
 use cpm_workflow::fit::{leaving_out, Inputs};
 use cpm_workflow::io::{merge, read_data, write_readings, Provenance, ReadOptions, Robot};
 use cpm_workflow::kinematics::KinematicsError;
@@ -77,7 +79,12 @@ fn a_pose_where_the_fit_cannot_start_is_left_out_and_the_fit_of_the_rest_returne
     let line = inputs.merged.pose_origin[k].1;
     // Pose 17's first link commanded 1000 mm longer: no pose has those lengths, so the model
     // cannot predict there and the fit cannot start.
-    inputs.merged.campaign.commanded_lengths_mm.as_mut().unwrap()[k][0] += 1000.0;
+    inputs
+        .merged
+        .campaign
+        .commanded_lengths_mm
+        .as_mut()
+        .unwrap()[k][0] += 1000.0;
     let options = inputs.identify.clone();
     let err = identify(&inputs.model, &inputs.merged.campaign, &options)
         .err()
@@ -94,7 +101,10 @@ fn a_pose_where_the_fit_cannot_start_is_left_out_and_the_fit_of_the_rest_returne
     assert_eq!(excluded.len(), 1);
     let (at, e) = &excluded[0];
     assert_eq!(*at, k);
-    assert_eq!((e.file.as_str(), e.line, e.label.as_str()), (FILE, line, "17"));
+    assert_eq!(
+        (e.file.as_str(), e.line, e.label.as_str()),
+        (FILE, line, "17")
+    );
     assert!(
         e.reason
             .starts_with("the fit cannot start there: forward kinematics did not converge"),
@@ -168,7 +178,10 @@ fn two_poses_in_forty_are_left_out_a_third_is_refused_naming_its_line() {
         text.starts_with(&format!("{FILE}:{line}: pose \"30\"")),
         "{text}"
     );
-    assert!(text.contains("forward kinematics did not converge"), "{text}");
+    assert!(
+        text.contains("forward kinematics did not converge"),
+        "{text}"
+    );
     assert_eq!(calls, 3);
 }
 
