@@ -87,8 +87,7 @@ fn a_pose_where_the_fit_cannot_start_is_left_out_and_the_fit_of_the_rest_returne
         .unwrap()[k][0] += 1000.0;
     let options = inputs.identify.clone();
     let err = identify(&inputs.model, &inputs.merged.campaign, &options)
-        .err()
-        .expect("the whole campaign cannot be fitted");
+        .expect_err("the whole campaign cannot be fitted");
     assert_eq!(cpm_workflow::load::error_pose(&err), Some(k), "{err}");
 
     let mut calls = 0;
@@ -113,7 +112,7 @@ fn a_pose_where_the_fit_cannot_start_is_left_out_and_the_fit_of_the_rest_returne
     );
     // The warning the commands give.
     let progress = Collect::default();
-    cpm_workflow::load::warn_excluded(&progress, &[e.clone()]);
+    cpm_workflow::load::warn_excluded(&progress, std::slice::from_ref(e));
     let notes = progress.notes.lock().unwrap().clone();
     assert_eq!(
         notes,
@@ -127,7 +126,7 @@ fn a_pose_where_the_fit_cannot_start_is_left_out_and_the_fit_of_the_rest_returne
     let without = inputs.without_poses(&excluded);
     assert_eq!(without.merged.campaign.poses.len(), 39);
     assert_eq!(index_of(&without.merged, "17"), None);
-    assert_eq!(without.merged.excluded, [e.clone()]);
+    assert_eq!(without.merged.excluded, std::slice::from_ref(e));
     let reference = identify(&inputs.model, &without.merged.campaign, &options).expect("fit");
     assert_eq!(cal.estimate_um, reference.estimate_um);
     assert_eq!(cal.std_um, reference.std_um);
@@ -171,7 +170,7 @@ fn two_poses_in_forty_are_left_out_a_third_is_refused_naming_its_line() {
     // A third pose is one more than one in 20: refused, naming the third pose's file and
     // line, after the two retries.
     let (r, calls) = run(&["17", "5", "30"]);
-    let err = r.err().expect("a third pose is refused");
+    let err = r.expect_err("a third pose is refused");
     let line = inputs.merged.pose_origin[index_of(&inputs.merged, "30").unwrap()].1;
     let text = format!("{err:#}");
     assert!(
@@ -193,8 +192,7 @@ fn fewer_than_twenty_poses_lose_none_and_an_error_at_no_pose_is_returned_at_once
         calls += 1;
         Err::<(), _>(fk_failure(index_of(merged, "3").unwrap()))
     })
-    .err()
-    .expect("19 poses may lose none");
+    .expect_err("19 poses may lose none");
     assert_eq!(calls, 1);
     let line = small.merged.pose_origin[index_of(&small.merged, "3").unwrap()].1;
     assert!(
@@ -208,8 +206,7 @@ fn fewer_than_twenty_poses_lose_none_and_an_error_at_no_pose_is_returned_at_once
         calls += 1;
         Err::<(), _>(CalibError::NoInformation("nothing to fit".into()))
     })
-    .err()
-    .expect("no pose to leave out");
+    .expect_err("no pose to leave out");
     assert_eq!(calls, 1);
     assert!(format!("{err:#}").contains("nothing to fit"), "{err:#}");
 }
