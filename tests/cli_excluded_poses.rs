@@ -6,7 +6,7 @@ use std::path::Path;
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::{cpm, example, ok, p, scratch};
+use cli::{calibrate_json, cpm, example, ok, p, scratch};
 
 /// Every number under `a` equals the one at the same place under `b` to `tol`.
 fn assert_close(a: &serde_json::Value, b: &serde_json::Value, tol: f64, at: &str) {
@@ -183,6 +183,37 @@ fn instrument_robots(d: &Path) -> (String, String) {
     (p(&robot), p(&truth))
 }
 
+/// The commanded pose columns of an instrument file.
+const COMMANDED: [&str; 6] = [
+    "cmd_x_mm",
+    "cmd_y_mm",
+    "cmd_z_mm",
+    "cmd_roll_deg",
+    "cmd_pitch_deg",
+    "cmd_yaw_deg",
+];
+
+/// `text` (a file as `cpm simulate` writes it: the simulated line, then the header) without
+/// the columns `drop`.
+fn without_columns(text: &str, drop: &[&str]) -> String {
+    let header: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+    let mut out = String::new();
+    for (k, l) in text.lines().enumerate() {
+        if k == 0 {
+            out.push_str(l);
+        } else {
+            let f: Vec<&str> = l.split(',').collect();
+            let keep: Vec<&str> = (0..f.len())
+                .filter(|&i| !drop.contains(&header[i]))
+                .map(|i| f[i])
+                .collect();
+            out.push_str(&keep.join(","));
+        }
+        out.push('\n');
+    }
+    out
+}
+
 /// `text` (an instrument file as `cpm simulate` writes it) with pose `label`'s `reading_1`
 /// 1000 mm longer on each of its rows (no pose of the machine has such link lengths), and
 /// the same file without that pose's rows; the columns `drop` left out of both. Returns the
@@ -352,10 +383,12 @@ fn calibrate_leaves_out_a_tilt_or_point_pose_whose_link_readings_give_no_pose() 
         t["noise_by_kind"]
     );
     instrument_pose_left_out(&d, &robot, &points, "points-commanded", &[], fit);
-    // (A tilt or point file with link readings alone, no commanded pose, is where the
-    // reader's forward kinematics gives no pose and the reader leaves it out; its clean
-    // version already fails calibrate's read-back check for some campaigns, e.g. this
-    // point file's, "does not reproduce the fit": not tested here until that is mended.)
+    // Files with the link readings alone: the reader's forward kinematics (its commanded
+    // pose) gives no pose at pose 17; the reader leaves it out.
+    let read = "gives no pose: forward kinematics of its link readings: ";
+    let t = instrument_pose_left_out(&d, &robot, &tilts, "tilts-readings", &COMMANDED, read);
+    assert_eq!(t["poses"], 39);
+    instrument_pose_left_out(&d, &robot, &points, "points-readings", &COMMANDED, read);
 
     // `cpm refine` lists the poses left out in refine.json as calibrate does in
     // calibration.json (the fit's and the reader's alike); for a clean file, not at all.
@@ -391,5 +424,111 @@ fn calibrate_leaves_out_a_tilt_or_point_pose_whose_link_readings_give_no_pose() 
         );
         let clean = refine(&d.join(format!("{name}-cut.csv")));
         assert!(clean.get("excluded_poses").is_none(), "{name}");
+    }
+}
+
+/// A tilt file and a point file that log the link readings alone (no commanded pose): the
+/// reader's commanded poses are the forward kinematics of the logged lengths on the design
+/// geometry, whichever robot reads them, so `cpm calibrate` passes its own read-back check
+/// (exit 0) and `cpm validate` of `calibrated.toml` (whose joints carry the fitted installation
+/// errors) on the same file reproduces the fit's residual RMS. Before the design geometry was
+/// used, the read-back took the calibrated geometry and both files failed ("does not
+/// reproduce the fit": 8.34 vs 9.97, 4.93 vs 6.51).
+#[test]
+fn calibrate_and_validate_agree_on_tilt_and_point_files_of_link_readings_alone() {
+    let d = scratch("excluded", "readings-alone");
+    let (robot, truth) = instrument_robots(&d);
+    let cases: [(&str, &[&str], &[&str]); 2] = [
+        (
+            "tilts",
+            &[
+                "--range-deg",
+                "10",
+                "--noise",
+                "gaussian:20",
+                "--base-tilt-deg",
+                "0.04,-0.02",
+            ],
+            // The reference noise of the weighting equal to the angle noise: the residual RMS
+            // in urad.
+            &["--sigma-um", "20", "--orientation-sigma-urad", "20"],
+        ),
+        (
+            "points",
+            &[
+                "--noise",
+                "gaussian:5",
+                "--tracker-frame",
+                "1500,200,-100,0,0,30",
+            ],
+            &[],
+        ),
+    ];
+    for (measure, sim, fit) in cases {
+        let full = d.join(format!("{measure}-full.csv"));
+        let mut args = vec![
+            "simulate",
+            "--robot",
+            &robot,
+            "--truth",
+            &truth,
+            "--random",
+            "40",
+            "--measure",
+            measure,
+            "--seed",
+            "1",
+        ];
+        args.extend_from_slice(sim);
+        let o = p(&full);
+        args.extend_from_slice(&["--out", &o]);
+        ok(&args);
+        // The file without its commanded pose columns.
+        let text = std::fs::read_to_string(&full).unwrap();
+        let alone = without_columns(&text, &COMMANDED);
+        let header = alone.lines().nth(1).unwrap();
+        assert!(
+            header.contains("reading_6") && !header.contains("cmd_"),
+            "{header}"
+        );
+        let data = d.join(format!("{measure}.csv"));
+        std::fs::write(&data, &alone).unwrap();
+        let out = d.join(format!("{measure}.out"));
+        let json = calibrate_json(Path::new(&robot), &[&data], fit, &out);
+        let fitted = json["residual_rms_um"].as_f64().unwrap();
+        let calibrated = out.join("calibrated.toml");
+        let toml = std::fs::read_to_string(&calibrated).unwrap();
+        // The calibrated geometry is not the design: the two robots' forward kinematics of
+        // the readings differ.
+        assert!(toml.contains("[installation_errors_um]"), "{toml}");
+        let v: serde_json::Value = serde_json::from_str(&ok(&[
+            "validate",
+            "--robot",
+            &p(&calibrated),
+            "--reference",
+            &robot,
+            "--data",
+            &p(&data),
+            "--json",
+        ]))
+        .unwrap();
+        let c = &v["calibrated"];
+        let (back, by_kind) = if measure == "tilts" {
+            (
+                c["orientation_rms_urad"].as_f64().unwrap(),
+                json["noise_by_kind"][0]["rms"].as_f64().unwrap(),
+            )
+        } else {
+            (c["rms_um"].as_f64().unwrap(), fitted)
+        };
+        eprintln!("{measure} read alone: fit RMS {fitted}, validate {back}");
+        assert!(
+            (back - fitted).abs() <= 1e-9 * fitted,
+            "{measure}: fit {fitted}, validate {back}"
+        );
+        assert!(
+            (back - by_kind).abs() <= 1e-9 * by_kind,
+            "{measure}: {by_kind} vs {back}"
+        );
     }
 }
