@@ -532,3 +532,115 @@ fn calibrate_and_validate_agree_on_tilt_and_point_files_of_link_readings_alone()
         );
     }
 }
+
+/// `cpm validate` compares the two robots on the same poses: a pose that one robot's reading
+/// leaves out (here: a description whose links are 5 mm shorter than the one pose of 40 that
+/// needs the longest link, the other robot the example hexapod) is left out for both, and
+/// each robot's figures are those of the file without that pose's rows; so whichever of the
+/// two is `--robot` and which `--reference`. The pose is warned of once.
+#[test]
+fn validate_leaves_out_for_both_robots_a_pose_either_robot_leaves_out() {
+    let d = scratch("excluded", "validate-union");
+    let robot = example("hexapod_66.toml");
+    let data = d.join("data.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--truth",
+        &example("hexapod_66_truth.toml"),
+        "--random",
+        "40",
+        "--range-mm",
+        "30",
+        "--range-deg",
+        "5",
+        "--seed",
+        "3",
+        "--out",
+        &p(&data),
+    ]);
+    // The longest link of each pose; the pose that needs the longest of all.
+    let example_robot = cpm_io::Robot::load(Path::new(&robot)).unwrap();
+    let file =
+        cpm_io::read_data_file(&data, &example_robot, &cpm_io::ReadOptions::default()).unwrap();
+    let longest: Vec<f64> = file
+        .campaign
+        .poses
+        .iter()
+        .map(|q| {
+            cpm_kinematics::inverse_lengths(&example_robot.table, q)
+                .into_iter()
+                .fold(f64::MIN, f64::max)
+        })
+        .collect();
+    let far = (0..longest.len())
+        .max_by(|a, b| longest[*a].total_cmp(&longest[*b]))
+        .unwrap();
+    let next = (0..longest.len())
+        .filter(|&j| j != far)
+        .map(|j| longest[j])
+        .fold(f64::MIN, f64::max);
+    assert!(longest[far] > next + 0.2, "{} vs {next}", longest[far]);
+    let label = file.pose_labels[far].clone();
+    // Held-out data are read with 5 mm of margin on the link limits
+    // (`cpm_io::campaign::CONSISTENCY_MM`): this limit leaves out that pose alone.
+    let limit = (longest[far] + next) / 2.0 - cpm_io::campaign::CONSISTENCY_MM;
+    let text = std::fs::read_to_string(&robot).unwrap();
+    assert_eq!(text.matches("length_limits_mm = [250.0, 400.0]").count(), 6);
+    let short = d.join("short.toml");
+    std::fs::write(
+        &short,
+        text.replace(
+            "length_limits_mm = [250.0, 400.0]",
+            &format!("length_limits_mm = [250.0, {limit}]"),
+        ),
+    )
+    .unwrap();
+    // The file without that pose's rows.
+    let all = std::fs::read_to_string(&data).unwrap();
+    let header: Vec<&str> = all.lines().nth(1).unwrap().split(',').collect();
+    let pose = header.iter().position(|h| *h == "pose").unwrap();
+    let cut = d.join("cut.csv");
+    let kept: Vec<&str> = all
+        .lines()
+        .enumerate()
+        .filter(|(k, l)| *k < 2 || l.split(',').nth(pose) != Some(label.as_str()))
+        .map(|(_, l)| l)
+        .collect();
+    assert!(kept.len() < all.lines().count());
+    std::fs::write(&cut, kept.join("\n") + "\n").unwrap();
+    let short = p(&short);
+    for (calibrated, reference) in [(&short, &robot), (&robot, &short)] {
+        let validate = |data: &Path| {
+            let o = cpm(&[
+                "validate",
+                "--robot",
+                calibrated,
+                "--reference",
+                reference,
+                "--data",
+                &p(data),
+                "--json",
+            ]);
+            let stderr = String::from_utf8_lossy(&o.stderr).to_string();
+            assert_eq!(o.status.code(), Some(0), "{stderr}");
+            let json: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+            (json, stderr)
+        };
+        let (json, stderr) = validate(&data);
+        let warning = format!("{}:", p(&data));
+        let warned: Vec<&str> = stderr.lines().filter(|l| l.contains(&warning)).collect();
+        assert_eq!(warned.len(), 1, "{stderr}");
+        assert!(
+            warned[0].contains(&format!("pose {label:?} excluded: ")),
+            "{stderr}"
+        );
+        assert!(warned[0].contains("is not reachable: link"), "{stderr}");
+        let (without, plain) = validate(&cut);
+        assert!(!plain.contains("excluded"), "{plain}");
+        for side in ["calibrated", "reference"] {
+            assert_close(&json[side], &without[side], 1e-9, side);
+        }
+    }
+}

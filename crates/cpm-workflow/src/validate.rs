@@ -186,6 +186,11 @@ fn read_held_out(
     Ok(file)
 }
 
+/// Whether `list` names the pose `e` names (the same file and label, whatever the reason).
+fn same_pose_in(list: &[crate::io::ExcludedPose], e: &crate::io::ExcludedPose) -> bool {
+    list.iter().any(|x| x.file == e.file && x.label == e.label)
+}
+
 /// `file` without the poses `leave_out` names (by file and label), with all their rows.
 fn without_left_out(
     file: crate::io::DataFile,
@@ -803,33 +808,51 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
     check_cancelled(progress)?;
     progress.stage("predicting the held-out measurements");
     let data = &options.data;
-    let cal_errors = errors_of(
-        &robot,
+    // The poses left out are those either robot's reading leaves out (most often the same),
+    // for both robots: the two are compared on the same poses. The reference reads the files
+    // without the poses the calibrated robot left out; when it leaves out others, the
+    // calibrated robot reads them again without those.
+    let cal_errors_of = |leave_out: &[crate::io::ExcludedPose]| {
+        errors_of(
+            &robot,
+            &reference,
+            data,
+            true,
+            tracker,
+            options.out.is_some(),
+            leave_out,
+        )
+    };
+    let mut cal_errors = cal_errors_of(&[])?;
+    check_cancelled(progress)?;
+    let ref_errors = errors_of(
+        &reference,
         &reference,
         data,
         true,
         tracker,
-        options.out.is_some(),
-        &[],
-    )?;
-    check_cancelled(progress)?;
-    let ref_errors =
-        errors_of(&reference, &reference, data, true, tracker, false, &[]).map_err(|e| {
-            e.context(format!(
-                "reading the held-out data against the reference {} (its sensors: {})",
-                reference.file,
-                sensor_names(&reference).join(", ")
-            ))
-        })?;
-    // The poses left out by either robot's reading (most often the same).
+        false,
+        &cal_errors.excluded,
+    )
+    .map_err(|e| {
+        e.context(format!(
+            "reading the held-out data against the reference {} (its sensors: {})",
+            reference.file,
+            sensor_names(&reference).join(", ")
+        ))
+    })?;
+    let only_reference: Vec<crate::io::ExcludedPose> = ref_errors
+        .excluded
+        .iter()
+        .filter(|e| !same_pose_in(&cal_errors.excluded, e))
+        .cloned()
+        .collect();
+    if !only_reference.is_empty() {
+        check_cancelled(progress)?;
+        cal_errors = cal_errors_of(&only_reference)?;
+    }
     let mut excluded = cal_errors.excluded.clone();
-    excluded.extend(
-        ref_errors
-            .excluded
-            .iter()
-            .filter(|e| !cal_errors.excluded.contains(e))
-            .cloned(),
-    );
+    excluded.extend(only_reference);
     crate::load::warn_excluded(progress, &excluded);
     let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
     if names != ref_names {
