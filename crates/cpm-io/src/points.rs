@@ -231,15 +231,19 @@ fn check_instrument_header<R: Read>(
 }
 
 /// The commanded configuration of each pose, pushed to `campaign.poses`: the logged link
-/// readings drive the machine (the commanded pose, or forward kinematics of the nominal
-/// lengths, starts forward kinematics); without readings the controller's inverse kinematics
-/// of the commanded pose. Returns the commanded lengths and the poses whose link readings give
-/// none (excluded, or the file refused when too many).
+/// readings drive the machine (the commanded pose, or forward kinematics of the commanded
+/// lengths on the design geometry ([`Robot::design_table`], as for a tracker row), starts
+/// forward kinematics); without readings the controller's inverse kinematics of the commanded
+/// pose. Returns the commanded lengths and the poses whose link readings give none (excluded,
+/// or the file refused when too many).
 fn commanded_configurations(
     poses: &[PoseOf],
     robot: &Robot,
     campaign: &mut Campaign,
 ) -> (Vec<Vec<f64>>, Vec<Unusable>) {
+    // The design, never the robot's installation errors: a calibrated description reads
+    // the file to the commanded poses the fit saw (where the link forces are evaluated).
+    let design = robot.design_table();
     let mut commanded: Vec<Vec<f64>> = Vec::new();
     // Poses whose link readings give none: excluded, or the file refused when too many.
     let mut unusable = Vec::new();
@@ -253,9 +257,9 @@ fn commanded_configurations(
                     .map(|(i, v)| robot.length_mm(i, *v))
                     .collect();
                 match cpm_kinematics::forward(
-                    &robot.table,
+                    &design,
                     &l,
-                    &robot.table.home,
+                    &design.home,
                     &cpm_kinematics::ForwardOptions::default(),
                 ) {
                     Ok((pose, _)) => pose,
@@ -268,7 +272,7 @@ fn commanded_configurations(
                             note: String::new(),
                             field: Some("reading_1".to_string()),
                         });
-                        robot.table.home
+                        design.home
                     }
                 }
             }

@@ -79,6 +79,24 @@ impl Robot {
         Ok(robot)
     }
 
+    /// The design geometry: the description's joints without `[installation_errors_um]` (the
+    /// table itself when the description has none). The commanded pose of a row that logs
+    /// link readings alone is the forward kinematics of its commanded lengths on this
+    /// geometry: it is the same for a description and for its calibration (which keeps the
+    /// joints and adds the fitted errors), so every command that reads a file sees the poses
+    /// the fit saw.
+    pub fn design_table(&self) -> std::borrow::Cow<'_, JointTable> {
+        if self.errors_applied {
+            std::borrow::Cow::Owned(
+                self.description
+                    .joint_table()
+                    .expect("checked when the robot was made (from_description)"),
+            )
+        } else {
+            std::borrow::Cow::Borrowed(&self.table)
+        }
+    }
+
     /// Number of links.
     pub fn num_links(&self) -> usize {
         self.table.num_links()

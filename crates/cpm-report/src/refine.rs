@@ -198,6 +198,10 @@ pub struct RefineDoc {
     /// Library effects left out of the candidates because they cannot act on these data
     /// (set by the caller that chose the candidates).
     pub not_applicable: Vec<NotApplicable>,
+    /// The poses left out with all their observations, as in `calibration.json` (set by the
+    /// caller that read the data; absent when none, so a clean campaign's file is unchanged).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub excluded_poses: Vec<crate::fit::ExcludedPoseReport>,
 }
 
 impl RefineDoc {
@@ -312,6 +316,7 @@ impl RefineDoc {
             hold_trials: r.hold_trials.clone(),
             held_groups: r.held_groups.clone(),
             not_applicable: Vec::new(),
+            excluded_poses: Vec::new(),
         }
     }
 

@@ -729,6 +729,7 @@ pub fn stage_calibrated(
             &inputs.merged.campaign,
             cal,
             inputs.identify.sigma_um,
+            &inputs.merged.excluded,
         )? {
             if !reproduces(fit, file) {
                 return Err(trouble(format!(
@@ -912,7 +913,12 @@ pub fn leaving_out<T>(
                 file,
                 line,
                 label,
-                reason: format!("the fit cannot start there: {e}"),
+                // The error's campaign index ("pose 16: ") says less than the label
+                // beside it, and names a pose of the campaign as it was then.
+                reason: format!(
+                    "the fit cannot start there: {}",
+                    e.to_string().replacen(&format!("pose {pose}: "), "", 1)
+                ),
             },
         ));
         merged = std::borrow::Cow::Owned(merged.without_pose(pose));

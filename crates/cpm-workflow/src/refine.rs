@@ -199,6 +199,14 @@ pub fn refine(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Resul
             why: why.to_string(),
         })
         .collect();
+    // The poses left out (by the readers or because the fit could not start there), as
+    // calibration.json lists them.
+    doc.excluded_poses = inputs
+        .merged
+        .excluded
+        .iter()
+        .map(crate::report::fit::ExcludedPoseReport::from)
+        .collect();
     set.add(dir.join("refine.json"), doc.to_json()?);
     let mut fit = FitReport::new(&inputs.report_inputs(), &r.model, cal, None);
     crate::fit::add_session_warnings(&mut fit, &inputs, &r.model)?;

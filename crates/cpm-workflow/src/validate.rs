@@ -186,6 +186,32 @@ fn read_held_out(
     Ok(file)
 }
 
+/// Whether `list` names the pose `e` names (the same file and label, whatever the reason).
+fn same_pose_in(list: &[crate::io::ExcludedPose], e: &crate::io::ExcludedPose) -> bool {
+    list.iter().any(|x| x.file == e.file && x.label == e.label)
+}
+
+/// `file` without the poses `leave_out` names (by file and label), with all their rows.
+fn without_left_out(
+    file: crate::io::DataFile,
+    leave_out: &[crate::io::ExcludedPose],
+) -> crate::io::DataFile {
+    let drop: Vec<bool> = file
+        .pose_labels
+        .iter()
+        .map(|l| {
+            leave_out
+                .iter()
+                .any(|e| e.file == file.file && e.label == *l)
+        })
+        .collect();
+    if drop.contains(&true) {
+        file.without_poses(&drop)
+    } else {
+        file
+    }
+}
+
 /// A file with sessions (tracker poses, points, tilts): its frame (or levelling) fitted
 /// afresh with the machine held, the predictions after it, and the session's check.
 fn register_held_out(
@@ -434,6 +460,9 @@ impl Gather {
 ///
 /// With `residuals`, `residuals.csv` of the files too (one numbering over the files, in the
 /// order given), its rows written as they are made; without, none of its text is made.
+///
+/// The poses `leave_out` names (file and label) are left out of the files as read, with all
+/// their rows, as the fit left them out (those the reading leaves out itself are gone already).
 fn errors_of(
     robot: &Robot,
     controller: &Robot,
@@ -441,6 +470,7 @@ fn errors_of(
     strict: bool,
     tracker: (f64, f64),
     residuals: bool,
+    leave_out: &[crate::io::ExcludedPose],
 ) -> anyhow::Result<RobotErrors> {
     let model: MeasurementModel = robot.model(&[]);
     let options = held_out_read_options(strict);
@@ -455,7 +485,10 @@ fn errors_of(
     }
     let mut written = 0;
     for path in paths {
-        let file = read_held_out(path, robot, controller, &options, tracker)?;
+        let file = without_left_out(
+            read_held_out(path, robot, controller, &options, tracker)?,
+            leave_out,
+        );
         gather.out.excluded.extend(file.excluded.iter().cloned());
         let campaign: &Campaign = &file.campaign;
         gather.out.simulated |= campaign.simulated;
@@ -783,32 +816,51 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
     check_cancelled(progress)?;
     progress.stage("predicting the held-out measurements");
     let data = &options.data;
-    let cal_errors = errors_of(
-        &robot,
+    // The poses left out are those either robot's reading leaves out (most often the same),
+    // for both robots: the two are compared on the same poses. The reference reads the files
+    // without the poses the calibrated robot left out; when it leaves out others, the
+    // calibrated robot reads them again without those.
+    let cal_errors_of = |leave_out: &[crate::io::ExcludedPose]| {
+        errors_of(
+            &robot,
+            &reference,
+            data,
+            true,
+            tracker,
+            options.out.is_some(),
+            leave_out,
+        )
+    };
+    let mut cal_errors = cal_errors_of(&[])?;
+    check_cancelled(progress)?;
+    let ref_errors = errors_of(
+        &reference,
         &reference,
         data,
         true,
         tracker,
-        options.out.is_some(),
-    )?;
-    check_cancelled(progress)?;
-    let ref_errors =
-        errors_of(&reference, &reference, data, true, tracker, false).map_err(|e| {
-            e.context(format!(
-                "reading the held-out data against the reference {} (its sensors: {})",
-                reference.file,
-                sensor_names(&reference).join(", ")
-            ))
-        })?;
-    // The poses left out by either robot's reading (most often the same).
+        false,
+        &cal_errors.excluded,
+    )
+    .map_err(|e| {
+        e.context(format!(
+            "reading the held-out data against the reference {} (its sensors: {})",
+            reference.file,
+            sensor_names(&reference).join(", ")
+        ))
+    })?;
+    let only_reference: Vec<crate::io::ExcludedPose> = ref_errors
+        .excluded
+        .iter()
+        .filter(|e| !same_pose_in(&cal_errors.excluded, e))
+        .cloned()
+        .collect();
+    if !only_reference.is_empty() {
+        check_cancelled(progress)?;
+        cal_errors = cal_errors_of(&only_reference)?;
+    }
     let mut excluded = cal_errors.excluded.clone();
-    excluded.extend(
-        ref_errors
-            .excluded
-            .iter()
-            .filter(|e| !cal_errors.excluded.contains(e))
-            .cloned(),
-    );
+    excluded.extend(only_reference);
     crate::load::warn_excluded(progress, &excluded);
     let (names, ref_names) = (&cal_errors.names, &ref_errors.names);
     if names != ref_names {
@@ -909,6 +961,10 @@ fn readings_in_memory(
 /// `sigma_ref / point_sigma`), or `None` when
 /// the check does not apply: tracker data fitted without `tracker_frame` (the fit keeps the
 /// rough registration, which a later reading improves on).
+///
+/// `excluded` are the poses the fit left out (`Merged::excluded`): read again, the files
+/// lose them too, so that the read-back predicts the fit's own data.
+#[allow(clippy::too_many_arguments)]
 pub fn file_reproduces_fit(
     text: &str,
     reference: &Robot,
@@ -917,6 +973,7 @@ pub fn file_reproduces_fit(
     campaign: &Campaign,
     cal: &crate::calib::Calibration,
     sigma_um: Option<f64>,
+    excluded: &[crate::io::ExcludedPose],
 ) -> anyhow::Result<Option<(f64, f64)>> {
     if !campaign.pose_measurements.is_empty()
         && !model.effects.contains(&crate::calib::Effect::TrackerFrame)
@@ -931,7 +988,7 @@ pub fn file_reproduces_fit(
     let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
     let e = match readings_in_memory(&robot, reference, campaign)? {
         Some(e) => e,
-        None => errors_of(&robot, reference, data, false, tracker, false)?,
+        None => errors_of(&robot, reference, data, false, tracker, false, excluded)?,
     };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
     let _ = sigma_um;
@@ -998,6 +1055,7 @@ mod tests {
                 false,
                 (campaign.pose_sigma(), campaign.orientation_sigma()),
                 false,
+                &[],
             )
             .unwrap();
             assert_eq!(memory.names, files.names);

@@ -162,6 +162,17 @@ pub struct ExcludedPoseReport {
     pub reason: String,
 }
 
+impl From<&cpm_io::ExcludedPose> for ExcludedPoseReport {
+    fn from(e: &cpm_io::ExcludedPose) -> Self {
+        Self {
+            file: e.file.clone(),
+            line: e.line,
+            label: e.label.clone(),
+            reason: e.reason.clone(),
+        }
+    }
+}
+
 /// `calibration.json`'s `misfit` object.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct MisfitReport {
@@ -716,12 +727,7 @@ impl FitReport {
                 .merged
                 .excluded
                 .iter()
-                .map(|e| ExcludedPoseReport {
-                    file: e.file.clone(),
-                    line: e.line,
-                    label: e.label.clone(),
-                    reason: e.reason.clone(),
-                })
+                .map(ExcludedPoseReport::from)
                 .collect(),
             registration: registration(inputs.merged, model, cal),
             misfit: misfit_report(cal),
