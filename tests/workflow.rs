@@ -127,3 +127,68 @@ fn a_cancelled_job_writes_nothing_and_says_so() {
     );
     assert!(job.fitted.cal.simulated);
 }
+
+/// The flag of the job the tripwire below stops, and its count of evaluations.
+static TRIP_FLAG: std::sync::OnceLock<std::sync::Arc<std::sync::atomic::AtomicBool>> =
+    std::sync::OnceLock::new();
+static TRIP_CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+
+/// A link effect that does nothing but count its evaluations and cancel the job at the 2000th
+/// (inside the fit: reading and the start take fewer).
+#[derive(Debug)]
+struct Tripwire;
+impl cpm::calib::EffectModel for Tripwire {
+    fn name(&self) -> &str {
+        "workflow_tripwire"
+    }
+    fn num_params(&self, _: usize, _: usize) -> usize {
+        1
+    }
+    fn param_name(&self, _: usize, _: &[String]) -> String {
+        "trip".into()
+    }
+    fn unit(&self) -> &str {
+        "um"
+    }
+    fn channels(&self) -> &[cpm::calib::Channel] {
+        &[cpm::calib::Channel::LinkLength]
+    }
+    fn link_coefficient(&self, _: usize, _: usize, _: &cpm::calib::EffectInput) -> f64 {
+        let n = TRIP_CALLS.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+        if n == 2000 {
+            if let Some(f) = TRIP_FLAG.get() {
+                f.store(true, std::sync::atomic::Ordering::SeqCst);
+            }
+        }
+        0.0
+    }
+}
+
+#[test]
+fn a_job_cancelled_inside_its_fit_stops_there_and_writes_nothing() {
+    cpm::calib::Effect::register(std::sync::Arc::new(Tripwire)).unwrap();
+    let d = scratch("workflow", "cancel-inside");
+    let out = d.join("never");
+    let progress = Collect::default();
+    TRIP_FLAG.set(progress.cancel.clone()).unwrap();
+    let mut options = fit::CalibrateOptions::new(
+        example("hexapod_66.toml"),
+        vec![example("hexapod_66_readings.csv").into()],
+        &out,
+    );
+    options.fit.effects = Some("workflow_tripwire".into());
+    let err = fit::calibrate(&options, &progress)
+        .err()
+        .expect("cancelled");
+    assert!(err.is::<cpm::workflow::Cancelled>(), "{err}");
+    // It stopped inside the fit: the fitting stage had begun, the evaluations stopped soon
+    // after the flag was set (a fit to its end takes many times more), nothing was written.
+    let stages = progress.stages.lock().unwrap().clone();
+    assert!(
+        stages.iter().any(|s| s.starts_with("fitting")),
+        "{stages:?}"
+    );
+    let calls = TRIP_CALLS.load(std::sync::atomic::Ordering::SeqCst);
+    assert!((2000..4000).contains(&calls), "{calls} evaluations");
+    assert!(!out.exists());
+}

@@ -42,6 +42,9 @@ pub enum CalibError {
     /// The data determine nothing (rank zero) or there are no readings.
     #[error("no information: {0}")]
     NoInformation(String),
+    /// The caller cancelled the fit ([`IdentifyOptions::cancel`](crate::IdentifyOptions)).
+    #[error("cancelled")]
+    Cancelled,
 }
 
 impl CalibError {

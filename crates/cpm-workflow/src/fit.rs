@@ -348,6 +348,7 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
         sigma_um: sigma,
         tolerances,
         leg_space: args.tracker_residuals == TrackerResiduals::Legs,
+        cancel: progress.cancel_flag(),
         ..IdentifyOptions::default()
     };
     Ok(Inputs {
@@ -1009,6 +1010,13 @@ impl Calibrated {
 /// and stages every output for `options.fit.out` (nothing is written: commit the set). Stages
 /// and notes go to `progress`; a cancelled job returns [`Cancelled`](crate::Cancelled).
 pub fn calibrate(
+    options: &CalibrateOptions,
+    progress: &dyn Progress,
+) -> anyhow::Result<Calibrated> {
+    crate::progress::unless_cancelled(calibrate_job(options, progress), progress)
+}
+
+fn calibrate_job(
     options: &CalibrateOptions,
     progress: &dyn Progress,
 ) -> anyhow::Result<Calibrated> {

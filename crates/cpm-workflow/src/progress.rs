@@ -7,7 +7,9 @@
 ///
 /// A job asks [`cancelled`](Progress::cancelled) between its stages (reading, each fit,
 /// staging the outputs, before committing them); when it answers `true` the job returns the
-/// typed error [`Cancelled`](crate::Cancelled) and writes nothing.
+/// typed error [`Cancelled`](crate::Cancelled) and writes nothing. A progress that gives a
+/// [`cancel_flag`](Progress::cancel_flag) also stops a fit inside its least-squares
+/// iterations (the flag goes to [`IdentifyOptions::cancel`](crate::calib::IdentifyOptions)).
 pub trait Progress {
     /// The stage the job is in now ("reading the measurements", "fitting ...").
     fn stage(&self, message: &str) {
@@ -29,7 +31,13 @@ pub trait Progress {
     }
     /// True when the caller wants the job stopped.
     fn cancelled(&self) -> bool {
-        false
+        self.cancel_flag()
+            .is_some_and(|f| f.load(std::sync::atomic::Ordering::Relaxed))
+    }
+    /// A flag the caller sets to stop the job, read inside the fits' iterations too. Default
+    /// `None`: the job asks [`cancelled`](Self::cancelled) between its stages only.
+    fn cancel_flag(&self) -> Option<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+        None
     }
 }
 
@@ -47,8 +55,8 @@ pub struct Collect {
     pub notes: std::sync::Mutex<Vec<String>>,
     /// The stages, in order.
     pub stages: std::sync::Mutex<Vec<String>>,
-    /// Set to cancel the job at its next check.
-    pub cancel: std::sync::atomic::AtomicBool,
+    /// Set to cancel the job at its next check (inside a fit's iterations too).
+    pub cancel: std::sync::Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl Progress for Collect {
@@ -65,8 +73,20 @@ impl Progress for Collect {
     fn warn(&self, message: &str) {
         self.note(&format!("warning: {message}"));
     }
-    fn cancelled(&self) -> bool {
-        self.cancel.load(std::sync::atomic::Ordering::Relaxed)
+    fn cancel_flag(&self) -> Option<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+        Some(self.cancel.clone())
+    }
+}
+
+/// A job's result told as [`Cancelled`](crate::Cancelled) when it failed because `progress`
+/// asked it to stop (a fit stopped inside its iterations fails with the solver's error).
+pub fn unless_cancelled<T>(
+    result: anyhow::Result<T>,
+    progress: &dyn Progress,
+) -> anyhow::Result<T> {
+    match result {
+        Err(_) if progress.cancelled() => Err(crate::error::Cancelled.into()),
+        other => other,
     }
 }
 

@@ -99,6 +99,10 @@ impl Refined {
 /// (an error, nothing staged) when the refined model predicts held-out data worse than plain
 /// calibration.
 pub fn refine(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Result<Refined> {
+    crate::progress::unless_cancelled(refine_job(options, progress), progress)
+}
+
+fn refine_job(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Result<Refined> {
     options.validate()?;
     let args = options;
     let inputs = args.fit.load(progress)?;

@@ -52,6 +52,20 @@ pub struct IdentifyOptions {
     /// ([`Calibration::set_aside`]). Ignored with a robust loss (which limits their
     /// influence itself) and in leg space.
     pub keep_outliers: bool,
+    /// Set by the caller to stop the fit: checked at every evaluation of the residuals and
+    /// the Jacobian inside the least-squares iterations, after which [`identify`] returns
+    /// [`CalibError::Cancelled`]. Default `None`: never cancelled.
+    pub cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+}
+
+/// [`CalibError::Cancelled`] when `cancel` is set.
+pub(crate) fn check_cancel(
+    cancel: &Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+) -> Result<(), CalibError> {
+    match cancel {
+        Some(c) if c.load(std::sync::atomic::Ordering::Relaxed) => Err(CalibError::Cancelled),
+        _ => Ok(()),
+    }
 }
 
 /// Most rounds of setting gross outliers aside ([`IdentifyOptions::keep_outliers`]).
@@ -193,6 +207,8 @@ struct Subspace<'a> {
     /// The last leg-space residuals (um) and their Jacobian in the fit's directions.
     leg_r: Vec<f64>,
     leg_jac: DMatrix<f64>,
+    /// The caller's cancel flag ([`IdentifyOptions::cancel`]).
+    cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 /// Refits the tracker frames of `e` in pose space (the machine held fixed); the problem's
@@ -295,6 +311,7 @@ impl Problem for Subspace<'_> {
         self.measured_mm.len() + self.prior_rows.len()
     }
     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+        check_cancel(&self.cancel)?;
         let m = self.measured_mm.len();
         if self.leg {
             let e = self.errors(x);
@@ -338,6 +355,7 @@ impl Problem for Subspace<'_> {
 
 impl DenseJacobian for Subspace<'_> {
     fn jacobian(&mut self, x: &[f64], mut jac: faer::MatMut<'_, f64>) -> Result<(), ModelError> {
+        check_cancel(&self.cancel)?;
         if self.leg {
             // Central differences along the fit's directions (the leg-space residuals are
             // cheap: inverse kinematics, no forward kinematics).
@@ -580,7 +598,23 @@ impl Calibration {
 }
 
 /// Identifies the installation errors from a campaign.
+///
+/// A fit whose [`IdentifyOptions::cancel`] flag is set (before or during its iterations)
+/// returns [`CalibError::Cancelled`], whatever the solver was doing then.
 pub fn identify(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+) -> Result<Calibration, CalibError> {
+    check_cancel(&options.cancel)?;
+    let fitted = identify_uncancelled(model, campaign, options);
+    match fitted {
+        Err(_) if check_cancel(&options.cancel).is_err() => Err(CalibError::Cancelled),
+        other => other,
+    }
+}
+
+fn identify_uncancelled(
     model: &MeasurementModel,
     campaign: &Campaign,
     options: &IdentifyOptions,
@@ -629,6 +663,7 @@ pub fn identify(
         leg: leg_space,
         leg_r: Vec::new(),
         leg_jac: DMatrix::zeros(0, 0),
+        cancel: options.cancel.clone(),
     };
     let mut theta = vec![0.0; rank];
     let mut r0 = vec![0.0; m + problem.prior_rows.len()];

@@ -755,6 +755,19 @@ pub fn refine(
     campaign: &Campaign,
     options: &RefineOptions,
 ) -> Result<Refinement, CalibError> {
+    // A cancelled candidate fit only fails that candidate: the flag decides at the end.
+    let cancel = &options.identify.cancel;
+    crate::fit::identify::check_cancel(cancel)?;
+    let refined = refine_uncancelled(model, campaign, options);
+    crate::fit::identify::check_cancel(cancel)?;
+    refined
+}
+
+fn refine_uncancelled(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &RefineOptions,
+) -> Result<Refinement, CalibError> {
     if !(options.alpha > 0.0 && options.alpha < 1.0) {
         return Err(CalibError::invalid(
             "alpha",
