@@ -210,9 +210,14 @@ def tracker_measurements(
 ) -> Measurements:
     """Tracker measurements from arrays: the commanded link ``readings`` ``(n, links)`` (in
     the links' units) and the measured ``poses`` ``(n, 7)`` (x, y, z mm in the tracker's
-    frame; unit quaternion qw, qx, qy, qz). Registered and checked as ``cpm`` does."""
+    frame; unit quaternion qw, qx, qy, qz) or ``(n, 6)`` (x, y, z mm; roll, pitch, yaw deg,
+    R = Rz(yaw) Ry(pitch) Rx(roll)). Registered and checked as ``cpm`` does: the same numbers
+    as a file give the same fit."""
     r = _float_array(readings, "readings", 2, robot.num_links)
-    p = _float_array(poses, "poses", 2, 7)
+    p = _float_array(poses, "poses", 2)
+    if p.shape[1] not in (6, 7):
+        raise UsageError(f"poses has shape {p.shape}, expected (n, 7) (x, y, z mm, qw, qx, qy, "
+                         "qz) or (n, 6) (x, y, z mm, roll, pitch, yaw deg)")
     t = None if time_s is None else _float_array(time_s, "time_s", 1)
     text = _cpm.tracker_csv(r, p, _labels(pose_labels), t, bool(simulated))
     return _from_text(text, name, robot, arrays=True)

@@ -171,21 +171,28 @@ def test_tracker_arrays(hexapod, tmp_path):
                              ("roll_deg", "pitch_deg", "yaw_deg")] for r in rows]))
     xyz = np.array([[float(r[header.index(c)]) for c in ("x_mm", "y_mm", "z_mm")]
                     for r in rows])
+    # The file's own numbers as arrays (its angles, roll pitch yaw deg): the same fit, to 1e-12.
+    rpy = np.array([[float(r[header.index(c)]) for c in ("roll_deg", "pitch_deg", "yaw_deg")]
+                    for r in rows])
+    same = cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, rpy]), simulated=True)
+    exact = cpm.calibrate(hexapod, same)
     m = cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q]), simulated=True)
     assert m.kinds == ["tracker"] and len(m.measured_poses) == len(rows)
     np.testing.assert_allclose(m.measured_poses[:, :3], sim.measured_poses[:, :3], atol=1e-9)
     a = cpm.calibrate(hexapod, sim)
     b = cpm.calibrate(hexapod, m)
+    np.testing.assert_allclose(exact.estimates_um, a.estimates_um, rtol=1e-12, atol=1e-12,
+                               equal_nan=True)
     # Tracker files are registered (a frame per file): the result says how.
     assert a.registration is not None and len(a.registration["sessions"]) == 1
     assert b.registration is not None and b.registration["sessions"][0]["file"] == \
         "tracker measurements"
-    # The orientations reach the two paths as text at different precisions (the file's
-    # angles, the arrays' quaternions): the fits agree to a relative 1e-6.
+    # Quaternions converted from the file's angles differ from them in the last bits: the
+    # fits agree to a relative 1e-6 (the solver's tolerance), not to the last digit.
     np.testing.assert_allclose(b.estimates_um, a.estimates_um, rtol=1e-6, atol=1e-6,
                                equal_nan=True)
-    with pytest.raises(cpm.UsageError, match=r"poses has shape \(12, 6\), expected \(n, 7\)"):
-        cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q[:, :3]]))
+    with pytest.raises(cpm.UsageError, match=r"poses has shape \(12, 5\), expected \(n, 7\)"):
+        cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q[:, :2]]))
     with pytest.raises(cpm.UsageError, match=r"readings has shape \(12, 5\)"):
         cpm.tracker_measurements(hexapod, readings[:, :5], np.hstack([xyz, q]))
 

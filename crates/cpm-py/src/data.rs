@@ -256,7 +256,9 @@ pub fn gauge_csv(
 
 /// Tracker measurements as the CSV of docs/formats.md ("Tracker pose measurements"): one row
 /// per pose, `readings` `(n, links)` (commanded link readings, the links' units), `poses`
-/// `(n, 7)` (measured x, y, z mm; quaternion qw, qx, qy, qz).
+/// `(n, 7)` (measured x, y, z mm; quaternion qw, qx, qy, qz) or `(n, 6)` (x, y, z mm; roll,
+/// pitch, yaw deg, the file format's other orientation), each number written in full (the
+/// shortest text that reads back to the same double).
 #[pyfunction]
 #[pyo3(signature = (readings, poses, pose_labels=None, time_s=None, simulated=false))]
 pub fn tracker_csv(
@@ -271,13 +273,26 @@ pub fn tracker_csv(
     let poses = poses.as_array();
     let n = readings.shape()[0];
     let links = readings.shape()[1];
-    check_shape(py, "poses", poses.shape(), n, Some(7))?;
+    let cols = if poses.shape().get(1) == Some(&6) { 6 } else { 7 };
+    if check_shape(py, "poses", poses.shape(), n, Some(cols)).is_err() {
+        return Err(crate::errors::usage(
+            py,
+            format!(
+                "poses has shape {:?}, expected ({n}, 7) (x, y, z mm, qw, qx, qy, qz) or ({n}, 6) (x, y, z mm, roll, pitch, yaw deg)",
+                poses.shape()
+            ),
+        ));
+    }
     let (labels, times) = labels_and_times(py, n, pose_labels, time_s)?;
     let mut s = String::from("pose");
     for k in 1..=links {
         let _ = write!(s, ",reading_{k}");
     }
-    s.push_str(",x_mm,y_mm,z_mm,qw,qx,qy,qz");
+    s.push_str(if cols == 7 {
+        ",x_mm,y_mm,z_mm,qw,qx,qy,qz"
+    } else {
+        ",x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg"
+    });
     if times.is_some() {
         s.push_str(",time_s");
     }
@@ -287,7 +302,7 @@ pub fn tracker_csv(
         for c in 0..links {
             let _ = write!(s, ",{}", readings[(k, c)]);
         }
-        for c in 0..7 {
+        for c in 0..cols {
             let _ = write!(s, ",{}", poses[(k, c)]);
         }
         if let Some(t) = &times {
