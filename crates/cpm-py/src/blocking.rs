@@ -3,10 +3,10 @@
 //!
 //! The work runs on a worker thread; the calling thread waits for it with the GIL released
 //! and checks for signals every 50 ms. On Ctrl-C (or any signal handler that raises) the
-//! exception is raised at once; the worker cannot be stopped from outside (the fits of
-//! cpm-calib take no cancellation callback), so it finishes in the background and its result
-//! is dropped. The work is told (the flag it gets turns true) and may skip what is left: the
-//! binding's `calibrate` then writes nothing. A command run whole (`run_command`: refine,
+//! exception is raised at once and the work is told (the flag it gets turns true): the
+//! binding's `calibrate` hands that flag to the fit ([`cpm::calib::IdentifyOptions::cancel`]),
+//! which stops at its next evaluation, and writes nothing; other work finishes in the
+//! background and its result is dropped. A command run whole (`run_command`: refine,
 //! design, ...) still commits its outputs to its `--out` when it finishes, all or nothing, as
 //! the command does.
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -25,11 +25,11 @@ const POLL: Duration = Duration::from_millis(50);
 pub fn run<T, F>(py: Python<'_>, work: F) -> PyResult<T>
 where
     T: Send + 'static,
-    F: FnOnce(&AtomicBool) -> T + Send + 'static,
+    F: FnOnce(Arc<AtomicBool>) -> T + Send + 'static,
 {
     let abandoned = Arc::new(AtomicBool::new(false));
     let flag = abandoned.clone();
-    let work = move || work(&flag);
+    let work = move || work(flag);
     let (tx, rx) = mpsc::channel();
     std::thread::Builder::new()
         .name("cpm-work".into())

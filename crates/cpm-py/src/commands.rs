@@ -132,6 +132,9 @@ pub fn calibrate<'py>(
         let ctx = Ctx::new(&mut sink, true);
         let mut inputs = args.fit.load(&ctx)?;
         rename(&mut inputs, &names);
+        // Ctrl-C stops the fit inside its iterations (the flag turns true when Python is
+        // interrupted).
+        inputs.identify.cancel = Some(abandoned.clone());
         let dir = &args.fit.out;
         let fitted = cal_cli::fit_with(&inputs, dir, args.minimum_norm, args.formulation)?;
         // The warnings of calibration.json (the fit's, the sessions', the noise's).

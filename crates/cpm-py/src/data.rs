@@ -273,7 +273,11 @@ pub fn tracker_csv(
     let poses = poses.as_array();
     let n = readings.shape()[0];
     let links = readings.shape()[1];
-    let cols = if poses.shape().get(1) == Some(&6) { 6 } else { 7 };
+    let cols = if poses.shape().get(1) == Some(&6) {
+        6
+    } else {
+        7
+    };
     if check_shape(py, "poses", poses.shape(), n, Some(cols)).is_err() {
         return Err(crate::errors::usage(
             py,
