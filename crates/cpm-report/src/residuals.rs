@@ -38,12 +38,44 @@ pub fn write_residual_rows<W: std::io::Write>(
     residuals: &[f64],
     first: usize,
 ) -> std::io::Result<()> {
+    use rayon::prelude::*;
     let residuals = in_tracker_axes(merged, residuals);
+    // Blocks of rows made in parallel, a batch of them at a time (so that at most a batch's
+    // text is held beside what `out` keeps), written in order.
+    const ROWS: usize = 1 << 13;
+    const BATCH: usize = 16;
+    let blocks: Vec<(usize, &[f64])> = residuals
+        .chunks(ROWS)
+        .enumerate()
+        .map(|(b, r)| (b * ROWS, r))
+        .collect();
+    for batch in blocks.chunks(BATCH) {
+        let texts: Vec<String> = batch
+            .par_iter()
+            .map(|(start, r)| residual_rows(robot, merged, r, *start, first))
+            .collect();
+        for t in &texts {
+            out.write_all(t.as_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// The rows of observations `start..start + residuals.len()` (see [`write_residual_rows`]).
+fn residual_rows(
+    robot: &Robot,
+    merged: &Merged,
+    residuals: &[f64],
+    start: usize,
+    first: usize,
+) -> String {
     let c = &merged.campaign;
-    let (mut what, mut field, mut chunk) = (String::new(), String::new(), String::new());
+    let (mut what, mut field) = (String::new(), String::new());
+    let mut chunk = String::with_capacity(64 * residuals.len());
     // The file field of the previous row, as written (rows of one file follow each other).
     let (mut file_of_field, mut file_field) = (None::<&str>, String::new());
-    for (k, r) in residuals.iter().enumerate() {
+    for (i, r) in residuals.iter().enumerate() {
+        let k = start + i;
         let origin = write_observation_origin(robot, merged, k, &mut what);
         let (file, line) = origin.unwrap_or(("", 0));
         if file_of_field != Some(file) {
@@ -64,12 +96,8 @@ pub fn write_residual_rows<W: std::io::Write>(
         let _ = write!(chunk, ",{unit},");
         crate::format::push_tidy_number(&mut chunk, *r);
         chunk.push('\n');
-        if chunk.len() >= 1 << 16 {
-            out.write_all(chunk.as_bytes())?;
-            chunk.clear();
-        }
     }
-    out.write_all(chunk.as_bytes())
+    chunk
 }
 
 /// `s` as a quoted CSV field, tidied as [`crate::format::tidy_csv`] tidies it in its line
