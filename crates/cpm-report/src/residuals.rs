@@ -5,7 +5,6 @@
 //! texts of an observation (file, line, what) exist only while its row is written, in
 //! buffers reused from row to row; the residuals stay numbers until then.
 use std::borrow::Cow;
-use std::fmt::Write as _;
 
 use cpm_io::{Merged, Robot};
 
@@ -91,13 +90,35 @@ fn residual_rows(
         // The row as `tidy_csv` would leave it: the numbering, the line and the unit are
         // left as they are, the residual is rounded to 12 significant digits.
         // Writing into a String cannot fail.
-        let _ = write!(chunk, "{},{file_field},{line},", k + first);
+        push_integer(&mut chunk, k + first);
+        chunk.push(',');
+        chunk.push_str(&file_field);
+        chunk.push(',');
+        push_integer(&mut chunk, line);
+        chunk.push(',');
         push_tidy_quoted(&mut chunk, &what, &mut field);
-        let _ = write!(chunk, ",{unit},");
+        chunk.push(',');
+        chunk.push_str(unit);
+        chunk.push(',');
         crate::format::push_tidy_number(&mut chunk, *r);
         chunk.push('\n');
     }
     chunk
+}
+
+/// `n` in decimal digits (as `{n}` writes it), appended to `out`.
+fn push_integer(out: &mut String, n: usize) {
+    let mut digits = [0u8; 20];
+    let (mut m, mut i) = (n, digits.len());
+    loop {
+        i -= 1;
+        digits[i] = b'0' + (m % 10) as u8;
+        m /= 10;
+        if m == 0 {
+            break;
+        }
+    }
+    out.push_str(std::str::from_utf8(&digits[i..]).expect("ASCII digits"));
 }
 
 /// `s` as a quoted CSV field, tidied as [`crate::format::tidy_csv`] tidies it in its line
@@ -198,6 +219,15 @@ mod tests {
         let mut s = String::new();
         super::push_tidy_quoted(&mut s, "a,-0,b", &mut String::new());
         assert_eq!(s, "\"a,0,b\"");
+    }
+
+    #[test]
+    fn integers_are_written_as_display_writes_them() {
+        for n in [0usize, 1, 9, 10, 99, 100, 12_345, 1_000_000, usize::MAX] {
+            let mut s = String::new();
+            super::push_integer(&mut s, n);
+            assert_eq!(s, n.to_string());
+        }
     }
 
     #[test]
