@@ -976,6 +976,14 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     let mut previous_cells: Vec<String> = Vec::new();
     // Without logged link readings, the robot's checks come after the rows (see above).
     let deferred = !logged;
+    // The sensor of the previous row; whether the robot's sensor names are all different
+    // (then a name matches one sensor only, the one `sensor_index` finds).
+    let sensors = &robot.table.sensors;
+    let mut previous_sensor: Option<usize> = None;
+    let names_unique = {
+        let mut seen = std::collections::HashSet::new();
+        sensors.iter().all(|s| seen.insert(s.name.as_str()))
+    };
     let mut rows = || -> Result<(), InputError> {
         while t.next_row_into(&mut next)? {
             let row = &next;
@@ -985,17 +993,23 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
             }
             let label = t.required_text_at(row, pose_col)?;
             let sensor_name = t.required_text_at(row, sensor_col)?;
-            let sensor = robot.table.sensor_index(sensor_name).ok_or_else(|| {
-                t.err(
-                    row,
-                    "sensor",
-                    format!(
-                        "unknown sensor {:?} (the robot description has: {})",
-                        shorten(sensor_name),
-                        robot.sensor_names()
-                    ),
-                )
-            })?;
+            // Rows usually name the sensors in turn: the one after the previous row's first.
+            let next_sensor = previous_sensor
+                .map(|s| (s + 1) % sensors.len())
+                .filter(|&s| names_unique && sensors[s].name == sensor_name);
+            let sensor = next_sensor
+                .or_else(|| robot.table.sensor_index(sensor_name))
+                .ok_or_else(|| {
+                    t.err(
+                        row,
+                        "sensor",
+                        format!(
+                            "unknown sensor {:?} (the robot description has: {})",
+                            shorten(sensor_name),
+                            robot.sensor_names()
+                        ),
+                    )
+                })?;
             let same_as_previous = previous.is_some_and(|j| labels[j] == label)
                 && pose_columns
                     .iter()
@@ -1113,6 +1127,7 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 }
             };
             previous = Some(j);
+            previous_sensor = Some(sensor);
             if options.check_sensor_lengths && !deferred && !excluding[j] {
                 let s = &robot.table.sensors[sensor];
                 let nominal = s.length_mm(&campaign.poses[j]);
