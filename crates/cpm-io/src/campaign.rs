@@ -945,9 +945,8 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     let mut commanded = Vec::new();
     let mut reading_lines = Vec::new();
     let mut angles: AngleCells = Vec::new();
-    // J1's condition number at home, computed at the first pose.
-    let mut bound = None;
-    let mut limits_table: Option<JointTable> = None;
+    // The robot's checks of each new pose made as it is read (logged link readings).
+    let mut pose_checks = PoseChecks::default();
     // The pose of the previous row (rows of one pose usually follow each other).
     let mut previous: Option<usize> = None;
     // The poses found unreachable, and per pose whether it is one of them.
@@ -1062,30 +1061,12 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 None => {
                     let pose = pose.expect("a new pose is made");
                     let j = entries.len();
+                    // An unreachable pose is excluded at the end (its rows unchecked), or
+                    // refuses the file when there are too many.
                     if !deferred {
-                        check_position_units(&t.file, row.line, &pose.position_mm, robot)?;
-                    }
-                    if o == Orientation::Rpy {
-                        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
-                            angles.push((row.line, *name, *v));
-                        }
-                    }
-                    if options.max_condition_ratio.is_finite() && !deferred {
-                        let b = match bound {
-                            Some(b) => b,
-                            None => *bound.insert(condition_bound(
-                                &robot.table,
-                                options.max_condition_ratio,
-                                &t.file,
-                                row.line,
-                            )?),
-                        };
-                        let table = limits_table.get_or_insert_with(|| {
-                            widened(&robot.table, options.link_limit_margin_mm)
-                        });
-                        // An unreachable pose is excluded at the end (its rows unchecked), or
-                        // refuses the file when there are too many.
-                        if let Some(what) = unreachable_why(table, &pose, b) {
+                        if let Some(what) =
+                            pose_checks.check(&t.file, row.line, robot, options, &pose)?
+                        {
                             unusable.push(Unusable {
                                 pose: j,
                                 what,
@@ -1094,25 +1075,16 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                             });
                         }
                     }
+                    if o == Orientation::Rpy {
+                        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+                            angles.push((row.line, *name, *v));
+                        }
+                    }
                     let usable = unusable.last().is_none_or(|u| u.pose != j);
                     if let Some(u) = &link {
-                        commanded.push(if usable {
-                            check_link_readings(
-                                &t.file,
-                                row.line,
-                                robot,
-                                &pose,
-                                u,
-                                None,
-                                "commanded pose",
-                                "",
-                            )?
-                        } else {
-                            u.iter()
-                                .enumerate()
-                                .map(|(i, v)| robot.length_mm(i, *v))
-                                .collect()
-                        });
+                        commanded.push(commanded_lengths(
+                            &t.file, row.line, robot, &pose, u, usable,
+                        )?);
                     }
                     excluding.push(!usable);
                     by_label.insert(label.to_string(), j);
@@ -1156,21 +1128,10 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     let read = rows();
     if deferred {
         // The robot's checks of the rows read (all, or those before the refused one) first.
-        let checked = robot_checks(
-            &t.file,
-            robot,
-            options,
-            &campaign.poses,
-            &campaign.readings,
-            &reading_lines,
-        );
-        match (checked, read) {
-            (Err(e), _) | (Ok(_), Err(e)) => return Err(e),
-            (Ok(u), Ok(())) => unusable = u,
-        }
-    } else {
-        read?;
+        let (c, lines) = (&campaign, &reading_lines);
+        unusable = robot_checks(&t.file, robot, options, &c.poses, &c.readings, lines)?;
     }
+    read?;
     if campaign.readings.is_empty() {
         return Err(InputError::file(
             &t.file,
@@ -1196,6 +1157,66 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
         excluded: Vec::new(),
     };
     Ok((f, unusable))
+}
+
+/// The commanded lengths of a pose from its logged link readings `u` (its first row, on
+/// `line`): checked against the pose when it is `usable` (kept), else only converted.
+fn commanded_lengths(
+    file: &str,
+    line: usize,
+    robot: &Robot,
+    pose: &Pose,
+    u: &[f64],
+    usable: bool,
+) -> Result<Vec<f64>, InputError> {
+    if usable {
+        check_link_readings(file, line, robot, pose, u, None, "commanded pose", "")
+    } else {
+        Ok(u.iter()
+            .enumerate()
+            .map(|(i, v)| robot.length_mm(i, *v))
+            .collect())
+    }
+}
+
+/// The robot's checks of a new pose of a readings file made at its first row (with logged
+/// link readings, whose check needs to know whether the pose is kept): its position (mm, not
+/// metres), J1's condition number at home (computed at the first pose), its reachability.
+#[derive(Default)]
+struct PoseChecks {
+    bound: Option<(f64, f64)>,
+    table: Option<JointTable>,
+}
+
+impl PoseChecks {
+    /// Why the pose is unreachable (to exclude), `None` when it is reachable; the error of
+    /// a refused position or of the condition number at home.
+    fn check(
+        &mut self,
+        file: &str,
+        line: usize,
+        robot: &Robot,
+        options: &ReadOptions,
+        pose: &Pose,
+    ) -> Result<Option<String>, InputError> {
+        check_position_units(file, line, &pose.position_mm, robot)?;
+        if !options.max_condition_ratio.is_finite() {
+            return Ok(None);
+        }
+        let b = match self.bound {
+            Some(b) => b,
+            None => *self.bound.insert(condition_bound(
+                &robot.table,
+                options.max_condition_ratio,
+                file,
+                line,
+            )?),
+        };
+        let table = self
+            .table
+            .get_or_insert_with(|| widened(&robot.table, options.link_limit_margin_mm));
+        Ok(unreachable_why(table, pose, b))
+    }
 }
 
 /// The checks of a readings file read without logged link readings that depend on the

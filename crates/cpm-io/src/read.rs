@@ -70,7 +70,7 @@ pub enum SecondReading {
     /// The same as the first robot's (the same poses left out, for the same reasons).
     SameAsFirst,
     /// Its own (other poses left out).
-    File(DataFile),
+    File(Box<DataFile>),
 }
 
 /// A measurement file read for two robots with one pass over it: the first robot's reading,
@@ -108,7 +108,7 @@ pub fn read_data_file_for_two(
             let mut f = all.clone();
             exclude_poses(&mut f, u)?;
             register_tracker_files(std::slice::from_mut(&mut f), second, options)?;
-            Ok(SecondReading::File(f))
+            Ok(SecondReading::File(Box::new(f)))
         }
     });
     let mut f = all;

@@ -592,7 +592,7 @@ fn errors_of_both(
                     .and_then(|f| rg.take(f)),
                 Some(Err(e)) => Err(e.into()),
                 Some(Ok(SecondReading::File(mut f))) => {
-                    held_out(&mut f, reference, reference, tracker).and_then(|()| rg.take(f))
+                    held_out(&mut f, reference, reference, tracker).and_then(|()| rg.take(*f))
                 }
                 Some(Ok(SecondReading::SameAsFirst)) => {
                     // The file as `robot` read it, with the reference's commanded lengths.
