@@ -901,6 +901,23 @@ pub(crate) fn read_readings_table<R: Read>(
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
+    let (mut f, unusable) = read_readings_unexcluded(t, robot, options)?;
+    exclude_poses(&mut f, unusable)?;
+    Ok(f)
+}
+
+/// [`read_readings_table`] without the exclusion of the unusable poses: the file with all
+/// its poses, and the poses to exclude.
+///
+/// Without logged link readings, the checks that depend on the robot (positions in mm,
+/// reachability, sensor lengths: [`robot_checks`]) are made after the rows are read, the
+/// reachability of the poses in parallel, with the errors they would have given row by row:
+/// when a row is refused, the checks of the rows before it come first.
+pub(crate) fn read_readings_unexcluded<R: Read>(
+    t: &mut Table<R>,
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Result<(DataFile, Vec<Unusable>), InputError> {
     let n = robot.num_links();
     let o = orientation(t)?;
     t.check_columns(
@@ -928,9 +945,8 @@ pub(crate) fn read_readings_table<R: Read>(
     let mut commanded = Vec::new();
     let mut reading_lines = Vec::new();
     let mut angles: AngleCells = Vec::new();
-    // J1's condition number at home, computed at the first pose.
-    let mut bound = None;
-    let mut limits_table: Option<JointTable> = None;
+    // The robot's checks of each new pose made as it is read (logged link readings).
+    let mut pose_checks = PoseChecks::default();
     // The pose of the previous row (rows of one pose usually follow each other).
     let mut previous: Option<usize> = None;
     // The poses found unreachable, and per pose whether it is one of them.
@@ -957,137 +973,138 @@ pub(crate) fn read_readings_table<R: Read>(
     // The pose cells of the previous row as written: a row of the same pose that repeats
     // them exactly has the same numbers, already checked.
     let mut previous_cells: Vec<String> = Vec::new();
-    while t.next_row_into(&mut next)? {
-        let row = &next;
-        let t: &Header = t;
-        if reading_lines.len() >= options.max_rows {
-            return Err(too_many_rows(t, row, options.max_rows));
-        }
-        let label = t.required_text_at(row, pose_col)?;
-        let sensor_name = t.required_text_at(row, sensor_col)?;
-        let sensor = robot.table.sensor_index(sensor_name).ok_or_else(|| {
-            t.err(
-                row,
-                "sensor",
-                format!(
-                    "unknown sensor {:?} (the robot description has: {})",
-                    shorten(sensor_name),
-                    robot.sensor_names()
-                ),
-            )
-        })?;
-        let same_as_previous = previous.is_some_and(|j| labels[j] == label)
-            && pose_columns
-                .iter()
-                .zip(&previous_cells)
-                .all(|((_, c), p)| row.fields[*c] == *p);
-        let known = match previous {
-            Some(j) if labels[j] == label => Some(j),
-            _ => by_label.get(label).copied(),
-        };
-        let (raw, pose) = if same_as_previous {
-            // The previous row's pose, cell for cell: it agreed with its pose's first row.
-            let j = known.expect("the previous row's pose");
-            (entries[j].raw, None)
-        } else {
-            let raw = raw_pose_at(t, row, &pose_columns)?;
-            // A repeated pose that agrees with its first row is that row's pose: not made
-            // again.
-            let pose = match known {
-                Some(j) if raw.agrees(&entries[j].raw) => None,
-                _ => Some(pose_of(t, row, o, &raw)?),
-            };
-            previous_cells.clear();
-            previous_cells.extend(pose_columns.iter().map(|(_, c)| row.fields[*c].clone()));
-            (raw, pose)
-        };
-        let length_mm = t.number_at(row, length_col)?;
-        let time_s = t.optional_number_at(row, time_col)?;
-        let temperature_c = t.optional_number_at(row, temperature_col)?;
-        if t.optional_bool_at(row, simulated_col)? == Some(true) {
-            campaign.simulated = true;
-        }
-        let link = if logged {
-            Some(link_readings(t, row, n)?)
-        } else {
-            None
-        };
-        let j = match known {
-            Some(j) => {
-                let e = &entries[j];
-                same_pose_as_before(t, row, label, (&raw, &link), (&e.raw, &e.readings), e.line)?;
-                j
+    // Without logged link readings, the robot's checks come after the rows (see above).
+    let deferred = !logged;
+    // The sensor of the previous row; whether the robot's sensor names are all different
+    // (then a name matches one sensor only, the one `sensor_index` finds).
+    let sensors = &robot.table.sensors;
+    let mut previous_sensor: Option<usize> = None;
+    let names_unique = {
+        let mut seen = std::collections::HashSet::new();
+        sensors.iter().all(|s| seen.insert(s.name.as_str()))
+    };
+    let mut rows = || -> Result<(), InputError> {
+        while t.next_row_into(&mut next)? {
+            let row = &next;
+            let t: &Header = t;
+            if reading_lines.len() >= options.max_rows {
+                return Err(too_many_rows(t, row, options.max_rows));
             }
-            None => {
-                let pose = pose.expect("a new pose is made");
-                let j = entries.len();
-                check_position_units(&t.file, row.line, &pose.position_mm, robot)?;
-                if o == Orientation::Rpy {
-                    for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
-                        angles.push((row.line, *name, *v));
-                    }
+            let label = t.required_text_at(row, pose_col)?;
+            let sensor_name = t.required_text_at(row, sensor_col)?;
+            // Rows usually name the sensors in turn: the one after the previous row's first.
+            let next_sensor = previous_sensor
+                .map(|s| (s + 1) % sensors.len())
+                .filter(|&s| names_unique && sensors[s].name == sensor_name);
+            let sensor = next_sensor
+                .or_else(|| robot.table.sensor_index(sensor_name))
+                .ok_or_else(|| {
+                    t.err(
+                        row,
+                        "sensor",
+                        format!(
+                            "unknown sensor {:?} (the robot description has: {})",
+                            shorten(sensor_name),
+                            robot.sensor_names()
+                        ),
+                    )
+                })?;
+            let same_as_previous = previous.is_some_and(|j| labels[j] == label)
+                && pose_columns
+                    .iter()
+                    .zip(&previous_cells)
+                    .all(|((_, c), p)| row.fields[*c] == *p);
+            let known = match previous {
+                Some(j) if labels[j] == label => Some(j),
+                _ => by_label.get(label).copied(),
+            };
+            let (raw, pose) = if same_as_previous {
+                // The previous row's pose, cell for cell: it agreed with its pose's first row.
+                let j = known.expect("the previous row's pose");
+                (entries[j].raw, None)
+            } else {
+                let raw = raw_pose_at(t, row, &pose_columns)?;
+                // A repeated pose that agrees with its first row is that row's pose: not made
+                // again.
+                let pose = match known {
+                    Some(j) if raw.agrees(&entries[j].raw) => None,
+                    _ => Some(pose_of(t, row, o, &raw)?),
+                };
+                previous_cells.clear();
+                previous_cells.extend(pose_columns.iter().map(|(_, c)| row.fields[*c].clone()));
+                (raw, pose)
+            };
+            let length_mm = t.number_at(row, length_col)?;
+            let time_s = t.optional_number_at(row, time_col)?;
+            let temperature_c = t.optional_number_at(row, temperature_col)?;
+            if t.optional_bool_at(row, simulated_col)? == Some(true) {
+                campaign.simulated = true;
+            }
+            let link = if logged {
+                Some(link_readings(t, row, n)?)
+            } else {
+                None
+            };
+            let j = match known {
+                Some(j) => {
+                    let e = &entries[j];
+                    same_pose_as_before(
+                        t,
+                        row,
+                        label,
+                        (&raw, &link),
+                        (&e.raw, &e.readings),
+                        e.line,
+                    )?;
+                    j
                 }
-                if options.max_condition_ratio.is_finite() {
-                    let b = match bound {
-                        Some(b) => b,
-                        None => *bound.insert(condition_bound(
-                            &robot.table,
-                            options.max_condition_ratio,
-                            &t.file,
-                            row.line,
-                        )?),
-                    };
-                    let table = limits_table
-                        .get_or_insert_with(|| widened(&robot.table, options.link_limit_margin_mm));
+                None => {
+                    let pose = pose.expect("a new pose is made");
+                    let j = entries.len();
                     // An unreachable pose is excluded at the end (its rows unchecked), or
                     // refuses the file when there are too many.
-                    if let Some(what) = unreachable_why(table, &pose, b) {
-                        unusable.push(Unusable {
-                            pose: j,
-                            what,
-                            note: String::new(),
-                            field: None,
-                        });
+                    if !deferred {
+                        if let Some(what) =
+                            pose_checks.check(&t.file, row.line, robot, options, &pose)?
+                        {
+                            unusable.push(Unusable {
+                                pose: j,
+                                what,
+                                note: String::new(),
+                                field: None,
+                            });
+                        }
                     }
-                }
-                let usable = unusable.last().is_none_or(|u| u.pose != j);
-                if let Some(u) = &link {
-                    commanded.push(if usable {
-                        check_link_readings(
-                            &t.file,
-                            row.line,
-                            robot,
-                            &pose,
-                            u,
-                            None,
-                            "commanded pose",
-                            "",
-                        )?
-                    } else {
-                        u.iter()
-                            .enumerate()
-                            .map(|(i, v)| robot.length_mm(i, *v))
-                            .collect()
+                    if o == Orientation::Rpy {
+                        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+                            angles.push((row.line, *name, *v));
+                        }
+                    }
+                    let usable = unusable.last().is_none_or(|u| u.pose != j);
+                    if let Some(u) = &link {
+                        commanded.push(commanded_lengths(
+                            &t.file, row.line, robot, &pose, u, usable,
+                        )?);
+                    }
+                    excluding.push(!usable);
+                    by_label.insert(label.to_string(), j);
+                    entries.push(PoseEntry {
+                        raw,
+                        readings: link,
+                        line: row.line,
                     });
+                    labels.push(label.to_string());
+                    campaign.poses.push(pose);
+                    j
                 }
-                excluding.push(!usable);
-                by_label.insert(label.to_string(), j);
-                entries.push(PoseEntry {
-                    raw,
-                    readings: link,
-                    line: row.line,
-                });
-                labels.push(label.to_string());
-                campaign.poses.push(pose);
-                j
-            }
-        };
-        previous = Some(j);
-        if options.check_sensor_lengths && !excluding[j] {
-            let s = &robot.table.sensors[sensor];
-            let nominal = s.length_mm(&campaign.poses[j]);
-            if !((length_mm - nominal).abs() <= tolerance_mm(nominal)) {
-                return Err(t.err(
+            };
+            previous = Some(j);
+            previous_sensor = Some(sensor);
+            if options.check_sensor_lengths && !deferred && !excluding[j] {
+                let s = &robot.table.sensors[sensor];
+                let nominal = s.length_mm(&campaign.poses[j]);
+                if !((length_mm - nominal).abs() <= tolerance_mm(nominal)) {
+                    return Err(t.err(
                     row,
                     "length_mm",
                     format!(
@@ -1095,17 +1112,26 @@ pub(crate) fn read_readings_table<R: Read>(
                         show(length_mm, None)
                     ),
                 ));
+                }
             }
+            campaign.readings.push(Reading {
+                pose: j,
+                sensor,
+                length_mm,
+                time_s,
+                temperature_c,
+            });
+            reading_lines.push(row.line);
         }
-        campaign.readings.push(Reading {
-            pose: j,
-            sensor,
-            length_mm,
-            time_s,
-            temperature_c,
-        });
-        reading_lines.push(row.line);
+        Ok(())
+    };
+    let read = rows();
+    if deferred {
+        // The robot's checks of the rows read (all, or those before the refused one) first.
+        let (c, lines) = (&campaign, &reading_lines);
+        unusable = robot_checks(&t.file, robot, options, &c.poses, &c.readings, lines)?;
     }
+    read?;
     if campaign.readings.is_empty() {
         return Err(InputError::file(
             &t.file,
@@ -1116,7 +1142,7 @@ pub(crate) fn read_readings_table<R: Read>(
     if logged {
         campaign.commanded_lengths_mm = Some(commanded);
     }
-    let mut f = DataFile {
+    let f = DataFile {
         file: t.file.clone(),
         kind: FileKind::Readings,
         pose_lines: entries.iter().map(|e| e.line).collect(),
@@ -1130,8 +1156,174 @@ pub(crate) fn read_readings_table<R: Read>(
         point_frame: None,
         excluded: Vec::new(),
     };
-    exclude_poses(&mut f, unusable)?;
-    Ok(f)
+    Ok((f, unusable))
+}
+
+/// The commanded lengths of a pose from its logged link readings `u` (its first row, on
+/// `line`): checked against the pose when it is `usable` (kept), else only converted.
+fn commanded_lengths(
+    file: &str,
+    line: usize,
+    robot: &Robot,
+    pose: &Pose,
+    u: &[f64],
+    usable: bool,
+) -> Result<Vec<f64>, InputError> {
+    if usable {
+        check_link_readings(file, line, robot, pose, u, None, "commanded pose", "")
+    } else {
+        Ok(u.iter()
+            .enumerate()
+            .map(|(i, v)| robot.length_mm(i, *v))
+            .collect())
+    }
+}
+
+/// The robot's checks of a new pose of a readings file made at its first row (with logged
+/// link readings, whose check needs to know whether the pose is kept): its position (mm, not
+/// metres), J1's condition number at home (computed at the first pose), its reachability.
+#[derive(Default)]
+struct PoseChecks {
+    bound: Option<(f64, f64)>,
+    table: Option<JointTable>,
+}
+
+impl PoseChecks {
+    /// Why the pose is unreachable (to exclude), `None` when it is reachable; the error of
+    /// a refused position or of the condition number at home.
+    fn check(
+        &mut self,
+        file: &str,
+        line: usize,
+        robot: &Robot,
+        options: &ReadOptions,
+        pose: &Pose,
+    ) -> Result<Option<String>, InputError> {
+        check_position_units(file, line, &pose.position_mm, robot)?;
+        if !options.max_condition_ratio.is_finite() {
+            return Ok(None);
+        }
+        let b = match self.bound {
+            Some(b) => b,
+            None => *self.bound.insert(condition_bound(
+                &robot.table,
+                options.max_condition_ratio,
+                file,
+                line,
+            )?),
+        };
+        let table = self
+            .table
+            .get_or_insert_with(|| widened(&robot.table, options.link_limit_margin_mm));
+        Ok(unreachable_why(table, pose, b))
+    }
+}
+
+/// The checks of a readings file read without logged link readings that depend on the
+/// robot, in the order the rows give them: at each pose's first row its position (mm, not
+/// metres), J1's condition number at home (at the first pose) and its reachability (an
+/// unreachable pose is to be excluded: returned), then at every row of a pose kept the
+/// sensor's length against the nominal. The reachability of all the poses is found first,
+/// in parallel (it depends on the pose alone).
+fn robot_checks(
+    file: &str,
+    robot: &Robot,
+    options: &ReadOptions,
+    poses: &[Pose],
+    readings: &[Reading],
+    reading_lines: &[usize],
+) -> Result<Vec<Unusable>, InputError> {
+    use rayon::prelude::*;
+    // Poses are numbered in the order of their first rows.
+    let met = readings.iter().map(|r| r.pose + 1).max().unwrap_or(0);
+    let reach = options.max_condition_ratio.is_finite() && met > 0;
+    let mut bound = reach.then(|| {
+        condition_bound(
+            &robot.table,
+            options.max_condition_ratio,
+            file,
+            reading_lines[0],
+        )
+    });
+    let why: Vec<Option<String>> = match &bound {
+        Some(Ok(b)) => {
+            let table = widened(&robot.table, options.link_limit_margin_mm);
+            poses[..met]
+                .par_iter()
+                .map(|p| unreachable_why(&table, p, *b))
+                .collect()
+        }
+        _ => Vec::new(),
+    };
+    let mut unusable = Vec::new();
+    let mut excluding = vec![false; met];
+    let mut next_pose = 0;
+    for (r, &line) in readings.iter().zip(reading_lines) {
+        let j = r.pose;
+        if j == next_pose {
+            next_pose += 1;
+            check_position_units(file, line, &poses[j].position_mm, robot)?;
+            if let Some(b) = bound.take() {
+                b?;
+            }
+            if let Some(what) = why.get(j).cloned().flatten() {
+                excluding[j] = true;
+                unusable.push(Unusable {
+                    pose: j,
+                    what,
+                    note: String::new(),
+                    field: None,
+                });
+            }
+        }
+        if options.check_sensor_lengths && !excluding[j] {
+            let s = &robot.table.sensors[r.sensor];
+            let nominal = s.length_mm(&poses[j]);
+            if !((r.length_mm - nominal).abs() <= tolerance_mm(nominal)) {
+                return Err(InputError::field(
+                    file,
+                    line,
+                    "length_mm",
+                    format!(
+                        "{} mm is far from the nominal length of sensor {:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?",
+                        show(r.length_mm, None),
+                        s.name
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(unusable)
+}
+
+/// A readings file read for a second robot from what the first robot's reading made of it
+/// (`first`, its poses all kept): the robot's own checks ([`robot_checks`]) and exclusions.
+/// `None` when the first reading cannot be shared: another kind of file, logged link
+/// readings (turned into lengths by each robot's reading models), or sensors named otherwise
+/// (the rows name them).
+pub(crate) fn readings_for_second_robot(
+    first: &DataFile,
+    first_robot: &Robot,
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Option<Result<Vec<Unusable>, InputError>> {
+    let (a, b) = (&first_robot.table.sensors, &robot.table.sensors);
+    let same_names = a.len() == b.len() && a.iter().zip(b).all(|(a, b)| a.name == b.name);
+    if first.kind != FileKind::Readings
+        || first.campaign.commanded_lengths_mm.is_some()
+        || !same_names
+    {
+        return None;
+    }
+    let c = &first.campaign;
+    Some(robot_checks(
+        &first.file,
+        robot,
+        options,
+        &c.poses,
+        &c.readings,
+        &first.reading_lines,
+    ))
 }
 
 /// Checks that a row of a pose already given (on line `line`) repeats its commanded pose and

@@ -75,6 +75,9 @@ pub use campaign::{
     TrackerRow, MAX_ROWS, POSES_PER_EXCLUDED_POSE, REGISTRATION_APPLY_MM,
 };
 pub use error::{read_text, InputError, ReadError};
-pub use read::{read_data, read_data_file, read_data_files, read_data_from};
+pub use read::{
+    read_data, read_data_file, read_data_file_for_two, read_data_files, read_data_from,
+    SecondReading,
+};
 pub use robot::{calibrated_description, calibrated_toml, parse_effects, Robot};
 pub use table::FileKind;

@@ -6,8 +6,9 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::campaign::{
-    finish, open, read_pose_measurements_table, read_readings_table, register_tracker_files,
-    DataFile, ReadOptions,
+    exclude_poses, finish, open, read_pose_measurements_table, read_readings_table,
+    read_readings_unexcluded, readings_for_second_robot, register_tracker_files, DataFile,
+    ReadOptions,
 };
 use crate::points::{read_point_measurements_table, read_tilt_measurements_table};
 use crate::table::{FileKind, Table};
@@ -60,6 +61,60 @@ pub fn read_data_from<R: Read>(
     let mut f = r.map_err(|e| finish(&mut t, e))?;
     register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
     Ok(f)
+}
+
+/// What a second robot's reading of a file is, beside the first's (see
+/// [`read_data_file_for_two`]).
+#[derive(Debug)]
+pub enum SecondReading {
+    /// The same as the first robot's (the same poses left out, for the same reasons).
+    SameAsFirst,
+    /// Its own (other poses left out).
+    File(Box<DataFile>),
+}
+
+/// A measurement file read for two robots with one pass over it: the first robot's reading,
+/// as [`read_data_file`] gives it, and the second robot's when it can share the pass (a
+/// readings file without logged link readings, and both robots name the same sensors in the
+/// same order): the second's own checks (positions, reachability, sensor lengths) and
+/// exclusions are made on the rows the first read, with the result and the error
+/// [`read_data_file`] gives for it. `None` for the second: read it on its own.
+pub fn read_data_file_for_two(
+    path: &Path,
+    first: &Robot,
+    second: &Robot,
+    options: &ReadOptions,
+) -> Result<(DataFile, Option<Result<SecondReading, ReadError>>), ReadError> {
+    let file = path.display().to_string();
+    let mut t = Table::from_reader(open(path)?, &file)?;
+    if !matches!(t.kind(), Ok(FileKind::Readings)) {
+        drop(t);
+        return Ok((read_data_file(path, first, options)?, None));
+    }
+    let (all, unusable) =
+        read_readings_unexcluded(&mut t, first, options).map_err(|e| finish(&mut t, e))?;
+    drop(t);
+    let theirs = readings_for_second_robot(&all, first, second, options);
+    let same = |u: &[crate::campaign::Unusable]| {
+        u.len() == unusable.len()
+            && u.iter()
+                .zip(&unusable)
+                .all(|(a, b)| a.pose == b.pose && a.what == b.what)
+    };
+    let second = theirs.map(|r| match r {
+        Err(e) => Err(ReadError::Input(e)),
+        Ok(u) if same(&u) => Ok(SecondReading::SameAsFirst),
+        Ok(u) => {
+            let mut f = all.clone();
+            exclude_poses(&mut f, u)?;
+            register_tracker_files(std::slice::from_mut(&mut f), second, options)?;
+            Ok(SecondReading::File(Box::new(f)))
+        }
+    });
+    let mut f = all;
+    exclude_poses(&mut f, unusable)?;
+    register_tracker_files(std::slice::from_mut(&mut f), first, options)?;
+    Ok((f, second))
 }
 
 /// Reads several measurement files (see [`read_data_file`]); the tracker files among them are

@@ -223,6 +223,9 @@ fn push_twelve_digits(out: &mut String, v: f64) {
 /// significant digits rounded), appended to `out`, without reading the number back.
 pub(crate) fn push_tidy_number(out: &mut String, v: f64) {
     use std::fmt::Write as _;
+    if push_rounded_twelve(out, v) {
+        return;
+    }
     let start = out.len();
     // Writing into a String cannot fail; a finite f64 is written in digits, `-` and `.`.
     let _ = write!(out, "{v}");
@@ -237,6 +240,79 @@ pub(crate) fn push_tidy_number(out: &mut String, v: f64) {
         out.truncate(start);
         push_twelve_digits(out, v);
     }
+}
+
+/// [`push_tidy_number`] of the common case made without formatting the number twice: a
+/// number of [1e-4, 1e12) in magnitude whose shortest form has more than 12 significant
+/// digits, rounded to 12 as [`push_twelve_digits`] rounds it (the decimals it gives, trailing
+/// zeros left out) from the integer of its 12 digits. False (nothing written) for any other
+/// number, and when the rounding is not certain in binary (within 1e-3 of a tie): the general
+/// way writes it.
+fn push_rounded_twelve(out: &mut String, v: f64) -> bool {
+    const POW10: [f64; 16] = [
+        1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+    ];
+    let a = v.abs();
+    if !(1e-4..1e12).contains(&a) {
+        return false;
+    }
+    // The decimals of `push_twelve_digits` (at most 15 in this range).
+    let e = a.log10().floor() as i64;
+    let d = (11 - e).clamp(0, 17) as usize;
+    let Some(&scale) = POW10.get(d) else {
+        return false;
+    };
+    // a * 10^d is below 1e13: its one rounding error is below 1e-3.
+    let x = a * scale;
+    let r = x.round();
+    if ((x - x.floor()) - 0.5).abs() < 1e-3 || !(1e10..=1e13).contains(&r) {
+        return false;
+    }
+    let n = r as u64;
+    // Its 12 digits read back as the number: the shortest form has 12 digits or fewer, and
+    // the number is written as it is (the general way).
+    if n as f64 / scale == a {
+        return false;
+    }
+    let mut digits = [0u8; 20];
+    let mut len = 0;
+    let mut m = n;
+    while m > 0 {
+        digits[len] = b'0' + (m % 10) as u8;
+        m /= 10;
+        len += 1;
+    }
+    digits[..len].reverse();
+    let digits = &digits[..len];
+    if v < 0.0 {
+        out.push('-');
+    }
+    // Integer part, then the decimals without their trailing zeros.
+    let (int, frac): (&[u8], usize) = if len > d {
+        (&digits[..len - d], d)
+    } else {
+        (b"0", d)
+    };
+    for &b in int {
+        out.push(b as char);
+    }
+    let mut decimals = [b'0'; 32];
+    if len > d {
+        decimals[..d].copy_from_slice(&digits[len - d..]);
+    } else {
+        decimals[d - len..d].copy_from_slice(digits);
+    }
+    let kept = decimals[..frac]
+        .iter()
+        .rposition(|b| *b != b'0')
+        .map_or(0, |i| i + 1);
+    if kept > 0 {
+        out.push('.');
+        for &b in &decimals[..kept] {
+            out.push(b as char);
+        }
+    }
+    true
 }
 
 /// The artefacts no user text may contain: a negative zero, a float printed at full
@@ -282,6 +358,61 @@ pub(crate) fn finite(v: Option<f64>) -> Option<f64> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    /// The tidy number written the general way (shortest form, then rounded to 12 digits
+    /// when longer), for comparison with the direct rounding.
+    fn tidy_the_general_way(v: f64) -> String {
+        use std::fmt::Write as _;
+        let mut out = String::new();
+        let _ = write!(out, "{v}");
+        if v.is_finite() && v != 0.0 && significant_digits(&out) > 12 {
+            out.clear();
+            push_twelve_digits(&mut out, v);
+        }
+        out
+    }
+
+    proptest! {
+        /// The direct rounding of 12 digits writes what formatting twice writes.
+        #[test]
+        fn rounding_twelve_digits_directly_is_formatting_twice(
+            m in -1.0f64..1.0,
+            e in -6i32..14,
+        ) {
+            let v = m * 10f64.powi(e);
+            let mut direct = String::new();
+            push_tidy_number(&mut direct, v);
+            prop_assert_eq!(direct, tidy_the_general_way(v));
+        }
+    }
+
+    #[test]
+    fn rounding_twelve_digits_directly_at_the_edges() {
+        let mut cases = vec![
+            0.1 + 0.2,
+            1.0 / 3.0,
+            -2.0 / 3.0,
+            999_999_999_999.9,
+            99.999_999_999_999,
+            9.999_999_999_995,
+            0.000_100_000_000_000_01,
+            0.000_099_999_999_999_999,
+            123_456_789_012.345,
+            1e-4,
+            1e12 - 0.5,
+            -331.739_672_003_852_1,
+        ];
+        let mut x = 0.123_456_789_012_345_6f64;
+        for _ in 0..20_000 {
+            x = (x * 7.3 + 0.1).fract();
+            cases.push((x - 0.5) * 10f64.powi((x * 1e6) as i32 % 17 - 5));
+        }
+        for v in cases {
+            let mut direct = String::new();
+            push_tidy_number(&mut direct, v);
+            assert_eq!(direct, tidy_the_general_way(v), "{v:e}");
+        }
+    }
 
     #[test]
     fn negative_zero_is_unsigned() {

@@ -5,7 +5,6 @@
 //! texts of an observation (file, line, what) exist only while its row is written, in
 //! buffers reused from row to row; the residuals stay numbers until then.
 use std::borrow::Cow;
-use std::fmt::Write as _;
 
 use cpm_io::{Merged, Robot};
 
@@ -38,12 +37,44 @@ pub fn write_residual_rows<W: std::io::Write>(
     residuals: &[f64],
     first: usize,
 ) -> std::io::Result<()> {
+    use rayon::prelude::*;
     let residuals = in_tracker_axes(merged, residuals);
+    // Blocks of rows made in parallel, a batch of them at a time (so that at most a batch's
+    // text is held beside what `out` keeps), written in order.
+    const ROWS: usize = 1 << 13;
+    const BATCH: usize = 16;
+    let blocks: Vec<(usize, &[f64])> = residuals
+        .chunks(ROWS)
+        .enumerate()
+        .map(|(b, r)| (b * ROWS, r))
+        .collect();
+    for batch in blocks.chunks(BATCH) {
+        let texts: Vec<String> = batch
+            .par_iter()
+            .map(|(start, r)| residual_rows(robot, merged, r, *start, first))
+            .collect();
+        for t in &texts {
+            out.write_all(t.as_bytes())?;
+        }
+    }
+    Ok(())
+}
+
+/// The rows of observations `start..start + residuals.len()` (see [`write_residual_rows`]).
+fn residual_rows(
+    robot: &Robot,
+    merged: &Merged,
+    residuals: &[f64],
+    start: usize,
+    first: usize,
+) -> String {
     let c = &merged.campaign;
-    let (mut what, mut field, mut chunk) = (String::new(), String::new(), String::new());
+    let (mut what, mut field) = (String::new(), String::new());
+    let mut chunk = String::with_capacity(64 * residuals.len());
     // The file field of the previous row, as written (rows of one file follow each other).
     let (mut file_of_field, mut file_field) = (None::<&str>, String::new());
-    for (k, r) in residuals.iter().enumerate() {
+    for (i, r) in residuals.iter().enumerate() {
+        let k = start + i;
         let origin = write_observation_origin(robot, merged, k, &mut what);
         let (file, line) = origin.unwrap_or(("", 0));
         if file_of_field != Some(file) {
@@ -59,17 +90,35 @@ pub fn write_residual_rows<W: std::io::Write>(
         // The row as `tidy_csv` would leave it: the numbering, the line and the unit are
         // left as they are, the residual is rounded to 12 significant digits.
         // Writing into a String cannot fail.
-        let _ = write!(chunk, "{},{file_field},{line},", k + first);
+        push_integer(&mut chunk, k + first);
+        chunk.push(',');
+        chunk.push_str(&file_field);
+        chunk.push(',');
+        push_integer(&mut chunk, line);
+        chunk.push(',');
         push_tidy_quoted(&mut chunk, &what, &mut field);
-        let _ = write!(chunk, ",{unit},");
+        chunk.push(',');
+        chunk.push_str(unit);
+        chunk.push(',');
         crate::format::push_tidy_number(&mut chunk, *r);
         chunk.push('\n');
-        if chunk.len() >= 1 << 16 {
-            out.write_all(chunk.as_bytes())?;
-            chunk.clear();
+    }
+    chunk
+}
+
+/// `n` in decimal digits (as `{n}` writes it), appended to `out`.
+fn push_integer(out: &mut String, n: usize) {
+    let mut digits = [0u8; 20];
+    let (mut m, mut i) = (n, digits.len());
+    loop {
+        i -= 1;
+        digits[i] = b'0' + (m % 10) as u8;
+        m /= 10;
+        if m == 0 {
+            break;
         }
     }
-    out.write_all(chunk.as_bytes())
+    out.push_str(std::str::from_utf8(&digits[i..]).expect("ASCII digits"));
 }
 
 /// `s` as a quoted CSV field, tidied as [`crate::format::tidy_csv`] tidies it in its line
@@ -170,6 +219,15 @@ mod tests {
         let mut s = String::new();
         super::push_tidy_quoted(&mut s, "a,-0,b", &mut String::new());
         assert_eq!(s, "\"a,0,b\"");
+    }
+
+    #[test]
+    fn integers_are_written_as_display_writes_them() {
+        for n in [0usize, 1, 9, 10, 99, 100, 12_345, 1_000_000, usize::MAX] {
+            let mut s = String::new();
+            super::push_integer(&mut s, n);
+            assert_eq!(s, n.to_string());
+        }
     }
 
     #[test]

@@ -169,6 +169,18 @@ fn read_held_out(
     tracker: (f64, f64),
 ) -> anyhow::Result<crate::io::DataFile> {
     let mut file = crate::io::read_data_file(path, robot, options)?;
+    held_out(&mut file, robot, controller, tracker)?;
+    Ok(file)
+}
+
+/// What [`read_held_out`] makes of a file `robot` read: refused when it is a pose list,
+/// commanded lengths from `controller` where it logged none, the tracker weights.
+fn held_out(
+    file: &mut crate::io::DataFile,
+    robot: &Robot,
+    controller: &Robot,
+    tracker: (f64, f64),
+) -> anyhow::Result<()> {
     if file.kind == FileKind::Poses {
         return Err(usage_error(format!(
             "{}: a pose list has no measurements to validate against",
@@ -183,7 +195,7 @@ fn read_held_out(
         file.campaign.pose_sigma_um,
         file.campaign.orientation_sigma_urad,
     ) = tracker;
-    Ok(file)
+    Ok(())
 }
 
 /// Whether `list` names the pose `e` names (the same file and label, whatever the reason).
@@ -450,6 +462,119 @@ impl Gather {
     }
 }
 
+/// The prediction errors of one robot, gathered file after file (see [`errors_of`]).
+struct RobotGather<'r> {
+    robot: &'r Robot,
+    model: MeasurementModel,
+    pose_map_range: Option<crate::calib::refine::PoseRange>,
+    gather: Gather,
+    /// `residuals.csv` so far, when it is asked for; and the observations it numbers.
+    residuals_csv: Option<Vec<u8>>,
+    written: usize,
+}
+
+impl<'r> RobotGather<'r> {
+    fn new(robot: &'r Robot, residuals: bool) -> Self {
+        RobotGather {
+            robot,
+            model: robot.model(&[]),
+            pose_map_range: fitted_pose_map_range(robot),
+            gather: Gather {
+                out: RobotErrors::default(),
+                sensor_group: vec![None; robot.table.sensors.len()],
+            },
+            residuals_csv: residuals.then(|| {
+                crate::report::residuals::RESIDUALS_HEADER
+                    .as_bytes()
+                    .to_vec()
+            }),
+            written: 0,
+        }
+    }
+
+    /// One held-out file (as [`read_held_out`] gives it) predicted and gathered; the
+    /// residuals in their own units when `residuals.csv` is asked for (else none).
+    fn file(&mut self, file: &crate::io::DataFile) -> anyhow::Result<Vec<f64>> {
+        let (robot, model, gather) = (self.robot, &self.model, &mut self.gather);
+        gather.out.excluded.extend(file.excluded.iter().cloned());
+        let campaign: &Campaign = &file.campaign;
+        gather.out.simulated |= campaign.simulated;
+        let fail = |e: crate::calib::CalibError| {
+            trouble(format!(
+                "{}: predicting with {}: {e}",
+                file.file, robot.file
+            ))
+        };
+        let prepared = Prepared::new(model, campaign).map_err(fail)?;
+        let (predicted, frame) = if campaign.pose_measurements.is_empty()
+            && campaign.point_measurements.is_empty()
+            && campaign.tilt_measurements.is_empty()
+        {
+            let zeros = vec![0.0; model.num_params()];
+            (
+                predict(model, &prepared, campaign, &zeros, None).map_err(fail)?,
+                None,
+            )
+        } else {
+            let (predicted, frame, check) = register_held_out(model, &prepared, file, &fail)?;
+            gather.out.sessions.push(check);
+            (predicted, Some(frame))
+        };
+        let observed = campaign.observations();
+        gather.readings(robot, campaign, &observed, &predicted);
+        gather.instruments(&file.file, campaign, &observed, &predicted);
+        if let Some(frame) = frame.filter(|_| !campaign.pose_measurements.is_empty()) {
+            gather.tracker(
+                robot,
+                model,
+                &prepared,
+                &file.file,
+                campaign,
+                &observed,
+                &predicted,
+                &frame,
+                self.pose_map_range.as_ref(),
+            );
+        }
+        // The residuals in their own units, for `residuals.csv` only.
+        Ok(if self.residuals_csv.is_some() {
+            observed
+                .iter()
+                .zip(&predicted)
+                .map(|(o, p)| (o - p) * 1e3)
+                .collect()
+        } else {
+            Vec::new()
+        })
+    }
+
+    /// [`file`](Self::file), and its rows of `residuals.csv` when it is asked for.
+    fn take(&mut self, file: crate::io::DataFile) -> anyhow::Result<()> {
+        let native = self.file(&file)?;
+        if let Some(csv) = &mut self.residuals_csv {
+            // Where each observation comes from, as the file was read.
+            let origins = crate::io::merge(vec![file], self.robot);
+            crate::report::residuals::write_residual_rows(
+                csv,
+                self.robot,
+                &origins,
+                &native,
+                self.written + 1,
+            )?;
+            self.written += native.len();
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> RobotErrors {
+        let mut out = self.gather.out;
+        if let Some(csv) = self.residuals_csv {
+            out.residuals_csv = String::from_utf8(csv).expect("UTF-8 rows");
+        }
+        out
+    }
+}
+
 /// The groups (sensor names, or `file (tracker)`) and their errors for one robot.
 ///
 /// A file without logged link readings was driven by the controller's inverse kinematics of
@@ -472,84 +597,60 @@ fn errors_of(
     residuals: bool,
     leave_out: &[crate::io::ExcludedPose],
 ) -> anyhow::Result<RobotErrors> {
-    let model: MeasurementModel = robot.model(&[]);
     let options = held_out_read_options(strict);
-    let pose_map_range = fitted_pose_map_range(robot);
-    let mut gather = Gather {
-        out: RobotErrors::default(),
-        sensor_group: vec![None; robot.table.sensors.len()],
-    };
-    let mut residuals_csv: Vec<u8> = Vec::new();
-    if residuals {
-        residuals_csv.extend_from_slice(crate::report::residuals::RESIDUALS_HEADER.as_bytes());
-    }
-    let mut written = 0;
+    let mut g = RobotGather::new(robot, residuals);
     for path in paths {
-        let file = without_left_out(
+        g.take(without_left_out(
             read_held_out(path, robot, controller, &options, tracker)?,
             leave_out,
-        );
-        gather.out.excluded.extend(file.excluded.iter().cloned());
-        let campaign: &Campaign = &file.campaign;
-        gather.out.simulated |= campaign.simulated;
-        let fail = |e: crate::calib::CalibError| {
-            trouble(format!(
-                "{}: predicting with {}: {e}",
-                file.file, robot.file
-            ))
-        };
-        let prepared = Prepared::new(&model, campaign).map_err(fail)?;
-        let (predicted, frame) = if campaign.pose_measurements.is_empty()
-            && campaign.point_measurements.is_empty()
-            && campaign.tilt_measurements.is_empty()
-        {
-            let zeros = vec![0.0; model.num_params()];
-            (
-                predict(&model, &prepared, campaign, &zeros, None).map_err(fail)?,
-                None,
-            )
-        } else {
-            let (predicted, frame, check) = register_held_out(&model, &prepared, &file, &fail)?;
-            gather.out.sessions.push(check);
-            (predicted, Some(frame))
-        };
-        let observed = campaign.observations();
-        gather.readings(robot, campaign, &observed, &predicted);
-        gather.instruments(&file.file, campaign, &observed, &predicted);
-        if let Some(frame) = frame.filter(|_| !campaign.pose_measurements.is_empty()) {
-            gather.tracker(
-                robot,
-                &model,
-                &prepared,
-                &file.file,
-                campaign,
-                &observed,
-                &predicted,
-                &frame,
-                pose_map_range.as_ref(),
-            );
-        }
-        if residuals {
-            let native: Vec<f64> = observed
-                .iter()
-                .zip(&predicted)
-                .map(|(o, p)| (o - p) * 1e3)
-                .collect();
-            // Where each observation comes from, as the file was read.
-            let origins = crate::io::merge(vec![file], robot);
-            crate::report::residuals::write_residual_rows(
-                &mut residuals_csv,
-                robot,
-                &origins,
-                &native,
-                written + 1,
-            )?;
-            written += native.len();
-        }
+        ))?;
     }
-    let mut out = gather.out;
-    out.residuals_csv = String::from_utf8(residuals_csv).expect("UTF-8 rows");
-    Ok(out)
+    Ok(g.finish())
+}
+
+/// [`errors_of`] `robot` and of `reference` (its own controller) on the same files, each file
+/// read once for both when the readers can share it ([`crate::io::read_data_file_for_two`]),
+/// with the results and errors of the two calls one after the other: an error of
+/// `robot`'s is returned, the reference's is its result.
+fn errors_of_both(
+    robot: &Robot,
+    reference: &Robot,
+    paths: &[PathBuf],
+    tracker: (f64, f64),
+    residuals: bool,
+) -> anyhow::Result<(RobotErrors, anyhow::Result<RobotErrors>)> {
+    let options = held_out_read_options(true);
+    let mut g = RobotGather::new(robot, residuals);
+    // The reference's gathering, until its first error (kept for after `robot`'s files).
+    let mut r: anyhow::Result<RobotGather> = Ok(RobotGather::new(reference, false));
+    for path in paths {
+        let (mut file, second) =
+            crate::io::read_data_file_for_two(path, robot, reference, &options)?;
+        if let Ok(rg) = &mut r {
+            use crate::io::SecondReading;
+            let done = match second {
+                None => read_held_out(path, reference, reference, &options, tracker)
+                    .and_then(|f| rg.take(f)),
+                Some(Err(e)) => Err(e.into()),
+                Some(Ok(SecondReading::File(mut f))) => {
+                    held_out(&mut f, reference, reference, tracker).and_then(|()| rg.take(*f))
+                }
+                Some(Ok(SecondReading::SameAsFirst)) => {
+                    // The file as `robot` read it, with the reference's commanded lengths.
+                    let done = held_out(&mut file, reference, reference, tracker)
+                        .and_then(|()| rg.file(&file).map(drop));
+                    file.campaign.commanded_lengths_mm = None;
+                    done
+                }
+            };
+            if let Err(e) = done {
+                r = Err(e);
+            }
+        }
+        held_out(&mut file, robot, reference, tracker)?;
+        g.take(file)?;
+    }
+    Ok((g.finish(), r.map(RobotGather::finish)))
 }
 
 /// Pose errors (position um per target, orientation urad per target) the machine `truth`
@@ -816,48 +917,44 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
     check_cancelled(progress)?;
     progress.stage("predicting the held-out measurements");
     let data = &options.data;
-    // The poses left out are those either robot's reading leaves out (most often the same),
-    // for both robots: the two are compared on the same poses. The reference reads the files
-    // without the poses the calibrated robot left out; when it leaves out others, the
-    // calibrated robot reads them again without those.
-    let cal_errors_of = |leave_out: &[crate::io::ExcludedPose]| {
-        errors_of(
-            &robot,
-            &reference,
-            data,
-            true,
-            tracker,
-            options.out.is_some(),
-            leave_out,
-        )
-    };
-    let mut cal_errors = cal_errors_of(&[])?;
+    // Each file read once for both robots where the readers can share it.
+    let (mut cal_errors, ref_errors) =
+        errors_of_both(&robot, &reference, data, tracker, options.out.is_some())?;
     check_cancelled(progress)?;
-    let ref_errors = errors_of(
-        &reference,
-        &reference,
-        data,
-        true,
-        tracker,
-        false,
-        &cal_errors.excluded,
-    )
-    .map_err(|e| {
+    let mut ref_errors = ref_errors.map_err(|e| {
         e.context(format!(
             "reading the held-out data against the reference {} (its sensors: {})",
             reference.file,
             sensor_names(&reference).join(", ")
         ))
     })?;
+    // The poses left out are those either robot's reading leaves out (most often the same),
+    // for both robots: the two are compared on the same poses. When the two left out
+    // different poses, each reads the files again without the union.
     let only_reference: Vec<crate::io::ExcludedPose> = ref_errors
         .excluded
         .iter()
         .filter(|e| !same_pose_in(&cal_errors.excluded, e))
         .cloned()
         .collect();
-    if !only_reference.is_empty() {
+    let only_calibrated = cal_errors
+        .excluded
+        .iter()
+        .any(|e| !same_pose_in(&ref_errors.excluded, e));
+    if !only_reference.is_empty() || only_calibrated {
         check_cancelled(progress)?;
-        cal_errors = cal_errors_of(&only_reference)?;
+        let mut union = cal_errors.excluded.clone();
+        union.extend(only_reference.iter().cloned());
+        cal_errors = errors_of(
+            &robot,
+            &reference,
+            data,
+            true,
+            tracker,
+            options.out.is_some(),
+            &union,
+        )?;
+        ref_errors = errors_of(&reference, &reference, data, true, tracker, false, &union)?;
     }
     let mut excluded = cal_errors.excluded.clone();
     excluded.extend(only_reference);

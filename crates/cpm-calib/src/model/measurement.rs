@@ -701,34 +701,50 @@ impl MeasurementModel {
     /// Effective link lengths (mm) the machine has at each commanded pose: the commanded
     /// lengths (logged, or nominal IK) plus the clearance shift from the link forces.
     pub fn effective_lengths(&self, campaign: &Campaign) -> Result<Vec<Vec<f64>>, CalibError> {
+        use rayon::prelude::*;
         let n = self.nominal.num_links();
-        let mut out = Vec::with_capacity(campaign.poses.len());
-        for (j, pose) in campaign.poses.iter().enumerate() {
-            let mut l = match &campaign.commanded_lengths_mm {
-                Some(c) => {
-                    let row = c.get(j).ok_or_else(|| {
-                        CalibError::invalid("commanded_lengths_mm", format!("no row for pose {j}"))
-                    })?;
-                    if row.len() != n {
-                        return Err(CalibError::invalid(
-                            "commanded_lengths_mm",
-                            format!("pose {j} has {} lengths, expected {n}", row.len()),
-                        ));
-                    }
-                    row.clone()
+        // Pose by pose in parallel (the statics of each pose are its own); the first error
+        // in pose order, as one pass would give it.
+        let rows: Vec<Result<Vec<f64>, CalibError>> = campaign
+            .poses
+            .par_iter()
+            .enumerate()
+            .map(|(j, pose)| self.effective_lengths_at(campaign, j, pose, n))
+            .collect();
+        rows.into_iter().collect()
+    }
+
+    /// The row of [`effective_lengths`](Self::effective_lengths) of pose `j`.
+    fn effective_lengths_at(
+        &self,
+        campaign: &Campaign,
+        j: usize,
+        pose: &Pose,
+        n: usize,
+    ) -> Result<Vec<f64>, CalibError> {
+        let mut l = match &campaign.commanded_lengths_mm {
+            Some(c) => {
+                let row = c.get(j).ok_or_else(|| {
+                    CalibError::invalid("commanded_lengths_mm", format!("no row for pose {j}"))
+                })?;
+                if row.len() != n {
+                    return Err(CalibError::invalid(
+                        "commanded_lengths_mm",
+                        format!("pose {j} has {} lengths, expected {n}", row.len()),
+                    ));
                 }
-                None => cpm_kinematics::inverse_lengths(&self.nominal, pose),
-            };
-            let dl = self
-                .clearance
-                .link_corrections_mm(self.statics_table(), pose, &self.load)
-                .map_err(|source| CalibError::Clearance { pose: j, source })?;
-            for (a, b) in l.iter_mut().zip(&dl) {
-                *a += b;
+                row.clone()
             }
-            out.push(l);
+            None => cpm_kinematics::inverse_lengths(&self.nominal, pose),
+        };
+        let dl = self
+            .clearance
+            .link_corrections_mm(self.statics_table(), pose, &self.load)
+            .map_err(|source| CalibError::Clearance { pose: j, source })?;
+        for (a, b) in l.iter_mut().zip(&dl) {
+            *a += b;
         }
-        Ok(out)
+        Ok(l)
     }
 
     /// Sensor clearance correction added to every predicted reading, mm (eq. 14).
