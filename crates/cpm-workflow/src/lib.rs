@@ -56,6 +56,7 @@ pub use cpm_kinematics as kinematics;
 pub use cpm_report as report;
 
 pub mod error;
+pub mod export;
 pub mod fit;
 pub mod formulation;
 pub mod gauges;
