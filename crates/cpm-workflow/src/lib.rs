@@ -55,6 +55,7 @@ pub use cpm_io as io;
 pub use cpm_kinematics as kinematics;
 pub use cpm_report as report;
 
+pub mod compensate;
 pub mod error;
 pub mod export;
 pub mod fit;
