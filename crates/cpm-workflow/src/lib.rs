@@ -9,6 +9,11 @@
 //! - [`refine`]: [`refine`](refine::refine) with [`RefineOptions`](refine::RefineOptions);
 //! - [`validate`]: [`validate`](validate::validate) held-out data, and
 //!   [`check_compensation`](validate::check_compensation);
+//! - [`identifiability`]: [`identifiability`](identifiability::identifiability) of a campaign
+//!   or a plan ([`plan`]: [`build_plan`](plan::build_plan) with
+//!   [`PlanOptions`](plan::PlanOptions));
+//! - [`export`]: [`export`](export::export) a robot's settings for a controller;
+//! - [`compensate`]: [`compensate`](compensate::compensate), the commands for target poses;
 //! - [`progress`]: the [`Progress`] trait (stages, notes, cancellation);
 //! - [`error`]: the kinds of failure and the exit code each gives;
 //! - [`output`]: outputs that never destroy (staged sets committed as one step).

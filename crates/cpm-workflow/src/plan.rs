@@ -114,7 +114,7 @@ pub const MAX_PLAN_POSES: usize = 1_000_000;
 /// ```
 /// use cpm_workflow::plan::{build_plan, PlanOptions};
 ///
-/// let robot = cpm_workflow::io::Robot::load("../../examples/hexapod_66.toml")?;
+/// let robot = cpm_workflow::io::Robot::load(std::path::Path::new("../../examples/hexapod_66.toml"))?;
 /// let options = PlanOptions { circle: true, count: 12, ..PlanOptions::default() };
 /// let spec = build_plan(&options, &robot, true)?;
 /// assert_eq!(spec.plan.poses.len(), 12);
