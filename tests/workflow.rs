@@ -5,7 +5,7 @@
 mod cli;
 use cli::{example, ok, p, scratch};
 
-use cpm::workflow::{fit, load, validate, Collect, Silent};
+use cpm::workflow::{compensate, export, fit, identifiability, load, validate, Collect, Silent};
 use std::path::{Path, PathBuf};
 
 /// Every number of a JSON value, in order, with its path (timings left out).
@@ -191,4 +191,79 @@ fn a_job_cancelled_inside_its_fit_stops_there_and_writes_nothing() {
     let calls = TRIP_CALLS.load(std::sync::atomic::Ordering::SeqCst);
     assert!((2000..4000).contains(&calls), "{calls} evaluations");
     assert!(!out.exists());
+}
+
+#[test]
+fn the_library_analyses_exports_and_compensates_as_the_commands_do() {
+    let robot = example("hexapod_66.toml");
+    let data = example("hexapod_66_readings.csv");
+    // identifiability: the report of the job is the command's --json, byte for byte, for
+    // measurements and for a plan.
+    let by_command = ok(&[
+        "identifiability",
+        "--robot",
+        &robot,
+        "--data",
+        &data,
+        "--json",
+    ]);
+    let mut options = identifiability::IdentifiabilityOptions::new(&robot);
+    options.data = vec![PathBuf::from(&data)];
+    let job = identifiability::identifiability(&options, &Silent).unwrap();
+    let v = serde_json::to_value(&job.doc).unwrap();
+    assert_eq!(
+        by_command,
+        format!("{}\n", serde_json::to_string_pretty(&v).unwrap())
+    );
+    assert!(job.doc.simulated);
+    let by_command = ok(&[
+        "identifiability",
+        "--robot",
+        &robot,
+        "--circle",
+        "--count",
+        "12",
+        "--json",
+    ]);
+    let mut options = identifiability::IdentifiabilityOptions::new(&robot);
+    options.plan.circle = true;
+    options.plan.count = 12;
+    let job = identifiability::identifiability(&options, &Silent).unwrap();
+    let v = serde_json::to_value(&job.doc).unwrap();
+    assert_eq!(
+        by_command,
+        format!("{}\n", serde_json::to_string_pretty(&v).unwrap())
+    );
+    // Options that contradict each other: the usage error of the command (exit code 2).
+    options.data = vec![PathBuf::from(&data)];
+    let err = options.validate().unwrap_err();
+    assert_eq!(
+        cpm::workflow::error::exit_kind(&err),
+        cpm::workflow::ExitKind::Usage
+    );
+
+    // export: the settings on standard output, in inches.
+    let truth = example("hexapod_66_truth.toml");
+    let by_command = ok(&[
+        "export", "--format", "linuxcnc", "--robot", &truth, "--units", "inch",
+    ]);
+    let mut options = export::ExportOptions::new(&truth);
+    options.units = export::Units::Inch;
+    let job = export::export(&options, &Silent).unwrap();
+    assert_eq!(by_command, job.hal);
+    assert!(job.ini.is_none());
+
+    // compensate: the commands file on standard output, and its notes.
+    let targets = example("targets.csv");
+    let by_command = ok(&["compensate", "--robot", &truth, "--poses", &targets]);
+    let options = compensate::CompensateOptions::new(&truth, &targets);
+    let progress = Collect::default();
+    let job = compensate::compensate(&options, &progress).unwrap();
+    assert_eq!(by_command, job.csv);
+    assert_eq!(job.readings.len(), job.targets.len());
+    let bad = compensate::CompensateOptions {
+        temperature_c: Some(f64::NAN),
+        ..options
+    };
+    assert!(bad.validate().is_err());
 }

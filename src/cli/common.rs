@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 use anyhow::Context as _;
 use clap::Args;
 
-use super::{input_error, usage_error, Ctx};
-use crate::calib::{campaign::circle, Effect, Plan};
-use crate::io::{self, ReadOptions, Robot};
+use super::Ctx;
+use crate::calib::Effect;
+use crate::io::Robot;
 use cpm_workflow::fit::{FitOptions, Inputs, NoisePerKind, TrackerResiduals};
 pub use cpm_workflow::load::*;
 
@@ -77,149 +77,30 @@ impl PlanArgs {
     pub fn given(&self) -> bool {
         self.plan.is_some() || self.circle || self.random.is_some()
     }
-}
 
-/// A plan with per-pose time and temperature (from a plan file).
-#[derive(Debug, Clone)]
-pub struct PlanSpec {
-    /// The plan.
-    pub plan: Plan,
-    /// Per pose: time (s) and temperature (deg C) when the plan file gives them.
-    pub conditions: Vec<(Option<f64>, Option<f64>)>,
-}
-
-impl PlanSpec {
-    /// The plan's campaign skeleton, with the plan file's times and temperatures.
-    pub fn skeleton(&self) -> crate::calib::Campaign {
-        let mut c = self.plan.skeleton();
-        for r in c.readings.iter_mut() {
-            let (t, temp) = self.conditions[r.pose];
-            r.time_s = t;
-            r.temperature_c = temp;
+    /// The workflow's options of these arguments.
+    pub fn options(&self) -> PlanOptions {
+        PlanOptions {
+            plan: self.plan.clone(),
+            circle: self.circle,
+            random: self.random,
+            radius_mm: self.radius_mm,
+            count: self.count,
+            range_mm: self.range_mm,
+            range_deg: self.range_deg,
+            sensors: self.sensors.clone(),
+            seed: self.seed,
         }
-        c
     }
 }
 
-/// The sensors of `--sensors` (all when empty) as indices.
-pub fn sensor_indices(names: &[String], robot: &Robot) -> anyhow::Result<Vec<usize>> {
-    if robot.table.sensors.is_empty() {
-        return Err(input_error(format!(
-            "{}: the robot description has no [[sensor]]: nothing to read",
-            robot.file
-        )));
-    }
-    if names.is_empty() {
-        return Ok((0..robot.table.sensors.len()).collect());
-    }
-    names
-        .iter()
-        .map(|n| {
-            robot.table.sensor_index(n.trim()).ok_or_else(|| {
-                usage_error(format!(
-                    "--sensors: unknown sensor {:?} (the robot description has: {})",
-                    n.trim(),
-                    robot.sensor_names()
-                ))
-            })
-        })
-        .collect()
-}
+pub use cpm_workflow::plan::{sensor_indices, PlanOptions, PlanSpec, MAX_PLAN_POSES};
 
-/// Builds the plan of `--plan`, `--circle` or `--random` (exactly one must be given).
+/// Builds the plan of `--plan`, `--circle` or `--random` (exactly one must be given):
+/// [`cpm_workflow::plan::build_plan`] of [`PlanArgs::options`].
 pub fn build_plan(args: &PlanArgs, robot: &Robot, need_sensors: bool) -> anyhow::Result<PlanSpec> {
-    let given = [args.plan.is_some(), args.circle, args.random.is_some()]
-        .iter()
-        .filter(|g| **g)
-        .count();
-    if given != 1 {
-        return Err(usage_error(
-            "give the poses with exactly one of --plan FILE, --circle or --random N",
-        ));
-    }
-    let sensors = if need_sensors {
-        sensor_indices(&args.sensors, robot)?
-    } else {
-        Vec::new()
-    };
-    let table = &robot.table;
-    let ratio = ReadOptions::default().max_condition_ratio;
-    for (n, name) in [
-        (args.random.unwrap_or(0), "--random"),
-        (if args.circle { args.count } else { 0 }, "--count"),
-    ] {
-        if n > MAX_PLAN_POSES {
-            return Err(usage_error(format!(
-                "{name} {n}: at most {MAX_PLAN_POSES} poses"
-            )));
-        }
-    }
-    if let Some(path) = &args.plan {
-        let file = path.display().to_string();
-        let rows = io::read_pose_list_file(path)?;
-        io::campaign::check_pose_list_units(&rows, &file, robot)?;
-        for r in &rows {
-            io::campaign::check_reachable(table, &r.pose, ratio, &file, r.line, &r.label)?;
-        }
-        let poses: Vec<_> = rows.iter().map(|r| r.pose).collect();
-        super::gauges::check_plan(robot, &sensors, &poses, &|k| (file.clone(), rows[k].line))?;
-        return Ok(PlanSpec {
-            conditions: rows.iter().map(|r| (r.time_s, r.temperature_c)).collect(),
-            plan: Plan {
-                poses: rows.iter().map(|r| r.pose).collect(),
-                sensors,
-            },
-        });
-    }
-    let poses = if args.circle {
-        if !(args.radius_mm.is_finite() && args.radius_mm >= 0.0) || args.count == 0 {
-            return Err(usage_error(
-                "--circle needs --radius-mm >= 0 and --count >= 1",
-            ));
-        }
-        let poses = circle(&table.home, args.radius_mm, args.count);
-        for (k, p) in poses.iter().enumerate() {
-            io::campaign::check_reachable(table, p, ratio, "--circle", k + 1, &(k + 1).to_string())
-                .map_err(|e| usage_error(format!("{}; try a smaller --radius-mm", e.message)))?;
-        }
-        poses
-    } else {
-        let n = args.random.unwrap_or(0);
-        if n == 0
-            || !(args.range_mm >= 0.0 && args.range_deg >= 0.0)
-            || !(args.range_mm.is_finite() && args.range_deg.is_finite())
-        {
-            return Err(usage_error(
-                "--random needs N >= 1 and finite, non-negative --range-mm, --range-deg",
-            ));
-        }
-        let poses = crate::calib::paper::random_workspace_poses(
-            table,
-            n,
-            args.range_mm,
-            args.range_deg,
-            3.0,
-            args.seed,
-        );
-        if poses.len() < n {
-            return Err(usage_error(format!(
-                "--random: found only {} of {n} well-conditioned poses within the link limits; try a smaller --range-mm or --range-deg",
-                poses.len()
-            )));
-        }
-        poses
-    };
-    let how = if args.circle { "--circle" } else { "--random" };
-    super::gauges::check_plan(robot, &sensors, &poses, &|k| (how.to_string(), k + 1))
-        .map_err(|e| usage_error(e.to_string()))?;
-    Ok(PlanSpec {
-        conditions: vec![(None, None); poses.len()],
-        plan: Plan { poses, sensors },
-    })
+    cpm_workflow::plan::build_plan(&args.options(), robot, need_sensors)
 }
-
-/// The largest number of poses of `--circle --count` and `--random`.
-pub const MAX_PLAN_POSES: usize = 1_000_000;
 
 /// Writes a single-file output to its checked target (re-checked now), atomically.
 pub fn write_out(

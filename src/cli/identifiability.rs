@@ -1,12 +1,13 @@
-//! `cpm identifiability`: what a campaign (or a plan, before measuring) can identify.
+//! `cpm identifiability`: what a campaign (or a plan, before measuring) can identify. The
+//! arguments and what is printed; the job is
+//! [`cpm_workflow::identifiability::identifiability`].
 use std::path::PathBuf;
 
 use clap::Args;
 
 use super::common::{self, EffectsArg, PlanArgs, RobotArg};
-use super::{usage_error, Ctx, Outcome};
-use crate::calib::RankOptions;
-use crate::report::fit::{IdentifiabilityDoc, IdentifiabilityReport};
+use super::{Ctx, Outcome};
+pub use cpm_workflow::identifiability::*;
 
 /// Arguments of `cpm identifiability`.
 #[derive(Debug, Clone, Args)]
@@ -46,93 +47,42 @@ pub struct IdentifiabilityArgs {
     pub hold: Vec<String>,
 }
 
-/// Runs `cpm identifiability`.
-pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
-    ctx.stage("reading the robot description");
-    let robot = common::load_robot(&args.robot.robot, ctx)?;
-    common::require_six_links(&robot)?;
-    let effects = args.effects.resolve(&robot)?;
-    let model = robot.model(&effects);
-    if !(args.rank_rtol > 0.0 && args.rank_rtol < 1.0) {
-        return Err(usage_error("--rank-rtol must be in (0, 1)"));
+impl IdentifiabilityArgs {
+    /// The workflow's options of these arguments.
+    pub fn options(&self) -> IdentifiabilityOptions {
+        IdentifiabilityOptions {
+            robot: self.robot.robot.clone(),
+            data: self.data.clone(),
+            plan: self.plan.options(),
+            effects: self.effects.effects.clone(),
+            sigma_um: self.sigma_um,
+            rank_rtol: self.rank_rtol,
+            tolerance: self.tolerance.clone(),
+            hold: self.hold.clone(),
+        }
     }
-    let (campaign, source) = match (args.data.is_empty(), args.plan.given()) {
-        (false, false) => {
-            if !args.plan.sensors.is_empty() {
-                return Err(usage_error("--sensors applies to a plan, not to --data"));
-            }
-            ctx.stage("reading the measurements");
-            let merged = common::load_data(&args.data, &robot, &common::read_options(&model))?;
-            common::warn_excluded(ctx, &merged.excluded);
-            let names: Vec<String> = args.data.iter().map(|p| p.display().to_string()).collect();
-            (merged.campaign, names.join(", "))
-        }
-        (true, true) => {
-            ctx.stage("building the plan");
-            let spec = common::build_plan(&args.plan, &robot, true)?;
-            (spec.skeleton(), "plan".to_string())
-        }
-        (false, true) => {
-            return Err(usage_error(
-                "give either --data or a plan (--plan, --circle, --random), not both",
-            ))
-        }
-        (true, false) => return Err(usage_error(
-            "give the measurements (--data FILE) or a plan (--plan FILE, --circle or --random N)",
-        )),
-    };
-    let model = match common::with_instruments(&robot, &model, &campaign) {
-        Some(m) => {
-            ctx.note(common::instruments_note(&m));
-            m
-        }
-        None => model,
-    };
-    let sigma = match args.sigma_um {
-        Some(s) => common::sigma(Some(s), &robot)?.unwrap_or(1.0),
-        None => robot.sensor_noise_um().unwrap_or(1.0),
-    };
-    ctx.stage(format!(
-        "analysing {} observations, {}",
-        campaign.len(),
-        common::describe_model(&model)
-    ));
-    let options = RankOptions {
-        rank_rtol: args.rank_rtol,
-        ..RankOptions::default()
-    };
-    let ident = crate::calib::identifiability(&model, &campaign, sigma, &options)?;
-    // Against the tolerances at this noise: what a fit determines, what it holds.
-    let tolerances = cpm_workflow::fit::tolerances_of(&robot, &args.tolerance, &args.hold, false)?;
-    let prior = crate::calib::prior::prior_std(&model, &tolerances)
-        .map_err(|e| usage_error(format!("tolerances: {e}")))?;
-    let names = model.parameter_names();
-    let against = if prior.iter().any(|p| p.is_finite()) {
-        let j = crate::calib::identification_jacobian(
-            &model,
-            &campaign,
-            &vec![0.0; model.num_params()],
-        )?;
-        Some(crate::report::identifiability::AgainstTolerances::new(
-            &j, &prior, sigma, &names,
-        ))
-    } else {
-        None
-    };
+}
+
+/// Runs `cpm identifiability`: the job, then what is printed.
+pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
+    let Identified {
+        doc,
+        ident,
+        names,
+        robot,
+        model,
+        sigma_um: sigma,
+        sigma_declared,
+    } = identifiability(&args.options(), &*ctx)?;
     ctx.finish();
     if args.json {
-        let doc = IdentifiabilityDoc {
-            analysis: IdentifiabilityReport::new(&ident, &names),
-            source: source.clone(),
-            simulated: campaign.simulated && !args.data.is_empty(),
-            effects: effects.iter().map(|e| e.name().to_string()).collect(),
-            against_tolerances: against,
-        };
         // Keys sorted, as every cpm JSON file.
         let v = serde_json::to_value(&doc)?;
         writeln!(ctx.out, "{}", serde_json::to_string_pretty(&v)?)?;
         return Ok(Outcome::Done);
     }
+    let source = &doc.source;
+    let against = &doc.against_tolerances;
     let o = &mut ctx.out;
     writeln!(
         o,
@@ -140,14 +90,14 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
         robot.file,
         common::describe_model(&model)
     )?;
-    if campaign.simulated && !args.data.is_empty() {
+    if doc.simulated {
         writeln!(o, "(the data are SIMULATED)")?;
     }
     write!(o, "{}", ident.summary())?;
     writeln!(
         o,
         "Cramér-Rao bounds for sensor noise {sigma} um{}: RMS {}, worst {}",
-        if args.sigma_um.is_none() && robot.sensor_noise_um().is_none() {
+        if !sigma_declared {
             " (none declared: bounds per um of noise)"
         } else {
             ""

@@ -9,6 +9,11 @@
 //! - [`refine`]: [`refine`](refine::refine) with [`RefineOptions`](refine::RefineOptions);
 //! - [`validate`]: [`validate`](validate::validate) held-out data, and
 //!   [`check_compensation`](validate::check_compensation);
+//! - [`identifiability`]: [`identifiability`](identifiability::identifiability) of a campaign
+//!   or a plan ([`plan`]: [`build_plan`](plan::build_plan) with
+//!   [`PlanOptions`](plan::PlanOptions));
+//! - [`export`]: [`export`](export::export) a robot's settings for a controller;
+//! - [`compensate`]: [`compensate`](compensate::compensate), the commands for target poses;
 //! - [`progress`]: the [`Progress`] trait (stages, notes, cancellation);
 //! - [`error`]: the kinds of failure and the exit code each gives;
 //! - [`output`]: outputs that never destroy (staged sets committed as one step).
@@ -55,12 +60,16 @@ pub use cpm_io as io;
 pub use cpm_kinematics as kinematics;
 pub use cpm_report as report;
 
+pub mod compensate;
 pub mod error;
+pub mod export;
 pub mod fit;
 pub mod formulation;
 pub mod gauges;
+pub mod identifiability;
 pub mod load;
 pub mod output;
+pub mod plan;
 pub mod progress;
 pub mod refine;
 pub mod truth;
