@@ -235,27 +235,50 @@ pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<P
             vectors: vs,
         });
     }
-    if let Some(b) = model
-        .blocks()
-        .into_iter()
-        .find(|b| b.effect == Some(crate::Effect::TrackerFrame))
-    {
-        // Moving every base joint by v moves the platform by v; a tracker registration moved
-        // by -v hides it. Likewise for a rotation about the base origin.
+    // Moving every base joint by v moves the platform by v; a tracker registration moved by
+    // -v hides it. Moving every platform joint by v moves the platform frame by -v under the
+    // legs; a marker frame moved by v keeps the measured body where it was. Likewise for a
+    // rotation about the base (platform) origin.
+    for (effect, side, sign, what, origin) in [
+        (
+            crate::Effect::TrackerFrame,
+            0,
+            -1.0,
+            "base joints and the tracker frame",
+            "base",
+        ),
+        (
+            crate::Effect::MarkerFrame,
+            1,
+            1.0,
+            "platform joints and the marker frame",
+            "platform",
+        ),
+    ] {
+        let Some(b) = model
+            .blocks()
+            .into_iter()
+            .find(|b| b.effect == Some(effect))
+        else {
+            continue;
+        };
+        let frame = |v: &mut DVector<f64>, k: usize| {
+            for f in 0..b.len / 6 {
+                v[b.offset + 6 * f + k] = sign;
+            }
+        };
         let trans = (0..3)
             .map(|a| {
                 let mut v = DVector::zeros(np);
                 for i in 0..n {
-                    v[6 * i + a] = 1.0;
+                    v[6 * i + 3 * side + a] = 1.0;
                 }
-                for f in 0..b.len / 6 {
-                    v[b.offset + 6 * f + a] = -1.0;
-                }
+                frame(&mut v, a);
                 v
             })
             .collect();
         out.push(Pattern {
-            description: "all base joints and the tracker frame translated together".into(),
+            description: format!("all {what} translated together"),
             vectors: trans,
         });
         let rot = (0..3)
@@ -264,65 +287,18 @@ pub fn physical_patterns(model: &MeasurementModel, campaign: &Campaign) -> Vec<P
                 w[a] = 1.0;
                 let mut v = DVector::zeros(np);
                 for (i, l) in table.links.iter().enumerate() {
-                    let d = w.cross(&l.base_mm) * 1e-3;
+                    let joint = if side == 0 { l.base_mm } else { l.platform_mm };
+                    let d = w.cross(&joint) * 1e-3;
                     for c in 0..3 {
-                        v[6 * i + c] = d[c];
+                        v[6 * i + 3 * side + c] = d[c];
                     }
                 }
-                for f in 0..b.len / 6 {
-                    v[b.offset + 6 * f + 3 + a] = -1.0;
-                }
+                frame(&mut v, 3 + a);
                 v
             })
             .collect();
         out.push(Pattern {
-            description:
-                "all base joints and the tracker frame rotated together about the base origin"
-                    .into(),
-            vectors: rot,
-        });
-    }
-    if let Some(b) = model
-        .blocks()
-        .into_iter()
-        .find(|b| b.effect == Some(crate::Effect::MarkerFrame))
-    {
-        // Moving every platform joint by v moves the platform frame by -v under the legs; a
-        // marker frame moved by v keeps the measured body where it was. Likewise for a
-        // rotation about the platform origin.
-        let trans = (0..3)
-            .map(|a| {
-                let mut v = DVector::zeros(np);
-                for i in 0..n {
-                    v[6 * i + 3 + a] = 1.0;
-                }
-                v[b.offset + a] = 1.0;
-                v
-            })
-            .collect();
-        out.push(Pattern {
-            description: "all platform joints and the marker frame translated together".into(),
-            vectors: trans,
-        });
-        let rot = (0..3)
-            .map(|a| {
-                let mut w = nalgebra::Vector3::zeros();
-                w[a] = 1.0;
-                let mut v = DVector::zeros(np);
-                for (i, l) in table.links.iter().enumerate() {
-                    let d = w.cross(&l.platform_mm) * 1e-3;
-                    for c in 0..3 {
-                        v[6 * i + 3 + c] = d[c];
-                    }
-                }
-                v[b.offset + 3 + a] = 1.0;
-                v
-            })
-            .collect();
-        out.push(Pattern {
-            description:
-                "all platform joints and the marker frame rotated together about the platform origin"
-                    .into(),
+            description: format!("all {what} rotated together about the {origin} origin"),
             vectors: rot,
         });
     }
