@@ -561,6 +561,16 @@ fn simulated_tilts_on_the_real_grid_with_an_undeclared_effect() {
     );
     assert!(joints_mm <= 2.0 * tolerance_mm, "{joints_mm} mm");
     assert!(scale_pct < 10.0);
+    // The tolerance is a prior's standard deviation, not a wall: a joint the undeclared
+    // effect pulls past it is said so.
+    let beyond = fit["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().starts_with("Beyond tolerance"));
+    if joints_mm > tolerance_mm {
+        assert!(beyond, "{}", fit["warnings"]);
+    }
     let out = dir.join("refined");
     refine(&robot(), &data, &out);
     let doc: serde_json::Value =

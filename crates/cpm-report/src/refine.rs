@@ -365,7 +365,8 @@ impl RefineDoc {
         }
         if !losing.is_empty() {
             s.push_str(&format!(
-                "Refused because the data would no longer determine parameters they determine now: {}. ",
+                "Refused because the data would no longer determine parameters they determine now (more than {} % of each would move along a blind direction): {}. ",
+                short(100.0 * cpm_calib::fit::refine::CONFOUNDED_FRACTION),
                 losing.join(", ")
             ));
         }

@@ -6,7 +6,8 @@
 //!    (`novelty`, 0 = entirely explained by what is there, 1 = new); a pose map term below
 //!    [`RefineOptions::min_novelty`] is skipped as confounded, a physical effect only below
 //!    [`PHYSICAL_NOVELTY_FRACTION`] of it (a small novelty is a reason for care, not to skip);
-//!    an effect that would leave fewer present parameters determined is refused;
+//!    an effect that would confound present parameters with a blind direction (more than
+//!    [`CONFOUNDED_FRACTION`] of one the data saw on its own) is refused;
 //! 2. the augmented model is fitted, and scored by an F-test on the drop of the residual sum of
 //!    squares per added identifiable dimension, and by the change of BIC
 //!    (`m ln(RSS/m) + k ln m`);
@@ -47,6 +48,12 @@ use crate::model::{predict, Prepared};
 use crate::{
     identify, CalibError, Calibration, Campaign, Effect, IdentifyOptions, MeasurementModel,
 };
+
+/// The null-space fraction of a parameter (the norm of its unit vector's projection on the
+/// blind directions) above which a candidate effect counts as taking it from the data: such an
+/// effect is refused. Smaller leaks (a pose map term sharing a thousandth to a hundredth of an
+/// offset with the frame gauges) are left to the out-of-sample judgement.
+pub const CONFOUNDED_FRACTION: f64 = 0.05;
 
 /// Options of [`refine`].
 #[derive(Debug, Clone)]
@@ -110,8 +117,9 @@ pub struct CandidateScore {
     /// tests, in order of BIC, until one improved on the current model).
     #[serde(default)]
     pub cv_rms_um: Option<f64>,
-    /// How many of the present parameters the data would no longer determine with the effect
-    /// (`Some` only when it loses some: the effect is then refused).
+    /// How many of the present parameters the effect would confound with a blind direction
+    /// (null-space fraction above [`CONFOUNDED_FRACTION`]; `Some` only when it confounds
+    /// some: the effect is then refused).
     #[serde(default)]
     pub determined_lost: Option<usize>,
 }
@@ -1075,13 +1083,16 @@ impl Rounds<'_> {
                 let db = bic(rss1, m, k1) - bic0;
                 score.p_value = Some(p);
                 score.delta_bic = Some(db);
-                // An effect that leaves fewer of the present parameters determined than
-                // before makes the model less useful, whatever its fit: refused.
+                // An effect that confounds present parameters with a blind direction (a
+                // sizeable part of a parameter the data saw on its own moves along it) makes
+                // the model less useful, whatever its fit: refused. A leak below
+                // [`CONFOUNDED_FRACTION`] is not a reason: the cross-validation judges it.
                 let np0 = current.num_params();
                 let determined = |c: &Calibration| {
-                    c.identifiability.determined[..np0.min(c.identifiability.determined.len())]
+                    let f = &c.identifiability.null_fraction;
+                    f[..np0.min(f.len())]
                         .iter()
-                        .filter(|d| **d)
+                        .filter(|x| **x <= CONFOUNDED_FRACTION)
                         .count()
                 };
                 let loses = determined(&c1) < determined(cal);

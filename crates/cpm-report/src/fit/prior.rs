@@ -219,3 +219,32 @@ pub fn warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
         sig(weakest.data_std_in_tolerances, 2)
     ))
 }
+
+/// The warning when the fit ends with parameters beyond their a-priori tolerance: the prior is
+/// a Gaussian of that standard deviation, not a wall, so the data can pull a parameter past
+/// it, and a user should know. `None` when every parameter with a tolerance is within it.
+pub fn beyond_warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
+    let p = cal.prior.as_ref()?;
+    let names = model.parameter_names();
+    let mut beyond: Vec<(usize, f64)> = p
+        .prior_std
+        .iter()
+        .zip(&cal.minimum_norm_um)
+        .enumerate()
+        .filter_map(|(k, (t, v))| match t {
+            Some(t) if *t > 0.0 && t.is_finite() && v.abs() > *t => Some((k, v.abs() / t)),
+            _ => None,
+        })
+        .collect();
+    beyond.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let (worst, ratio) = *beyond.first()?;
+    Some(format!(
+        "**Beyond tolerance**: {} parameter{} end{} beyond the a-priori tolerance (the largest: {} at {} tolerances); the tolerance is the prior's standard deviation, and the data pulled {} past it. An effect the model lacks (`cpm refine`), a set-up that moved, or a tolerance set too tight can do that; the values are written as fitted.",
+        beyond.len(),
+        if beyond.len() == 1 { "" } else { "s" },
+        if beyond.len() == 1 { "s" } else { "" },
+        names.get(worst).map_or("?", |n| n.as_str()),
+        sig(ratio, 3),
+        if beyond.len() == 1 { "it" } else { "them" },
+    ))
+}
