@@ -190,9 +190,9 @@ impl PriorReport {
             s.push_str("Held near nominal (the data see these less well than their tolerance; they are not measured):\n\n");
             for h in self.held_directions.iter().take(12) {
                 s.push_str(&format!(
-                    "- {} (data std {} tolerances)\n",
+                    "- {} (data std {})\n",
                     h.description,
-                    sig(h.data_std_in_tolerances, 2)
+                    in_tolerances(h.data_std_in_tolerances)
                 ));
             }
             if self.held_directions.len() > 12 {
@@ -206,17 +206,26 @@ impl PriorReport {
     }
 }
 
+/// A data standard deviation in tolerances, in words when the data alone do not see it.
+fn in_tolerances(x: f64) -> String {
+    if x.is_finite() {
+        format!("{} tolerances", sig(x, 2))
+    } else {
+        "infinite: the data alone do not see it".to_string()
+    }
+}
+
 /// The warning when the prior held directions near nominal: the data do not measure them.
 pub fn warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
     let p = cal.prior.as_ref()?;
     let weakest = p.held_directions.first()?;
     let names = model.parameter_names();
     Some(format!(
-        "**Held near nominal**: {} direction{} of the parameters the data see less well than their tolerance (the weakest: {}, known to {} tolerances from the data alone); the fit keeps them near nominal instead of measuring them. They are listed under \"What the data determine at their noise\"; a campaign with more varied poses, another instrument or a declared effect the model lacks would determine them.",
+        "**Held near nominal**: {} direction{} of the parameters the data see less well than their tolerance (the weakest: {}, data std {} from the data alone); the fit keeps them near nominal instead of measuring them. They are listed under \"What the data determine at their noise\"; a campaign with more varied poses, another instrument or a declared effect the model lacks would determine them.",
         p.held_directions.len(),
         if p.held_directions.len() == 1 { "" } else { "s" },
         describe(&names, &weakest.loadings),
-        sig(weakest.data_std_in_tolerances, 2)
+        in_tolerances(weakest.data_std_in_tolerances)
     ))
 }
 
