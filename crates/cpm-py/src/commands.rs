@@ -311,7 +311,10 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
     }
     d.set_item("files", files)?;
     d.set_item("written", fit.written)?;
-    d.set_item("timings", fit.timings.into_iter().collect::<HashMap<_, _>>())?;
+    d.set_item(
+        "timings",
+        fit.timings.into_iter().collect::<HashMap<_, _>>(),
+    )?;
     Ok(d)
 }
 
@@ -414,14 +417,12 @@ fn calibrate_options(
         if !known.contains(&key.as_str()) {
             return Err(crate::errors::usage(
                 py,
-                format!(
-                    "unexpected argument '--{}' found",
-                    key.replace('_', "-")
-                ),
+                format!("unexpected argument '--{}' found", key.replace('_', "-")),
             ));
         }
     }
-    let flag = |key: &str| -> PyResult<bool> { Ok(option::<bool>(py, options, key)?.unwrap_or(false)) };
+    let flag =
+        |key: &str| -> PyResult<bool> { Ok(option::<bool>(py, options, key)?.unwrap_or(false)) };
     let mut o = cpm_workflow::fit::CalibrateOptions::new(PathBuf::new(), Vec::new(), out);
     let f = &mut o.fit;
     f.effects = option(py, options, "effects")?;

@@ -254,7 +254,8 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
     progress.stage("reading the robot description");
     let robot = crate::load::load_robot(&args.robot, progress)?;
     let names = data.iter().map(|p| p.display().to_string()).collect();
-    let read = |robot: &Robot, options: &io::ReadOptions| crate::load::load_data(data, robot, options);
+    let read =
+        |robot: &Robot, options: &io::ReadOptions| crate::load::load_data(data, robot, options);
     load_inputs_with(args, robot, read, data.clone(), names, progress)
 }
 
