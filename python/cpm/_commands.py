@@ -11,9 +11,15 @@ stopped from outside: it finishes in the background, and a command given ``out=`
 commits its outputs there when it finishes (all or nothing), as the command would have;
 :func:`calibrate` is the exception and writes nothing once interrupted.
 
-Measurements made from arrays or tables (and robots made from text) reach a command as files
-in a scratch directory; errors name them by their names (and rows), and so do the outputs of
-:func:`calibrate`; the outputs of the other commands name the scratch file.
+:func:`calibrate` runs the workflow's job on the campaign in memory
+(``cpm_workflow::memory``): the robot as loaded, measurements made from arrays or tables as
+they were read (read again from memory only when the fit needs other read options), files by
+their paths; no scratch file, no argument vector. Two or more tracker sets of which some were
+made in memory are registered together only when read from files: such a campaign goes
+through scratch files and the command's parser, as every campaign did before. For the other
+commands, measurements made from arrays or tables (and robots made from text) reach the
+command as files in a scratch directory; errors name them by their names (and rows), and the
+outputs name the scratch file.
 """
 from __future__ import annotations
 
