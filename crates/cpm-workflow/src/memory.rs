@@ -137,7 +137,6 @@ pub fn load(
         Vec::new()
     };
     let names = sources.iter().map(Source::name).collect();
-    progress.stage("reading the measurements");
     let read = |robot: &Robot, o: &ReadOptions| read_sources(sources, robot, o);
     let inputs = crate::fit::load_inputs_with(options, robot, read, data_paths, names, progress)?;
     options.prepare(inputs, progress)
