@@ -11,9 +11,15 @@ stopped from outside: it finishes in the background, and a command given ``out=`
 commits its outputs there when it finishes (all or nothing), as the command would have;
 :func:`calibrate` is the exception and writes nothing once interrupted.
 
-Measurements made from arrays or tables (and robots made from text) reach a command as files
-in a scratch directory; errors name them by their names (and rows), and so do the outputs of
-:func:`calibrate`; the outputs of the other commands name the scratch file.
+:func:`calibrate` runs the workflow's job on the campaign in memory
+(``cpm_workflow::memory``): the robot as loaded, measurements made from arrays or tables as
+they were read (read again from memory only when the fit needs other read options), files by
+their paths; no scratch file, no argument vector. Two or more tracker sets of which some were
+made in memory are registered together only when read from files: such a campaign goes
+through scratch files and the command's parser, as every campaign did before. For the other
+commands, measurements made from arrays or tables (and robots made from text) reach the
+command as files in a scratch directory; errors name them by their names (and rows), and the
+outputs name the scratch file.
 """
 from __future__ import annotations
 
@@ -31,7 +37,7 @@ import numpy as np
 from . import _cpm
 from ._data import Measurements, _Source, as_measurements
 from ._robot import PathLike, Robot, Scratch
-from .errors import CpmError, CpmWarning, UsageError
+from .errors import CpmError, CpmWarning, InputError, UsageError
 
 __all__ = [
     "calibrate", "refine", "validate", "compensate", "design", "simulate",
@@ -255,6 +261,10 @@ class CalibrationResult(_Files):
         self.warnings: List[str] = list(d["warnings"])
         self.trouble: Optional[str] = d["trouble"]
         self.written: List[str] = list(d["written"])
+        #: Seconds spent by part, for a calibration from memory: ``job`` (reading what was
+        #: not read yet, the fit and its outputs), ``solver`` (the final least-squares
+        #: solve), ``total`` (the job and the results made ready for Python).
+        self.timings: Dict[str, float] = dict(d.get("timings") or {})
 
     @property
     def determined(self) -> np.ndarray:
@@ -332,8 +342,103 @@ def calibrate(
     A fit that did not converge (or a robust fit that failed) is returned with ``trouble`` set
     and a :class:`cpm.CpmWarning` (the command's exit code 1)."""
     r = _robot(robot)
+    items = _data(data, r)
+    d = _calibrate_in_memory(r, items, effects, robust, sigma_um, out, options)
+    if d is None:
+        d = _calibrate_from_files(r, items, effects, robust, sigma_um, out, options)
+    result = CalibrationResult(dict(d))
+    if result.trouble:
+        _warnings.warn(result.trouble, CpmWarning, stacklevel=2)
+    return result
+
+
+# Options of `cpm calibrate` whose values are numbers of um, urad (floats) or counts (ints).
+_FLOATS = {"sigma_um", "pose_sigma_um", "orientation_sigma_urad"}
+_INTS = {"max_iterations"}
+
+
+def _memory_options(effects: Any, robust: Any, sigma_um: Any,
+                    options: Dict[str, Any]) -> Dict[str, Any]:
+    """The options of :func:`calibrate` as the workflow's (``--option`` by name, values of
+    their types): what the command's parser would have made of the argument vector."""
+    given: Dict[str, Any] = dict(effects=effects, sigma_um=sigma_um, robust=robust)
+    given.update(options)
+    out: Dict[str, Any] = {}
+    for key, value in given.items():
+        if value is None or value is False:
+            continue
+        flag = "--" + key.replace("_", "-")
+        if key == "effects":
+            if isinstance(value, str):
+                out[key] = value
+            else:
+                names = [str(v) for v in value]
+                out[key] = ",".join(names) if names else "none"
+        elif key == "tolerances" and isinstance(value, dict):
+            out.setdefault("tolerance", [])
+            out["tolerance"] += [f"{k}={'inf' if np.isinf(v) else repr(float(v))}"
+                                 for k, v in value.items()]
+        elif key in ("tolerance", "hold"):
+            items = [value] if isinstance(value, str) else list(value)
+            out.setdefault(key, [])
+            out[key] += [_text(v) for v in items]
+        elif key == "noise_per_kind" and value is True:
+            out[key] = "on"
+        elif key in _FLOATS or key in _INTS:
+            try:
+                out[key] = int(value) if key in _INTS else float(value)
+            except (TypeError, ValueError):
+                raise UsageError(f"invalid value {value!r} for '{flag}'") from None
+            if key in _INTS and out[key] < 0:
+                raise UsageError(f"invalid value {value!r} for '{flag}'")
+        elif value is True:
+            out[key] = True
+        elif isinstance(value, (list, tuple, np.ndarray)):
+            raise UsageError(f"{flag}: one value expected, got {value!r}")
+        else:
+            out[key] = _text(value)
+    return out
+
+
+def _calibrate_in_memory(r: Robot, items: List[Any], effects: Any, robust: Any, sigma_um: Any,
+                         out: Optional[PathLike], options: Dict[str, Any]) -> Optional[Any]:
+    """:func:`calibrate` on the campaign in memory (the workflow's job, no files, no argument
+    vector): measurements from arrays as read, files by their paths. ``None`` when the
+    campaign must be read from files (several tracker sets, some made in memory)."""
+    sources: List[Any] = []
+    arrays: set = set()
+    for item in items:
+        if isinstance(item, Measurements):
+            for s in item.sources:
+                handle = s.info.get("handle")
+                if s.path is not None:
+                    sources.append(s.path)
+                elif handle is not None:
+                    sources.append(handle)
+                    if s.arrays:
+                        arrays.add(s.name)
+                else:
+                    return None
+        elif isinstance(item, (str, os.PathLike)):
+            sources.append(os.fspath(item))
+        else:
+            return None
+    opts = _memory_options(effects, robust, sigma_um, options)
+    target = os.fspath(out) if out is not None else None
+    try:
+        return _cpm.calibrate_memory(r._h, sources, opts, target, out is not None)
+    except InputError as e:
+        if e.file in arrays and e.line is not None and e.line >= 2 and e.row is None:
+            raise InputError(str(e), e.file, e.line, e.field, e.line - 2) from None
+        raise
+
+
+def _calibrate_from_files(r: Robot, items: List[Any], effects: Any, robust: Any, sigma_um: Any,
+                          out: Optional[PathLike], options: Dict[str, Any]) -> Any:
+    """:func:`calibrate` through the command's parser, the measurements made in memory
+    written to a scratch directory (a campaign :func:`_calibrate_in_memory` does not take)."""
     with Scratch() as scratch:
-        opts: Dict[str, Any] = dict(robot=r, data=_data(data, r), effects=effects, sigma_um=sigma_um,
+        opts: Dict[str, Any] = dict(robot=r, data=items, effects=effects, sigma_um=sigma_um,
                                     robust=robust)
         opts.update(options)
         commit = out is not None
@@ -342,13 +447,9 @@ def calibrate(
             opts["effects"] = "none"
         argv = _argv("calibrate", scratch, opts)
         try:
-            d = _cpm.calibrate(argv, commit, dict(scratch.names))
+            return _cpm.calibrate(argv, commit, dict(scratch.names))
         except CpmError as e:
             raise scratch.fix(e) from None
-    result = CalibrationResult(dict(d))
-    if result.trouble:
-        _warnings.warn(result.trouble, CpmWarning, stacklevel=2)
-    return result
 
 
 class RefineResult(_Files):

@@ -203,3 +203,43 @@ def test_measurements_add_and_read_errors(hexapod, readings):
     with pytest.raises(cpm.InputError) as e:
         cpm.read_measurements(MALFORMED / "not_a_number.csv", cpm.Robot.from_toml(CUBE))
     assert e.value.line is not None and e.value.field is not None
+
+
+def _max_difference(a, b):
+    """The largest difference between two calibrations' numbers, relative to max(1, |x|)
+    (NaN where both are NaN: parameters the data do not determine)."""
+    worst = 0.0
+    for x, y in ((a.estimates_um, b.estimates_um), (a.std_um, b.std_um),
+                 (a.minimum_norm_um, b.minimum_norm_um), (a.residuals_um, b.residuals_um),
+                 (a.covariance, b.covariance)):
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        assert x.shape == y.shape
+        assert np.array_equal(np.isnan(x), np.isnan(y))
+        ok = ~np.isnan(x)
+        d = np.abs(x[ok] - y[ok]) / np.maximum(1.0, np.abs(x[ok]))
+        worst = max(worst, float(d.max()) if d.size else 0.0)
+    return worst
+
+
+def test_arrays_and_file_agree_to_1e_12(hexapod, readings, monkeypatch):
+    """Issue 36: the same calibration from arrays and from the file agree to 1e-12; the
+    arrays reach the fit in memory (no scratch file, no argument vector)."""
+    poses, sensors, lengths, labels = _arrays(readings)
+    m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels,
+                           simulated=True)
+    from cpm import _robot
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    for effects in (None, ["link_offset"], ["sensor_offset"]):
+        a = cpm.calibrate(hexapod, HEXAPOD_READINGS, effects=effects)
+        with monkeypatch.context() as mp:
+            mp.setattr(_robot.Scratch, "write", no_scratch)
+            b = cpm.calibrate(hexapod, m, effects=effects)
+        worst = _max_difference(a, b)
+        print(f"effects {effects}: largest difference file vs arrays {worst:.3g}")
+        assert worst <= 1e-12, worst
+        assert b.timings["solver"] > 0.0 and b.timings["total"] >= b.timings["job"]
+    # The arrays name themselves in the outputs.
+    assert b.observation_origin(0)[0] == "gauge readings"

@@ -12,7 +12,7 @@
 //! standard deviations, the Cramér-Rao covariance, identifiability, residuals, and every staged
 //! output file (`calibration.json`, `report.md`, `report.html`, `calibrated.toml`, figures).
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use clap::Parser;
 use cpm::cli::{self, calibrate as cal_cli, common, Cli, Command, Ctx, Outcome};
@@ -81,7 +81,40 @@ struct Fit {
     trouble: Option<String>,
     files: Vec<(String, Vec<u8>)>,
     written: Vec<String>,
-    origins: Vec<Option<(String, usize, String)>>,
+    origins: Origins,
+    /// Seconds spent, by part (the job, its solver, and all of the work with the results).
+    timings: Vec<(String, f64)>,
+}
+
+/// Where each observation of a fit came from (file, line, what), told when asked: a list
+/// of them for 10^5 readings would take longer to build than the rest of the results.
+#[pyclass(name = "ObservationOrigins", module = "cpm._cpm", frozen)]
+pub struct Origins {
+    count: usize,
+    robot: cpm_io::Robot,
+    merged: cpm_io::Merged,
+}
+
+#[pymethods]
+impl Origins {
+    fn __len__(&self) -> usize {
+        self.count
+    }
+    /// Observation `k`'s file, line and what it is (`None` when not known); negative `k`
+    /// counts from the end.
+    fn __getitem__(&self, k: isize) -> PyResult<Option<(String, usize, String)>> {
+        let n = self.count as isize;
+        let i = if k < 0 { k + n } else { k };
+        if i < 0 || i >= n {
+            return Err(pyo3::exceptions::PyIndexError::new_err(
+                "observation index out of range",
+            ));
+        }
+        Ok(
+            cal_cli::observation_origin(&self.robot, &self.merged, i as usize)
+                .map(|o| (o.file, o.line, o.what)),
+        )
+    }
 }
 
 /// Puts back the names that scratch files stand for (measurements made from arrays, a robot
@@ -173,12 +206,12 @@ pub fn calibrate<'py>(
         } else {
             Vec::new()
         };
-        let origins = (0..cal.residuals_um.len())
-            .map(|k| {
-                cal_cli::observation_origin(&inputs.robot, &inputs.merged, k)
-                    .map(|o| (o.file, o.line, o.what))
-            })
-            .collect();
+        let origins = Origins {
+            count: cal.residuals_um.len(),
+            robot: inputs.robot,
+            merged: inputs.merged,
+        };
+        let timings = vec![("solver".to_string(), cal.solver.elapsed.as_secs_f64())];
         Ok(Fit {
             names: inputs.model.parameter_names(),
             cal,
@@ -187,6 +220,7 @@ pub fn calibrate<'py>(
             files,
             written,
             origins,
+            timings,
         })
     })?;
     let fit = r.map_err(|e| crate::errors::to_py(py, &e))?;
@@ -256,7 +290,7 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
     )?;
     d.set_item("identifiability_summary", id.summary())?;
     d.set_item("residuals_um", PyArray1::from_slice(py, &cal.residuals_um))?;
-    d.set_item("observation_origin", fit.origins)?;
+    d.set_item("observation_origin", Bound::new(py, fit.origins)?)?;
     d.set_item("outliers", cal.outliers.clone())?;
     d.set_item("sigma_um", cal.sigma_um)?;
     d.set_item("sigma_estimated", cal.sigma_estimated)?;
@@ -277,6 +311,10 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
     }
     d.set_item("files", files)?;
     d.set_item("written", fit.written)?;
+    d.set_item(
+        "timings",
+        fit.timings.into_iter().collect::<HashMap<_, _>>(),
+    )?;
     Ok(d)
 }
 
@@ -289,4 +327,301 @@ pub fn render_html(
     svgs: std::collections::HashMap<String, String>,
 ) -> String {
     cpm::report::html::render(title, markdown, |name| svgs.get(name).cloned())
+}
+
+/// The progress of a job run for Python: shows nothing; Ctrl-C (the caller gone) cancels,
+/// inside the fit's iterations too.
+struct Cancel(std::sync::Arc<std::sync::atomic::AtomicBool>);
+
+impl cpm_workflow::Progress for Cancel {
+    fn cancel_flag(&self) -> Option<std::sync::Arc<std::sync::atomic::AtomicBool>> {
+        Some(self.0.clone())
+    }
+}
+
+/// A value of an option given by name (`--name`), or a usage error naming the option.
+fn option<'py, T: FromPyObject<'py>>(
+    py: Python<'py>,
+    options: &Bound<'py, PyDict>,
+    key: &str,
+) -> PyResult<Option<T>> {
+    match options.get_item(key)? {
+        None => Ok(None),
+        Some(v) if v.is_none() => Ok(None),
+        Some(v) => v.extract().map(Some).map_err(|e| {
+            crate::errors::usage(
+                py,
+                format!("invalid value for '--{}': {e}", key.replace('_', "-")),
+            )
+        }),
+    }
+}
+
+/// One of `values` for the option `key` (a usage error listing them otherwise).
+fn choice<T: Copy>(
+    py: Python<'_>,
+    options: &Bound<'_, PyDict>,
+    key: &str,
+    values: &[(&str, T)],
+    default: T,
+) -> PyResult<T> {
+    let Some(v) = option::<String>(py, options, key)? else {
+        return Ok(default);
+    };
+    values
+        .iter()
+        .find(|(name, _)| *name == v)
+        .map(|(_, t)| *t)
+        .ok_or_else(|| {
+            let names: Vec<&str> = values.iter().map(|(n, _)| *n).collect();
+            crate::errors::usage(
+                py,
+                format!(
+                    "invalid value '{v}' for '--{}'\n  [possible values: {}]",
+                    key.replace('_', "-"),
+                    names.join(", ")
+                ),
+            )
+        })
+}
+
+/// The options of `cpm calibrate` from a dict of the command's options by name (`sigma_um`
+/// for `--sigma-um`; values already of their types), for the output directory `out`.
+fn calibrate_options(
+    py: Python<'_>,
+    options: &Bound<'_, PyDict>,
+    out: PathBuf,
+) -> PyResult<cpm_workflow::fit::CalibrateOptions> {
+    use cpm_workflow::fit::{NoisePerKind, TrackerResiduals};
+    use cpm_workflow::formulation::FormulationArg;
+    let known = [
+        "effects",
+        "sigma_um",
+        "pose_sigma_um",
+        "orientation_sigma_urad",
+        "robust",
+        "keep_outliers",
+        "max_iterations",
+        "noise_per_kind",
+        "tolerance",
+        "hold",
+        "no_prior",
+        "tracker_residuals",
+        "minimum_norm",
+        "formulation",
+        "json",
+        "quiet",
+    ];
+    for key in options.keys() {
+        let key: String = key.extract()?;
+        if !known.contains(&key.as_str()) {
+            return Err(crate::errors::usage(
+                py,
+                format!("unexpected argument '--{}' found", key.replace('_', "-")),
+            ));
+        }
+    }
+    let flag =
+        |key: &str| -> PyResult<bool> { Ok(option::<bool>(py, options, key)?.unwrap_or(false)) };
+    let mut o = cpm_workflow::fit::CalibrateOptions::new(PathBuf::new(), Vec::new(), out);
+    let f = &mut o.fit;
+    f.effects = option(py, options, "effects")?;
+    f.sigma_um = option(py, options, "sigma_um")?;
+    f.pose_sigma_um = option(py, options, "pose_sigma_um")?;
+    f.orientation_sigma_urad = option(py, options, "orientation_sigma_urad")?;
+    f.robust = option(py, options, "robust")?;
+    f.keep_outliers = flag("keep_outliers")?;
+    f.max_iterations = option(py, options, "max_iterations")?;
+    f.noise_per_kind = choice(
+        py,
+        options,
+        "noise_per_kind",
+        &[
+            ("auto", NoisePerKind::Auto),
+            ("on", NoisePerKind::On),
+            ("off", NoisePerKind::Off),
+        ],
+        NoisePerKind::Auto,
+    )?;
+    f.tolerance = option(py, options, "tolerance")?.unwrap_or_default();
+    f.hold = option::<Vec<String>>(py, options, "hold")?
+        .unwrap_or_default()
+        .iter()
+        .flat_map(|h| h.split(',').map(str::to_string))
+        .collect();
+    f.no_prior = flag("no_prior")?;
+    f.tracker_residuals = choice(
+        py,
+        options,
+        "tracker_residuals",
+        &[
+            ("auto", TrackerResiduals::Auto),
+            ("pose", TrackerResiduals::Pose),
+            ("legs", TrackerResiduals::Legs),
+        ],
+        TrackerResiduals::Auto,
+    )?;
+    o.minimum_norm = flag("minimum_norm")?;
+    o.formulation = choice(
+        py,
+        options,
+        "formulation",
+        &[
+            ("auto", FormulationArg::Auto),
+            ("nested", FormulationArg::Nested),
+            ("implicit", FormulationArg::Implicit),
+        ],
+        FormulationArg::Auto,
+    )?;
+    Ok(o)
+}
+
+/// A directory for outputs that are only staged: its name is in `calibrated.toml` (where the
+/// robot lies relative to it), as a scratch directory's was. Made empty, removed after.
+struct Unwritten(PathBuf);
+
+impl Unwritten {
+    fn new() -> std::io::Result<Unwritten> {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static COUNT: AtomicUsize = AtomicUsize::new(0);
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        let dir = std::env::temp_dir().join(format!(
+            "cpm-py-{}-{}-{nanos}",
+            std::process::id(),
+            COUNT.fetch_add(1, Ordering::Relaxed)
+        ));
+        std::fs::create_dir(&dir)?;
+        Ok(Unwritten(dir))
+    }
+}
+
+impl Drop for Unwritten {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir(&self.0);
+    }
+}
+
+/// `cpm calibrate` on a campaign in memory ([`cpm_workflow::memory::calibrate`]): `robot`
+/// as loaded, `data` paths (read as `--data` reads them) or measurements read by
+/// [`crate::data::read_text`] (taken as read), `options` the command's by name with values
+/// of their types. With `out` and `commit` the outputs are written there as the command
+/// writes them (all or nothing), otherwise only staged. Returns the dict of [`calibrate`], or
+/// `None` when the campaign must be read from files (two or more tracker sets, some in
+/// memory: [`cpm_workflow::memory::NeedsFiles`]).
+#[pyfunction]
+#[pyo3(signature = (robot, data, options, out=None, commit=false))]
+pub fn calibrate_memory<'py>(
+    py: Python<'py>,
+    robot: &crate::robot::PyRobot,
+    data: Vec<Bound<'py, PyAny>>,
+    options: &Bound<'py, PyDict>,
+    out: Option<PathBuf>,
+    commit: bool,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    use cpm_workflow::memory::{calibrate as calibrate_in_memory, NeedsFiles, Source};
+    if data.is_empty() {
+        return Err(crate::errors::usage(py, "data: no measurements"));
+    }
+    let mut sources = Vec::with_capacity(data.len());
+    for d in &data {
+        sources.push(match d.downcast::<crate::data::PyData>() {
+            Ok(h) => h.get().source(robot),
+            Err(_) => Source::Path(d.extract()?),
+        });
+    }
+    let staged = match out {
+        Some(_) => None,
+        None => Some(Unwritten::new().map_err(|e| {
+            crate::errors::to_py(py, &anyhow::Error::new(e).context("a scratch directory"))
+        })?),
+    };
+    let dir = match &staged {
+        Some(s) => s.0.join("cal"),
+        None => out.clone().unwrap_or_default(),
+    };
+    let options = calibrate_options(py, options, dir.clone())?;
+    let bot = robot.robot.clone();
+    let robot_path = robot.path.clone();
+    let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Option<Fit>> {
+        let progress = Cancel(abandoned.clone());
+        let t0 = std::time::Instant::now();
+        let job = match calibrate_in_memory(&options, bot, &sources, &progress) {
+            Err(e) if e.downcast_ref::<NeedsFiles>().is_some() => return Ok(None),
+            r => r?,
+        };
+        let fitted_s = t0.elapsed().as_secs_f64();
+        let cpm_workflow::fit::Calibrated { inputs, fitted } = job;
+        let warnings = fitted.report.fit.warnings.clone();
+        let cal = fitted.cal;
+        let trouble = if let Some(why) = cal.robust_failure() {
+            Some(format!("the fit failed: {why}"))
+        } else if !cal.solver.was_successful() {
+            Some(format!(
+                "the solver did not converge ({})",
+                cal.solver.termination
+            ))
+        } else {
+            None
+        };
+        let files: Vec<(String, Vec<u8>)> = fitted
+            .set
+            .paths()
+            .filter_map(|p| {
+                let name = p.strip_prefix(&dir).unwrap_or(p).display().to_string();
+                fitted.set.contents(p).map(|b| (name, b.to_vec()))
+            })
+            .collect();
+        if abandoned.load(std::sync::atomic::Ordering::SeqCst) {
+            anyhow::bail!("interrupted");
+        }
+        let written = if commit {
+            let inputs_paths: Vec<&Path> = robot_path
+                .iter()
+                .map(|p| p.as_path())
+                .chain(sources.iter().filter_map(|s| match s {
+                    Source::Path(p) => Some(p.as_path()),
+                    _ => None,
+                }))
+                .collect();
+            cpm_workflow::load::commit_dir(
+                fitted.set,
+                &dir,
+                &inputs_paths,
+                "calibrate",
+                &cpm_workflow::Silent,
+            )?
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect()
+        } else {
+            Vec::new()
+        };
+        let origins = Origins {
+            count: cal.residuals_um.len(),
+            robot: inputs.robot,
+            merged: inputs.merged,
+        };
+        let timings = vec![
+            ("job".to_string(), fitted_s),
+            ("solver".to_string(), cal.solver.elapsed.as_secs_f64()),
+            ("total".to_string(), t0.elapsed().as_secs_f64()),
+        ];
+        Ok(Some(Fit {
+            names: inputs.model.parameter_names(),
+            cal,
+            warnings,
+            trouble,
+            files,
+            written,
+            origins,
+            timings,
+        }))
+    })?;
+    drop(staged);
+    match r.map_err(|e| crate::errors::to_py(py, &e))? {
+        Some(fit) => fit_dict(py, fit).map(Some),
+        None => Ok(None),
+    }
 }

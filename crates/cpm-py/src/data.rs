@@ -14,6 +14,41 @@ use pyo3::types::PyDict;
 
 use crate::robot::PyRobot;
 
+/// Measurements as read, kept for the jobs that take them from memory
+/// ([`cpm_workflow::memory`]): the file as read, the read options, its text (read again when a
+/// job needs other options) and the robot they were read against.
+#[pyclass(name = "DataHandle", module = "cpm._cpm", frozen)]
+pub struct PyData {
+    /// The measurements as read.
+    pub data: std::sync::Arc<DataFile>,
+    /// The read options they were read with.
+    pub options: ReadOptions,
+    /// Their text.
+    pub text: std::sync::Arc<str>,
+    /// The robot's description text and name they were read against.
+    pub robot: (String, String),
+}
+
+impl PyData {
+    /// The measurements as a source of a job on `robot`: as read when read against it,
+    /// else their text to read again.
+    pub fn source(&self, robot: &PyRobot) -> cpm_workflow::memory::Source {
+        use cpm_workflow::memory::{ReadData, Source};
+        if self.robot.0 == robot.text && self.robot.1 == robot.robot.file {
+            Source::Read(ReadData {
+                data: self.data.clone(),
+                options: self.options,
+                text: self.text.clone(),
+            })
+        } else {
+            Source::Text {
+                name: self.data.file.clone(),
+                text: self.text.clone(),
+            }
+        }
+    }
+}
+
 /// The read options of `cpm calibrate` for a robot and its declared effects.
 fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<ReadOptions> {
     let effects = robot
@@ -145,7 +180,8 @@ pub fn read_file<'py>(
     summary(py, &f, robot)
 }
 
-/// Reads measurements from CSV text; `name` stands for the file in messages.
+/// Reads measurements from CSV text; `name` stands for the file in messages. The dict's
+/// `handle` keeps them as read, for the jobs that take measurements from memory.
 #[pyfunction]
 pub fn read_text<'py>(
     py: Python<'py>,
@@ -156,7 +192,15 @@ pub fn read_text<'py>(
     let options = options(py, robot)?;
     let f = cpm_io::read_data(text, name, &robot.robot, &options)
         .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
-    summary(py, &f, robot)
+    let d = summary(py, &f, robot)?;
+    let handle = PyData {
+        data: std::sync::Arc::new(f),
+        options,
+        text: text.into(),
+        robot: (robot.text.clone(), robot.robot.file.clone()),
+    };
+    d.set_item("handle", Bound::new(py, handle)?)?;
+    Ok(d)
 }
 
 /// Checks that an array has `n` rows (and `cols` columns); a usage error naming it otherwise.

@@ -30,6 +30,8 @@ pub mod robot;
 fn _cpm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_class::<robot::PyRobot>()?;
+    m.add_class::<data::PyData>()?;
+    m.add_class::<commands::Origins>()?;
     m.add_function(wrap_pyfunction!(robot::robot_load, m)?)?;
     m.add_function(wrap_pyfunction!(robot::robot_from_text, m)?)?;
     m.add_function(wrap_pyfunction!(data::read_file, m)?)?;
@@ -39,6 +41,7 @@ fn _cpm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(commands::run_command, m)?)?;
     m.add_function(wrap_pyfunction!(commands::main, m)?)?;
     m.add_function(wrap_pyfunction!(commands::calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(commands::calibrate_memory, m)?)?;
     m.add_function(wrap_pyfunction!(commands::effect_names, m)?)?;
     m.add_function(wrap_pyfunction!(commands::render_html, m)?)?;
     m.add_function(wrap_pyfunction!(lm::least_squares, m)?)?;

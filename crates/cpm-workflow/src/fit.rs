@@ -136,7 +136,14 @@ impl FitOptions {
     /// robot, the effects and the data.
     pub fn load(&self, progress: &dyn Progress) -> anyhow::Result<Inputs> {
         self.validate()?;
-        let mut inputs = load_inputs(self, progress)?;
+        let inputs = load_inputs(self, progress)?;
+        self.prepare(inputs, progress)
+    }
+
+    /// What [`load`](Self::load) does once the robot and the data are loaded: the solver
+    /// options, the noise per kind, the tracker residuals (also for inputs loaded otherwise,
+    /// [`crate::memory`]).
+    pub fn prepare(&self, mut inputs: Inputs, progress: &dyn Progress) -> anyhow::Result<Inputs> {
         solver_options(
             &mut inputs.identify,
             self.robust.as_deref(),
@@ -246,6 +253,23 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
     let data = &args.data;
     progress.stage("reading the robot description");
     let robot = crate::load::load_robot(&args.robot, progress)?;
+    let names = data.iter().map(|p| p.display().to_string()).collect();
+    let read =
+        |robot: &Robot, options: &io::ReadOptions| crate::load::load_data(data, robot, options);
+    load_inputs_with(args, robot, read, data.clone(), names, progress)
+}
+
+/// [`load_inputs`] with the robot given and the data read by `read` (with the read options
+/// of the model); `data_paths` are the files read (empty for data in memory), `names` what
+/// the provenance calls the data.
+pub(crate) fn load_inputs_with(
+    args: &FitOptions,
+    robot: Robot,
+    read: impl FnOnce(&Robot, &io::ReadOptions) -> anyhow::Result<Merged>,
+    data_paths: Vec<PathBuf>,
+    names: Vec<String>,
+    progress: &dyn Progress,
+) -> anyhow::Result<Inputs> {
     // The tracker's noise: the options, else the description's `[calibration]`.
     let declared = robot.tracker_sigmas();
     let (pose_sigma_um, orientation_sigma_urad) = (
@@ -267,7 +291,7 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
         }
     }
     progress.stage("reading the measurements");
-    let mut merged = crate::load::load_data(data, &robot, &crate::load::read_options(&model))?;
+    let mut merged = read(&robot, &crate::load::read_options(&model))?;
     crate::load::warn_excluded(progress, &merged.excluded);
     if let Some(v) = pose_sigma_um {
         merged.campaign.pose_sigma_um = v;
@@ -352,10 +376,10 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
         ..IdentifyOptions::default()
     };
     Ok(Inputs {
-        data_paths: data.clone(),
+        data_paths,
         provenance: Provenance {
             robot: robot.file.clone(),
-            data: data.iter().map(|p| p.display().to_string()).collect(),
+            data: names,
         },
         identify,
         robot,

@@ -6,6 +6,8 @@
 //!   committing a result directory;
 //! - [`fit`]: [`calibrate`](fit::calibrate) with [`CalibrateOptions`](fit::CalibrateOptions),
 //!   and the stages every fit shares (the read-back check of `calibrated.toml` among them);
+//! - [`memory`]: [`calibrate`](memory::calibrate) a campaign held in memory (the robot
+//!   as loaded, measurements already read), for the Python binding;
 //! - [`refine`]: [`refine`](refine::refine) with [`RefineOptions`](refine::RefineOptions);
 //! - [`validate`]: [`validate`](validate::validate) held-out data, and
 //!   [`check_compensation`](validate::check_compensation);
@@ -68,6 +70,7 @@ pub mod formulation;
 pub mod gauges;
 pub mod identifiability;
 pub mod load;
+pub mod memory;
 pub mod output;
 pub mod plan;
 pub mod progress;

@@ -1,0 +1,216 @@
+//! Jobs on a campaign held in memory: the robot as loaded and measurements already read
+//! (from arrays, from text, from files), for callers that hold them (the Python binding):
+//! no file is written or read again unless the fit needs other read options.
+//!
+//! [`calibrate`] is [`fit::calibrate`](crate::fit::calibrate) with the robot and the data
+//! given ([`Source`]); the options are the same ([`CalibrateOptions`]: its `robot` and `data`
+//! paths are not used). The fit, the outputs and the report are the same functions: the
+//! same measurements give the same numbers, to the last bit, whether read from a file or
+//! given in memory.
+//!
+//! Measurements read in memory name themselves (their [`DataFile::file`]) in errors and
+//! outputs. The read-back check of `calibrated.toml` needs the data as files and is made
+//! when every source is a file.
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use crate::fit::{CalibrateOptions, Calibrated, FitOptions, Inputs};
+use crate::io::{self, DataFile, FileKind, Merged, ReadOptions, Robot};
+use crate::progress::{check_cancelled, Progress};
+
+/// Measurements a job reads from memory, with how they were read.
+#[derive(Debug, Clone)]
+pub struct ReadData {
+    /// The measurements as read (with `options`, against the job's robot).
+    pub data: Arc<DataFile>,
+    /// The read options they were read with.
+    pub options: ReadOptions,
+    /// Their text (a measurement file's), read again when the job needs other read options.
+    pub text: Arc<str>,
+}
+
+/// One set of measurements of a campaign.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A file, read as `cpm calibrate --data PATH` reads it.
+    Path(PathBuf),
+    /// Measurements already read against the job's robot (the caller checks that it is the
+    /// same robot: else give them as [`Source::Text`]).
+    Read(ReadData),
+    /// Measurement text to read (its name stands for the file).
+    Text {
+        /// The name in messages and outputs.
+        name: String,
+        /// The text, as a measurement file holds it.
+        text: Arc<str>,
+    },
+}
+
+impl Source {
+    /// The name of the source in messages and outputs.
+    pub fn name(&self) -> String {
+        match self {
+            Source::Path(p) => p.display().to_string(),
+            Source::Read(r) => r.data.file.clone(),
+            Source::Text { name, .. } => name.clone(),
+        }
+    }
+}
+
+/// The error of a campaign that has two or more tracker pose sets of which some are held in
+/// memory: tracker sets are registered together (reading offsets shared) only when read
+/// from files ([`io::read_data_files`]). Write them to files, or give one set at a time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct NeedsFiles;
+
+impl std::fmt::Display for NeedsFiles {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("two or more tracker measurement sets are registered together only when read from files")
+    }
+}
+
+impl std::error::Error for NeedsFiles {}
+
+/// Reads and merges the sources with `options` (the read options of the job's model): files
+/// only are read as [`load::load_data`](crate::load::load_data) reads them; measurements
+/// already read with the same options are taken as they are, others read again from their
+/// text. [`NeedsFiles`] for two or more tracker sets when one is in memory.
+pub fn read_sources(
+    sources: &[Source],
+    robot: &Robot,
+    options: &ReadOptions,
+) -> anyhow::Result<Merged> {
+    let paths: Vec<PathBuf> = sources
+        .iter()
+        .filter_map(|s| match s {
+            Source::Path(p) => Some(p.clone()),
+            _ => None,
+        })
+        .collect();
+    if paths.len() == sources.len() {
+        return crate::load::load_data(&paths, robot, options);
+    }
+    let mut files = Vec::with_capacity(sources.len());
+    for s in sources {
+        let f = match s {
+            Source::Path(p) => io::read_data_file(p, robot, options)?,
+            Source::Read(r) if r.options == *options => DataFile::clone(&r.data),
+            Source::Read(r) => io::read_data(&r.text, &r.data.file, robot, options)?,
+            Source::Text { name, text } => io::read_data(text, name, robot, options)?,
+        };
+        files.push(f);
+    }
+    let trackers = files
+        .iter()
+        .filter(|f| f.kind == FileKind::PoseMeasurements)
+        .count();
+    if trackers > 1 {
+        return Err(NeedsFiles.into());
+    }
+    let merged = io::merge(files, robot);
+    if options.check_sensor_lengths {
+        crate::gauges::check_readings(robot, &merged)?;
+    }
+    Ok(merged)
+}
+
+/// Loads a fit's inputs from memory: [`FitOptions::load`] with the robot given and the data
+/// read by [`read_sources`] (its `robot` and `data` paths are not used).
+pub fn load(
+    options: &FitOptions,
+    robot: Robot,
+    sources: &[Source],
+    progress: &dyn Progress,
+) -> anyhow::Result<Inputs> {
+    options.validate()?;
+    let data_paths: Vec<PathBuf> = sources
+        .iter()
+        .filter_map(|s| match s {
+            Source::Path(p) => Some(p.clone()),
+            _ => None,
+        })
+        .collect();
+    // The read-back of calibrated.toml reads the data files: only when all are files.
+    let data_paths = if data_paths.len() == sources.len() {
+        data_paths
+    } else {
+        Vec::new()
+    };
+    let names = sources.iter().map(Source::name).collect();
+    let read = |robot: &Robot, o: &ReadOptions| read_sources(sources, robot, o);
+    let inputs = crate::fit::load_inputs_with(options, robot, read, data_paths, names, progress)?;
+    options.prepare(inputs, progress)
+}
+
+/// `cpm calibrate` on a campaign in memory: [`fit::calibrate`](crate::fit::calibrate) with
+/// the robot and the data given. Nothing is written (commit the staged set); a cancelled job
+/// returns [`Cancelled`](crate::Cancelled).
+pub fn calibrate(
+    options: &CalibrateOptions,
+    robot: Robot,
+    sources: &[Source],
+    progress: &dyn Progress,
+) -> anyhow::Result<Calibrated> {
+    let job = || -> anyhow::Result<Calibrated> {
+        check_cancelled(progress)?;
+        let inputs = load(&options.fit, robot, sources, progress)?;
+        check_cancelled(progress)?;
+        progress.stage(&format!(
+            "fitting {} to {} observations",
+            crate::load::describe_model(&inputs.model),
+            inputs.merged.campaign.len()
+        ));
+        let fitted = crate::fit::fit_with(
+            &inputs,
+            &options.fit.out,
+            options.minimum_norm,
+            options.formulation,
+        )?;
+        crate::load::warn_excluded(progress, &fitted.excluded);
+        check_cancelled(progress)?;
+        Ok(Calibrated { inputs, fitted })
+    };
+    crate::progress::unless_cancelled(job(), progress)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ex(f: &str) -> PathBuf {
+        PathBuf::from("../../examples").join(f)
+    }
+
+    /// The same file from memory and from its path: the same calibration, bit for bit.
+    #[test]
+    fn memory_and_file_give_the_same_fit() {
+        let robot_path = ex("hexapod_66.toml");
+        let data_path = ex("hexapod_66_readings.csv");
+        let out = std::env::temp_dir().join("cpm-memory-test-unwritten");
+        let options = CalibrateOptions::new(&robot_path, vec![data_path.clone()], &out);
+        let from_file = crate::fit::calibrate(&options, &crate::Silent).unwrap();
+        let robot = Robot::load(&robot_path).unwrap();
+        let text: Arc<str> = std::fs::read_to_string(&data_path).unwrap().into();
+        let name = data_path.display().to_string();
+        let read_with = crate::load::read_options(&robot.model(&robot.declared_effects().unwrap()));
+        let data = io::read_data(&text, &name, &robot, &read_with).unwrap();
+        let sources = [Source::Read(ReadData {
+            data: Arc::new(data),
+            options: read_with,
+            text,
+        })];
+        let in_memory = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
+        let (a, b) = (&from_file.fitted.cal, &in_memory.fitted.cal);
+        assert_eq!(a.estimate_um, b.estimate_um);
+        assert_eq!(a.residuals_um, b.residuals_um);
+        // The calibrated description, byte for byte (calibration.json holds timings).
+        let toml = |c: &Calibrated| {
+            c.fitted
+                .set
+                .contents(&out.join("calibrated.toml"))
+                .map(<[u8]>::to_vec)
+        };
+        assert!(toml(&from_file).is_some());
+        assert_eq!(toml(&from_file), toml(&in_memory));
+    }
+}

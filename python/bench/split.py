@@ -1,0 +1,71 @@
+"""Where the time of a calibration from numpy arrays goes (issue 36): 10^5 gauge readings
+(simulated, examples/hexapod_66.toml: 33,334 random poses x 3 sensors) made into
+measurements, then calibrated in memory. Prints the seconds of each part: inside the fit
+(the least-squares solve) and outside it (reading the arrays, loading, the outputs, the
+results for Python). Not a test: no time is asserted.
+
+    python python/bench/split.py [POSES] [--effects a,b]
+"""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import cpm
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def main() -> None:
+    args = sys.argv[1:]
+    effects = None
+    if "--effects" in args:
+        i = args.index("--effects")
+        effects = args[i + 1].split(",")
+        del args[i:i + 2]
+    poses = int(args[0]) if args else 33334
+    robot = cpm.Robot.from_toml(ROOT / "examples" / "hexapod_66.toml")
+    sim = cpm.simulate(robot, random=poses, truth=str(ROOT / "examples" / "hexapod_66_truth.toml"),
+                       noise="gaussian:1", seed=7)
+    # The simulated campaign as arrays, one row per reading.
+    info = sim.sources[0].info
+    k = np.asarray(info["reading_pose"], dtype=int)
+    p = np.asarray(info["poses"])[k]
+    sensors = list(info["reading_sensor"])
+    lengths = np.asarray(info["lengths_mm"])
+    labels = [info["pose_labels"][j] for j in k]
+    print(f"{len(lengths)} readings at {poses} poses, effects {effects or 'declared'}")
+    for run in range(3):
+        t0 = time.perf_counter()
+        m = cpm.gauge_readings(robot, p, sensors, lengths, pose_labels=labels, simulated=True)
+        t1 = time.perf_counter()
+        r = cpm.calibrate(robot, m, effects=effects)
+        t2 = time.perf_counter()
+        t = r.timings
+        solver = t.get("solver", float("nan"))
+        outside = (t2 - t1) - solver
+        print(f"run {run + 1}: arrays->measurements {t1 - t0:.3f} s; calibrate {t2 - t1:.3f} s "
+              f"(job {t.get('job', float('nan')):.3f} s, results for Python "
+              f"{(t2 - t1) - t.get('job', float('nan')):.3f} s): inside the fit (solver) "
+              f"{solver:.3f} s, outside {outside:.3f} s = {100 * outside / (t2 - t1):.0f} % "
+              f"of calibrate, {100 * (outside + t1 - t0) / (t2 - t0):.0f} % with the arrays; "
+              f"{r.solver}")
+    # Before issue 36: the same arrays through CSV text in a scratch folder and the command's
+    # parser (kept for campaigns the memory path does not take).
+    from cpm._commands import _calibrate_from_files
+
+    for run in range(2):
+        t1 = time.perf_counter()
+        d = _calibrate_from_files(robot, [m], effects, None, None, None, {})
+        t2 = time.perf_counter()
+        solver = d["timings"]["solver"]
+        print(f"files run {run + 1}: calibrate {t2 - t1:.3f} s: inside the fit (solver) "
+              f"{solver:.3f} s, outside {(t2 - t1) - solver:.3f} s = "
+              f"{100 * ((t2 - t1) - solver) / (t2 - t1):.0f} %")
+
+
+if __name__ == "__main__":
+    main()
