@@ -186,7 +186,10 @@ fn hard_rule_corrections_are_the_signs_of_the_svd_forces() {
             );
             let got = model.link_corrections_mm(&table, &pose, load).unwrap();
             let t = link_forces_n(&table, &pose, load).unwrap();
-            let want: Vec<f64> = t.iter().map(|&t| two_r_mm * SignRule::Hard.factor(t)).collect();
+            let want: Vec<f64> = t
+                .iter()
+                .map(|&t| two_r_mm * SignRule::Hard.factor(t))
+                .collect();
             assert_eq!(got, want, "pose {i}");
         }
     }
