@@ -114,6 +114,13 @@ impl ClearanceModel {
         if self.radius_um == 0.0 {
             return Ok(vec![0.0; table.num_links()]);
         }
+        if self.rule == SignRule::Hard {
+            // The hard rule needs only the forces' signs: from an LU solve when they are
+            // certain, else (near zero or near singular) from the SVD below.
+            if let Some(signs) = crate::statics::link_force_signs_if_certain(table, pose, load) {
+                return Ok(self.corrections_from_forces_mm(&signs));
+            }
+        }
         let t = link_forces_n(table, pose, load)?;
         Ok(self.corrections_from_forces_mm(&t))
     }

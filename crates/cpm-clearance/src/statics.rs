@@ -71,6 +71,37 @@ pub fn platform_wrench(load: &Load, pose: &Pose) -> Vector6<f64> {
     Vector6::new(f.x, f.y, f.z, m.x, m.y, m.z)
 }
 
+/// The signs (-1, 0 or +1) of [`link_forces_n`]'s forces when an LU solve makes them certain
+/// (six links, the Frobenius condition number of `J1` below 1e9, every force farther from
+/// zero than the solve's error bound), `None` otherwise: the hard sign rule's corrections
+/// then need no SVD (the SVD's own acceptance, condition below 1e10, follows from the bound).
+pub(crate) fn link_force_signs_if_certain(
+    table: &JointTable,
+    pose: &Pose,
+    load: &Load,
+) -> Option<[f64; 6]> {
+    if table.num_links() != 6 {
+        return None;
+    }
+    let j1: DMatrix<f64> = cpm_kinematics::j1(table, pose);
+    let a = nalgebra::Matrix6::from_fn(|r, c| j1[(c, r)]);
+    let inv = a.lu().try_inverse()?;
+    // cond_2 <= cond_F: below 1e9 the pose is well inside the SVD's acceptance.
+    let cond_f = a.norm() * inv.norm();
+    if !(cond_f < 1e9) {
+        return None;
+    }
+    let t = inv * platform_wrench(load, pose);
+    let size = t.amax();
+    // Both solves are within about 6 cond eps |t| of the exact forces: a force this far from
+    // zero has the same sign in either.
+    let margin = cond_f * 1e-12 * size;
+    if !(size.is_finite() && t.iter().all(|v| v.abs() > margin)) {
+        return None;
+    }
+    Some(std::array::from_fn(|i| t[i].signum()))
+}
+
 /// Axial link forces (N, tension positive) that hold the platform at `pose` under `load`:
 /// the solution of `J1^T t = w` (least norm for more than six links).
 ///

@@ -153,3 +153,44 @@ fn forces_match_an_svd_solve_over_wide_poses_and_singular_poses_fail() {
     let pose = Pose::from_xyz_rpy(0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     assert!(link_forces_n(&flat, &pose, &Load::default()).is_err());
 }
+
+/// The hard rule's corrections (taken from an LU solve when the forces' signs are certain)
+/// are the signs of the SVD's forces, pose for pose, over a grid of poses and loads; and a
+/// load of zero (every force zero, no sign certain) still gives zero shifts.
+#[test]
+fn hard_rule_corrections_are_the_signs_of_the_svd_forces() {
+    let table = JointTable::paper_cubic();
+    let model = ClearanceModel::default();
+    let two_r_mm = 2.0 * model.radius_um * 1e-3;
+    let loads = [
+        Load::default(),
+        Load {
+            external_force_n: Vector3::new(5.0, -3.0, 2.0),
+            ..Load::default()
+        },
+        Load {
+            platform_mass_kg: 0.0,
+            ..Load::default()
+        },
+    ];
+    for load in &loads {
+        for i in 0..200 {
+            let f = i as f64;
+            let pose = Pose::from_xyz_rpy(
+                40.0 * (0.7 * f).sin(),
+                40.0 * (1.3 * f).cos(),
+                400.0 + 30.0 * (0.4 * f).sin(),
+                0.15 * (0.9 * f).cos(),
+                0.15 * (1.7 * f).sin(),
+                0.15 * (0.3 * f).cos(),
+            );
+            let got = model.link_corrections_mm(&table, &pose, load).unwrap();
+            let t = link_forces_n(&table, &pose, load).unwrap();
+            let want: Vec<f64> = t
+                .iter()
+                .map(|&t| two_r_mm * SignRule::Hard.factor(t))
+                .collect();
+            assert_eq!(got, want, "pose {i}");
+        }
+    }
+}

@@ -1030,8 +1030,11 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                     Some(j) if raw.agrees(&entries[j].raw) => None,
                     _ => Some(pose_of(t, row, o, &raw)?),
                 };
-                previous_cells.clear();
-                previous_cells.extend(pose_columns.iter().map(|(_, c)| row.fields[*c].clone()));
+                // The previous cells' strings reused (one row after the other).
+                previous_cells.resize_with(pose_columns.len(), String::new);
+                for (p, (_, c)) in previous_cells.iter_mut().zip(&pose_columns) {
+                    p.clone_from(&row.fields[*c]);
+                }
                 (raw, pose)
             };
             let length_mm = t.number_at(row, length_col)?;

@@ -1009,6 +1009,15 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// Whether pose `j` has anything observed at it (readings or measurements).
+    fn observed_at(&self, j: usize) -> bool {
+        !(self.by_pose[j].is_empty()
+            && self.measurements_by_pose[j].is_empty()
+            && self.points_by_pose[j].is_empty()
+            && self.tilts_by_pose[j].is_empty()
+            && self.instruments_by_pose[j].is_empty())
+    }
+
     /// Prepares a campaign for repeated predictions.
     pub fn new(model: &MeasurementModel, campaign: &Campaign) -> Result<Self, CalibError> {
         model.check_campaign(campaign)?;
@@ -1197,29 +1206,44 @@ fn predict_exact(
     let channels = Channels::new(model, params);
     let mut y = vec![0.0; campaign.len()];
     let mut at = AtPose::new(n);
+    let input_at = |j: usize| EffectInput {
+        context: &prepared.contexts[j],
+        commanded: &campaign.poses[j],
+        home: &model.nominal.home,
+        settings: &model.effect_settings,
+        t0_s: prepared.t0_s,
+    };
+    // Forward kinematics of every observed pose (the bulk of a prediction) first, in
+    // parallel (each pose's own); the rest pose by pose in order, the first error in pose
+    // order as before.
+    let mut fks: Vec<Option<Result<Pose, cpm_kinematics::KinematicsError>>> = {
+        use rayon::prelude::*;
+        (0..prepared.by_pose.len())
+            .into_par_iter()
+            .with_min_len(64)
+            .map_init(
+                || AtPose::new(n),
+                |at, j| {
+                    if !prepared.observed_at(j) {
+                        return None;
+                    }
+                    channels.at_pose(&input_at(j), &prepared.lengths_mm[j], at);
+                    Some(forward(&table, &at.lengths, &campaign.poses[j], &model.fk).map(|r| r.0))
+                },
+            )
+            .collect()
+    };
     for (j, readings) in prepared.by_pose.iter().enumerate() {
         let measurements = &prepared.measurements_by_pose[j];
         let points = &prepared.points_by_pose[j];
         let tilts = &prepared.tilts_by_pose[j];
         let instruments = &prepared.instruments_by_pose[j];
-        if readings.is_empty()
-            && measurements.is_empty()
-            && points.is_empty()
-            && tilts.is_empty()
-            && instruments.is_empty()
-        {
+        let Some(fk) = fks[j].take() else {
             continue;
-        }
-        let input = EffectInput {
-            context: &prepared.contexts[j],
-            commanded: &campaign.poses[j],
-            home: &model.nominal.home,
-            settings: &model.effect_settings,
-            t0_s: prepared.t0_s,
         };
+        let input = input_at(j);
         channels.at_pose(&input, &prepared.lengths_mm[j], &mut at);
-        let (fk, _) = forward(&table, &at.lengths, &campaign.poses[j], &model.fk)
-            .map_err(|source| CalibError::Kinematics { pose: j, source })?;
+        let fk = fk.map_err(|source| CalibError::Kinematics { pose: j, source })?;
         let pose = if at.twist == nalgebra::Vector6::zeros() {
             fk
         } else {
