@@ -5,7 +5,9 @@
 mod cli;
 use cli::{example, ok, p, scratch};
 
-use cpm::workflow::{compensate, export, fit, identifiability, load, validate, Collect, Silent};
+use cpm::workflow::{
+    compensate, export, fit, identifiability, load, simulate, validate, Collect, Silent,
+};
 use std::path::{Path, PathBuf};
 
 /// Every number of a JSON value, in order, with its path (timings left out).
@@ -266,4 +268,79 @@ fn the_library_analyses_exports_and_compensates_as_the_commands_do() {
         ..options
     };
     assert!(bad.validate().is_err());
+}
+
+#[test]
+fn the_library_simulates_as_the_command_does() {
+    let robot = example("hexapod_66.toml");
+    let truth = example("hexapod_66_truth.toml");
+    let dir = scratch("workflow", "simulate");
+    // Readings with link effects and noise: the file the command writes is the job's text,
+    // byte for byte, and the command's --json is the job's summary.
+    let out = dir.join("data.csv");
+    let by_command = ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--random",
+        "15",
+        "--truth",
+        &truth,
+        "--effects",
+        "link_offset",
+        "--noise",
+        "gaussian:2",
+        "--seed",
+        "7",
+        "--out",
+        &p(&out),
+        "--json",
+    ]);
+    let mut options = simulate::SimulateOptions::new(&robot);
+    options.plan.random = Some(15);
+    options.plan.seed = 7;
+    options.truth = Some(PathBuf::from(&truth));
+    options.effects = Some("link_offset".into());
+    options.noise = Some("gaussian:2".into());
+    options.validate().unwrap();
+    let job = simulate::simulate(&options, &Silent).unwrap();
+    assert_eq!(std::fs::read_to_string(&out).unwrap(), job.text);
+    assert_eq!(by_command, format!("{}\n", job.summary(&out).to_json()));
+    assert_eq!(job.campaign.poses.len(), 15);
+    // Tracker poses in a tracker frame, on standard output.
+    let by_command = ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--circle",
+        "--count",
+        "8",
+        "--truth",
+        &truth,
+        "--measure",
+        "poses",
+        "--orientation-noise-urad",
+        "5",
+        "--tracker-frame",
+        "100,-50,20,1,2,-3",
+        "--out",
+        "-",
+    ]);
+    let mut options = simulate::SimulateOptions::new(&robot);
+    options.plan.circle = true;
+    options.plan.count = 8;
+    options.truth = Some(PathBuf::from(&truth));
+    options.measure = simulate::Measure::Poses;
+    options.orientation_noise_urad = 5.0;
+    options.tracker_frame = Some("100,-50,20,1,2,-3".into());
+    let job = simulate::simulate(&options, &Silent).unwrap();
+    assert_eq!(by_command, job.text);
+    // A tracker frame for length readings: the command's usage error (exit code 2).
+    options.measure = simulate::Measure::Lengths;
+    let err = options.validate().unwrap_err();
+    assert_eq!(
+        cpm::workflow::error::exit_kind(&err),
+        cpm::workflow::ExitKind::Usage
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -16,6 +16,8 @@
 //!   [`PlanOptions`](plan::PlanOptions));
 //! - [`export`]: [`export`](export::export) a robot's settings for a controller;
 //! - [`compensate`]: [`compensate`](compensate::compensate), the commands for target poses;
+//! - [`simulate`]: [`simulate`](simulate::simulate) a measurement campaign with
+//!   [`SimulateOptions`](simulate::SimulateOptions);
 //! - [`progress`]: the [`Progress`] trait (stages, notes, cancellation);
 //! - [`error`]: the kinds of failure and the exit code each gives;
 //! - [`output`]: outputs that never destroy (staged sets committed as one step).
@@ -75,6 +77,7 @@ pub mod output;
 pub mod plan;
 pub mod progress;
 pub mod refine;
+pub mod simulate;
 pub mod truth;
 pub mod validate;
 

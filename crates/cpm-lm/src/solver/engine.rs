@@ -710,6 +710,10 @@ pub(crate) struct Abandon {
 /// One solve. `abandon`: the restart's early stop (see [`Abandon`]); an abandoned run ends
 /// with [`TerminationReason::UserStop`], never reported since its cost is not below the
 /// plain run's.
+///
+/// The stages: [`check_start`] and the backend's set-up, [`Solve::begin`] (the cost at the
+/// start), then [`Solve::iteration`] until one says why the solve ends, and
+/// [`Solve::finish`] (the statistics at the solution and the [`Report`]).
 pub(crate) fn run<M: Model>(
     mut backend: Backend<'_, M>,
     x: &mut [f64],
@@ -719,6 +723,37 @@ pub(crate) fn run<M: Model>(
 ) -> Result<Report, LmError> {
     let start = Instant::now();
     let (n, m) = backend.dims();
+    let bounds = check_start(&backend, x, options, n, m)?;
+    backend.setup(options, m, n)?;
+    // The parameter-sized vectors share one allocation (small problems spend a fair part
+    // of their time in the allocator).
+    let track = options.evaporation_restart.is_some() || abandon.is_some();
+    let mut nbuf = vec![0.0; if track { 8 * n } else { 7 * n }];
+    let work = Work::split(&mut nbuf, n, track);
+    let mut solve = Solve::new(&backend, options, work, bounds.is_some(), start, n, m);
+    let mut termination = solve.begin(&mut backend, options, x)?;
+    while termination.is_none() {
+        termination = solve.iteration(
+            &mut backend,
+            options,
+            x,
+            bounds.as_ref(),
+            abandon.as_ref(),
+            &mut callback,
+        )?;
+    }
+    solve.finish(backend, options, x, termination)
+}
+
+/// The checks before a solve (a problem with parameters and residuals, a start of the
+/// right size, valid options, a finite start), and the bounds, with `x` projected onto them.
+fn check_start<M: Model>(
+    backend: &Backend<'_, M>,
+    x: &mut [f64],
+    options: &Options,
+    n: usize,
+    m: usize,
+) -> Result<Option<Bounds>, LmError> {
     if n == 0 || m == 0 {
         return Err(LmError::EmptyProblem {
             num_params: n,
@@ -746,286 +781,537 @@ pub(crate) fn run<M: Model>(
     if let Some(b) = &bounds {
         b.project(x);
     }
-    backend.setup(options, m, n)?;
+    Ok(bounds)
+}
 
-    let mut timings = Timings {
-        phases_timed: true,
-        ..Timings::default()
-    };
-    let cubic = options.damping == Damping::CubicInterpolation;
-    let mut accel = options.acceleration;
-    // Residual evaluations after which plain steps switch to geodesic acceleration.
-    let crawl_limit = match backend {
-        Backend::Stored(_) => crawl_limit(options, n),
-        Backend::Normal(_) => None,
-    };
-    // The parameter-sized vectors share one allocation (small problems spend a fair part
-    // of their time in the allocator).
-    let watch = options.evaporation_restart;
-    let track = watch.is_some() || abandon.is_some();
-    let mut nbuf = vec![0.0; if track { 8 * n } else { 7 * n }];
-    let (peak2, nbuf7) = nbuf.split_at_mut(if track { n } else { 0 });
-    let (wa, rest) = nbuf7.split_at_mut(n);
-    let (x_trial, rest) = rest.split_at_mut(n);
-    let (h, rest) = rest.split_at_mut(n);
-    let (step, rest) = rest.split_at_mut(n);
-    let (g, rest) = rest.split_at_mut(n);
-    let (norms2, d) = rest.split_at_mut(n);
-    let mut frozen = if bounds.is_some() {
-        vec![false; n]
-    } else {
-        Vec::new()
-    };
-    let mut any_frozen = false;
-    let mut records: Vec<IterationRecord> = Vec::with_capacity(options.max_iterations.min(32));
-    let (mut residual_evaluations, mut jacobian_evaluations) = (0usize, 0usize);
-    let (mut accepted_steps, mut rejected_steps) = (0usize, 0usize);
+/// The parameter-sized vectors of a solve: slices of one allocation.
+struct Work<'w> {
+    /// The peak squared column norms (evaporation watched or an abandon test; else empty).
+    peak2: &'w mut [f64],
+    /// Scratch.
+    wa: &'w mut [f64],
+    /// The trial point.
+    x_trial: &'w mut [f64],
+    /// The step direction (the velocity, plus half the acceleration when accelerated).
+    h: &'w mut [f64],
+    /// The step taken, `x_trial - x`.
+    step: &'w mut [f64],
+    /// The gradient `J^T r`.
+    g: &'w mut [f64],
+    /// The squared column norms of `J`.
+    norms2: &'w mut [f64],
+    /// The scaling `D`.
+    d: &'w mut [f64],
+}
 
-    let mut damping = DampingState::new(options.damping, 1.0);
-    let mut clock = Clock::new(start);
-    let mut cost = backend.start(options, x, damping.mu(), g, norms2, d)?;
-    match backend {
-        Backend::Stored(_) => timings.residuals += clock.lap(),
-        Backend::Normal(_) => timings.jacobian += clock.lap(),
+impl<'w> Work<'w> {
+    /// `buf` (`8 n` long with `track`, else `7 n`) cut into the vectors.
+    fn split(buf: &'w mut [f64], n: usize, track: bool) -> Self {
+        let (peak2, buf7) = buf.split_at_mut(if track { n } else { 0 });
+        let (wa, rest) = buf7.split_at_mut(n);
+        let (x_trial, rest) = rest.split_at_mut(n);
+        let (h, rest) = rest.split_at_mut(n);
+        let (step, rest) = rest.split_at_mut(n);
+        let (g, rest) = rest.split_at_mut(n);
+        let (norms2, d) = rest.split_at_mut(n);
+        Self {
+            peak2,
+            wa,
+            x_trial,
+            h,
+            step,
+            g,
+            norms2,
+            d,
+        }
     }
-    residual_evaluations += 1;
-    let initial_cost = cost;
+}
 
-    let mut termination = if !cost.is_finite() {
-        Some(TerminationReason::NonFinite)
-    } else if cost == 0.0 {
-        Some(TerminationReason::ZeroResidual)
-    } else {
-        None
-    };
-    let mut first = true;
-    let mut need_jac = true;
-    let mut grad_inf = 0.0;
-    // Relative rounding level of a computed cost (sum of m squares, each residual usually a
-    // difference of larger numbers, hence the margin over eps).
-    let noise = 32.0 * f64::EPSILON * (m as f64).sqrt();
+/// How the velocity of a trial step was used ([`Solve::accelerate`]).
+enum Velocity {
+    /// The plain step.
+    Plain,
+    /// The step with half the geodesic acceleration added.
+    Accelerated,
+    /// The acceleration was too large: the trial is rejected (and recorded), with the
+    /// termination that gives, if any.
+    Rejected(Option<TerminationReason>),
+}
 
-    while termination.is_none() {
-        if need_jac {
-            let rnorm = backend.linearise(
-                options,
-                x,
-                records.len(),
-                first,
-                damping.mu(),
-                bounds.as_ref(),
-                &mut frozen,
-                &mut any_frozen,
-                g,
-                norms2,
-                d,
-                &mut timings,
-                &mut clock,
-            )?;
-            jacobian_evaluations += 1;
-            let Some(rnorm) = rnorm else {
-                termination = Some(TerminationReason::NonFinite);
-                break;
-            };
-            for (p, &c) in peak2.iter_mut().zip(norms2.iter()) {
-                *p = p.max(c);
-            }
-            if let Some(a) = &abandon {
-                if cost >= a.cost
-                    && cost <= a.cost * (1.0 + ABANDON_BAND)
-                    && a.evaporated
-                        .iter()
-                        .all(|&j| norms2[j] < a.threshold * peak2[j])
-                {
-                    termination = Some(TerminationReason::UserStop);
-                    break;
-                }
-            }
-            if first {
-                clock.settle(&mut timings);
-                let mut mu0 = 0.0f64;
-                for j in 0..n {
-                    mu0 = mu0.max(norms2[j] / (d[j] * d[j]));
-                }
-                mu0 *= options.tau;
-                if !(mu0.is_finite() && mu0 > 0.0) {
-                    mu0 = options.tau;
-                }
-                damping = DampingState::new(options.damping, mu0);
-                if damping.is_trust_region() {
-                    let xn = x
-                        .iter()
-                        .zip(d.iter())
-                        .map(|(a, b)| (a * b) * (a * b))
-                        .sum::<f64>()
-                        .sqrt();
-                    // Bound on ||D h|| of the step damped with mu0: ||D^-1 g|| / mu0.
-                    let gn = g
-                        .iter()
-                        .zip(d.iter())
-                        .map(|(a, b)| (a / b) * (a / b))
-                        .sum::<f64>()
-                        .sqrt();
-                    damping.init_radius(xn, gn / mu0);
-                }
-                first = false;
-            } else if damping.needs_slope() {
-                damping.new_slope(2.0 * dot(g, h));
-            }
-            // Gradient test (cosine between the residual and each column).
-            let mut gnorm = 0.0f64;
-            grad_inf = 0.0f64;
-            for j in 0..n {
-                grad_inf = grad_inf.max(g[j].abs());
-                if norms2[j] > 0.0 && rnorm > 0.0 {
-                    gnorm = gnorm.max(g[j].abs() / (norms2[j].sqrt() * rnorm));
-                }
-            }
-            need_jac = false;
-            if gnorm <= options.gtol {
-                termination = Some(TerminationReason::ConvergedGtol);
-                break;
+/// A trial point, formed ([`Solve::propose`]): whether the bounds clipped it and the sizes
+/// of its step.
+struct Proposal {
+    /// The bounds moved the trial point.
+    clipped: bool,
+    /// `||D step||^2`.
+    dx2: f64,
+    /// `||D x||^2`.
+    xn2: f64,
+    /// `||step||^2`.
+    s2: f64,
+}
+
+/// A trial point, evaluated ([`Solve::evaluate`]).
+struct Trial {
+    /// The cost there (infinite when not finite).
+    cost: f64,
+    /// The predicted reduction of the cost.
+    pred: f64,
+    /// The actual reduction.
+    actred: f64,
+    /// The gain ratio `actred / pred`.
+    rho: f64,
+    /// What the damping control needs.
+    line: LineInfo,
+}
+
+/// The state of one solve between its stages: the point's cost, the damping, the work
+/// vectors, the counters, the records and the clock.
+struct Solve<'w> {
+    n: usize,
+    m: usize,
+    v: Work<'w>,
+    cost: f64,
+    initial_cost: f64,
+    damping: DampingState,
+    /// The geodesic acceleration, once on (from the options or after a crawl).
+    accel: Option<crate::GeodesicAcceleration>,
+    /// Residual evaluations after which plain steps switch to geodesic acceleration.
+    crawl_limit: Option<usize>,
+    cubic: bool,
+    /// Relative rounding level of a computed cost (sum of m squares, each residual usually a
+    /// difference of larger numbers, hence the margin over eps).
+    noise: f64,
+    /// The first linearisation is still to come.
+    first: bool,
+    /// The point moved: linearise again.
+    need_jac: bool,
+    /// The largest gradient component at the last linearisation.
+    grad_inf: f64,
+    /// Parameters held at a bound (empty without bounds).
+    frozen: Vec<bool>,
+    any_frozen: bool,
+    records: Vec<IterationRecord>,
+    residual_evaluations: usize,
+    jacobian_evaluations: usize,
+    accepted_steps: usize,
+    rejected_steps: usize,
+    timings: Timings,
+    clock: Clock,
+}
+
+impl<'w> Solve<'w> {
+    fn new<M: Model>(
+        backend: &Backend<'_, M>,
+        options: &Options,
+        v: Work<'w>,
+        bounded: bool,
+        start: Instant,
+        n: usize,
+        m: usize,
+    ) -> Self {
+        let timings = Timings {
+            phases_timed: true,
+            ..Timings::default()
+        };
+        let crawl_limit = match backend {
+            Backend::Stored(_) => crawl_limit(options, n),
+            Backend::Normal(_) => None,
+        };
+        let frozen = if bounded { vec![false; n] } else { Vec::new() };
+        let records = Vec::with_capacity(options.max_iterations.min(32));
+        let damping = DampingState::new(options.damping, 1.0);
+        Self {
+            n,
+            m,
+            v,
+            cost: f64::NAN,
+            initial_cost: f64::NAN,
+            damping,
+            accel: options.acceleration,
+            crawl_limit,
+            cubic: options.damping == Damping::CubicInterpolation,
+            noise: 32.0 * f64::EPSILON * (m as f64).sqrt(),
+            first: true,
+            need_jac: true,
+            grad_inf: 0.0,
+            frozen,
+            any_frozen: false,
+            records,
+            residual_evaluations: 0,
+            jacobian_evaluations: 0,
+            accepted_steps: 0,
+            rejected_steps: 0,
+            timings,
+            clock: Clock::new(start),
+        }
+    }
+
+    /// The cost at the start; the termination when it is already not finite or zero.
+    fn begin<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        options: &Options,
+        x: &[f64],
+    ) -> Result<Option<TerminationReason>, LmError> {
+        let v = &mut self.v;
+        self.cost = backend.start(options, x, self.damping.mu(), v.g, v.norms2, v.d)?;
+        match backend {
+            Backend::Stored(_) => self.timings.residuals += self.clock.lap(),
+            Backend::Normal(_) => self.timings.jacobian += self.clock.lap(),
+        }
+        self.residual_evaluations += 1;
+        self.initial_cost = self.cost;
+        Ok(if !self.cost.is_finite() {
+            Some(TerminationReason::NonFinite)
+        } else if self.cost == 0.0 {
+            Some(TerminationReason::ZeroResidual)
+        } else {
+            None
+        })
+    }
+
+    /// One iteration: a linearisation when the point moved (with the gradient test), the
+    /// limits, then one trial step, accepted or rejected. Returns why the solve ends, if it
+    /// does.
+    fn iteration<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        options: &Options,
+        x: &mut [f64],
+        bounds: Option<&Bounds>,
+        abandon: Option<&Abandon>,
+        callback: &mut Callback<'_, '_>,
+    ) -> Result<Option<TerminationReason>, LmError> {
+        if self.need_jac {
+            if let Some(t) = self.linearise(backend, options, x, bounds, abandon)? {
+                return Ok(Some(t));
             }
         }
-        if records.len() >= options.max_iterations {
-            termination = Some(TerminationReason::MaxIterations);
-            break;
+        if let Some(t) = self.limits(options) {
+            return Ok(Some(t));
         }
-        if residual_evaluations >= options.max_evaluations {
-            termination = Some(TerminationReason::MaxEvaluations);
-            break;
-        }
-        if accel.is_none() && crawl_limit.is_some_and(|k| residual_evaluations >= k) {
-            if let Backend::Stored(s) = &mut backend {
-                s.enable_acceleration(m, n);
-                accel = Some(crate::GeodesicAcceleration::default());
+        if self.accel.is_none()
+            && self
+                .crawl_limit
+                .is_some_and(|k| self.residual_evaluations >= k)
+        {
+            if let Backend::Stored(s) = backend {
+                s.enable_acceleration(self.m, self.n);
+                self.accel = Some(crate::GeodesicAcceleration::default());
             }
         }
-        let iteration = records.len() + 1;
+        let iteration = self.records.len() + 1;
+        let v = &mut self.v;
         let (solved, mu) = backend.solve(
             x,
             iteration,
-            &mut damping,
-            d,
-            g,
-            h,
-            wa,
-            &mut timings,
-            &mut clock,
+            &mut self.damping,
+            v.d,
+            v.g,
+            v.h,
+            v.wa,
+            &mut self.timings,
+            &mut self.clock,
         )?;
-        let failed_record = |step_length: f64, step_norm: f64, clock: &Clock| IterationRecord {
+        if !solved {
+            self.timings.linear_solver += self.clock.lap();
+            self.rejected_steps += 1;
+            self.damping.singular();
+            let rec = self.failed_record(iteration, mu, 0.0, 0.0);
+            return Ok(record_failed_trial(
+                &mut self.records,
+                rec,
+                &self.damping,
+                callback,
+            ));
+        }
+        let alpha = self.damping.step_length();
+        let accelerated = match self.accelerate(backend, x, mu, alpha, iteration, callback)? {
+            Velocity::Rejected(t) => return Ok(t),
+            Velocity::Accelerated => true,
+            Velocity::Plain => false,
+        };
+        let proposal = match self.propose(options, x, bounds, alpha) {
+            Ok(p) => p,
+            Err(t) => return Ok(Some(t)),
+        };
+        let trial = self.evaluate(backend, options, alpha, accelerated, &proposal, iteration)?;
+        Ok(self.conclude(
+            backend, options, x, trial, &proposal, mu, alpha, iteration, callback,
+        ))
+    }
+
+    /// Linearises at `x` (gradient, column norms, scales), sets the damping at the first
+    /// linearisation, and runs the gradient test. Returns why the solve ends, if it does (a
+    /// Jacobian not finite, an abandoned restart, the gradient test).
+    fn linearise<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        options: &Options,
+        x: &[f64],
+        bounds: Option<&Bounds>,
+        abandon: Option<&Abandon>,
+    ) -> Result<Option<TerminationReason>, LmError> {
+        let v = &mut self.v;
+        let rnorm = backend.linearise(
+            options,
+            x,
+            self.records.len(),
+            self.first,
+            self.damping.mu(),
+            bounds,
+            &mut self.frozen,
+            &mut self.any_frozen,
+            v.g,
+            v.norms2,
+            v.d,
+            &mut self.timings,
+            &mut self.clock,
+        )?;
+        self.jacobian_evaluations += 1;
+        let Some(rnorm) = rnorm else {
+            return Ok(Some(TerminationReason::NonFinite));
+        };
+        for (p, &c) in v.peak2.iter_mut().zip(v.norms2.iter()) {
+            *p = p.max(c);
+        }
+        if let Some(a) = abandon {
+            if self.cost >= a.cost
+                && self.cost <= a.cost * (1.0 + ABANDON_BAND)
+                && a.evaporated
+                    .iter()
+                    .all(|&j| v.norms2[j] < a.threshold * v.peak2[j])
+            {
+                return Ok(Some(TerminationReason::UserStop));
+            }
+        }
+        if self.first {
+            self.clock.settle(&mut self.timings);
+            self.first_damping(options, x);
+            self.first = false;
+        } else if self.damping.needs_slope() {
+            self.damping.new_slope(2.0 * dot(self.v.g, self.v.h));
+        }
+        // Gradient test (cosine between the residual and each column).
+        let v = &self.v;
+        let mut gnorm = 0.0f64;
+        self.grad_inf = 0.0f64;
+        for j in 0..self.n {
+            self.grad_inf = self.grad_inf.max(v.g[j].abs());
+            if v.norms2[j] > 0.0 && rnorm > 0.0 {
+                gnorm = gnorm.max(v.g[j].abs() / (v.norms2[j].sqrt() * rnorm));
+            }
+        }
+        self.need_jac = false;
+        Ok((gnorm <= options.gtol).then_some(TerminationReason::ConvergedGtol))
+    }
+
+    /// The damping at the first linearisation: `tau` times the largest scaled squared
+    /// column norm, and for a trust region its radius.
+    fn first_damping(&mut self, options: &Options, x: &[f64]) {
+        let (g, norms2, d) = (&*self.v.g, &*self.v.norms2, &*self.v.d);
+        let mut mu0 = 0.0f64;
+        for j in 0..self.n {
+            mu0 = mu0.max(norms2[j] / (d[j] * d[j]));
+        }
+        mu0 *= options.tau;
+        if !(mu0.is_finite() && mu0 > 0.0) {
+            mu0 = options.tau;
+        }
+        self.damping = DampingState::new(options.damping, mu0);
+        if self.damping.is_trust_region() {
+            let xn = x
+                .iter()
+                .zip(d.iter())
+                .map(|(a, b)| (a * b) * (a * b))
+                .sum::<f64>()
+                .sqrt();
+            // Bound on ||D h|| of the step damped with mu0: ||D^-1 g|| / mu0.
+            let gn = g
+                .iter()
+                .zip(d.iter())
+                .map(|(a, b)| (a / b) * (a / b))
+                .sum::<f64>()
+                .sqrt();
+            self.damping.init_radius(xn, gn / mu0);
+        }
+    }
+
+    /// The limits on iterations and residual evaluations.
+    fn limits(&self, options: &Options) -> Option<TerminationReason> {
+        if self.records.len() >= options.max_iterations {
+            Some(TerminationReason::MaxIterations)
+        } else if self.residual_evaluations >= options.max_evaluations {
+            Some(TerminationReason::MaxEvaluations)
+        } else {
+            None
+        }
+    }
+
+    /// The record of a trial that produced no evaluated point.
+    fn failed_record(
+        &self,
+        iteration: usize,
+        mu: f64,
+        step_length: f64,
+        step_norm: f64,
+    ) -> IterationRecord {
+        IterationRecord {
             iteration,
-            cost,
+            cost: self.cost,
             trial_cost: f64::NAN,
             damping: mu,
             step_length,
             step_norm,
             gain_ratio: f64::NAN,
             accepted: false,
-            gradient_norm: grad_inf,
-            elapsed: clock.elapsed(),
-        };
-        if !solved {
-            timings.linear_solver += clock.lap();
-            rejected_steps += 1;
-            damping.singular();
-            let rec = failed_record(0.0, 0.0, &clock);
-            termination = record_failed_trial(&mut records, rec, &damping, &mut callback);
-            continue;
+            gradient_norm: self.grad_inf,
+            elapsed: self.clock.elapsed(),
         }
-        let alpha = damping.step_length();
-        // Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
-        // 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial. Not for a
-        // velocity below sqrt(eps) of the scaled parameters: there the finite difference
-        // r_vv is rounding noise (its error grows as 1 / ||v||, so each rejection, shortening
-        // v, would make the next ratio larger), and the plain step is taken.
-        let mut accelerated = false;
-        let resolvable = accel.is_some() && {
+    }
+
+    /// Geodesic acceleration: a = -(J^T J + mu D^2)^-1 J^T r_vv, tried as v + a / 2 when
+    /// 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial. Not for a
+    /// velocity below sqrt(eps) of the scaled parameters: there the finite difference
+    /// r_vv is rounding noise (its error grows as 1 / ||v||, so each rejection, shortening
+    /// v, would make the next ratio larger), and the plain step is taken.
+    fn accelerate<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        x: &[f64],
+        mu: f64,
+        alpha: f64,
+        iteration: usize,
+        callback: &mut Callback<'_, '_>,
+    ) -> Result<Velocity, LmError> {
+        let (n, v) = (self.n, &mut self.v);
+        let resolvable = self.accel.is_some() && {
             let (mut dv2, mut dx2) = (0.0, 0.0);
             for j in 0..n {
-                dv2 += (d[j] * h[j]).powi(2);
-                dx2 += (d[j] * x[j]).powi(2);
+                dv2 += (v.d[j] * v.h[j]).powi(2);
+                dx2 += (v.d[j] * x[j]).powi(2);
             }
             dv2 > f64::EPSILON * dx2
         };
-        if let (Some(ga), Backend::Stored(s), true) = (accel, &mut backend, resolvable) {
-            timings.linear_solver += clock.lap();
-            let ratio = s.accelerate(x, x_trial, h, ga.fd_step, mu, d, iteration)?;
-            timings.residuals += clock.lap();
-            residual_evaluations += 1;
-            accelerated = true;
-            if !(ratio <= ga.max_ratio) {
-                // The velocity is not to be trusted this far: a rejected trial (the cost at
-                // the step is not evaluated; the damping grows as after a failed step).
-                timings.linear_solver += clock.lap();
-                rejected_steps += 1;
-                let dv = d
-                    .iter()
-                    .zip(h.iter())
+        let (Some(ga), Backend::Stored(s), true) = (self.accel, backend, resolvable) else {
+            return Ok(Velocity::Plain);
+        };
+        self.timings.linear_solver += self.clock.lap();
+        let ratio = s.accelerate(x, v.x_trial, v.h, ga.fd_step, mu, v.d, iteration)?;
+        self.timings.residuals += self.clock.lap();
+        self.residual_evaluations += 1;
+        if !(ratio <= ga.max_ratio) {
+            // The velocity is not to be trusted this far: a rejected trial (the cost at
+            // the step is not evaluated; the damping grows as after a failed step).
+            self.timings.linear_solver += self.clock.lap();
+            self.rejected_steps += 1;
+            let dv =
+                v.d.iter()
+                    .zip(v.h.iter())
                     .map(|(a, b)| (a * b) * (a * b))
                     .sum::<f64>()
                     .sqrt();
-                damping.rejected(
-                    -1.0,
-                    LineInfo {
-                        f0: 2.0 * cost,
-                        slope0: 0.0,
-                        alpha,
-                        f_trial: 2.0 * cost,
-                        est_sum: 0.0,
-                        scaled_step: dv,
-                        gs: dot(g, h),
-                    },
-                );
-                let rec = failed_record(alpha, norm2(h).sqrt(), &clock);
-                termination = record_failed_trial(&mut records, rec, &damping, &mut callback);
-                continue;
-            }
-            for j in 0..n {
-                h[j] += 0.5 * s.acc[j];
-            }
+            self.damping.rejected(
+                -1.0,
+                LineInfo {
+                    f0: 2.0 * self.cost,
+                    slope0: 0.0,
+                    alpha,
+                    f_trial: 2.0 * self.cost,
+                    est_sum: 0.0,
+                    scaled_step: dv,
+                    gs: dot(v.g, v.h),
+                },
+            );
+            let rec = self.failed_record(iteration, mu, alpha, norm2(self.v.h).sqrt());
+            return Ok(Velocity::Rejected(record_failed_trial(
+                &mut self.records,
+                rec,
+                &self.damping,
+                callback,
+            )));
         }
         for j in 0..n {
-            x_trial[j] = x[j] + alpha * h[j];
+            v.h[j] += 0.5 * s.acc[j];
+        }
+        Ok(Velocity::Accelerated)
+    }
+
+    /// The trial point `x + alpha h`, projected onto the bounds, and its step; the step
+    /// test's termination when the step is negligible.
+    fn propose(
+        &mut self,
+        options: &Options,
+        x: &[f64],
+        bounds: Option<&Bounds>,
+        alpha: f64,
+    ) -> Result<Proposal, TerminationReason> {
+        let (n, v) = (self.n, &mut self.v);
+        for j in 0..n {
+            v.x_trial[j] = x[j] + alpha * v.h[j];
         }
         let mut clipped = false;
-        if let Some(b) = &bounds {
-            b.project(x_trial);
-            clipped = (0..n).any(|j| x_trial[j] != x[j] + alpha * h[j]);
+        if let Some(b) = bounds {
+            b.project(v.x_trial);
+            clipped = (0..n).any(|j| v.x_trial[j] != x[j] + alpha * v.h[j]);
         }
         let (mut dx2, mut xn2, mut s2) = (0.0, 0.0, 0.0);
         for j in 0..n {
-            step[j] = x_trial[j] - x[j];
-            dx2 += (d[j] * step[j]).powi(2);
-            xn2 += (d[j] * x[j]).powi(2);
-            s2 += step[j] * step[j];
+            v.step[j] = v.x_trial[j] - x[j];
+            dx2 += (v.d[j] * v.step[j]).powi(2);
+            xn2 += (v.d[j] * x[j]).powi(2);
+            s2 += v.step[j] * v.step[j];
         }
         if dx2.sqrt() <= options.xtol * (xn2.sqrt() + options.xtol) {
-            termination = Some(TerminationReason::ConvergedXtol);
-            break;
+            return Err(TerminationReason::ConvergedXtol);
         }
+        Ok(Proposal {
+            clipped,
+            dx2,
+            xn2,
+            s2,
+        })
+    }
+
+    /// The trial point's predicted and actual reductions of the cost, its gain ratio and
+    /// what the damping control needs.
+    fn evaluate<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        options: &Options,
+        alpha: f64,
+        accelerated: bool,
+        p: &Proposal,
+        iteration: usize,
+    ) -> Result<Trial, LmError> {
+        let (n, v) = (self.n, &mut self.v);
         // With acceleration the prediction is the linear model's for the velocity (GSL's
         // convention): the acceleration is a correction the model does not see.
-        let (js2, gs) = match (&mut backend, accelerated) {
+        let (js2, gs) = match (&mut *backend, accelerated) {
             (Backend::Stored(s), true) => {
                 for j in 0..n {
-                    wa[j] = step[j] - 0.5 * alpha * s.acc[j];
+                    v.wa[j] = v.step[j] - 0.5 * alpha * s.acc[j];
                 }
-                (s.jac.product_norm2(wa, jstep(&mut s.rbuf, s.m)), dot(g, wa))
+                (
+                    s.jac.product_norm2(v.wa, jstep(&mut s.rbuf, s.m)),
+                    dot(v.g, v.wa),
+                )
             }
-            _ => (backend.step_norm2(step, alpha), dot(g, step)),
+            _ => (backend.step_norm2(v.step, alpha), dot(v.g, v.step)),
         };
         let pred = -gs - 0.5 * js2;
 
         // The linear solver's time includes forming the step and its predicted reduction.
-        timings.linear_solver += clock.lap();
-        let unmodified = alpha == 1.0 && !clipped && !accelerated;
-        let mut cost_trial = backend.trial_cost(options, x_trial, unmodified, iteration)?;
-        timings.residuals += clock.lap();
-        residual_evaluations += 1;
+        self.timings.linear_solver += self.clock.lap();
+        let unmodified = alpha == 1.0 && !p.clipped && !accelerated;
+        let mut cost_trial = backend.trial_cost(options, v.x_trial, unmodified, iteration)?;
+        self.timings.residuals += self.clock.lap();
+        self.residual_evaluations += 1;
         if !cost_trial.is_finite() {
             cost_trial = f64::INFINITY;
         }
+        let cost = self.cost;
         let actred = cost - cost_trial;
         let rho = if pred > 0.0 {
             actred / pred
@@ -1034,22 +1320,22 @@ pub(crate) fn run<M: Model>(
         } else {
             -1.0
         };
-        let line = match (&mut backend, cubic) {
+        let line = match (backend, self.cubic) {
             (Backend::Stored(s), true) => {
-                let jh2 = if alpha == 1.0 && !clipped {
+                let jh2 = if alpha == 1.0 && !p.clipped {
                     js2
                 } else {
-                    s.jac.mul(h, &mut s.jdir);
+                    s.jac.mul(v.h, &mut s.jdir);
                     norm2(&s.jdir)
                 };
-                let gh = dot(g, h);
+                let gh = dot(v.g, v.h);
                 LineInfo {
                     f0: 2.0 * cost,
                     slope0: 2.0 * gh,
                     alpha,
                     f_trial: 2.0 * cost_trial,
                     est_sum: 2.0 * cost + 2.0 * gh + jh2,
-                    scaled_step: dx2.sqrt(),
+                    scaled_step: p.dx2.sqrt(),
                     gs,
                 }
             }
@@ -1059,130 +1345,181 @@ pub(crate) fn run<M: Model>(
                 alpha,
                 f_trial: 2.0 * cost_trial,
                 est_sum: 0.0,
-                scaled_step: dx2.sqrt(),
+                scaled_step: p.dx2.sqrt(),
                 gs,
             },
         };
-        let cost_before = cost;
-        let accept = damping.accepts(rho, cost_trial < cost);
+        Ok(Trial {
+            cost: cost_trial,
+            pred,
+            actred,
+            rho,
+            line,
+        })
+    }
+
+    /// Accepts or rejects the trial, records it, and runs the cost tests and the callback.
+    /// Returns why the solve ends, if it does.
+    fn conclude<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        options: &Options,
+        x: &mut [f64],
+        trial: Trial,
+        p: &Proposal,
+        mu: f64,
+        alpha: f64,
+        iteration: usize,
+        callback: &mut Callback<'_, '_>,
+    ) -> Option<TerminationReason> {
+        let cost_before = self.cost;
+        let accept = self.damping.accepts(trial.rho, trial.cost < self.cost);
         if accept {
-            x.copy_from_slice(x_trial);
-            cost = cost_trial;
-            need_jac = true;
+            x.copy_from_slice(self.v.x_trial);
+            self.cost = trial.cost;
+            self.need_jac = true;
             // A step below sqrt(eps) of the scaled parameters leaves the Jacobian as it was
             // to about 1e-8: good enough for the statistics (with the plain loss, whose
             // Jacobian is not reweighted).
-            backend.accept(dx2 <= f64::EPSILON * xn2);
-            accepted_steps += 1;
-            damping.accepted(rho, line);
+            backend.accept(p.dx2 <= f64::EPSILON * p.xn2);
+            self.accepted_steps += 1;
+            self.damping.accepted(trial.rho, trial.line);
         } else {
-            rejected_steps += 1;
-            damping.rejected(rho, line);
+            self.rejected_steps += 1;
+            self.damping.rejected(trial.rho, trial.line);
         }
         let rec = IterationRecord {
             iteration,
-            cost,
-            trial_cost: cost_trial,
+            cost: self.cost,
+            trial_cost: trial.cost,
             damping: mu,
             step_length: alpha,
-            step_norm: s2.sqrt(),
-            gain_ratio: rho,
+            step_norm: p.s2.sqrt(),
+            gain_ratio: trial.rho,
             accepted: accept,
-            gradient_norm: grad_inf,
-            elapsed: clock.elapsed(),
+            gradient_norm: self.grad_inf,
+            elapsed: self.clock.elapsed(),
         };
-        records.push(rec);
-        if cost == 0.0 {
-            termination = Some(TerminationReason::ZeroResidual);
+        self.records.push(rec);
+        let (pred, actred, rho) = (trial.pred, trial.actred, trial.rho);
+        if self.cost == 0.0 {
+            Some(TerminationReason::ZeroResidual)
         } else if pred <= options.ftol * cost_before
             && ((actred.abs() <= options.ftol * cost_before && rho <= 2.0)
-                || actred.abs() <= noise * cost_before
+                || actred.abs() <= self.noise * cost_before
                 || actred <= 0.0)
         {
-            termination = Some(TerminationReason::ConvergedFtol);
+            Some(TerminationReason::ConvergedFtol)
         } else if let Some(cb) = callback.as_mut() {
-            if cb(&rec).is_break() {
-                termination = Some(TerminationReason::UserStop);
-            }
+            cb(&rec).is_break().then_some(TerminationReason::UserStop)
+        } else {
+            None
         }
     }
-    // What the last lap left (a preparation not followed by a solve).
-    match backend {
-        Backend::Stored(_) => timings.linear_solver += clock.lap(),
-        Backend::Normal(_) => timings.jacobian += clock.lap(),
-    }
-    let termination = termination.unwrap_or(TerminationReason::MaxIterations);
-    let evaporated: Vec<usize> = match watch {
-        Some(e) if jacobian_evaluations > 0 => (0..peak2.len())
-            .filter(|&j| {
-                norms2[j] < e.threshold * peak2[j] && !frozen.get(j).copied().unwrap_or(false)
-            })
-            .collect(),
-        _ => Vec::new(),
-    };
 
-    let keep = options.statistics != StatisticsMode::Off
-        && n <= options.statistics_max_params
-        && termination != TerminationReason::NonFinite;
-    let statistics = OnceLock::new();
-    let fit = match backend {
-        Backend::Stored(mut s) if keep => {
-            if !s.jac_current || any_frozen {
-                s.model
-                    .jacobian(x, &mut s.jac)
-                    .map_err(model_error(records.len(), EvalStage::Jacobian))?;
-                jacobian_evaluations += 1;
-                if s.robust {
-                    let r = slot(&s.rbuf, s.cur, s.m);
-                    weigh(options, r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
-                }
-            }
-            let residuals = if s.robust {
-                s.rw
-            } else {
-                // The current residuals moved to the front of their buffer (no copy into a
-                // new allocation).
-                let mut r = s.rbuf;
-                if s.cur != 0 {
-                    r.copy_within(s.cur * s.m..(s.cur + 1) * s.m, 0);
-                }
-                r.truncate(s.m);
-                r
-            };
-            let fit = FitAtSolution {
-                jacobian: s.jac,
-                residuals,
-                rank_tol: options.rank_tol,
-            };
-            if options.statistics == StatisticsMode::AtEnd {
-                let _ = statistics.set(fit.statistics());
-            }
-            // The clock was read at the end of the loop.
-            timings.statistics = clock.lap();
-            Some(fit)
+    /// The end of a solve: the parameters that evaporated, the statistics at the solution
+    /// (when kept) and the report.
+    fn finish<M: Model>(
+        mut self,
+        backend: Backend<'_, M>,
+        options: &Options,
+        x: &[f64],
+        termination: Option<TerminationReason>,
+    ) -> Result<Report, LmError> {
+        // What the last lap left (a preparation not followed by a solve).
+        match backend {
+            Backend::Stored(_) => self.timings.linear_solver += self.clock.lap(),
+            Backend::Normal(_) => self.timings.jacobian += self.clock.lap(),
         }
-        _ => None,
-    };
+        let termination = termination.unwrap_or(TerminationReason::MaxIterations);
+        let evaporated = self.evaporated(options);
+        let keep = options.statistics != StatisticsMode::Off
+            && self.n <= options.statistics_max_params
+            && termination != TerminationReason::NonFinite;
+        let statistics = OnceLock::new();
+        let fit = match backend {
+            Backend::Stored(s) if keep => Some(self.fit_at_solution(s, options, x, &statistics)?),
+            _ => None,
+        };
+        Ok(Report {
+            termination,
+            initial_cost: self.initial_cost,
+            final_cost: self.cost,
+            iterations: self.records,
+            accepted_steps: self.accepted_steps,
+            rejected_steps: self.rejected_steps,
+            residual_evaluations: self.residual_evaluations,
+            jacobian_evaluations: self.jacobian_evaluations,
+            // The last lap ended the solve (the report's assembly is not timed).
+            elapsed: self.clock.elapsed(),
+            timings: self.timings,
+            num_params: self.n,
+            num_residuals: self.m,
+            damping: options.damping.name(),
+            linear_solver: options.linear_solver.name(),
+            evaporated,
+            restarts: 0,
+            statistics,
+            fit,
+        })
+    }
 
-    Ok(Report {
-        termination,
-        initial_cost,
-        final_cost: cost,
-        iterations: records,
-        accepted_steps,
-        rejected_steps,
-        residual_evaluations,
-        jacobian_evaluations,
-        // The last lap ended the solve (the report's assembly is not timed).
-        elapsed: clock.elapsed(),
-        timings,
-        num_params: n,
-        num_residuals: m,
-        damping: options.damping.name(),
-        linear_solver: options.linear_solver.name(),
-        evaporated,
-        restarts: 0,
-        statistics,
-        fit,
-    })
+    /// The parameters whose squared column norm fell below the threshold of
+    /// [`Evaporation`](crate::Evaporation) times its peak (none held at a bound).
+    fn evaporated(&self, options: &Options) -> Vec<usize> {
+        let v = &self.v;
+        match options.evaporation_restart {
+            Some(e) if self.jacobian_evaluations > 0 => (0..v.peak2.len())
+                .filter(|&j| {
+                    v.norms2[j] < e.threshold * v.peak2[j]
+                        && !self.frozen.get(j).copied().unwrap_or(false)
+                })
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The Jacobian and residuals at the solution (the Jacobian evaluated again when the
+    /// last one is not the solution's), and the statistics when asked for at the end.
+    fn fit_at_solution<M: Model>(
+        &mut self,
+        mut s: Stored<'_, M>,
+        options: &Options,
+        x: &[f64],
+        statistics: &OnceLock<crate::Statistics>,
+    ) -> Result<FitAtSolution, LmError> {
+        if !s.jac_current || self.any_frozen {
+            s.model
+                .jacobian(x, &mut s.jac)
+                .map_err(model_error(self.records.len(), EvalStage::Jacobian))?;
+            self.jacobian_evaluations += 1;
+            if s.robust {
+                let r = slot(&s.rbuf, s.cur, s.m);
+                weigh(options, r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+            }
+        }
+        let residuals = if s.robust {
+            s.rw
+        } else {
+            // The current residuals moved to the front of their buffer (no copy into a
+            // new allocation).
+            let mut r = s.rbuf;
+            if s.cur != 0 {
+                r.copy_within(s.cur * s.m..(s.cur + 1) * s.m, 0);
+            }
+            r.truncate(s.m);
+            r
+        };
+        let fit = FitAtSolution {
+            jacobian: s.jac,
+            residuals,
+            rank_tol: options.rank_tol,
+        };
+        if options.statistics == StatisticsMode::AtEnd {
+            let _ = statistics.set(fit.statistics());
+        }
+        // The clock was read at the end of the loop.
+        self.timings.statistics = self.clock.lap();
+        Ok(fit)
+    }
 }
