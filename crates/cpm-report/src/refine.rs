@@ -52,6 +52,8 @@ pub struct CandidateReport {
     pub cv_rms_um: Option<f64>,
     /// Present parameters the data would no longer determine with it (it is then refused).
     pub determined_lost: Option<usize>,
+    /// The data determine none of its parameters better than its tolerance (refused).
+    pub undetermined: bool,
 }
 
 /// One added effect.
@@ -88,6 +90,8 @@ pub struct LastRoundCandidate {
     pub confounded: bool,
     /// Present parameters the data would no longer determine with it (refused).
     pub determined_lost: Option<usize>,
+    /// The data determine none of its parameters better than its tolerance (refused).
+    pub undetermined: bool,
     /// F-test p-value.
     pub p_value: Option<f64>,
     /// BIC change.
@@ -249,6 +253,7 @@ impl RefineDoc {
                             rms_um: c.rms_um,
                             cv_rms_um: c.cv_rms_um,
                             determined_lost: c.determined_lost,
+                            undetermined: c.undetermined,
                         })
                         .collect(),
                 })
@@ -266,6 +271,7 @@ impl RefineDoc {
                     delta_bic: c.delta_bic,
                     rms_um: c.rms_um,
                     determined_lost: c.determined_lost,
+                    undetermined: c.undetermined,
                 })
                 .collect(),
             min_novelty,
@@ -346,10 +352,16 @@ impl RefineDoc {
                     .map(|n| format!("`{}` ({n} fewer determined)", c.effect))
             })
             .collect();
+        let undetermined: Vec<String> = self
+            .last_round
+            .iter()
+            .filter(|c| c.undetermined && c.determined_lost.is_none())
+            .map(|c| format!("`{}`", c.effect))
+            .collect();
         let weak: Vec<String> = self
             .last_round
             .iter()
-            .filter(|c| !c.confounded && c.determined_lost.is_none())
+            .filter(|c| !c.confounded && c.determined_lost.is_none() && !c.undetermined)
             .map(|c| match c.p_value {
                 Some(p) => format!("`{}` (p {})", c.effect, p_value(p)),
                 None => format!("`{}` (no fit)", c.effect),
@@ -368,6 +380,13 @@ impl RefineDoc {
                 "Refused because the data would no longer determine parameters they determine now (more than {} % of each would move along a blind direction): {}. ",
                 short(100.0 * cpm_calib::fit::refine::CONFOUNDED_FRACTION),
                 losing.join(", ")
+            ));
+        }
+        if !undetermined.is_empty() {
+            s.push_str(&format!(
+                "Refused because the data would not determine it better than its tolerance (each of its parameters' data share below {}: its value would be its prior, not a measurement): {}. ",
+                short(cpm_calib::fit::prior::MIN_DATA_SHARE),
+                undetermined.join(", ")
             ));
         }
         if !weak.is_empty() {

@@ -122,6 +122,12 @@ pub struct CandidateScore {
     /// some: the effect is then refused).
     #[serde(default)]
     pub determined_lost: Option<usize>,
+    /// True when the data determine none of the effect's parameters better than its
+    /// tolerance (each one's data share below
+    /// [`MIN_DATA_SHARE`](crate::fit::prior::MIN_DATA_SHARE)): its fitted value would be
+    /// mostly its prior, so it is refused whatever its fit.
+    #[serde(default)]
+    pub undetermined: bool,
 }
 
 /// One accepted refinement step.
@@ -425,6 +431,11 @@ pub struct Folds {
     pub count: usize,
     /// The fold of each pose.
     pub fold_of_pose: Vec<usize>,
+    /// The independent unit of each pose for the standard error of a comparison
+    /// ([`CvErrors::clearly_worse_than`]): its commanded XY position in a leave-position-out
+    /// split (poses at one position share its systematic error, so they are one unit), else
+    /// the pose itself.
+    pub unit_of_pose: Vec<usize>,
 }
 
 /// Most folds of a leave-position-out split: more positions are grouped, in order of first
@@ -445,6 +456,7 @@ pub fn cv_folds(campaign: &Campaign, folds: usize) -> Folds {
             fold_of_pose: (0..campaign.poses.len())
                 .map(|p| starts.partition_point(|s| *s <= p))
                 .collect(),
+            unit_of_pose: (0..campaign.poses.len()).collect(),
         };
     }
     // Commanded XY positions, to 0.5 mm, in order of first appearance.
@@ -473,6 +485,7 @@ pub fn cv_folds(campaign: &Campaign, folds: usize) -> Folds {
             kind: FoldKind::Positions,
             count,
             fold_of_pose: group.iter().map(|&i| i * count / g).collect(),
+            unit_of_pose: group,
         };
     }
     let folds = folds.max(2);
@@ -480,6 +493,7 @@ pub fn cv_folds(campaign: &Campaign, folds: usize) -> Folds {
         kind: FoldKind::Blocks,
         count: folds,
         fold_of_pose: (0..campaign.poses.len()).map(|p| p * folds / n).collect(),
+        unit_of_pose: (0..campaign.poses.len()).collect(),
     }
 }
 
@@ -490,7 +504,8 @@ pub fn cv_folds(campaign: &Campaign, folds: usize) -> Folds {
 pub struct CvErrors {
     /// Squared weighted errors.
     pub squared: Vec<f64>,
-    /// The pose (fold-unique key) of each.
+    /// The independent unit of each ([`Folds::unit_of_pose`]: its held-out pose, or its
+    /// commanded position in a leave-position-out split).
     pub pose: Vec<usize>,
     /// How the folds were made.
     pub kind: FoldKind,
@@ -503,8 +518,8 @@ impl CvErrors {
     }
 
     /// True when `other` predicts the held-out data better than `self` by more than one
-    /// standard error of the difference of their mean squared errors (the poses as the
-    /// independent units): a candidate chosen among many on a small campaign must beat the
+    /// standard error of the difference of their mean squared errors (the poses, or the
+    /// positions of a leave-position-out split, as the independent units): a candidate chosen among many on a small campaign must beat the
     /// current model clearly, not by the luck of the folds.
     pub fn clearly_worse_than(&self, other: &CvErrors) -> bool {
         if self.squared.len() != other.squared.len() || self.squared.is_empty() {
@@ -550,21 +565,21 @@ pub fn cross_validated_errors(
         .into_par_iter()
         .map(|f| fold_errors(model, campaign, options, start, &|p| fold_of(p) == f))
         .collect::<Result<_, _>>()?;
-    let mut pose_base = 0;
-    for (sq, pose, n) in per_fold.into_iter().flatten() {
+    // The held-out campaigns keep the poses' numbering (`filter_poses`).
+    for (sq, pose) in per_fold.into_iter().flatten() {
         out.squared.extend(sq);
-        out.pose.extend(pose.into_iter().map(|p| pose_base + p));
-        pose_base += n;
+        out.pose
+            .extend(pose.into_iter().map(|p| split.unit_of_pose[p]));
     }
     Ok(out)
 }
 
-/// A fold's squared errors, their poses (in the held-out campaign) and its number of poses.
-type FoldErrors = (Vec<f64>, Vec<usize>, usize);
+/// A fold's squared errors and their poses (numbered as in the whole campaign).
+type FoldErrors = (Vec<f64>, Vec<usize>);
 
 /// One fold of a cross-validation: fitted without the poses `held`, the squared weighted
-/// errors of the held-out observations and their poses (in the held-out campaign), and its
-/// number of poses; `None` for an empty fold.
+/// errors of the held-out observations and their poses (numbered as in `campaign`); `None`
+/// for an empty fold.
 fn fold_errors(
     model: &MeasurementModel,
     campaign: &Campaign,
@@ -605,7 +620,7 @@ fn fold_errors(
             sq.push(((yk - mk) * 1e3 * wk).powi(2));
             pose.push(test.observation_pose(k));
         }
-        Ok(Some((sq, pose, test.poses.len())))
+        Ok(Some((sq, pose)))
     }
 }
 
@@ -1060,6 +1075,7 @@ impl Rounds<'_> {
                 rms_um: None,
                 cv_rms_um: None,
                 determined_lost: None,
+                undetermined: false,
             };
             if nov < novelty_threshold(options, e) {
                 scores.push(score);
@@ -1099,12 +1115,22 @@ impl Rounds<'_> {
                 if loses {
                     score.determined_lost = Some(determined(cal) - determined(&c1));
                 }
+                // An effect the data determine no better than its tolerance adds its prior,
+                // not a measurement (issue 32: a direction is kept only where its standard
+                // deviation is below the tolerance): refused.
+                score.undetermined = undetermined_effect(&aug, e, &c1);
                 // A residual at rounding level has nothing left to explain: the F-test on it
                 // measures floating-point noise.
                 let explainable = cal.residual_rms_um > RESIDUAL_FLOOR_UM;
                 // Only the candidates that pass the screening are cross-validated (a
                 // cross-validation is a fit per fold; the others' would only be reported).
-                if p < level && db < 0.0 && !c1.robust_failed && !loses && explainable {
+                if p < level
+                    && db < 0.0
+                    && !c1.robust_failed
+                    && !loses
+                    && !score.undetermined
+                    && explainable
+                {
                     eligible.push((scores.len(), aug, c1));
                 }
             }
@@ -1182,6 +1208,23 @@ impl Rounds<'_> {
         }
         Ok(best)
     }
+}
+
+/// True when `e` has a prior (a tolerance) on every one of its parameters in `fitted` and the
+/// data determine none of them ([`PriorSummary::determined`](crate::fit::prior::PriorSummary::determined)).
+fn undetermined_effect(model: &MeasurementModel, e: Effect, fitted: &Calibration) -> bool {
+    let (Some(prior), Some(block)) = (
+        fitted.prior.as_ref(),
+        model.blocks().into_iter().find(|b| b.effect == Some(e)),
+    ) else {
+        return false;
+    };
+    let ks = block.offset..block.offset + block.len;
+    block.len > 0
+        && ks
+            .clone()
+            .all(|k| matches!(prior.prior_std.get(k), Some(Some(t)) if *t > 0.0 && t.is_finite()))
+        && ks.clone().all(|k| !prior.determined(k))
 }
 
 /// The novelty below which a candidate is not fitted: a physical effect with a small novelty
@@ -1288,7 +1331,66 @@ fn against_calibrate_on(
 
 #[cfg(test)]
 mod tests {
-    use super::AgainstCalibrate;
+    use super::{AgainstCalibrate, CvErrors, FoldKind};
+
+    /// A grid visiting 3 positions 4 times each is split leaving positions out, each pose's
+    /// unit its position; poses that never repeat are split in blocks, each pose its own unit.
+    #[test]
+    fn a_repeated_grid_is_split_by_position_with_positions_as_units() {
+        use super::cv_folds;
+        use crate::Campaign;
+        use cpm_geometry::Pose;
+        use nalgebra::{Rotation3, Vector3};
+        let at = |x: f64, y: f64, roll: f64| {
+            Pose::new(
+                Vector3::new(x, y, 500.0),
+                Rotation3::from_euler_angles(roll, 0.0, 0.0),
+            )
+        };
+        let grid = [(0.0, 0.0), (100.0, 0.0), (0.0, 100.0)];
+        let mut tilts = Campaign::default();
+        for k in 0..4 {
+            for (x, y) in grid {
+                tilts.poses.push(at(x, y, 0.01 * k as f64));
+            }
+        }
+        let folds = cv_folds(&tilts, 5);
+        assert_eq!(folds.kind, FoldKind::Positions);
+        assert_eq!(folds.count, 3);
+        assert_eq!(folds.unit_of_pose, [0, 1, 2].repeat(4));
+        assert_eq!(folds.fold_of_pose, folds.unit_of_pose);
+        let mut walk = Campaign::default();
+        for k in 0..12 {
+            walk.poses.push(at(10.0 * k as f64, 0.0, 0.0));
+        }
+        let folds = cv_folds(&walk, 4);
+        assert_eq!(folds.kind, FoldKind::Blocks);
+        assert_eq!(folds.unit_of_pose, (0..12).collect::<Vec<_>>());
+    }
+
+    /// Two of three positions favour the candidate, one disfavours it: counted pose by pose
+    /// (30 independent units) the gain is clear, counted position by position (3 units, the
+    /// poses of one position sharing its error) it is within a standard error.
+    #[test]
+    fn positions_not_poses_are_the_units_of_a_leave_position_out_comparison() {
+        let gain: Vec<f64> = (0..30).map(|i| if i < 20 { 2.0 } else { -1.5 }).collect();
+        let current = |pose: Vec<usize>, kind| CvErrors {
+            squared: gain.iter().map(|d| 10.0 + d).collect(),
+            pose,
+            kind,
+        };
+        let candidate = |pose: Vec<usize>, kind| CvErrors {
+            squared: vec![10.0; 30],
+            pose,
+            kind,
+        };
+        let by_pose: Vec<usize> = (0..30).collect();
+        let by_position: Vec<usize> = (0..30).map(|i| i / 10).collect();
+        assert!(current(by_pose.clone(), FoldKind::Blocks)
+            .clearly_worse_than(&candidate(by_pose, FoldKind::Blocks)));
+        assert!(!current(by_position.clone(), FoldKind::Positions)
+            .clearly_worse_than(&candidate(by_position, FoldKind::Positions)));
+    }
 
     #[test]
     fn a_refined_model_worse_than_calibration_is_refused() {
