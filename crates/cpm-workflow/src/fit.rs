@@ -742,9 +742,11 @@ pub fn stage_calibrated(
     })?;
     // What every reader of the file will predict is what the fit predicted: checked on the
     // fit's own data before anything is written.
-    // (Inputs read from memory have no files to read back; nor has a caller that removed
-    // its scratch files, as Python's binding does when it is interrupted.)
-    if check && !inputs.data_paths.is_empty() && inputs.data_paths.iter().all(|p| p.exists()) {
+    // Gauge readings are predicted from the campaign in memory (read from files or given in
+    // memory alike); other kinds are read again from their files, and inputs held in memory
+    // without files (or a caller's scratch files removed, as Python's binding does when it
+    // is interrupted) are not checked for those.
+    if check && inputs.data_paths.iter().all(|p| p.exists()) {
         let data = &inputs.data_paths;
         if let Some((fit, file)) = crate::validate::file_reproduces_fit(
             &text,

@@ -9,8 +9,9 @@
 //! given in memory.
 //!
 //! Measurements read in memory name themselves (their [`DataFile::file`]) in errors and
-//! outputs. The read-back check of `calibrated.toml` needs the data as files and is made
-//! when every source is a file.
+//! outputs. The read-back check of `calibrated.toml` predicts gauge readings from the
+//! campaign in memory, whatever their source; other kinds of measurement are read again from
+//! their files, so it is made for them when every source is a file.
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -179,6 +180,56 @@ mod tests {
 
     fn ex(f: &str) -> PathBuf {
         PathBuf::from("../../examples").join(f)
+    }
+
+    /// Gauge readings given in memory are read back too: `calibrated.toml` is checked
+    /// against the campaign in memory (no file needed), and a description with a joint
+    /// moved by 2 mm is seen worse by the same check.
+    #[test]
+    fn readings_in_memory_are_read_back_without_files() {
+        let robot_path = ex("hexapod_66.toml");
+        let data_path = ex("hexapod_66_readings.csv");
+        let out = std::env::temp_dir().join("cpm-memory-test-read-back-unwritten");
+        let options = CalibrateOptions::new(&robot_path, vec![data_path.clone()], &out);
+        let robot = Robot::load(&robot_path).unwrap();
+        let sources = [Source::Text {
+            name: "readings in memory".to_string(),
+            text: std::fs::read_to_string(&data_path).unwrap().into(),
+        }];
+        let c = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
+        assert!(c.inputs.data_paths.is_empty());
+        let text = String::from_utf8(
+            c.fitted
+                .set
+                .contents(&out.join("calibrated.toml"))
+                .unwrap()
+                .to_vec(),
+        )
+        .unwrap();
+        let check = |t: &str| {
+            crate::validate::file_reproduces_fit(
+                t,
+                &c.inputs.robot,
+                &[],
+                &c.inputs.model,
+                &c.inputs.merged.campaign,
+                &c.fitted.cal,
+                None,
+                &c.fitted.excluded,
+            )
+            .unwrap()
+            .expect("gauge readings in memory are checked")
+        };
+        let (fit, file) = check(&text);
+        assert!(crate::fit::reproduces(fit, file), "{fit} {file}");
+        // The first base joint's x moved by 2 mm.
+        let key = "base_mm = [";
+        let at = text.find(key).unwrap() + key.len();
+        let end = at + text[at..].find(',').unwrap();
+        let x: f64 = text[at..end].trim().parse().unwrap();
+        let moved = format!("{}{}{}", &text[..at], x + 2.0, &text[end..]);
+        let (_, worse) = check(&moved);
+        assert!(worse > file + 1.0, "{worse} against {file}");
     }
 
     /// The same file from memory and from its path: the same calibration, bit for bit.

@@ -1057,7 +1057,9 @@ fn readings_in_memory(
 /// `sigma_ref / pose_sigma`, orientations at `sigma_ref / orientation_sigma`, points at
 /// `sigma_ref / point_sigma`), or `None` when
 /// the check does not apply: tracker data fitted without `tracker_frame` (the fit keeps the
-/// rough registration, which a later reading improves on).
+/// rough registration, which a later reading improves on), or measurements other than gauge
+/// readings given without files (`data` empty: gauge readings are predicted from the
+/// campaign in memory, the rest read again from `data`).
 ///
 /// `excluded` are the poses the fit left out (`Merged::excluded`): read again, the files
 /// lose them too, so that the read-back predicts the fit's own data.
@@ -1085,6 +1087,8 @@ pub fn file_reproduces_fit(
     let tracker = (campaign.pose_sigma(), campaign.orientation_sigma());
     let e = match readings_in_memory(&robot, reference, campaign)? {
         Some(e) => e,
+        // Measurements held in memory alone: no file to read again.
+        None if data.is_empty() => return Ok(None),
         None => errors_of(&robot, reference, data, false, tracker, false, excluded)?,
     };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
