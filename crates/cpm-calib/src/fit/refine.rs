@@ -519,8 +519,9 @@ impl CvErrors {
 
     /// True when `other` predicts the held-out data better than `self` by more than one
     /// standard error of the difference of their mean squared errors (the poses, or the
-    /// positions of a leave-position-out split, as the independent units): a candidate chosen among many on a small campaign must beat the
-    /// current model clearly, not by the luck of the folds.
+    /// positions of a leave-position-out split, as the independent units): a candidate
+    /// chosen among many on a small campaign must beat the current model clearly, not by the
+    /// luck of the folds.
     pub fn clearly_worse_than(&self, other: &CvErrors) -> bool {
         if self.squared.len() != other.squared.len() || self.squared.is_empty() {
             return false;
@@ -1219,12 +1220,10 @@ fn undetermined_effect(model: &MeasurementModel, e: Effect, fitted: &Calibration
     ) else {
         return false;
     };
-    let ks = block.offset..block.offset + block.len;
-    block.len > 0
-        && ks
-            .clone()
-            .all(|k| matches!(prior.prior_std.get(k), Some(Some(t)) if *t > 0.0 && t.is_finite()))
-        && ks.clone().all(|k| !prior.determined(k))
+    let mut ks = block.offset..block.offset + block.len;
+    let with_tolerance =
+        |k: usize| matches!(prior.prior_std.get(k), Some(Some(t)) if *t > 0.0 && t.is_finite());
+    block.len > 0 && ks.all(|k| with_tolerance(k) && !prior.determined(k))
 }
 
 /// The novelty below which a candidate is not fitted: a physical effect with a small novelty
