@@ -630,6 +630,13 @@ const CASES: &[Case] = &[
         "must be > 0, got 0",
     ),
     case(
+        "robot_tolerance_limit.toml",
+        Toml,
+        Some(66),
+        Some("calibration.tolerance_limit"),
+        "must be > 0 (a number of tolerances; inf for no limit), got -1",
+    ),
+    case(
         "robot_sensor_name_hash.toml",
         Toml,
         Some(43),

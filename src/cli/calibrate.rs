@@ -65,6 +65,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             || w.starts_with("Noise not as weighed")
             || w.starts_with("Held near nominal")
             || w.starts_with("Beyond tolerance")
+            || w.starts_with("Held at tolerance")
             || w.starts_with(&NOT_WHITE.replace("**", ""))
     }) {
         ctx.note(w);

@@ -26,6 +26,20 @@ fn paper_plan(model: &MeasurementModel) -> Plan {
     }
 }
 
+/// The designed model, the paper's Table 2 errors and their noise-free readings at `poses`
+/// random poses (seed `seed`).
+fn noise_free_table2(poses: usize, seed: u64) -> (MeasurementModel, Vec<f64>, Campaign) {
+    let model = designed_model();
+    let plan = designed_plan(&model, poses, seed);
+    let truth = InstallationErrors::paper_table2().to_vec_um();
+    let sim = SimulationOptions {
+        noise: Noise::None,
+        ..SimulationOptions::default()
+    };
+    let data = simulate(&model, &truth, &plan, &sim).unwrap();
+    (model, truth, data)
+}
+
 #[test]
 fn identification_jacobian_matches_central_differences() {
     let model = designed_model();
@@ -55,14 +69,7 @@ fn identification_jacobian_matches_central_differences() {
 
 #[test]
 fn noise_free_recovery_to_a_micro_micrometre() {
-    let model = designed_model();
-    let plan = designed_plan(&model, 30, 5);
-    let truth = InstallationErrors::paper_table2().to_vec_um();
-    let sim = SimulationOptions {
-        noise: Noise::None,
-        ..SimulationOptions::default()
-    };
-    let data = simulate(&model, &truth, &plan, &sim).unwrap();
+    let (model, truth, data) = noise_free_table2(30, 5);
     let cal = identify(&model, &data, &IdentifyOptions::default()).unwrap();
     assert_eq!(cal.identifiability.rank, 36);
     for k in 0..36 {
@@ -327,4 +334,107 @@ fn compensating_with_well_determined_combinations_helps_even_on_the_paper_design
         acc.calibrated.rms_position_um < 0.5 * acc.nominal.rms_position_um,
         "{acc:?}"
     );
+}
+
+/// A parameter the data pull beyond its tolerance's limit without determining it is held at
+/// the limit, with the sign the data pulled it to, named and not measured; the others stay
+/// within it. Without a limit (the Gaussian prior alone) the same data carry it past. A
+/// parameter the data determine is never held, however far out.
+#[test]
+fn a_parameter_pulled_beyond_its_limit_without_being_determined_is_held_there() {
+    let (model, truth, data) = noise_free_table2(30, 5);
+    // Tolerances 20 times tighter than the truth, and a declared noise at which the data see
+    // each parameter about 1.5 tolerances wide: the data pull several tolerances out without
+    // determining what they pull.
+    let largest = truth.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let tolerance = largest / 20.0;
+    let unit = identify(
+        &model,
+        &data,
+        &IdentifyOptions {
+            tolerances: Tolerances::none(),
+            sigma_um: Some(1.0),
+            ..IdentifyOptions::default()
+        },
+    )
+    .unwrap();
+    let mut stds: Vec<f64> = unit.std_um.iter().flatten().copied().collect();
+    stds.sort_by(f64::total_cmp);
+    let sigma = 1.5 * tolerance / stds[stds.len() / 2];
+    let fit = |limit: f64| {
+        let mut t = Tolerances::default();
+        t.set("installation_errors", tolerance).unwrap();
+        t.set_limit(limit).unwrap();
+        identify(
+            &model,
+            &data,
+            &IdentifyOptions {
+                tolerances: t,
+                sigma_um: Some(sigma),
+                ..IdentifyOptions::default()
+            },
+        )
+        .unwrap()
+    };
+    let free = fit(f64::INFINITY);
+    assert!(free.held_at_limit.is_empty());
+    let limit = 3.0;
+    let prior = free.prior.as_ref().unwrap();
+    let runaways: Vec<usize> = (0..36)
+        .filter(|&k| free.minimum_norm_um[k].abs() > limit * tolerance && !prior.determined(k))
+        .collect();
+    assert!(
+        !runaways.is_empty(),
+        "no undetermined parameter beyond {limit} tolerances"
+    );
+    let held = fit(limit);
+    assert!(!held.held_at_limit.is_empty());
+    assert_eq!(held.tolerance_limit, limit);
+    let after = held.prior.as_ref().unwrap();
+    for k in 0..36 {
+        let v = held.minimum_norm_um[k];
+        if held.held_at_limit.contains(&k) {
+            assert_eq!(v.abs(), limit * tolerance, "{k}: held at the limit");
+            if runaways.contains(&k) {
+                let pulled = free.minimum_norm_um[k].signum();
+                assert_eq!(v.signum(), pulled, "{k}: held where the data pulled it");
+            }
+            assert!(held.estimate_um[k].is_none(), "{k}: held, not measured");
+        } else if !after.determined(k) {
+            assert!(v.abs() <= limit * tolerance * (1.0 + 1e-9), "{k}: {v} um");
+        }
+    }
+    // What the free fit carried furthest is held.
+    let worst = runaways
+        .iter()
+        .copied()
+        .max_by(|a, b| {
+            free.minimum_norm_um[*a]
+                .abs()
+                .total_cmp(&free.minimum_norm_um[*b].abs())
+        })
+        .unwrap();
+    assert!(held.held_at_limit.contains(&worst));
+    // The same data at a small noise determine every parameter: measured, none held, though
+    // 20 tolerances out.
+    let mut t = Tolerances::default();
+    t.set("installation_errors", tolerance).unwrap();
+    let sure = identify(
+        &model,
+        &data,
+        &IdentifyOptions {
+            tolerances: t,
+            sigma_um: Some(1e-3 * sigma),
+            ..IdentifyOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(sure.held_at_limit.is_empty());
+    assert!(sure
+        .minimum_norm_um
+        .iter()
+        .any(|v| v.abs() > 10.0 * tolerance));
+    // A limit that is no number of tolerances is refused.
+    assert!(Tolerances::default().set_limit(0.0).is_err());
+    assert!(Tolerances::default().set_limit(f64::NAN).is_err());
 }

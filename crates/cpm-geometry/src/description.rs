@@ -449,6 +449,11 @@ pub struct CalibrationSpec {
     /// data see less well than its tolerance near nominal. Default: the calibration crate's.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub tolerances: BTreeMap<String, f64>,
+    /// How many tolerances a fitted parameter may reach: one the data pull further is held
+    /// there (not measured, named in the report) and the fit repeated; `inf` for no limit.
+    /// Interpreted by the calibration crate. Default (when absent) 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance_limit: Option<f64>,
     /// Groups of parameters held at their nominal (or known) values and not fitted, e.g.
     /// `hold = ["installation_errors"]` to fit only the effects. Default none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
@@ -1214,6 +1219,15 @@ fn check_calibration(c: &CalibrationSpec) -> Result<(), Problem> {
                 format!(
                     "must be > 0, got {v} (leave it out to estimate the noise from the residual)"
                 ),
+            ));
+        }
+    }
+    if let Some(v) = c.tolerance_limit {
+        // A number of tolerances: > 0, `inf` for no limit.
+        if !(v > 0.0) {
+            return Err(Problem::new(
+                &[Key("calibration"), Key("tolerance_limit")],
+                format!("must be > 0 (a number of tolerances; inf for no limit), got {v}"),
             ));
         }
     }

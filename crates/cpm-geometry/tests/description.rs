@@ -111,6 +111,7 @@ fn round_trip_with_every_section() {
         .into_iter()
         .collect(),
         tolerances: [("link_scale".to_string(), 20_000.0)].into_iter().collect(),
+        tolerance_limit: Some(2.5),
         hold: vec!["installation_errors".into()],
         undetermined: vec!["base 1 x".into()],
         blind_directions: vec!["all base joints translated together".into()],

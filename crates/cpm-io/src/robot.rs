@@ -234,6 +234,14 @@ impl Robot {
                 })?;
             }
             t.hold = c.hold.clone();
+            if let Some(limit) = c.tolerance_limit {
+                t.set_limit(limit).map_err(|e| InputError {
+                    file: self.file.clone(),
+                    line: None,
+                    field: Some("calibration.tolerance_limit".into()),
+                    message: e.to_string(),
+                })?;
+            }
         }
         Ok(t)
     }

@@ -148,9 +148,16 @@ pub struct Calibration {
     /// the prior and posterior standard deviations and the data's share, and the directions
     /// held near nominal because the data see them less well than their tolerance.
     pub prior: Option<PriorSummary>,
-    /// The a-priori standard deviation of every parameter as applied (model units; 0 held,
-    /// infinite free).
+    /// The a-priori standard deviation of every parameter from its group's tolerance (model
+    /// units; 0 for a held group, infinite free); the parameters held at their limit are in
+    /// `held_at_limit`.
     pub prior_std: Vec<f64>,
+    /// The parameters the data pulled beyond [`Tolerances::limit`] tolerances, held there (at
+    /// the limit, with the sign they were pulled to) in the final fit: not measured, named in
+    /// the report (sorted indices).
+    pub held_at_limit: Vec<usize>,
+    /// The limit applied, in tolerances ([`Tolerances::limit`]; infinite: none).
+    pub tolerance_limit: f64,
     /// True when the 6-D tracker poses were fitted in leg space
     /// ([`IdentifyOptions::leg_space`]); the residuals here are in pose space either way.
     pub leg_space: bool,
@@ -607,24 +614,85 @@ pub fn identify(
     options: &IdentifyOptions,
 ) -> Result<Calibration, CalibError> {
     check_cancel(&options.cancel)?;
-    let fitted = identify_uncancelled(model, campaign, options);
+    let fitted = identify_within_limit(model, campaign, options);
     match fitted {
         Err(_) if check_cancel(&options.cancel).is_err() => Err(CalibError::Cancelled),
         other => other,
     }
 }
 
-fn identify_uncancelled(
+/// Most refits of [`identify`] that hold at their limit the parameters the previous fit
+/// pulled beyond it ([`Tolerances::limit`]).
+pub const MAX_LIMIT_ROUNDS: usize = 4;
+
+/// The fit, then every parameter with a tolerance that the data pulled beyond
+/// [`Tolerances::limit`] tolerances without determining it (a data share below
+/// [`MIN_DATA_SHARE`](crate::fit::prior::MIN_DATA_SHARE)) held at the limit (with the sign it
+/// was pulled to) and the fit repeated, until none is beyond or after [`MAX_LIMIT_ROUNDS`]
+/// refits (what is still beyond then is reported as such). A misfit the model does not
+/// declare pours into the weakly seen directions: the limit keeps the written machine
+/// physical, and the report names what it held. A parameter the data determine is measured,
+/// however far from its tolerance (the tolerance was wrong: the report says it is beyond).
+fn identify_within_limit(
     model: &MeasurementModel,
     campaign: &Campaign,
     options: &IdentifyOptions,
 ) -> Result<Calibration, CalibError> {
+    let limit = options.tolerances.limit;
+    if !(limit > 0.0) {
+        return Err(CalibError::invalid(
+            "tolerance limit",
+            format!("{limit} must be > 0 (in tolerances; inf for none)"),
+        ));
+    }
+    let mut at_limit: Vec<(usize, f64)> = Vec::new();
+    let mut cal = identify_uncancelled(model, campaign, options, &at_limit)?;
+    if options.tolerances.off || limit.is_infinite() {
+        return Ok(cal);
+    }
+    for _ in 0..MAX_LIMIT_ROUNDS {
+        let beyond: Vec<(usize, f64)> = cal
+            .prior_std
+            .iter()
+            .zip(&cal.minimum_norm_um)
+            .enumerate()
+            .filter(|(k, (t, v))| {
+                t.is_finite()
+                    && **t > 0.0
+                    && v.abs() > limit * **t
+                    && !at_limit.iter().any(|(j, _)| j == k)
+                    && !cal.prior.as_ref().is_some_and(|p| p.determined(*k))
+            })
+            .map(|(k, (t, v))| (k, limit * t * v.signum()))
+            .collect();
+        if beyond.is_empty() {
+            break;
+        }
+        at_limit.extend(beyond);
+        at_limit.sort_by_key(|p| p.0);
+        cal = identify_uncancelled(model, campaign, options, &at_limit)?;
+    }
+    Ok(cal)
+}
+
+fn identify_uncancelled(
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    options: &IdentifyOptions,
+    at_limit: &[(usize, f64)],
+) -> Result<Calibration, CalibError> {
     options.lm.validate()?;
     let np = model.num_params();
-    let start = checked_start(np, options)?;
+    let mut start = checked_start(np, options)?;
     let prepared = Prepared::new(model, campaign)?;
     let m = campaign.len();
-    let prior = prior_std(model, &options.tolerances)?;
+    let mut prior = prior_std(model, &options.tolerances)?;
+    let group_prior = prior.clone();
+    // The parameters held at their limit: at it, out of the fit.
+    for &(k, v) in at_limit {
+        prior[k] = 0.0;
+        start[k] = v;
+    }
     let sigma_ref = campaign.reference_sigma(options.sigma_um);
     let w = Weighing {
         with_prior: prior.iter().any(|p| p.is_finite()),
@@ -747,7 +815,13 @@ fn identify_uncancelled(
         sigma_ref_um: w.sigma_ref,
         leverages,
         prior: prior_summary,
-        prior_std: w.prior,
+        prior_std: group_prior,
+        held_at_limit: at_limit.iter().map(|p| p.0).collect(),
+        tolerance_limit: if options.tolerances.off {
+            f64::INFINITY
+        } else {
+            options.tolerances.limit
+        },
         leg_space,
     })
 }

@@ -708,6 +708,8 @@ pub fn identify_implicit_calibration(
         // prior (its campaigns determine every parameter they fit far below any tolerance).
         prior: None,
         prior_std: vec![f64::INFINITY; np],
+        held_at_limit: Vec::new(),
+        tolerance_limit: f64::INFINITY,
         leg_space: false,
     })
 }

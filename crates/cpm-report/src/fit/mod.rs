@@ -676,6 +676,7 @@ impl FitReport {
         let mut warnings_md = warnings(model, cal);
         warnings_md.extend(noise_warning(&kinds));
         warnings_md.extend(prior::warning(model, cal));
+        warnings_md.extend(prior::limit_warning(model, cal));
         warnings_md.extend(prior::beyond_warning(model, cal));
         Self {
             cpm_version: env!("CARGO_PKG_VERSION").to_string(),

@@ -57,6 +57,11 @@ pub struct PriorReport {
     pub parameters: Vec<ParameterPrior>,
     /// Directions held near nominal, weakest first.
     pub held_directions: Vec<HeldDirectionReport>,
+    /// How many tolerances a fitted parameter may reach (`null`: no limit): one the data
+    /// pulled further is held there.
+    pub limit_in_tolerances: Option<f64>,
+    /// The parameters the data pulled beyond the limit, held at it (not measured).
+    pub held_at_limit: Vec<String>,
     /// Directions the data determine better than their tolerance.
     pub determined_dimensions: usize,
     /// Effective number of parameters fitted (trace of the hat matrix).
@@ -127,6 +132,12 @@ impl PriorReport {
                     description: describe(&names, &h.loadings),
                 })
                 .collect(),
+            limit_in_tolerances: cal.tolerance_limit.is_finite().then_some(cal.tolerance_limit),
+            held_at_limit: cal
+                .held_at_limit
+                .iter()
+                .map(|&k| names.get(k).cloned().unwrap_or_else(|| format!("#{k}")))
+                .collect(),
             determined_dimensions: p.determined_dimensions,
             effective_params: p.effective_params,
         })
@@ -155,6 +166,22 @@ impl PriorReport {
             ));
         }
         s.push('\n');
+        if let Some(limit) = self.limit_in_tolerances {
+            s.push_str(&format!(
+                "A fitted parameter may reach {} tolerance{} (`[calibration] tolerance_limit`); {}.\n\n",
+                sig(limit, 3),
+                if limit == 1.0 { "" } else { "s" },
+                if self.held_at_limit.is_empty() {
+                    "none was pulled beyond it".to_string()
+                } else {
+                    format!(
+                        "the data pulled {} beyond it, held there and not measured: {}",
+                        self.held_at_limit.len(),
+                        self.held_at_limit.join(", ")
+                    )
+                }
+            ));
+        }
         // Per parameter, how much of it the data determined (1 - posterior / prior variance),
         // and what stayed at its nominal.
         let stayed: Vec<&ParameterPrior> = self
@@ -229,19 +256,42 @@ pub fn warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
     ))
 }
 
-/// The warning when the fit ends with parameters beyond their a-priori tolerance: the prior is
-/// a Gaussian of that standard deviation, not a wall, so the data can pull a parameter past
-/// it, and a user should know. `None` when every parameter with a tolerance is within it.
-pub fn beyond_warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
-    let p = cal.prior.as_ref()?;
+/// The warning when the fit held parameters at their limit ([`Calibration::held_at_limit`]):
+/// the data pulled them beyond what their tolerance allows. `None` when it held none.
+pub fn limit_warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
+    let first = *cal.held_at_limit.first()?;
     let names = model.parameter_names();
-    let mut beyond: Vec<(usize, f64)> = p
+    let n = cal.held_at_limit.len();
+    Some(format!(
+        "**Held at tolerance**: the data pulled {n} parameter{} beyond {} tolerance{} (the first: {}); {} held there, not measured, and the fit repeated. An effect the model lacks (`cpm refine`), a set-up that moved, or a tolerance set too tight can do that.",
+        if n == 1 { "" } else { "s" },
+        sig(cal.tolerance_limit, 3),
+        if cal.tolerance_limit == 1.0 { "" } else { "s" },
+        names.get(first).map_or("?", |s| s.as_str()),
+        if n == 1 { "it is" } else { "they are" },
+    ))
+}
+
+/// The warning when the fit ends with parameters beyond their a-priori tolerance (no limit, or
+/// one a frame's gauge moved past it): the prior is a Gaussian of that standard deviation, so
+/// the data can pull a parameter past it, and a user should know. `None` when every parameter
+/// with a tolerance is within it.
+pub fn beyond_warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
+    cal.prior.as_ref()?;
+    let names = model.parameter_names();
+    let mut beyond: Vec<(usize, f64)> = cal
         .prior_std
         .iter()
         .zip(&cal.minimum_norm_um)
         .enumerate()
         .filter_map(|(k, (t, v))| match t {
-            Some(t) if *t > 0.0 && t.is_finite() && v.abs() > *t => Some((k, v.abs() / t)),
+            t if *t > 0.0
+                && t.is_finite()
+                && v.abs() > *t * (1.0 + 1e-9)
+                && !cal.held_at_limit.contains(&k) =>
+            {
+                Some((k, v.abs() / t))
+            }
             _ => None,
         })
         .collect();
