@@ -214,28 +214,49 @@ pub struct HoldTrial {
     pub held: bool,
 }
 
+/// What [`choose_holds`] decided: the identification options with the groups held, the
+/// trials, and the fits it made on the way that the rest of refine needs again (the same fits
+/// of the same campaign give the same numbers: they are not made twice).
+struct Holds {
+    /// The options with the chosen groups held.
+    identify: IdentifyOptions,
+    /// The groups tried.
+    trials: Vec<HoldTrial>,
+    /// The fit with the chosen groups held (`None` when no trial was made).
+    chosen: Option<Calibration>,
+    /// The fit with nothing held but what was declared (`None` when no trial was made).
+    declared: Option<Calibration>,
+}
+
 /// Refine's choice of groups to hold: each candidate group held in turn (on top of those
 /// already held), kept when the fit without it predicts held-out data clearly better.
 fn choose_holds(
     model: &MeasurementModel,
     campaign: &Campaign,
     options: &RefineOptions,
-) -> Result<(IdentifyOptions, Vec<HoldTrial>), CalibError> {
+) -> Result<Holds, CalibError> {
     let mut opts = options.identify.clone();
     let mut trials = Vec::new();
+    let mut declared: Option<Calibration> = None;
     if opts.tolerances.off || options.hold_candidates.is_empty() {
-        return Ok((opts, trials));
+        return Ok(Holds {
+            identify: opts,
+            trials,
+            chosen: None,
+            declared,
+        });
     }
     let np = model.num_params();
-    let score = |o: &IdentifyOptions| -> Result<CvErrors, CalibError> {
+    let score = |o: &IdentifyOptions| -> Result<(Calibration, CvErrors), CalibError> {
         let c = identify(model, campaign, o)?;
         let cvo = IdentifyOptions {
             prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
             ..o.clone()
         };
-        cross_validated_errors(model, campaign, &cvo, options.folds, &vec![0.0; np])
+        let e = cross_validated_errors(model, campaign, &cvo, options.folds, &vec![0.0; np])?;
+        Ok((c, e))
     };
-    let mut current: Option<CvErrors> = None;
+    let mut current: Option<(Calibration, CvErrors)> = None;
     for g in &options.hold_candidates {
         if opts.tolerances.hold.contains(g) {
             continue;
@@ -251,17 +272,21 @@ fn choose_holds(
         }
         let base = match current.take() {
             Some(c) => c,
-            None => score(&opts)?,
+            None => {
+                let first = score(&opts)?;
+                declared = Some(first.0.clone());
+                first
+            }
         };
         let Ok(with) = score(&held) else {
             current = Some(base);
             continue;
         };
-        let better = base.clearly_worse_than(&with);
+        let better = base.1.clearly_worse_than(&with.1);
         trials.push(HoldTrial {
             group: g.clone(),
-            cv_rms_fitted_um: base.rms(),
-            cv_rms_held_um: with.rms(),
+            cv_rms_fitted_um: base.1.rms(),
+            cv_rms_held_um: with.1.rms(),
             held: better,
         });
         if better {
@@ -271,7 +296,12 @@ fn choose_holds(
             current = Some(base);
         }
     }
-    Ok((opts, trials))
+    Ok(Holds {
+        identify: opts,
+        trials,
+        chosen: current.map(|c| c.0),
+        declared,
+    })
 }
 
 /// Plain calibration (the starting model, as `cpm calibrate` fits it) against the refined
@@ -798,15 +828,19 @@ fn refine_uncancelled(
             format!("{} must be in (0, 1)", options.alpha),
         ));
     }
-    let (identify_options, hold_trials) = choose_holds(model, campaign, options)?;
+    let holds = choose_holds(model, campaign, options)?;
+    let hold_trials = holds.trials;
     let held = RefineOptions {
-        identify: identify_options,
+        identify: holds.identify,
         ..options.clone()
     };
-    let mut r = refine_effects(model, campaign, &held)?;
+    let mut r = refine_effects(model, campaign, &held, holds.chosen)?;
     if hold_trials.iter().any(|t| t.held) {
         // Plain calibration is the model with nothing held but what was declared.
-        let c = identify(model, campaign, &options.identify)?;
+        let c = match holds.declared {
+            Some(c) => c,
+            None => identify(model, campaign, &options.identify)?,
+        };
         let o = IdentifyOptions {
             prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
             ..options.identify.clone()
@@ -819,12 +853,18 @@ fn refine_uncancelled(
     Ok(r)
 }
 
+/// The rounds of effects on top of `model` (its fit with `options.identify` given as `first`
+/// when already made).
 fn refine_effects(
     model: &MeasurementModel,
     campaign: &Campaign,
     options: &RefineOptions,
+    first: Option<Calibration>,
 ) -> Result<Refinement, CalibError> {
-    let first = identify(model, campaign, &options.identify)?;
+    let first = match first {
+        Some(c) => c,
+        None => identify(model, campaign, &options.identify)?,
+    };
     let (outliers_before, outliers_explained) =
         outliers_or_signal(model, campaign, options, &first)?;
     let full = campaign;

@@ -264,10 +264,28 @@ impl Bound<'_> {
             &mut d_pose,
             &mut d_nuisance,
         );
-        let rows = &d_pose * dx;
-        for (a, r) in at.iter().enumerate() {
-            if let Some(r) = r {
-                jac.row_mut(*r).copy_from(&rows.row(a));
+        if m <= 5 {
+            // Row `a` of `d_pose * dx`, written straight into the Jacobian: a measurement of
+            // one to five values (an angle, a point), where a general product of such thin
+            // matrices spends its time in loop overhead. The sums run in the order of
+            // nalgebra's product for these sizes (column by column): the same bits.
+            for (a, r) in at.iter().enumerate() {
+                let Some(r) = *r else { continue };
+                let d: [f64; 6] = std::array::from_fn(|k| d_pose[(a, k)]);
+                for (j, x) in dx.column_iter().enumerate() {
+                    let mut s = d[0] * x[0];
+                    for (dk, xk) in d.iter().zip(x.iter()).skip(1) {
+                        s += dk * xk;
+                    }
+                    jac[(r, j)] = s;
+                }
+            }
+        } else {
+            let rows = &d_pose * dx;
+            for (a, r) in at.iter().enumerate() {
+                if let Some(r) = r {
+                    jac.row_mut(*r).copy_from(&rows.row(a));
+                }
             }
         }
         for c in 0..p + q {
