@@ -95,13 +95,12 @@ pub struct Tolerances {
     pub limit: f64,
 }
 
-/// The default [`Tolerances::limit`]: a parameter may reach three tolerances (three standard
-/// deviations of its prior: a value the prior calls implausible), not go beyond, unless the
-/// data determine it. A limit of one tolerance (on every parameter) was tried and judged on
-/// real data: on the real motion-capture session (`tests/real_data.rs`) it held 20 parameters
-/// and the held-out leg RMS rose from 0.674 mm to 0.896 mm; the data there pull seven
-/// parameters to between 1 and 1.81 tolerances, and the model that keeps them predicts later
-/// poses better.
+/// The default [`Tolerances::limit`]: an undetermined parameter may reach three tolerances
+/// (three standard deviations of its prior: a value the prior calls implausible), not go
+/// beyond. Measured on `tests/real_data.rs` (docs/estimation.md): a limit of 1 on every
+/// parameter raised the real motion-capture session's held-out leg RMS from 0.674 mm to 0.896
+/// mm; a limit of 1 on the undetermined ones left those figures unchanged but made `refine`
+/// choose clearance over the simulated truth's compliance.
 pub const DEFAULT_LIMIT: f64 = 3.0;
 
 fn default_limit() -> f64 {

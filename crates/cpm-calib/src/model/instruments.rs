@@ -272,11 +272,15 @@ impl Bound<'_> {
             for (a, r) in at.iter().enumerate() {
                 let Some(r) = *r else { continue };
                 let d: [f64; 6] = std::array::from_fn(|k| d_pose[(a, k)]);
-                for (j, x) in dx.column_iter().enumerate() {
+                // `dx` is 6 x np, column-major: its columns are the chunks of six.
+                debug_assert_eq!(dx.nrows(), 6);
+                for (j, x) in dx.as_slice().chunks_exact(6).enumerate() {
                     let mut s = d[0] * x[0];
-                    for (dk, xk) in d.iter().zip(x.iter()).skip(1) {
-                        s += dk * xk;
-                    }
+                    s += d[1] * x[1];
+                    s += d[2] * x[2];
+                    s += d[3] * x[3];
+                    s += d[4] * x[4];
+                    s += d[5] * x[5];
                     jac[(r, j)] = s;
                 }
             }
