@@ -618,6 +618,42 @@ fn simulated_tilts_on_the_real_grid_with_an_undeclared_effect() {
     }
     let held = fit["prior"]["held_at_limit"].as_array().unwrap();
     assert_eq!(warned("Held at tolerance"), !held.is_empty());
+    // A user for whom a written joint beyond its tolerance is not acceptable sets the limit to
+    // one tolerance: the joints the data pull further without determining them are held
+    // there, named and warned about.
+    let at_one = dir.join("cal-limit-1");
+    let strict = calibrate_json(
+        Path::new(&robot),
+        &[&data],
+        &["--tolerance-limit", "1"],
+        &at_one,
+    );
+    let (joints_1, _) = plausibility(&at_one.join("calibrated.toml"));
+    let held_1 = strict["prior"]["held_at_limit"].as_array().unwrap();
+    eprintln!(
+        "simulated tilts, --tolerance-limit 1: joints within {joints_1:.3} mm, {} held: {held_1:?}",
+        held_1.len()
+    );
+    assert_eq!(strict["prior"]["limit_in_tolerances"].as_f64(), Some(1.0));
+    assert!(joints_1 <= tolerance_mm * (1.0 + 1e-9), "{joints_1} mm");
+    assert!(!held_1.is_empty());
+    assert!(strict["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|w| w.as_str().unwrap().starts_with("Held at tolerance")));
+    let refused = cli::cpm(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--tolerance-limit",
+        "0",
+        "--out",
+        &p(&dir.join("cal-limit-0")),
+    ]);
+    assert_eq!(refused.status.code(), Some(2));
     let out = dir.join("refined");
     refine(&robot, &data, &out);
     let doc: serde_json::Value =

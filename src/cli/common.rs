@@ -198,6 +198,11 @@ pub struct FitArgs {
     /// may then run off along directions the noise hides).
     #[arg(long)]
     pub no_prior: bool,
+    /// Tolerances an undetermined parameter may reach: one the data pull further is held
+    /// there, named in the report, and the fit repeated (`inf`: no limit). Default:
+    /// `[calibration] tolerance_limit` of the description, else 3 (docs/estimation.md).
+    #[arg(long, value_name = "N")]
+    pub tolerance_limit: Option<f64>,
     /// Residuals of 6-D tracker poses: `pose` (position and orientation), `legs` (each link's
     /// length against the length the joints need for the measured pose: the
     /// inverse-kinematics formulation), or `auto` (the default: whichever predicts held-out
@@ -224,6 +229,7 @@ impl FitArgs {
             tolerance: self.tolerance.clone(),
             hold: self.hold.clone(),
             no_prior: self.no_prior,
+            tolerance_limit: self.tolerance_limit,
             tracker_residuals: self.tracker_residuals,
         }
     }

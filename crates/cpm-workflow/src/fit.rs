@@ -80,6 +80,10 @@ pub struct FitOptions {
     pub hold: Vec<String>,
     /// No prior (plain least squares in every direction the data see); default false.
     pub no_prior: bool,
+    /// Tolerances an undetermined parameter may reach before it is held there
+    /// ([`Tolerances::limit`](crate::calib::Tolerances::limit)); default none (the
+    /// description's `[calibration] tolerance_limit`, else cpm-calib's 3).
+    pub tolerance_limit: Option<f64>,
     /// Residuals of 6-D tracker poses; default [`TrackerResiduals::Auto`].
     pub tracker_residuals: TrackerResiduals,
 }
@@ -102,6 +106,7 @@ impl FitOptions {
             tolerance: Vec::new(),
             hold: Vec::new(),
             no_prior: false,
+            tolerance_limit: None,
             tracker_residuals: TrackerResiduals::Auto,
         }
     }
@@ -126,11 +131,21 @@ impl FitOptions {
                 return Err(usage_error(format!("{name} must be > 0")));
             }
         }
+        if let Some(l) = self.tolerance_limit.filter(|l| !(*l > 0.0)) {
+            return Err(usage_error(format!(
+                "--tolerance-limit must be > 0 (a number of tolerances; inf for no limit), got {l}"
+            )));
+        }
         Ok(())
     }
     /// The tolerances of the fit: the description's, then the options'.
     pub fn tolerances(&self, robot: &Robot) -> anyhow::Result<crate::calib::Tolerances> {
-        tolerances_of(robot, &self.tolerance, &self.hold, self.no_prior)
+        let mut t = tolerances_of(robot, &self.tolerance, &self.hold, self.no_prior)?;
+        if let Some(limit) = self.tolerance_limit {
+            t.set_limit(limit)
+                .map_err(|e| usage_error(format!("--tolerance-limit: {e}")))?;
+        }
+        Ok(t)
     }
     /// Checks the options (usage errors before any file is read), then loads and checks the
     /// robot, the effects and the data.
