@@ -1431,6 +1431,59 @@ mod tests {
             .clearly_worse_than(&candidate(by_position, FoldKind::Positions)));
     }
 
+    /// An effect whose every parameter the data determine worse than its tolerance is
+    /// undetermined (refine refuses it); the same effect with its default tolerance, which the
+    /// designed campaign determines far better, is not.
+    #[test]
+    fn an_effect_the_data_see_worse_than_its_tolerance_is_undetermined() {
+        use super::undetermined_effect;
+        use crate::paper::{designed_sensors, random_workspace_poses};
+        use crate::{
+            identify, simulate, Effect, IdentifyOptions, MeasurementModel, Plan, SimulationOptions,
+            Tolerances,
+        };
+        let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
+        model.nominal.sensors = designed_sensors();
+        model.effects = vec![Effect::LinkOffset];
+        let plan = Plan {
+            poses: random_workspace_poses(&model.nominal, 30, 100.0, 25.0, 3.0, 3),
+            sensors: (0..model.nominal.sensors.len()).collect(),
+        };
+        let data = simulate(
+            &model,
+            &vec![0.0; model.num_params()],
+            &plan,
+            &SimulationOptions::default(),
+        )
+        .unwrap();
+        let fit = |tolerance: Option<f64>| {
+            let mut t = Tolerances::default();
+            if let Some(v) = tolerance {
+                t.set("link_offset", v).unwrap();
+            }
+            identify(
+                &model,
+                &data,
+                &IdentifyOptions {
+                    tolerances: t,
+                    sigma_um: Some(1.0),
+                    ..IdentifyOptions::default()
+                },
+            )
+            .unwrap()
+        };
+        assert!(!undetermined_effect(&model, Effect::LinkOffset, &fit(None)));
+        // A tolerance of a thousandth of a micrometre: the data (about a micrometre) supply
+        // almost none of its determination.
+        assert!(undetermined_effect(
+            &model,
+            Effect::LinkOffset,
+            &fit(Some(1e-3))
+        ));
+        // An effect the model does not have is not judged.
+        assert!(!undetermined_effect(&model, Effect::LinkScale, &fit(None)));
+    }
+
     #[test]
     fn a_refined_model_worse_than_calibration_is_refused() {
         let worse = AgainstCalibrate {
