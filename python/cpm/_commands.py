@@ -333,7 +333,9 @@ def calibrate(
     ``minimum_norm``, ``max_iterations``, ``formulation``). The estimator's prior:
     ``tolerances={"installation_errors": 2000, "link_scale": 50000}`` (each group's a-priori
     standard deviation in its unit, ``float("inf")`` frees it), ``hold=["installation_errors"]``
-    (groups kept at nominal), ``no_prior=True`` (plain least squares);
+    (groups kept at nominal), ``tolerance_limit=1`` (tolerances an undetermined parameter may
+    reach before it is held there; default the description's, else 3), ``no_prior=True``
+    (plain least squares);
     ``tracker_residuals="auto"|"pose"|"legs"`` for 6-D tracker poses (docs/estimation.md). With ``out`` the outputs are written
     there as the command writes them. The GIL is released during the fit; Ctrl-C raises
     ``KeyboardInterrupt`` at once (the fit itself finishes in the background and is dropped;
@@ -353,7 +355,7 @@ def calibrate(
 
 
 # Options of `cpm calibrate` whose values are numbers of um, urad (floats) or counts (ints).
-_FLOATS = {"sigma_um", "pose_sigma_um", "orientation_sigma_urad"}
+_FLOATS = {"sigma_um", "pose_sigma_um", "orientation_sigma_urad", "tolerance_limit"}
 _INTS = {"max_iterations"}
 
 

@@ -258,3 +258,11 @@ def test_tolerances_and_hold_reach_the_fit(in_root):
     assert groups["link_offset"]["treatment"] == "prior"
     with pytest.raises(cpm.CpmError, match="not_a_group"):
         cpm.calibrate(robot, data, tolerances={"not_a_group": 1.0})
+    # The limit reaches the fit and its report; one that is no number of tolerances is a
+    # usage error.
+    limited = cpm.calibrate(robot, data, effects=["link_offset"], tolerance_limit=2.0)
+    prior = json.loads(limited.text("calibration.json"))["prior"]
+    assert prior["limit_in_tolerances"] == 2.0
+    assert isinstance(prior["held_at_limit"], list)
+    with pytest.raises(cpm.UsageError, match="tolerance-limit"):
+        cpm.calibrate(robot, data, tolerance_limit=0.0)

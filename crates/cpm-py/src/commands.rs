@@ -406,6 +406,7 @@ fn calibrate_options(
         "tolerance",
         "hold",
         "no_prior",
+        "tolerance_limit",
         "tracker_residuals",
         "minimum_norm",
         "formulation",
@@ -450,6 +451,7 @@ fn calibrate_options(
         .flat_map(|h| h.split(',').map(str::to_string))
         .collect();
     f.no_prior = flag("no_prior")?;
+    f.tolerance_limit = option(py, options, "tolerance_limit")?;
     f.tracker_residuals = choice(
         py,
         options,
