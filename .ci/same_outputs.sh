@@ -32,6 +32,11 @@ run_all() {
     step validate --reference $R --commands commands.csv --truth examples/hexapod_66_truth.toml --out comp
     step export --format linuxcnc --robot cal/calibrated.toml
     step design --robot $R --readings 60 --out design
+    step design --robot $R --readings 60 --json --out design_json
+    step design --robot $R --sockets design/sockets.csv --readings 60 --criterion d --out design_d
+    step design --robot $R --stroke-mm 100 --readings 60 --setups 4 --candidates 200 --out design_limited
+    step design --robot $R --instruments gauges,tracker --readings 120 --candidates 200 --out design_mix
+    step design --robot $R --readings 60 --base-sockets 50 --out design_refused
     step calibrate --robot tilt/robot.toml --data tilt/session_1.csv --out tilt_cal
     step validate --robot tilt_cal/calibrated.toml --data tilt/session_1.csv --out tilt_val --json
     step calibrate --robot mocap/robot.toml --data mocap/session_108.csv --out mocap_cal

@@ -65,6 +65,7 @@ pub use cpm_kinematics as kinematics;
 pub use cpm_report as report;
 
 pub mod compensate;
+pub mod design;
 pub mod error;
 pub mod export;
 pub mod fit;

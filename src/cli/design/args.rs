@@ -1,13 +1,12 @@
-//! The arguments of `cpm design`, shared by the socket design (`cli::design`) and the pose
-//! design for a mix of instruments (`cli::design_instruments`).
+//! The arguments of `cpm design` and the workflow's options they make
+//! ([`cpm_workflow::design::DesignJobOptions`]).
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use crate::calib::design::{Clearance, Criterion, DesignLimits, JointLimits};
+use crate::calib::design::{Criterion, GaugeKind};
 use crate::cli::common::RobotArg;
-use crate::cli::usage_error;
-use crate::io::Robot;
+use cpm_workflow::design::DesignJobOptions;
 
 /// Optimality criterion of the pose selection.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -140,77 +139,43 @@ pub struct DesignArgs {
     pub instruments: Option<String>,
 }
 
-/// The limits of a design without a gauge: the description's `[limits]` overridden by
-/// `--cone-deg` and `--clearance-mm` (the defaults of [`crate::geometry::description::LimitsSpec`] for what neither gives),
-/// with where they came from in words; `None` when none of them is given.
-pub fn plain_limits(
-    args: &DesignArgs,
-    robot: &Robot,
-) -> anyhow::Result<Option<(DesignLimits, String)>> {
-    let declared = robot.description.limits;
-    if declared.is_none() && args.cone_deg.is_none() && args.clearance_mm.is_none() {
-        return Ok(None);
-    }
-    let spec = declared.unwrap_or_default();
-    let mut from = Vec::new();
-    if let Some(v) = args.cone_deg {
-        if !(v.is_finite() && v > 0.0 && v <= 180.0) {
-            return Err(usage_error(format!(
-                "--cone-deg {v}: must be in (0, 180] deg"
-            )));
-        }
-        from.push(format!("--cone-deg {v}"));
-    }
-    if let Some(v) = args.clearance_mm {
-        if !(v.is_finite() && v >= 0.0) {
-            return Err(usage_error(format!(
-                "--clearance-mm {v}: must be finite and >= 0"
-            )));
-        }
-        from.push(format!("--clearance-mm {v}"));
-    }
-    if let Some(l) = &declared {
-        let mut what = Vec::new();
-        if args.cone_deg.is_none() {
-            what.push(format!(
-                "base_cone_deg = {}, platform_cone_deg = {}",
-                l.base_cone_deg, l.platform_cone_deg
-            ));
-        }
-        if let Some(r) = l.link_radius_mm {
-            what.push(format!("link_radius_mm = {r}"));
-        }
-        if let (None, Some(c)) = (args.clearance_mm, l.gauge_link_clearance_mm) {
-            what.push(format!("gauge_link_clearance_mm = {c}"));
-        }
-        if !what.is_empty() {
-            from.push(format!("[limits] {} of {}", what.join(", "), robot.file));
+impl GaugeArg {
+    /// The gauge kind of cpm-calib's design.
+    pub fn kind(self) -> GaugeKind {
+        match self {
+            GaugeArg::Telescoping => GaugeKind::Telescoping,
+            GaugeArg::Ballbar => GaugeKind::Ballbar,
         }
     }
-    let limits = DesignLimits {
-        joints: JointLimits {
-            base_cone_deg: args.cone_deg.unwrap_or(spec.base_cone_deg),
-            platform_cone_deg: args.cone_deg.unwrap_or(spec.platform_cone_deg),
-        },
-        clearance: Clearance {
-            gauge_link_mm: args.clearance_mm.unwrap_or(spec.gauge_link_mm(None)),
-            link_link_mm: spec.link_link_mm(),
-        },
-    };
-    // Limits neither the flags nor the description give: their defaults, stated.
-    if args.cone_deg.is_none() && declared.is_none() {
-        from.push(format!(
-            "the default --cone-deg {}",
-            limits.joints.base_cone_deg
-        ));
+}
+
+impl DesignArgs {
+    /// The workflow's options of these arguments.
+    pub fn options(&self) -> DesignJobOptions {
+        DesignJobOptions {
+            robot: self.robot.robot.clone(),
+            sockets: self.sockets.clone(),
+            readings: self.readings,
+            base_sockets: self.base_sockets,
+            platform_sockets: self.platform_sockets,
+            poses: self.poses,
+            candidates: self.candidates,
+            range_mm: self.range_mm,
+            range_deg: self.range_deg,
+            criterion: self.criterion.criterion(),
+            sigma_um: self.sigma_um,
+            seed: self.seed,
+            stroke_mm: self.stroke_mm,
+            gauge_name: self.gauge_name.clone(),
+            gauge: self.gauge.map(GaugeArg::kind),
+            shortest_mm: self.shortest_mm,
+            longest_mm: self.longest_mm,
+            bars_mm: self.bars_mm.clone(),
+            clearance_mm: self.clearance_mm,
+            cone_deg: self.cone_deg,
+            setups: self.setups,
+            out: self.out.clone(),
+            instruments: self.instruments.clone(),
+        }
     }
-    let described_clearance =
-        declared.is_some_and(|l| l.gauge_link_clearance_mm.is_some() || l.link_radius_mm.is_some());
-    if args.clearance_mm.is_none() && !described_clearance {
-        from.push(format!(
-            "the default --clearance-mm {}",
-            limits.clearance.gauge_link_mm
-        ));
-    }
-    Ok(Some((limits, from.join(" and "))))
 }

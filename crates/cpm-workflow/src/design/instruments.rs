@@ -4,14 +4,14 @@
 //! instrument alone at the chosen poses.
 use serde::Serialize;
 
-use super::args::{CriterionArg, DesignArgs};
+use super::{DesignJobOptions, Designed};
 use crate::calib::design::instruments::{InstrumentBounds, InstrumentNoise, Instruments};
 use crate::calib::design::limits::{cone_angles_deg, gauge_clearance_mm};
-use crate::calib::design::{candidates, DesignLimits, SelectOptions};
-use crate::cli::common;
-use crate::cli::{input_error, usage_error, Ctx, Outcome};
+use crate::calib::design::{DesignLimits, SelectOptions};
+use crate::error::{input_error, usage_error};
 use crate::io::{self, Robot};
 use crate::output::OutputSet;
+use crate::progress::Progress;
 use crate::report::format::{sig, tidy_csv};
 
 /// `design.json` of an instrument design.
@@ -170,23 +170,23 @@ fn parse(list: &str, robot: &Robot) -> anyhow::Result<(Instruments, Vec<String>)
     Ok((ins, names))
 }
 
-/// Runs `cpm design --instruments LIST` (checks of the shared options done by the caller).
-pub fn run(
-    args: &DesignArgs,
+/// The design of `--instruments LIST` (checks of the shared options done by the caller).
+pub fn design(
+    options: &DesignJobOptions,
     list: &str,
     robot: &Robot,
     gauge_sigma_um: f64,
-    ctx: &mut Ctx<'_>,
-) -> anyhow::Result<Outcome> {
-    if args.sockets.is_some() || args.stroke_mm.is_some() {
+    progress: &dyn Progress,
+) -> anyhow::Result<Designed> {
+    if options.sockets.is_some() || options.stroke_mm.is_some() {
         return Err(usage_error(
             "--instruments chooses poses for the instruments as described; --sockets and --stroke-mm design gauge sockets: give one or the other",
         ));
     }
-    if args.candidates == 0
-        || args.candidates > 100_000
-        || !(args.range_mm > 0.0 && args.range_deg >= 0.0)
-        || !(args.range_mm.is_finite() && args.range_deg.is_finite())
+    if options.candidates == 0
+        || options.candidates > 100_000
+        || !(options.range_mm > 0.0 && options.range_deg >= 0.0)
+        || !(options.range_mm.is_finite() && options.range_deg.is_finite())
     {
         return Err(usage_error(
             "--candidates must be 1 to 100000 and --range-mm > 0, --range-deg >= 0 (finite)",
@@ -206,24 +206,16 @@ pub fn run(
     };
     let per_pose = ins.observations_per_pose(&model);
     // The budget is a ceiling: as many whole poses as it holds.
-    let n = args.poses.unwrap_or(args.readings / per_pose);
+    let n = options.poses.unwrap_or(options.readings / per_pose);
     if n == 0 {
         return Err(usage_error(format!(
             "--readings {}: fewer than the {per_pose} observations of one pose of {}: raise --readings",
-            args.readings,
+            options.readings,
             names.join(" + ")
         )));
     }
-    let limits = super::args::plain_limits(args, robot)?;
-    ctx.stage("candidate poses");
-    let (cands, rejected) = candidates::default_candidates(
-        &robot.table,
-        &candidates::Workspace::default(),
-        args.candidates,
-        args.range_mm,
-        args.range_deg,
-        args.seed,
-    );
+    let limits = super::plain_limits(options, robot)?;
+    let (cands, rejected) = super::candidate_poses(options, robot, progress);
     // Only poses within the limits (joint cones, link lengths and link-link clearance; the
     // gauge-link clearance of every gauge read there).
     let cands = match &limits {
@@ -274,8 +266,8 @@ pub fn run(
             rejected.total()
         )));
     }
-    let criterion = args.criterion.criterion();
-    ctx.stage(format!("choosing {n} of {} poses", cands.len()));
+    let criterion = options.criterion;
+    progress.stage(&format!("choosing {n} of {} poses", cands.len()));
     let select = SelectOptions {
         criterion,
         ..SelectOptions::default()
@@ -299,12 +291,7 @@ pub fn run(
         robot: robot.file.clone(),
         instruments: names,
         noise,
-        criterion: match args.criterion {
-            CriterionArg::A => "A",
-            CriterionArg::D => "D",
-            CriterionArg::E => "E",
-        }
-        .to_string(),
+        criterion: options.criterion.name().to_string(),
         candidates: cands.len(),
         bounds,
         alone,
@@ -315,10 +302,10 @@ pub fn run(
                 .iter()
                 .fold(m, |(a, b), (x, y)| (a.max(*x), b.max(*y)))
         }),
-        max_observations: args.readings,
+        max_observations: options.readings,
     };
-    ctx.stage("writing the design");
-    let dir = &args.out;
+    progress.stage("writing the design");
+    let dir = &options.out;
     let mut set = OutputSet::new();
     set.add(
         dir.join("poses.csv"),
@@ -328,35 +315,30 @@ pub fn run(
     set.add(dir.join("design.json"), json.clone());
     let markdown = report.markdown();
     set.add(dir.join("report.md"), markdown.as_str());
-    common::stage_report_html(&mut set, dir, "cpm experiment design", &markdown);
-    let written = common::commit_dir(set, dir, &[args.robot.robot.as_path()], "design", ctx)?;
-    ctx.finish();
-    if args.json {
-        writeln!(ctx.out, "{json}")?;
-    } else {
-        let b = &report.bounds;
-        let um = |v: f64| {
-            if v.is_finite() {
-                format!("{v:.3} um")
-            } else {
-                "n/a".to_string()
-            }
-        };
-        writeln!(
-            ctx.out,
-            "{} poses x {} observations ({}); rank {} of {}; {} of 36 joint errors determined, Cramér-Rao RMS {}; minimum-norm RMS {}",
-            b.poses,
-            per_pose,
-            report.instruments.join(" + "),
-            b.rank,
-            b.parameters,
-            b.joint_errors_determined,
-            um(b.joint_crb_rms_um),
-            um(b.joint_min_norm_rms_um)
-        )?;
-        for w in &written {
-            writeln!(ctx.out, "wrote {}", w.display())?;
+    crate::load::stage_report_html(&mut set, dir, "cpm experiment design", &markdown);
+    let b = &report.bounds;
+    let um = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.3} um")
+        } else {
+            "n/a".to_string()
         }
-    }
-    Ok(Outcome::Done)
+    };
+    let summary = format!(
+        "{} poses x {} observations ({}); rank {} of {}; {} of 36 joint errors determined, Cramér-Rao RMS {}; minimum-norm RMS {}",
+        b.poses,
+        per_pose,
+        report.instruments.join(" + "),
+        b.rank,
+        b.parameters,
+        b.joint_errors_determined,
+        um(b.joint_crb_rms_um),
+        um(b.joint_min_norm_rms_um)
+    );
+    Ok(Designed {
+        outputs: set,
+        inputs: vec![options.robot.clone()],
+        json,
+        summary,
+    })
 }
