@@ -88,7 +88,7 @@ pub struct Tolerances {
     /// How many tolerances a fitted parameter may reach when the data do not determine it:
     /// one the data pull further is held at this many tolerances (with its sign) and the fit
     /// repeated
-    /// ([`identify`](crate::identify)), so that a misfit the model lacks cannot carry the
+    /// ([`identify`](crate::identify())), so that a misfit the model lacks cannot carry the
     /// machine beyond what its drawing allows; the report names what was held.
     /// `f64::INFINITY`: no limit (the Gaussian prior alone). Default [`DEFAULT_LIMIT`] (3).
     #[serde(default = "default_limit")]
