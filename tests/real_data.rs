@@ -654,6 +654,26 @@ fn simulated_tilts_on_the_real_grid_with_an_undeclared_effect() {
         &p(&dir.join("cal-limit-0")),
     ]);
     assert_eq!(refused.status.code(), Some(2));
+    // With the limit at one tolerance the base fit holds joints (above) that its candidates
+    // need not hold; refine compares their determined parameters leaving the union of the held
+    // ones aside, and still finds the load-dependent effect rather than trading it for another.
+    let strict_refined = dir.join("refined-limit-1");
+    ok(&[
+        "refine",
+        "--robot",
+        &robot,
+        "--data",
+        &p(&data),
+        "--tolerance-limit",
+        "1",
+        "--out",
+        &p(&strict_refined),
+    ]);
+    let added_1 = added_effects(&strict_refined);
+    eprintln!("simulated tilts, refine at --tolerance-limit 1 added {added_1:?}");
+    assert!(added_1.iter().any(|e| e == "compliance"), "{added_1:?}");
+    let (joints_r1, _) = plausibility(&strict_refined.join("calibrated.toml"));
+    assert!(joints_r1 <= tolerance_mm * (1.0 + 1e-9), "{joints_r1} mm");
     let out = dir.join("refined");
     refine(&robot, &data, &out);
     let doc: serde_json::Value =

@@ -100,7 +100,8 @@ pub struct Tolerances {
 /// beyond. Measured on `tests/real_data.rs` (docs/estimation.md): a limit of 1 on every
 /// parameter raised the real motion-capture session's held-out leg RMS from 0.674 mm to 0.896
 /// mm; a limit of 1 on the undetermined ones left those figures unchanged but made `refine`
-/// choose clearance over the simulated truth's compliance.
+/// from offsets and scales on the real tilt session's nine positions add `link_nonlinearity`
+/// rather than a load-dependent effect.
 pub const DEFAULT_LIMIT: f64 = 3.0;
 
 fn default_limit() -> f64 {

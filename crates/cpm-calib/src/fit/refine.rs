@@ -1144,17 +1144,24 @@ impl Rounds<'_> {
                 // sizeable part of a parameter the data saw on its own moves along it) makes
                 // the model less useful, whatever its fit: refused. A leak below
                 // [`CONFOUNDED_FRACTION`] is not a reason: the cross-validation judges it.
+                // Compared like with like: a parameter either fit holds at its tolerance
+                // limit is held in both (holding one pins the blind directions it spans, so a
+                // fit that needs fewer holds would otherwise look as if it lost what they
+                // pinned).
                 let np0 = current.num_params();
+                let held = held_in_either(cal, &c1);
                 let determined = |c: &Calibration| {
-                    let f = &c.identifiability.null_fraction;
+                    let f = null_fraction_holding(&c.identifiability, &held);
                     f[..np0.min(f.len())]
                         .iter()
-                        .filter(|x| **x <= CONFOUNDED_FRACTION)
+                        .enumerate()
+                        .filter(|(k, x)| **x <= CONFOUNDED_FRACTION && !held.contains(k))
                         .count()
                 };
-                let loses = determined(&c1) < determined(cal);
+                let (before, after) = (determined(cal), determined(&c1));
+                let loses = after < before;
                 if loses {
-                    score.determined_lost = Some(determined(cal) - determined(&c1));
+                    score.determined_lost = Some(before - after);
                 }
                 // An effect the data determine no better than its tolerance adds its prior,
                 // not a measurement (issue 32: a direction is kept only where its standard
@@ -1249,6 +1256,62 @@ impl Rounds<'_> {
         }
         Ok(best)
     }
+}
+
+/// The parameters `a` or `b` holds at its tolerance limit (`b` may have more parameters than
+/// `a`: the current model's come first), sorted.
+fn held_in_either(a: &Calibration, b: &Calibration) -> Vec<usize> {
+    let mut held: Vec<usize> = a
+        .held_at_limit
+        .iter()
+        .chain(&b.held_at_limit)
+        .copied()
+        .collect();
+    held.sort_unstable();
+    held.dedup();
+    held
+}
+
+/// Each parameter's null-space fraction (as [`Identifiability::null_fraction`]) when the
+/// parameters `held` are held as well: the blind directions that leave every held parameter
+/// where it is (`N Z`, with `Z` the null space of the held rows of the null-space basis `N`).
+/// A held parameter itself counts as blind (1). Without holds: the fit's own fractions.
+///
+/// [`Identifiability::null_fraction`]: crate::analysis::identifiability::Identifiability::null_fraction
+fn null_fraction_holding(
+    ident: &crate::analysis::identifiability::Identifiability,
+    held: &[usize],
+) -> Vec<f64> {
+    let held: Vec<usize> = held
+        .iter()
+        .copied()
+        .filter(|k| *k < ident.num_params)
+        .collect();
+    let d = ident.num_params - ident.rank;
+    if held.is_empty() || d == 0 || ident.v.ncols() != ident.num_params {
+        return ident.null_fraction.clone();
+    }
+    let null = ident.null_space();
+    // The held rows, padded to at least d rows so that the SVD's V is complete.
+    let mut a = nalgebra::DMatrix::zeros(held.len().max(d), d);
+    for (r, &k) in held.iter().enumerate() {
+        a.row_mut(r).copy_from(&null.row(k));
+    }
+    let Ok((sv, z)) = crate::linalg::svd_values_and_v(&a) else {
+        return ident.null_fraction.clone();
+    };
+    // The rows are parts of orthonormal vectors: a singular value below 1e-9 is zero.
+    let r = sv.iter().filter(|s| **s > 1e-9).count();
+    let kept = &null * z.columns(r, d - r);
+    (0..ident.num_params)
+        .map(|k| {
+            if held.contains(&k) {
+                1.0
+            } else {
+                kept.row(k).norm()
+            }
+        })
+        .collect()
 }
 
 /// True when `e` has a prior (a tolerance) on every one of its parameters in `fitted` and the
@@ -1371,6 +1434,34 @@ fn against_calibrate_on(
 #[cfg(test)]
 mod tests {
     use super::{AgainstCalibrate, CvErrors, FoldKind};
+
+    /// Holding a parameter pins the blind directions it spans: with `p0 + p1` and `p2` seen,
+    /// `p0` and `p1` are half blind (`(1, -1, 0, 0)` unseen) and `p3` wholly; holding `p0`
+    /// leaves `p1` determined, holding `p3` changes nothing else.
+    #[test]
+    fn holding_a_parameter_determines_what_it_pinned() {
+        use super::null_fraction_holding;
+        use crate::analysis::identifiability::{analyze, RankOptions};
+        use nalgebra::DMatrix;
+        let j = DMatrix::from_row_slice(2, 4, &[1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        let ident = analyze(&j, 1.0, &RankOptions::default(), &[]);
+        assert_eq!(ident.rank, 2);
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+        assert!(close(
+            &null_fraction_holding(&ident, &[]),
+            &[h, h, 0.0, 1.0]
+        ));
+        let f0 = null_fraction_holding(&ident, &[0]);
+        assert!(close(&f0, &[1.0, 0.0, 0.0, 1.0]), "{f0:?}");
+        let f3 = null_fraction_holding(&ident, &[3]);
+        assert!(close(&f3, &[h, h, 0.0, 1.0]), "{f3:?}");
+        // An index beyond the parameters (a candidate's own) is ignored.
+        assert!(close(
+            &null_fraction_holding(&ident, &[7]),
+            &[h, h, 0.0, 1.0]
+        ));
+    }
 
     /// A grid visiting 3 positions 4 times each is split leaving positions out, each pose's
     /// unit its position; poses that never repeat are split in blocks, each pose its own unit.
