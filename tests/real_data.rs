@@ -167,7 +167,9 @@ fn the_real_tilt_session_calibrates_to_a_plausible_machine() {
 /// Fitted on nine positions, judged on the other eight, each model's session re-levelled by
 /// `validate`: `calibrate` with the description's declared effects (leg offsets, scales and
 /// compliance), `refine` (choosing further effects out of sample), and `refine` from a
-/// description without the compliance (it finds it on the nine positions).
+/// description without the compliance (it adds what the nine positions, left out one at a
+/// time, say generalises: at the default limit of one tolerance `link_nonlinearity`, at three
+/// clearance; the eight positions judge either).
 #[test]
 fn the_real_tilt_session_predicts_positions_it_never_saw() {
     let dir = scratch("real", "tilt-split");
@@ -187,15 +189,16 @@ fn the_real_tilt_session_predicts_positions_it_never_saw() {
     eprintln!(
         "tilt session, 9 positions -> the other 8, calibrate without compliance: {bare_deg:.4} deg"
     );
-    // Why robot.toml declares compliance: from the bare description, `refine` chooses a
-    // load-dependent effect on the nine positions alone (judged leaving positions out).
+    // From the bare description `refine` adds an effect on the nine positions alone.
     let refined_bare = dir.join("refined-bare");
     refine(&bare, &train, &refined_bare);
     let added = added_effects(&refined_bare);
     eprintln!("tilt session, 9 positions, refine from offsets and scales added {added:?}");
+    // What it adds is chosen leaving positions out; the eight positions it never saw judge
+    // it against the bare calibration (below, and the bound of the loop).
     assert!(
-        added.iter().any(|e| e == "compliance" || e == "clearance"),
-        "{added:?}"
+        !added.is_empty(),
+        "refine added nothing to offsets and scales"
     );
     for (who, out) in [
         ("refine", &refined),
@@ -211,6 +214,10 @@ fn the_real_tilt_session_predicts_positions_it_never_saw() {
         let deg = held_out_deg(&calibrated, &test);
         eprintln!("tilt session, 9 positions -> the other 8, {who}: {deg:.4} deg");
         assert!(deg <= 0.105, "{who}: held-out positions {deg} deg");
+        assert!(
+            deg < bare_deg,
+            "{who}: {deg} deg, no better than offsets and scales alone"
+        );
     }
 }
 
@@ -553,7 +560,8 @@ fn the_motion_capture_body_is_placed_by_the_marker_frame_not_the_joints() {
 /// angle noise (1300 urad), from a truth outside the declared model: every leg 3.5 % long in
 /// scale and compliant (1.5 mm per N of the description's assumed 1 kg load... in um/kN).
 /// `calibrate` with the declared effects (offsets and scales, no compliance) stays within the
-/// tolerances (beyond one tolerance warned; an undetermined parameter beyond the limit held);
+/// tolerances (an undetermined parameter the misfit pulls beyond one tolerance is held there
+/// and named; with `--tolerance-limit 3` it may go further, warned);
 /// `refine` finds the load-dependent effect and recovers the scales and the compliance within
 /// their stated standard deviations.
 #[test]
@@ -600,48 +608,51 @@ fn simulated_tilts_on_the_real_grid_with_an_undeclared_effect() {
     eprintln!(
         "simulated tilts, declared model: joints within {joints_mm:.3} mm (tolerance {tolerance_mm:.3} mm), scales within {scale_pct:.2} %"
     );
-    // The tolerance is a prior's standard deviation: a joint the undeclared effect pulls past
-    // it is said so; the limit (`[calibration] tolerance_limit`, default 3 tolerances) holds
-    // an undetermined parameter that would go further.
-    assert_eq!(fit["prior"]["limit_in_tolerances"].as_f64(), Some(3.0));
-    assert!(joints_mm <= 2.0 * tolerance_mm, "{joints_mm} mm");
+    // The tolerance is a prior's standard deviation; the limit (`[calibration]
+    // tolerance_limit`, default one tolerance) holds a parameter the data pull beyond it
+    // without determining it: the joints the undeclared effect pulls further are held there,
+    // named and warned about.
+    assert_eq!(fit["prior"]["limit_in_tolerances"].as_f64(), Some(1.0));
+    assert!(joints_mm <= tolerance_mm * (1.0 + 1e-9), "{joints_mm} mm");
     assert!(scale_pct < 10.0);
-    let warned = |start: &str| {
+    let warned = |fit: &serde_json::Value, start: &str| {
         fit["warnings"]
             .as_array()
             .unwrap()
             .iter()
             .any(|w| w.as_str().unwrap().starts_with(start))
     };
-    if joints_mm > tolerance_mm {
-        assert!(warned("Beyond tolerance"), "{}", fit["warnings"]);
-    }
     let held = fit["prior"]["held_at_limit"].as_array().unwrap();
-    assert_eq!(warned("Held at tolerance"), !held.is_empty());
-    // A user for whom a written joint beyond its tolerance is not acceptable sets the limit to
-    // one tolerance: the joints the data pull further without determining them are held
-    // there, named and warned about.
-    let at_one = dir.join("cal-limit-1");
-    let strict = calibrate_json(
+    eprintln!(
+        "simulated tilts, declared model: {} held at one tolerance: {held:?}",
+        held.len()
+    );
+    assert!(!held.is_empty());
+    assert!(warned(&fit, "Held at tolerance"), "{}", fit["warnings"]);
+    // A looser limit lets those joints go further (the Gaussian prior alone pulls them back
+    // towards nominal); beyond one tolerance it is said so.
+    let at_three = dir.join("cal-limit-3");
+    let loose = calibrate_json(
         Path::new(&robot),
         &[&data],
-        &["--tolerance-limit", "1"],
-        &at_one,
+        &["--tolerance-limit", "3"],
+        &at_three,
     );
-    let (joints_1, _) = plausibility(&at_one.join("calibrated.toml"));
-    let held_1 = strict["prior"]["held_at_limit"].as_array().unwrap();
+    let (joints_3, _) = plausibility(&at_three.join("calibrated.toml"));
+    let held_3 = loose["prior"]["held_at_limit"].as_array().unwrap();
     eprintln!(
-        "simulated tilts, --tolerance-limit 1: joints within {joints_1:.3} mm, {} held: {held_1:?}",
-        held_1.len()
+        "simulated tilts, --tolerance-limit 3: joints within {joints_3:.3} mm, {} held",
+        held_3.len()
     );
-    assert_eq!(strict["prior"]["limit_in_tolerances"].as_f64(), Some(1.0));
-    assert!(joints_1 <= tolerance_mm * (1.0 + 1e-9), "{joints_1} mm");
-    assert!(!held_1.is_empty());
-    assert!(strict["warnings"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .any(|w| w.as_str().unwrap().starts_with("Held at tolerance")));
+    assert_eq!(loose["prior"]["limit_in_tolerances"].as_f64(), Some(3.0));
+    assert!(
+        joints_3 <= 3.0 * tolerance_mm * (1.0 + 1e-9),
+        "{joints_3} mm"
+    );
+    if joints_3 > tolerance_mm {
+        assert!(warned(&loose, "Beyond tolerance"), "{}", loose["warnings"]);
+    }
+    assert_eq!(warned(&loose, "Held at tolerance"), !held_3.is_empty());
     let refused = cli::cpm(&[
         "calibrate",
         "--robot",
@@ -654,28 +665,16 @@ fn simulated_tilts_on_the_real_grid_with_an_undeclared_effect() {
         &p(&dir.join("cal-limit-0")),
     ]);
     assert_eq!(refused.status.code(), Some(2));
-    // With the limit at one tolerance the base fit holds joints (above) that its candidates
-    // need not hold; refine compares their determined parameters leaving the union of the held
-    // ones aside, and still finds the load-dependent effect rather than trading it for another.
-    let strict_refined = dir.join("refined-limit-1");
-    ok(&[
-        "refine",
-        "--robot",
-        &robot,
-        "--data",
-        &p(&data),
-        "--tolerance-limit",
-        "1",
-        "--out",
-        &p(&strict_refined),
-    ]);
-    let added_1 = added_effects(&strict_refined);
-    eprintln!("simulated tilts, refine at --tolerance-limit 1 added {added_1:?}");
-    assert!(added_1.iter().any(|e| e == "compliance"), "{added_1:?}");
-    let (joints_r1, _) = plausibility(&strict_refined.join("calibrated.toml"));
-    assert!(joints_r1 <= tolerance_mm * (1.0 + 1e-9), "{joints_r1} mm");
+    // The base fit holds joints (above) that its candidates need not hold; refine compares
+    // their determined parameters leaving the union of the held ones aside, and finds the
+    // load-dependent effect rather than trading it for another.
     let out = dir.join("refined");
     refine(&robot, &data, &out);
+    let added = added_effects(&out);
+    eprintln!("simulated tilts, refine added {added:?}");
+    assert!(added.iter().any(|e| e == "compliance"), "{added:?}");
+    let (joints_r, _) = plausibility(&out.join("calibrated.toml"));
+    assert!(joints_r <= tolerance_mm * (1.0 + 1e-9), "{joints_r} mm");
     let doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap())
             .unwrap();

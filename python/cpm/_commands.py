@@ -333,8 +333,8 @@ def calibrate(
     ``minimum_norm``, ``max_iterations``, ``formulation``). The estimator's prior:
     ``tolerances={"installation_errors": 2000, "link_scale": 50000}`` (each group's a-priori
     standard deviation in its unit, ``float("inf")`` frees it), ``hold=["installation_errors"]``
-    (groups kept at nominal), ``tolerance_limit=1`` (tolerances an undetermined parameter may
-    reach before it is held there; default the description's, else 3), ``no_prior=True``
+    (groups kept at nominal), ``tolerance_limit=3`` (tolerances an undetermined parameter may
+    reach before it is held there; default the description's, else 1), ``no_prior=True``
     (plain least squares);
     ``tracker_residuals="auto"|"pose"|"legs"`` for 6-D tracker poses (docs/estimation.md). With ``out`` the outputs are written
     there as the command writes them. The GIL is released during the fit; Ctrl-C raises

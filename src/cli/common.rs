@@ -200,7 +200,7 @@ pub struct FitArgs {
     pub no_prior: bool,
     /// Tolerances an undetermined parameter may reach: one the data pull further is held
     /// there, named in the report, and the fit repeated (`inf`: no limit). Default:
-    /// `[calibration] tolerance_limit` of the description, else 3 (docs/estimation.md).
+    /// `[calibration] tolerance_limit` of the description, else 1 (docs/estimation.md).
     #[arg(long, value_name = "N")]
     pub tolerance_limit: Option<f64>,
     /// Residuals of 6-D tracker poses: `pose` (position and orientation), `legs` (each link's

@@ -82,7 +82,7 @@ pub struct FitOptions {
     pub no_prior: bool,
     /// Tolerances an undetermined parameter may reach before it is held there
     /// ([`Tolerances::limit`](crate::calib::Tolerances::limit)); default none (the
-    /// description's `[calibration] tolerance_limit`, else cpm-calib's 3).
+    /// description's `[calibration] tolerance_limit`, else cpm-calib's 1).
     pub tolerance_limit: Option<f64>,
     /// Residuals of 6-D tracker poses; default [`TrackerResiduals::Auto`].
     pub tracker_residuals: TrackerResiduals,

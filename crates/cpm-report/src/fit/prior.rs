@@ -248,7 +248,7 @@ pub fn warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
     let weakest = p.held_directions.first()?;
     let names = model.parameter_names();
     Some(format!(
-        "**Held near nominal**: {} direction{} of the parameters the data see less well than their tolerance (the weakest: {}, data std {} from the data alone); the fit keeps them near nominal instead of measuring them. They are listed under \"What the data determine at their noise\"; a campaign with more varied poses, another instrument or a declared effect the model lacks would determine them.",
+        "**Held near nominal**: {} direction{} of the parameters the data see less well than their tolerance (the weakest: {}; its standard deviation from the data alone: {}); the fit keeps them near nominal instead of measuring them. They are listed under \"What the data determine at their noise\"; a campaign with more varied poses, another instrument or a declared effect the model lacks would determine them.",
         p.held_directions.len(),
         if p.held_directions.len() == 1 { "" } else { "s" },
         describe(&names, &weakest.loadings),
