@@ -7,9 +7,10 @@ use cpm::calib::{simulate_campaign, Campaign, Effect, Noise, Plan, SimulationOpt
 use cpm::geometry::{Pose, RobotDescription};
 use cpm::io::robot::calibrated_description;
 use cpm::io::{
-    read_data, read_pose_list, write_pose_list, write_pose_measurements, write_readings, FileKind,
+    read_pose_list, write_pose_list, write_pose_measurements, write_readings, FileKind,
     ReadOptions, Robot,
 };
+use cpm::workflow::ingest::read_data;
 
 fn example(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -4,7 +4,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use cpm::geometry::{InstallationErrors, RobotDescription};
-use cpm::io::{read_data, ReadOptions, Robot};
+use cpm::io::{ReadOptions, Robot};
+use cpm::workflow::ingest::read_data;
 
 const OFFSETS_UM: [f64; 6] = [30.0, -20.0, 15.0, 0.0, -25.0, 10.0];
 const SCALES_PPM: [f64; 6] = [200.0, -150.0, 0.0, 100.0, 50.0, -80.0];

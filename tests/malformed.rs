@@ -9,7 +9,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use cpm::io::{read_data_file, ReadError, ReadOptions, Robot};
+use cpm::io::{ReadError, ReadOptions, Robot};
+use cpm::workflow::ingest::read_data_file;
 
 const DIR: &str = "tests/data/malformed";
 const CUBE: &str = "examples/paper_cubic.toml";
@@ -1045,9 +1046,14 @@ fn readers_stream_and_stop_at_the_first_problem() {
         row: b"3,paper,0,0,410,0,0,0,309.9\n".to_vec(),
         at: 0,
     };
-    let e = cpm::io::read_data_from(endless, "endless.csv", &cube, &ReadOptions::default())
-        .unwrap_err()
-        .to_string();
+    let e = cpm::workflow::ingest::read_data_from(
+        endless,
+        "endless.csv",
+        &cube,
+        &ReadOptions::default(),
+    )
+    .unwrap_err()
+    .to_string();
     assert_eq!(e, "endless.csv:3: field length_mm: \"abc\" is not a number");
     // An endless file of good rows stops at the row limit.
     let endless = Endless {
@@ -1059,7 +1065,7 @@ fn readers_stream_and_stop_at_the_first_problem() {
         max_rows: 1000,
         ..ReadOptions::default()
     };
-    let e = cpm::io::read_data_from(endless, "endless.csv", &cube, &options)
+    let e = cpm::workflow::ingest::read_data_from(endless, "endless.csv", &cube, &options)
         .unwrap_err()
         .to_string();
     assert!(
@@ -1072,9 +1078,10 @@ fn readers_stream_and_stop_at_the_first_problem() {
         row: b"7".to_vec(),
         at: 0,
     };
-    let e = cpm::io::read_data_from(endless, "blob.csv", &cube, &ReadOptions::default())
-        .unwrap_err()
-        .to_string();
+    let e =
+        cpm::workflow::ingest::read_data_from(endless, "blob.csv", &cube, &ReadOptions::default())
+            .unwrap_err()
+            .to_string();
     assert!(
         e.starts_with("blob.csv:2: the line is longer than 1048576 bytes"),
         "{e}"

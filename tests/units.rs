@@ -6,7 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use cpm::io::{read_data_file, read_pose_list_file, ReadError, ReadOptions, Robot};
+use cpm::io::{read_pose_list_file, ReadError, ReadOptions, Robot};
+use cpm::workflow::ingest::read_data_file;
 
 fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/hexapod_66.toml")

@@ -168,7 +168,7 @@ pub fn read_file<'py>(
     robot: &PyRobot,
 ) -> PyResult<Bound<'py, PyDict>> {
     let options = options(py, robot)?;
-    let f = cpm_io::read_data_file(&path, &robot.robot, &options)
+    let f = cpm_workflow::ingest::read_data_file(&path, &robot.robot, &options)
         .map_err(|e| crate::errors::read_to_py(py, e))?;
     if f.kind == FileKind::Poses {
         return Err(crate::errors::input(
@@ -190,7 +190,7 @@ pub fn read_text<'py>(
     robot: &PyRobot,
 ) -> PyResult<Bound<'py, PyDict>> {
     let options = options(py, robot)?;
-    let f = cpm_io::read_data(text, name, &robot.robot, &options)
+    let f = cpm_workflow::ingest::read_data(text, name, &robot.robot, &options)
         .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
     let d = summary(py, &f, robot)?;
     let handle = PyData {

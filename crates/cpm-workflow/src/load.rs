@@ -89,7 +89,7 @@ pub fn load_data(
     robot: &Robot,
     options: &ReadOptions,
 ) -> anyhow::Result<Merged> {
-    let files = io::read_data_files(paths, robot, options)?;
+    let files = crate::ingest::read_data_files(paths, robot, options)?;
     let merged = merge(files, robot);
     if options.check_sensor_lengths {
         crate::gauges::check_readings(robot, &merged)?;

@@ -60,7 +60,7 @@ impl Source {
 
 /// The error of a campaign that has two or more tracker pose sets of which some are held in
 /// memory: tracker sets are registered together (reading offsets shared) only when read
-/// from files ([`io::read_data_files`]). Write them to files, or give one set at a time.
+/// from files ([`ingest::read_data_files`](crate::ingest::read_data_files)). Write them to files, or give one set at a time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NeedsFiles;
 
@@ -94,10 +94,10 @@ pub fn read_sources(
     let mut files = Vec::with_capacity(sources.len());
     for s in sources {
         let f = match s {
-            Source::Path(p) => io::read_data_file(p, robot, options)?,
+            Source::Path(p) => crate::ingest::read_data_file(p, robot, options)?,
             Source::Read(r) if r.options == *options => DataFile::clone(&r.data),
-            Source::Read(r) => io::read_data(&r.text, &r.data.file, robot, options)?,
-            Source::Text { name, text } => io::read_data(text, name, robot, options)?,
+            Source::Read(r) => crate::ingest::read_data(&r.text, &r.data.file, robot, options)?,
+            Source::Text { name, text } => crate::ingest::read_data(text, name, robot, options)?,
         };
         files.push(f);
     }
@@ -244,7 +244,7 @@ mod tests {
         let text: Arc<str> = std::fs::read_to_string(&data_path).unwrap().into();
         let name = data_path.display().to_string();
         let read_with = crate::load::read_options(&robot.model(&robot.declared_effects().unwrap()));
-        let data = io::read_data(&text, &name, &robot, &read_with).unwrap();
+        let data = crate::ingest::read_data(&text, &name, &robot, &read_with).unwrap();
         let sources = [Source::Read(ReadData {
             data: Arc::new(data),
             options: read_with,

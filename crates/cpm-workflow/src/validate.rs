@@ -168,7 +168,7 @@ fn read_held_out(
     options: &ReadOptions,
     tracker: (f64, f64),
 ) -> anyhow::Result<crate::io::DataFile> {
-    let mut file = crate::io::read_data_file(path, robot, options)?;
+    let mut file = crate::ingest::read_data_file(path, robot, options)?;
     held_out(&mut file, robot, controller, tracker)?;
     Ok(file)
 }
@@ -609,7 +609,7 @@ fn errors_of(
 }
 
 /// [`errors_of`] `robot` and of `reference` (its own controller) on the same files, each file
-/// read once for both when the readers can share it ([`crate::io::read_data_file_for_two`]),
+/// read once for both when the readers can share it ([`crate::ingest::read_data_file_for_two`]),
 /// with the results and errors of the two calls one after the other: an error of
 /// `robot`'s is returned, the reference's is its result.
 fn errors_of_both(
@@ -625,7 +625,7 @@ fn errors_of_both(
     let mut r: anyhow::Result<RobotGather> = Ok(RobotGather::new(reference, false));
     for path in paths {
         let (mut file, second) =
-            crate::io::read_data_file_for_two(path, robot, reference, &options)?;
+            crate::ingest::read_data_file_for_two(path, robot, reference, &options)?;
         if let Ok(rg) = &mut r {
             use crate::io::SecondReading;
             let done = match second {
@@ -1138,7 +1138,8 @@ mod tests {
         let path = root.join("examples/hexapod_66_readings.csv");
         let text = std::fs::read_to_string(root.join("examples/hexapod_66.toml")).unwrap();
         let reference = Robot::from_toml(&text, "hexapod_66.toml").unwrap();
-        let file = crate::io::read_data_file(&path, &reference, &ReadOptions::default()).unwrap();
+        let file =
+            crate::ingest::read_data_file(&path, &reference, &ReadOptions::default()).unwrap();
         let campaign = crate::io::merge(vec![file], &reference).campaign;
         let joint = "base_mm = [193.185165258, -51.763809021, 0.0]";
         assert!(text.contains(joint));

@@ -11,7 +11,8 @@ use cpm_workflow::calib::{
     identify, simulate, CalibError, IdentifyOptions, Plan, SimulationOptions,
 };
 use cpm_workflow::fit::{leaving_out, Inputs};
-use cpm_workflow::io::{merge, read_data, write_readings, Provenance, ReadOptions, Robot};
+use cpm_workflow::ingest::read_data;
+use cpm_workflow::io::{merge, write_readings, Provenance, ReadOptions, Robot};
 use cpm_workflow::kinematics::KinematicsError;
 use cpm_workflow::Collect;
 
