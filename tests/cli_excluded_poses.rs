@@ -566,6 +566,7 @@ fn validate_leaves_out_for_both_robots_a_pose_either_robot_leaves_out() {
         &data,
         &example_robot,
         &cpm_io::ReadOptions::default(),
+        &Default::default(),
     )
     .unwrap();
     let longest: Vec<f64> = file

@@ -294,6 +294,7 @@ fn the_real_jugglebot_tilt_session_reads() {
         &dir.join("session_1.csv"),
         &robot,
         &cpm::io::campaign::ReadOptions::default(),
+        &Default::default(),
     )
     .unwrap();
     assert_eq!(f.kind, cpm::io::FileKind::TiltMeasurements);

@@ -5,12 +5,15 @@
 //! `tests/data/malformed/` (see its README.md). Also: inputs that look odd but are fine (CRLF,
 //! a byte-order mark, pose-label gaps, blank lines), streaming of huge inputs, a solver that
 //! does not converge, a rank-deficient fit, an outlier reading and a failure while writing.
+#[path = "common/ingest.rs"]
+mod ingest;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use cpm::io::{ReadError, ReadOptions, Robot};
-use cpm::workflow::ingest::read_data_file;
+use ingest::{read_data_file, read_data_from};
 
 const DIR: &str = "tests/data/malformed";
 const CUBE: &str = "examples/paper_cubic.toml";
@@ -1046,14 +1049,9 @@ fn readers_stream_and_stop_at_the_first_problem() {
         row: b"3,paper,0,0,410,0,0,0,309.9\n".to_vec(),
         at: 0,
     };
-    let e = cpm::workflow::ingest::read_data_from(
-        endless,
-        "endless.csv",
-        &cube,
-        &ReadOptions::default(),
-    )
-    .unwrap_err()
-    .to_string();
+    let e = read_data_from(endless, "endless.csv", &cube, &ReadOptions::default())
+        .unwrap_err()
+        .to_string();
     assert_eq!(e, "endless.csv:3: field length_mm: \"abc\" is not a number");
     // An endless file of good rows stops at the row limit.
     let endless = Endless {
@@ -1065,7 +1063,7 @@ fn readers_stream_and_stop_at_the_first_problem() {
         max_rows: 1000,
         ..ReadOptions::default()
     };
-    let e = cpm::workflow::ingest::read_data_from(endless, "endless.csv", &cube, &options)
+    let e = read_data_from(endless, "endless.csv", &cube, &options)
         .unwrap_err()
         .to_string();
     assert!(
@@ -1078,10 +1076,9 @@ fn readers_stream_and_stop_at_the_first_problem() {
         row: b"7".to_vec(),
         at: 0,
     };
-    let e =
-        cpm::workflow::ingest::read_data_from(endless, "blob.csv", &cube, &ReadOptions::default())
-            .unwrap_err()
-            .to_string();
+    let e = read_data_from(endless, "blob.csv", &cube, &ReadOptions::default())
+        .unwrap_err()
+        .to_string();
     assert!(
         e.starts_with("blob.csv:2: the line is longer than 1048576 bytes"),
         "{e}"

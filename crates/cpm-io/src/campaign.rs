@@ -43,7 +43,8 @@ pub const CONSISTENCY_REL: f64 = 0.05;
 /// The largest plausible position coordinate, mm (1 km).
 pub const MAX_POSITION_MM: f64 = 1e6;
 
-/// How strictly measurement files are checked.
+/// How strictly measurement files are checked. (How tracker files are registered is the fit
+/// side's: `cpm_workflow::ingest::RegistrationOptions`.)
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReadOptions {
     /// Check each length reading against the nominal sensor length at its pose. Turn off for
@@ -55,17 +56,6 @@ pub struct ReadOptions {
     /// The most data rows a file may have (the reading stops with an error at the next one).
     /// Default [`MAX_ROWS`].
     pub max_rows: usize,
-    /// Register tracker files automatically before their consistency checks (the fit side's
-    /// `cpm_workflow::ingest::register_tracker_files`; the readers of this crate never
-    /// register). Default true.
-    pub register_tracker: bool,
-    /// The known `tracker_frame` of the description (tx, ty, tz um; rx, ry, rz urad), which
-    /// the model applies to its predictions: registration works on the measured poses with
-    /// it taken out. Default none.
-    pub known_tracker_frame: Option<[f64; 6]>,
-    /// Let the registration of tracker files estimate one reading offset per link (applied
-    /// when large). Default true; `cpm validate` holds the machine fixed (false).
-    pub register_link_offsets: bool,
     /// Widens every link's length limits by this much (mm) when checking that a commanded
     /// pose is reachable. Default 0 (the limits as declared); `cpm validate` reads held-out
     /// data, commanded by another model of the machine (the reference's inverse kinematics),
@@ -83,9 +73,6 @@ impl Default for ReadOptions {
             check_sensor_lengths: true,
             max_condition_ratio: 1e3,
             max_rows: MAX_ROWS,
-            register_tracker: true,
-            known_tracker_frame: None,
-            register_link_offsets: true,
             link_limit_margin_mm: 0.0,
         }
     }

@@ -16,6 +16,32 @@ use crate::io::{
     SecondReading, SessionRegistration, TrackerRow, REGISTRATION_APPLY_MM,
 };
 
+/// How tracker files are registered before their consistency checks (see
+/// [`register_tracker_files`]): the fit side's settings, beside the [`ReadOptions`] of the
+/// reading itself. [`Default`] gives the defaults documented here.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RegistrationOptions {
+    /// Register tracker files automatically before their consistency checks. Default true.
+    pub register_tracker: bool,
+    /// The known `tracker_frame` of the description (tx, ty, tz um; rx, ry, rz urad), which
+    /// the model applies to its predictions: registration works on the measured poses with
+    /// it taken out. Default none.
+    pub known_tracker_frame: Option<[f64; 6]>,
+    /// Let the registration of tracker files estimate one reading offset per link (applied
+    /// when large). Default true; `cpm validate` holds the machine fixed (false).
+    pub register_link_offsets: bool,
+}
+
+impl Default for RegistrationOptions {
+    fn default() -> Self {
+        Self {
+            register_tracker: true,
+            known_tracker_frame: None,
+            register_link_offsets: true,
+        }
+    }
+}
+
 /// Reads a measurement file of either kind (told from the header) from text
 /// ([`io::read_data`](crate::io::read_data)), tracker files registered and checked
 /// ([`register_tracker_files`]).
@@ -24,10 +50,14 @@ pub fn read_data(
     file: &str,
     robot: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> Result<DataFile, InputError> {
-    let mut f = crate::io::read_data(text, file, robot, options)?;
-    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
-    Ok(f)
+    registered(
+        crate::io::read_data(text, file, robot, options),
+        robot,
+        options,
+        registration,
+    )
 }
 
 /// Reads a measurement file of either kind, streaming its rows from the file at `path`
@@ -37,10 +67,14 @@ pub fn read_data_file(
     path: &Path,
     robot: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> Result<DataFile, ReadError> {
-    let mut f = crate::io::read_data_file(path, robot, options)?;
-    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
-    Ok(f)
+    registered(
+        crate::io::read_data_file(path, robot, options),
+        robot,
+        options,
+        registration,
+    )
 }
 
 /// Reads a measurement file of either kind from a reader, row by row
@@ -51,9 +85,25 @@ pub fn read_data_from<R: Read>(
     file: &str,
     robot: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> Result<DataFile, ReadError> {
-    let mut f = crate::io::read_data_from(source, file, robot, options)?;
-    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
+    registered(
+        crate::io::read_data_from(source, file, robot, options),
+        robot,
+        options,
+        registration,
+    )
+}
+
+/// A file as read (`read`), registered and checked when it is a tracker file.
+fn registered<E: From<InputError>>(
+    read: Result<DataFile, E>,
+    robot: &Robot,
+    options: &ReadOptions,
+    registration: &RegistrationOptions,
+) -> Result<DataFile, E> {
+    let mut f = read?;
+    register_tracker_files(std::slice::from_mut(&mut f), robot, options, registration)?;
     Ok(f)
 }
 
@@ -66,16 +116,15 @@ pub fn read_data_file_for_two(
     first: &Robot,
     second: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> Result<(DataFile, Option<Result<SecondReading, ReadError>>), ReadError> {
-    let (mut f, theirs) = crate::io::read_data_file_for_two(path, first, second, options)?;
+    let (f, theirs) = crate::io::read_data_file_for_two(path, first, second, options)?;
     let theirs = theirs.map(|r| match r {
-        Ok(SecondReading::File(mut g)) => {
-            register_tracker_files(std::slice::from_mut(&mut *g), second, options)?;
-            Ok(SecondReading::File(g))
-        }
+        Ok(SecondReading::File(g)) => registered(Ok(*g), second, options, registration)
+            .map(|g| SecondReading::File(Box::new(g))),
         other => other,
     });
-    register_tracker_files(std::slice::from_mut(&mut f), first, options)?;
+    let f = registered::<ReadError>(Ok(f), first, options, registration)?;
     Ok((f, theirs))
 }
 
@@ -86,9 +135,10 @@ pub fn read_data_files(
     paths: &[PathBuf],
     robot: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> Result<Vec<DataFile>, ReadError> {
     let mut files = crate::io::read_data_files(paths, robot, options)?;
-    register_tracker_files(&mut files, robot, options)?;
+    register_tracker_files(&mut files, robot, options, registration)?;
     Ok(files)
 }
 
@@ -102,6 +152,7 @@ pub fn register_tracker_files(
     files: &mut [DataFile],
     robot: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> Result<(), InputError> {
     let idx: Vec<usize> = (0..files.len())
         .filter(|&k| files[k].kind == FileKind::PoseMeasurements && !files[k].checked)
@@ -109,7 +160,7 @@ pub fn register_tracker_files(
     if idx.is_empty() {
         return Ok(());
     }
-    let known = options
+    let known = registration
         .known_tracker_frame
         .map(|q| cpm_calib::effects::tracker_registration(&q));
     // The measured pose with the known registration taken out, and put back.
@@ -167,7 +218,7 @@ pub fn register_tracker_files(
             })
             .collect()
     };
-    if options.register_tracker {
+    if registration.register_tracker {
         let sessions: Vec<cpm_calib::registration::Session> = idx
             .iter()
             .map(|&k| {
@@ -208,7 +259,7 @@ pub fn register_tracker_files(
                 &robot.table,
                 &sessions,
                 &cpm_calib::registration::RegistrationOptions {
-                    estimate_link_offsets: options.register_link_offsets,
+                    estimate_link_offsets: registration.register_link_offsets,
                     ..Default::default()
                 },
                 &clearance,

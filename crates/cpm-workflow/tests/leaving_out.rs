@@ -36,7 +36,14 @@ fn inputs(poses: usize) -> Inputs {
     )
     .expect("simulate");
     let text = write_readings(&data, &robot, "test");
-    let file = read_data(&text, FILE, &robot, &ReadOptions::default()).expect("read");
+    let file = read_data(
+        &text,
+        FILE,
+        &robot,
+        &ReadOptions::default(),
+        &Default::default(),
+    )
+    .expect("read");
     assert_eq!(file.campaign.poses.len(), poses);
     let mut merged = merge(vec![file], &robot);
     // The commands the controller sent (its inverse kinematics of each pose), as a log of
