@@ -72,9 +72,13 @@ fn tilt_session() -> (MeasurementModel, Campaign, IdentifyOptions) {
     let effects = robot.declared_effects().expect("effects");
     let model = robot.model(&effects);
     let paths: Vec<PathBuf> = vec![dir.join("session_1.csv")];
-    let merged =
-        cpm::cli::common::load_data(&paths, &robot, &cpm::cli::common::read_options(&model))
-            .expect("data");
+    let merged = cpm::cli::common::load_data(
+        &paths,
+        &robot,
+        &cpm::cli::common::read_options(&model),
+        &cpm::cli::common::registration_options(&model),
+    )
+    .expect("data");
     let model =
         cpm::cli::common::with_instruments(&robot, &model, &merged.campaign).unwrap_or(model);
     let options = IdentifyOptions {

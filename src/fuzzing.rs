@@ -93,7 +93,13 @@ pub fn robot_toml(data: &[u8]) {
 /// hexapod, pose lists and candidate sockets. Errors must name the file and a line within it.
 pub fn csv_readers(data: &[u8]) {
     for robot in robots() {
-        match io::read_data_from(data, FILE, robot, &ReadOptions::default()) {
+        match crate::workflow::ingest::read_data_from(
+            data,
+            FILE,
+            robot,
+            &ReadOptions::default(),
+            &Default::default(),
+        ) {
             Err(e) => check_read_error(&e, FILE, data),
             Ok(f) => {
                 let c = &f.campaign;
@@ -124,7 +130,13 @@ pub fn calibrate(data: &[u8]) {
         max_rows: CALIBRATE_MAX_ROWS,
         ..ReadOptions::default()
     };
-    let file = match io::read_data_from(data, FILE, robot, &options) {
+    let file = match crate::workflow::ingest::read_data_from(
+        data,
+        FILE,
+        robot,
+        &options,
+        &Default::default(),
+    ) {
         Ok(f) => f,
         Err(e) => return check_read_error(&e, FILE, data),
     };

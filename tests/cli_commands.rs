@@ -1467,7 +1467,13 @@ fn simulate_json_summary_counts_what_the_file_holds() {
     ]);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let robot = Robot::load(Path::new(&robot_path)).unwrap();
-    let back = cpm::io::read_data_file(&data, &robot, &Default::default()).unwrap();
+    let back = cpm::workflow::ingest::read_data_file(
+        &data,
+        &robot,
+        &Default::default(),
+        &Default::default(),
+    )
+    .unwrap();
     assert_eq!(v["simulated"], true);
     assert!(back.campaign.simulated);
     assert_eq!(v["out"], p(&data));

@@ -562,8 +562,13 @@ fn validate_leaves_out_for_both_robots_a_pose_either_robot_leaves_out() {
     ]);
     // The longest link of each pose; the pose that needs the longest of all.
     let example_robot = cpm_io::Robot::load(Path::new(&robot)).unwrap();
-    let file =
-        cpm_io::read_data_file(&data, &example_robot, &cpm_io::ReadOptions::default()).unwrap();
+    let file = cpm::workflow::ingest::read_data_file(
+        &data,
+        &example_robot,
+        &cpm_io::ReadOptions::default(),
+        &Default::default(),
+    )
+    .unwrap();
     let longest: Vec<f64> = file
         .campaign
         .poses

@@ -1,5 +1,8 @@
 //! File formats of the `cpm` command: round trips (write -> read gives the same campaign) and
 //! bad files (each error names file, line and field).
+#[path = "common/ingest.rs"]
+mod ingest;
+
 use std::path::{Path, PathBuf};
 
 use cpm::calib::campaign::{circle, PoseMeasurement};
@@ -7,9 +10,10 @@ use cpm::calib::{simulate_campaign, Campaign, Effect, Noise, Plan, SimulationOpt
 use cpm::geometry::{Pose, RobotDescription};
 use cpm::io::robot::calibrated_description;
 use cpm::io::{
-    read_data, read_pose_list, write_pose_list, write_pose_measurements, write_readings, FileKind,
+    read_pose_list, write_pose_list, write_pose_measurements, write_readings, FileKind,
     ReadOptions, Robot,
 };
+use ingest::read_data;
 
 fn example(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

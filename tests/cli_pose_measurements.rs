@@ -1,10 +1,14 @@
 //! A 6-6 hexapod measured by a tracker: simulated pose measurements with link offsets and
 //! scales, read back, and calibrated with `link_offset` and `link_scale` unknowns.
+#[path = "common/ingest.rs"]
+mod ingest;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use cpm::geometry::{InstallationErrors, RobotDescription};
-use cpm::io::{read_data, ReadOptions, Robot};
+use cpm::io::{ReadOptions, Robot};
+use ingest::read_data;
 
 const OFFSETS_UM: [f64; 6] = [30.0, -20.0, 15.0, 0.0, -25.0, 10.0];
 const SCALES_PPM: [f64; 6] = [200.0, -150.0, 0.0, 100.0, 50.0, -80.0];

@@ -290,10 +290,11 @@ fn points_in_metres_and_angles_in_radians_are_refused_with_a_units_hint() {
 fn the_real_jugglebot_tilt_session_reads() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot_tilt");
     let robot = cpm::io::Robot::load(&dir.join("robot.toml")).unwrap();
-    let f = cpm::io::read_data_file(
+    let f = cpm::workflow::ingest::read_data_file(
         &dir.join("session_1.csv"),
         &robot,
         &cpm::io::campaign::ReadOptions::default(),
+        &Default::default(),
     )
     .unwrap();
     assert_eq!(f.kind, cpm::io::FileKind::TiltMeasurements);

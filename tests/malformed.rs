@@ -5,11 +5,15 @@
 //! `tests/data/malformed/` (see its README.md). Also: inputs that look odd but are fine (CRLF,
 //! a byte-order mark, pose-label gaps, blank lines), streaming of huge inputs, a solver that
 //! does not converge, a rank-deficient fit, an outlier reading and a failure while writing.
+#[path = "common/ingest.rs"]
+mod ingest;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use cpm::io::{read_data_file, ReadError, ReadOptions, Robot};
+use cpm::io::{ReadError, ReadOptions, Robot};
+use ingest::{read_data_file, read_data_from};
 
 const DIR: &str = "tests/data/malformed";
 const CUBE: &str = "examples/paper_cubic.toml";
@@ -1045,7 +1049,7 @@ fn readers_stream_and_stop_at_the_first_problem() {
         row: b"3,paper,0,0,410,0,0,0,309.9\n".to_vec(),
         at: 0,
     };
-    let e = cpm::io::read_data_from(endless, "endless.csv", &cube, &ReadOptions::default())
+    let e = read_data_from(endless, "endless.csv", &cube, &ReadOptions::default())
         .unwrap_err()
         .to_string();
     assert_eq!(e, "endless.csv:3: field length_mm: \"abc\" is not a number");
@@ -1059,7 +1063,7 @@ fn readers_stream_and_stop_at_the_first_problem() {
         max_rows: 1000,
         ..ReadOptions::default()
     };
-    let e = cpm::io::read_data_from(endless, "endless.csv", &cube, &options)
+    let e = read_data_from(endless, "endless.csv", &cube, &options)
         .unwrap_err()
         .to_string();
     assert!(
@@ -1072,7 +1076,7 @@ fn readers_stream_and_stop_at_the_first_problem() {
         row: b"7".to_vec(),
         at: 0,
     };
-    let e = cpm::io::read_data_from(endless, "blob.csv", &cube, &ReadOptions::default())
+    let e = read_data_from(endless, "blob.csv", &cube, &ReadOptions::default())
         .unwrap_err()
         .to_string();
     assert!(

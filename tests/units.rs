@@ -3,10 +3,14 @@
 //! with file, line and field, exit code 3, no output; ordinary files, small-angle campaigns
 //! in degrees and constant orientations are read. Files are SIMULATED by `cpm simulate` and
 //! converted here.
+#[path = "common/ingest.rs"]
+mod ingest;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use cpm::io::{read_data_file, read_pose_list_file, ReadError, ReadOptions, Robot};
+use cpm::io::{read_pose_list_file, ReadError, ReadOptions, Robot};
+use ingest::read_data_file;
 
 fn example() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/hexapod_66.toml")

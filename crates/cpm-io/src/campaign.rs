@@ -2,12 +2,18 @@
 //! [`Campaign`] and written back; lists of poses (plans, compensation targets).
 //!
 //! The formats are documented in `docs/formats.md`. Reading checks every field (numbers
-//! finite, sensor names known, rows of one pose agreeing) and every pose (reachable where it
-//! is: length limits, J1's condition, forward kinematics returning it; link readings and sensor lengths consistent with it, which
-//! catches a file in the wrong units); each failure names the file, the line and the field.
-//! The one exception: a long file may lose one pose in [`POSES_PER_EXCLUDED_POSE`] that is not
-//! reachable where it is; such a pose is left out with all its rows and recorded
-//! ([`DataFile::excluded`], [`ExcludedPose`]) instead of refusing the file.
+//! finite, sensor names known, rows of one pose agreeing) and every pose of a readings file
+//! (reachable where it is: length limits, J1's condition, forward kinematics returning it;
+//! link readings and sensor lengths consistent with it, which catches a file in the wrong
+//! units); each failure names the file, the line and the field. The one exception: a long
+//! file may lose one pose in [`POSES_PER_EXCLUDED_POSE`] that is not reachable where it is;
+//! such a pose is left out with all its rows and recorded ([`DataFile::excluded`],
+//! [`ExcludedPose`]) instead of refusing the file.
+//!
+//! This module parses and writes, nothing else: a tracker file is read as logged, its poses
+//! checked against the robot only after the registration of its frame, which is a fit and
+//! belongs to the fit side (`cpm_workflow::ingest`). The checks it uses ([`unreachable_why`],
+//! [`check_link_readings`], [`exclude_poses`]) are public for it.
 use std::collections::HashMap;
 use std::io::Read;
 use std::path::Path;
@@ -37,7 +43,8 @@ pub const CONSISTENCY_REL: f64 = 0.05;
 /// The largest plausible position coordinate, mm (1 km).
 pub const MAX_POSITION_MM: f64 = 1e6;
 
-/// How strictly measurement files are checked.
+/// How strictly measurement files are checked. (How tracker files are registered is the fit
+/// side's: `cpm_workflow::ingest::RegistrationOptions`.)
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReadOptions {
     /// Check each length reading against the nominal sensor length at its pose. Turn off for
@@ -49,16 +56,6 @@ pub struct ReadOptions {
     /// The most data rows a file may have (the reading stops with an error at the next one).
     /// Default [`MAX_ROWS`].
     pub max_rows: usize,
-    /// Register tracker files automatically before their consistency checks (see
-    /// [`register_tracker_files`]). Default true.
-    pub register_tracker: bool,
-    /// The known `tracker_frame` of the description (tx, ty, tz um; rx, ry, rz urad), which
-    /// the model applies to its predictions: registration works on the measured poses with
-    /// it taken out. Default none.
-    pub known_tracker_frame: Option<[f64; 6]>,
-    /// Let the registration of tracker files estimate one reading offset per link (applied
-    /// when large). Default true; `cpm validate` holds the machine fixed (false).
-    pub register_link_offsets: bool,
     /// Widens every link's length limits by this much (mm) when checking that a commanded
     /// pose is reachable. Default 0 (the limits as declared); `cpm validate` reads held-out
     /// data, commanded by another model of the machine (the reference's inverse kinematics),
@@ -76,16 +73,13 @@ impl Default for ReadOptions {
             check_sensor_lengths: true,
             max_condition_ratio: 1e3,
             max_rows: MAX_ROWS,
-            register_tracker: true,
-            known_tracker_frame: None,
-            register_link_offsets: true,
             link_limit_margin_mm: 0.0,
         }
     }
 }
 
 /// `table` with every link's length limits widened by `margin_mm`.
-fn widened(table: &JointTable, margin_mm: f64) -> JointTable {
+pub fn widened(table: &JointTable, margin_mm: f64) -> JointTable {
     let mut t = table.clone();
     for l in t.links.iter_mut() {
         if let Some((lo, hi)) = l.length_limits_mm {
@@ -111,12 +105,14 @@ pub struct DataFile {
     /// The line of each reading.
     pub reading_lines: Vec<usize>,
     /// Tracker files: the automatic registration of this file's frame (and the reading
-    /// offsets shared by all tracker files read together), when it was attempted.
+    /// offsets shared by all tracker files read together), when it was attempted (by the fit
+    /// side, `cpm_workflow::ingest`; the readers leave it `None`).
     pub registration: Option<RegistrationReport>,
     /// Tracker files: each row as logged (before registration), for the checks that follow it.
     pub tracker_rows: Vec<TrackerRow>,
     /// Tracker files: whether the rows passed the consistency checks (they are checked after
-    /// registration, which may involve several files).
+    /// registration, which may involve several files, by `cpm_workflow::ingest`; the readers
+    /// return tracker files unchecked).
     pub checked: bool,
     /// Point files: the line of each point measurement; inclinometer files: of each tilt
     /// measurement.
@@ -529,7 +525,7 @@ pub fn check_reachable(
 
 /// The largest J1 condition number [`check_reachable`] accepts (`max_condition_ratio` times
 /// home's, at least 10), and home's; the error names `line`.
-fn condition_bound(
+pub fn condition_bound(
     table: &JointTable,
     max_condition_ratio: f64,
     file: &str,
@@ -569,7 +565,8 @@ fn unreachable_error(file: &str, line: usize, label: &str, what: &str) -> InputE
 
 /// Why `pose` is not reachable (see [`check_reachable`]), `None` when it is: where it is and
 /// the reason, e.g. `(x 1 mm, ..., yaw 0.0000 deg) is not reachable: link 3 would be ...`.
-fn unreachable_why(table: &JointTable, pose: &Pose, (bound, c0): (f64, f64)) -> Option<String> {
+/// `bound` is what [`condition_bound`] gives.
+pub fn unreachable_why(table: &JointTable, pose: &Pose, (bound, c0): (f64, f64)) -> Option<String> {
     let why = match reachable_at(table, pose, bound) {
         Ok(()) => return None,
         Err(Unreachable::LengthLimit {
@@ -652,7 +649,7 @@ impl std::fmt::Display for ExcludedPose {
 
 /// A pose of a file found unreachable while reading it, to exclude (or to refuse the file
 /// with, see [`exclude_poses`]).
-pub(crate) struct Unusable {
+pub struct Unusable {
     /// Its index among the file's campaign poses.
     pub pose: usize,
     /// What is wrong, after `pose "LABEL" ` ([`unreachable_why`]).
@@ -665,7 +662,7 @@ pub(crate) struct Unusable {
 
 /// Excludes the poses `unusable` from `f` (see [`POSES_PER_EXCLUDED_POSE`]) and records them
 /// in [`DataFile::excluded`], or, when they are too many, returns the first one's error.
-pub(crate) fn exclude_poses(f: &mut DataFile, unusable: Vec<Unusable>) -> Result<(), InputError> {
+pub fn exclude_poses(f: &mut DataFile, unusable: Vec<Unusable>) -> Result<(), InputError> {
     let Some(first) = unusable.first() else {
         return Ok(());
     };
@@ -838,7 +835,7 @@ pub(crate) fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>,
 /// registration found reading offsets) against the pose's inverse kinematics; errors name
 /// `file`, `line` and the `reading_k` field, with `note` appended.
 #[allow(clippy::too_many_arguments)]
-fn check_link_readings(
+pub fn check_link_readings(
     file: &str,
     line: usize,
     robot: &Robot,
@@ -1362,8 +1359,11 @@ fn same_pose_as_before(
     Ok(())
 }
 
-/// Reads tracker pose measurements (see `docs/formats.md`); unreachable measured poses are
-/// left out as in [`read_readings`], after the registration.
+/// Reads tracker pose measurements (see `docs/formats.md`), parsed and unregistered: the rows
+/// are checked field by field and for units, not yet against the robot (reachability, link
+/// readings consistent), which follows the registration of the tracker frame on the fit side
+/// (`cpm_workflow::ingest::register_tracker_files`); the file is returned with
+/// [`DataFile::checked`] false.
 pub fn read_pose_measurements(
     text: &str,
     file: &str,
@@ -1371,9 +1371,7 @@ pub fn read_pose_measurements(
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
     let mut t = Table::parse(text, file)?;
-    let mut f = read_pose_measurements_table(&mut t, robot, options)?;
-    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
-    Ok(f)
+    read_pose_measurements_table(&mut t, robot, options)
 }
 
 pub(crate) fn read_pose_measurements_table<R: Read>(
@@ -1567,356 +1565,6 @@ fn check_tracker_position_units(
             "the measured positions move by {moved:.4} mm over the file while the links travel {travel:.3} mm: metres? Positions are in mm"
         ),
     ))
-}
-
-/// Registers the tracker files among `files` together (a frame per file, reading offsets per
-/// link shared by them; see [`cpm_calib::registration`]), applies what is large (over
-/// [`REGISTRATION_APPLY_MM`]) to their measured poses and commanded lengths, then checks every
-/// tracker row: the pose reachable, the link readings consistent with it. Files already
-/// checked are left alone. Errors name the file, line and field, and the registration when it
-/// is the likely cause.
-pub fn register_tracker_files(
-    files: &mut [DataFile],
-    robot: &Robot,
-    options: &ReadOptions,
-) -> Result<(), InputError> {
-    let idx: Vec<usize> = (0..files.len())
-        .filter(|&k| files[k].kind == FileKind::PoseMeasurements && !files[k].checked)
-        .collect();
-    if idx.is_empty() {
-        return Ok(());
-    }
-    let known = options
-        .known_tracker_frame
-        .map(|q| cpm_calib::effects::tracker_registration(&q));
-    // The measured pose with the known registration taken out, and put back.
-    let unknown = |p: &Pose| match &known {
-        Some((t, r)) => Pose::new(r.inverse() * (p.position_mm - t), r.inverse() * p.rotation),
-        None => *p,
-    };
-    let known_applied = |p: &Pose| match &known {
-        Some((t, r)) => Pose::new(r * p.position_mm + t, r * p.rotation),
-        None => *p,
-    };
-    // The lengths the registration works with: the readings through the reading models,
-    // plus the robot's known link effects (a calibrated description's link offsets and
-    // scales, backlash, ...), evaluated in the file's order with the link forces of the home
-    // pose (the registration is rough; the fit and `cpm validate` refine the frame through
-    // the full model).
-    let known_model = robot.model(&[]);
-    let known_shifts = |f: &DataFile| -> Vec<Vec<f64>> {
-        if known_model.known_effects.is_empty() {
-            return Vec::new();
-        }
-        let home = robot.table.home;
-        let mut previous: Option<cpm_calib::effects::PoseContext> = None;
-        f.tracker_rows
-            .iter()
-            .map(|r| {
-                let l: Vec<f64> = r
-                    .readings
-                    .iter()
-                    .enumerate()
-                    .map(|(i, v)| robot.length_mm(i, *v))
-                    .collect();
-                match known_model.pose_context(&home, l, previous.as_ref(), None, None) {
-                    Ok(ctx) => {
-                        let d = known_model.known_link_shift_at(&ctx, &home, 0.0);
-                        previous = Some(ctx);
-                        d
-                    }
-                    Err(_) => vec![0.0; robot.num_links()],
-                }
-            })
-            .collect()
-    };
-    let raw_lengths = |f: &DataFile| -> Vec<Vec<f64>> {
-        let known = known_shifts(f);
-        f.tracker_rows
-            .iter()
-            .enumerate()
-            .map(|(q, r)| {
-                r.readings
-                    .iter()
-                    .enumerate()
-                    .map(|(i, v)| robot.length_mm(i, *v) + known.get(q).map_or(0.0, |k| k[i]))
-                    .collect()
-            })
-            .collect()
-    };
-    if options.register_tracker {
-        let sessions: Vec<cpm_calib::registration::Session> = idx
-            .iter()
-            .map(|&k| {
-                // Rows measured in full register the session.
-                let f = &files[k];
-                let full: Vec<bool> = f.tracker_rows.iter().map(TrackerRow::complete).collect();
-                cpm_calib::registration::Session {
-                    lengths_mm: raw_lengths(f)
-                        .into_iter()
-                        .zip(&full)
-                        .filter(|(_, c)| **c)
-                        .map(|(l, _)| l)
-                        .collect(),
-                    measured: f
-                        .tracker_rows
-                        .iter()
-                        .filter(|r| r.complete())
-                        .map(|r| unknown(&r.measured))
-                        .collect(),
-                }
-            })
-            .collect();
-        let finite = sessions
-            .iter()
-            .all(|s| s.lengths_mm.iter().flatten().all(|v| v.is_finite()));
-        // The model's joint clearance shifts the effective link lengths with the link forces:
-        // the registration uses it too.
-        let model = robot.model(&[]);
-        let n = robot.num_links();
-        let clearance = |p: &Pose| {
-            model
-                .clearance
-                .link_corrections_mm(&model.nominal, p, &model.load)
-                .unwrap_or_else(|_| vec![0.0; n])
-        };
-        let result = if finite {
-            cpm_calib::registration::register_with_corrections(
-                &robot.table,
-                &sessions,
-                &cpm_calib::registration::RegistrationOptions {
-                    estimate_link_offsets: options.register_link_offsets,
-                    ..Default::default()
-                },
-                &clearance,
-            )
-            .map_err(|e| e.to_string())
-        } else {
-            Err("a link reading gives a length that is not a finite number".to_string())
-        };
-        match result {
-            Ok(reg) => {
-                let largest_offset = reg
-                    .link_offset_mm
-                    .iter()
-                    .fold(0.0_f64, |a, o| a.max(o.abs()));
-                let offsets_applied =
-                    reg.offsets_estimated && largest_offset > REGISTRATION_APPLY_MM;
-                let mut report = RegistrationReport {
-                    sessions: Vec::new(),
-                    link_offset_mm: reg.link_offset_mm.clone(),
-                    link_offset_sd_mm: reg.link_offset_sd_mm.clone(),
-                    offsets_estimated: reg.offsets_estimated,
-                    offsets_applied,
-                    variance_factor: reg.variance_factor,
-                    failure: None,
-                };
-                for (s, (&k, frame)) in sessions.iter().zip(idx.iter().zip(&reg.frames)) {
-                    let largest_move_mm = s
-                        .measured
-                        .iter()
-                        .map(|q| (frame.to_base(q).position_mm - q.position_mm).norm())
-                        .fold(0.0_f64, f64::max);
-                    let applied = largest_move_mm > REGISTRATION_APPLY_MM;
-                    report.sessions.push(SessionRegistration {
-                        file: files[k].file.clone(),
-                        frame: frame.clone(),
-                        applied,
-                        largest_move_mm,
-                    });
-                }
-                for (s, &k) in report.sessions.iter().zip(&idx) {
-                    let offsets = offsets_applied.then_some(report.link_offset_mm.as_slice());
-                    apply_registration(&mut files[k], s, offsets, &unknown, &known_applied);
-                }
-                for &k in &idx {
-                    files[k].registration = Some(report.clone());
-                }
-            }
-            Err(why) => {
-                let report = RegistrationReport::failed(why);
-                for &k in &idx {
-                    files[k].registration = Some(report.clone());
-                }
-            }
-        }
-    }
-    // The checks, after registration. A measured pose is where the real machine went: the
-    // nominal inverse kinematics of it misses the true link lengths by the machine's errors,
-    // so its link limits are checked widened by the consistency tolerance
-    // ([`CONSISTENCY_MM`]), which only catches gross errors (units, frames, link mapping).
-    let measured_table = widened(&robot.table, CONSISTENCY_MM);
-    for &k in &idx {
-        let f = &mut files[k];
-        let note = registration_note(f);
-        let offsets = f
-            .registration
-            .as_ref()
-            .filter(|r| r.offsets_applied)
-            .map(|r| r.link_offset_mm.clone());
-        let known = known_shifts(f);
-        let mut unusable = Vec::new();
-        for (q, row) in f.tracker_rows.iter().enumerate() {
-            let pose = f.campaign.poses[f.campaign.pose_measurements[q].pose];
-            // The registration's reading offsets and the robot's known link effects.
-            let row_offsets: Option<Vec<f64>> = match (&offsets, known.get(q)) {
-                (None, None) => None,
-                (o, k) => Some(
-                    (0..robot.num_links())
-                        .map(|i| o.as_ref().map_or(0.0, |o| o[i]) + k.map_or(0.0, |k| k[i]))
-                        .collect(),
-                ),
-            };
-            if options.max_condition_ratio.is_finite() {
-                let bound = condition_bound(
-                    &measured_table,
-                    options.max_condition_ratio,
-                    &f.file,
-                    row.line,
-                )?;
-                // An unreachable pose is excluded after the file's checks (its link readings
-                // unchecked), or refuses the file when there are too many.
-                if let Some(what) = unreachable_why(&measured_table, &pose, bound) {
-                    unusable.push(Unusable {
-                        pose: f.campaign.pose_measurements[q].pose,
-                        what,
-                        note: note.clone(),
-                        field: None,
-                    });
-                    continue;
-                }
-            }
-            check_link_readings(
-                &f.file,
-                row.line,
-                robot,
-                &pose,
-                &row.readings,
-                row_offsets.as_deref(),
-                "measured pose",
-                &note,
-            )?;
-        }
-        exclude_poses(f, unusable)?;
-        f.checked = true;
-    }
-    commanded_poses_of_tracker_rows(files, &idx, robot);
-    Ok(())
-}
-
-/// The commanded pose of each tracker row of `files[idx]` (what the link effects and a pose
-/// map read, where the link forces are computed): the forward kinematics of its commanded
-/// lengths on the design geometry, started from the registered measured pose. It depends on
-/// the logged readings and the design only, never on the robot that registers the session,
-/// so that every command that reads the file sees the same poses as the fit did.
-fn commanded_poses_of_tracker_rows(files: &mut [DataFile], idx: &[usize], robot: &Robot) {
-    let model = robot.model(&[]);
-    let design = model.statics_table();
-    let fk = cpm_kinematics::ForwardOptions::default();
-    for &k in idx {
-        let f = &mut files[k];
-        let Some(commanded) = f.campaign.commanded_lengths_mm.clone() else {
-            continue;
-        };
-        for q in 0..f.campaign.pose_measurements.len() {
-            let j = f.campaign.pose_measurements[q].pose;
-            if let Ok((p, _)) =
-                cpm_kinematics::forward(design, &commanded[j], &f.campaign.poses[j], &fk)
-            {
-                if p.is_finite() && (p.position_mm - f.campaign.poses[j].position_mm).norm() < 1e3 {
-                    f.campaign.poses[j] = p;
-                }
-            }
-        }
-    }
-}
-
-/// A session's registration applied to its file: each measured pose (the known frame
-/// `unknown` taken out, put back by `known_applied`) in the base frame, the commanded pose of a
-/// row measured in full moved there too, and with `offsets`, the registration's reading
-/// offsets added to the commanded lengths.
-fn apply_registration(
-    f: &mut DataFile,
-    s: &SessionRegistration,
-    offsets: Option<&[f64]>,
-    unknown: &dyn Fn(&Pose) -> Pose,
-    known_applied: &dyn Fn(&Pose) -> Pose,
-) {
-    if s.applied {
-        let mut unmeasured = f.campaign.unmeasured.clone();
-        for (q, row) in f.tracker_rows.iter().enumerate() {
-            let base = s.frame.to_base(&unknown(&row.measured));
-            f.campaign.pose_measurements[q].measured = known_applied(&base);
-            if row.complete() {
-                f.campaign.poses[f.campaign.pose_measurements[q].pose] = base;
-            } else if row.mask[..3].contains(&true) && row.mask[..3].contains(&false) {
-                // The frame's rotation mixes the coordinates: a position measured in part is
-                // not known in the base frame.
-                unmeasured.extend((0..3).map(|a| (q, a)));
-            }
-        }
-        unmeasured.sort_unstable();
-        unmeasured.dedup();
-        f.campaign.unmeasured = unmeasured;
-    }
-    if let Some(offsets) = offsets {
-        if let Some(c) = &mut f.campaign.commanded_lengths_mm {
-            for l in c.iter_mut() {
-                for (a, o) in l.iter_mut().zip(offsets) {
-                    *a += o;
-                }
-            }
-        }
-    }
-}
-
-impl RegistrationReport {
-    /// The report of a registration that failed (`why`), with nothing estimated.
-    fn failed(why: String) -> Self {
-        RegistrationReport {
-            sessions: Vec::new(),
-            link_offset_mm: Vec::new(),
-            link_offset_sd_mm: Vec::new(),
-            offsets_estimated: false,
-            offsets_applied: false,
-            variance_factor: f64::NAN,
-            failure: Some(why),
-        }
-    }
-}
-
-/// What a consistency error of a tracker file says about its registration.
-fn registration_note(f: &DataFile) -> String {
-    let Some(r) = &f.registration else {
-        return " (the tracker frame was not registered automatically: the measured poses must be in the base frame)".to_string();
-    };
-    if let Some(why) = &r.failure {
-        return format!(" (the automatic registration of the tracker frame failed: {why}; the measured poses were checked as logged)");
-    }
-    let Some(s) = r.sessions.iter().find(|s| s.file == f.file) else {
-        return String::new();
-    };
-    let t = s.frame.translation_mm;
-    format!(
-        " (the tracker frame of this file was registered automatically{}: {:.3} mm, {:.4} deg from the base frame, RMS {:.3} mm before and {:.3} mm after{}; a wrong registration, from too few poses, poses all alike or a wrong link mapping, is the likely cause)",
-        if s.applied { " and applied" } else { ", not applied (small)" },
-        t.norm(),
-        s.frame.rotation_angle_deg(),
-        s.frame.rms_before_mm,
-        s.frame.rms_after_mm,
-        if r.offsets_applied {
-            format!(
-                ", reading offsets {} mm applied",
-                r.link_offset_mm
-                    .iter()
-                    .map(|o| format!("{o:.3}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
-        } else {
-            String::new()
-        }
-    )
 }
 
 /// Several measurement files merged into one campaign, with where each pose came from.

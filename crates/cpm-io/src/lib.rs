@@ -14,6 +14,12 @@
 //! the first bad row, except that a long file may lose one pose in
 //! [`POSES_PER_EXCLUDED_POSE`] the machine cannot reach, recorded in [`DataFile::excluded`].
 //!
+//! This crate parses and writes, nothing else: a tracker file is returned as logged
+//! ([`DataFile::checked`] false). Registering its frame is a fit, and checking its poses
+//! against the robot follows it: both are the fit side's (`cpm_workflow::ingest`, whose
+//! `read_data_file` and friends read with this crate, then register; what may read a tracker
+//! file uses those).
+//!
 //! One's own robot from files: a description and a readings file (`examples/` ships a 6-6
 //! hexapod and 90 simulated readings of it), read and fitted:
 //!
@@ -70,10 +76,10 @@ pub struct Provenance {
 }
 pub use campaign::{
     max_excluded_poses, merge, read_commands_file, read_pose_list, read_pose_list_file,
-    read_pose_list_from, read_pose_measurements, read_readings, register_tracker_files,
-    write_commands, write_pose_list, write_pose_measurements, write_readings, DataFile,
-    ExcludedPose, Merged, PoseRow, ReadOptions, RegistrationReport, SessionRegistration,
-    TrackerRow, MAX_ROWS, POSES_PER_EXCLUDED_POSE, REGISTRATION_APPLY_MM,
+    read_pose_list_from, read_pose_measurements, read_readings, write_commands, write_pose_list,
+    write_pose_measurements, write_readings, DataFile, ExcludedPose, Merged, PoseRow, ReadOptions,
+    RegistrationReport, SessionRegistration, TrackerRow, MAX_ROWS, POSES_PER_EXCLUDED_POSE,
+    REGISTRATION_APPLY_MM,
 };
 pub use error::{read_text, InputError, ReadError};
 pub use read::{

@@ -1,14 +1,15 @@
 //! Reading measurement files of any kind: the kind is told from the header and the file
 //! handed to its reader ([`crate::campaign`] for readings and tracker poses,
-//! [`crate::points`] for point targets and inclinometer angles); tracker files are registered
-//! together after reading.
+//! [`crate::points`] for point targets and inclinometer angles). Tracker files are returned
+//! as parsed, unregistered and unchecked against the robot ([`DataFile::checked`] false):
+//! their registration and consistency checks are the fit side's (`cpm_workflow::ingest`, whose
+//! readers of the same names read with these, then register).
 use std::io::Read;
 use std::path::Path;
 
 use crate::campaign::{
     exclude_poses, finish, open, read_pose_measurements_table, read_readings_table,
-    read_readings_unexcluded, readings_for_second_robot, register_tracker_files, DataFile,
-    ReadOptions,
+    read_readings_unexcluded, readings_for_second_robot, DataFile, ReadOptions,
 };
 use crate::points::{read_point_measurements_table, read_tilt_measurements_table};
 use crate::table::{FileKind, Table};
@@ -58,9 +59,7 @@ pub fn read_data_from<R: Read>(
         )),
         Err(e) => Err(e),
     };
-    let mut f = r.map_err(|e| finish(&mut t, e))?;
-    register_tracker_files(std::slice::from_mut(&mut f), robot, options)?;
-    Ok(f)
+    r.map_err(|e| finish(&mut t, e))
 }
 
 /// What a second robot's reading of a file is, beside the first's (see
@@ -107,38 +106,23 @@ pub fn read_data_file_for_two(
         Ok(u) => {
             let mut f = all.clone();
             exclude_poses(&mut f, u)?;
-            register_tracker_files(std::slice::from_mut(&mut f), second, options)?;
             Ok(SecondReading::File(Box::new(f)))
         }
     });
     let mut f = all;
     exclude_poses(&mut f, unusable)?;
-    register_tracker_files(std::slice::from_mut(&mut f), first, options)?;
     Ok((f, second))
 }
 
-/// Reads several measurement files (see [`read_data_file`]); the tracker files among them are
-/// registered together ([`register_tracker_files`]: a frame per file, reading offsets shared)
-/// before their consistency checks.
+/// Reads several measurement files (see [`read_data_file`]), the tracker files among them
+/// unregistered (`cpm_workflow::ingest::read_data_files` registers them together).
 pub fn read_data_files(
     paths: &[std::path::PathBuf],
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<Vec<DataFile>, ReadError> {
-    let mut files = Vec::with_capacity(paths.len());
-    for path in paths {
-        let file = path.display().to_string();
-        let mut t = Table::from_reader(open(path)?, &file)?;
-        let r = match t.kind() {
-            Ok(FileKind::PoseMeasurements) => read_pose_measurements_table(&mut t, robot, options),
-            _ => {
-                drop(t);
-                files.push(read_data_file(path, robot, options)?);
-                continue;
-            }
-        };
-        files.push(r.map_err(|e| finish(&mut t, e))?);
-    }
-    register_tracker_files(&mut files, robot, options)?;
-    Ok(files)
+    paths
+        .iter()
+        .map(|path| read_data_file(path, robot, options))
+        .collect()
 }

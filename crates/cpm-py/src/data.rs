@@ -8,6 +8,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use cpm_io::{DataFile, FileKind, ReadOptions};
+use cpm_workflow::ingest::RegistrationOptions;
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -23,6 +24,8 @@ pub struct PyData {
     pub data: std::sync::Arc<DataFile>,
     /// The read options they were read with.
     pub options: ReadOptions,
+    /// The registration options they were read with (tracker files).
+    pub registration: RegistrationOptions,
     /// Their text.
     pub text: std::sync::Arc<str>,
     /// The robot's description text and name they were read against.
@@ -38,6 +41,7 @@ impl PyData {
             Source::Read(ReadData {
                 data: self.data.clone(),
                 options: self.options,
+                registration: self.registration,
                 text: self.text.clone(),
             })
         } else {
@@ -49,13 +53,17 @@ impl PyData {
     }
 }
 
-/// The read options of `cpm calibrate` for a robot and its declared effects.
-fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<ReadOptions> {
+/// The read and registration options of `cpm calibrate` for a robot and its declared effects.
+fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<(ReadOptions, RegistrationOptions)> {
     let effects = robot
         .robot
         .declared_effects()
         .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
-    Ok(cpm::cli::common::read_options(&robot.robot.model(&effects)))
+    let model = robot.robot.model(&effects);
+    Ok((
+        cpm::cli::common::read_options(&model),
+        cpm::cli::common::registration_options(&model),
+    ))
 }
 
 /// What a measurement file holds, as a dict of plain values and numpy arrays.
@@ -167,8 +175,8 @@ pub fn read_file<'py>(
     path: PathBuf,
     robot: &PyRobot,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let options = options(py, robot)?;
-    let f = cpm_io::read_data_file(&path, &robot.robot, &options)
+    let (options, registration) = options(py, robot)?;
+    let f = cpm_workflow::ingest::read_data_file(&path, &robot.robot, &options, &registration)
         .map_err(|e| crate::errors::read_to_py(py, e))?;
     if f.kind == FileKind::Poses {
         return Err(crate::errors::input(
@@ -189,13 +197,14 @@ pub fn read_text<'py>(
     name: &str,
     robot: &PyRobot,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let options = options(py, robot)?;
-    let f = cpm_io::read_data(text, name, &robot.robot, &options)
+    let (options, registration) = options(py, robot)?;
+    let f = cpm_workflow::ingest::read_data(text, name, &robot.robot, &options, &registration)
         .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
     let d = summary(py, &f, robot)?;
     let handle = PyData {
         data: std::sync::Arc::new(f),
         options,
+        registration,
         text: text.into(),
         robot: (robot.text.clone(), robot.robot.file.clone()),
     };

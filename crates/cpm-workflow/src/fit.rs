@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use crate::calib::{Calibration, Campaign, IdentifyOptions, MeasurementModel};
 use crate::error::{trouble, usage_error};
+use crate::ingest::RegistrationOptions;
 use crate::io::{self, Merged, Provenance, Robot};
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
@@ -269,18 +270,19 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
     progress.stage("reading the robot description");
     let robot = crate::load::load_robot(&args.robot, progress)?;
     let names = data.iter().map(|p| p.display().to_string()).collect();
-    let read =
-        |robot: &Robot, options: &io::ReadOptions| crate::load::load_data(data, robot, options);
+    let read = |robot: &Robot, options: &io::ReadOptions, registration: &RegistrationOptions| {
+        crate::load::load_data(data, robot, options, registration)
+    };
     load_inputs_with(args, robot, read, data.clone(), names, progress)
 }
 
-/// [`load_inputs`] with the robot given and the data read by `read` (with the read options
-/// of the model); `data_paths` are the files read (empty for data in memory), `names` what
-/// the provenance calls the data.
+/// [`load_inputs`] with the robot given and the data read by `read` (with the read and
+/// registration options of the model); `data_paths` are the files read (empty for data in
+/// memory), `names` what the provenance calls the data.
 pub(crate) fn load_inputs_with(
     args: &FitOptions,
     robot: Robot,
-    read: impl FnOnce(&Robot, &io::ReadOptions) -> anyhow::Result<Merged>,
+    read: impl FnOnce(&Robot, &io::ReadOptions, &RegistrationOptions) -> anyhow::Result<Merged>,
     data_paths: Vec<PathBuf>,
     names: Vec<String>,
     progress: &dyn Progress,
@@ -306,7 +308,11 @@ pub(crate) fn load_inputs_with(
         }
     }
     progress.stage("reading the measurements");
-    let mut merged = read(&robot, &crate::load::read_options(&model))?;
+    let mut merged = read(
+        &robot,
+        &crate::load::read_options(&model),
+        &crate::load::registration_options(&model),
+    )?;
     crate::load::warn_excluded(progress, &merged.excluded);
     if let Some(v) = pose_sigma_um {
         merged.campaign.pose_sigma_um = v;

@@ -142,7 +142,8 @@ pub fn identifiability(
     let (campaign, source) = if from_data {
         progress.stage("reading the measurements");
         let read = crate::load::read_options(&model);
-        let merged = crate::load::load_data(&options.data, &robot, &read)?;
+        let registration = crate::load::registration_options(&model);
+        let merged = crate::load::load_data(&options.data, &robot, &read, &registration)?;
         crate::load::warn_excluded(progress, &merged.excluded);
         let names: Vec<String> = options
             .data

@@ -2,6 +2,8 @@
 //! crates and the `cpm` command line (which parses arguments into these options, runs the job,
 //! commits its outputs and prints).
 //!
+//! - [`ingest`]: measurement files read with [`io`] (parsing only), then the tracker files
+//!   among them registered and checked ([`register_tracker_files`](ingest::register_tracker_files));
 //! - [`load`]: the robot, the measurement files, the effects; the model for a campaign;
 //!   committing a result directory;
 //! - [`fit`]: [`calibrate`](fit::calibrate) with [`CalibrateOptions`](fit::CalibrateOptions),
@@ -72,6 +74,7 @@ pub mod fit;
 pub mod formulation;
 pub mod gauges;
 pub mod identifiability;
+pub mod ingest;
 pub mod load;
 pub mod memory;
 pub mod output;

@@ -8,6 +8,7 @@ use anyhow::Context as _;
 
 use crate::calib::{CalibError, Effect, MeasurementModel};
 use crate::error::{input_error, usage_error};
+use crate::ingest::RegistrationOptions;
 use crate::io::{self, merge, Merged, ReadOptions, Robot};
 use crate::progress::Progress;
 
@@ -83,13 +84,14 @@ pub fn require_six_links(robot: &Robot) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Reads and merges measurement files.
+/// Reads and merges measurement files (tracker files registered with `registration`).
 pub fn load_data(
     paths: &[PathBuf],
     robot: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> anyhow::Result<Merged> {
-    let files = io::read_data_files(paths, robot, options)?;
+    let files = crate::ingest::read_data_files(paths, robot, options, registration)?;
     let merged = merge(files, robot);
     if options.check_sensor_lengths {
         crate::gauges::check_readings(robot, &merged)?;
@@ -105,15 +107,22 @@ pub fn warn_excluded(progress: &dyn Progress, excluded: &[io::ExcludedPose]) {
     }
 }
 
-/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled;
-/// tracker files are registered with the model's known `tracker_frame` taken out.
+/// Read options for a model: sensor lengths are checked unless `sensor_offset` is modelled.
 pub fn read_options(model: &MeasurementModel) -> ReadOptions {
     ReadOptions {
         check_sensor_lengths: !model.effects.contains(&Effect::SensorOffset),
+        ..ReadOptions::default()
+    }
+}
+
+/// Registration options for a model: tracker files are registered with the model's known
+/// `tracker_frame` taken out.
+pub fn registration_options(model: &MeasurementModel) -> RegistrationOptions {
+    RegistrationOptions {
         known_tracker_frame: model
             .known(Effect::TrackerFrame)
             .and_then(|q| <[f64; 6]>::try_from(q).ok()),
-        ..ReadOptions::default()
+        ..RegistrationOptions::default()
     }
 }
 

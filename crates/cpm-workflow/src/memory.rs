@@ -16,6 +16,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use crate::fit::{CalibrateOptions, Calibrated, FitOptions, Inputs};
+use crate::ingest::RegistrationOptions;
 use crate::io::{self, DataFile, FileKind, Merged, ReadOptions, Robot};
 use crate::progress::{check_cancelled, Progress};
 
@@ -26,6 +27,8 @@ pub struct ReadData {
     pub data: Arc<DataFile>,
     /// The read options they were read with.
     pub options: ReadOptions,
+    /// The registration options they were read with (tracker files).
+    pub registration: RegistrationOptions,
     /// Their text (a measurement file's), read again when the job needs other read options.
     pub text: Arc<str>,
 }
@@ -60,7 +63,8 @@ impl Source {
 
 /// The error of a campaign that has two or more tracker pose sets of which some are held in
 /// memory: tracker sets are registered together (reading offsets shared) only when read
-/// from files ([`io::read_data_files`]). Write them to files, or give one set at a time.
+/// from files ([`ingest::read_data_files`](crate::ingest::read_data_files)). Write them to
+/// files, or give one set at a time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct NeedsFiles;
 
@@ -72,14 +76,16 @@ impl std::fmt::Display for NeedsFiles {
 
 impl std::error::Error for NeedsFiles {}
 
-/// Reads and merges the sources with `options` (the read options of the job's model): files
-/// only are read as [`load::load_data`](crate::load::load_data) reads them; measurements
-/// already read with the same options are taken as they are, others read again from their
+/// Reads and merges the sources with `options` and `registration` (the read and registration
+/// options of the job's model): files only are read as
+/// [`load::load_data`](crate::load::load_data) reads them; measurements already read with the
+/// same options are taken as they are, others read again from their
 /// text. [`NeedsFiles`] for two or more tracker sets when one is in memory.
 pub fn read_sources(
     sources: &[Source],
     robot: &Robot,
     options: &ReadOptions,
+    registration: &RegistrationOptions,
 ) -> anyhow::Result<Merged> {
     let paths: Vec<PathBuf> = sources
         .iter()
@@ -89,15 +95,21 @@ pub fn read_sources(
         })
         .collect();
     if paths.len() == sources.len() {
-        return crate::load::load_data(&paths, robot, options);
+        return crate::load::load_data(&paths, robot, options, registration);
     }
     let mut files = Vec::with_capacity(sources.len());
     for s in sources {
         let f = match s {
-            Source::Path(p) => io::read_data_file(p, robot, options)?,
-            Source::Read(r) if r.options == *options => DataFile::clone(&r.data),
-            Source::Read(r) => io::read_data(&r.text, &r.data.file, robot, options)?,
-            Source::Text { name, text } => io::read_data(text, name, robot, options)?,
+            Source::Path(p) => crate::ingest::read_data_file(p, robot, options, registration)?,
+            Source::Read(r) if r.options == *options && r.registration == *registration => {
+                DataFile::clone(&r.data)
+            }
+            Source::Read(r) => {
+                crate::ingest::read_data(&r.text, &r.data.file, robot, options, registration)?
+            }
+            Source::Text { name, text } => {
+                crate::ingest::read_data(text, name, robot, options, registration)?
+            }
         };
         files.push(f);
     }
@@ -138,7 +150,9 @@ pub fn load(
         Vec::new()
     };
     let names = sources.iter().map(Source::name).collect();
-    let read = |robot: &Robot, o: &ReadOptions| read_sources(sources, robot, o);
+    let read = |robot: &Robot, o: &ReadOptions, r: &RegistrationOptions| {
+        read_sources(sources, robot, o, r)
+    };
     let inputs = crate::fit::load_inputs_with(options, robot, read, data_paths, names, progress)?;
     options.prepare(inputs, progress)
 }
@@ -243,11 +257,15 @@ mod tests {
         let robot = Robot::load(&robot_path).unwrap();
         let text: Arc<str> = std::fs::read_to_string(&data_path).unwrap().into();
         let name = data_path.display().to_string();
-        let read_with = crate::load::read_options(&robot.model(&robot.declared_effects().unwrap()));
-        let data = io::read_data(&text, &name, &robot, &read_with).unwrap();
+        let model = robot.model(&robot.declared_effects().unwrap());
+        let read_with = crate::load::read_options(&model);
+        let registration = crate::load::registration_options(&model);
+        let data =
+            crate::ingest::read_data(&text, &name, &robot, &read_with, &registration).unwrap();
         let sources = [Source::Read(ReadData {
             data: Arc::new(data),
             options: read_with,
+            registration,
             text,
         })];
         let in_memory = calibrate(&options, robot, &sources, &crate::Silent).unwrap();

@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use crate::calib::model::{predict, Prepared};
 use crate::calib::{Campaign, MeasurementModel};
 use crate::error::{input_error, trouble, usage_error};
+use crate::ingest::RegistrationOptions;
 use crate::io::{FileKind, ReadOptions, Robot};
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
@@ -128,12 +129,20 @@ fn commanded_lengths(
         .collect()
 }
 
-/// The read options of held-out data: the machine is held fixed (the readers register the
-/// frame, never the link zeros). Not `strict` (the fit's own data read back): no reachability
-/// or sensor-length checks, which the data passed when they were fitted.
+/// The registration options of held-out data: the machine is held fixed (the frame is
+/// registered, never the link zeros).
+fn held_out_registration() -> RegistrationOptions {
+    RegistrationOptions {
+        register_link_offsets: false,
+        ..RegistrationOptions::default()
+    }
+}
+
+/// The read options of held-out data (registered with [`held_out_registration`]). Not
+/// `strict` (the fit's own data read back): no reachability or sensor-length checks, which the
+/// data passed when they were fitted.
 fn held_out_read_options(strict: bool) -> ReadOptions {
     ReadOptions {
-        register_link_offsets: false,
         max_condition_ratio: if strict {
             ReadOptions::default().max_condition_ratio
         } else {
@@ -168,7 +177,7 @@ fn read_held_out(
     options: &ReadOptions,
     tracker: (f64, f64),
 ) -> anyhow::Result<crate::io::DataFile> {
-    let mut file = crate::io::read_data_file(path, robot, options)?;
+    let mut file = crate::ingest::read_data_file(path, robot, options, &held_out_registration())?;
     held_out(&mut file, robot, controller, tracker)?;
     Ok(file)
 }
@@ -609,7 +618,7 @@ fn errors_of(
 }
 
 /// [`errors_of`] `robot` and of `reference` (its own controller) on the same files, each file
-/// read once for both when the readers can share it ([`crate::io::read_data_file_for_two`]),
+/// read once for both when the readers can share it ([`crate::ingest::read_data_file_for_two`]),
 /// with the results and errors of the two calls one after the other: an error of
 /// `robot`'s is returned, the reference's is its result.
 fn errors_of_both(
@@ -624,8 +633,13 @@ fn errors_of_both(
     // The reference's gathering, until its first error (kept for after `robot`'s files).
     let mut r: anyhow::Result<RobotGather> = Ok(RobotGather::new(reference, false));
     for path in paths {
-        let (mut file, second) =
-            crate::io::read_data_file_for_two(path, robot, reference, &options)?;
+        let (mut file, second) = crate::ingest::read_data_file_for_two(
+            path,
+            robot,
+            reference,
+            &options,
+            &held_out_registration(),
+        )?;
         if let Ok(rg) = &mut r {
             use crate::io::SecondReading;
             let done = match second {
@@ -1138,7 +1152,13 @@ mod tests {
         let path = root.join("examples/hexapod_66_readings.csv");
         let text = std::fs::read_to_string(root.join("examples/hexapod_66.toml")).unwrap();
         let reference = Robot::from_toml(&text, "hexapod_66.toml").unwrap();
-        let file = crate::io::read_data_file(&path, &reference, &ReadOptions::default()).unwrap();
+        let file = crate::ingest::read_data_file(
+            &path,
+            &reference,
+            &ReadOptions::default(),
+            &Default::default(),
+        )
+        .unwrap();
         let campaign = crate::io::merge(vec![file], &reference).campaign;
         let joint = "base_mm = [193.185165258, -51.763809021, 0.0]";
         assert!(text.contains(joint));

@@ -11,7 +11,8 @@ use cpm_workflow::calib::{
     identify, simulate, CalibError, IdentifyOptions, Plan, SimulationOptions,
 };
 use cpm_workflow::fit::{leaving_out, Inputs};
-use cpm_workflow::io::{merge, read_data, write_readings, Provenance, ReadOptions, Robot};
+use cpm_workflow::ingest::read_data;
+use cpm_workflow::io::{merge, write_readings, Provenance, ReadOptions, Robot};
 use cpm_workflow::kinematics::KinematicsError;
 use cpm_workflow::Collect;
 
@@ -35,7 +36,14 @@ fn inputs(poses: usize) -> Inputs {
     )
     .expect("simulate");
     let text = write_readings(&data, &robot, "test");
-    let file = read_data(&text, FILE, &robot, &ReadOptions::default()).expect("read");
+    let file = read_data(
+        &text,
+        FILE,
+        &robot,
+        &ReadOptions::default(),
+        &Default::default(),
+    )
+    .expect("read");
     assert_eq!(file.campaign.poses.len(), poses);
     let mut merged = merge(vec![file], &robot);
     // The commands the controller sent (its inverse kinematics of each pose), as a log of
