@@ -43,8 +43,9 @@ class RobotHandle:
     def description_json(self) -> str: ...
 
 class DataHandle:
-    """Measurements as read (``read_text``'s ``handle``), taken from memory by
-    ``calibrate_memory``."""
+    """Measurements as read (``read_text``'s or ``gauge_rows``' ``handle``), taken from
+    memory by ``calibrate_memory``."""
+    def csv(self) -> str: ...
 
 class ObservationOrigins:
     def __len__(self) -> int: ...
@@ -54,14 +55,16 @@ def robot_load(path: str) -> RobotHandle: ...
 def robot_from_text(text: str, name: str) -> RobotHandle: ...
 def read_file(path: str, robot: RobotHandle) -> Dict[str, Any]: ...
 def read_text(text: str, name: str, robot: RobotHandle) -> Dict[str, Any]: ...
-def gauge_csv(
+def gauge_rows(
     poses: npt.NDArray[np.float64],
     sensors: List[str],
     lengths_mm: npt.NDArray[np.float64],
+    robot: RobotHandle,
+    name: str,
     pose_labels: Optional[List[str]] = None,
     time_s: Optional[npt.NDArray[np.float64]] = None,
     simulated: bool = False,
-) -> str: ...
+) -> Dict[str, Any]: ...
 def tracker_csv(
     readings: npt.NDArray[np.float64],
     poses: npt.NDArray[np.float64],

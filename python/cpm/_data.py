@@ -1,6 +1,7 @@
-"""Measurements: files read by the readers of ``cpm`` (``docs/formats.md``), or numpy arrays
-and pandas tables written as the same formats and read by the same readers, so that they get
-the same checks (units, reachability, consistency) and the same errors."""
+"""Measurements: files read by the readers of ``cpm`` (``docs/formats.md``); gauge readings
+from numpy arrays read as values with the checks and errors of the file reader (no text);
+tracker arrays and pandas tables written as their file formats and read by the same readers.
+Every route gets the same checks (units, reachability, consistency) and the same errors."""
 from __future__ import annotations
 
 import os
@@ -124,7 +125,8 @@ class Measurements:
                 out.append(s.path)
             else:
                 base = s.name if s.name.endswith(".csv") else s.name + ".csv"
-                out.append(scratch.write(base, s.text or "", s.name, arrays=s.arrays))
+                text = s.text if s.text is not None else s.info["handle"].csv()
+                out.append(scratch.write(base, text, s.name, arrays=s.arrays))
         return out
 
     def __repr__(self) -> str:
@@ -142,14 +144,21 @@ def read_measurements(path: PathLike, robot: Robot) -> Measurements:
     return Measurements([_Source(p, p, None, dict(info))])
 
 
+def _row_error(e: InputError) -> InputError:
+    """An error of measurements made from arrays, with the row of the arrays (line 2 is row
+    0) when it names a line."""
+    if e.line is not None and e.line >= 2:
+        row = e.line - 2
+        return InputError(f"{e} (row {row} of the arrays)", e.file, e.line, e.field, row)
+    return e
+
+
 def _from_text(text: str, name: str, robot: Robot, arrays: bool) -> Measurements:
     try:
         info = _cpm.read_text(text, name, robot._h)
     except InputError as e:
-        if arrays and e.line is not None and e.line >= 2:
-            row = e.line - 2
-            raise InputError(f"{e} (row {row} of the arrays)", e.file, e.line, e.field,
-                             row) from None
+        if arrays:
+            raise _row_error(e) from None
         raise
     return Measurements([_Source(name, None, text, dict(info), arrays)])
 
@@ -187,15 +196,19 @@ def gauge_readings(
     ``(n,)``. Rows with the same ``pose_labels`` share a pose (default: every row its own
     pose). ``simulated=True`` labels simulated data (every result then says so).
 
-    Read by the reader of ``cpm`` (the same checks); an error's ``row`` is the row of the
-    arrays."""
+    Read as values with the checks of the file reader of ``cpm`` and its errors (no text is
+    made); an error's ``row`` is the row of the arrays."""
     p = _float_array(poses, "poses", 2, 6)
     n = p.shape[0]
     lengths = _float_array(lengths_mm, "lengths_mm", 1)
     names = [sensors] * n if isinstance(sensors, str) else [str(s) for s in sensors]
     t = None if time_s is None else _float_array(time_s, "time_s", 1)
-    text = _cpm.gauge_csv(p, names, lengths, _labels(pose_labels), t, bool(simulated))
-    return _from_text(text, name, robot, arrays=True)
+    try:
+        info = _cpm.gauge_rows(p, names, lengths, robot._h, name, _labels(pose_labels), t,
+                               bool(simulated))
+    except InputError as e:
+        raise _row_error(e) from None
+    return Measurements([_Source(name, None, None, dict(info), True)])
 
 
 def tracker_measurements(

@@ -308,13 +308,28 @@ fn orientation_columns(o: Orientation) -> &'static [&'static str] {
 /// The numbers a pose was made of, by column (for agreement checks): position, then three
 /// angles or four quaternion components.
 #[derive(Debug, Clone, Copy)]
-struct RawPose {
+pub(crate) struct RawPose {
     cells: [(&'static str, f64); 7],
     len: usize,
 }
 
+impl Default for RawPose {
+    fn default() -> Self {
+        RawPose {
+            cells: [("", 0.0); 7],
+            len: 0,
+        }
+    }
+}
+
 impl RawPose {
-    fn iter(&self) -> std::slice::Iter<'_, (&'static str, f64)> {
+    /// Adds the number of column `name`.
+    pub(crate) fn push(&mut self, name: &'static str, v: f64) {
+        self.cells[self.len] = (name, v);
+        self.len += 1;
+    }
+
+    pub(crate) fn iter(&self) -> std::slice::Iter<'_, (&'static str, f64)> {
         self.cells[..self.len].iter()
     }
 
@@ -323,7 +338,7 @@ impl RawPose {
     }
 
     /// True when every number agrees with `other`'s ([`close`]).
-    fn agrees(&self, other: &RawPose) -> bool {
+    pub(crate) fn agrees(&self, other: &RawPose) -> bool {
         self.len == other.len && self.iter().zip(other.iter()).all(|(a, b)| close(a.1, b.1))
     }
 }
@@ -373,16 +388,23 @@ fn raw_pose_at(
 
 /// Positions within 1 km, angles within [-360, 360] degrees.
 pub(crate) fn check_pose_cell(t: &Header, row: &Row, c: &str, v: f64) -> Result<(), InputError> {
+    check_pose_value(&t.file, row.line, c, v)
+}
+
+/// [`check_pose_cell`] of a value of column `c` on `line` of `file`.
+pub(crate) fn check_pose_value(file: &str, line: usize, c: &str, v: f64) -> Result<(), InputError> {
     if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
-        return Err(t.err(
-            row,
+        return Err(InputError::field(
+            file,
+            line,
             c,
             format!("{v:e} mm is implausibly far (over 1 km): positions are in mm"),
         ));
     }
     if c.ends_with("_deg") && v.abs() > 360.0 {
-        return Err(t.err(
-            row,
+        return Err(InputError::field(
+            file,
+            line,
             c,
             format!("{v} degrees: an angle is within [-360, 360] (angles are in degrees)"),
         ));
@@ -429,13 +451,13 @@ pub const RADIANS_MAX: f64 = 0.2;
 pub const RADIANS_MIN: f64 = 0.02;
 
 /// Angle values of a file: (line, column, value) for every `_deg` column of every row.
-type AngleCells = Vec<(usize, &'static str, f64)>;
+pub(crate) type AngleCells = Vec<(usize, &'static str, f64)>;
 
 /// Refuses a file whose `roll_deg`, `pitch_deg`, `yaw_deg` values all lie within
 /// +-[`RADIANS_MAX`] while the largest reaches [`RADIANS_MIN`]: angles in radians, most
 /// likely. The error names the first row with such an angle, and says how to keep truly tiny
 /// angles (a quaternion).
-fn check_angle_units(file: &str, cells: &AngleCells) -> Result<(), InputError> {
+pub(crate) fn check_angle_units(file: &str, cells: &AngleCells) -> Result<(), InputError> {
     let largest = cells.iter().fold(0.0_f64, |a, c| a.max(c.2.abs()));
     if cells.is_empty() || !(RADIANS_MIN..=RADIANS_MAX).contains(&largest) {
         return Ok(());
@@ -698,6 +720,31 @@ pub fn exclude_poses(f: &mut DataFile, unusable: Vec<Unusable>) -> Result<(), In
 }
 
 impl DataFile {
+    /// A readings file as read (checked, nothing excluded yet): its campaign with the label
+    /// and first line of each pose and the line of each reading.
+    pub(crate) fn readings(
+        file: String,
+        campaign: Campaign,
+        pose_labels: Vec<String>,
+        pose_lines: Vec<usize>,
+        reading_lines: Vec<usize>,
+    ) -> DataFile {
+        DataFile {
+            file,
+            kind: FileKind::Readings,
+            pose_lines,
+            campaign,
+            pose_labels,
+            reading_lines,
+            registration: None,
+            tracker_rows: Vec::new(),
+            checked: true,
+            point_lines: Vec::new(),
+            point_frame: None,
+            excluded: Vec::new(),
+        }
+    }
+
     /// The file without the campaign poses `j` with `drop[j]`, all their rows (readings,
     /// tracker rows, points, angles) and their lines left out, the poses left renumbered
     /// ([`Campaign::without_poses`]).
@@ -870,11 +917,30 @@ pub fn check_link_readings(
     Ok(lengths)
 }
 
+/// The error of a row naming a sensor the robot does not have.
+pub(crate) fn unknown_sensor(file: &str, line: usize, robot: &Robot, name: &str) -> InputError {
+    InputError::field(
+        file,
+        line,
+        "sensor",
+        format!(
+            "unknown sensor {:?} (the robot description has: {})",
+            shorten(name),
+            robot.sensor_names()
+        ),
+    )
+}
+
 /// The error of a file with more rows than allowed.
 pub(crate) fn too_many_rows(t: &Header, row: &Row, max: usize) -> InputError {
+    too_many_rows_at(&t.file, row.line, max)
+}
+
+/// [`too_many_rows`] on `line` of `file`.
+pub(crate) fn too_many_rows_at(file: &str, line: usize, max: usize) -> InputError {
     InputError::line(
-        &t.file,
-        row.line,
+        file,
+        line,
         format!("more than {max} data rows: cpm reads at most {max} (average repeated readings, or split the campaign)"),
     )
 }
@@ -995,17 +1061,7 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 .filter(|&s| names_unique && sensors[s].name == sensor_name);
             let sensor = next_sensor
                 .or_else(|| robot.table.sensor_index(sensor_name))
-                .ok_or_else(|| {
-                    t.err(
-                        row,
-                        "sensor",
-                        format!(
-                            "unknown sensor {:?} (the robot description has: {})",
-                            shorten(sensor_name),
-                            robot.sensor_names()
-                        ),
-                    )
-                })?;
+                .ok_or_else(|| unknown_sensor(&t.file, row.line, robot, sensor_name))?;
             let same_as_previous = previous.is_some_and(|j| labels[j] == label)
                 && pose_columns
                     .iter()
@@ -1049,8 +1105,8 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 Some(j) => {
                     let e = &entries[j];
                     same_pose_as_before(
-                        t,
-                        row,
+                        &t.file,
+                        row.line,
                         label,
                         (&raw, &link),
                         (&e.raw, &e.readings),
@@ -1142,20 +1198,8 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     if logged {
         campaign.commanded_lengths_mm = Some(commanded);
     }
-    let f = DataFile {
-        file: t.file.clone(),
-        kind: FileKind::Readings,
-        pose_lines: entries.iter().map(|e| e.line).collect(),
-        campaign,
-        pose_labels: labels,
-        reading_lines,
-        registration: None,
-        tracker_rows: Vec::new(),
-        checked: true,
-        point_lines: Vec::new(),
-        point_frame: None,
-        excluded: Vec::new(),
-    };
+    let pose_lines = entries.iter().map(|e| e.line).collect();
+    let f = DataFile::readings(t.file.clone(), campaign, labels, pose_lines, reading_lines);
     Ok((f, unusable))
 }
 
@@ -1225,7 +1269,7 @@ impl PoseChecks {
 /// unreachable pose is to be excluded: returned), then at every row of a pose kept the
 /// sensor's length against the nominal. The reachability of all the poses is found first,
 /// in parallel (it depends on the pose alone).
-fn robot_checks(
+pub(crate) fn robot_checks(
     file: &str,
     robot: &Robot,
     options: &ReadOptions,
@@ -1328,9 +1372,9 @@ pub(crate) fn readings_for_second_robot(
 
 /// Checks that a row of a pose already given (on line `line`) repeats its commanded pose and
 /// link readings (`now` against `before`), naming the field that differs.
-fn same_pose_as_before(
-    t: &Header,
-    row: &Row,
+pub(crate) fn same_pose_as_before(
+    file: &str,
+    line_now: usize,
     label: &str,
     now: (&RawPose, &Option<Vec<f64>>),
     before: (&RawPose, &Option<Vec<f64>>),
@@ -1338,9 +1382,10 @@ fn same_pose_as_before(
 ) -> Result<(), InputError> {
     for ((name, a), (_, b)) in now.0.iter().zip(before.0.iter()) {
         if !close(*a, *b) {
-            return Err(t.err(
-                row,
-                name,
+            return Err(InputError::field(
+                file,
+                line_now,
+                *name,
                 format!("{} differs from {} given for pose {:?} on line {}: rows of one pose share one commanded pose (a repeated pose label?)", show(*a, None), show(*b, None), shorten(label), line),
             ));
         }
@@ -1348,9 +1393,10 @@ fn same_pose_as_before(
     if let (Some(a), Some(b)) = (now.1, before.1) {
         for (k, (x, y)) in a.iter().zip(b).enumerate() {
             if !close(*x, *y) {
-                return Err(t.err(
-                    row,
-                    &format!("reading_{}", k + 1),
+                return Err(InputError::field(
+                    file,
+                    line_now,
+                    format!("reading_{}", k + 1),
                     format!("{x} differs from {y} given for pose {:?} on line {}: rows of one pose share one command", shorten(label), line),
                 ));
             }

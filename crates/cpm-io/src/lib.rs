@@ -61,6 +61,7 @@ pub mod error;
 pub mod points;
 pub mod read;
 pub mod robot;
+pub mod rows;
 pub mod sockets;
 pub mod table;
 pub mod write;

@@ -555,6 +555,7 @@ pub fn calibrate_memory<'py>(
         };
         let fitted_s = t0.elapsed().as_secs_f64();
         let cpm_workflow::fit::Calibrated { inputs, fitted } = job;
+        let stages = fitted.seconds;
         let warnings = fitted.report.fit.warnings.clone();
         let cal = fitted.cal;
         let trouble = if let Some(why) = cal.robust_failure() {
@@ -607,6 +608,8 @@ pub fn calibrate_memory<'py>(
         };
         let timings = vec![
             ("job".to_string(), fitted_s),
+            ("fit".to_string(), stages.fit_s),
+            ("outputs".to_string(), stages.outputs_s),
             ("solver".to_string(), cal.solver.elapsed.as_secs_f64()),
             ("total".to_string(), t0.elapsed().as_secs_f64()),
         ];

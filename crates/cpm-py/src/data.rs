@@ -1,6 +1,7 @@
 //! Measurements for Python: files read by the readers of `cpm` (same checks, same
-//! `file:line: field` errors), and numpy arrays written as the same CSV formats so that they
-//! pass through the very same readers.
+//! `file:line: field` errors); gauge readings from numpy arrays read as values by
+//! [`cpm_io::rows`] (the checks and errors of the CSV reader, no text); tracker arrays
+//! written as their CSV format and read by the same reader.
 //!
 //! Numbers are written with Rust's shortest round-trip formatting, so the reader gets back
 //! every `f64` exactly.
@@ -9,6 +10,7 @@ use std::path::PathBuf;
 
 use cpm_io::{DataFile, FileKind, ReadOptions};
 use cpm_workflow::ingest::RegistrationOptions;
+use cpm_workflow::memory::Given;
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -26,8 +28,8 @@ pub struct PyData {
     pub options: ReadOptions,
     /// The registration options they were read with (tracker files).
     pub registration: RegistrationOptions,
-    /// Their text.
-    pub text: std::sync::Arc<str>,
+    /// What they were read from (a file's text, or readings as values).
+    pub given: Given,
     /// The robot's description text and name they were read against.
     pub robot: (String, String),
 }
@@ -42,13 +44,28 @@ impl PyData {
                 data: self.data.clone(),
                 options: self.options,
                 registration: self.registration,
-                text: self.text.clone(),
+                given: self.given.clone(),
             })
         } else {
-            Source::Text {
-                name: self.data.file.clone(),
-                text: self.text.clone(),
+            match &self.given {
+                Given::Text(text) => Source::Text {
+                    name: self.data.file.clone(),
+                    text: text.clone(),
+                },
+                Given::GaugeRows(rows) => Source::GaugeRows(rows.clone()),
             }
+        }
+    }
+}
+
+#[pymethods]
+impl PyData {
+    /// The measurements as the text of a measurement file (for a command that reads files):
+    /// the text read, or the CSV of readings given as values (every number exact).
+    fn csv(&self) -> String {
+        match &self.given {
+            Given::Text(text) => text.to_string(),
+            Given::GaugeRows(rows) => rows.to_csv(),
         }
     }
 }
@@ -188,6 +205,26 @@ pub fn read_file<'py>(
     summary(py, &f, robot)
 }
 
+/// The dict of [`summary`] with its `handle`: the measurements as read, how, and from what.
+fn with_handle<'py>(
+    py: Python<'py>,
+    f: DataFile,
+    (options, registration): (ReadOptions, RegistrationOptions),
+    given: Given,
+    robot: &PyRobot,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = summary(py, &f, robot)?;
+    let handle = PyData {
+        data: std::sync::Arc::new(f),
+        options,
+        registration,
+        given,
+        robot: (robot.text.clone(), robot.robot.file.clone()),
+    };
+    d.set_item("handle", Bound::new(py, handle)?)?;
+    Ok(d)
+}
+
 /// Reads measurements from CSV text; `name` stands for the file in messages. The dict's
 /// `handle` keeps them as read, for the jobs that take measurements from memory.
 #[pyfunction]
@@ -200,16 +237,8 @@ pub fn read_text<'py>(
     let (options, registration) = options(py, robot)?;
     let f = cpm_workflow::ingest::read_data(text, name, &robot.robot, &options, &registration)
         .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
-    let d = summary(py, &f, robot)?;
-    let handle = PyData {
-        data: std::sync::Arc::new(f),
-        options,
-        registration,
-        text: text.into(),
-        robot: (robot.text.clone(), robot.robot.file.clone()),
-    };
-    d.set_item("handle", Bound::new(py, handle)?)?;
-    Ok(d)
+    let given = Given::Text(text.into());
+    with_handle(py, f, (options, registration), given, robot)
 }
 
 /// Checks that an array has `n` rows (and `cols` columns); a usage error naming it otherwise.
@@ -232,15 +261,6 @@ fn check_shape(
         py,
         format!("{what} has shape {shape:?}, expected {want}"),
     ))
-}
-
-/// A CSV field: quoted when it holds a comma, a quote or leading/trailing blanks.
-fn field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) || s.trim() != s {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
 }
 
 /// Optional labels and times, checked against `n` rows.
@@ -267,44 +287,50 @@ fn labels_and_times(
     Ok((labels, times))
 }
 
-/// Gauge readings as the CSV of docs/formats.md ("Length-sensor readings"): one row per
-/// reading, `poses` `(n, 6)` (x, y, z mm; roll, pitch, yaw deg), `sensors` `n` names,
-/// `lengths_mm` `(n,)`; rows with the same label share a pose.
+/// Reads gauge readings given as arrays (no text: [`cpm_io::rows::read_gauge_rows`], the
+/// checks and errors of the CSV reader, row `k` on line `k + 2`): `poses` `(n, 6)` (x, y,
+/// z mm; roll, pitch, yaw deg), `sensors` `n` names, `lengths_mm` `(n,)`; rows with the same
+/// label share a pose (default: every row its own pose, labelled from 1). `name` stands for
+/// the file in messages and outputs. Returns the dict of [`read_text`], with its `handle`.
 #[pyfunction]
-#[pyo3(signature = (poses, sensors, lengths_mm, pose_labels=None, time_s=None, simulated=false))]
-pub fn gauge_csv(
-    py: Python<'_>,
-    poses: PyReadonlyArray2<'_, f64>,
+#[pyo3(signature = (poses, sensors, lengths_mm, robot, name, pose_labels=None, time_s=None, simulated=false))]
+#[allow(clippy::too_many_arguments)]
+pub fn gauge_rows<'py>(
+    py: Python<'py>,
+    poses: PyReadonlyArray2<'py, f64>,
     sensors: Vec<String>,
-    lengths_mm: PyReadonlyArray1<'_, f64>,
+    lengths_mm: PyReadonlyArray1<'py, f64>,
+    robot: &PyRobot,
+    name: &str,
     pose_labels: Option<Vec<String>>,
-    time_s: Option<PyReadonlyArray1<'_, f64>>,
+    time_s: Option<PyReadonlyArray1<'py, f64>>,
     simulated: bool,
-) -> PyResult<String> {
+) -> PyResult<Bound<'py, PyDict>> {
     let poses = poses.as_array();
     let n = poses.shape()[0];
     check_shape(py, "poses", poses.shape(), n, Some(6))?;
     check_shape(py, "sensors", &[sensors.len()], n, None)?;
     check_shape(py, "lengths_mm", lengths_mm.shape(), n, None)?;
-    let lengths = lengths_mm.as_array();
-    let (labels, times) = labels_and_times(py, n, pose_labels, time_s)?;
-    let mut s = String::from("pose,sensor,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,length_mm");
-    if times.is_some() {
-        s.push_str(",time_s");
-    }
-    s.push_str(",simulated\n");
-    for k in 0..n {
-        let _ = write!(s, "{},{}", field(&labels[k]), field(&sensors[k]));
-        for c in 0..6 {
-            let _ = write!(s, ",{}", poses[(k, c)]);
-        }
-        let _ = write!(s, ",{}", lengths[k]);
-        if let Some(t) = &times {
-            let _ = write!(s, ",{}", t[k]);
-        }
-        let _ = writeln!(s, ",{simulated}");
-    }
-    Ok(s)
+    let (pose_labels, time_s) = labels_and_times(py, n, pose_labels, time_s)?;
+    let rows = cpm_io::rows::GaugeRows {
+        file: name.to_string(),
+        pose_labels,
+        sensors,
+        poses: poses
+            .rows()
+            .into_iter()
+            .map(|r| [r[0], r[1], r[2], r[3], r[4], r[5]])
+            .collect(),
+        lengths_mm: lengths_mm.as_array().iter().copied().collect(),
+        time_s,
+        simulated,
+    };
+    let (options, registration) = options(py, robot)?;
+    let f = py
+        .allow_threads(|| cpm_io::rows::read_gauge_rows(&rows, &robot.robot, &options))
+        .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
+    let given = Given::GaugeRows(std::sync::Arc::new(rows));
+    with_handle(py, f, (options, registration), given, robot)
 }
 
 /// Tracker measurements as the CSV of docs/formats.md ("Tracker pose measurements"): one row
@@ -355,7 +381,7 @@ pub fn tracker_csv(
     }
     s.push_str(",simulated\n");
     for k in 0..n {
-        s.push_str(&field(&labels[k]));
+        s.push_str(&cpm_io::table::field(&labels[k]));
         for c in 0..links {
             let _ = write!(s, ",{}", readings[(k, c)]);
         }

@@ -36,7 +36,7 @@ fn _cpm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(robot::robot_from_text, m)?)?;
     m.add_function(wrap_pyfunction!(data::read_file, m)?)?;
     m.add_function(wrap_pyfunction!(data::read_text, m)?)?;
-    m.add_function(wrap_pyfunction!(data::gauge_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(data::gauge_rows, m)?)?;
     m.add_function(wrap_pyfunction!(data::tracker_csv, m)?)?;
     m.add_function(wrap_pyfunction!(commands::run_command, m)?)?;
     m.add_function(wrap_pyfunction!(commands::main, m)?)?;

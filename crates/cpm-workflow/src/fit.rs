@@ -851,6 +851,20 @@ pub struct Fitted {
     pub report: crate::report::calibrate::CalibrateReport,
     /// The poses the fit left out because it could not start there (see [`leaving_out`]).
     pub excluded: Vec<crate::io::ExcludedPose>,
+    /// Where the time went, s: the fit (the solver and the statistics of the calibration),
+    /// then its outputs (report, figures, residuals, `calibrated.toml` and its read-back).
+    pub seconds: FitSeconds,
+}
+
+/// The wall-clock time of the stages of [`fit_with`], s.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FitSeconds {
+    /// The fit: [`identify_with`](crate::formulation::identify_with) (solver, identifiability,
+    /// noise), with the poses it had to leave out.
+    pub fit_s: f64,
+    /// The outputs staged from it (report, figures, residuals, `calibrated.toml` and its
+    /// read-back check).
+    pub outputs_s: f64,
 }
 
 /// Fits the inputs and stages every output of `cpm calibrate` in memory, for `dir`: nothing
@@ -871,6 +885,7 @@ pub fn fit_with(
     minimum_norm: bool,
     formulation: crate::formulation::FormulationArg,
 ) -> anyhow::Result<Fitted> {
+    let started = std::time::Instant::now();
     // A pose where the fit cannot start (forward kinematics does not converge there) is
     // left out, with its observations, and the fit run again (see `leaving_out`).
     let ((cal, formulation), excluded) = leaving_out(inputs, |merged| {
@@ -887,6 +902,8 @@ pub fn fit_with(
     };
     let campaign = &inputs.merged.campaign;
     let model = &inputs.model;
+    let fit_s = started.elapsed().as_secs_f64();
+    let started = std::time::Instant::now();
     let mut set = OutputSet::new();
     let mut fit = FitReport::new(&inputs.report_inputs(), model, &cal, Some(formulation));
     add_session_warnings(&mut fit, inputs, model)?;
@@ -926,6 +943,10 @@ pub fn fit_with(
         set,
         report,
         excluded: excluded.into_iter().map(|(_, e)| e).collect(),
+        seconds: FitSeconds {
+            fit_s,
+            outputs_s: started.elapsed().as_secs_f64(),
+        },
     })
 }
 

@@ -17,6 +17,7 @@ use std::sync::Arc;
 
 use crate::fit::{CalibrateOptions, Calibrated, FitOptions, Inputs};
 use crate::ingest::RegistrationOptions;
+use crate::io::rows::GaugeRows;
 use crate::io::{self, DataFile, FileKind, Merged, ReadOptions, Robot};
 use crate::progress::{check_cancelled, Progress};
 
@@ -29,8 +30,34 @@ pub struct ReadData {
     pub options: ReadOptions,
     /// The registration options they were read with (tracker files).
     pub registration: RegistrationOptions,
-    /// Their text (a measurement file's), read again when the job needs other read options.
-    pub text: Arc<str>,
+    /// What they were read from, read again when the job needs other read options.
+    pub given: Given,
+}
+
+/// Measurements as given in memory, before reading.
+#[derive(Debug, Clone)]
+pub enum Given {
+    /// The text of a measurement file.
+    Text(Arc<str>),
+    /// Length-sensor readings as values ([`GaugeRows`]: no text).
+    GaugeRows(Arc<GaugeRows>),
+}
+
+impl Given {
+    /// Reads them against `robot` (`name` stands for the file of a text), as
+    /// [`ingest::read_data`](crate::ingest::read_data) reads a file's text.
+    pub fn read(
+        &self,
+        name: &str,
+        robot: &Robot,
+        options: &ReadOptions,
+        registration: &RegistrationOptions,
+    ) -> Result<DataFile, io::InputError> {
+        match self {
+            Given::Text(text) => crate::ingest::read_data(text, name, robot, options, registration),
+            Given::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options),
+        }
+    }
 }
 
 /// One set of measurements of a campaign.
@@ -48,6 +75,8 @@ pub enum Source {
         /// The text, as a measurement file holds it.
         text: Arc<str>,
     },
+    /// Length-sensor readings as values, to read (their `file` names them).
+    GaugeRows(Arc<GaugeRows>),
 }
 
 impl Source {
@@ -57,6 +86,7 @@ impl Source {
             Source::Path(p) => p.display().to_string(),
             Source::Read(r) => r.data.file.clone(),
             Source::Text { name, .. } => name.clone(),
+            Source::GaugeRows(rows) => rows.file.clone(),
         }
     }
 }
@@ -104,12 +134,11 @@ pub fn read_sources(
             Source::Read(r) if r.options == *options && r.registration == *registration => {
                 DataFile::clone(&r.data)
             }
-            Source::Read(r) => {
-                crate::ingest::read_data(&r.text, &r.data.file, robot, options, registration)?
-            }
+            Source::Read(r) => r.given.read(&r.data.file, robot, options, registration)?,
             Source::Text { name, text } => {
                 crate::ingest::read_data(text, name, robot, options, registration)?
             }
+            Source::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options)?,
         };
         files.push(f);
     }
@@ -266,7 +295,7 @@ mod tests {
             data: Arc::new(data),
             options: read_with,
             registration,
-            text,
+            given: Given::Text(text),
         })];
         let in_memory = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
         let (a, b) = (&from_file.fitted.cal, &in_memory.fitted.cal);
@@ -281,5 +310,40 @@ mod tests {
         };
         assert!(toml(&from_file).is_some());
         assert_eq!(toml(&from_file), toml(&in_memory));
+    }
+
+    /// Readings given as values (numpy arrays in Python) and the same readings in their
+    /// file: the same calibration, bit for bit.
+    #[test]
+    fn rows_and_file_give_the_same_fit() {
+        let robot_path = ex("hexapod_66.toml");
+        let data_path = ex("hexapod_66_readings.csv");
+        let out = std::env::temp_dir().join("cpm-memory-test-rows-unwritten");
+        let options = CalibrateOptions::new(&robot_path, vec![data_path.clone()], &out);
+        let from_file = crate::fit::calibrate(&options, &crate::Silent).unwrap();
+        // The file's columns as values.
+        let text = std::fs::read_to_string(&data_path).unwrap();
+        let mut t = io::table::Table::parse(&text, "readings").unwrap();
+        let mut rows = GaugeRows::new("readings as values", vec![], vec![], vec![], vec![]);
+        rows.simulated = t.simulated_mark;
+        let number =
+            |t: &io::table::Table<&[u8]>, r: &io::table::Row, c: &str| t.number(r, c).unwrap();
+        while let Some(r) = t.next_row().unwrap() {
+            rows.pose_labels
+                .push(t.text(&r, "pose").unwrap().to_string());
+            rows.sensors.push(t.text(&r, "sensor").unwrap().to_string());
+            let cols = ["x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg"];
+            rows.poses.push(cols.map(|c| number(&t, &r, c)));
+            rows.lengths_mm.push(number(&t, &r, "length_mm"));
+        }
+        let robot = Robot::load(&robot_path).unwrap();
+        let sources = [Source::GaugeRows(Arc::new(rows))];
+        let from_rows = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
+        let (a, b) = (&from_file.fitted.cal, &from_rows.fitted.cal);
+        assert_eq!(a.estimate_um, b.estimate_um);
+        assert_eq!(a.std_um, b.std_um);
+        assert_eq!(a.residuals_um, b.residuals_um);
+        assert!(b.simulated);
+        assert_eq!(from_rows.inputs.merged.campaign.readings.len(), 90);
     }
 }
