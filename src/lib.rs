@@ -74,11 +74,13 @@ pub mod cli;
 #[cfg(feature = "cli")]
 pub mod fuzzing;
 /// The jobs as library functions (the [`cpm-workflow`](cpm_workflow) crate): calibrate,
-/// refine, validate with typed options, progress and cancellation.
-#[cfg(feature = "cli")]
+/// refine, validate with typed options, progress and cancellation. With the `workflow`
+/// feature alone (`default-features = false, features = ["workflow"]`) they come without
+/// the command line's crates.
+#[cfg(feature = "workflow")]
 pub use cpm_workflow as workflow;
 /// Outputs that never destroy (the workflow layer's [`cpm_workflow::output`]).
-#[cfg(feature = "cli")]
+#[cfg(feature = "workflow")]
 pub use cpm_workflow::output;
 #[cfg(feature = "cli")]
 pub mod paper_report;
