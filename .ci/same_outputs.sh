@@ -41,6 +41,14 @@ run_all() {
     step validate --robot tilt_cal/calibrated.toml --data tilt/session_1.csv --out tilt_val --json
     step calibrate --robot mocap/robot.toml --data mocap/session_108.csv --out mocap_cal
     step validate --robot mocap_cal/calibrated.toml --data mocap/session_108.csv --out mocap_val
+    # Point targets (laser-tracker reflectors): three on the platform, a session in a frame
+    # of its own (the ingest registers it roughly).
+    for f in hexapod_66 hexapod_66_truth; do
+        { cat examples/$f.toml; printf '\n[[target]]\nname = "a"\nplatform_mm = [90.0, 10.0, 30.0]\n\n[[target]]\nname = "b"\nplatform_mm = [-50.0, 80.0, 25.0]\n\n[[target]]\nname = "c"\nplatform_mm = [-40.0, -85.0, 35.0]\n'; } > pts_$f.toml
+    done
+    step simulate --robot pts_hexapod_66.toml --truth pts_hexapod_66_truth.toml --random 30 --seed 4 --measure points --noise gaussian:5 --tracker-frame 1200,-300,40,0,0,30 --out pts.csv
+    step calibrate --robot pts_hexapod_66.toml --data pts.csv --out pts_cal --json
+    step validate --robot pts_cal/calibrated.toml --data pts.csv --out pts_val --json
     step calibrate --robot $R --data sim.csv --sigma-um=-1 --out bad
     step validate --robot cal/calibrated.toml --data examples/targets.csv
     rm -rf examples mocap tilt

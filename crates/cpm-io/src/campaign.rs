@@ -117,8 +117,10 @@ pub struct DataFile {
     /// Point files: the line of each point measurement; inclinometer files: of each tilt
     /// measurement.
     pub point_lines: Vec<usize>,
-    /// Point files: the rough registration the reader applied to the measured points (the
-    /// base frame's pose in the tracker's coordinates, `p_tracker = R p_base + t`).
+    /// Point files: the rough registration applied to the measured points (the base frame's
+    /// pose in the tracker's coordinates, `p_tracker = R p_base + t`); `None` as read (the
+    /// points in the tracker's frame): the fit side registers the file
+    /// (`cpm_workflow::ingest::register_point_files`).
     pub point_frame: Option<Pose>,
     /// The poses left out of the campaign, with all their rows, because the machine cannot
     /// be there (at most one in [`POSES_PER_EXCLUDED_POSE`]; more refuse the file).

@@ -2,10 +2,12 @@
 //! on the platform, one row per target per pose, in the tracker's frame, and inclinometer
 //! angles (`[[inclinometer]]`), one row per instrument per pose (`docs/formats.md`).
 //!
-//! Each file is a session: the reader registers it roughly (the rigid frame that best takes
-//! the nominal targets at the commanded poses onto the measured points,
-//! [`cpm_calib::points::rough_frame`]) and applies that frame to the points, so that the fit's
-//! `point_frame` of the session is a small correction.
+//! Each file is a session. The reader parses and checks it (units included) and returns the
+//! points as measured, in the tracker's frame ([`DataFile::point_frame`] `None`): registering
+//! the session roughly (the rigid frame that best takes the nominal targets at the commanded
+//! poses onto the measured points, [`cpm_calib::points::rough_frame`], applied to the points so
+//! that the fit's `point_frame` of the session is a small correction) is a fit, made on the fit
+//! side (`cpm_workflow::ingest`).
 use std::collections::HashMap;
 use std::io::Read;
 
@@ -477,8 +479,6 @@ fn read_instrument_table<R: Read>(
     exclude_poses(&mut file, unusable)?;
     if instrument.points {
         check_point_units(&t.file, robot, &file.campaign, &file.point_lines)?;
-        let frame = register_points(&t.file, robot, &mut file.campaign)?;
-        file.point_frame = Some(frame);
     } else {
         check_tilt_units(
             &t.file,
@@ -610,37 +610,6 @@ fn check_tilt_units(
         ));
     }
     Ok(())
-}
-
-/// The rough registration of a point session: the frame that best takes the nominal targets
-/// at the commanded poses onto the measured points, applied to the points; returns it.
-fn register_points(file: &str, robot: &Robot, campaign: &mut Campaign) -> Result<Pose, InputError> {
-    let targets: Vec<Vector3<f64>> = robot
-        .description
-        .targets
-        .iter()
-        .map(|s| Vector3::from(s.platform_mm))
-        .collect();
-    let base: Vec<Vector3<f64>> = campaign
-        .point_measurements
-        .iter()
-        .map(|m| campaign.poses[m.pose].transform_point(&targets[m.target]))
-        .collect();
-    let measured: Vec<Vector3<f64>> = campaign
-        .point_measurements
-        .iter()
-        .map(|m| m.measured_mm)
-        .collect();
-    let Some((tr, rot)) = cpm_calib::points::rough_frame(&base, &measured) else {
-        return Err(InputError::file(
-            file,
-            "the measured points do not fix the tracker's frame (fewer than three points, or all on a line): measure more poses",
-        ));
-    };
-    for m in &mut campaign.point_measurements {
-        m.measured_mm = rot.inverse() * (m.measured_mm - tr);
-    }
-    Ok(Pose::new(tr, rot))
 }
 
 /// The simulated line and the header of an instrument file up to the measured columns:

@@ -1,12 +1,15 @@
 //! Ingesting measurement files: read with `cpm-io` (which parses, nothing else), then register
 //! the tracker files among them (a frame per file, reading offsets per link shared by them: a
-//! fit) and check their rows against the robot, which needs the registration first. What may
-//! read a tracker file reads through here ([`read_data_file`], [`read_data_files`], ...); a
-//! file of another kind comes out as `cpm-io` read it.
+//! fit) and check their rows against the robot, which needs the registration first, and
+//! register each point file roughly ([`register_point_files`]: the frame that takes the
+//! nominal targets onto the measured points). What may read a tracker or point file reads
+//! through here ([`read_data_file`], [`read_data_files`], ...); a file of another kind comes
+//! out as `cpm-io` read it.
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use crate::geometry::Pose;
+use crate::calib::Campaign;
+use crate::geometry::{Pose, Vector3};
 use crate::io::campaign::{
     check_link_readings, condition_bound, exclude_poses, unreachable_why, widened, Unusable,
     CONSISTENCY_MM,
@@ -103,8 +106,67 @@ fn registered<E: From<InputError>>(
     registration: &RegistrationOptions,
 ) -> Result<DataFile, E> {
     let mut f = read?;
-    register_tracker_files(std::slice::from_mut(&mut f), robot, options, registration)?;
+    register_files(std::slice::from_mut(&mut f), robot, options, registration)?;
     Ok(f)
+}
+
+/// Registers the files as read: each point file roughly ([`register_point_files`]), the
+/// tracker files together ([`register_tracker_files`]).
+fn register_files(
+    files: &mut [DataFile],
+    robot: &Robot,
+    options: &ReadOptions,
+    registration: &RegistrationOptions,
+) -> Result<(), InputError> {
+    register_point_files(files, robot)?;
+    register_tracker_files(files, robot, options, registration)
+}
+
+/// Registers each point file among `files` not yet registered ([`DataFile::point_frame`]
+/// `None`) roughly: the rigid frame that best takes the robot's nominal targets at the
+/// commanded poses onto the measured points ([`rough_frame`](crate::calib::points::rough_frame)),
+/// applied to the points (so that the fit's `point_frame` of the session is a small
+/// correction) and recorded in `point_frame`. The error names the file when its points do
+/// not fix the frame.
+pub fn register_point_files(files: &mut [DataFile], robot: &Robot) -> Result<(), InputError> {
+    for f in files
+        .iter_mut()
+        .filter(|f| f.kind == FileKind::PointMeasurements && f.point_frame.is_none())
+    {
+        f.point_frame = Some(register_points(&f.file, robot, &mut f.campaign)?);
+    }
+    Ok(())
+}
+
+/// The rough registration of a point session: the frame that best takes the nominal targets
+/// at the commanded poses onto the measured points, applied to the points; returns it.
+fn register_points(file: &str, robot: &Robot, campaign: &mut Campaign) -> Result<Pose, InputError> {
+    let targets: Vec<Vector3<f64>> = robot
+        .description
+        .targets
+        .iter()
+        .map(|s| Vector3::from(s.platform_mm))
+        .collect();
+    let base: Vec<Vector3<f64>> = campaign
+        .point_measurements
+        .iter()
+        .map(|m| campaign.poses[m.pose].transform_point(&targets[m.target]))
+        .collect();
+    let measured: Vec<Vector3<f64>> = campaign
+        .point_measurements
+        .iter()
+        .map(|m| m.measured_mm)
+        .collect();
+    let Some((tr, rot)) = crate::calib::points::rough_frame(&base, &measured) else {
+        return Err(InputError::file(
+            file,
+            "the measured points do not fix the tracker's frame (fewer than three points, or all on a line): measure more poses",
+        ));
+    };
+    for m in &mut campaign.point_measurements {
+        m.measured_mm = rot.inverse() * (m.measured_mm - tr);
+    }
+    Ok(Pose::new(tr, rot))
 }
 
 /// A measurement file read for two robots with one pass over it
@@ -138,7 +200,7 @@ pub fn read_data_files(
     registration: &RegistrationOptions,
 ) -> Result<Vec<DataFile>, ReadError> {
     let mut files = crate::io::read_data_files(paths, robot, options)?;
-    register_tracker_files(&mut files, robot, options, registration)?;
+    register_files(&mut files, robot, options, registration)?;
     Ok(files)
 }
 
@@ -489,4 +551,83 @@ fn registration_note(f: &DataFile) -> String {
             String::new()
         }
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::PointMeasurement;
+    use crate::geometry::Rotation3;
+
+    /// cpm-io returns a point file as measured (in the tracker's frame, unregistered); the
+    /// ingest registers it: the frame found is the tracker's, the points come back to the
+    /// base frame.
+    #[test]
+    fn point_files_are_registered_on_the_fit_side() {
+        let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+        let text = std::fs::read_to_string(examples.join("hexapod_66.toml")).unwrap()
+            + "\n[[target]]\nname = \"a\"\nplatform_mm = [90.0, 10.0, 30.0]\n\
+               \n[[target]]\nname = \"b\"\nplatform_mm = [-50.0, 80.0, 25.0]\n\
+               \n[[target]]\nname = \"c\"\nplatform_mm = [-40.0, -85.0, 35.0]\n";
+        let robot = Robot::from_toml(&text, "robot.toml").unwrap();
+        let home = robot.table.home;
+        // The tracker's frame: 1.2 m away, turned 30 degrees about z.
+        let (t, r) = (
+            Vector3::new(1200.0, -300.0, 40.0),
+            Rotation3::from_euler_angles(0.0, 0.0, 30f64.to_radians()),
+        );
+        let mut campaign = Campaign::default();
+        let offsets = [[0.0, 0.0, 0.0], [20.0, -10.0, 5.0], [-15.0, 12.0, -8.0]];
+        for (j, o) in offsets.iter().enumerate() {
+            let pose = Pose::new(home.position_mm + Vector3::from(*o), home.rotation);
+            for (k, target) in robot.description.targets.iter().enumerate() {
+                let base = pose.transform_point(&Vector3::from(target.platform_mm));
+                campaign.point_measurements.push(PointMeasurement {
+                    pose: j,
+                    target: k,
+                    session: 0,
+                    measured_mm: r * base + t,
+                    time_s: None,
+                });
+            }
+            campaign.poses.push(pose);
+        }
+        let csv = crate::io::points::write_point_measurements(&campaign, &robot, "test");
+        let options = ReadOptions::default();
+        let parsed = crate::io::read_data(&csv, "points.csv", &robot, &options).unwrap();
+        assert_eq!(parsed.kind, FileKind::PointMeasurements);
+        assert!(parsed.point_frame.is_none());
+        let first = parsed.campaign.point_measurements[0].measured_mm;
+        assert!((first - campaign.point_measurements[0].measured_mm).norm() < 1e-9);
+        let f = read_data(&csv, "points.csv", &robot, &options, &Default::default()).unwrap();
+        let frame = f.point_frame.expect("registered");
+        assert!(
+            (frame.position_mm - t).norm() < 1e-6,
+            "{}",
+            frame.position_mm
+        );
+        assert!((frame.rotation.matrix() - r.matrix()).norm() < 1e-9);
+        for (m, truth) in f
+            .campaign
+            .point_measurements
+            .iter()
+            .zip(&campaign.point_measurements)
+        {
+            let base = campaign.poses[truth.pose].transform_point(&Vector3::from(
+                robot.description.targets[truth.target].platform_mm,
+            ));
+            assert!((m.measured_mm - base).norm() < 1e-6);
+        }
+        // Three points on a line do not fix a frame: the error names the file.
+        campaign.point_measurements.truncate(1);
+        campaign.poses.truncate(1);
+        let csv = crate::io::points::write_point_measurements(&campaign, &robot, "test");
+        assert!(crate::io::read_data(&csv, "one.csv", &robot, &options).is_ok());
+        let e = read_data(&csv, "one.csv", &robot, &options, &Default::default()).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("one.csv: the measured points do not fix"),
+            "{e}"
+        );
+    }
 }
