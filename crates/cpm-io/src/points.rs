@@ -514,12 +514,7 @@ fn check_point_units(
     campaign: &Campaign,
     lines: &[usize],
 ) -> Result<(), InputError> {
-    let targets: Vec<Vector3<f64>> = robot
-        .description
-        .targets
-        .iter()
-        .map(|s| Vector3::from(s.platform_mm))
-        .collect();
+    let targets = robot.target_positions_mm();
     let m = &campaign.point_measurements;
     let radius = |p: &[Vector3<f64>]| -> (f64, usize) {
         let n = p.len().max(1) as f64;

@@ -303,6 +303,15 @@ impl Robot {
         m
     }
 
+    /// The nominal positions of the platform's targets (`[[target]]`), platform frame, mm.
+    pub fn target_positions_mm(&self) -> Vec<cpm_geometry::Vector3<f64>> {
+        self.description
+            .targets
+            .iter()
+            .map(|s| cpm_geometry::Vector3::from(s.platform_mm))
+            .collect()
+    }
+
     /// Nominal sensor names, for messages.
     pub fn sensor_names(&self) -> String {
         if self.table.sensors.is_empty() {

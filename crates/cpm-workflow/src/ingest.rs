@@ -141,12 +141,7 @@ pub fn register_point_files(files: &mut [DataFile], robot: &Robot) -> Result<(),
 /// The rough registration of a point session: the frame that best takes the nominal targets
 /// at the commanded poses onto the measured points, applied to the points; returns it.
 fn register_points(file: &str, robot: &Robot, campaign: &mut Campaign) -> Result<Pose, InputError> {
-    let targets: Vec<Vector3<f64>> = robot
-        .description
-        .targets
-        .iter()
-        .map(|s| Vector3::from(s.platform_mm))
-        .collect();
+    let targets = robot.target_positions_mm();
     let base: Vec<Vector3<f64>> = campaign
         .point_measurements
         .iter()
