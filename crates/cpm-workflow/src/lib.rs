@@ -3,13 +3,15 @@
 //! commits its outputs and prints).
 //!
 //! - [`ingest`]: measurement files read with [`io`] (parsing only), then the tracker files
-//!   among them registered and checked ([`register_tracker_files`](ingest::register_tracker_files));
+//!   among them registered and checked ([`register_tracker_files`](ingest::register_tracker_files))
+//!   and each point file registered roughly ([`register_point_files`](ingest::register_point_files));
 //! - [`load`]: the robot, the measurement files, the effects; the model for a campaign;
 //!   committing a result directory;
 //! - [`fit`]: [`calibrate`](fit::calibrate) with [`CalibrateOptions`](fit::CalibrateOptions),
 //!   and the stages every fit shares (the read-back check of `calibrated.toml` among them);
 //! - [`memory`]: [`calibrate`](memory::calibrate) a campaign held in memory (the robot
-//!   as loaded, measurements already read), for the Python binding;
+//!   as loaded, measurements already read, or given as values: [`io::rows`]), for the Python
+//!   binding;
 //! - [`refine`]: [`refine`](refine::refine) with [`RefineOptions`](refine::RefineOptions);
 //! - [`validate`]: [`validate`](validate::validate) held-out data, and
 //!   [`check_compensation`](validate::check_compensation);
