@@ -546,7 +546,8 @@ def validate(robot: Optional[Union[Robot, PathLike]], reference: Union[Robot, Pa
         opts.update(options)
         text, _ = _run(_argv("validate", scratch, opts), scratch)
         files = _read_dir(d)
-    return ValidationResult(json.loads(text), files)
+        doc = scratch.named(json.loads(text))
+    return ValidationResult(doc, files)
 
 
 class CompensationResult:
@@ -666,7 +667,7 @@ def identifiability(robot: Union[Robot, PathLike], data: Any = None,
             options["plan"] = _poses_file(options["plan"], scratch)
         text, _ = _run(_argv("identifiability", scratch, dict(robot=r, data=m, json=True,
                                                                **options)), scratch)
-    return json.loads(text)
+        return scratch.named(json.loads(text))
 
 
 def export(robot: Union[Robot, PathLike], format: str = "linuxcnc", **options: Any) -> str:

@@ -184,6 +184,17 @@ class Scratch:
             self.array_sources.add(stands_for)
         return os.fspath(target)
 
+    def named(self, value: Any) -> Any:
+        """``value`` (parsed JSON) with every scratch file's path replaced by the name it
+        stands for (a command's report names its inputs)."""
+        if isinstance(value, str):
+            return self.names.get(value, value)
+        if isinstance(value, list):
+            return [self.named(v) for v in value]
+        if isinstance(value, dict):
+            return {k: self.named(v) for k, v in value.items()}
+        return value
+
     def fix(self, err: BaseException) -> BaseException:
         """Puts the names the scratch files stand for back into an error."""
         from .errors import InputError
