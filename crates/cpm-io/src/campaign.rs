@@ -21,7 +21,7 @@ use std::path::Path;
 use cpm_calib::campaign::{PointMeasurement, PoseMeasurement, TiltMeasurement};
 use cpm_calib::{Campaign, Reading};
 use cpm_geometry::{JointTable, Pose, Vector3};
-use cpm_kinematics::workspace::{reachable_at, Unreachable};
+use cpm_kinematics::workspace::{reachable_at, ReachableAt, Unreachable};
 
 use super::table::{field, num, shorten, show, FileKind, Header, Row, Table, SIMULATED_MARK};
 use super::{InputError, ReadError, Robot};
@@ -590,8 +590,17 @@ fn unreachable_error(file: &str, line: usize, label: &str, what: &str) -> InputE
 /// Why `pose` is not reachable (see [`check_reachable`]), `None` when it is: where it is and
 /// the reason, e.g. `(x 1 mm, ..., yaw 0.0000 deg) is not reachable: link 3 would be ...`.
 /// `bound` is what [`condition_bound`] gives.
-pub fn unreachable_why(table: &JointTable, pose: &Pose, (bound, c0): (f64, f64)) -> Option<String> {
-    let why = match reachable_at(table, pose, bound) {
+pub fn unreachable_why(table: &JointTable, pose: &Pose, bound: (f64, f64)) -> Option<String> {
+    why_unreachable(reachable_at(table, pose, bound.0), pose, bound)
+}
+
+/// What [`unreachable_why`] says of `pose` given what [`reachable_at`] found there.
+fn why_unreachable(
+    found: Result<(), Unreachable>,
+    pose: &Pose,
+    (bound, c0): (f64, f64),
+) -> Option<String> {
+    let why = match found {
         Ok(()) => return None,
         Err(Unreachable::LengthLimit {
             link,
@@ -1294,9 +1303,10 @@ pub(crate) fn robot_checks(
     let why: Vec<Option<String>> = match &bound {
         Some(Ok(b)) => {
             let table = widened(&robot.table, options.link_limit_margin_mm);
+            let reach = ReachableAt::new(&table);
             poses[..met]
                 .par_iter()
-                .map(|p| unreachable_why(&table, p, *b))
+                .map(|p| why_unreachable(reach.check(p, b.0), p, *b))
                 .collect()
         }
         _ => Vec::new(),
@@ -1739,7 +1749,7 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
                 None => registration = Some(r.clone()),
             }
         }
-        let c = f.campaign;
+        let mut c = f.campaign;
         let base = out.poses.len();
         // Each file is a session: its motion history starts afresh.
         if base > 0 && !c.poses.is_empty() {
@@ -1759,10 +1769,16 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
             }
         }
         out.poses.extend(c.poses.iter().copied());
-        out.readings.extend(c.readings.iter().map(|r| Reading {
-            pose: r.pose + base,
-            ..*r
-        }));
+        if out.readings.is_empty() && base == 0 {
+            // The first file's readings as they are (numbered from its first pose): moved,
+            // not copied (10^6 readings are 56 MB).
+            out.readings = std::mem::take(&mut c.readings);
+        } else {
+            out.readings.extend(c.readings.iter().map(|r| Reading {
+                pose: r.pose + base,
+                ..*r
+            }));
+        }
         let q0 = out.pose_measurements.len();
         out.unmeasured
             .extend(c.unmeasured.iter().map(|(q, a)| (q + q0, *a)));

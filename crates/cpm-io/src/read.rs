@@ -31,7 +31,12 @@ pub fn read_data_file(
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, ReadError> {
-    read_data_from(open(path)?, &path.display().to_string(), robot, options)
+    let file = path.display().to_string();
+    read_data_table(
+        Table::from_reader(open(path)?, &file)?.read_ahead(),
+        robot,
+        options,
+    )
 }
 
 /// Reads a measurement file of either kind (told from the header) from a reader, row by row:
@@ -42,7 +47,15 @@ pub fn read_data_from<R: Read>(
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, ReadError> {
-    let mut t = Table::from_reader(source, file)?;
+    read_data_table(Table::from_reader(source, file)?, robot, options)
+}
+
+/// [`read_data_from`] a table whose header is read.
+fn read_data_table<R: Read>(
+    mut t: Table<R>,
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Result<DataFile, ReadError> {
     let r = match t.kind() {
         Ok(FileKind::Readings) => read_readings_table(&mut t, robot, options),
         Ok(FileKind::PoseMeasurements) => read_pose_measurements_table(&mut t, robot, options),
@@ -53,7 +66,7 @@ pub fn read_data_from<R: Read>(
             read_tilt_measurements_table(&mut t, robot, options)
         }
         Ok(FileKind::Poses) => Err(InputError::line(
-            file,
+            &t.file,
             t.header_line,
             "this is a list of poses (no sensor readings and no link readings): measurements need `sensor` and `length_mm` columns, or `reading_1`.. columns with a measured pose",
         )),
@@ -85,11 +98,12 @@ pub fn read_data_file_for_two(
     options: &ReadOptions,
 ) -> Result<(DataFile, Option<Result<SecondReading, ReadError>>), ReadError> {
     let file = path.display().to_string();
-    let mut t = Table::from_reader(open(path)?, &file)?;
+    let t = Table::from_reader(open(path)?, &file)?;
     if !matches!(t.kind(), Ok(FileKind::Readings)) {
         drop(t);
         return Ok((read_data_file(path, first, options)?, None));
     }
+    let mut t = t.read_ahead();
     let (all, unusable) =
         read_readings_unexcluded(&mut t, first, options).map_err(|e| finish(&mut t, e))?;
     drop(t);

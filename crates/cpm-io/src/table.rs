@@ -78,6 +78,19 @@ pub struct Header {
 pub struct Table<R: Read> {
     /// The header.
     pub header: Header,
+    source: Source<R>,
+}
+
+/// Where a table's rows come from.
+enum Source<R: Read> {
+    /// Its lines, read and split here as they are asked for.
+    Here(Lines<R>),
+    /// A thread that reads and splits them ahead ([`Table::read_ahead`]).
+    Ahead(Ahead),
+}
+
+/// The lines of a table's reader, and what splitting them reuses from line to line.
+struct Lines<R: Read> {
     reader: BufReader<R>,
     buf: Vec<u8>,
     /// The unquoted bytes of the fields of the current line, and where each field ends in it.
@@ -86,6 +99,32 @@ pub struct Table<R: Read> {
     line: usize,
     io_error: Option<std::io::Error>,
 }
+
+/// Rows split by the reading thread, in order: `rows[..len]`, then how the reading ended
+/// when it did (after the rows): at the end of the file, or with the error of the next line
+/// (and the I/O error behind it).
+struct Batch {
+    rows: Vec<Row>,
+    len: usize,
+    end: Option<Result<(), (InputError, Option<std::io::Error>)>>,
+}
+
+/// The receiving end of a table read ahead by a thread: the batch being handed out (its
+/// next row), the batches to come, and the way back for the rows handed in for them (their
+/// strings reused).
+struct Ahead {
+    batch: Batch,
+    next: usize,
+    batches: std::sync::mpsc::Receiver<Batch>,
+    spent: std::sync::mpsc::Sender<Vec<Row>>,
+    io_error: Option<std::io::Error>,
+}
+
+/// Rows per batch of a table read ahead.
+const BATCH_ROWS: usize = 512;
+
+/// Batches a reading thread may be ahead of the rows asked for.
+const BATCHES_AHEAD: usize = 8;
 
 impl<R: Read> std::ops::Deref for Table<R> {
     type Target = Header;
@@ -113,12 +152,14 @@ impl<R: Read> Table<R> {
                 simulated_mark: false,
                 index: HashMap::new(),
             },
-            reader: BufReader::with_capacity(64 * 1024, source),
-            buf: Vec::new(),
-            unquoted: Vec::new(),
-            ends: Vec::new(),
-            line: 0,
-            io_error: None,
+            source: Source::Here(Lines {
+                reader: BufReader::with_capacity(64 * 1024, source),
+                buf: Vec::new(),
+                unquoted: Vec::new(),
+                ends: Vec::new(),
+                line: 0,
+                io_error: None,
+            }),
         };
         let Some(first) = t.next_record()? else {
             return Err(InputError::file(
@@ -180,11 +221,148 @@ impl<R: Read> Table<R> {
     /// The I/O error that stopped the reading, if one did (the returned [`InputError`] then
     /// only says that the file could not be read there).
     pub fn take_io_error(&mut self) -> Option<std::io::Error> {
-        self.io_error.take()
+        match &mut self.source {
+            Source::Here(lines) => lines.io_error.take(),
+            Source::Ahead(ahead) => ahead.io_error.take(),
+        }
     }
 
+    /// The next line that is neither a comment nor blank, split into trimmed UTF-8 fields.
+    fn next_record(&mut self) -> Result<Option<Row>, InputError> {
+        let mut row = Row {
+            line: 0,
+            fields: Vec::new(),
+        };
+        Ok(self.next_record_into(&mut row)?.then_some(row))
+    }
+
+    /// [`next_record`](Self::next_record) into a reused row: false at the end.
+    fn next_record_into(&mut self, row: &mut Row) -> Result<bool, InputError> {
+        match &mut self.source {
+            Source::Here(lines) => lines.next_record_into(&mut self.header, row),
+            Source::Ahead(ahead) => ahead.next_record_into(&self.header, row),
+        }
+    }
+}
+
+impl<R: Read + Send + 'static> Table<R> {
+    /// The table with its remaining lines read and split into rows by a thread of its own,
+    /// a few batches ahead of the rows asked for, while the caller works on the rows it has
+    /// (the same rows, errors and line numbers as read here: the reading of a large file
+    /// is then about the caller's work alone). The reading stops at the first error, as the
+    /// callers do: after it the table has no more rows. The table as it is when no thread
+    /// can be started.
+    pub fn read_ahead(self) -> Self {
+        let Source::Here(lines) = self.source else {
+            return self;
+        };
+        let (give, take) = std::sync::mpsc::channel::<Lines<R>>();
+        let (batches_in, batches) = std::sync::mpsc::sync_channel(BATCHES_AHEAD);
+        let (spent, spent_out) = std::sync::mpsc::channel::<Vec<Row>>();
+        let mut header = self.header.clone();
+        let started = std::thread::Builder::new()
+            .name("cpm-csv".to_string())
+            .spawn(move || {
+                let Ok(mut lines) = take.recv() else {
+                    return;
+                };
+                let mut rows = Vec::new();
+                loop {
+                    let (mut len, mut end) = (0, None);
+                    while len < BATCH_ROWS {
+                        if rows.len() == len {
+                            rows.push(Row {
+                                line: 0,
+                                fields: Vec::new(),
+                            });
+                        }
+                        match lines.next_record_into(&mut header, &mut rows[len]) {
+                            Ok(true) => len += 1,
+                            Ok(false) => end = Some(Ok(())),
+                            Err(e) => end = Some(Err((e, lines.io_error.take()))),
+                        }
+                        if end.is_some() {
+                            break;
+                        }
+                    }
+                    let last = end.is_some();
+                    // Stops when the table is gone (the caller stopped reading).
+                    if batches_in.send(Batch { rows, len, end }).is_err() || last {
+                        return;
+                    }
+                    rows = spent_out.try_recv().unwrap_or_default();
+                }
+            });
+        if started.is_err() {
+            return Table {
+                header: self.header,
+                source: Source::Here(lines),
+            };
+        }
+        match give.send(lines) {
+            Ok(()) => Table {
+                header: self.header,
+                source: Source::Ahead(Ahead {
+                    batch: Batch {
+                        rows: Vec::new(),
+                        len: 0,
+                        end: None,
+                    },
+                    next: 0,
+                    batches,
+                    spent,
+                    io_error: None,
+                }),
+            },
+            Err(std::sync::mpsc::SendError(lines)) => Table {
+                header: self.header,
+                source: Source::Here(lines),
+            },
+        }
+    }
+}
+
+impl Ahead {
+    /// The next row the reading thread split, into `row` (whose strings go back to it for
+    /// the rows to come): false at the end; the error where the reading stopped, once (then
+    /// the end).
+    fn next_record_into(&mut self, header: &Header, row: &mut Row) -> Result<bool, InputError> {
+        loop {
+            if self.next < self.batch.len {
+                std::mem::swap(row, &mut self.batch.rows[self.next]);
+                self.next += 1;
+                return Ok(true);
+            }
+            match self.batch.end.replace(Ok(())) {
+                Some(Ok(())) => return Ok(false),
+                Some(Err((e, io))) => {
+                    self.io_error = io;
+                    return Err(e);
+                }
+                None => self.batch.end = None,
+            }
+            // The thread may be done: the rows are then dropped.
+            let _ = self.spent.send(std::mem::take(&mut self.batch.rows));
+            match self.batches.recv() {
+                Ok(batch) => {
+                    self.batch = batch;
+                    self.next = 0;
+                }
+                Err(_) => {
+                    // The thread stopped without saying how the reading ended: a panic.
+                    return Err(InputError::file(
+                        &header.file,
+                        "cannot read: the thread reading the file stopped",
+                    ));
+                }
+            }
+        }
+    }
+}
+
+impl<R: Read> Lines<R> {
     /// Reads the next physical line into `buf` (without its line ending); false at the end.
-    fn read_line(&mut self) -> Result<bool, InputError> {
+    fn read_line(&mut self, header: &mut Header) -> Result<bool, InputError> {
         self.buf.clear();
         // At most one byte past the longest line: enough to tell that it is too long, without
         // reading all of a file that is not CSV.
@@ -193,11 +371,7 @@ impl<R: Read> Table<R> {
             .take(limit)
             .read_until(b'\n', &mut self.buf)
         {
-            let err = InputError::line(
-                &self.header.file,
-                self.line + 1,
-                format!("cannot read: {e}"),
-            );
+            let err = InputError::line(&header.file, self.line + 1, format!("cannot read: {e}"));
             self.io_error = Some(e);
             return Err(err);
         }
@@ -206,7 +380,7 @@ impl<R: Read> Table<R> {
         }
         if self.buf.len() > MAX_LINE_BYTES {
             return Err(InputError::line(
-                &self.header.file,
+                &header.file,
                 self.line + 1,
                 format!(
                     "the line is longer than {MAX_LINE_BYTES} bytes: this is not a CSV table of cpm"
@@ -221,7 +395,7 @@ impl<R: Read> Table<R> {
             if self.buf.starts_with(b"\xEF\xBB\xBF") {
                 self.buf.drain(..3);
             }
-            self.header.simulated_mark = self
+            header.simulated_mark = self
                 .buf
                 .trim_ascii_start()
                 .starts_with(SIMULATED_MARK.as_bytes());
@@ -229,19 +403,11 @@ impl<R: Read> Table<R> {
         Ok(true)
     }
 
-    /// The next line that is neither a comment nor blank, split into trimmed UTF-8 fields.
-    fn next_record(&mut self) -> Result<Option<Row>, InputError> {
-        let mut row = Row {
-            line: 0,
-            fields: Vec::new(),
-        };
-        Ok(self.next_record_into(&mut row)?.then_some(row))
-    }
-
-    /// [`next_record`](Self::next_record) into a reused row: false at the end.
-    fn next_record_into(&mut self, row: &mut Row) -> Result<bool, InputError> {
+    /// The next line that is neither a comment nor blank, split into trimmed UTF-8 fields
+    /// (named after `header`'s columns in errors), into a reused row: false at the end.
+    fn next_record_into(&mut self, header: &mut Header, row: &mut Row) -> Result<bool, InputError> {
         loop {
-            if !self.read_line()? {
+            if !self.read_line(header)? {
                 return Ok(false);
             }
             if self.buf.first() == Some(&b'#') || self.buf.trim_ascii().is_empty() {
@@ -252,9 +418,9 @@ impl<R: Read> Table<R> {
                 return Ok(true);
             }
             split_fields(&self.buf, &mut self.unquoted, &mut self.ends).map_err(|(col, m)| {
-                match self.header.headers.get(col - 1) {
-                    Some(name) => InputError::field(&self.header.file, line, name, m),
-                    None => InputError::line(&self.header.file, line, format!("column {col}: {m}")),
+                match header.headers.get(col - 1) {
+                    Some(name) => InputError::field(&header.file, line, name, m),
+                    None => InputError::line(&header.file, line, format!("column {col}: {m}")),
                 }
             })?;
             row.line = line;
@@ -263,9 +429,9 @@ impl<R: Read> Table<R> {
             for (k, &end) in self.ends.iter().enumerate() {
                 let Ok(text) = std::str::from_utf8(&self.unquoted[start..end]) else {
                     let what = "not UTF-8 text (save the file as UTF-8)";
-                    return Err(match self.header.headers.get(k) {
-                        Some(name) => InputError::field(&self.header.file, line, name, what),
-                        None => InputError::line(&self.header.file, line, what),
+                    return Err(match header.headers.get(k) {
+                        Some(name) => InputError::field(&header.file, line, name, what),
+                        None => InputError::line(&header.file, line, what),
                     });
                 };
                 match row.fields.get_mut(k) {
@@ -280,9 +446,7 @@ impl<R: Read> Table<R> {
             return Ok(true);
         }
     }
-}
 
-impl<R: Read> Table<R> {
     /// The fields of the current line into `row` when the line is the common case, UTF-8
     /// text without a quoted field: split at its commas in one pass, straight from the line's
     /// bytes. False (nothing done) otherwise: the general splitting reads it, and says what is
@@ -681,6 +845,96 @@ mod tests {
             v.push(r);
         }
         Ok((t.header.clone(), v))
+    }
+
+    /// What a table gives, row after row, until the end or the first error (and the I/O
+    /// error behind it).
+    fn all_rows<R: Read>(mut t: Table<R>) -> (Vec<(usize, Vec<String>)>, String, bool) {
+        let mut rows = Vec::new();
+        let mut row = Row {
+            line: 0,
+            fields: Vec::new(),
+        };
+        let end = loop {
+            match t.next_row_into(&mut row) {
+                Ok(true) => rows.push((row.line, row.fields.clone())),
+                Ok(false) => break "end".to_string(),
+                Err(e) => break e.to_string(),
+            }
+        };
+        (rows, end, t.take_io_error().is_some())
+    }
+
+    /// A reader that fails after `left` bytes.
+    struct Failing {
+        text: std::io::Cursor<Vec<u8>>,
+        left: usize,
+    }
+
+    impl Read for Failing {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            if self.left == 0 {
+                return Err(std::io::Error::other("disk on fire"));
+            }
+            let n = buf.len().min(self.left);
+            let n = self.text.read(&mut buf[..n])?;
+            self.left -= n;
+            Ok(n)
+        }
+    }
+
+    /// A table read ahead by a thread gives the rows, line numbers and first error (a bad
+    /// row, a line too long, an I/O error) of one read here, over many batches.
+    #[test]
+    fn read_ahead_changes_nothing() {
+        let mut text = b"# simulated by cpm\na,b,c\n".to_vec();
+        for k in 0..3 * BATCH_ROWS {
+            let line = match k % 7 {
+                0 => format!(" {k} ,\"x,{k}\", 2\n"),
+                3 => "# a comment\n\n".to_string(),
+                _ => format!("{k},{},{}\r\n", k * 2, k % 5),
+            };
+            text.extend(line.bytes());
+        }
+        let mut cases = vec![text.clone()];
+        for bad in [&b"1,2\n"[..], b"1,\"2,3\n", b"1,\xff,3\n"] {
+            for at in [40, BATCH_ROWS * 20 + 7, text.len()] {
+                let at = text[..at].iter().rposition(|b| *b == b'\n').unwrap() + 1;
+                let mut t = text[..at].to_vec();
+                t.extend_from_slice(bad);
+                t.extend_from_slice(&text[at..]);
+                cases.push(t);
+            }
+        }
+        let mut long = text.clone();
+        long.extend(std::iter::repeat_n(b'7', MAX_LINE_BYTES + 10));
+        cases.push(long);
+        let mut errors = 0;
+        for case in cases {
+            let here = Table::from_reader(std::io::Cursor::new(case.clone()), "t.csv").unwrap();
+            let ahead = Table::from_reader(std::io::Cursor::new(case), "t.csv")
+                .unwrap()
+                .read_ahead();
+            assert!(matches!(ahead.source, Source::Ahead(_)));
+            let here = all_rows(here);
+            errors += usize::from(here.1.starts_with("t.csv:"));
+            assert_eq!(all_rows(ahead), here);
+        }
+        assert_eq!(errors, 10);
+        for left in [100, 5000, text.len() / 2] {
+            let failing = || Failing {
+                text: std::io::Cursor::new(text.clone()),
+                left,
+            };
+            let here = all_rows(Table::from_reader(failing(), "t.csv").unwrap());
+            let ahead = all_rows(Table::from_reader(failing(), "t.csv").unwrap().read_ahead());
+            assert!(
+                here.2 && here.1.contains("cannot read: disk on fire"),
+                "{}",
+                here.1
+            );
+            assert_eq!(ahead, here);
+        }
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! Forward kinematics: link lengths to pose by Newton-Raphson with the analytic J1.
 use cpm_geometry::{JointTable, Pose};
-use nalgebra::{DMatrix, Matrix6, Vector3, Vector6};
+use nalgebra::{DMatrix, Matrix6, Vector3, Vector6, LU, U6};
 
 use crate::linalg::SvdError;
 use crate::KinematicsError;
@@ -109,10 +109,67 @@ fn singular(iteration: usize, jac: &Mat6, links: usize) -> KinematicsError {
 /// Solves `a x = b` by nalgebra's fixed-size LU with partial pivoting (allocation-free).
 /// `None` when a pivot is zero or anything is not finite.
 fn solve6(a: &Mat6, b: &[f64; 6]) -> Option<Vector6<f64>> {
-    let x = Matrix6::from_fn(|i, j| a[i][j])
-        .lu()
-        .solve(&Vector6::from(*b))?;
+    solve_lu(&Matrix6::from_fn(|i, j| a[i][j]).lu(), b)
+}
+
+/// [`solve6`] with the LU factors of `a`.
+fn solve_lu(lu: &LU<f64, U6, U6>, b: &[f64; 6]) -> Option<Vector6<f64>> {
+    let x = lu.solve(&Vector6::from(*b))?;
     x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// Forward kinematics' first step from one start pose, computed once for many solves from it
+/// ([`forward_from`]; the reachability of every pose of a file starts at home): six links'
+/// lengths at the start, J1 there and its LU factors, and whether J1's condition number there
+/// is surely acceptable.
+#[derive(Debug, Clone)]
+pub struct ForwardStart {
+    pose: Pose,
+    options: ForwardOptions,
+    lengths_mm: [f64; 6],
+    jac: Mat6,
+    lu: LU<f64, U6, U6>,
+    surely_acceptable: bool,
+}
+
+impl ForwardStart {
+    /// The first step of [`forward`] from `start` on `table` with `options`; `None` unless
+    /// the table has six links.
+    pub fn new(table: &JointTable, start: &Pose, options: &ForwardOptions) -> Option<Self> {
+        if table.num_links() != 6 {
+            return None;
+        }
+        let (mut jac, mut rhs) = ([[0.0; 6]; 6], [0.0; 6]);
+        // Against lengths of zero the residuals are the lengths themselves (negated: exact).
+        residual_and_jacobian(table, start, &[0.0; 6], &mut jac, &mut rhs);
+        let m = Matrix6::from_fn(|i, j| jac[i][j]);
+        Some(ForwardStart {
+            pose: *start,
+            options: *options,
+            lengths_mm: rhs.map(|r| -r),
+            jac,
+            lu: m.lu(),
+            surely_acceptable: condition_at_most(&m, options.max_condition),
+        })
+    }
+
+    /// What [`residual_and_jacobian`] gives at the start for `lengths_mm`.
+    fn residual_and_jacobian(&self, lengths_mm: &[f64], jac: &mut Mat6, rhs: &mut [f64; 6]) -> f64 {
+        *jac = self.jac;
+        let mut worst = 0.0f64;
+        let mut finite = true;
+        for (i, (at_start, target)) in self.lengths_mm.iter().zip(lengths_mm).enumerate() {
+            let res = at_start - target;
+            finite &= res.is_finite();
+            worst = worst.max(res.abs());
+            rhs[i] = -res;
+        }
+        if finite {
+            worst
+        } else {
+            f64::NAN
+        }
+    }
 }
 
 /// Residual `l(x) - L` and J1 for six links (or the normal equations `J1^T J1`, `-J1^T r`
@@ -179,6 +236,27 @@ pub fn forward(
     start: &Pose,
     options: &ForwardOptions,
 ) -> Result<(Pose, ForwardReport), KinematicsError> {
+    newton(table, lengths_mm, start, options, None)
+}
+
+/// [`forward`] from the pose and with the options `start` was made with, on the table it was
+/// made for: the same result, the first step from what `start` holds.
+pub fn forward_from(
+    table: &JointTable,
+    lengths_mm: &[f64],
+    start: &ForwardStart,
+) -> Result<(Pose, ForwardReport), KinematicsError> {
+    newton(table, lengths_mm, &start.pose, &start.options, Some(start))
+}
+
+/// [`forward`], the first step from `first` when given (six links).
+fn newton(
+    table: &JointTable,
+    lengths_mm: &[f64],
+    start: &Pose,
+    options: &ForwardOptions,
+    first: Option<&ForwardStart>,
+) -> Result<(Pose, ForwardReport), KinematicsError> {
     let n = table.num_links();
     if n < 6 || lengths_mm.len() != n {
         return Err(KinematicsError::Dimension {
@@ -204,7 +282,11 @@ pub fn forward(
     let mut rhs = [0.0; 6];
     let mut worst = f64::NAN;
     for it in 0..=options.max_iterations {
-        worst = residual_and_jacobian(table, &pose, lengths_mm, &mut jac, &mut rhs);
+        let first = first.filter(|_| it == 0 && n == 6);
+        worst = match first {
+            Some(f) => f.residual_and_jacobian(lengths_mm, &mut jac, &mut rhs),
+            None => residual_and_jacobian(table, &pose, lengths_mm, &mut jac, &mut rhs),
+        };
         if worst <= options.tolerance_mm {
             return Ok((
                 pose,
@@ -217,7 +299,11 @@ pub fn forward(
         if it == options.max_iterations {
             break;
         }
-        let Some(step) = solve6(&jac, &rhs) else {
+        let step = match first {
+            Some(f) => solve_lu(&f.lu, &rhs),
+            None => solve6(&jac, &rhs),
+        };
+        let Some(step) = step else {
             return Err(singular(it, &jac, n));
         };
         // Cheap singularity guard: a huge step from a small residual means J1 is near singular.
@@ -229,6 +315,9 @@ pub fn forward(
         // The condition number only when an upper bound of it (cheap) could exceed the limit:
         // the same decision, without an SVD at every long step.
         let surely_acceptable = || {
+            if let Some(f) = first {
+                return f.surely_acceptable;
+            }
             let m = Matrix6::from_fn(|i, j| jac[i][j]);
             if n == 6 {
                 condition_at_most(&m, options.max_condition)

@@ -29,8 +29,9 @@
 use cpm_geometry::{JointTable, Pose};
 use nalgebra::{Matrix6, Vector6};
 
+use crate::fk::{forward_from, ForwardStart};
 use crate::linalg::SvdError;
-use crate::{forward, inverse_lengths, j1, ForwardOptions};
+use crate::{forward, inverse_lengths, j1, ForwardOptions, ForwardReport, KinematicsError};
 
 /// Why a pose is not reachable (see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -185,6 +186,40 @@ pub fn reachable_at(
     pose: &Pose,
     max_condition: f64,
 ) -> Result<(), Unreachable> {
+    judge(table, None, pose, max_condition)
+}
+
+/// [`reachable_at`] for many poses of one table: forward kinematics' first step from home
+/// (J1 there and its LU factors, [`ForwardStart`]) made once, not at every pose; the same
+/// results.
+#[derive(Debug, Clone)]
+pub struct ReachableAt<'t> {
+    table: &'t JointTable,
+    home: Option<ForwardStart>,
+}
+
+impl<'t> ReachableAt<'t> {
+    /// For the poses of `table`.
+    pub fn new(table: &'t JointTable) -> Self {
+        ReachableAt {
+            table,
+            home: ForwardStart::new(table, &table.home, &ForwardOptions::default()),
+        }
+    }
+
+    /// [`reachable_at`] of `pose` on the table.
+    pub fn check(&self, pose: &Pose, max_condition: f64) -> Result<(), Unreachable> {
+        judge(self.table, self.home.as_ref(), pose, max_condition)
+    }
+}
+
+/// [`reachable_at`], forward kinematics from home started with `home` when given.
+fn judge(
+    table: &JointTable,
+    home: Option<&ForwardStart>,
+    pose: &Pose,
+    max_condition: f64,
+) -> Result<(), Unreachable> {
     if table.num_links() < 6 || !pose.is_finite() {
         return Err(Unreachable::Invalid);
     }
@@ -209,8 +244,8 @@ pub fn reachable_at(
         .iter()
         .map(|l| l.platform_mm.norm())
         .fold(1.0f64, f64::max);
-    let distance = |start: &Pose| -> f64 {
-        match forward(table, &lengths, start, &ForwardOptions::default()) {
+    let distance = |solved: Result<(Pose, ForwardReport), KinematicsError>| -> f64 {
+        match solved {
             Ok((p, _)) => {
                 let d = pose.difference(&p);
                 let dt = Vector6::new(d[0], d[1], d[2], 0.0, 0.0, 0.0).norm();
@@ -220,7 +255,10 @@ pub fn reachable_at(
             Err(_) => f64::INFINITY,
         }
     };
-    let from_home_mm = distance(&table.home);
+    let from_home_mm = distance(match home {
+        Some(h) => forward_from(table, &lengths, h),
+        None => forward(table, &lengths, &table.home, &ForwardOptions::default()),
+    });
     if from_home_mm <= RETURN_TOLERANCE_MM {
         return Ok(());
     }
@@ -230,7 +268,8 @@ pub fn reachable_at(
             return Err(Unreachable::AssemblyModeChange { at: 1.0 });
         }
     }
-    let from_near_mm = distance(&pose.perturbed(&Vector6::from(NEAR_START)));
+    let near = pose.perturbed(&Vector6::from(NEAR_START));
+    let from_near_mm = distance(forward(table, &lengths, &near, &ForwardOptions::default()));
     if from_near_mm <= RETURN_TOLERANCE_MM {
         return Ok(());
     }

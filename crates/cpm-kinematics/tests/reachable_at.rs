@@ -79,3 +79,53 @@ fn another_assembly_mode_is_refused() {
         Err(Unreachable::AssemblyModeChange { .. })
     ));
 }
+
+/// `ReachableAt` (forward kinematics' first step from home made once) gives what
+/// `reachable_at` gives, to the bit, on poses of every kind (reachable, outside the link
+/// limits, near singular, in another assembly mode, in metres) of three tables; and
+/// `forward_from` what `forward` gives from the same start, with few iterations too.
+#[test]
+fn the_first_step_made_once_changes_nothing() {
+    use cpm_geometry::InstallationErrors;
+    use cpm_kinematics::{forward_from, ForwardStart, ReachableAt};
+    let cube = JointTable::paper_cubic();
+    let shifted = InstallationErrors::paper_table2().apply(&cube).unwrap();
+    let mut rng = StdRng::seed_from_u64(34);
+    let mut kinds = std::collections::BTreeSet::new();
+    for t in [cube, shifted, JointTable::hexapod_66()] {
+        let reach = ReachableAt::new(&t);
+        let h = t.home.position_mm;
+        for k in 0..6000 {
+            let mut u = || rng.random_range(-1.0..1.0);
+            let (mm, deg) = [(5.0, 2.0), (60.0, 15.0), (250.0, 70.0)][k % 3];
+            let mut p = Pose::from_xyz_rpy_deg(
+                [h.x + mm * u(), h.y + mm * u(), h.z + mm * u()],
+                [deg * u(), deg * u(), deg * u()],
+            );
+            if k % 50 == 0 {
+                // Folded through the base plane, or in metres.
+                p = Pose::from_xyz_rpy(1e-3 * p.position_mm.x, 0.0, 0.41, 0.0, 0.0, 0.0);
+            }
+            let bound = [1e4, 50.0][k % 2];
+            let (once, each) = (reach.check(&p, bound), reachable_at(&t, &p, bound));
+            assert_eq!(format!("{once:?}"), format!("{each:?}"), "{p:?}");
+            kinds.insert(format!("{each:?}").chars().take(8).collect::<String>());
+            let mut lengths = inverse_lengths(&t, &p);
+            lengths[k % 6] += 1e-3 * u();
+            for iterations in [0, 1, 3, 50] {
+                let options = ForwardOptions {
+                    max_iterations: iterations,
+                    ..ForwardOptions::default()
+                };
+                let start = ForwardStart::new(&t, &t.home, &options).unwrap();
+                assert_eq!(
+                    format!("{:?}", forward_from(&t, &lengths, &start)),
+                    format!("{:?}", forward(&t, &lengths, &t.home, &options)),
+                    "{p:?} {iterations}"
+                );
+            }
+        }
+    }
+    // Accepted, and refused for the link limits, the condition number, the assembly mode.
+    assert_eq!(kinds.len(), 4, "{kinds:?}");
+}
