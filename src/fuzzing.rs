@@ -149,7 +149,7 @@ pub fn calibrate(data: &[u8]) {
     identify.lm.max_iterations = 50;
     let inputs = Inputs {
         model: robot.model(&[]),
-        merged: io::merge(vec![file], robot),
+        merged: io::merge(vec![file], robot).into(),
         identify,
         provenance: Provenance {
             robot: robot.file.clone(),

@@ -22,6 +22,38 @@ pub fn write_synced(path: &Path, contents: &[u8]) -> std::io::Result<()> {
     f.sync_all()
 }
 
+/// Writes staged `contents` to `path` through `wrap` (which sees every byte, e.g. to count
+/// and fingerprint them) and syncs it to disk.
+pub fn write_contents_synced(
+    path: &Path,
+    contents: &Contents,
+    wrap: &mut dyn FnMut(&[u8]),
+) -> std::io::Result<()> {
+    /// A buffered file that shows every byte written to `seen`.
+    struct Seen<'a> {
+        file: std::io::BufWriter<std::fs::File>,
+        seen: &'a mut dyn FnMut(&[u8]),
+    }
+    impl Write for Seen<'_> {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let n = self.file.write(buf)?;
+            (self.seen)(&buf[..n]);
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            self.file.flush()
+        }
+    }
+    let file = std::fs::File::create(path)?;
+    let mut out = Seen {
+        file: std::io::BufWriter::with_capacity(1 << 20, file),
+        seen: wrap,
+    };
+    contents.write_to(&mut out)?;
+    let file = out.file.into_inner().map_err(|e| e.into_error())?;
+    file.sync_all()
+}
+
 /// Writes `contents` to `path` atomically (temporary file in the same folder, then rename).
 ///
 /// This low-level helper does not check what `path` is (the `cpm` command checks its outputs
@@ -56,7 +88,50 @@ fn refuse_directory(path: &Path) -> std::io::Result<()> {
 /// `.NAME.tmpPID` files beside intact earlier results.
 #[derive(Debug, Default)]
 pub struct OutputSet {
-    files: Vec<(PathBuf, Vec<u8>)>,
+    files: Vec<(PathBuf, Contents)>,
+}
+
+/// A writer of a staged file's contents, run when the file is written (or its bytes asked
+/// for): a large file (residuals.csv of 10^6 readings) is never held in memory as a whole.
+pub type Producer = Box<dyn Fn(&mut dyn Write) -> std::io::Result<()> + Send + Sync>;
+
+/// What a staged file holds: its bytes, or what writes them.
+pub enum Contents {
+    /// The bytes.
+    Bytes(Vec<u8>),
+    /// Written when the file is (the same bytes every time).
+    Streamed(Producer),
+}
+
+impl std::fmt::Debug for Contents {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Contents::Bytes(b) => write!(f, "Bytes({} bytes)", b.len()),
+            Contents::Streamed(_) => f.write_str("Streamed"),
+        }
+    }
+}
+
+impl Contents {
+    /// Writes the contents to `out`.
+    pub fn write_to(&self, out: &mut dyn Write) -> std::io::Result<()> {
+        match self {
+            Contents::Bytes(b) => out.write_all(b),
+            Contents::Streamed(produce) => produce(out),
+        }
+    }
+
+    /// The bytes (made now for streamed contents).
+    pub fn bytes(&self) -> std::borrow::Cow<'_, [u8]> {
+        match self {
+            Contents::Bytes(b) => std::borrow::Cow::Borrowed(b),
+            Contents::Streamed(_) => {
+                let mut out = Vec::new();
+                self.write_to(&mut out).expect("writing to memory");
+                std::borrow::Cow::Owned(out)
+            }
+        }
+    }
 }
 
 impl OutputSet {
@@ -67,20 +142,38 @@ impl OutputSet {
 
     /// Stages a file.
     pub fn add(&mut self, path: impl Into<PathBuf>, contents: impl Into<Vec<u8>>) {
-        self.files.push((path.into(), contents.into()));
+        self.files
+            .push((path.into(), Contents::Bytes(contents.into())));
     }
 
-    /// The staged contents of `path`, if it is staged.
+    /// Stages a file whose contents `produce` writes when the file is written.
+    pub fn add_streamed(&mut self, path: impl Into<PathBuf>, produce: Producer) {
+        self.files.push((path.into(), Contents::Streamed(produce)));
+    }
+
+    /// The staged bytes of `path`, if it is staged with its bytes (not streamed: see
+    /// [`bytes`](Self::bytes)).
     pub fn contents(&self, path: &Path) -> Option<&[u8]> {
         self.files
             .iter()
             .find(|(p, _)| p == path)
-            .map(|(_, c)| c.as_slice())
+            .and_then(|(_, c)| match c {
+                Contents::Bytes(b) => Some(b.as_slice()),
+                Contents::Streamed(_) => None,
+            })
+    }
+
+    /// The contents of `path`, if it is staged (streamed contents made now).
+    pub fn bytes(&self, path: &Path) -> Option<std::borrow::Cow<'_, [u8]>> {
+        self.files
+            .iter()
+            .find(|(p, _)| p == path)
+            .map(|(_, c)| c.bytes())
     }
 
     /// The staged files, as (path, contents), for a writer of its own (the `cpm` command's
     /// result directories).
-    pub fn into_files(self) -> Vec<(PathBuf, Vec<u8>)> {
+    pub fn into_files(self) -> Vec<(PathBuf, Contents)> {
         self.files
     }
 
@@ -122,7 +215,7 @@ impl OutputSet {
                 }
                 let tmp = sibling(path, "tmp");
                 staged.push((path.clone(), tmp.clone()));
-                write_synced(&tmp, contents)
+                write_contents_synced(&tmp, contents, &mut |_| {})
             })();
             if let Err(e) = result {
                 cleanup(&staged, &created_dirs);
@@ -235,6 +328,53 @@ mod tests {
         assert!(e.to_string().contains("is a directory"), "{e}");
         assert_eq!(listing(&d), ["a.txt", "b.txt"]);
         assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "old a");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    /// A streamed file is written as its producer writes it, and its bytes are the same
+    /// when asked for; only staged bytes are `contents`.
+    #[test]
+    fn a_streamed_file_is_written_as_produced() {
+        let d = scratch("streamed");
+        let mut set = OutputSet::new();
+        set.add(d.join("a.txt"), "bytes");
+        set.add_streamed(
+            d.join("big.csv"),
+            Box::new(|out| {
+                for k in 0..10_000 {
+                    writeln!(out, "{k},{}", k * k)?;
+                }
+                Ok(())
+            }),
+        );
+        let expected: String = (0..10_000).map(|k| format!("{k},{}\n", k * k)).collect();
+        assert!(set.contents(&d.join("big.csv")).is_none());
+        assert_eq!(set.contents(&d.join("a.txt")), Some(&b"bytes"[..]));
+        assert_eq!(
+            set.bytes(&d.join("big.csv")).as_deref(),
+            Some(expected.as_bytes())
+        );
+        let mut seen = 0usize;
+        let files = set.into_files();
+        write_contents_synced(&d.join("copy.csv"), &files[1].1, &mut |b| seen += b.len()).unwrap();
+        assert_eq!(seen, expected.len());
+        let mut set = OutputSet::new();
+        for (p, c) in files {
+            match c {
+                Contents::Bytes(b) => set.add(p, b),
+                Contents::Streamed(f) => set.add_streamed(p, f),
+            }
+        }
+        set.commit().unwrap();
+        assert_eq!(
+            std::fs::read_to_string(d.join("big.csv")).unwrap(),
+            expected
+        );
+        assert_eq!(
+            std::fs::read_to_string(d.join("copy.csv")).unwrap(),
+            expected
+        );
+        assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "bytes");
         let _ = std::fs::remove_dir_all(&d);
     }
 }

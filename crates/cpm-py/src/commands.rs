@@ -92,7 +92,7 @@ struct Fit {
 pub struct Origins {
     count: usize,
     robot: cpm_io::Robot,
-    merged: cpm_io::Merged,
+    merged: std::sync::Arc<cpm_io::Merged>,
 }
 
 #[pymethods]
@@ -129,7 +129,7 @@ fn rename(inputs: &mut cal_cli::Inputs, names: &HashMap<String, String>) {
     name(&mut inputs.provenance.robot);
     name(&mut inputs.robot.file);
     inputs.provenance.data.iter_mut().for_each(name);
-    let m = &mut inputs.merged;
+    let m = std::sync::Arc::make_mut(&mut inputs.merged);
     m.pose_origin.iter_mut().for_each(|o| name(&mut o.0));
     for o in m.reading_origin.iter_mut() {
         if let Some(n) = names.get(&*o.0) {
@@ -188,7 +188,7 @@ pub fn calibrate<'py>(
             .paths()
             .filter_map(|p| {
                 let name = p.strip_prefix(dir).unwrap_or(p).display().to_string();
-                fitted.set.contents(p).map(|b| (name, b.to_vec()))
+                fitted.set.bytes(p).map(|b| (name, b.into_owned()))
             })
             .collect();
         // Interrupted (the caller raised KeyboardInterrupt and left): write nothing.
@@ -573,7 +573,7 @@ pub fn calibrate_memory<'py>(
             .paths()
             .filter_map(|p| {
                 let name = p.strip_prefix(&dir).unwrap_or(p).display().to_string();
-                fitted.set.contents(p).map(|b| (name, b.to_vec()))
+                fitted.set.bytes(p).map(|b| (name, b.into_owned()))
             })
             .collect();
         if abandoned.load(std::sync::atomic::Ordering::SeqCst) {

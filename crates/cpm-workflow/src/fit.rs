@@ -198,7 +198,7 @@ impl FitOptions {
                 r.fits,
                 list.join(", ")
             ));
-            let c = &mut inputs.merged.campaign;
+            let c = &mut std::sync::Arc::make_mut(&mut inputs.merged).campaign;
             c.pose_sigma_um = r.campaign.pose_sigma_um;
             c.orientation_sigma_urad = r.campaign.orientation_sigma_urad;
             c.point_sigma_um = r.campaign.point_sigma_um;
@@ -241,8 +241,8 @@ pub struct Inputs {
     pub robot: Robot,
     /// The model.
     pub model: MeasurementModel,
-    /// The merged data.
-    pub merged: Merged,
+    /// The merged data (shared with the outputs that stream from it, residuals.csv).
+    pub merged: std::sync::Arc<Merged>,
     /// Identification options.
     pub identify: IdentifyOptions,
     /// Where it all came from.
@@ -405,7 +405,7 @@ pub(crate) fn load_inputs_with(
         identify,
         robot,
         model,
-        merged,
+        merged: std::sync::Arc::new(merged),
     })
 }
 
@@ -835,9 +835,14 @@ pub fn stage_residuals(set: &mut OutputSet, dir: &Path, inputs: &Inputs, cal: &C
         .zip(&w)
         .map(|(r, w)| -r / w)
         .collect();
-    set.add(
+    // Written as the file is (10^6 rows are 80 MB of text), from the numbers.
+    let (robot, merged) = (inputs.robot.clone(), inputs.merged.clone());
+    set.add_streamed(
         dir.join("residuals.csv"),
-        residuals_csv(&inputs.robot, &inputs.merged, &native),
+        Box::new(move |mut out| {
+            out.write_all(crate::report::residuals::RESIDUALS_HEADER.as_bytes())?;
+            crate::report::residuals::write_residual_rows(&mut out, &robot, &merged, &native, 1)
+        }),
     );
 }
 
@@ -963,7 +968,7 @@ pub fn leaving_out<T>(
 ) -> anyhow::Result<(T, Vec<(usize, crate::io::ExcludedPose)>)> {
     let budget = crate::io::campaign::max_excluded_poses(inputs.merged.campaign.poses.len());
     let mut excluded: Vec<(usize, crate::io::ExcludedPose)> = Vec::new();
-    let mut merged = std::borrow::Cow::Borrowed(&inputs.merged);
+    let mut merged = std::borrow::Cow::Borrowed(&*inputs.merged);
     loop {
         let e = match fit(&merged) {
             Ok(r) => return Ok((r, excluded)),
@@ -998,7 +1003,7 @@ impl Inputs {
     /// The inputs without the poses [`leaving_out`] left out (in its order), recorded in
     /// the merged data's `excluded`.
     pub fn without_poses(&self, excluded: &[(usize, crate::io::ExcludedPose)]) -> Inputs {
-        let mut merged = self.merged.clone();
+        let mut merged = Merged::clone(&self.merged);
         for (pose, e) in excluded {
             merged = merged.without_pose(*pose);
             merged.excluded.push(e.clone());
@@ -1006,7 +1011,7 @@ impl Inputs {
         Inputs {
             robot: self.robot.clone(),
             model: self.model.clone(),
-            merged,
+            merged: std::sync::Arc::new(merged),
             identify: self.identify.clone(),
             provenance: self.provenance.clone(),
             data_paths: self.data_paths.clone(),

@@ -10,8 +10,8 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
-use cpm_io::write::write_synced;
 pub use cpm_io::write::{write_atomic, OutputSet};
+use cpm_io::write::{write_contents_synced, write_synced};
 
 /// Why an output was not written.
 #[derive(Debug, thiserror::Error)]
@@ -154,12 +154,39 @@ pub const MANIFEST: &str = ".cpm-result.json";
 
 /// FNV-1a, 64 bits: a content fingerprint for the manifest.
 pub fn fingerprint(bytes: &[u8]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in bytes {
-        h ^= u64::from(*b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
+    let mut h = Fingerprint::new();
+    h.add(bytes);
+    h.value()
+}
+
+/// [`fingerprint`] of bytes given piece by piece (as a file is written).
+#[derive(Debug, Clone, Copy)]
+pub struct Fingerprint(u64);
+
+impl Default for Fingerprint {
+    fn default() -> Self {
+        Self::new()
     }
-    h
+}
+
+impl Fingerprint {
+    /// Of no bytes yet.
+    pub fn new() -> Self {
+        Fingerprint(0xcbf2_9ce4_8422_2325)
+    }
+
+    /// Adds the next bytes.
+    pub fn add(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 ^= u64::from(*b);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    /// The fingerprint of the bytes so far.
+    pub fn value(&self) -> u64 {
+        self.0
+    }
 }
 
 /// What [`commit_dir`] did.
@@ -327,7 +354,7 @@ pub fn commit_dir(
         }
         _ => {}
     }
-    let mut rels: Vec<(PathBuf, Vec<u8>)> = Vec::new();
+    let mut rels: Vec<(PathBuf, crate::io::write::Contents)> = Vec::new();
     for (p, c) in set.into_files() {
         let rel = p.strip_prefix(dir).map_err(|_| {
             OutputError::Refused(format!(
@@ -400,11 +427,17 @@ pub fn commit_dir(
                 std::fs::create_dir_all(d).map_err(io_at(d))?;
             }
             let _ = std::fs::remove_file(&p);
-            write_synced(&p, contents).map_err(io_at(&dir.join(rel)))?;
+            // The bytes counted and fingerprinted as they are written.
+            let (mut bytes, mut hash) = (0usize, Fingerprint::new());
+            write_contents_synced(&p, contents, &mut |b| {
+                bytes += b.len();
+                hash.add(b);
+            })
+            .map_err(io_at(&dir.join(rel)))?;
             listed.push(serde_json::json!({
                 "name": rel.to_string_lossy(),
-                "bytes": contents.len(),
-                "fnv1a64": format!("{:016x}", fingerprint(contents)),
+                "bytes": bytes,
+                "fnv1a64": format!("{:016x}", hash.value()),
             }));
             fault_point("file-written");
         }

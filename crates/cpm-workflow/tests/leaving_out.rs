@@ -57,7 +57,7 @@ fn inputs(poses: usize) -> Inputs {
             data: vec![FILE.to_string()],
         },
         robot,
-        merged,
+        merged: merged.into(),
         identify: IdentifyOptions::default(),
         data_paths: Vec::new(),
     }
@@ -87,8 +87,7 @@ fn a_pose_where_the_fit_cannot_start_is_left_out_and_the_fit_of_the_rest_returne
     let line = inputs.merged.pose_origin[k].1;
     // Pose 17's first link commanded 1000 mm longer: no pose has those lengths, so the model
     // cannot predict there and the fit cannot start.
-    inputs
-        .merged
+    std::sync::Arc::make_mut(&mut inputs.merged)
         .campaign
         .commanded_lengths_mm
         .as_mut()
