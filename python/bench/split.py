@@ -56,10 +56,10 @@ def main() -> None:
               f"(solver {solver:.3f} s) + outputs (report, figures, residuals, "
               f"calibrated.toml and its read-back) {outputs:.3f} s + results for Python "
               f"{python:.3f} s")
-        print(f"    outside the fit: {100 * (total - fit) / total:.0f} % of the total; the "
-              f"binding's own work (arrays->measurements without the reader's checks is not "
-              f"separable here, results for Python) {100 * python / total:.1f} % + arrays "
-              f"{100 * (t1 - t0) / total:.0f} %; outputs {100 * outputs / total:.0f} %; {r.solver}")
+        print(f"    outside the fit: {100 * (total - fit) / total:.0f} % of the total: "
+              f"arrays->measurements {100 * (t1 - t0) / total:.0f} % (mostly the reader's "
+              f"checks), outputs {100 * outputs / total:.0f} %, results for Python "
+              f"{100 * python / total:.1f} %; {r.solver}")
     # Before issue 36: the same arrays through CSV text in a scratch folder and the command's
     # parser (kept for campaigns the memory path does not take).
     from cpm._commands import _calibrate_from_files

@@ -32,8 +32,7 @@ use cpm_geometry::Pose;
 
 use crate::campaign::{
     check_angle_units, check_pose_value, exclude_poses, robot_checks, same_pose_as_before,
-    too_many_rows_at, unknown_sensor, DataFile, RawPose, ReadOptions, READINGS_REQUIRED,
-    RPY_COLUMNS,
+    too_many_rows_at, unknown_sensor, DataFile, RawPose, ReadOptions,
 };
 use crate::table::{field, parse_number};
 use crate::{InputError, Robot};
@@ -144,6 +143,9 @@ impl GaugeRows {
     }
 }
 
+/// The columns of a row's pose, in the order of [`GaugeRows::poses`].
+const POSE_COLUMNS: [&str; 6] = ["x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg"];
+
 /// A value of a number column: finite, else the reader's message for its text.
 fn finite(file: &str, line: usize, name: &str, v: f64) -> Result<f64, InputError> {
     if v.is_finite() {
@@ -177,11 +179,6 @@ pub fn read_gauge_rows(
 ) -> Result<DataFile, InputError> {
     rows.check_columns()?;
     let file = rows.file.as_str();
-    let pose_names: Vec<&'static str> = READINGS_REQUIRED[2..5]
-        .iter()
-        .chain(&RPY_COLUMNS)
-        .copied()
-        .collect();
     let mut by_label: HashMap<&str, usize> = HashMap::new();
     // Per pose: the numbers of its first row, its first line.
     let mut first: Vec<(RawPose, usize)> = Vec::new();
@@ -222,7 +219,7 @@ pub fn read_gauge_rows(
                 (first[known.expect("the previous row's pose")].0, None)
             } else {
                 let mut raw = RawPose::default();
-                for (name, v) in pose_names.iter().zip(values) {
+                for (name, v) in POSE_COLUMNS.iter().zip(values) {
                     let v = finite(file, line, name, v)?;
                     check_pose_value(file, line, name, v)?;
                     raw.push(name, v);
