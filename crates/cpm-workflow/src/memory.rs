@@ -136,9 +136,11 @@ pub fn read_sources(
             }
             Source::Read(r) => r.given.read(&r.data.file, robot, options, registration)?,
             Source::Text { name, text } => {
-                crate::ingest::read_data(text, name, robot, options, registration)?
+                Given::Text(text.clone()).read(name, robot, options, registration)?
             }
-            Source::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options)?,
+            Source::GaugeRows(rows) => {
+                Given::GaugeRows(rows.clone()).read(&rows.file, robot, options, registration)?
+            }
         };
         files.push(f);
     }
