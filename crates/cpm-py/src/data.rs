@@ -78,8 +78,8 @@ fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<(ReadOptions, Registrati
         .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
     let model = robot.robot.model(&effects);
     Ok((
-        cpm::cli::common::read_options(&model),
-        cpm::cli::common::registration_options(&model),
+        cpm_workflow::load::read_options(&model),
+        cpm_workflow::load::registration_options(&model),
     ))
 }
 
@@ -99,7 +99,7 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
         },
     )?;
     d.set_item("simulated", c.simulated)?;
-    let pose_row = |p: &cpm::geometry::Pose| {
+    let pose_row = |p: &cpm_workflow::geometry::Pose| {
         let r = p.rpy_deg();
         vec![
             p.position_mm.x,

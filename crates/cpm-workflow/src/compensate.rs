@@ -38,7 +38,7 @@ use crate::progress::{check_cancelled, Progress};
 use crate::report::commands::CompensateSummary;
 
 /// The options of `cpm compensate`. [`CompensateOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CompensateOptions {
     /// The (calibrated) robot description.
     pub robot: PathBuf,

@@ -28,8 +28,9 @@ use crate::io::Robot;
 use crate::progress::{check_cancelled, Progress};
 
 /// Export formats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum Format {
     #[default]
     /// LinuxCNC genhexkins HAL settings (`setp genhexkins.base.0.x ...`).
@@ -37,8 +38,9 @@ pub enum Format {
 }
 
 /// Length units of the exported controller settings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum Units {
     /// Millimetres (LinuxCNC `LINEAR_UNITS = mm`), the default.
     #[default]
@@ -232,7 +234,7 @@ pub fn linuxcnc_ini(robot: &Robot, units: Units) -> String {
 }
 
 /// The options of `cpm export`. [`ExportOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ExportOptions {
     /// The robot description (usually a `calibrated.toml`).
     pub robot: PathBuf,

@@ -26,7 +26,7 @@ use crate::report::fit::{IdentifiabilityDoc, IdentifiabilityReport};
 
 /// The options of `cpm identifiability`: the robot and either measurement files or a plan.
 /// [`IdentifiabilityOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct IdentifiabilityOptions {
     /// The robot description.
     pub robot: PathBuf,
@@ -34,6 +34,7 @@ pub struct IdentifiabilityOptions {
     pub data: Vec<PathBuf>,
     /// The plan (where the poses come from) when there are no measurement files; default: no
     /// source ([`PlanOptions::default`]).
+    #[serde(flatten)]
     pub plan: PlanOptions,
     /// The effects modelled beside the installation errors, comma-separated (`none` for
     /// none); default `None`: the description's `[calibration] effects`.

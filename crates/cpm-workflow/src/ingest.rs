@@ -112,7 +112,7 @@ fn registered<E: From<InputError>>(
 
 /// Registers the files as read: each point file roughly ([`register_point_files`]), the
 /// tracker files together ([`register_tracker_files`]).
-fn register_files(
+pub(crate) fn register_files(
     files: &mut [DataFile],
     robot: &Robot,
     options: &ReadOptions,

@@ -58,6 +58,20 @@ impl Given {
             Given::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options),
         }
     }
+
+    /// Reads them against `robot` as the readers do, without registering tracker or point
+    /// sets ([`io::read_data`]): for a campaign registered together.
+    pub fn read_unregistered(
+        &self,
+        name: &str,
+        robot: &Robot,
+        options: &ReadOptions,
+    ) -> Result<DataFile, io::InputError> {
+        match self {
+            Given::Text(text) => io::read_data(text, name, robot, options),
+            Given::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options),
+        }
+    }
 }
 
 /// One set of measurements of a campaign.
@@ -91,26 +105,12 @@ impl Source {
     }
 }
 
-/// The error of a campaign that has two or more tracker pose sets of which some are held in
-/// memory: tracker sets are registered together (reading offsets shared) only when read
-/// from files ([`ingest::read_data_files`](crate::ingest::read_data_files)). Write them to
-/// files, or give one set at a time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct NeedsFiles;
-
-impl std::fmt::Display for NeedsFiles {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("two or more tracker measurement sets are registered together only when read from files")
-    }
-}
-
-impl std::error::Error for NeedsFiles {}
-
 /// Reads and merges the sources with `options` and `registration` (the read and registration
 /// options of the job's model): files only are read as
 /// [`load::load_data`](crate::load::load_data) reads them; measurements already read with the
 /// same options are taken as they are, others read again from their
-/// text. [`NeedsFiles`] for two or more tracker sets when one is in memory.
+/// text. Tracker and point sets are registered as [`load::load_data`](crate::load::load_data)
+/// registers files: two or more tracker sets together, whatever their source.
 pub fn read_sources(
     sources: &[Source],
     robot: &Robot,
@@ -127,20 +127,19 @@ pub fn read_sources(
     if paths.len() == sources.len() {
         return crate::load::load_data(&paths, robot, options, registration);
     }
+    // Read as the readers read, registered afterwards all together (as files are): a set
+    // already read and registered on its own is read again from what was given when it has
+    // to be registered with others (two or more tracker sets).
     let mut files = Vec::with_capacity(sources.len());
     for s in sources {
         let f = match s {
-            Source::Path(p) => crate::ingest::read_data_file(p, robot, options, registration)?,
+            Source::Path(p) => io::read_data_file(p, robot, options)?,
             Source::Read(r) if r.options == *options && r.registration == *registration => {
                 DataFile::clone(&r.data)
             }
-            Source::Read(r) => r.given.read(&r.data.file, robot, options, registration)?,
-            Source::Text { name, text } => {
-                Given::Text(text.clone()).read(name, robot, options, registration)?
-            }
-            Source::GaugeRows(rows) => {
-                Given::GaugeRows(rows.clone()).read(&rows.file, robot, options, registration)?
-            }
+            Source::Read(r) => r.given.read_unregistered(&r.data.file, robot, options)?,
+            Source::Text { name, text } => io::read_data(text, name, robot, options)?,
+            Source::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options)?,
         };
         files.push(f);
     }
@@ -149,8 +148,15 @@ pub fn read_sources(
         .filter(|f| f.kind == FileKind::PoseMeasurements)
         .count();
     if trackers > 1 {
-        return Err(NeedsFiles.into());
+        for (k, s) in sources.iter().enumerate() {
+            if let Source::Read(r) = s {
+                if files[k].kind == FileKind::PoseMeasurements && files[k].checked {
+                    files[k] = r.given.read_unregistered(&r.data.file, robot, options)?;
+                }
+            }
+        }
     }
+    crate::ingest::register_files(&mut files, robot, options, registration)?;
     let merged = io::merge(files, robot);
     if options.check_sensor_lengths {
         crate::gauges::check_readings(robot, &merged)?;
@@ -347,5 +353,49 @@ mod tests {
         assert_eq!(a.residuals_um, b.residuals_um);
         assert!(b.simulated);
         assert_eq!(from_rows.inputs.merged.campaign.readings.len(), 90);
+    }
+    /// Two tracker sessions, each in a frame of its own, registered together whether read
+    /// from files or given as text: the same registration and fit, bit for bit (a campaign
+    /// of several tracker sets in memory needs no files).
+    #[test]
+    fn two_tracker_sets_in_memory_are_registered_together_as_files_are() {
+        let robot_path = ex("hexapod_66.toml");
+        let dir =
+            std::env::temp_dir().join(format!("cpm-memory-two-trackers-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut paths = Vec::new();
+        let mut sources = Vec::new();
+        for (k, frame) in ["1200,-300,40,0.5,-0.3,30", "-800,900,-20,-0.4,0.2,-120"]
+            .iter()
+            .enumerate()
+        {
+            let mut o = crate::simulate::SimulateOptions::new(&robot_path);
+            o.plan.random = Some(30);
+            o.plan.seed = 40 + k as u64;
+            o.paper_table2 = true;
+            o.measure = crate::simulate::Measure::Poses;
+            o.noise = Some("gaussian:5".to_string());
+            o.tracker_frame = Some(frame.to_string());
+            let text = crate::simulate::simulate(&o, &crate::Silent).unwrap().text;
+            let path = dir.join(format!("session{k}.csv"));
+            std::fs::write(&path, &text).unwrap();
+            sources.push(Source::Text {
+                name: path.display().to_string(),
+                text: text.into(),
+            });
+            paths.push(path);
+        }
+        let out = dir.join("cal");
+        let options = CalibrateOptions::new(&robot_path, paths.clone(), &out);
+        let from_files = crate::fit::calibrate(&options, &crate::Silent).unwrap();
+        let robot = Robot::load(&robot_path).unwrap();
+        let from_text = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
+        let registration = |c: &Calibrated| format!("{:?}", c.inputs.merged.registration);
+        assert!(from_files.inputs.merged.registration.is_some());
+        assert_eq!(registration(&from_files), registration(&from_text));
+        let (a, b) = (&from_files.fitted.cal, &from_text.fitted.cal);
+        assert_eq!(a.estimate_um, b.estimate_um);
+        assert_eq!(a.residuals_um, b.residuals_um);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -13,9 +13,10 @@ use crate::report::fit::FitReport;
 use crate::report::refine::{RefineDoc, RefineReport};
 
 /// The options of `cpm refine`. [`RefineOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefineOptions {
     /// Robot, data, effects, noise, solver and output directory: as for calibrate.
+    #[serde(flatten)]
     pub fit: FitOptions,
     /// Candidate effects, comma-separated; default `None`: every effect of the library that
     /// can act on the data.

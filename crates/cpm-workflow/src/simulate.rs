@@ -36,8 +36,9 @@ use crate::report::commands::SimulateSummary;
 use crate::truth::truth_effect_for;
 
 /// What the simulated campaign measures.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum Measure {
     /// Length-sensor readings (every plan sensor at every pose).
     Lengths,
@@ -59,12 +60,13 @@ impl Measure {
 }
 
 /// The options of `cpm simulate`. [`SimulateOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SimulateOptions {
     /// The robot description.
     pub robot: PathBuf,
     /// The plan: where the poses come from (exactly one source); default: no source
     /// ([`PlanOptions::default`]). Its seed is also the noise's.
+    #[serde(flatten)]
     pub plan: PlanOptions,
     /// The true machine: a robot description whose geometry (joints plus
     /// `[installation_errors_um]`), link reading models and sensor sockets differ from
