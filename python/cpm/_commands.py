@@ -68,6 +68,35 @@ def _data(data: Any, robot: Robot) -> Any:
     return [as_measurements(data, robot)]
 
 
+def _sources(r: Robot, items: List[Any]) -> Tuple[List[Any], set]:
+    """The measurements for a job on ``r`` in memory: read ones by their handles (as read),
+    files by their paths; and the names of those made from arrays."""
+    sources: List[Any] = []
+    arrays: set = set()
+    for item in items:
+        if isinstance(item, Measurements):
+            for s in item.sources:
+                handle = s.info.get("handle")
+                if s.path is not None:
+                    sources.append(s.path)
+                    continue
+                if handle is None:
+                    handle = _cpm.read_text(s.text, s.name, r._h)["handle"]
+                sources.append(handle)
+                if s.arrays:
+                    arrays.add(s.name)
+        else:
+            sources.append(os.fspath(item))
+    return sources, arrays
+
+
+def _row_of(e: InputError, arrays: set) -> InputError:
+    """An error in measurements made from arrays also says the row of the arrays."""
+    if e.file in arrays and e.line is not None and e.line >= 2 and e.row is None:
+        return InputError(str(e), e.file, e.line, e.field, e.line - 2)
+    return e
+
+
 def _value(key: str, value: Any, scratch: Scratch) -> Any:
     """One option's value as the job takes it by name (JSON): robots and measurements as
     the paths of their files, paths as text, numpy numbers as numbers, lists as lists."""
@@ -124,14 +153,24 @@ def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
 
 
 def _job(command: str, scratch: Scratch, options: Dict[str, Any],
-         out: Optional[PathLike] = None) -> Dict[str, Any]:
+         out: Optional[PathLike] = None, robot: Optional[Robot] = None,
+         data: Optional[List[Any]] = None) -> Dict[str, Any]:
     """Runs ``command`` as the workflow's job with ``options`` by name; its outputs are
-    committed to ``out`` when given (all or nothing). Trouble (the command's exit code 1,
-    outputs written) is a :class:`cpm.CpmWarning`."""
+    committed to ``out`` when given (all or nothing). ``robot`` and ``data`` go to the job
+    in memory (``refine``, ``identifiability``), not as files. Trouble (the command's exit
+    code 1, outputs written) is a :class:`cpm.CpmWarning`."""
     text = _by_name(scratch, options)
     target = os.fspath(out) if out is not None else None
+    arrays: set = set()
+    held: Dict[str, Any] = {}
+    if robot is not None:
+        held["robot"] = robot._h
+        if data is not None:
+            held["data"], arrays = _sources(robot, data)
     try:
-        d = dict(_cpm.job(command, text, target, out is not None))
+        d = dict(_cpm.job(command, text, target, out is not None, **held))
+    except InputError as e:
+        raise _row_of(scratch.fix(e), arrays) from None
     except CpmError as e:
         raise scratch.fix(e) from None
     if d["trouble"]:
@@ -342,23 +381,7 @@ def calibrate(
     A fit that did not converge (or a robust fit that failed) is returned with ``trouble`` set
     and a :class:`cpm.CpmWarning` (the command's exit code 1)."""
     r = _robot(robot)
-    items = _data(data, r)
-    sources: List[Any] = []
-    arrays: set = set()
-    for item in items:
-        if isinstance(item, Measurements):
-            for s in item.sources:
-                handle = s.info.get("handle")
-                if s.path is not None:
-                    sources.append(s.path)
-                    continue
-                if handle is None:
-                    handle = _cpm.read_text(s.text, s.name, r._h)["handle"]
-                sources.append(handle)
-                if s.arrays:
-                    arrays.add(s.name)
-        else:
-            sources.append(os.fspath(item))
+    sources, arrays = _sources(r, _data(data, r))
     given: Dict[str, Any] = dict(effects=effects, sigma_um=sigma_um, robust=robust)
     given.update(options)
     with Scratch() as scratch:
@@ -367,9 +390,7 @@ def calibrate(
     try:
         d = _cpm.calibrate_memory(r._h, sources, opts, target, out is not None)
     except InputError as e:
-        if e.file in arrays and e.line is not None and e.line >= 2 and e.row is None:
-            raise InputError(str(e), e.file, e.line, e.field, e.line - 2) from None
-        raise
+        raise _row_of(e, arrays) from None
     result = CalibrationResult(dict(d))
     if result.trouble:
         _warnings.warn(result.trouble, CpmWarning, stacklevel=2)
@@ -411,7 +432,7 @@ def refine(robot: Union[Robot, PathLike], data: Any, *, out: Optional[PathLike] 
     ``pose_map_degree``, ``sigma_um``, ``robust``, ...)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        d = _job("refine", scratch, dict(robot=r, data=_data(data, r), **options), out)
+        d = _job("refine", scratch, dict(options), out, robot=r, data=_data(data, r))
     return RefineResult(d["files"], d["trouble"])
 
 
@@ -573,7 +594,7 @@ def identifiability(robot: Union[Robot, PathLike], data: Any = None,
         m = None if data is None else _data(data, r)
         if options.get("plan") is not None:
             options["plan"] = _poses_file(options["plan"], scratch)
-        d = _job("identifiability", scratch, dict(robot=r, data=m, **options))
+        d = _job("identifiability", scratch, dict(options), robot=r, data=m)
         return scratch.named(json.loads(d["summary"]))
 
 

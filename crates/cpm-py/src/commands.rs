@@ -288,6 +288,20 @@ impl Drop for Unwritten {
     }
 }
 
+/// The measurements for a job on `robot`: read ones as read ([`crate::data::PyData`]),
+/// paths as files.
+pub fn sources_of(
+    robot: &crate::robot::PyRobot,
+    data: &[Bound<'_, PyAny>],
+) -> PyResult<Vec<cpm_workflow::memory::Source>> {
+    data.iter()
+        .map(|d| match d.downcast::<crate::data::PyData>() {
+            Ok(h) => Ok(h.get().source(robot)),
+            Err(_) => Ok(cpm_workflow::memory::Source::Path(d.extract()?)),
+        })
+        .collect()
+}
+
 /// `cpm calibrate` on a campaign in memory ([`cpm_workflow::memory::calibrate`]): `robot`
 /// as loaded, `data` paths (read as `--data` reads them) or measurements read by
 /// [`crate::data`] (taken as read), `options` the command's by name (JSON text, [`by_name`]).
@@ -308,13 +322,7 @@ pub fn calibrate_memory<'py>(
     if data.is_empty() {
         return Err(crate::errors::usage(py, "data: no measurements"));
     }
-    let mut sources = Vec::with_capacity(data.len());
-    for d in &data {
-        sources.push(match d.downcast::<crate::data::PyData>() {
-            Ok(h) => h.get().source(robot),
-            Err(_) => Source::Path(d.extract()?),
-        });
-    }
+    let sources = sources_of(robot, &data)?;
     let staged = match out {
         Some(_) => None,
         None => Some(Unwritten::new().map_err(|e| {

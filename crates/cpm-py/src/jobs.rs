@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use cpm_workflow::memory::{InMemory, Source};
 use cpm_workflow::output::OutputSet;
 use cpm_workflow::{compensate, design, export, identifiability, load, refine, simulate};
 use cpm_workflow::{validate, Progress};
@@ -104,19 +105,32 @@ fn write_one(
 
 /// Runs `cpm COMMAND` as the workflow's job: `options` by name (JSON text; paths for the
 /// robot, the data and the other files), `out` where the outputs go (committed there when
-/// `commit`, else only staged). Returns a dict: `summary` (what the command prints with
-/// `--json`), `trouble`, `files` (name -> bytes), `text` (the single-file output), `ini`,
-/// `written`.
+/// `commit`, else only staged). `refine` and `identifiability` also take the robot as loaded
+/// and the measurements (read, or paths) in memory, for their `robot` and `data` options.
+/// Returns a dict: `summary` (what the command prints with `--json`), `trouble`, `files`
+/// (name -> bytes), `text` (the single-file output), `ini`, `written`.
 #[pyfunction]
-#[pyo3(signature = (command, options, out=None, commit=false))]
+#[pyo3(signature = (command, options, out=None, commit=false, robot=None, data=None))]
 pub fn job<'py>(
     py: Python<'py>,
     command: &str,
     options: &str,
     out: Option<PathBuf>,
     commit: bool,
+    robot: Option<&crate::robot::PyRobot>,
+    data: Option<Vec<Bound<'py, PyAny>>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let commit = commit && out.is_some();
+    let mut held = InMemory::none();
+    // Paths of inputs an output may not replace (the robot's file, when it has one).
+    let mut robot_path = None;
+    if let Some(r) = robot {
+        held.robot = Some(r.robot.clone());
+        robot_path = r.path.clone();
+        if let Some(d) = &data {
+            held.data = Some(crate::commands::sources_of(r, d)?);
+        }
+    }
     let (r, staged) = match command {
         "validate" => {
             let (dir, staged) = out_dir(py, out.as_deref(), "validation")?;
@@ -133,7 +147,9 @@ pub fn job<'py>(
             let mut o = by_name(py, command, &d, options)?;
             o.fit.out = dir.clone();
             (
-                run(py, move |a, p| run_refine(&o, &dir, commit, a, p))?,
+                run(py, move |a, p| {
+                    run_refine(&o, held, robot_path, &dir, commit, a, p)
+                })?,
                 staged,
             )
         }
@@ -150,7 +166,7 @@ pub fn job<'py>(
         "identifiability" => {
             let d = identifiability::IdentifiabilityOptions::new(PathBuf::new());
             let o = by_name(py, command, &d, options)?;
-            (run(py, move |_, p| run_identifiability(&o, p))?, None)
+            (run(py, move |_, p| run_identifiability(&o, held, p))?, None)
         }
         "simulate" => {
             let mut o = by_name(
@@ -243,12 +259,25 @@ fn run_validate(
 
 fn run_refine(
     o: &refine::RefineOptions,
+    held: InMemory,
+    robot_path: Option<PathBuf>,
     dir: &Path,
     commit_to_dir: bool,
     abandoned: &AtomicBool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
-    let job = refine::refine(o, progress)?;
+    let data_paths: Vec<PathBuf> = match &held.data {
+        Some(sources) => sources
+            .iter()
+            .filter_map(|s| match s {
+                Source::Path(p) => Some(p.clone()),
+                _ => None,
+            })
+            .collect(),
+        None => o.fit.data.clone(),
+    };
+    let robot_path = robot_path.or_else(|| held.robot.is_none().then(|| o.fit.robot.clone()));
+    let job = refine::refine_in(o, held, progress)?;
     let mut r = Ran {
         trouble: job.trouble(),
         summary: job.report.doc.to_json()?,
@@ -256,8 +285,10 @@ fn run_refine(
         ..Ran::default()
     };
     if commit_to_dir {
-        let inputs: Vec<&Path> = std::iter::once(o.fit.robot.as_path())
-            .chain(o.fit.data.iter().map(PathBuf::as_path))
+        let inputs: Vec<&Path> = robot_path
+            .iter()
+            .chain(data_paths.iter())
+            .map(PathBuf::as_path)
             .collect();
         r.written = commit(job.set, dir, &inputs, "refine", abandoned)?;
     }
@@ -286,9 +317,10 @@ fn run_design(
 
 fn run_identifiability(
     o: &identifiability::IdentifiabilityOptions,
+    held: InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
-    let job = identifiability::identifiability(o, progress)?;
+    let job = identifiability::identifiability_in(o, held, progress)?;
     // Keys sorted, as every cpm JSON file (and `cpm identifiability --json`).
     let v = serde_json::to_value(&job.doc)?;
     Ok(Ran {

@@ -105,6 +105,48 @@ impl Source {
     }
 }
 
+/// What a caller holds in memory for a job, in place of the files its options name: the
+/// robot as loaded (for the options' `robot` path) and the measurements (for their `data`
+/// paths). What is `None` is read from the options' paths, as the command reads it.
+#[derive(Debug, Clone, Default)]
+pub struct InMemory {
+    /// The robot as loaded.
+    pub robot: Option<Robot>,
+    /// The measurements.
+    pub data: Option<Vec<Source>>,
+}
+
+impl InMemory {
+    /// Nothing held: every input is read from the options' paths.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// True when nothing is held.
+    pub fn is_empty(&self) -> bool {
+        self.robot.is_none() && self.data.is_none()
+    }
+
+    /// The robot held, else the one at `path` ([`load_robot`](crate::load::load_robot)).
+    pub fn robot_or_load(
+        &mut self,
+        path: &std::path::Path,
+        progress: &dyn Progress,
+    ) -> anyhow::Result<Robot> {
+        match self.robot.take() {
+            Some(r) => Ok(r),
+            None => crate::load::load_robot(path, progress),
+        }
+    }
+
+    /// The measurements held, else the files at `paths`.
+    pub fn sources_or(&mut self, paths: &[PathBuf]) -> Vec<Source> {
+        self.data
+            .take()
+            .unwrap_or_else(|| paths.iter().cloned().map(Source::Path).collect())
+    }
+}
+
 /// Reads and merges the sources with `options` and `registration` (the read and registration
 /// options of the job's model): files only are read as
 /// [`load::load_data`](crate::load::load_data) reads them; measurements already read with the
