@@ -156,8 +156,9 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
          out: Optional[PathLike] = None, robot: Optional[Robot] = None,
          data: Optional[List[Any]] = None) -> Dict[str, Any]:
     """Runs ``command`` as the workflow's job with ``options`` by name; its outputs are
-    committed to ``out`` when given (all or nothing). ``robot`` and ``data`` go to the job
-    in memory (``refine``, ``identifiability``), not as files. Trouble (the command's exit
+    committed to ``out`` when given (all or nothing). ``robot`` goes to the job in memory
+    (every job but ``validate``), ``data`` too (``refine``, ``identifiability``), not as
+    files. Trouble (the command's exit
     code 1, outputs written) is a :class:`cpm.CpmWarning`."""
     text = _by_name(scratch, options)
     target = os.fspath(out) if out is not None else None
@@ -517,8 +518,8 @@ def compensate(robot: Union[Robot, PathLike], poses: Any, *, out: Optional[PathL
     ``temperature_c``, ``from_home``."""
     r = _robot(robot)
     with Scratch() as scratch:
-        d = _job("compensate", scratch,
-                 dict(robot=r, poses=_poses_file(poses, scratch), **options), out)
+        d = _job("compensate", scratch, dict(poses=_poses_file(poses, scratch), **options), out,
+                 robot=r)
     return CompensationResult(d["text"], json.loads(d["summary"]), r.num_links)
 
 
@@ -559,7 +560,7 @@ def design(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     Without ``out`` the design lives in memory (``result.robot`` is read from its text)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        d = _job("design", scratch, dict(robot=r, **options), out)
+        d = _job("design", scratch, dict(options), out, robot=r)
     return DesignResult(d["files"], Path(out) if out is not None else None)
 
 
@@ -574,7 +575,7 @@ def simulate(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     with Scratch() as scratch:
         if "plan" in options and options["plan"] is not None:
             options["plan"] = _poses_file(options["plan"], scratch)
-        d = _job("simulate", scratch, dict(robot=r, **options), out)
+        d = _job("simulate", scratch, dict(options), out, robot=r)
     if out is not None:
         from ._data import read_measurements
 
@@ -604,5 +605,5 @@ def export(robot: Union[Robot, PathLike], format: str = "linuxcnc", *,
     written to ``out`` too when given (options ``units``, ``ini``)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        d = _job("export", scratch, dict(format=format, robot=r, **options), out)
+        d = _job("export", scratch, dict(format=format, **options), out, robot=r)
     return d["text"]

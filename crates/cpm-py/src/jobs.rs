@@ -77,12 +77,25 @@ fn commit(
     if abandoned.load(Ordering::SeqCst) {
         anyhow::bail!("interrupted");
     }
+    let inputs: Vec<&Path> = inputs
+        .iter()
+        .copied()
+        .filter(|p| !p.as_os_str().is_empty())
+        .collect();
     Ok(
-        load::commit_dir(set, dir, inputs, command, &cpm_workflow::Silent)?
+        load::commit_dir(set, dir, &inputs, command, &cpm_workflow::Silent)?
             .iter()
             .map(|p| p.display().to_string())
             .collect(),
     )
+}
+
+/// The robot option of a job given the robot in memory: the path of its file when it has one
+/// (an output may not replace it), else left empty (the robot is never read from it).
+fn given_robot(option: &mut PathBuf, path: &Option<PathBuf>) {
+    if let (true, Some(p)) = (option.as_os_str().is_empty(), path) {
+        *option = p.clone();
+    }
 }
 
 /// Writes a single-file output as the command does (never over an input), unless the
@@ -97,7 +110,12 @@ fn write_one(
     if abandoned.load(Ordering::SeqCst) {
         anyhow::bail!("interrupted");
     }
-    load::out_target(option, path, inputs)?;
+    let inputs: Vec<&Path> = inputs
+        .iter()
+        .copied()
+        .filter(|p| !p.as_os_str().is_empty())
+        .collect();
+    load::out_target(option, path, &inputs)?;
     cpm_workflow::output::write_file(path, text.as_bytes())
         .map_err(|e| anyhow::Error::new(e).context(format!("writing {}", path.display())))?;
     Ok(path.display().to_string())
@@ -105,8 +123,9 @@ fn write_one(
 
 /// Runs `cpm COMMAND` as the workflow's job: `options` by name (JSON text; paths for the
 /// robot, the data and the other files), `out` where the outputs go (committed there when
-/// `commit`, else only staged). `refine` and `identifiability` also take the robot as loaded
-/// and the measurements (read, or paths) in memory, for their `robot` and `data` options.
+/// `commit`, else only staged). Every job but `validate` also takes the robot as loaded (for
+/// its `robot` option); `refine` and `identifiability` the measurements in memory (read, or
+/// paths) for their `data`.
 /// Returns a dict: `summary` (what the command prints with `--json`), `trouble`, `files`
 /// (name -> bytes), `text` (the single-file output), `ini`, `written`.
 #[pyfunction]
@@ -158,8 +177,9 @@ pub fn job<'py>(
             let d = design::DesignJobOptions::new(PathBuf::new(), &dir);
             let mut o = by_name(py, command, &d, options)?;
             o.out = dir.clone();
+            given_robot(&mut o.robot, &robot_path);
             (
-                run(py, move |a, p| run_design(&o, &dir, commit, a, p))?,
+                run(py, move |a, p| run_design(&o, held, &dir, commit, a, p))?,
                 staged,
             )
         }
@@ -176,13 +196,15 @@ pub fn job<'py>(
                 options,
             )?;
             o.out = out.clone().filter(|_| commit);
-            (run(py, move |a, p| run_simulate(&o, a, p))?, None)
+            given_robot(&mut o.robot, &robot_path);
+            (run(py, move |a, p| run_simulate(&o, held, a, p))?, None)
         }
         "compensate" => {
             let d = compensate::CompensateOptions::new(PathBuf::new(), PathBuf::new());
             let mut o = by_name(py, command, &d, options)?;
             o.out = out.clone().filter(|_| commit);
-            (run(py, move |a, p| run_compensate(&o, a, p))?, None)
+            given_robot(&mut o.robot, &robot_path);
+            (run(py, move |a, p| run_compensate(&o, held, a, p))?, None)
         }
         "export" => {
             let mut o = by_name(
@@ -192,7 +214,8 @@ pub fn job<'py>(
                 options,
             )?;
             o.out = out.clone().filter(|_| commit);
-            (run(py, move |a, p| run_export(&o, a, p))?, None)
+            given_robot(&mut o.robot, &robot_path);
+            (run(py, move |a, p| run_export(&o, held, a, p))?, None)
         }
         other => {
             return Err(crate::errors::usage(
@@ -297,12 +320,13 @@ fn run_refine(
 
 fn run_design(
     o: &design::DesignJobOptions,
+    held: InMemory,
     dir: &Path,
     commit_to_dir: bool,
     abandoned: &AtomicBool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
-    let d = design::design(o, progress)?;
+    let d = design::design_in(o, held, progress)?;
     let mut r = Ran {
         files: files_of(&d.outputs, dir),
         summary: d.json,
@@ -331,10 +355,11 @@ fn run_identifiability(
 
 fn run_simulate(
     o: &simulate::SimulateOptions,
+    held: InMemory,
     abandoned: &AtomicBool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
-    let job = simulate::simulate(o, progress)?;
+    let job = simulate::simulate_in(o, held, progress)?;
     let mut r = Ran::default();
     if let Some(out) = &o.out {
         r.written = vec![write_one(out, "--out", &o.inputs(), &job.text, abandoned)?];
@@ -350,10 +375,11 @@ fn run_simulate(
 
 fn run_compensate(
     o: &compensate::CompensateOptions,
+    held: InMemory,
     abandoned: &AtomicBool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
-    let job = compensate::compensate(o, progress)?;
+    let job = compensate::compensate_in(o, held, progress)?;
     let mut r = Ran::default();
     if let Some(out) = &o.out {
         r.written = vec![write_one(out, "--out", &o.inputs(), &job.csv, abandoned)?];
@@ -369,10 +395,11 @@ fn run_compensate(
 
 fn run_export(
     o: &export::ExportOptions,
+    held: InMemory,
     abandoned: &AtomicBool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
-    let job = export::export(o, progress)?;
+    let job = export::export_in(o, held, progress)?;
     let inputs = o.inputs();
     let mut r = Ran::default();
     if let (Some(path), Some(ini)) = (&o.ini, &job.ini) {

@@ -290,9 +290,19 @@ pub struct Exported {
 
 /// `cpm export`: the robot's settings for the controller in `options.format`.
 pub fn export(options: &ExportOptions, progress: &dyn Progress) -> anyhow::Result<Exported> {
+    export_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`export`] with the robot held in memory (as loaded: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+pub fn export_in(
+    options: &ExportOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Exported> {
     options.validate()?;
     check_cancelled(progress)?;
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     let hal = match options.format {
         Format::Linuxcnc => {
             if robot.num_links() != 6 {

@@ -739,13 +739,23 @@ fn measure(
 /// `cpm simulate`: reads the robot (and the truth and plan files), builds the true machine
 /// and the plan, and simulates the campaign.
 pub fn simulate(options: &SimulateOptions, progress: &dyn Progress) -> anyhow::Result<Simulated> {
+    simulate_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`simulate`] with the robot held in memory (as loaded: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+pub fn simulate_in(
+    options: &SimulateOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Simulated> {
     options.check_out()?;
     if options.paper_table2 && options.truth.is_some() {
         return Err(usage_error("--truth and --paper-table2 exclude each other"));
     }
     check_cancelled(progress)?;
     progress.stage("reading the robot description");
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     let declared = crate::load::resolve_effects(options.effects.as_deref(), &robot)?;
     let noise = match options.parse_noise()? {
         Some(noise) => noise,

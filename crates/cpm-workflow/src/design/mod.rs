@@ -228,9 +228,19 @@ pub fn sockets_of(robot: &Robot) -> SocketCandidates {
 /// Runs the design job: reads the description (and the sockets file), chooses the
 /// sockets and poses (or the poses of `instruments`), and stages every output.
 pub fn design(options: &DesignJobOptions, progress: &dyn Progress) -> anyhow::Result<Designed> {
+    design_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`design`] with the robot held in memory (as loaded: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+pub fn design_in(
+    options: &DesignJobOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Designed> {
     options.validate()?;
     progress.stage("reading the robot description");
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     crate::load::require_six_links(&robot)?;
     if let Some(list) = &options.instruments {
         let sigma = gauge_sigma_um(options, &robot)?;
