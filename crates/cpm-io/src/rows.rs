@@ -1,5 +1,6 @@
-//! Length-sensor readings given as values (numpy arrays, a program's own log), read into a
-//! [`DataFile`] with every check of the CSV reader and the same errors, without text.
+//! Length-sensor readings and tracker pose measurements given as values (numpy arrays, a
+//! program's own log), read into a [`DataFile`] with every check of the CSV reader and the
+//! same errors, without text.
 //!
 //! [`GaugeRows`] holds the columns of a readings file (`docs/formats.md`, "Length-sensor
 //! readings") as typed values, one row per reading. [`read_gauge_rows`] gives exactly what
@@ -7,6 +8,12 @@
 //! them: the same campaign to the last bit, the same exclusions, the same first error (row
 //! `k` is line `k + 2` of that text, its header on line 1), in a fraction of the time (no
 //! number is formatted or parsed).
+//!
+//! [`TrackerRows`] holds the columns of a tracker file ("Tracker pose measurements"), one row
+//! per pose; [`read_tracker_rows`] gives what
+//! [`read_pose_measurements`](crate::campaign::read_pose_measurements) gives for the text of
+//! [`TrackerRows::to_csv`], in the same way (unregistered: the fit side registers tracker
+//! sets, `cpm_workflow::ingest`).
 //!
 //! ```
 //! use cpm_io::rows::{read_gauge_rows, GaugeRows};
@@ -228,6 +235,20 @@ fn finite(file: &str, line: usize, name: &str, v: f64) -> Result<f64, InputError
     }
 }
 
+/// Refuses the texts of a row (`(column, text)`, in the order of their columns) that its CSV
+/// cannot hold on its line, as the CSV reader refuses that line: a text with a line break.
+fn one_line(file: &str, line: usize, texts: &[(&str, &str)]) -> Result<(), InputError> {
+    match texts.iter().find(|(_, v)| v.contains('\n')) {
+        Some((name, _)) => Err(InputError::field(
+            file,
+            line,
+            *name,
+            crate::table::QUOTE_NOT_CLOSED,
+        )),
+        None => Ok(()),
+    }
+}
+
 /// A required text column: non-empty.
 fn required<'a>(file: &str, line: usize, name: &str, v: &'a str) -> Result<&'a str, InputError> {
     if v.is_empty() {
@@ -262,6 +283,11 @@ pub fn read_gauge_rows(
     let mut read = || -> Result<(), InputError> {
         for k in 0..rows.len() {
             let line = GaugeRows::line(k);
+            let texts = [
+                ("pose", &*rows.pose_labels[k]),
+                ("sensor", &*rows.sensors[k]),
+            ];
+            one_line(file, line, &texts)?;
             if reading_lines.len() >= options.max_rows {
                 return Err(too_many_rows_at(file, line, options.max_rows));
             }
@@ -533,6 +559,7 @@ pub fn read_tracker_rows(
     let mut read = TrackerRead::new(rows.simulated);
     for k in 0..rows.len() {
         let line = row_line(k);
+        one_line(file, line, &[("pose", &rows.pose_labels[k])])?;
         read.check_more(file, line, options.max_rows)?;
         let label = required(file, line, "pose", &rows.pose_labels[k])?;
         read.check_label(file, line, label)?;
@@ -631,6 +658,8 @@ mod tests {
                 9 => pose[2] += 1000.0,
                 10 => time = f64::NAN,
                 11 => pose[1] = -0.0,
+                12 => label.insert(0, '\n'),
+                13 => sensor.push_str("\nx"),
                 _ => {}
             }
             rows.pose_labels.push(label);
@@ -778,6 +807,7 @@ mod tests {
                 }
                 9 => pq[3..].iter_mut().for_each(|v| *v = -*v),
                 10 => pq[3..].iter_mut().for_each(|v| *v *= 1.0005),
+                11 => label.push('\n'),
                 _ => {}
             }
             labels.push(label);
