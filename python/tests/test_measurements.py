@@ -178,6 +178,15 @@ def test_tracker_arrays(hexapod, tmp_path):
     exact = cpm.calibrate(hexapod, same)
     m = cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q]), simulated=True)
     assert m.kinds == ["tracker"] and len(m.measured_poses) == len(rows)
+    # Issue 36: tracker arrays are read as values (no CSV text is made); a command that reads
+    # files gets their CSV, every number exact, and reads what the arrays gave.
+    assert m.sources[0].text is None and same.sources[0].text is None
+    again = tmp_path / "again.csv"
+    again.write_text(same.sources[0].info["handle"].csv())
+    back = cpm.read_measurements(again, hexapod)
+    np.testing.assert_array_equal(back.measured_poses, same.measured_poses)
+    np.testing.assert_array_equal(back.poses, same.poses)
+    assert back.simulated and back.kinds == ["tracker"]
     np.testing.assert_allclose(m.measured_poses[:, :3], sim.measured_poses[:, :3], atol=1e-9)
     a = cpm.calibrate(hexapod, sim)
     b = cpm.calibrate(hexapod, m)
@@ -312,6 +321,7 @@ def test_two_tracker_sets_from_arrays_are_registered_together(hexapod, tmp_path,
         pose = np.stack([col(c) for c in ("x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg",
                                           "yaw_deg")], axis=1)
         arrays.append(cpm.tracker_measurements(hexapod, readings, pose, simulated=True))
+        assert arrays[-1].sources[0].text is None
     a = cpm.calibrate(hexapod, [str(f) for f in files])
     from cpm import _robot
 

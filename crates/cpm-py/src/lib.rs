@@ -41,7 +41,7 @@ fn _cpm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(data::read_file, m)?)?;
     m.add_function(wrap_pyfunction!(data::read_text, m)?)?;
     m.add_function(wrap_pyfunction!(data::gauge_rows, m)?)?;
-    m.add_function(wrap_pyfunction!(data::tracker_csv, m)?)?;
+    m.add_function(wrap_pyfunction!(data::tracker_rows, m)?)?;
     #[cfg(feature = "cli")]
     m.add_function(wrap_pyfunction!(cli::main, m)?)?;
     m.add_function(wrap_pyfunction!(jobs::job, m)?)?;

@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use crate::fit::{CalibrateOptions, Calibrated, FitOptions, Inputs};
 use crate::ingest::RegistrationOptions;
-use crate::io::rows::GaugeRows;
+use crate::io::rows::{GaugeRows, TrackerRows};
 use crate::io::{self, DataFile, FileKind, Merged, ReadOptions, Robot};
 use crate::progress::{check_cancelled, Progress};
 
@@ -41,11 +41,15 @@ pub enum Given {
     Text(Arc<str>),
     /// Length-sensor readings as values ([`GaugeRows`]: no text).
     GaugeRows(Arc<GaugeRows>),
+    /// Tracker pose measurements as values ([`TrackerRows`]: no text).
+    TrackerRows(Arc<TrackerRows>),
 }
 
 impl Given {
     /// Reads them against `robot` (`name` stands for the file of a text), as
-    /// [`ingest::read_data`](crate::ingest::read_data) reads a file's text.
+    /// [`ingest::read_data`](crate::ingest::read_data) reads a file's text: read
+    /// ([`read_unregistered`](Self::read_unregistered)), then a tracker or point set registered
+    /// on its own.
     pub fn read(
         &self,
         name: &str,
@@ -53,10 +57,9 @@ impl Given {
         options: &ReadOptions,
         registration: &RegistrationOptions,
     ) -> Result<DataFile, io::InputError> {
-        match self {
-            Given::Text(text) => crate::ingest::read_data(text, name, robot, options, registration),
-            Given::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options),
-        }
+        let mut f = self.read_unregistered(name, robot, options)?;
+        crate::ingest::register_files(std::slice::from_mut(&mut f), robot, options, registration)?;
+        Ok(f)
     }
 
     /// Reads them against `robot` as the readers do, without registering tracker or point
@@ -70,6 +73,7 @@ impl Given {
         match self {
             Given::Text(text) => io::read_data(text, name, robot, options),
             Given::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options),
+            Given::TrackerRows(rows) => io::rows::read_tracker_rows(rows, robot, options),
         }
     }
 }
@@ -91,6 +95,8 @@ pub enum Source {
     },
     /// Length-sensor readings as values, to read (their `file` names them).
     GaugeRows(Arc<GaugeRows>),
+    /// Tracker pose measurements as values, to read and register (their `file` names them).
+    TrackerRows(Arc<TrackerRows>),
 }
 
 impl Source {
@@ -101,6 +107,7 @@ impl Source {
             Source::Read(r) => r.data.file.clone(),
             Source::Text { name, .. } => name.clone(),
             Source::GaugeRows(rows) => rows.file.clone(),
+            Source::TrackerRows(rows) => rows.file.clone(),
         }
     }
 }
@@ -182,6 +189,7 @@ pub fn read_sources(
             Source::Read(r) => r.given.read_unregistered(&r.data.file, robot, options)?,
             Source::Text { name, text } => io::read_data(text, name, robot, options)?,
             Source::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options)?,
+            Source::TrackerRows(rows) => io::rows::read_tracker_rows(rows, robot, options)?,
         };
         files.push(f);
     }
@@ -396,6 +404,67 @@ mod tests {
         assert!(b.simulated);
         assert_eq!(from_rows.inputs.merged.campaign.readings.len(), 90);
     }
+    /// A tracker campaign given as values (numpy arrays in Python) and the same
+    /// measurements in their file: the same registration and calibration, bit for bit.
+    #[test]
+    fn tracker_rows_and_file_give_the_same_fit() {
+        let robot_path = ex("hexapod_66.toml");
+        let dir =
+            std::env::temp_dir().join(format!("cpm-memory-tracker-rows-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut o = crate::simulate::SimulateOptions::new(&robot_path);
+        o.plan.random = Some(30);
+        o.plan.seed = 7;
+        o.paper_table2 = true;
+        o.measure = crate::simulate::Measure::Poses;
+        o.noise = Some("gaussian:5".to_string());
+        o.tracker_frame = Some("900,-200,30,0.3,-0.2,20".to_string());
+        let text = crate::simulate::simulate(&o, &crate::Silent).unwrap().text;
+        let data_path = dir.join("tracker.csv");
+        std::fs::write(&data_path, &text).unwrap();
+        let out = dir.join("cal");
+        let options = CalibrateOptions::new(&robot_path, vec![data_path.clone()], &out);
+        let from_file = crate::fit::calibrate(&options, &crate::Silent).unwrap();
+        // The file's columns as values.
+        let robot = Robot::load(&robot_path).unwrap();
+        let links = robot.num_links();
+        let mut t = io::table::Table::parse(&text, "tracker").unwrap();
+        let (mut labels, mut readings, mut poses) = (vec![], vec![], vec![]);
+        let number =
+            |t: &io::table::Table<&[u8]>, r: &io::table::Row, c: &str| t.number(r, c).unwrap();
+        let mut simulated = t.simulated_mark;
+        while let Some(r) = t.next_row().unwrap() {
+            labels.push(t.text(&r, "pose").unwrap().to_string());
+            readings.extend((1..=links).map(|k| number(&t, &r, &format!("reading_{k}"))));
+            let cols = ["x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg"];
+            poses.push(cols.map(|c| number(&t, &r, c)));
+            simulated |= t.optional_bool(&r, "simulated").unwrap() == Some(true);
+        }
+        let mut rows = TrackerRows::new(
+            "tracker as values",
+            labels,
+            links,
+            readings,
+            io::rows::TrackerPoses::Rpy(poses),
+        );
+        rows.simulated = simulated;
+        let sources = [Source::TrackerRows(Arc::new(rows))];
+        let from_rows = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
+        let registration = |c: &Calibrated| {
+            let mut r = c.inputs.merged.registration.clone().expect("registered");
+            r.sessions.iter_mut().for_each(|s| s.file.clear());
+            format!("{r:?}")
+        };
+        assert_eq!(registration(&from_file), registration(&from_rows));
+        let (a, b) = (&from_file.fitted.cal, &from_rows.fitted.cal);
+        assert_eq!(a.estimate_um, b.estimate_um);
+        assert_eq!(a.std_um, b.std_um);
+        assert_eq!(a.residuals_um, b.residuals_um);
+        assert!(b.simulated);
+        assert_eq!(from_rows.inputs.merged.campaign.pose_measurements.len(), 30);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     /// Two tracker sessions, each in a frame of its own, registered together whether read
     /// from files or given as text: the same registration and fit, bit for bit (a campaign
     /// of several tracker sets in memory needs no files).
