@@ -682,6 +682,7 @@ impl std::fmt::Display for ExcludedPose {
 
 /// A pose of a file found unreachable while reading it, to exclude (or to refuse the file
 /// with, see [`exclude_poses`]).
+#[derive(Debug)]
 pub struct Unusable {
     /// Its index among the file's campaign poses.
     pub pose: usize,
@@ -696,8 +697,20 @@ pub struct Unusable {
 /// Excludes the poses `unusable` from `f` (see [`POSES_PER_EXCLUDED_POSE`]) and records them
 /// in [`DataFile::excluded`], or, when they are too many, returns the first one's error.
 pub fn exclude_poses(f: &mut DataFile, unusable: Vec<Unusable>) -> Result<(), InputError> {
+    if let Some(g) = without_unusable(f, &unusable)? {
+        *f = g;
+    }
+    Ok(())
+}
+
+/// [`exclude_poses`] into a new file, `f` left as it is: `None` when nothing is to be
+/// excluded.
+pub(crate) fn without_unusable(
+    f: &DataFile,
+    unusable: &[Unusable],
+) -> Result<Option<DataFile>, InputError> {
     let Some(first) = unusable.first() else {
-        return Ok(());
+        return Ok(None);
     };
     let poses = f.campaign.poses.len();
     let label = |j: usize| f.pose_labels.get(j).map_or("", String::as_str);
@@ -715,19 +728,22 @@ pub fn exclude_poses(f: &mut DataFile, unusable: Vec<Unusable>) -> Result<(), In
         return Err(e);
     }
     let mut drop = vec![false; poses];
-    for u in &unusable {
+    let mut excluded = Vec::with_capacity(unusable.len());
+    for u in unusable {
         if let Some(d) = drop.get_mut(u.pose) {
             *d = true;
         }
-        f.excluded.push(ExcludedPose {
+        excluded.push(ExcludedPose {
             file: f.file.clone(),
             line: line(u.pose),
             label: label(u.pose).to_string(),
             reason: u.what.clone(),
         });
     }
-    *f = f.without_poses(&drop);
-    Ok(())
+    // The file's earlier exclusions first, as `without_poses` keeps them.
+    let mut g = f.without_poses(&drop);
+    g.excluded.extend(excluded);
+    Ok(Some(g))
 }
 
 impl DataFile {
@@ -1279,7 +1295,8 @@ impl PoseChecks {
 /// metres), J1's condition number at home (at the first pose) and its reachability (an
 /// unreachable pose is to be excluded: returned), then at every row of a pose kept the
 /// sensor's length against the nominal. The reachability of all the poses is found first,
-/// in parallel (it depends on the pose alone).
+/// in parallel (it depends on the pose alone), then the first row whose sensor length is
+/// refused, in parallel too (whether its pose is kept depends on the pose alone).
 pub(crate) fn robot_checks(
     file: &str,
     robot: &Robot,
@@ -1311,10 +1328,23 @@ pub(crate) fn robot_checks(
         }
         _ => Vec::new(),
     };
+    // A pose is left out at its first row, before the rows of its own are checked.
+    let excluded = |j: usize| why.get(j).is_some_and(Option::is_some);
+    let far = |r: &Reading| {
+        let nominal = robot.table.sensors[r.sensor].length_mm(&poses[r.pose]);
+        !((r.length_mm - nominal).abs() <= tolerance_mm(nominal))
+    };
+    let first_far = if options.check_sensor_lengths {
+        readings
+            .par_iter()
+            .with_min_len(1 << 12)
+            .position_first(|r| !excluded(r.pose) && far(r))
+    } else {
+        None
+    };
     let mut unusable = Vec::new();
-    let mut excluding = vec![false; met];
     let mut next_pose = 0;
-    for (r, &line) in readings.iter().zip(reading_lines) {
+    for (k, (r, &line)) in readings.iter().zip(reading_lines).enumerate() {
         let j = r.pose;
         if j == next_pose {
             next_pose += 1;
@@ -1323,7 +1353,6 @@ pub(crate) fn robot_checks(
                 b?;
             }
             if let Some(what) = why.get(j).cloned().flatten() {
-                excluding[j] = true;
                 unusable.push(Unusable {
                     pose: j,
                     what,
@@ -1332,21 +1361,19 @@ pub(crate) fn robot_checks(
                 });
             }
         }
-        if options.check_sensor_lengths && !excluding[j] {
+        if first_far == Some(k) {
             let s = &robot.table.sensors[r.sensor];
             let nominal = s.length_mm(&poses[j]);
-            if !((r.length_mm - nominal).abs() <= tolerance_mm(nominal)) {
-                return Err(InputError::field(
-                    file,
-                    line,
-                    "length_mm",
-                    format!(
-                        "{} mm is far from the nominal length of sensor {:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?",
-                        show(r.length_mm, None),
-                        s.name
-                    ),
-                ));
-            }
+            return Err(InputError::field(
+                file,
+                line,
+                "length_mm",
+                format!(
+                    "{} mm is far from the nominal length of sensor {:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?",
+                    show(r.length_mm, None),
+                    s.name
+                ),
+            ));
         }
     }
     Ok(unusable)
