@@ -682,7 +682,6 @@ impl std::fmt::Display for ExcludedPose {
 
 /// A pose of a file found unreachable while reading it, to exclude (or to refuse the file
 /// with, see [`exclude_poses`]).
-#[derive(Debug)]
 pub struct Unusable {
     /// Its index among the file's campaign poses.
     pub pose: usize,
@@ -697,20 +696,8 @@ pub struct Unusable {
 /// Excludes the poses `unusable` from `f` (see [`POSES_PER_EXCLUDED_POSE`]) and records them
 /// in [`DataFile::excluded`], or, when they are too many, returns the first one's error.
 pub fn exclude_poses(f: &mut DataFile, unusable: Vec<Unusable>) -> Result<(), InputError> {
-    if let Some(g) = without_unusable(f, &unusable)? {
-        *f = g;
-    }
-    Ok(())
-}
-
-/// [`exclude_poses`] into a new file, `f` left as it is: `None` when nothing is to be
-/// excluded.
-pub(crate) fn without_unusable(
-    f: &DataFile,
-    unusable: &[Unusable],
-) -> Result<Option<DataFile>, InputError> {
     let Some(first) = unusable.first() else {
-        return Ok(None);
+        return Ok(());
     };
     let poses = f.campaign.poses.len();
     let label = |j: usize| f.pose_labels.get(j).map_or("", String::as_str);
@@ -728,22 +715,19 @@ pub(crate) fn without_unusable(
         return Err(e);
     }
     let mut drop = vec![false; poses];
-    let mut excluded = Vec::with_capacity(unusable.len());
-    for u in unusable {
+    for u in &unusable {
         if let Some(d) = drop.get_mut(u.pose) {
             *d = true;
         }
-        excluded.push(ExcludedPose {
+        f.excluded.push(ExcludedPose {
             file: f.file.clone(),
             line: line(u.pose),
             label: label(u.pose).to_string(),
             reason: u.what.clone(),
         });
     }
-    // The file's earlier exclusions first, as `without_poses` keeps them.
-    let mut g = f.without_poses(&drop);
-    g.excluded.extend(excluded);
-    Ok(Some(g))
+    *f = f.without_poses(&drop);
+    Ok(())
 }
 
 impl DataFile {

@@ -84,8 +84,8 @@ pub use campaign::{
 };
 pub use error::{read_text, InputError, ReadError};
 pub use read::{
-    read_data, read_data_file, read_data_file_for_first, read_data_file_for_two, read_data_files,
-    read_data_from, ReadForTwo, SecondReading,
+    read_data, read_data_file, read_data_file_for_two, read_data_files, read_data_from,
+    SecondReading,
 };
 pub use robot::{calibrated_description, calibrated_toml, parse_effects, Robot};
 pub use table::FileKind;

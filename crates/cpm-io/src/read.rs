@@ -8,8 +8,8 @@ use std::io::Read;
 use std::path::Path;
 
 use crate::campaign::{
-    finish, open, read_pose_measurements_table, read_readings_table, read_readings_unexcluded,
-    readings_for_second_robot, without_unusable, DataFile, ReadOptions,
+    exclude_poses, finish, open, read_pose_measurements_table, read_readings_table,
+    read_readings_unexcluded, readings_for_second_robot, DataFile, ReadOptions,
 };
 use crate::points::{read_point_measurements_table, read_tilt_measurements_table};
 use crate::table::{FileKind, Table};
@@ -97,94 +97,35 @@ pub fn read_data_file_for_two(
     second: &Robot,
     options: &ReadOptions,
 ) -> Result<(DataFile, Option<Result<SecondReading, ReadError>>), ReadError> {
-    let read = read_data_file_for_first(path, first, options)?;
-    let second = read.second(first, second, options);
-    Ok((read.into_file(), second))
-}
-
-/// [`read_data_file_for_two`] in two steps: the first robot's reading now, the second's
-/// when asked for ([`ReadForTwo::second`]: while the first's reading is at work elsewhere).
-pub fn read_data_file_for_first(
-    path: &Path,
-    first: &Robot,
-    options: &ReadOptions,
-) -> Result<ReadForTwo, ReadError> {
     let file = path.display().to_string();
     let t = Table::from_reader(open(path)?, &file)?;
     if !matches!(t.kind(), Ok(FileKind::Readings)) {
         drop(t);
-        return Ok(ReadForTwo {
-            file: read_data_file(path, first, options)?,
-            all: None,
-            unusable: None,
-        });
+        return Ok((read_data_file(path, first, options)?, None));
     }
     let mut t = t.read_ahead();
     let (all, unusable) =
         read_readings_unexcluded(&mut t, first, options).map_err(|e| finish(&mut t, e))?;
     drop(t);
-    Ok(match without_unusable(&all, &unusable)? {
-        Some(f) => ReadForTwo {
-            file: f,
-            all: Some(all),
-            unusable: Some(unusable),
-        },
-        None => ReadForTwo {
-            file: all,
-            all: None,
-            unusable: Some(unusable),
-        },
-    })
-}
-
-/// A measurement file as a first robot read it, a second robot's reading to come
-/// ([`read_data_file_for_first`]).
-#[derive(Debug)]
-pub struct ReadForTwo {
-    /// The first robot's reading, as [`read_data_file`] gives it.
-    file: DataFile,
-    /// The file with every pose, when the first robot's reading left some out.
-    all: Option<DataFile>,
-    /// The poses the first robot's reading left out, when a second robot can share it.
-    unusable: Option<Vec<crate::campaign::Unusable>>,
-}
-
-impl ReadForTwo {
-    /// The first robot's reading.
-    pub fn file(&self) -> &DataFile {
-        &self.file
-    }
-
-    /// The first robot's reading, the second's no longer to come.
-    pub fn into_file(self) -> DataFile {
-        self.file
-    }
-
-    /// The second robot's reading, as [`read_data_file_for_two`] gives it (`first`: the
-    /// robot that read the file, with the same `options`).
-    pub fn second(
-        &self,
-        first: &Robot,
-        second: &Robot,
-        options: &ReadOptions,
-    ) -> Option<Result<SecondReading, ReadError>> {
-        let unusable = self.unusable.as_ref()?;
-        let all = self.all.as_ref().unwrap_or(&self.file);
-        let theirs = readings_for_second_robot(all, first, second, options);
-        let same = |u: &[crate::campaign::Unusable]| {
-            u.len() == unusable.len()
-                && u.iter()
-                    .zip(unusable)
-                    .all(|(a, b)| a.pose == b.pose && a.what == b.what)
-        };
-        theirs.map(|r| match r {
-            Err(e) => Err(ReadError::Input(e)),
-            Ok(u) if same(&u) => Ok(SecondReading::SameAsFirst),
-            Ok(u) => Ok(SecondReading::File(Box::new(
-                without_unusable(all, &u)?.unwrap_or_else(|| all.clone()),
-            ))),
-        })
-    }
+    let theirs = readings_for_second_robot(&all, first, second, options);
+    let same = |u: &[crate::campaign::Unusable]| {
+        u.len() == unusable.len()
+            && u.iter()
+                .zip(&unusable)
+                .all(|(a, b)| a.pose == b.pose && a.what == b.what)
+    };
+    let second = theirs.map(|r| match r {
+        Err(e) => Err(ReadError::Input(e)),
+        Ok(u) if same(&u) => Ok(SecondReading::SameAsFirst),
+        Ok(u) => {
+            let mut f = all.clone();
+            exclude_poses(&mut f, u)?;
+            Ok(SecondReading::File(Box::new(f)))
+        }
+    });
+    let mut f = all;
+    exclude_poses(&mut f, unusable)?;
+    Ok((f, second))
 }
 
 /// Reads several measurement files (see [`read_data_file`]), the tracker files among them

@@ -15,7 +15,7 @@ use crate::io::campaign::{
     CONSISTENCY_MM,
 };
 use crate::io::{
-    DataFile, FileKind, InputError, ReadError, ReadForTwo, ReadOptions, RegistrationReport, Robot,
+    DataFile, FileKind, InputError, ReadError, ReadOptions, RegistrationReport, Robot,
     SecondReading, SessionRegistration, TrackerRow, REGISTRATION_APPLY_MM,
 };
 
@@ -175,37 +175,14 @@ pub fn read_data_file_for_two(
     options: &ReadOptions,
     registration: &RegistrationOptions,
 ) -> Result<(DataFile, Option<Result<SecondReading, ReadError>>), ReadError> {
-    let read = crate::io::read_data_file_for_first(path, first, options)?;
-    let theirs = second_reading(&read, first, second, options, registration);
-    Ok((first_reading(read, first, options, registration)?, theirs))
-}
-
-/// The first robot's reading of a file read for two ([`io::read_data_file_for_first`]
-/// (crate::io::read_data_file_for_first)), registered and checked with it: as
-/// [`read_data_file_for_two`] gives it.
-pub fn first_reading(
-    read: ReadForTwo,
-    first: &Robot,
-    options: &ReadOptions,
-    registration: &RegistrationOptions,
-) -> Result<DataFile, ReadError> {
-    registered::<ReadError>(Ok(read.into_file()), first, options, registration)
-}
-
-/// The second robot's reading of a file read for two, registered and checked with it: as
-/// [`read_data_file_for_two`] gives it (`first`: the robot that read it).
-pub fn second_reading(
-    read: &ReadForTwo,
-    first: &Robot,
-    second: &Robot,
-    options: &ReadOptions,
-    registration: &RegistrationOptions,
-) -> Option<Result<SecondReading, ReadError>> {
-    read.second(first, second, options).map(|r| match r {
+    let (f, theirs) = crate::io::read_data_file_for_two(path, first, second, options)?;
+    let theirs = theirs.map(|r| match r {
         Ok(SecondReading::File(g)) => registered(Ok(*g), second, options, registration)
             .map(|g| SecondReading::File(Box::new(g))),
         other => other,
-    })
+    });
+    let f = registered::<ReadError>(Ok(f), first, options, registration)?;
+    Ok((f, theirs))
 }
 
 /// Reads several measurement files ([`io::read_data_files`](crate::io::read_data_files));

@@ -647,8 +647,7 @@ fn errors_of(
 /// [`errors_of`] `robot` and of `reference` (its own controller) on the same files, each file
 /// read once for both when the readers can share it ([`crate::ingest::read_data_file_for_two`]),
 /// with the results and errors of the two calls one after the other: an error of
-/// `robot`'s is returned, the reference's is its result. A file of gauge readings is predicted
-/// by `robot` while the reference reads it and predicts it ([`reference_on`]).
+/// `robot`'s is returned, the reference's is its result.
 fn errors_of_both(
     robot: &Robot,
     reference: &Robot,
@@ -657,88 +656,42 @@ fn errors_of_both(
     residuals: bool,
 ) -> anyhow::Result<(Predicted, anyhow::Result<RobotErrors>)> {
     let options = held_out_read_options(true);
-    let registration = held_out_registration();
     let mut g = RobotGather::new(robot, residuals);
     // The reference's gathering, until its first error (kept for after `robot`'s files).
     let mut r: anyhow::Result<RobotGather> = Ok(RobotGather::new(reference, false));
     for path in paths {
-        let read = crate::io::read_data_file_for_first(path, robot, &options)?;
-        if read.file().kind != FileKind::Readings {
-            // No second reading shares it: the reference reads it on its own.
-            let mut file = crate::ingest::first_reading(read, robot, &options, &registration)?;
-            if let Ok(rg) = &mut r {
-                let done = read_held_out(path, reference, reference, &options, tracker)
-                    .and_then(|f| rg.take(f));
-                if let Err(e) = done {
-                    r = Err(e);
+        let (mut file, second) = crate::ingest::read_data_file_for_two(
+            path,
+            robot,
+            reference,
+            &options,
+            &held_out_registration(),
+        )?;
+        if let Ok(rg) = &mut r {
+            use crate::io::SecondReading;
+            let done = match second {
+                None => read_held_out(path, reference, reference, &options, tracker)
+                    .and_then(|f| rg.take(f)),
+                Some(Err(e)) => Err(e.into()),
+                Some(Ok(SecondReading::File(mut f))) => {
+                    held_out(&mut f, reference, reference, tracker).and_then(|()| rg.take(*f))
                 }
+                Some(Ok(SecondReading::SameAsFirst)) => {
+                    // Gauge readings alone, the file as `robot` read it (no logged link
+                    // readings), predicted with the reference's commanded lengths (those
+                    // `held_out` would give it).
+                    let theirs = commanded_lengths(reference, reference, &file.campaign.poses);
+                    rg.file_commanded(&file, Some(&theirs)).map(drop)
+                }
+            };
+            if let Err(e) = done {
+                r = Err(e);
             }
-            held_out(&mut file, robot, reference, tracker)?;
-            g.take(file)?;
-            continue;
-        }
-        let file = read.file();
-        // The commanded lengths `robot` predicts with: logged, else those `held_out` gives.
-        let mine = (file.campaign.commanded_lengths_mm.as_ref())
-            .is_none()
-            .then(|| commanded_lengths(robot, reference, &file.campaign.poses));
-        let commanded = mine
-            .as_deref()
-            .or(file.campaign.commanded_lengths_mm.as_deref());
-        let (native, done) = match &mut r {
-            Ok(rg) => {
-                let (native, done) = rayon::join(
-                    || g.file_commanded(file, commanded),
-                    || reference_on(rg, &read, path, robot, reference, &options, tracker),
-                );
-                (native, Some(done))
-            }
-            Err(_) => (g.file_commanded(file, commanded), None),
-        };
-        if let Some(Err(e)) = done {
-            r = Err(e);
-        }
-        let mut file = crate::ingest::first_reading(read, robot, &options, &registration)?;
-        if mine.is_some() {
-            file.campaign.commanded_lengths_mm = mine;
         }
         held_out(&mut file, robot, reference, tracker)?;
-        g.rows(file, native?)?;
+        g.take(file)?;
     }
     Ok((g.finish(), r.map(|r| r.finish().0)))
-}
-
-/// The reference's reading of a file of gauge readings `robot` read (`read`), predicted and
-/// gathered in `rg`: the same reading predicted with the reference's commanded lengths, else
-/// its own reading (or the file read again for it).
-fn reference_on(
-    rg: &mut RobotGather,
-    read: &crate::io::ReadForTwo,
-    path: &Path,
-    robot: &Robot,
-    reference: &Robot,
-    options: &ReadOptions,
-    tracker: (f64, f64),
-) -> anyhow::Result<()> {
-    use crate::io::SecondReading;
-    let second =
-        crate::ingest::second_reading(read, robot, reference, options, &held_out_registration());
-    match second {
-        None => {
-            read_held_out(path, reference, reference, options, tracker).and_then(|f| rg.take(f))
-        }
-        Some(Err(e)) => Err(e.into()),
-        Some(Ok(SecondReading::File(mut f))) => {
-            held_out(&mut f, reference, reference, tracker).and_then(|()| rg.take(*f))
-        }
-        Some(Ok(SecondReading::SameAsFirst)) => {
-            // The file as `robot` read it (no logged link readings), with the reference's
-            // commanded lengths (those `held_out` would give it).
-            let file = read.file();
-            let theirs = commanded_lengths(reference, reference, &file.campaign.poses);
-            rg.file_commanded(file, Some(&theirs)).map(drop)
-        }
-    }
 }
 
 /// Pose errors (position um per target, orientation urad per target) the machine `truth`
