@@ -1324,7 +1324,8 @@ impl PoseChecks {
 /// metres), J1's condition number at home (at the first pose) and its reachability (an
 /// unreachable pose is to be excluded: returned), then at every row of a pose kept the
 /// sensor's length against the nominal. The reachability of all the poses is found first,
-/// in parallel (it depends on the pose alone).
+/// in parallel (it depends on the pose alone), then the first row whose sensor length is
+/// refused, in parallel too (whether its pose is kept depends on the pose alone).
 pub(crate) fn robot_checks(
     file: &str,
     robot: &Robot,
@@ -1356,10 +1357,23 @@ pub(crate) fn robot_checks(
         }
         _ => Vec::new(),
     };
+    // A pose is left out at its first row, before the rows of its own are checked.
+    let excluded = |j: usize| why.get(j).is_some_and(Option::is_some);
+    let far = |r: &Reading| {
+        let nominal = robot.table.sensors[r.sensor].length_mm(&poses[r.pose]);
+        !((r.length_mm - nominal).abs() <= tolerance_mm(nominal))
+    };
+    let first_far = if options.check_sensor_lengths {
+        readings
+            .par_iter()
+            .with_min_len(1 << 12)
+            .position_first(|r| !excluded(r.pose) && far(r))
+    } else {
+        None
+    };
     let mut unusable = Vec::new();
-    let mut excluding = vec![false; met];
     let mut next_pose = 0;
-    for (r, &line) in readings.iter().zip(reading_lines) {
+    for (k, (r, &line)) in readings.iter().zip(reading_lines).enumerate() {
         let j = r.pose;
         if j == next_pose {
             next_pose += 1;
@@ -1368,7 +1382,6 @@ pub(crate) fn robot_checks(
                 b?;
             }
             if let Some(what) = why.get(j).cloned().flatten() {
-                excluding[j] = true;
                 unusable.push(Unusable {
                     pose: j,
                     what,
@@ -1377,21 +1390,19 @@ pub(crate) fn robot_checks(
                 });
             }
         }
-        if options.check_sensor_lengths && !excluding[j] {
+        if first_far == Some(k) {
             let s = &robot.table.sensors[r.sensor];
             let nominal = s.length_mm(&poses[j]);
-            if !((r.length_mm - nominal).abs() <= tolerance_mm(nominal)) {
-                return Err(InputError::field(
-                    file,
-                    line,
-                    "length_mm",
-                    format!(
-                        "{} mm is far from the nominal length of sensor {:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?",
-                        show(r.length_mm, None),
-                        s.name
-                    ),
-                ));
-            }
+            return Err(InputError::field(
+                file,
+                line,
+                "length_mm",
+                format!(
+                    "{} mm is far from the nominal length of sensor {:?} at this pose ({nominal:.3} mm): wrong units (mm expected), wrong sensor, or a pose in other units?",
+                    show(r.length_mm, None),
+                    s.name
+                ),
+            ));
         }
     }
     Ok(unusable)

@@ -39,8 +39,10 @@ pub fn write_residual_rows<W: std::io::Write>(
 ) -> std::io::Result<()> {
     use rayon::prelude::*;
     let residuals = in_tracker_axes(merged, residuals);
-    // Blocks of rows made in parallel, a batch of them at a time (so that at most a batch's
-    // text is held beside what `out` keeps), written in order.
+    // Blocks of rows made in parallel, a batch of them at a time (so that at most two
+    // batches' text is held beside what `out` keeps), written in order: each batch is made
+    // while the one before it is written (`out` may take its time: a file, fingerprinted as it
+    // is written).
     const ROWS: usize = 1 << 13;
     const BATCH: usize = 16;
     let blocks: Vec<(usize, &[f64])> = residuals
@@ -48,16 +50,23 @@ pub fn write_residual_rows<W: std::io::Write>(
         .enumerate()
         .map(|(b, r)| (b * ROWS, r))
         .collect();
-    for batch in blocks.chunks(BATCH) {
-        let texts: Vec<String> = batch
+    let make = |batch: &[(usize, &[f64])]| -> Vec<String> {
+        batch
             .par_iter()
             .map(|(start, r)| residual_rows(robot, merged, r, *start, first))
-            .collect();
-        for t in &texts {
-            out.write_all(t.as_bytes())?;
-        }
+            .collect()
+    };
+    let mut made: Vec<String> = Vec::new();
+    for batch in blocks.chunks(BATCH) {
+        let mut next = Vec::new();
+        let written = rayon::in_place_scope(|s| {
+            s.spawn(|_| next = make(batch));
+            made.iter().try_for_each(|t| out.write_all(t.as_bytes()))
+        });
+        written?;
+        made = next;
     }
-    Ok(())
+    made.iter().try_for_each(|t| out.write_all(t.as_bytes()))
 }
 
 /// The rows of observations `start..start + residuals.len()` (see [`write_residual_rows`]).

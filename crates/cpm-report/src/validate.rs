@@ -175,9 +175,6 @@ pub struct PredictionErrors {
     pub outside_pose_map: usize,
     /// Tracker poses.
     pub tracker_poses: usize,
-    /// `residuals.csv`: every observation of every file, measured minus predicted in its own
-    /// unit, with its file, line and what it is (as `calibrate` writes it).
-    pub residuals_csv: String,
     /// The poses the readers left out (the machine cannot be there), file after file.
     pub excluded: Vec<cpm_io::ExcludedPose>,
 }

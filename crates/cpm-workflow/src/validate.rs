@@ -477,10 +477,34 @@ struct RobotGather<'r> {
     model: MeasurementModel,
     pose_map_range: Option<crate::calib::refine::PoseRange>,
     gather: Gather,
-    /// `residuals.csv` so far, when it is asked for; and the observations it numbers.
-    residuals_csv: Option<Vec<u8>>,
-    written: usize,
+    /// The rows of `residuals.csv` so far, when it is asked for.
+    residuals: Option<Vec<(crate::io::Merged, Vec<f64>)>>,
 }
+
+/// `residuals.csv` of the files one robot predicted, written when the file is (10^6 readings
+/// make 80 MB of text, never held whole): each file's observations as read (where each comes
+/// from) with their residuals in their own units, numbered on from file to file.
+struct ResidualRows {
+    robot: Robot,
+    files: Vec<(crate::io::Merged, Vec<f64>)>,
+}
+
+impl ResidualRows {
+    /// Writes the file (its header, then the rows of each file in turn).
+    fn write(&self, mut out: &mut dyn std::io::Write) -> std::io::Result<()> {
+        use crate::report::residuals::{write_residual_rows, RESIDUALS_HEADER};
+        out.write_all(RESIDUALS_HEADER.as_bytes())?;
+        let mut first = 1;
+        for (origins, native) in &self.files {
+            write_residual_rows(&mut out, &self.robot, origins, native, first)?;
+            first += native.len();
+        }
+        Ok(())
+    }
+}
+
+/// What one robot predicts on the held-out files, and `residuals.csv` of them when asked for.
+type Predicted = (RobotErrors, Option<ResidualRows>);
 
 impl<'r> RobotGather<'r> {
     fn new(robot: &'r Robot, residuals: bool) -> Self {
@@ -492,18 +516,23 @@ impl<'r> RobotGather<'r> {
                 out: RobotErrors::default(),
                 sensor_group: vec![None; robot.table.sensors.len()],
             },
-            residuals_csv: residuals.then(|| {
-                crate::report::residuals::RESIDUALS_HEADER
-                    .as_bytes()
-                    .to_vec()
-            }),
-            written: 0,
+            residuals: residuals.then(Vec::new),
         }
     }
 
     /// One held-out file (as [`read_held_out`] gives it) predicted and gathered; the
     /// residuals in their own units when `residuals.csv` is asked for (else none).
     fn file(&mut self, file: &crate::io::DataFile) -> anyhow::Result<Vec<f64>> {
+        self.file_commanded(file, file.campaign.commanded_lengths_mm.as_deref())
+    }
+
+    /// [`file`](Self::file) with the commanded lengths `commanded` in place of the file's
+    /// (a file of gauge readings alone: sessions and tracker poses read the file's own).
+    fn file_commanded(
+        &mut self,
+        file: &crate::io::DataFile,
+        commanded: Option<&[Vec<f64>]>,
+    ) -> anyhow::Result<Vec<f64>> {
         let (robot, model, gather) = (self.robot, &self.model, &mut self.gather);
         gather.out.excluded.extend(file.excluded.iter().cloned());
         let campaign: &Campaign = &file.campaign;
@@ -514,7 +543,7 @@ impl<'r> RobotGather<'r> {
                 file.file, robot.file
             ))
         };
-        let prepared = Prepared::new(model, campaign).map_err(fail)?;
+        let prepared = Prepared::with_commanded(model, campaign, commanded).map_err(fail)?;
         let (predicted, frame) = if campaign.pose_measurements.is_empty()
             && campaign.point_measurements.is_empty()
             && campaign.tilt_measurements.is_empty()
@@ -546,7 +575,7 @@ impl<'r> RobotGather<'r> {
             );
         }
         // The residuals in their own units, for `residuals.csv` only.
-        Ok(if self.residuals_csv.is_some() {
+        Ok(if self.residuals.is_some() {
             observed
                 .iter()
                 .zip(&predicted)
@@ -560,27 +589,25 @@ impl<'r> RobotGather<'r> {
     /// [`file`](Self::file), and its rows of `residuals.csv` when it is asked for.
     fn take(&mut self, file: crate::io::DataFile) -> anyhow::Result<()> {
         let native = self.file(&file)?;
-        if let Some(csv) = &mut self.residuals_csv {
+        self.rows(file, native)
+    }
+
+    /// The rows of `residuals.csv` of `file` when it is asked for (kept to be written with
+    /// the file), its residuals `native` (as [`file`](Self::file) gives them).
+    fn rows(&mut self, file: crate::io::DataFile, native: Vec<f64>) -> anyhow::Result<()> {
+        if let Some(files) = &mut self.residuals {
             // Where each observation comes from, as the file was read.
-            let origins = crate::io::merge(vec![file], self.robot);
-            crate::report::residuals::write_residual_rows(
-                csv,
-                self.robot,
-                &origins,
-                &native,
-                self.written + 1,
-            )?;
-            self.written += native.len();
+            files.push((crate::io::merge(vec![file], self.robot), native));
         }
         Ok(())
     }
 
-    fn finish(self) -> RobotErrors {
-        let mut out = self.gather.out;
-        if let Some(csv) = self.residuals_csv {
-            out.residuals_csv = String::from_utf8(csv).expect("UTF-8 rows");
-        }
-        out
+    fn finish(self) -> Predicted {
+        let rows = self.residuals.map(|files| ResidualRows {
+            robot: self.robot.clone(),
+            files,
+        });
+        (self.gather.out, rows)
     }
 }
 
@@ -593,7 +620,7 @@ impl<'r> RobotGather<'r> {
 /// the weights with which each tracker session is registered.
 ///
 /// With `residuals`, `residuals.csv` of the files too (one numbering over the files, in the
-/// order given), its rows written as they are made; without, none of its text is made.
+/// order given), to be written when the file is; without, none of it is kept.
 ///
 /// The poses `leave_out` names (file and label) are left out of the files as read, with all
 /// their rows, as the fit left them out (those the reading leaves out itself are gone already).
@@ -605,7 +632,7 @@ fn errors_of(
     tracker: (f64, f64),
     residuals: bool,
     leave_out: &[crate::io::ExcludedPose],
-) -> anyhow::Result<RobotErrors> {
+) -> anyhow::Result<Predicted> {
     let options = held_out_read_options(strict);
     let mut g = RobotGather::new(robot, residuals);
     for path in paths {
@@ -627,7 +654,7 @@ fn errors_of_both(
     paths: &[PathBuf],
     tracker: (f64, f64),
     residuals: bool,
-) -> anyhow::Result<(RobotErrors, anyhow::Result<RobotErrors>)> {
+) -> anyhow::Result<(Predicted, anyhow::Result<RobotErrors>)> {
     let options = held_out_read_options(true);
     let mut g = RobotGather::new(robot, residuals);
     // The reference's gathering, until its first error (kept for after `robot`'s files).
@@ -650,11 +677,11 @@ fn errors_of_both(
                     held_out(&mut f, reference, reference, tracker).and_then(|()| rg.take(*f))
                 }
                 Some(Ok(SecondReading::SameAsFirst)) => {
-                    // The file as `robot` read it, with the reference's commanded lengths.
-                    let done = held_out(&mut file, reference, reference, tracker)
-                        .and_then(|()| rg.file(&file).map(drop));
-                    file.campaign.commanded_lengths_mm = None;
-                    done
+                    // Gauge readings alone, the file as `robot` read it (no logged link
+                    // readings), predicted with the reference's commanded lengths (those
+                    // `held_out` would give it).
+                    let theirs = commanded_lengths(reference, reference, &file.campaign.poses);
+                    rg.file_commanded(&file, Some(&theirs)).map(drop)
                 }
             };
             if let Err(e) = done {
@@ -664,7 +691,7 @@ fn errors_of_both(
         held_out(&mut file, robot, reference, tracker)?;
         g.take(file)?;
     }
-    Ok((g.finish(), r.map(RobotGather::finish)))
+    Ok((g.finish(), r.map(|r| r.finish().0)))
 }
 
 /// Pose errors (position um per target, orientation urad per target) the machine `truth`
@@ -932,7 +959,7 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
     progress.stage("predicting the held-out measurements");
     let data = &options.data;
     // Each file read once for both robots where the readers can share it.
-    let (mut cal_errors, ref_errors) =
+    let ((mut cal_errors, mut cal_rows), ref_errors) =
         errors_of_both(&robot, &reference, data, tracker, options.out.is_some())?;
     check_cancelled(progress)?;
     let mut ref_errors = ref_errors.map_err(|e| {
@@ -959,7 +986,7 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
         check_cancelled(progress)?;
         let mut union = cal_errors.excluded.clone();
         union.extend(only_reference.iter().cloned());
-        cal_errors = errors_of(
+        (cal_errors, cal_rows) = errors_of(
             &robot,
             &reference,
             data,
@@ -968,7 +995,7 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
             options.out.is_some(),
             &union,
         )?;
-        ref_errors = errors_of(&reference, &reference, data, true, tracker, false, &union)?;
+        ref_errors = errors_of(&reference, &reference, data, true, tracker, false, &union)?.0;
     }
     let mut excluded = cal_errors.excluded.clone();
     excluded.extend(only_reference);
@@ -997,7 +1024,13 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
             set.add(dir.join("report.md"), markdown.as_str());
             set.add(dir.join("validation.svg"), svg);
             crate::load::stage_report_html(&mut set, dir, "cpm validation report", &markdown);
-            set.add(dir.join("residuals.csv"), cal_errors.residuals_csv);
+            if let Some(rows) = cal_rows {
+                // Written as the file is, from the numbers.
+                set.add_streamed(
+                    dir.join("residuals.csv"),
+                    Box::new(move |out| rows.write(out)),
+                );
+            }
             Some(set)
         }
         None => None,
@@ -1103,7 +1136,7 @@ pub fn file_reproduces_fit(
         Some(e) => e,
         // Measurements held in memory alone: no file to read again.
         None if data.is_empty() => return Ok(None),
-        None => errors_of(&robot, reference, data, false, tracker, false, excluded)?,
+        None => errors_of(&robot, reference, data, false, tracker, false, excluded)?.0,
     };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
     let _ = sigma_um;
@@ -1178,7 +1211,8 @@ mod tests {
                 false,
                 &[],
             )
-            .unwrap();
+            .unwrap()
+            .0;
             assert_eq!(memory.names, files.names);
             let values = |e: &RobotErrors| -> Vec<f64> {
                 e.groups.iter().flat_map(|g| g.values_um.clone()).collect()

@@ -701,6 +701,16 @@ impl MeasurementModel {
     /// Effective link lengths (mm) the machine has at each commanded pose: the commanded
     /// lengths (logged, or nominal IK) plus the clearance shift from the link forces.
     pub fn effective_lengths(&self, campaign: &Campaign) -> Result<Vec<Vec<f64>>, CalibError> {
+        self.effective_lengths_commanded(campaign, campaign.commanded_lengths_mm.as_deref())
+    }
+
+    /// [`effective_lengths`](Self::effective_lengths) with the commanded lengths `commanded`
+    /// in place of the campaign's.
+    fn effective_lengths_commanded(
+        &self,
+        campaign: &Campaign,
+        commanded: Option<&[Vec<f64>]>,
+    ) -> Result<Vec<Vec<f64>>, CalibError> {
         use rayon::prelude::*;
         let n = self.nominal.num_links();
         // Pose by pose in parallel (the statics of each pose are its own); the first error
@@ -709,20 +719,21 @@ impl MeasurementModel {
             .poses
             .par_iter()
             .enumerate()
-            .map(|(j, pose)| self.effective_lengths_at(campaign, j, pose, n))
+            .map(|(j, pose)| self.effective_lengths_at(commanded, j, pose, n))
             .collect();
         rows.into_iter().collect()
     }
 
-    /// The row of [`effective_lengths`](Self::effective_lengths) of pose `j`.
+    /// The row of [`effective_lengths`](Self::effective_lengths) of pose `j`, the commanded
+    /// lengths `commanded` (`None`: the nominal inverse kinematics).
     fn effective_lengths_at(
         &self,
-        campaign: &Campaign,
+        commanded: Option<&[Vec<f64>]>,
         j: usize,
         pose: &Pose,
         n: usize,
     ) -> Result<Vec<f64>, CalibError> {
-        let mut l = match &campaign.commanded_lengths_mm {
+        let mut l = match commanded {
             Some(c) => {
                 let row = c.get(j).ok_or_else(|| {
                     CalibError::invalid("commanded_lengths_mm", format!("no row for pose {j}"))
@@ -1020,8 +1031,20 @@ impl Prepared {
 
     /// Prepares a campaign for repeated predictions.
     pub fn new(model: &MeasurementModel, campaign: &Campaign) -> Result<Self, CalibError> {
+        Self::with_commanded(model, campaign, campaign.commanded_lengths_mm.as_deref())
+    }
+
+    /// [`new`](Self::new) with the commanded lengths `commanded` (mm, per pose and link;
+    /// `None`: none logged) in place of the campaign's `commanded_lengths_mm`: one campaign
+    /// prepared for two machines commanded alike but with their own reading models, without
+    /// a copy of it.
+    pub fn with_commanded(
+        model: &MeasurementModel,
+        campaign: &Campaign,
+        commanded: Option<&[Vec<f64>]>,
+    ) -> Result<Self, CalibError> {
         model.check_campaign(campaign)?;
-        let lengths_mm = model.effective_lengths(campaign)?;
+        let lengths_mm = model.effective_lengths_commanded(campaign, commanded)?;
         let mut by_pose = vec![Vec::new(); campaign.poses.len()];
         for (k, r) in campaign.readings.iter().enumerate() {
             by_pose[r.pose].push(k);
@@ -1042,7 +1065,7 @@ impl Prepared {
         for (q, m) in campaign.instrument_measurements.iter().enumerate() {
             instruments_by_pose[m.pose].push(q);
         }
-        let contexts = contexts(model, campaign, &lengths_mm, &by_pose)?;
+        let contexts = contexts(model, campaign, commanded, &lengths_mm, &by_pose)?;
         // The known link effects depend on the pose context only: applied here, once.
         let mut lengths_mm = lengths_mm;
         if !model.known_effects.is_empty() {
@@ -1103,6 +1126,7 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
 fn contexts(
     model: &MeasurementModel,
     campaign: &Campaign,
+    commanded: Option<&[Vec<f64>]>,
     effective_mm: &[Vec<f64>],
     by_pose: &[Vec<usize>],
 ) -> Result<Vec<PoseContext>, CalibError> {
@@ -1111,7 +1135,7 @@ fn contexts(
         // The commanded lengths: logged, or the nominal inverse kinematics (never the
         // effective lengths, which carry the clearance shift: an effect that reads the
         // commanded length must see the same value whether the controller logged it or not).
-        let commanded_mm = match &campaign.commanded_lengths_mm {
+        let commanded_mm = match commanded {
             Some(c) => c[j].clone(),
             None if model.clearance.radius_um == 0.0 => effective_mm[j].clone(),
             None => cpm_kinematics::inverse_lengths(&model.nominal, pose),
