@@ -344,3 +344,119 @@ fn the_library_simulates_as_the_command_does() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The commands' options by name (how Python gives them, `cpm._cpm.job`): every option of
+/// each command is a field of its workflow options under the same name (`--sigma-um` is
+/// `sigma_um`), no field is missing from the command line, and the options struct's defaults
+/// (`new`) are the command's. Options given by name can therefore not drift from the
+/// command's.
+#[test]
+fn options_by_name_are_the_commands_with_the_commands_defaults() {
+    use clap::{CommandFactory, Parser};
+    use cpm::cli::{Cli, Command};
+    use serde_json::Value;
+    use std::collections::BTreeSet;
+
+    let parse = |argv: &str| -> Command {
+        Cli::try_parse_from(std::iter::once("cpm").chain(argv.split_whitespace()))
+            .unwrap_or_else(|e| panic!("{argv}: {e}"))
+            .command
+    };
+    let options: Value = match parse("calibrate --robot R --data D --out O") {
+        Command::Calibrate(a) => serde_json::to_value(a.options()).unwrap(),
+        _ => unreachable!(),
+    };
+    let cases: Vec<(&str, Value, Value)> = vec![
+        (
+            "calibrate",
+            options,
+            serde_json::to_value(fit::CalibrateOptions::new("R", vec!["D".into()], "O")).unwrap(),
+        ),
+        (
+            "refine",
+            match parse("refine --robot R --data D --out O") {
+                Command::Refine(a) => serde_json::to_value(a.options()).unwrap(),
+                _ => unreachable!(),
+            },
+            serde_json::to_value(cpm::workflow::refine::RefineOptions::new(
+                "R",
+                vec!["D".into()],
+                "O",
+            ))
+            .unwrap(),
+        ),
+        (
+            "validate",
+            match parse("validate --robot R --data D") {
+                Command::Validate(a) => serde_json::to_value(a.options()).unwrap(),
+                _ => unreachable!(),
+            },
+            serde_json::to_value(validate::ValidateOptions::new("R", vec!["D".into()])).unwrap(),
+        ),
+        (
+            "identifiability",
+            match parse("identifiability --robot R") {
+                Command::Identifiability(a) => serde_json::to_value(a.options()).unwrap(),
+                _ => unreachable!(),
+            },
+            serde_json::to_value(identifiability::IdentifiabilityOptions::new("R")).unwrap(),
+        ),
+        (
+            "simulate",
+            match parse("simulate --robot R --out O") {
+                Command::Simulate(a) => serde_json::to_value(a.options()).unwrap(),
+                _ => unreachable!(),
+            },
+            serde_json::to_value(simulate::SimulateOptions {
+                out: Some("O".into()),
+                ..simulate::SimulateOptions::new("R")
+            })
+            .unwrap(),
+        ),
+        (
+            "compensate",
+            match parse("compensate --robot R --poses P") {
+                Command::Compensate(a) => serde_json::to_value(a.options()).unwrap(),
+                _ => unreachable!(),
+            },
+            serde_json::to_value(compensate::CompensateOptions::new("R", "P")).unwrap(),
+        ),
+        (
+            "design",
+            match parse("design --robot R --out O") {
+                Command::Design(a) => serde_json::to_value(a.options()).unwrap(),
+                _ => unreachable!(),
+            },
+            serde_json::to_value(cpm::workflow::design::DesignJobOptions::new("R", "O")).unwrap(),
+        ),
+        (
+            "export",
+            match parse("export --format linuxcnc --robot R") {
+                Command::Export(a) => serde_json::to_value(a.options()).unwrap(),
+                _ => unreachable!(),
+            },
+            serde_json::to_value(export::ExportOptions::new("R")).unwrap(),
+        ),
+    ];
+    let cli = Cli::command();
+    for (name, from_cli, from_new) in cases {
+        assert_eq!(from_cli, from_new, "{name}: the defaults differ");
+        let fields: BTreeSet<String> = from_new.as_object().unwrap().keys().cloned().collect();
+        let flags: BTreeSet<String> = cli
+            .find_subcommand(name)
+            .unwrap()
+            .get_arguments()
+            .filter_map(|a| a.get_long())
+            .filter(|l| !["json", "quiet", "help"].contains(l))
+            .map(|l| l.replace('-', "_"))
+            .collect();
+        assert_eq!(fields, flags, "{name}: fields and options differ");
+    }
+    // Options given by name come back as they went (what the binding relies on).
+    let mut o = validate::ValidateOptions::new("R", vec!["D".into()]);
+    o.pose_sigma_um = Some(3.5);
+    o.truth_effect = vec!["backlash=1,2".into()];
+    let back: validate::ValidateOptions =
+        serde_json::from_value(serde_json::to_value(&o).unwrap()).unwrap();
+    assert_eq!(back, o);
+}

@@ -60,18 +60,6 @@ def main() -> None:
               f"arrays->measurements {100 * (t1 - t0) / total:.0f} % (mostly the reader's "
               f"checks), outputs {100 * outputs / total:.0f} %, results for Python "
               f"{100 * python / total:.1f} %; {r.solver}")
-    # Before issue 36: the same arrays through CSV text in a scratch folder and the command's
-    # parser (kept for campaigns the memory path does not take).
-    from cpm._commands import _calibrate_from_files
-
-    for run in range(2):
-        t1 = time.perf_counter()
-        d = _calibrate_from_files(robot, [m], effects, None, None, None, {})
-        t2 = time.perf_counter()
-        solver = d["timings"]["solver"]
-        print(f"files run {run + 1}: calibrate {t2 - t1:.3f} s: inside the fit (solver) "
-              f"{solver:.3f} s, outside {(t2 - t1) - solver:.3f} s = "
-              f"{100 * ((t2 - t1) - solver) / (t2 - t1):.0f} %")
 
 
 if __name__ == "__main__":

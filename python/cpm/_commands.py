@@ -1,25 +1,22 @@
 """The commands of ``cpm`` (``docs/cli.md``) as functions.
 
 Keyword arguments are the command's options with ``_`` for ``-`` (``sigma_um=1`` is
-``--sigma-um 1``, ``from_home=True`` is ``--from-home``, a list repeats an option); the
-command's own parser reads them, so names, defaults and errors are the command's. Robots and
-measurements may be objects or paths. ``out=`` writes the command's outputs where the command
-would (all or nothing); without it they are made in a scratch directory and kept in memory.
+``--sigma-um 1``, ``from_home=True`` is ``--from-home``, a list gives an option several
+values). Each command runs as the workflow's job (``cpm_workflow``), not through the command
+line: the options go by name to the job's options struct, whose names and defaults are the
+command's (``tests/workflow.rs`` checks that), and an unknown option or a value of the wrong
+type is a :class:`cpm.UsageError` naming it. Robots and measurements may be objects or paths.
+``out=`` writes the command's outputs where the command would (all or nothing); without it
+they are made in memory.
 
-Interrupting (Ctrl-C) raises ``KeyboardInterrupt`` at once, but the command's work cannot be
-stopped from outside: it finishes in the background, and a command given ``out=`` still
-commits its outputs there when it finishes (all or nothing), as the command would have;
-:func:`calibrate` is the exception and writes nothing once interrupted.
+Interrupting (Ctrl-C) raises ``KeyboardInterrupt`` at once and cancels the job: a fit stops
+inside its iterations, and nothing is written.
 
-:func:`calibrate` runs the workflow's job on the campaign in memory
-(``cpm_workflow::memory``): the robot as loaded, measurements made from arrays or tables as
-they were read (read again from memory only when the fit needs other read options), files by
-their paths; no scratch file, no argument vector. Two or more tracker sets of which some were
-made in memory are registered together only when read from files: such a campaign goes
-through scratch files and the command's parser, as every campaign did before. For the other
-commands, measurements made from arrays or tables (and robots made from text) reach the
-command as files in a scratch directory; errors name them by their names (and rows), and the
-outputs name the scratch file.
+:func:`calibrate` runs on the campaign in memory (``cpm_workflow::memory``): the robot as
+loaded, measurements made from arrays or tables as they were read, files by their paths; no
+scratch file. For the other commands, measurements made from arrays or tables (and robots
+made from text) reach the job as files in a scratch directory; errors and reports name them
+by their names (and rows).
 """
 from __future__ import annotations
 
@@ -59,58 +56,9 @@ def _robot(r: Union[Robot, PathLike]) -> Robot:
     return r if isinstance(r, Robot) else Robot.from_toml(r)
 
 
-def _argv(command: str, scratch: Scratch, options: Dict[str, Any]) -> List[str]:
-    """``--option value`` for each keyword argument (None and False left out)."""
-    argv = [command]
-    for key, value in options.items():
-        if value is None or value is False:
-            continue
-        flag = "--" + key.replace("_", "-")
-        if value is True:
-            argv.append(flag)
-            continue
-        if isinstance(value, Robot):
-            argv += [flag, value._cli_path(scratch)]
-            continue
-        if isinstance(value, Measurements):
-            for p in value._cli_paths(scratch):
-                argv += [flag, p]
-            continue
-        if key == "tolerances" and isinstance(value, dict):
-            # {"link_scale": 20000, "installation_errors": float("inf")} -> --tolerance G=V
-            flag = "--tolerance"
-            value = [f"{k}={'inf' if np.isinf(v) else repr(float(v))}" for k, v in value.items()]
-        if key == "truth_effect" and isinstance(value, dict):
-            value = [f"{k}=" + ",".join(repr(float(v)) for v in np.atleast_1d(vs))
-                     for k, vs in value.items()]
-        if isinstance(value, (list, tuple, np.ndarray)):
-            items = []
-            for v in value:
-                if isinstance(v, Measurements):
-                    items += v._cli_paths(scratch)
-                else:
-                    items.append(_text(v))
-            if key in _JOINED:
-                argv += [flag, ",".join(items) if items else "none"]
-            else:
-                for v in items:
-                    argv += [flag, v]
-            continue
-        argv += [flag, _text(value)]
-    return argv
-
-
-def _text(v: Any) -> str:
-    if isinstance(v, (float, np.floating)):
-        return repr(float(v))
-    if isinstance(v, os.PathLike):
-        return os.fspath(v)
-    return str(v)
-
-
 def _data(data: Any, robot: Robot) -> Any:
-    """Measurements for ``--data``: paths go to the command as they are (it reads them, with
-    its checks and errors); arrays and tables were read into :class:`Measurements`."""
+    """Measurements for ``data``: paths go to the job as they are (it reads them, with its
+    checks and errors); arrays and tables were read into :class:`Measurements`."""
     if isinstance(data, (str, os.PathLike, Measurements)):
         return [data]
     if isinstance(data, (list, tuple)):
@@ -120,26 +68,116 @@ def _data(data: Any, robot: Robot) -> Any:
     return [as_measurements(data, robot)]
 
 
-def _run(argv: List[str], scratch: Scratch) -> Tuple[str, Optional[str]]:
+def _sources(r: Robot, items: List[Any]) -> Tuple[List[Any], set]:
+    """The measurements for a job on ``r`` in memory: read ones by their handles (as read),
+    files by their paths; and the names of those made from arrays."""
+    sources: List[Any] = []
+    arrays: set = set()
+    for item in items:
+        if isinstance(item, Measurements):
+            for s in item.sources:
+                handle = s.info.get("handle")
+                if s.path is not None:
+                    sources.append(s.path)
+                    continue
+                if handle is None:
+                    handle = _cpm.read_text(s.text, s.name, r._h)["handle"]
+                sources.append(handle)
+                if s.arrays:
+                    arrays.add(s.name)
+        else:
+            sources.append(os.fspath(item))
+    return sources, arrays
+
+
+def _row_of(e: InputError, arrays: set) -> InputError:
+    """An error in measurements made from arrays also says the row of the arrays."""
+    if e.file in arrays and e.line is not None and e.line >= 2 and e.row is None:
+        return InputError(str(e), e.file, e.line, e.field, e.line - 2)
+    return e
+
+
+def _value(key: str, value: Any, scratch: Scratch) -> Any:
+    """One option's value as the job takes it by name (JSON): robots and measurements as
+    the paths of their files, paths as text, numpy numbers as numbers, lists as lists."""
+    if isinstance(value, Robot):
+        return value._cli_path(scratch)
+    if isinstance(value, Measurements):
+        return value._cli_paths(scratch)
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, float) and not np.isfinite(value):
+        raise UsageError(f"invalid value {value!r} for '--{key.replace('_', '-')}': "
+                         "not a finite number")
+    if isinstance(value, (list, tuple, np.ndarray)):
+        items: List[Any] = []
+        for v in value:
+            v = _value(key, v, scratch)
+            items += v if isinstance(v, list) else [v]
+        if key in _JOINED:
+            return ",".join(str(v) for v in items) if items else "none"
+        return items
+    return value
+
+
+def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
+    """The options of a command by name, as JSON text for the job (None and False left
+    out: the command's defaults)."""
+    out: Dict[str, Any] = {}
+    for key, value in options.items():
+        if value is None or value is False:
+            continue
+        if key == "tolerances" and isinstance(value, dict):
+            # {"link_scale": 20000, "installation_errors": float("inf")} -> tolerance G=V
+            key = "tolerance"
+            value = [f"{k}={'inf' if np.isinf(v) else repr(float(v))}" for k, v in value.items()]
+        elif key == "truth_effect" and isinstance(value, dict):
+            value = [f"{k}=" + ",".join(repr(float(v)) for v in np.atleast_1d(vs))
+                     for k, vs in value.items()]
+        elif key == "noise_per_kind" and value is True:
+            value = "on"
+        elif key in ("tolerance", "hold", "truth_effect", "data") and isinstance(value, str):
+            value = [value]
+        value = _value(key, value, scratch)
+        if key in out and isinstance(out[key], list) and isinstance(value, list):
+            out[key] += value
+        else:
+            out[key] = value
+    return json.dumps(out)
+
+
+def _job(command: str, scratch: Scratch, options: Dict[str, Any],
+         out: Optional[PathLike] = None, robot: Optional[Robot] = None,
+         data: Optional[List[Any]] = None) -> Dict[str, Any]:
+    """Runs ``command`` as the workflow's job with ``options`` by name; its outputs are
+    committed to ``out`` when given (all or nothing). ``robot`` goes to the job in memory
+    (every job but ``validate``), ``data`` too (``refine``, ``identifiability``), not as
+    files. Trouble (the command's exit
+    code 1, outputs written) is a :class:`cpm.CpmWarning`."""
+    text = _by_name(scratch, options)
+    target = os.fspath(out) if out is not None else None
+    arrays: set = set()
+    held: Dict[str, Any] = {}
+    if robot is not None:
+        held["robot"] = robot._h
+        if data is not None:
+            held["data"], arrays = _sources(robot, data)
     try:
-        out, trouble = _cpm.run_command(argv)
+        d = dict(_cpm.job(command, text, target, out is not None, **held))
+    except InputError as e:
+        raise _row_of(scratch.fix(e), arrays) from None
     except CpmError as e:
         raise scratch.fix(e) from None
-    if trouble:
-        _warnings.warn(trouble, CpmWarning, stacklevel=3)
-    return out, trouble
-
-
-def _read_dir(d: Path) -> Dict[str, bytes]:
-    files: Dict[str, bytes] = {}
-    for p in sorted(d.rglob("*")):
-        if p.is_file() and not p.name.startswith(".cpm-"):
-            files[p.relative_to(d).as_posix()] = p.read_bytes()
-    return files
-
-
-def _out_dir(out: Optional[PathLike], scratch: Scratch, name: str) -> Path:
-    return Path(out) if out is not None else scratch.path / name
+    if d["trouble"]:
+        _warnings.warn(d["trouble"], CpmWarning, stacklevel=3)
+    d["files"] = dict(d["files"])
+    return d
 
 
 def _csv_rows(text: str) -> Tuple[List[str], List[List[str]]]:
@@ -344,114 +382,20 @@ def calibrate(
     A fit that did not converge (or a robust fit that failed) is returned with ``trouble`` set
     and a :class:`cpm.CpmWarning` (the command's exit code 1)."""
     r = _robot(robot)
-    items = _data(data, r)
-    d = _calibrate_in_memory(r, items, effects, robust, sigma_um, out, options)
-    if d is None:
-        d = _calibrate_from_files(r, items, effects, robust, sigma_um, out, options)
+    sources, arrays = _sources(r, _data(data, r))
+    given: Dict[str, Any] = dict(effects=effects, sigma_um=sigma_um, robust=robust)
+    given.update(options)
+    with Scratch() as scratch:
+        opts = _by_name(scratch, given)
+    target = os.fspath(out) if out is not None else None
+    try:
+        d = _cpm.calibrate_memory(r._h, sources, opts, target, out is not None)
+    except InputError as e:
+        raise _row_of(e, arrays) from None
     result = CalibrationResult(dict(d))
     if result.trouble:
         _warnings.warn(result.trouble, CpmWarning, stacklevel=2)
     return result
-
-
-# Options of `cpm calibrate` whose values are numbers of um, urad (floats) or counts (ints).
-_FLOATS = {"sigma_um", "pose_sigma_um", "orientation_sigma_urad", "tolerance_limit"}
-_INTS = {"max_iterations"}
-
-
-def _memory_options(effects: Any, robust: Any, sigma_um: Any,
-                    options: Dict[str, Any]) -> Dict[str, Any]:
-    """The options of :func:`calibrate` as the workflow's (``--option`` by name, values of
-    their types): what the command's parser would have made of the argument vector."""
-    given: Dict[str, Any] = dict(effects=effects, sigma_um=sigma_um, robust=robust)
-    given.update(options)
-    out: Dict[str, Any] = {}
-    for key, value in given.items():
-        if value is None or value is False:
-            continue
-        flag = "--" + key.replace("_", "-")
-        if key == "effects":
-            if isinstance(value, str):
-                out[key] = value
-            else:
-                names = [str(v) for v in value]
-                out[key] = ",".join(names) if names else "none"
-        elif key == "tolerances" and isinstance(value, dict):
-            out.setdefault("tolerance", [])
-            out["tolerance"] += [f"{k}={'inf' if np.isinf(v) else repr(float(v))}"
-                                 for k, v in value.items()]
-        elif key in ("tolerance", "hold"):
-            items = [value] if isinstance(value, str) else list(value)
-            out.setdefault(key, [])
-            out[key] += [_text(v) for v in items]
-        elif key == "noise_per_kind" and value is True:
-            out[key] = "on"
-        elif key in _FLOATS or key in _INTS:
-            try:
-                out[key] = int(value) if key in _INTS else float(value)
-            except (TypeError, ValueError):
-                raise UsageError(f"invalid value {value!r} for '{flag}'") from None
-            if key in _INTS and out[key] < 0:
-                raise UsageError(f"invalid value {value!r} for '{flag}'")
-        elif value is True:
-            out[key] = True
-        elif isinstance(value, (list, tuple, np.ndarray)):
-            raise UsageError(f"{flag}: one value expected, got {value!r}")
-        else:
-            out[key] = _text(value)
-    return out
-
-
-def _calibrate_in_memory(r: Robot, items: List[Any], effects: Any, robust: Any, sigma_um: Any,
-                         out: Optional[PathLike], options: Dict[str, Any]) -> Optional[Any]:
-    """:func:`calibrate` on the campaign in memory (the workflow's job, no files, no argument
-    vector): measurements from arrays as read, files by their paths. ``None`` when the
-    campaign must be read from files (several tracker sets, some made in memory)."""
-    sources: List[Any] = []
-    arrays: set = set()
-    for item in items:
-        if isinstance(item, Measurements):
-            for s in item.sources:
-                handle = s.info.get("handle")
-                if s.path is not None:
-                    sources.append(s.path)
-                elif handle is not None:
-                    sources.append(handle)
-                    if s.arrays:
-                        arrays.add(s.name)
-                else:
-                    return None
-        elif isinstance(item, (str, os.PathLike)):
-            sources.append(os.fspath(item))
-        else:
-            return None
-    opts = _memory_options(effects, robust, sigma_um, options)
-    target = os.fspath(out) if out is not None else None
-    try:
-        return _cpm.calibrate_memory(r._h, sources, opts, target, out is not None)
-    except InputError as e:
-        if e.file in arrays and e.line is not None and e.line >= 2 and e.row is None:
-            raise InputError(str(e), e.file, e.line, e.field, e.line - 2) from None
-        raise
-
-
-def _calibrate_from_files(r: Robot, items: List[Any], effects: Any, robust: Any, sigma_um: Any,
-                          out: Optional[PathLike], options: Dict[str, Any]) -> Any:
-    """:func:`calibrate` through the command's parser, the measurements made in memory
-    written to a scratch directory (a campaign :func:`_calibrate_in_memory` does not take)."""
-    with Scratch() as scratch:
-        opts: Dict[str, Any] = dict(robot=r, data=items, effects=effects, sigma_um=sigma_um,
-                                    robust=robust)
-        opts.update(options)
-        commit = out is not None
-        opts["out"] = os.fspath(out) if commit else os.fspath(scratch.path / "cal")
-        if effects is not None and not isinstance(effects, str) and len(effects) == 0:
-            opts["effects"] = "none"
-        argv = _argv("calibrate", scratch, opts)
-        try:
-            return _cpm.calibrate(argv, commit, dict(scratch.names))
-        except CpmError as e:
-            raise scratch.fix(e) from None
 
 
 class RefineResult(_Files):
@@ -489,11 +433,8 @@ def refine(robot: Union[Robot, PathLike], data: Any, *, out: Optional[PathLike] 
     ``pose_map_degree``, ``sigma_um``, ``robust``, ...)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        d = _out_dir(out, scratch, "refined")
-        _, trouble = _run(_argv("refine", scratch, dict(robot=r, data=_data(data, r), out=d, json=True,
-                                                         **options)), scratch)
-        files = _read_dir(d)
-    return RefineResult(files, trouble)
+        d = _job("refine", scratch, dict(options), out, robot=r, data=_data(data, r))
+    return RefineResult(d["files"], d["trouble"])
 
 
 class ValidationResult(_Files):
@@ -541,13 +482,11 @@ def validate(robot: Optional[Union[Robot, PathLike]], reference: Union[Robot, Pa
     rob = None if robot is None else _robot(robot)
     with Scratch() as scratch:
         m = None if data is None else _data(data, rob if rob is not None else ref)
-        d = _out_dir(out, scratch, "validation")
-        opts: Dict[str, Any] = dict(robot=rob, reference=ref, data=m, out=d, json=True)
+        opts: Dict[str, Any] = dict(robot=rob, reference=ref, data=m)
         opts.update(options)
-        text, _ = _run(_argv("validate", scratch, opts), scratch)
-        files = _read_dir(d)
-        doc = scratch.named(json.loads(text))
-    return ValidationResult(doc, files)
+        d = _job("validate", scratch, opts, out)
+        doc = scratch.named(json.loads(d["summary"]))
+    return ValidationResult(doc, d["files"])
 
 
 class CompensationResult:
@@ -579,12 +518,9 @@ def compensate(robot: Union[Robot, PathLike], poses: Any, *, out: Optional[PathL
     ``temperature_c``, ``from_home``."""
     r = _robot(robot)
     with Scratch() as scratch:
-        target = Path(out) if out is not None else scratch.path / "commands.csv"
-        text, _ = _run(_argv("compensate", scratch, dict(
-            robot=r, poses=_poses_file(poses, scratch), out=target, json=True, **options)),
-            scratch)
-        csv_text = target.read_text(encoding="utf-8")
-    return CompensationResult(csv_text, json.loads(text) if text.strip() else {}, r.num_links)
+        d = _job("compensate", scratch, dict(poses=_poses_file(poses, scratch), **options), out,
+                 robot=r)
+    return CompensationResult(d["text"], json.loads(d["summary"]), r.num_links)
 
 
 class DesignResult(_Files):
@@ -624,10 +560,8 @@ def design(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     Without ``out`` the design lives in memory (``result.robot`` is read from its text)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        d = _out_dir(out, scratch, "design")
-        _run(_argv("design", scratch, dict(robot=r, out=d, json=True, **options)), scratch)
-        files = _read_dir(d)
-    return DesignResult(files, Path(out) if out is not None else None)
+        d = _job("design", scratch, dict(options), out, robot=r)
+    return DesignResult(d["files"], Path(out) if out is not None else None)
 
 
 def simulate(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
@@ -641,16 +575,12 @@ def simulate(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     with Scratch() as scratch:
         if "plan" in options and options["plan"] is not None:
             options["plan"] = _poses_file(options["plan"], scratch)
-        for key in ("truth",):
-            if isinstance(options.get(key), Robot):
-                options[key] = options[key]._cli_path(scratch)
-        target = Path(out) if out is not None else scratch.path / "simulated.csv"
-        _run(_argv("simulate", scratch, dict(robot=r, out=target, **options)), scratch)
-        if out is not None:
-            from ._data import read_measurements
+        d = _job("simulate", scratch, dict(options), out, robot=r)
+    if out is not None:
+        from ._data import read_measurements
 
-            return read_measurements(target, r)
-        text = target.read_text(encoding="utf-8")
+        return read_measurements(out, r)
+    text = d["text"]
     info = _cpm.read_text(text, "simulated.csv", r._h)
     return Measurements([_Source("simulated.csv", None, text, dict(info))])
 
@@ -665,15 +595,15 @@ def identifiability(robot: Union[Robot, PathLike], data: Any = None,
         m = None if data is None else _data(data, r)
         if options.get("plan") is not None:
             options["plan"] = _poses_file(options["plan"], scratch)
-        text, _ = _run(_argv("identifiability", scratch, dict(robot=r, data=m, json=True,
-                                                               **options)), scratch)
-        return scratch.named(json.loads(text))
+        d = _job("identifiability", scratch, dict(options), robot=r, data=m)
+        return scratch.named(json.loads(d["summary"]))
 
 
-def export(robot: Union[Robot, PathLike], format: str = "linuxcnc", **options: Any) -> str:
-    """``cpm export``: the joints for a machine controller (LinuxCNC genhexkins HAL text)."""
+def export(robot: Union[Robot, PathLike], format: str = "linuxcnc", *,
+           out: Optional[PathLike] = None, **options: Any) -> str:
+    """``cpm export``: the joints for a machine controller (LinuxCNC genhexkins HAL text),
+    written to ``out`` too when given (options ``units``, ``ini``)."""
     r = _robot(robot)
     with Scratch() as scratch:
-        text, _ = _run(_argv("export", scratch, dict(format=format, robot=r, **options)),
-                       scratch)
-    return text
+        d = _job("export", scratch, dict(format=format, **options), out, robot=r)
+    return d["text"]

@@ -43,8 +43,9 @@ class RobotHandle:
     def description_json(self) -> str: ...
 
 class DataHandle:
-    """Measurements as read (``read_text``'s or ``gauge_rows``' ``handle``), taken from
-    memory by ``calibrate_memory``."""
+    """Measurements as read (``read_text``'s, ``gauge_rows``' or ``tracker_rows``'
+    ``handle``), taken from memory by ``calibrate_memory``; ``csv()`` gives their text as
+    a measurement file (for a command that reads files)."""
     def csv(self) -> str: ...
 
 class ObservationOrigins:
@@ -65,23 +66,29 @@ def gauge_rows(
     time_s: Optional[npt.NDArray[np.float64]] = None,
     simulated: bool = False,
 ) -> Dict[str, Any]: ...
-def tracker_csv(
+def tracker_rows(
     readings: npt.NDArray[np.float64],
     poses: npt.NDArray[np.float64],
+    robot: RobotHandle,
+    name: str,
     pose_labels: Optional[List[str]] = None,
     time_s: Optional[npt.NDArray[np.float64]] = None,
     simulated: bool = False,
-) -> str: ...
-def run_command(argv: List[str]) -> Tuple[str, Optional[str]]: ...
+) -> Dict[str, Any]: ...
 def main(argv: List[str]) -> int: ...
-def calibrate(argv: List[str], commit: bool, names: Dict[str, str]) -> Dict[str, Any]: ...
+def job(
+    command: str,
+    options: str,
+    out: Optional[str] = None,
+    commit: bool = False,
+) -> Dict[str, Any]: ...
 def calibrate_memory(
     robot: RobotHandle,
     data: List[Any],
-    options: Dict[str, Any],
+    options: str,
     out: Optional[str] = None,
     commit: bool = False,
-) -> Optional[Dict[str, Any]]: ...
+) -> Dict[str, Any]: ...
 def effect_names() -> List[str]: ...
 def render_html(title: str, markdown: str, svgs: Dict[str, str]) -> str: ...
 def least_squares(

@@ -1,7 +1,8 @@
 """Measurements: files read by the readers of ``cpm`` (``docs/formats.md``); gauge readings
-from numpy arrays read as values with the checks and errors of the file reader (no text);
-tracker arrays and pandas tables written as their file formats and read by the same readers.
-Every route gets the same checks (units, reachability, consistency) and the same errors."""
+and tracker measurements from numpy arrays read as values with the checks and errors of the
+file readers (no text); pandas tables written as their file formats and read by the same
+readers. Every route gets the same checks (units, reachability, consistency, the
+registration of tracker sets) and the same errors."""
 from __future__ import annotations
 
 import os
@@ -163,6 +164,16 @@ def _from_text(text: str, name: str, robot: Robot, arrays: bool) -> Measurements
     return Measurements([_Source(name, None, text, dict(info), arrays)])
 
 
+def _from_arrays(read: Any, name: str) -> Measurements:
+    """Measurements read from arrays as values by ``read()`` (no text), errors naming the
+    row of the arrays."""
+    try:
+        info = read()
+    except InputError as e:
+        raise _row_error(e) from None
+    return Measurements([_Source(name, None, None, dict(info), True)])
+
+
 def _float_array(x: Any, name: str, ndim: int, cols: Optional[int] = None) -> np.ndarray:
     """``x`` as float64 (float32, integers and non-contiguous arrays are converted), checked
     for its number of dimensions and columns."""
@@ -203,12 +214,9 @@ def gauge_readings(
     lengths = _float_array(lengths_mm, "lengths_mm", 1)
     names = [sensors] * n if isinstance(sensors, str) else [str(s) for s in sensors]
     t = None if time_s is None else _float_array(time_s, "time_s", 1)
-    try:
-        info = _cpm.gauge_rows(p, names, lengths, robot._h, name, _labels(pose_labels), t,
-                               bool(simulated))
-    except InputError as e:
-        raise _row_error(e) from None
-    return Measurements([_Source(name, None, None, dict(info), True)])
+    return _from_arrays(lambda: _cpm.gauge_rows(p, names, lengths, robot._h, name,
+                                                _labels(pose_labels), t, bool(simulated)),
+                        name)
 
 
 def tracker_measurements(
@@ -224,16 +232,21 @@ def tracker_measurements(
     """Tracker measurements from arrays: the commanded link ``readings`` ``(n, links)`` (in
     the links' units) and the measured ``poses`` ``(n, 7)`` (x, y, z mm in the tracker's
     frame; unit quaternion qw, qx, qy, qz) or ``(n, 6)`` (x, y, z mm; roll, pitch, yaw deg,
-    R = Rz(yaw) Ry(pitch) Rx(roll)). Registered and checked as ``cpm`` does: the same numbers
-    as a file give the same fit."""
+    R = Rz(yaw) Ry(pitch) Rx(roll)). Rows with the same ``pose_labels`` are refused (one row
+    per pose; default: the rows numbered from 1). ``simulated=True`` labels simulated data.
+
+    Read as values with the checks of the file reader of ``cpm`` and its errors (no text is
+    made; an error's ``row`` is the row of the arrays), registered and checked as ``cpm`` does
+    a tracker file: the same numbers as a file give the same fit."""
     r = _float_array(readings, "readings", 2, robot.num_links)
     p = _float_array(poses, "poses", 2)
     if p.shape[1] not in (6, 7):
         raise UsageError(f"poses has shape {p.shape}, expected (n, 7) (x, y, z mm, qw, qx, qy, "
                          "qz) or (n, 6) (x, y, z mm, roll, pitch, yaw deg)")
     t = None if time_s is None else _float_array(time_s, "time_s", 1)
-    text = _cpm.tracker_csv(r, p, _labels(pose_labels), t, bool(simulated))
-    return _from_text(text, name, robot, arrays=True)
+    return _from_arrays(lambda: _cpm.tracker_rows(r, p, robot._h, name, _labels(pose_labels),
+                                                  t, bool(simulated)),
+                        name)
 
 
 def measurements_from_frame(frame: Any, robot: Robot, name: str = "DataFrame") -> Measurements:

@@ -178,6 +178,15 @@ def test_tracker_arrays(hexapod, tmp_path):
     exact = cpm.calibrate(hexapod, same)
     m = cpm.tracker_measurements(hexapod, readings, np.hstack([xyz, q]), simulated=True)
     assert m.kinds == ["tracker"] and len(m.measured_poses) == len(rows)
+    # Issue 36: tracker arrays are read as values (no CSV text is made); a command that reads
+    # files gets their CSV, every number exact, and reads what the arrays gave.
+    assert m.sources[0].text is None and same.sources[0].text is None
+    again = tmp_path / "again.csv"
+    again.write_text(same.sources[0].info["handle"].csv())
+    back = cpm.read_measurements(again, hexapod)
+    np.testing.assert_array_equal(back.measured_poses, same.measured_poses)
+    np.testing.assert_array_equal(back.poses, same.poses)
+    assert back.simulated and back.kinds == ["tracker"]
     np.testing.assert_allclose(m.measured_poses[:, :3], sim.measured_poses[:, :3], atol=1e-9)
     a = cpm.calibrate(hexapod, sim)
     b = cpm.calibrate(hexapod, m)
@@ -265,3 +274,63 @@ def test_gauge_arrays_are_read_as_values(hexapod, readings, tmp_path):
     assert a.pop("source") == "gauge readings"
     b.pop("source")
     assert a == b
+
+
+def test_refine_and_identifiability_take_arrays_in_memory(hexapod, readings, monkeypatch):
+    """Issue 36: ``refine`` and ``identifiability`` run on a robot made from text and
+    measurements made from arrays in memory (no scratch file is written), and give what the
+    files give."""
+    poses, sensors, lengths, labels = _arrays(readings)
+    m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels,
+                           simulated=True)
+    text_robot = cpm.Robot.from_text(HEXAPOD.read_text(), "hexapod from text")
+    from cpm import _robot
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    a = cpm.identifiability(HEXAPOD, HEXAPOD_READINGS)
+    with monkeypatch.context() as mp:
+        mp.setattr(_robot.Scratch, "write", no_scratch)
+        b = cpm.identifiability(text_robot, m)
+        r = cpm.refine(text_robot, m, max_steps=1)
+    np.testing.assert_allclose(b["singular_values"],
+                               a["singular_values"], rtol=1e-12)
+    assert b["source"] == "gauge readings" and a["source"] == str(HEXAPOD_READINGS)
+    ref = cpm.refine(HEXAPOD, HEXAPOD_READINGS, max_steps=1)
+    assert r.doc["steps"] == ref.doc["steps"]
+    np.testing.assert_allclose(r.calibration["residual_rms_um"],
+                               ref.calibration["residual_rms_um"], rtol=1e-12)
+
+
+def test_two_tracker_sets_from_arrays_are_registered_together(hexapod, tmp_path, monkeypatch):
+    """Issue 36: two tracker sessions given as arrays calibrate in memory (no scratch file),
+    registered together as two files are (a frame each): the same fit as from the files."""
+    files = []
+    for k, seed in enumerate((3, 4)):
+        f = tmp_path / f"tracker{k}.csv"
+        cpm.simulate(hexapod, random=20, truth=str(HEXAPOD.parent / "hexapod_66_truth.toml"),
+                     measure="poses", noise="gaussian:1", seed=seed, out=f,
+                     tracker_frame=f"{500 * k},{-300 * k},10,0.2,-0.1,{40 * k}")
+        files.append(f)
+    arrays = []
+    for f in files:
+        header, rows = _rows(f)
+        col = lambda c: np.array([float(r[header.index(c)]) for r in rows])  # noqa: E731
+        readings = np.stack([col(f"reading_{k}") for k in range(1, 7)], axis=1)
+        pose = np.stack([col(c) for c in ("x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg",
+                                          "yaw_deg")], axis=1)
+        arrays.append(cpm.tracker_measurements(hexapod, readings, pose, simulated=True))
+        assert arrays[-1].sources[0].text is None
+    a = cpm.calibrate(hexapod, [str(f) for f in files])
+    from cpm import _robot
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_robot.Scratch, "write", no_scratch)
+        b = cpm.calibrate(hexapod, arrays)
+    assert len(a.registration["sessions"]) == 2 and len(b.registration["sessions"]) == 2
+    np.testing.assert_allclose(b.estimates_um, a.estimates_um, rtol=1e-9, atol=1e-9,
+                               equal_nan=True)

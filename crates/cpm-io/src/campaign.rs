@@ -268,7 +268,7 @@ pub struct PoseRow {
 
 /// Which orientation columns a file uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Orientation {
+pub(crate) enum Orientation {
     Rpy,
     Quaternion,
 }
@@ -300,7 +300,7 @@ fn orientation(t: &Header) -> Result<Orientation, InputError> {
     }
 }
 
-fn orientation_columns(o: Orientation) -> &'static [&'static str] {
+pub(crate) fn orientation_columns(o: Orientation) -> &'static [&'static str] {
     match o {
         Orientation::Rpy => &RPY_COLUMNS,
         Orientation::Quaternion => &QUATERNION_COLUMNS,
@@ -416,6 +416,16 @@ pub(crate) fn check_pose_value(file: &str, line: usize, c: &str, v: f64) -> Resu
 
 /// The pose the numbers of a row make (a quaternion must have unit norm).
 fn pose_of(t: &Header, row: &Row, o: Orientation, raw: &RawPose) -> Result<Pose, InputError> {
+    pose_from_raw(&t.file, row.line, o, raw)
+}
+
+/// [`pose_of`] the numbers of a row on `line` of `file`.
+pub(crate) fn pose_from_raw(
+    file: &str,
+    line: usize,
+    o: Orientation,
+    raw: &RawPose,
+) -> Result<Pose, InputError> {
     let v = |k| raw.value(k);
     let p = [v(0), v(1), v(2)];
     Ok(match o {
@@ -424,14 +434,15 @@ fn pose_of(t: &Header, row: &Row, o: Orientation, raw: &RawPose) -> Result<Pose,
             let q = [v(3), v(4), v(5), v(6)];
             let norm = q.iter().map(|v| v * v).sum::<f64>().sqrt();
             if (norm - 1.0).abs() > 1e-3 {
-                return Err(t.err(
-                    row,
+                return Err(InputError::field(
+                    file,
+                    line,
                     "qw",
                     format!("(qw, qx, qy, qz) = ({}, {}, {}, {}) is not a unit quaternion (norm {norm})", q[0], q[1], q[2], q[3]),
                 ));
             }
             Pose::try_from_quaternion(Vector3::from(p), q)
-                .map_err(|e| t.err(row, "qw", e.to_string()))?
+                .map_err(|e| InputError::field(file, line, "qw", e.to_string()))?
         }
     })
 }
@@ -856,28 +867,59 @@ pub(crate) fn finish<R: Read>(t: &mut Table<R>, e: InputError) -> ReadError {
 /// Checks the `reading_k` columns: none, or exactly `reading_1..reading_n`.
 pub(crate) fn link_reading_columns(t: &Header, n: usize) -> Result<bool, InputError> {
     let ks = t.reading_columns()?;
-    if ks.is_empty() {
+    link_reading_count(&t.file, t.header_line, ks.len(), n)
+}
+
+/// [`link_reading_columns`] of `count` columns `reading_1..reading_count` in the header (on
+/// `header_line` of `file`).
+pub(crate) fn link_reading_count(
+    file: &str,
+    header_line: usize,
+    count: usize,
+    n: usize,
+) -> Result<bool, InputError> {
+    if count == 0 {
         return Ok(false);
     }
-    if ks.len() != n {
-        let name = if ks.len() < n {
-            format!("reading_{}", ks.len() + 1)
+    if count != n {
+        let name = if count < n {
+            format!("reading_{}", count + 1)
         } else {
             format!("reading_{}", n + 1)
         };
-        let what = if ks.len() < n {
+        let what = if count < n {
             "missing column"
         } else {
             "unknown column"
         };
         return Err(InputError::field(
-            &t.file,
-            t.header_line,
+            file,
+            header_line,
             name,
             format!("{what}: the robot has {n} links, so a file with link readings has reading_1 to reading_{n}"),
         ));
     }
     Ok(true)
+}
+
+/// A tracker file's link reading columns (`count` of them, `reading_1..reading_count`):
+/// exactly `reading_1..reading_n` ([`link_reading_count`]), none refused.
+pub(crate) fn tracker_link_columns(
+    file: &str,
+    header_line: usize,
+    count: usize,
+    n: usize,
+) -> Result<(), InputError> {
+    if link_reading_count(file, header_line, count, n)? {
+        Ok(())
+    } else {
+        Err(InputError::field(
+            file,
+            header_line,
+            "reading_1",
+            "missing column",
+        ))
+    }
 }
 
 /// The names of the first `reading_k` columns (no name made for every row).
@@ -896,13 +938,16 @@ const READING_NAMES: [&str; 12] = [
     "reading_12",
 ];
 
+/// The name of the column of link `i`'s reading (from 0): `reading_{i + 1}`.
+pub(crate) fn reading_name(i: usize) -> std::borrow::Cow<'static, str> {
+    match READING_NAMES.get(i) {
+        Some(name) => (*name).into(),
+        None => format!("reading_{}", i + 1).into(),
+    }
+}
+
 pub(crate) fn link_readings(t: &Header, row: &Row, n: usize) -> Result<Vec<f64>, InputError> {
-    (1..=n)
-        .map(|k| match READING_NAMES.get(k - 1) {
-            Some(name) => t.number(row, name),
-            None => t.number(row, &format!("reading_{k}")),
-        })
-        .collect()
+    (0..n).map(|i| t.number(row, &reading_name(i))).collect()
 }
 
 /// Checks link lengths (from the logged readings `readings`, plus `offset_mm` per link when the
@@ -1475,37 +1520,14 @@ pub(crate) fn read_pose_measurements_table<R: Read>(
                 || super::table::reading_index(h).is_some()
         },
     )?;
-    if !link_reading_columns(t, n)? {
-        return Err(InputError::field(
-            &t.file,
-            t.header_line,
-            "reading_1",
-            "missing column",
-        ));
-    }
-    let mut campaign = Campaign {
-        simulated: t.simulated_mark,
-        ..Campaign::default()
-    };
-    let mut seen: HashMap<String, usize> = HashMap::new();
-    let mut labels = Vec::new();
-    let mut lines = Vec::new();
-    let mut commanded = Vec::new();
-    let mut rows = Vec::new();
-    let mut angles: AngleCells = Vec::new();
+    let links = t.reading_columns()?.len();
+    tracker_link_columns(&t.file, t.header_line, links, n)?;
+    let mut read = TrackerRead::new(t.simulated_mark);
     while let Some(row) = t.next_row()? {
         let t: &Header = t;
-        if lines.len() >= options.max_rows {
-            return Err(too_many_rows(t, &row, options.max_rows));
-        }
-        let label = t.required_text(&row, "pose")?.to_string();
-        if let Some(first) = seen.get(&label) {
-            return Err(t.err(
-                &row,
-                "pose",
-                format!("pose {:?} appears again (first on line {first}): a tracker file has one row per pose", shorten(&label)),
-            ));
-        }
+        read.check_more(&t.file, row.line, options.max_rows)?;
+        let label = t.required_text(&row, "pose")?;
+        read.check_label(&t.file, row.line, label)?;
         let (measured, raw, mask) = match partial_pose(t, &row, o)? {
             None => {
                 let (m, raw) = parse_pose(t, &row, o)?;
@@ -1513,88 +1535,177 @@ pub(crate) fn read_pose_measurements_table<R: Read>(
             }
             Some((m, mask, raw)) => (m, raw, mask),
         };
-        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
-            angles.push((row.line, *name, *v));
-        }
-        let u = link_readings(t, &row, n)?;
-        let q = campaign.pose_measurements.len();
-        for (a, m) in mask.iter().enumerate() {
-            if !m {
-                campaign.unmeasured.push((q, a));
-            }
-        }
+        let readings = link_readings(t, &row, n)?;
         let time_s = t.optional_number(&row, "time_s")?;
         let temperature_c = t.optional_number(&row, "temperature_c")?;
-        if t.optional_bool(&row, "simulated")? == Some(true) {
-            campaign.simulated = true;
+        let simulated = t.optional_bool(&row, "simulated")? == Some(true);
+        let row = TrackerRow {
+            line: row.line,
+            label: label.to_string(),
+            measured,
+            readings,
+            mask,
+        };
+        read.push(robot, row, &raw, (time_s, temperature_c), simulated);
+    }
+    read.finish(&t.file, robot)
+}
+
+/// A tracker file being read, one row (pose) after the other, by the CSV reader
+/// ([`read_pose_measurements`]) and the reader of values ([`crate::rows`]): what the rows
+/// make, and the checks of a row against those before it and of the whole file.
+pub(crate) struct TrackerRead {
+    campaign: Campaign,
+    /// The first line of each label.
+    seen: HashMap<String, usize>,
+    labels: Vec<String>,
+    lines: Vec<usize>,
+    /// Each row's commanded link lengths, mm.
+    commanded: Vec<Vec<f64>>,
+    rows: Vec<TrackerRow>,
+    angles: AngleCells,
+}
+
+impl TrackerRead {
+    /// Nothing read yet; `simulated` when the file says so before its rows.
+    pub(crate) fn new(simulated: bool) -> Self {
+        TrackerRead {
+            campaign: Campaign {
+                simulated,
+                ..Campaign::default()
+            },
+            seen: HashMap::new(),
+            labels: Vec::new(),
+            lines: Vec::new(),
+            commanded: Vec::new(),
+            rows: Vec::new(),
+            angles: Vec::new(),
         }
-        commanded.push(
-            u.iter()
+    }
+
+    /// Refuses a row on `line` beyond the `max` rows allowed.
+    pub(crate) fn check_more(&self, file: &str, line: usize, max: usize) -> Result<(), InputError> {
+        if self.lines.len() >= max {
+            return Err(too_many_rows_at(file, line, max));
+        }
+        Ok(())
+    }
+
+    /// Refuses the label of a row on `line` given to a row before: one row per pose.
+    pub(crate) fn check_label(
+        &self,
+        file: &str,
+        line: usize,
+        label: &str,
+    ) -> Result<(), InputError> {
+        match self.seen.get(label) {
+            Some(first) => Err(InputError::field(
+                file,
+                line,
+                "pose",
+                format!("pose {:?} appears again (first on line {first}): a tracker file has one row per pose", shorten(label)),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    /// Adds a row checked field by field: its pose made of the numbers `raw`, its time and
+    /// temperature, whether it is simulated.
+    pub(crate) fn push(
+        &mut self,
+        robot: &Robot,
+        row: TrackerRow,
+        raw: &RawPose,
+        (time_s, temperature_c): (Option<f64>, Option<f64>),
+        simulated: bool,
+    ) {
+        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+            self.angles.push((row.line, *name, *v));
+        }
+        let q = self.campaign.pose_measurements.len();
+        for (a, m) in row.mask.iter().enumerate() {
+            if !m {
+                self.campaign.unmeasured.push((q, a));
+            }
+        }
+        if simulated {
+            self.campaign.simulated = true;
+        }
+        self.commanded.push(
+            row.readings
+                .iter()
                 .enumerate()
                 .map(|(i, v)| robot.length_mm(i, *v))
-                .collect::<Vec<f64>>(),
+                .collect(),
         );
-        seen.insert(label.clone(), row.line);
-        let j = campaign.poses.len();
-        campaign.poses.push(measured);
-        campaign.pose_measurements.push(PoseMeasurement {
+        self.seen.insert(row.label.clone(), row.line);
+        let j = self.campaign.poses.len();
+        self.campaign.poses.push(row.measured);
+        self.campaign.pose_measurements.push(PoseMeasurement {
             pose: j,
-            measured,
+            measured: row.measured,
             time_s,
             temperature_c,
         });
-        rows.push(TrackerRow {
-            line: row.line,
-            label: label.clone(),
-            measured,
-            readings: u,
-            mask,
-        });
-        labels.push(label);
-        lines.push(row.line);
+        self.labels.push(row.label.clone());
+        self.lines.push(row.line);
+        self.rows.push(row);
     }
-    if campaign.pose_measurements.is_empty() {
-        return Err(InputError::file(
-            &t.file,
-            "no pose measurements: the file has a header but no rows",
-        ));
-    }
-    check_angle_units(&t.file, &angles)?;
-    check_tracker_position_units(&t.file, &rows, &commanded)?;
-    // A row not measured in full: its pose (the start of forward kinematics) is the nominal
-    // forward kinematics of its commanded lengths.
-    for (q, r) in rows.iter().enumerate().filter(|(_, r)| !r.complete()) {
-        let (p, _) = cpm_kinematics::forward(
-            &robot.table,
-            &commanded[q],
-            &robot.table.home,
-            &cpm_kinematics::ForwardOptions::default(),
-        )
-        .map_err(|e| {
-            InputError::field(
-                &t.file,
-                r.line,
-                "reading_1",
-                format!("the link readings give no pose (forward kinematics: {e}): wrong units or link mapping?"),
+
+    /// The file of the rows read, after the checks of the whole file (some rows, units).
+    pub(crate) fn finish(self, file: &str, robot: &Robot) -> Result<DataFile, InputError> {
+        let TrackerRead {
+            mut campaign,
+            labels,
+            lines,
+            commanded,
+            rows,
+            angles,
+            ..
+        } = self;
+        if campaign.pose_measurements.is_empty() {
+            return Err(InputError::file(
+                file,
+                "no pose measurements: the file has a header but no rows",
+            ));
+        }
+        check_angle_units(file, &angles)?;
+        check_tracker_position_units(file, &rows, &commanded)?;
+        // A row not measured in full: its pose (the start of forward kinematics) is the
+        // nominal forward kinematics of its commanded lengths.
+        for (q, r) in rows.iter().enumerate().filter(|(_, r)| !r.complete()) {
+            let (p, _) = cpm_kinematics::forward(
+                &robot.table,
+                &commanded[q],
+                &robot.table.home,
+                &cpm_kinematics::ForwardOptions::default(),
             )
-        })?;
-        campaign.poses[q] = p;
+            .map_err(|e| {
+                InputError::field(
+                    file,
+                    r.line,
+                    "reading_1",
+                    format!("the link readings give no pose (forward kinematics: {e}): wrong units or link mapping?"),
+                )
+            })?;
+            campaign.poses[q] = p;
+        }
+        campaign.commanded_lengths_mm = Some(commanded);
+        Ok(DataFile {
+            file: file.to_string(),
+            kind: FileKind::PoseMeasurements,
+            campaign,
+            pose_labels: labels,
+            pose_lines: lines,
+            reading_lines: Vec::new(),
+            registration: None,
+            tracker_rows: rows,
+            checked: false,
+            point_lines: Vec::new(),
+            point_frame: None,
+            excluded: Vec::new(),
+        })
     }
-    campaign.commanded_lengths_mm = Some(commanded);
-    Ok(DataFile {
-        file: t.file.clone(),
-        kind: FileKind::PoseMeasurements,
-        campaign,
-        pose_labels: labels,
-        pose_lines: lines,
-        reading_lines: Vec::new(),
-        registration: None,
-        tracker_rows: rows,
-        checked: false,
-        point_lines: Vec::new(),
-        point_frame: None,
-        excluded: Vec::new(),
-    })
 }
 
 /// Refuses a tracker file whose measured positions spread a hundred times less than the

@@ -1,5 +1,6 @@
-//! Length-sensor readings given as values (numpy arrays, a program's own log), read into a
-//! [`DataFile`] with every check of the CSV reader and the same errors, without text.
+//! Length-sensor readings and tracker pose measurements given as values (numpy arrays, a
+//! program's own log), read into a [`DataFile`] with every check of the CSV reader and the
+//! same errors, without text.
 //!
 //! [`GaugeRows`] holds the columns of a readings file (`docs/formats.md`, "Length-sensor
 //! readings") as typed values, one row per reading. [`read_gauge_rows`] gives exactly what
@@ -7,6 +8,12 @@
 //! them: the same campaign to the last bit, the same exclusions, the same first error (row
 //! `k` is line `k + 2` of that text, its header on line 1), in a fraction of the time (no
 //! number is formatted or parsed).
+//!
+//! [`TrackerRows`] holds the columns of a tracker file ("Tracker pose measurements"), one row
+//! per pose; [`read_tracker_rows`] gives what
+//! [`read_pose_measurements`](crate::campaign::read_pose_measurements) gives for the text of
+//! [`TrackerRows::to_csv`], in the same way (unregistered: the fit side registers tracker
+//! sets, `cpm_workflow::ingest`).
 //!
 //! ```
 //! use cpm_io::rows::{read_gauge_rows, GaugeRows};
@@ -31,11 +38,33 @@ use cpm_calib::{Campaign, Reading};
 use cpm_geometry::Pose;
 
 use crate::campaign::{
-    check_angle_units, check_pose_value, exclude_poses, robot_checks, same_pose_as_before,
-    too_many_rows_at, unknown_sensor, DataFile, RawPose, ReadOptions,
+    check_angle_units, check_pose_value, exclude_poses, pose_from_raw, reading_name, robot_checks,
+    same_pose_as_before, too_many_rows_at, tracker_link_columns, unknown_sensor, DataFile,
+    Orientation, RawPose, ReadOptions, TrackerRead, TrackerRow,
 };
 use crate::table::{field, parse_number};
 use crate::{InputError, Robot};
+
+/// The number of rows of rows given as values (their labels': the reader, named, checks the
+/// other columns against it), and the line of a row in their CSV.
+macro_rules! rows_by_label {
+    ($reader:literal) => {
+        #[doc = concat!("The number of rows (of the labels; [`", $reader, "`] checks the other columns against it).")]
+        pub fn len(&self) -> usize {
+            self.pose_labels.len()
+        }
+
+        /// True without rows.
+        pub fn is_empty(&self) -> bool {
+            self.pose_labels.is_empty()
+        }
+
+        /// The line of row `k` (from 0) in the text of [`to_csv`](Self::to_csv): `k + 2`.
+        pub fn line(k: usize) -> usize {
+            row_line(k)
+        }
+    };
+}
 
 /// Length-sensor readings as values, one row per reading: the columns of a readings file.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,31 +106,14 @@ impl GaugeRows {
         }
     }
 
-    /// The number of rows (of the labels; [`read_gauge_rows`] checks the other columns
-    /// against it).
-    pub fn len(&self) -> usize {
-        self.pose_labels.len()
-    }
-
-    /// True without rows.
-    pub fn is_empty(&self) -> bool {
-        self.pose_labels.is_empty()
-    }
-
-    /// The line of row `k` (from 0) in the text of [`to_csv`](Self::to_csv): `k + 2`.
-    pub fn line(k: usize) -> usize {
-        k + 2
-    }
+    rows_by_label!("read_gauge_rows");
 
     /// The rows as the CSV of a readings file (header on line 1, row `k` on line `k + 2`),
     /// every number in its shortest form that reads back to the same `f64`; a `simulated`
     /// column says whether they are simulated.
     pub fn to_csv(&self) -> String {
         let mut s = String::from("pose,sensor,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,length_mm");
-        if self.time_s.is_some() {
-            s.push_str(",time_s");
-        }
-        s.push_str(",simulated\n");
+        end_header(&mut s, self.time_s.is_some());
         for k in 0..self.len() {
             let label = self.pose_labels.get(k).map_or("", String::as_str);
             let sensor = self.sensors.get(k).map_or("", String::as_str);
@@ -114,10 +126,7 @@ impl GaugeRows {
                 ",{}",
                 self.lengths_mm.get(k).copied().unwrap_or(f64::NAN)
             );
-            if let Some(t) = &self.time_s {
-                let _ = write!(s, ",{}", t.get(k).copied().unwrap_or(f64::NAN));
-            }
-            let _ = writeln!(s, ",{}", self.simulated);
+            end_row(&mut s, self.time_s.as_ref(), k, self.simulated);
         }
         s
     }
@@ -125,26 +134,92 @@ impl GaugeRows {
     /// Checks that every column has a value per row.
     fn check_columns(&self) -> Result<(), InputError> {
         let n = self.len();
-        let columns = [
-            ("sensor", self.sensors.len()),
-            ("x_mm .. yaw_deg", self.poses.len()),
-            ("length_mm", self.lengths_mm.len()),
-            ("time_s", self.time_s.as_ref().map_or(n, Vec::len)),
-        ];
-        for (name, len) in columns {
-            if len != n {
-                return Err(InputError::file(
-                    &self.file,
-                    format!("{len} values of {name} for {n} pose labels: every row needs one"),
-                ));
-            }
-        }
-        Ok(())
+        check_columns(
+            &self.file,
+            n,
+            &[
+                ("sensor", self.sensors.len(), 1),
+                ("x_mm .. yaw_deg", self.poses.len(), 1),
+                ("length_mm", self.lengths_mm.len(), 1),
+                ("time_s", self.time_s.as_ref().map_or(n, Vec::len), 1),
+            ],
+        )
     }
+}
+
+/// Checks that each column `(name, values, per row)` has `per row` values for each of the
+/// `n` rows, naming the first that has not.
+fn check_columns(file: &str, n: usize, columns: &[(&str, usize, usize)]) -> Result<(), InputError> {
+    for &(name, len, per_row) in columns {
+        if len != n * per_row {
+            let need = match per_row {
+                1 => "one".to_string(),
+                k => k.to_string(),
+            };
+            return Err(InputError::file(
+                file,
+                format!("{len} values of {name} for {n} pose labels: every row needs {need}"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The line of row `k` (from 0) in the CSV text of rows given as values: `k + 2` (the header
+/// on line 1).
+fn row_line(k: usize) -> usize {
+    k + 2
+}
+
+/// The end of the header of the CSV of rows: the `time_s` column when they have times, then
+/// `simulated`.
+fn end_header(s: &mut String, times: bool) {
+    if times {
+        s.push_str(",time_s");
+    }
+    s.push_str(",simulated\n");
+}
+
+/// The end of row `k` of the CSV of rows: its time when they have times, then whether they
+/// are simulated.
+fn end_row(s: &mut String, time_s: Option<&Vec<f64>>, k: usize, simulated: bool) {
+    if let Some(t) = time_s {
+        let _ = write!(s, ",{}", t.get(k).copied().unwrap_or(f64::NAN));
+    }
+    let _ = writeln!(s, ",{simulated}");
+}
+
+/// The time of row `k` on `line`, when the rows have times: finite.
+fn time(
+    file: &str,
+    line: usize,
+    time_s: Option<&Vec<f64>>,
+    k: usize,
+) -> Result<Option<f64>, InputError> {
+    time_s
+        .map(|t| finite(file, line, "time_s", t[k]))
+        .transpose()
 }
 
 /// The columns of a row's pose, in the order of [`GaugeRows::poses`].
 const POSE_COLUMNS: [&str; 6] = ["x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg"];
+
+/// The numbers of a row's pose, each of the column named beside it in `columns`: finite and
+/// within range (the checks of the CSV reader, cell by cell).
+fn raw_pose(
+    file: &str,
+    line: usize,
+    columns: &[&'static str],
+    values: &[f64],
+) -> Result<RawPose, InputError> {
+    let mut raw = RawPose::default();
+    for (name, v) in columns.iter().zip(values) {
+        let v = finite(file, line, name, *v)?;
+        check_pose_value(file, line, name, v)?;
+        raw.push(name, v);
+    }
+    Ok(raw)
+}
 
 /// A value of a number column: finite, else the reader's message for its text.
 fn finite(file: &str, line: usize, name: &str, v: f64) -> Result<f64, InputError> {
@@ -157,6 +232,20 @@ fn finite(file: &str, line: usize, name: &str, v: f64) -> Result<f64, InputError
             name,
             parse_number(&v.to_string()).expect_err("not finite"),
         ))
+    }
+}
+
+/// Refuses the texts of a row (`(column, text)`, in the order of their columns) that its CSV
+/// cannot hold on its line, as the CSV reader refuses that line: a text with a line break.
+fn one_line(file: &str, line: usize, texts: &[(&str, &str)]) -> Result<(), InputError> {
+    match texts.iter().find(|(_, v)| v.contains('\n')) {
+        Some((name, _)) => Err(InputError::field(
+            file,
+            line,
+            *name,
+            crate::table::QUOTE_NOT_CLOSED,
+        )),
+        None => Ok(()),
     }
 }
 
@@ -194,6 +283,11 @@ pub fn read_gauge_rows(
     let mut read = || -> Result<(), InputError> {
         for k in 0..rows.len() {
             let line = GaugeRows::line(k);
+            let texts = [
+                ("pose", &*rows.pose_labels[k]),
+                ("sensor", &*rows.sensors[k]),
+            ];
+            one_line(file, line, &texts)?;
             if reading_lines.len() >= options.max_rows {
                 return Err(too_many_rows_at(file, line, options.max_rows));
             }
@@ -218,12 +312,7 @@ pub fn read_gauge_rows(
             let (raw, pose) = if same_as_previous {
                 (first[known.expect("the previous row's pose")].0, None)
             } else {
-                let mut raw = RawPose::default();
-                for (name, v) in POSE_COLUMNS.iter().zip(values) {
-                    let v = finite(file, line, name, v)?;
-                    check_pose_value(file, line, name, v)?;
-                    raw.push(name, v);
-                }
+                let raw = raw_pose(file, line, &POSE_COLUMNS, &values)?;
                 let pose = match known {
                     Some(j) if raw.agrees(&first[j].0) => None,
                     _ => Some(Pose::from_xyz_rpy_deg(
@@ -234,10 +323,7 @@ pub fn read_gauge_rows(
                 (raw, pose)
             };
             let length_mm = finite(file, line, "length_mm", rows.lengths_mm[k])?;
-            let time_s = match &rows.time_s {
-                Some(t) => Some(finite(file, line, "time_s", t[k])?),
-                None => None,
-            };
+            let time_s = time(file, line, rows.time_s.as_ref(), k)?;
             let j = match known {
                 Some(j) => {
                     let (before, first_line) = &first[j];
@@ -308,6 +394,196 @@ pub fn read_gauge_rows(
     Ok(f)
 }
 
+/// The measured poses of tracker rows, one per row, in one of the two orientations of a
+/// tracker file.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TrackerPoses {
+    /// x, y, z mm; roll, pitch, yaw deg (`R = Rz(yaw) Ry(pitch) Rx(roll)`).
+    Rpy(Vec<[f64; 6]>),
+    /// x, y, z mm; unit quaternion qw, qx, qy, qz.
+    Quaternion(Vec<[f64; 7]>),
+}
+
+/// The columns of a tracker row's pose given as a quaternion.
+const QUATERNION_POSE_COLUMNS: [&str; 7] = ["x_mm", "y_mm", "z_mm", "qw", "qx", "qy", "qz"];
+
+impl TrackerPoses {
+    /// The number of poses.
+    pub fn len(&self) -> usize {
+        match self {
+            TrackerPoses::Rpy(p) => p.len(),
+            TrackerPoses::Quaternion(p) => p.len(),
+        }
+    }
+
+    /// True without poses.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The numbers of pose `k`.
+    fn row(&self, k: usize) -> Option<&[f64]> {
+        match self {
+            TrackerPoses::Rpy(p) => p.get(k).map(|v| v.as_slice()),
+            TrackerPoses::Quaternion(p) => p.get(k).map(|v| v.as_slice()),
+        }
+    }
+
+    /// The columns of a pose, in the order of its numbers.
+    fn columns(&self) -> &'static [&'static str] {
+        match self {
+            TrackerPoses::Rpy(_) => &POSE_COLUMNS,
+            TrackerPoses::Quaternion(_) => &QUATERNION_POSE_COLUMNS,
+        }
+    }
+
+    fn orientation(&self) -> Orientation {
+        match self {
+            TrackerPoses::Rpy(_) => Orientation::Rpy,
+            TrackerPoses::Quaternion(_) => Orientation::Quaternion,
+        }
+    }
+}
+
+/// Tracker pose measurements as values, one row per pose: the columns of a tracker file
+/// (`docs/formats.md`, "Tracker pose measurements").
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackerRows {
+    /// The name that stands for the file in messages and outputs.
+    pub file: String,
+    /// Each row's pose label (one row per pose: no label twice).
+    pub pose_labels: Vec<String>,
+    /// The number of link readings of a row (`reading_1 .. reading_links`).
+    pub links: usize,
+    /// The commanded link readings (in the links' units), row after row: `links` per row.
+    pub readings: Vec<f64>,
+    /// Each row's measured pose, in the tracker's frame.
+    pub poses: TrackerPoses,
+    /// Each row's time, s, when given.
+    pub time_s: Option<Vec<f64>>,
+    /// True for simulated measurements (every result then says so).
+    pub simulated: bool,
+}
+
+impl TrackerRows {
+    /// Rows without times, not simulated.
+    pub fn new(
+        file: impl Into<String>,
+        pose_labels: Vec<String>,
+        links: usize,
+        readings: Vec<f64>,
+        poses: TrackerPoses,
+    ) -> TrackerRows {
+        TrackerRows {
+            file: file.into(),
+            pose_labels,
+            links,
+            readings,
+            poses,
+            time_s: None,
+            simulated: false,
+        }
+    }
+
+    rows_by_label!("read_tracker_rows");
+
+    /// The link readings of row `k`.
+    pub fn row_readings(&self, k: usize) -> &[f64] {
+        self.readings
+            .get(k * self.links..(k + 1) * self.links)
+            .unwrap_or(&[])
+    }
+
+    /// The rows as the CSV of a tracker file (header on line 1, row `k` on line `k + 2`),
+    /// every number in its shortest form that reads back to the same `f64`; a `simulated`
+    /// column says whether they are simulated.
+    pub fn to_csv(&self) -> String {
+        let mut s = String::from("pose");
+        for k in 1..=self.links {
+            let _ = write!(s, ",reading_{k}");
+        }
+        for c in self.poses.columns() {
+            let _ = write!(s, ",{c}");
+        }
+        end_header(&mut s, self.time_s.is_some());
+        let missing = [f64::NAN; 7];
+        for k in 0..self.len() {
+            s.push_str(&field(&self.pose_labels[k]));
+            let readings = self.row_readings(k);
+            for c in 0..self.links {
+                let _ = write!(s, ",{}", readings.get(c).copied().unwrap_or(f64::NAN));
+            }
+            let pose = self.poses.row(k).unwrap_or(&missing);
+            for v in &pose[..self.poses.columns().len()] {
+                let _ = write!(s, ",{v}");
+            }
+            end_row(&mut s, self.time_s.as_ref(), k, self.simulated);
+        }
+        s
+    }
+
+    /// Checks that every column has a value per row (and `links` link readings).
+    fn check_columns(&self) -> Result<(), InputError> {
+        let n = self.len();
+        let readings = format!("reading_1 .. reading_{}", self.links);
+        let pose = match self.poses {
+            TrackerPoses::Rpy(_) => "x_mm .. yaw_deg",
+            TrackerPoses::Quaternion(_) => "x_mm .. qz",
+        };
+        check_columns(
+            &self.file,
+            n,
+            &[
+                (readings.as_str(), self.readings.len(), self.links),
+                (pose, self.poses.len(), 1),
+                ("time_s", self.time_s.as_ref().map_or(n, Vec::len), 1),
+            ],
+        )
+    }
+}
+
+/// Reads tracker pose measurements given as values: what
+/// [`read_pose_measurements`](crate::campaign::read_pose_measurements) gives for the text of
+/// [`TrackerRows::to_csv`] (the same campaign to the last bit, the same first error: row `k`
+/// is line `k + 2`), read directly. Like that reader, it leaves the rows unregistered and
+/// unchecked against the robot ([`DataFile::checked`] false): the fit side registers them.
+pub fn read_tracker_rows(
+    rows: &TrackerRows,
+    robot: &Robot,
+    options: &ReadOptions,
+) -> Result<DataFile, InputError> {
+    rows.check_columns()?;
+    let file = rows.file.as_str();
+    tracker_link_columns(file, 1, rows.links, robot.num_links())?;
+    let (o, columns) = (rows.poses.orientation(), rows.poses.columns());
+    let mut read = TrackerRead::new(rows.simulated);
+    for k in 0..rows.len() {
+        let line = row_line(k);
+        one_line(file, line, &[("pose", &rows.pose_labels[k])])?;
+        read.check_more(file, line, options.max_rows)?;
+        let label = required(file, line, "pose", &rows.pose_labels[k])?;
+        read.check_label(file, line, label)?;
+        let raw = raw_pose(file, line, columns, rows.poses.row(k).expect("checked"))?;
+        let measured = pose_from_raw(file, line, o, &raw)?;
+        let readings = rows
+            .row_readings(k)
+            .iter()
+            .enumerate()
+            .map(|(i, v)| finite(file, line, &reading_name(i), *v))
+            .collect::<Result<Vec<f64>, InputError>>()?;
+        let time_s = time(file, line, rows.time_s.as_ref(), k)?;
+        let row = TrackerRow {
+            line,
+            label: label.to_string(),
+            measured,
+            readings,
+            mask: [true; 6],
+        };
+        read.push(robot, row, &raw, (time_s, None), rows.simulated);
+    }
+    read.finish(file, robot)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -335,22 +611,24 @@ mod tests {
 
     const LABELS: [&str; 7] = ["1", "2", "3", "a,b", "#c", " d", "e\"f"];
 
+    /// Offsets of a pose from home: x, y, z mm; roll, pitch, yaw deg.
+    const OFFSETS: [[f64; 6]; 4] = [
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [20.0, -10.0, 5.0, 2.0, -1.5, 3.0],
+        [-15.0, 12.0, -8.0, -3.0, 1.0, -2.0],
+        [5.0, 5.0, 20.0, 0.5, 4.0, 1.0],
+    ];
+
     /// Rows of the example hexapod with faults: the reading from values and the CSV reader
     /// of their text agree on every campaign and every first error.
     fn rows_of(draw: &[(usize, usize, usize, f64, u8)], times: bool) -> GaugeRows {
         let robot = robot();
         let home = robot.table.home;
         let [r0, p0, y0] = home.rpy_deg();
-        let offsets = [
-            [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            [20.0, -10.0, 5.0, 2.0, -1.5, 3.0],
-            [-15.0, 12.0, -8.0, -3.0, 1.0, -2.0],
-            [5.0, 5.0, 20.0, 0.5, 4.0, 1.0],
-        ];
         let mut rows = GaugeRows::new("arrays", vec![], vec![], vec![], vec![]);
         let mut t = Vec::new();
         for (k, &(label, sensor, offset, noise, fault)) in draw.iter().enumerate() {
-            let o = offsets[(offset + label) % 4];
+            let o = OFFSETS[(offset + label) % 4];
             let mut pose = [
                 home.position_mm.x + o[0],
                 home.position_mm.y + o[1],
@@ -380,6 +658,8 @@ mod tests {
                 9 => pose[2] += 1000.0,
                 10 => time = f64::NAN,
                 11 => pose[1] = -0.0,
+                12 => label.insert(0, '\n'),
+                13 => sensor.push_str("\nx"),
                 _ => {}
             }
             rows.pose_labels.push(label);
@@ -412,6 +692,27 @@ mod tests {
             let csv = outcome(crate::read_readings(&text, "arrays", &robot, &options));
             prop_assert_eq!(direct, csv, "text:\n{}", text);
         }
+
+        #[test]
+        fn tracker_rows_read_as_their_csv_reads(
+            draw in proptest::collection::vec(tracker_row(), 0..30),
+            quaternion in any::<bool>(),
+            times in any::<bool>(),
+            simulated in any::<bool>(),
+            shape in 0..12u8,
+            max_rows in prop_oneof![Just(crate::MAX_ROWS), 1..30usize],
+        ) {
+            let robot = robot();
+            let mut rows = tracker_rows_of(&draw, quaternion, times, shape);
+            rows.simulated = simulated;
+            let options = ReadOptions { max_rows, ..ReadOptions::default() };
+            let direct = outcome(read_tracker_rows(&rows, &robot, &options));
+            let text = rows.to_csv();
+            let csv = outcome(crate::campaign::read_pose_measurements(
+                &text, "tracker arrays", &robot, &options,
+            ));
+            prop_assert_eq!(direct, csv, "text:\n{}", text);
+        }
     }
 
     /// Columns of different lengths are refused, naming the column.
@@ -433,5 +734,127 @@ mod tests {
         rows.time_s = Some(vec![0.0; 3]);
         let e = read_gauge_rows(&rows, &robot(), &ReadOptions::default()).unwrap_err();
         assert!(e.to_string().contains("3 values of time_s"), "{e}");
+    }
+
+    /// One tracker row: a label (some awkward for CSV), an offset of the measured pose from
+    /// home (x, y, z mm; roll, pitch, yaw deg), noise on the link readings, and a fault drawn
+    /// now and then.
+    fn tracker_row() -> impl Strategy<Value = (usize, usize, f64, u8)> {
+        (0..7usize, 0..4usize, -0.01..0.01f64, 0..200u8)
+    }
+
+    /// Tracker rows of the example hexapod with faults: row faults, and faults of the whole
+    /// set by `shape` (0: positions in metres, 1: angles in radians, 2: a link reading short).
+    fn tracker_rows_of(
+        draw: &[(usize, usize, f64, u8)],
+        quaternion: bool,
+        times: bool,
+        shape: u8,
+    ) -> TrackerRows {
+        let robot = robot();
+        let home = robot.table.home;
+        let [r0, p0, y0] = home.rpy_deg();
+        let links = robot.num_links() - usize::from(shape == 2);
+        let mut labels: Vec<String> = Vec::new();
+        let (mut readings, mut rpy, mut quat, mut t) = (vec![], vec![], vec![], vec![]);
+        for (k, &(label, offset, noise, fault)) in draw.iter().enumerate() {
+            let o = OFFSETS[(offset + label) % 4];
+            let xyz = [
+                home.position_mm.x + o[0],
+                home.position_mm.y + o[1],
+                home.position_mm.z + o[2],
+            ];
+            let p = Pose::from_xyz_rpy_deg(xyz, [r0 + o[3], p0 + o[4], y0 + o[5]]);
+            let lengths = cpm_kinematics::inverse_lengths(&robot.table, &p);
+            let mut u: Vec<f64> = (0..links)
+                .map(|i| robot.reading(i, lengths[i]) + noise)
+                .collect();
+            // In the tracker's frame: shifted (the reader does not know the frame).
+            let mut x = [xyz[0] + 1200.0, xyz[1] - 300.0, xyz[2] + 40.0];
+            if shape == 0 {
+                x = x.map(|v| v / 1000.0);
+            }
+            let mut a = [r0 + o[3], p0 + o[4], y0 + o[5]];
+            if shape == 1 {
+                a = a.map(f64::to_radians);
+            }
+            let q = p.quaternion();
+            let mut pr = [x[0], x[1], x[2], a[0], a[1], a[2]];
+            let mut pq = [x[0], x[1], x[2], q[0], q[1], q[2], q[3]];
+            let mut label = format!("{}{k}", LABELS[label]);
+            let mut time = k as f64 * 0.5;
+            match fault {
+                0 => {
+                    pr[k % 6] = f64::NAN;
+                    pq[k % 7] = f64::NAN;
+                }
+                1 => u[k % links] = f64::INFINITY,
+                2 => {
+                    pr[3 + k % 3] = 400.0;
+                    pq[3] *= 1.5;
+                }
+                3 => {
+                    pr[k % 3] = 2e6;
+                    pq[k % 3] = -2e6;
+                }
+                4 => label = labels.last().cloned().unwrap_or_default(),
+                5 => label.clear(),
+                6 => time = f64::NAN,
+                7 => u[links - 1] = f64::NAN,
+                8 => {
+                    pr[1] = -0.0;
+                    pq[4] = -0.0;
+                }
+                9 => pq[3..].iter_mut().for_each(|v| *v = -*v),
+                10 => pq[3..].iter_mut().for_each(|v| *v *= 1.0005),
+                11 => label.push('\n'),
+                _ => {}
+            }
+            labels.push(label);
+            readings.extend(u);
+            rpy.push(pr);
+            quat.push(pq);
+            t.push(time);
+        }
+        let poses = match quaternion {
+            true => TrackerPoses::Quaternion(quat),
+            false => TrackerPoses::Rpy(rpy),
+        };
+        let mut rows = TrackerRows::new("tracker arrays", labels, links, readings, poses);
+        if times {
+            rows.time_s = Some(t);
+        }
+        rows
+    }
+
+    /// Tracker columns of different lengths are refused, naming the column.
+    #[test]
+    fn every_tracker_column_needs_a_value_per_row() {
+        let poses = TrackerPoses::Rpy(vec![[0.0; 6]; 2]);
+        let mut rows =
+            TrackerRows::new("log", vec!["1".into(), "2".into()], 6, vec![0.0; 11], poses);
+        let e = read_tracker_rows(&rows, &robot(), &ReadOptions::default()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "log: 11 values of reading_1 .. reading_6 for 2 pose labels: every row needs 6"
+        );
+        rows.readings.push(0.0);
+        rows.poses = TrackerPoses::Quaternion(vec![[0.0; 7]; 3]);
+        let e = read_tracker_rows(&rows, &robot(), &ReadOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("3 values of x_mm .. qz"), "{e}");
+    }
+
+    /// The text of tracker rows is the tracker file format, numbers exact.
+    #[test]
+    fn tracker_rows_csv() {
+        let poses = TrackerPoses::Quaternion(vec![[1.5, -0.0, 3.0, 1.0, 0.0, 0.0, 0.0]]);
+        let mut rows = TrackerRows::new("log", vec!["a,b".into()], 2, vec![0.1, 2.0], poses);
+        rows.time_s = Some(vec![0.25]);
+        rows.simulated = true;
+        assert_eq!(
+            rows.to_csv(),
+            "pose,reading_1,reading_2,x_mm,y_mm,z_mm,qw,qx,qy,qz,time_s,simulated\n\
+             \"a,b\",0.1,2,1.5,-0,3,1,0,0,0,0.25,true\n"
+        );
     }
 }

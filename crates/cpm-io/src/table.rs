@@ -518,6 +518,10 @@ fn commas(bytes: &[u8], out: &mut Vec<usize>) {
     }
 }
 
+/// The error of a quoted field that a line ends in (one record per line).
+pub(crate) const QUOTE_NOT_CLOSED: &str =
+    "a quote is not closed on this line (a quoted field cannot span lines)";
+
 /// Splits one CSV line into trimmed fields: commas separate, a field that starts with `"`
 /// is quoted (`""` is a quote inside it). The fields' bytes go one after the other into
 /// `out`, and `ends[k]` is where field `k` ends in it (both cleared first).
@@ -538,12 +542,7 @@ fn split_fields(
             i += 1;
             loop {
                 match line.get(i) {
-                    None => {
-                        return Err((
-                            col,
-                            "a quote is not closed on this line (a quoted field cannot span lines)",
-                        ))
-                    }
+                    None => return Err((col, QUOTE_NOT_CLOSED)),
                     Some(b'"') if line.get(i + 1) == Some(&b'"') => {
                         out.push(b'"');
                         i += 2;

@@ -4,11 +4,11 @@
 //! The work runs on a worker thread; the calling thread waits for it with the GIL released
 //! and checks for signals every 50 ms. On Ctrl-C (or any signal handler that raises) the
 //! exception is raised at once and the work is told (the flag it gets turns true): the
-//! binding's `calibrate` hands that flag to the fit ([`cpm::calib::IdentifyOptions::cancel`]),
-//! which stops at its next evaluation, and writes nothing; other work finishes in the
-//! background and its result is dropped. A command run whole (`run_command`: refine,
-//! design, ...) still commits its outputs to its `--out` when it finishes, all or nothing, as
-//! the command does.
+//! binding's jobs hand that flag to the workflow as their progress's cancel flag
+//! ([`cpm_workflow::Progress::cancel_flag`]; the fit checks it at each evaluation,
+//! [`cpm_workflow::calib::IdentifyOptions::cancel`]), stop at the next check, and write
+//! nothing; a job that has no check left finishes in the background, its result dropped and
+//! its outputs not committed.
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::Duration;

@@ -1,70 +1,100 @@
-//! The commands of `cpm` for Python.
+//! The commands of `cpm` for Python, run as the workflow's jobs ([`cpm_workflow`]): no
+//! argument vector, no command-line parser.
 //!
-//! Every command's arguments are parsed from an argument vector by the command's own parser
-//! ([`cpm::cli::Cli`]): the Python layer turns keyword arguments into `--option value`, so the
-//! options, their defaults and their usage errors are exactly the command's, and an option
-//! added to the command is there in Python too.
+//! Options come by name, as JSON text (`{"sigma_um": 2.0, "hold": ["link_scale"]}`), and
+//! become the job's options struct ([`by_name`]): every option of a command is a field of its
+//! options under the same name (`--sigma-um` is `sigma_um`; `tests/workflow.rs` checks that
+//! fields and defaults are the command's), so a Python call takes exactly the command's
+//! options with the command's defaults. Unknown options and values of the wrong type are
+//! usage errors naming the option.
 //!
-//! [`run_command`] runs any command as `cpm` does (its outputs go where `--out` says; the
-//! Python layer gives a scratch directory when the caller gave none and reads them back).
-//! [`calibrate`] runs the fit of `cpm calibrate` ([`cpm::cli::calibrate::FitArgs::load`] and
-//! [`cpm::cli::calibrate::fit_with`]) and also hands back the calibration itself: estimates,
-//! standard deviations, the Cramér-Rao covariance, identifiability, residuals, and every staged
-//! output file (`calibration.json`, `report.md`, `report.html`, `calibrated.toml`, figures).
+//! [`calibrate_memory`] runs the fit on a campaign in memory ([`cpm_workflow::memory`]) and
+//! hands back the calibration itself: estimates, standard deviations, the Cramér-Rao
+//! covariance, identifiability, residuals, and every staged output file.
+//! [`crate::jobs::job`] runs any other command.
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use clap::Parser;
-use cpm::cli::{self, calibrate as cal_cli, common, Cli, Command, Ctx, Outcome};
 use numpy::{PyArray1, PyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use serde::{de::DeserializeOwned, Serialize};
+use serde_json::Value;
 
-/// Parses an argument vector (without the program name) with the command's parser.
-fn parse(py: Python<'_>, argv: &[String]) -> PyResult<Cli> {
-    let args = std::iter::once("cpm".to_string()).chain(argv.iter().cloned());
-    Cli::try_parse_from(args).map_err(|e| {
-        let text = e.render().to_string();
-        crate::errors::usage(py, text.trim_end().trim_start_matches("error: "))
-    })
+/// The options struct `T` of `command` from options given by name (`given`: a JSON object),
+/// over `defaults` (the struct's `new`). A list option given one value takes it as a list of
+/// one; the options `cpm` splits at commas (`hold`, `sensors`, `bars_mm`) are split alike.
+/// Unknown names and values of the wrong type are usage errors naming the option.
+pub fn by_name<T: Serialize + DeserializeOwned>(
+    py: Python<'_>,
+    command: &str,
+    defaults: &T,
+    given: &str,
+) -> PyResult<T> {
+    let internal = |e: serde_json::Error| crate::errors::internal(py, e.to_string());
+    let given: serde_json::Map<String, Value> = serde_json::from_str(given).map_err(internal)?;
+    let Value::Object(base) = serde_json::to_value(defaults).map_err(internal)? else {
+        return Err(crate::errors::internal(py, "options are not an object"));
+    };
+    let mut all = base.clone();
+    for (key, value) in given {
+        let flag = format!("--{}", key.replace('_', "-"));
+        let Some(default) = base.get(&key) else {
+            let mut known: Vec<&String> = base.keys().collect();
+            known.sort();
+            let known: Vec<&str> = known.iter().map(|k| k.as_str()).collect();
+            return Err(crate::errors::usage(
+                py,
+                format!(
+                    "unexpected argument '{flag}' found ({command} takes {})",
+                    known.join(", ")
+                ),
+            ));
+        };
+        let value = shaped(&key, default, value);
+        let mut one = base.clone();
+        one.insert(key.clone(), value.clone());
+        if let Err(e) = serde_json::from_value::<T>(Value::Object(one)) {
+            return Err(crate::errors::usage(
+                py,
+                format!("invalid value {value} for '{flag}' ({key}): {e}"),
+            ));
+        }
+        all.insert(key, value);
+    }
+    serde_json::from_value(Value::Object(all)).map_err(|e| crate::errors::usage(py, e.to_string()))
 }
 
-/// What a command gave back: what it printed, and its trouble (exit code 1 with outputs
-/// written) if any.
-type Ran = (String, Option<String>);
-
-/// Runs a `cpm` command given as an argument vector (`["simulate", "--robot", ...]`),
-/// exactly as the command line does, with the GIL released. Returns what it printed on
-/// standard output and, when it finished but reports trouble (the command's exit code 1, its
-/// outputs written), the message. `--quiet` is implied (no progress display, no notes).
-#[pyfunction]
-pub fn run_command(py: Python<'_>, argv: Vec<String>) -> PyResult<Ran> {
-    let cli = parse(py, &argv)?;
-    let r = crate::blocking::run(py, move |_| -> anyhow::Result<Ran> {
-        let mut out: Vec<u8> = Vec::new();
-        let outcome = {
-            let mut ctx = Ctx::new(&mut out, true);
-            let r = cli::execute(&cli, &mut ctx);
-            ctx.finish();
-            r
-        }?;
-        let text = String::from_utf8_lossy(&out).to_string();
-        Ok(match outcome {
-            Outcome::Done => (text, None),
-            Outcome::Trouble(m) => (text, Some(m)),
-        })
-    })?;
-    r.map_err(|e| crate::errors::to_py(py, &e))
-}
-
-/// The `cpm` command itself: runs `argv` (the program name first) exactly as the binary
-/// does, printing to the process's standard output and error, and returns the exit code. The
-/// `cpm` script a `pip install` puts on the PATH calls it (`cpm._main`), so the command comes
-/// with the wheel, without a Rust toolchain.
-#[pyfunction]
-pub fn main(py: Python<'_>, argv: Vec<String>) -> i32 {
-    cli::record_stdout_at_start();
-    py.allow_threads(move || cli::run(argv))
+/// A value given by name in the shape of the option's `default`: one value for a list
+/// option is a list of one; `hold`, `sensors` and `bars_mm` split at commas as `cpm` does.
+fn shaped(key: &str, default: &Value, value: Value) -> Value {
+    if !default.is_array() {
+        return value;
+    }
+    let items = match value {
+        Value::Array(a) => a,
+        Value::Null => Vec::new(),
+        v => vec![v],
+    };
+    if !["hold", "sensors", "bars_mm"].contains(&key) {
+        return Value::Array(items);
+    }
+    let mut out = Vec::with_capacity(items.len());
+    for v in items {
+        match v {
+            Value::String(s) => {
+                for part in s.split(',') {
+                    let part = part.trim();
+                    out.push(match (key, part.parse::<f64>()) {
+                        ("bars_mm", Ok(x)) => serde_json::json!(x),
+                        _ => Value::String(part.to_string()),
+                    });
+                }
+            }
+            v => out.push(v),
+        }
+    }
+    Value::Array(out)
 }
 
 /// The names of the effects `--effects` knows (the library's, without pose map terms).
@@ -111,120 +141,10 @@ impl Origins {
             ));
         }
         Ok(
-            cal_cli::observation_origin(&self.robot, &self.merged, i as usize)
+            cpm_workflow::fit::observation_origin(&self.robot, &self.merged, i as usize)
                 .map(|o| (o.file, o.line, o.what)),
         )
     }
-}
-
-/// Puts back the names that scratch files stand for (measurements made from arrays, a robot
-/// made from text) wherever the inputs name their files, so that the outputs say
-/// `tracker measurements`, not a temporary path.
-fn rename(inputs: &mut cal_cli::Inputs, names: &HashMap<String, String>) {
-    let name = |f: &mut String| {
-        if let Some(n) = names.get(f.as_str()) {
-            *f = n.clone();
-        }
-    };
-    name(&mut inputs.provenance.robot);
-    name(&mut inputs.robot.file);
-    inputs.provenance.data.iter_mut().for_each(name);
-    let m = std::sync::Arc::make_mut(&mut inputs.merged);
-    m.pose_origin.iter_mut().for_each(|o| name(&mut o.0));
-    for o in m.reading_origin.iter_mut() {
-        if let Some(n) = names.get(&*o.0) {
-            o.0 = n.as_str().into();
-        }
-    }
-    if let Some(r) = m.registration.as_mut() {
-        r.sessions.iter_mut().for_each(|s| name(&mut s.file));
-    }
-}
-
-/// Runs `cpm calibrate` from an argument vector (`["calibrate", "--robot", ...]`); when
-/// `commit` is true the outputs are written to `--out` as the command writes them (all or
-/// nothing), otherwise only staged in memory. `names` maps scratch files to the names they
-/// stand for (measurements made from arrays, a robot made from text). Returns a dict: the calibration's numbers as numpy arrays,
-/// `files` (name -> bytes of every output), `warnings`, `trouble`.
-#[pyfunction]
-pub fn calibrate<'py>(
-    py: Python<'py>,
-    argv: Vec<String>,
-    commit: bool,
-    names: HashMap<String, String>,
-) -> PyResult<Bound<'py, PyDict>> {
-    let cli = parse(py, &argv)?;
-    let Command::Calibrate(args) = cli.command else {
-        return Err(crate::errors::usage(
-            py,
-            "cpm._cpm.calibrate runs `calibrate` only",
-        ));
-    };
-    let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Fit> {
-        let mut sink: Vec<u8> = Vec::new();
-        let ctx = Ctx::new(&mut sink, true);
-        let mut inputs = args.fit.load(&ctx)?;
-        rename(&mut inputs, &names);
-        // Ctrl-C stops the fit inside its iterations (the flag turns true when Python is
-        // interrupted).
-        inputs.identify.cancel = Some(abandoned.clone());
-        let dir = &args.fit.out;
-        let fitted = cal_cli::fit_with(&inputs, dir, args.minimum_norm, args.formulation)?;
-        // The warnings of calibration.json (the fit's, the sessions', the noise's).
-        let warnings = fitted.report.fit.warnings.clone();
-        let cal = fitted.cal;
-        let trouble = if let Some(why) = cal.robust_failure() {
-            Some(format!("the fit failed: {why}"))
-        } else if !cal.solver.was_successful() {
-            Some(format!(
-                "the solver did not converge ({})",
-                cal.solver.termination
-            ))
-        } else {
-            None
-        };
-        let files: Vec<(String, Vec<u8>)> = fitted
-            .set
-            .paths()
-            .filter_map(|p| {
-                let name = p.strip_prefix(dir).unwrap_or(p).display().to_string();
-                fitted.set.bytes(p).map(|b| (name, b.into_owned()))
-            })
-            .collect();
-        // Interrupted (the caller raised KeyboardInterrupt and left): write nothing.
-        if abandoned.load(std::sync::atomic::Ordering::SeqCst) {
-            anyhow::bail!("interrupted");
-        }
-        let written = if commit {
-            let inputs_paths: Vec<&Path> = std::iter::once(args.fit.robot.robot.as_path())
-                .chain(args.fit.data.iter().map(|p| p.as_path()))
-                .collect();
-            common::commit_dir(fitted.set, dir, &inputs_paths, "calibrate", &ctx)?
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect()
-        } else {
-            Vec::new()
-        };
-        let origins = Origins {
-            count: cal.residuals_um.len(),
-            robot: inputs.robot,
-            merged: inputs.merged,
-        };
-        let timings = vec![("solver".to_string(), cal.solver.elapsed.as_secs_f64())];
-        Ok(Fit {
-            names: inputs.model.parameter_names(),
-            cal,
-            warnings,
-            trouble,
-            files,
-            written,
-            origins,
-            timings,
-        })
-    })?;
-    let fit = r.map_err(|e| crate::errors::to_py(py, &e))?;
-    fit_dict(py, fit)
 }
 
 fn opt_array<'py>(py: Python<'py>, v: &[Option<f64>]) -> Bound<'py, PyArray1<f64>> {
@@ -318,7 +238,8 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
     Ok(d)
 }
 
-/// Renders Markdown as the self-contained HTML page of `report.html` ([`cpm::report::html::render`]),
+/// Renders Markdown as the self-contained HTML page of `report.html`
+/// ([`cpm_workflow::report::html::render`]),
 /// inlining the SVG figures of `svgs` (image name -> SVG text).
 #[pyfunction]
 pub fn render_html(
@@ -326,12 +247,12 @@ pub fn render_html(
     markdown: &str,
     svgs: std::collections::HashMap<String, String>,
 ) -> String {
-    cpm::report::html::render(title, markdown, |name| svgs.get(name).cloned())
+    cpm_workflow::report::html::render(title, markdown, |name| svgs.get(name).cloned())
 }
 
 /// The progress of a job run for Python: shows nothing; Ctrl-C (the caller gone) cancels,
 /// inside the fit's iterations too.
-struct Cancel(std::sync::Arc<std::sync::atomic::AtomicBool>);
+pub struct Cancel(pub std::sync::Arc<std::sync::atomic::AtomicBool>);
 
 impl cpm_workflow::Progress for Cancel {
     fn cancel_flag(&self) -> Option<std::sync::Arc<std::sync::atomic::AtomicBool>> {
@@ -339,151 +260,13 @@ impl cpm_workflow::Progress for Cancel {
     }
 }
 
-/// A value of an option given by name (`--name`), or a usage error naming the option.
-fn option<'py, T: FromPyObject<'py>>(
-    py: Python<'py>,
-    options: &Bound<'py, PyDict>,
-    key: &str,
-) -> PyResult<Option<T>> {
-    match options.get_item(key)? {
-        None => Ok(None),
-        Some(v) if v.is_none() => Ok(None),
-        Some(v) => v.extract().map(Some).map_err(|e| {
-            crate::errors::usage(
-                py,
-                format!("invalid value for '--{}': {e}", key.replace('_', "-")),
-            )
-        }),
-    }
-}
-
-/// One of `values` for the option `key` (a usage error listing them otherwise).
-fn choice<T: Copy>(
-    py: Python<'_>,
-    options: &Bound<'_, PyDict>,
-    key: &str,
-    values: &[(&str, T)],
-    default: T,
-) -> PyResult<T> {
-    let Some(v) = option::<String>(py, options, key)? else {
-        return Ok(default);
-    };
-    values
-        .iter()
-        .find(|(name, _)| *name == v)
-        .map(|(_, t)| *t)
-        .ok_or_else(|| {
-            let names: Vec<&str> = values.iter().map(|(n, _)| *n).collect();
-            crate::errors::usage(
-                py,
-                format!(
-                    "invalid value '{v}' for '--{}'\n  [possible values: {}]",
-                    key.replace('_', "-"),
-                    names.join(", ")
-                ),
-            )
-        })
-}
-
-/// The options of `cpm calibrate` from a dict of the command's options by name (`sigma_um`
-/// for `--sigma-um`; values already of their types), for the output directory `out`.
-fn calibrate_options(
-    py: Python<'_>,
-    options: &Bound<'_, PyDict>,
-    out: PathBuf,
-) -> PyResult<cpm_workflow::fit::CalibrateOptions> {
-    use cpm_workflow::fit::{NoisePerKind, TrackerResiduals};
-    use cpm_workflow::formulation::FormulationArg;
-    let known = [
-        "effects",
-        "sigma_um",
-        "pose_sigma_um",
-        "orientation_sigma_urad",
-        "robust",
-        "keep_outliers",
-        "max_iterations",
-        "noise_per_kind",
-        "tolerance",
-        "hold",
-        "no_prior",
-        "tolerance_limit",
-        "tracker_residuals",
-        "minimum_norm",
-        "formulation",
-        "json",
-        "quiet",
-    ];
-    for key in options.keys() {
-        let key: String = key.extract()?;
-        if !known.contains(&key.as_str()) {
-            return Err(crate::errors::usage(
-                py,
-                format!("unexpected argument '--{}' found", key.replace('_', "-")),
-            ));
-        }
-    }
-    let flag =
-        |key: &str| -> PyResult<bool> { Ok(option::<bool>(py, options, key)?.unwrap_or(false)) };
-    let mut o = cpm_workflow::fit::CalibrateOptions::new(PathBuf::new(), Vec::new(), out);
-    let f = &mut o.fit;
-    f.effects = option(py, options, "effects")?;
-    f.sigma_um = option(py, options, "sigma_um")?;
-    f.pose_sigma_um = option(py, options, "pose_sigma_um")?;
-    f.orientation_sigma_urad = option(py, options, "orientation_sigma_urad")?;
-    f.robust = option(py, options, "robust")?;
-    f.keep_outliers = flag("keep_outliers")?;
-    f.max_iterations = option(py, options, "max_iterations")?;
-    f.noise_per_kind = choice(
-        py,
-        options,
-        "noise_per_kind",
-        &[
-            ("auto", NoisePerKind::Auto),
-            ("on", NoisePerKind::On),
-            ("off", NoisePerKind::Off),
-        ],
-        NoisePerKind::Auto,
-    )?;
-    f.tolerance = option(py, options, "tolerance")?.unwrap_or_default();
-    f.hold = option::<Vec<String>>(py, options, "hold")?
-        .unwrap_or_default()
-        .iter()
-        .flat_map(|h| h.split(',').map(str::to_string))
-        .collect();
-    f.no_prior = flag("no_prior")?;
-    f.tolerance_limit = option(py, options, "tolerance_limit")?;
-    f.tracker_residuals = choice(
-        py,
-        options,
-        "tracker_residuals",
-        &[
-            ("auto", TrackerResiduals::Auto),
-            ("pose", TrackerResiduals::Pose),
-            ("legs", TrackerResiduals::Legs),
-        ],
-        TrackerResiduals::Auto,
-    )?;
-    o.minimum_norm = flag("minimum_norm")?;
-    o.formulation = choice(
-        py,
-        options,
-        "formulation",
-        &[
-            ("auto", FormulationArg::Auto),
-            ("nested", FormulationArg::Nested),
-            ("implicit", FormulationArg::Implicit),
-        ],
-        FormulationArg::Auto,
-    )?;
-    Ok(o)
-}
-
 /// A directory for outputs that are only staged: its name is in `calibrated.toml` (where the
 /// robot lies relative to it), as a scratch directory's was. Made empty, removed after.
-struct Unwritten(PathBuf);
+pub struct Unwritten(pub PathBuf);
 
 impl Unwritten {
-    fn new() -> std::io::Result<Unwritten> {
+    /// A new empty directory under the system's temporary directory.
+    pub fn new() -> std::io::Result<Unwritten> {
         use std::sync::atomic::{AtomicUsize, Ordering};
         static COUNT: AtomicUsize = AtomicUsize::new(0);
         let nanos = std::time::SystemTime::now()
@@ -505,34 +288,41 @@ impl Drop for Unwritten {
     }
 }
 
+/// The measurements for a job on `robot`: read ones as read ([`crate::data::PyData`]),
+/// paths as files.
+pub fn sources_of(
+    robot: &crate::robot::PyRobot,
+    data: &[Bound<'_, PyAny>],
+) -> PyResult<Vec<cpm_workflow::memory::Source>> {
+    data.iter()
+        .map(|d| match d.downcast::<crate::data::PyData>() {
+            Ok(h) => Ok(h.get().source(robot)),
+            Err(_) => Ok(cpm_workflow::memory::Source::Path(d.extract()?)),
+        })
+        .collect()
+}
+
 /// `cpm calibrate` on a campaign in memory ([`cpm_workflow::memory::calibrate`]): `robot`
 /// as loaded, `data` paths (read as `--data` reads them) or measurements read by
-/// [`crate::data::read_text`] (taken as read), `options` the command's by name with values
-/// of their types. With `out` and `commit` the outputs are written there as the command
-/// writes them (all or nothing), otherwise only staged. Returns the dict of [`calibrate`], or
-/// `None` when the campaign must be read from files (two or more tracker sets, some in
-/// memory: [`cpm_workflow::memory::NeedsFiles`]).
+/// [`crate::data`] (taken as read), `options` the command's by name (JSON text, [`by_name`]).
+/// With `out` and `commit` the outputs are written there as the command writes them (all or
+/// nothing), otherwise only staged. Returns the fit as a dict (numbers as numpy arrays,
+/// `files`: name -> bytes of every output, `warnings`, `trouble`, `timings`).
 #[pyfunction]
 #[pyo3(signature = (robot, data, options, out=None, commit=false))]
 pub fn calibrate_memory<'py>(
     py: Python<'py>,
     robot: &crate::robot::PyRobot,
     data: Vec<Bound<'py, PyAny>>,
-    options: &Bound<'py, PyDict>,
+    options: &str,
     out: Option<PathBuf>,
     commit: bool,
-) -> PyResult<Option<Bound<'py, PyDict>>> {
-    use cpm_workflow::memory::{calibrate as calibrate_in_memory, NeedsFiles, Source};
+) -> PyResult<Bound<'py, PyDict>> {
+    use cpm_workflow::memory::{calibrate as calibrate_in_memory, Source};
     if data.is_empty() {
         return Err(crate::errors::usage(py, "data: no measurements"));
     }
-    let mut sources = Vec::with_capacity(data.len());
-    for d in &data {
-        sources.push(match d.downcast::<crate::data::PyData>() {
-            Ok(h) => h.get().source(robot),
-            Err(_) => Source::Path(d.extract()?),
-        });
-    }
+    let sources = sources_of(robot, &data)?;
     let staged = match out {
         Some(_) => None,
         None => Some(Unwritten::new().map_err(|e| {
@@ -543,16 +333,16 @@ pub fn calibrate_memory<'py>(
         Some(s) => s.0.join("cal"),
         None => out.clone().unwrap_or_default(),
     };
-    let options = calibrate_options(py, options, dir.clone())?;
+    let defaults = cpm_workflow::fit::CalibrateOptions::new(PathBuf::new(), Vec::new(), &dir);
+    let mut options = by_name(py, "calibrate", &defaults, options)?;
+    // The robot and the data are given as objects; the output directory is `out`.
+    options.fit.out = dir.clone();
     let bot = robot.robot.clone();
     let robot_path = robot.path.clone();
-    let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Option<Fit>> {
+    let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Fit> {
         let progress = Cancel(abandoned.clone());
         let t0 = std::time::Instant::now();
-        let job = match calibrate_in_memory(&options, bot, &sources, &progress) {
-            Err(e) if e.downcast_ref::<NeedsFiles>().is_some() => return Ok(None),
-            r => r?,
-        };
+        let job = calibrate_in_memory(&options, bot, &sources, &progress)?;
         let fitted_s = t0.elapsed().as_secs_f64();
         let cpm_workflow::fit::Calibrated { inputs, fitted } = job;
         let stages = fitted.seconds;
@@ -613,7 +403,7 @@ pub fn calibrate_memory<'py>(
             ("solver".to_string(), cal.solver.elapsed.as_secs_f64()),
             ("total".to_string(), t0.elapsed().as_secs_f64()),
         ];
-        Ok(Some(Fit {
+        Ok(Fit {
             names: inputs.model.parameter_names(),
             cal,
             warnings,
@@ -622,11 +412,8 @@ pub fn calibrate_memory<'py>(
             written,
             origins,
             timings,
-        }))
+        })
     })?;
     drop(staged);
-    match r.map_err(|e| crate::errors::to_py(py, &e))? {
-        Some(fit) => fit_dict(py, fit).map(Some),
-        None => Ok(None),
-    }
+    fit_dict(py, r.map_err(|e| crate::errors::to_py(py, &e))?)
 }

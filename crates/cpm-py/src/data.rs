@@ -1,11 +1,10 @@
 //! Measurements for Python: files read by the readers of `cpm` (same checks, same
-//! `file:line: field` errors); gauge readings from numpy arrays read as values by
-//! [`cpm_io::rows`] (the checks and errors of the CSV reader, no text); tracker arrays
-//! written as their CSV format and read by the same reader.
+//! `file:line: field` errors); gauge readings and tracker measurements from numpy arrays
+//! read as values by [`cpm_io::rows`] (the checks and errors of the CSV reader, no text;
+//! tracker sets registered as tracker files are).
 //!
-//! Numbers are written with Rust's shortest round-trip formatting, so the reader gets back
-//! every `f64` exactly.
-use std::fmt::Write as _;
+//! A command that reads files gets the arrays' CSV ([`PyData`]'s `csv`), every number in
+//! Rust's shortest round-trip form, so its reader gets back every `f64` exactly.
 use std::path::PathBuf;
 
 use cpm_io::{DataFile, FileKind, ReadOptions};
@@ -53,6 +52,7 @@ impl PyData {
                     text: text.clone(),
                 },
                 Given::GaugeRows(rows) => Source::GaugeRows(rows.clone()),
+                Given::TrackerRows(rows) => Source::TrackerRows(rows.clone()),
             }
         }
     }
@@ -66,6 +66,7 @@ impl PyData {
         match &self.given {
             Given::Text(text) => text.to_string(),
             Given::GaugeRows(rows) => rows.to_csv(),
+            Given::TrackerRows(rows) => rows.to_csv(),
         }
     }
 }
@@ -78,8 +79,8 @@ fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<(ReadOptions, Registrati
         .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
     let model = robot.robot.model(&effects);
     Ok((
-        cpm::cli::common::read_options(&model),
-        cpm::cli::common::registration_options(&model),
+        cpm_workflow::load::read_options(&model),
+        cpm_workflow::load::registration_options(&model),
     ))
 }
 
@@ -99,7 +100,7 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
         },
     )?;
     d.set_item("simulated", c.simulated)?;
-    let pose_row = |p: &cpm::geometry::Pose| {
+    let pose_row = |p: &cpm_workflow::geometry::Pose| {
         let r = p.rpy_deg();
         vec![
             p.position_mm.x,
@@ -333,25 +334,30 @@ pub fn gauge_rows<'py>(
     with_handle(py, f, (options, registration), given, robot)
 }
 
-/// Tracker measurements as the CSV of docs/formats.md ("Tracker pose measurements"): one row
-/// per pose, `readings` `(n, links)` (commanded link readings, the links' units), `poses`
-/// `(n, 7)` (measured x, y, z mm; quaternion qw, qx, qy, qz) or `(n, 6)` (x, y, z mm; roll,
-/// pitch, yaw deg, the file format's other orientation), each number written in full (the
-/// shortest text that reads back to the same double).
+/// Reads tracker measurements given as arrays (no text: [`cpm_io::rows::read_tracker_rows`],
+/// the checks and errors of the CSV reader, row `k` on line `k + 2`; then registered as a
+/// tracker file is): one row per pose, `readings` `(n, links)` (commanded link readings, the
+/// links' units), `poses` `(n, 7)` (measured x, y, z mm; quaternion qw, qx, qy, qz) or
+/// `(n, 6)` (x, y, z mm; roll, pitch, yaw deg, the file format's other orientation); labels
+/// default to the row numbers from 1. `name` stands for the file in messages and outputs.
+/// Returns the dict of [`read_text`], with its `handle`.
 #[pyfunction]
-#[pyo3(signature = (readings, poses, pose_labels=None, time_s=None, simulated=false))]
-pub fn tracker_csv(
-    py: Python<'_>,
-    readings: PyReadonlyArray2<'_, f64>,
-    poses: PyReadonlyArray2<'_, f64>,
+#[pyo3(signature = (readings, poses, robot, name, pose_labels=None, time_s=None, simulated=false))]
+#[allow(clippy::too_many_arguments)]
+pub fn tracker_rows<'py>(
+    py: Python<'py>,
+    readings: PyReadonlyArray2<'py, f64>,
+    poses: PyReadonlyArray2<'py, f64>,
+    robot: &PyRobot,
+    name: &str,
     pose_labels: Option<Vec<String>>,
-    time_s: Option<PyReadonlyArray1<'_, f64>>,
+    time_s: Option<PyReadonlyArray1<'py, f64>>,
     simulated: bool,
-) -> PyResult<String> {
+) -> PyResult<Bound<'py, PyDict>> {
+    use cpm_io::rows::{TrackerPoses, TrackerRows};
     let readings = readings.as_array();
     let poses = poses.as_array();
-    let n = readings.shape()[0];
-    let links = readings.shape()[1];
+    let (n, links) = (readings.shape()[0], readings.shape()[1]);
     let cols = if poses.shape().get(1) == Some(&6) {
         6
     } else {
@@ -366,32 +372,26 @@ pub fn tracker_csv(
             ),
         ));
     }
-    let (labels, times) = labels_and_times(py, n, pose_labels, time_s)?;
-    let mut s = String::from("pose");
-    for k in 1..=links {
-        let _ = write!(s, ",reading_{k}");
-    }
-    s.push_str(if cols == 7 {
-        ",x_mm,y_mm,z_mm,qw,qx,qy,qz"
+    let (pose_labels, time_s) = labels_and_times(py, n, pose_labels, time_s)?;
+    let rows = poses.rows().into_iter();
+    let poses = if cols == 6 {
+        TrackerPoses::Rpy(rows.map(|r| std::array::from_fn(|c| r[c])).collect())
     } else {
-        ",x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg"
-    });
-    if times.is_some() {
-        s.push_str(",time_s");
-    }
-    s.push_str(",simulated\n");
-    for k in 0..n {
-        s.push_str(&cpm_io::table::field(&labels[k]));
-        for c in 0..links {
-            let _ = write!(s, ",{}", readings[(k, c)]);
-        }
-        for c in 0..cols {
-            let _ = write!(s, ",{}", poses[(k, c)]);
-        }
-        if let Some(t) = &times {
-            let _ = write!(s, ",{}", t[k]);
-        }
-        let _ = writeln!(s, ",{simulated}");
-    }
-    Ok(s)
+        TrackerPoses::Quaternion(rows.map(|r| std::array::from_fn(|c| r[c])).collect())
+    };
+    let rows = TrackerRows {
+        file: name.to_string(),
+        pose_labels,
+        links,
+        readings: readings.iter().copied().collect(),
+        poses,
+        time_s,
+        simulated,
+    };
+    let (options, registration) = options(py, robot)?;
+    let given = Given::TrackerRows(std::sync::Arc::new(rows));
+    let f = py
+        .allow_threads(|| given.read(name, &robot.robot, &options, &registration))
+        .map_err(|e| crate::errors::input(py, e.to_string(), Some(&e)))?;
+    with_handle(py, f, (options, registration), given, robot)
 }

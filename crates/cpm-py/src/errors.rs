@@ -1,11 +1,11 @@
 //! Rust errors as the Python exceptions of `cpm.errors`: `InputError` (with `file`, `line`,
 //! `field`), `UsageError`, `SolverError`, `CpmIOError`, all under `CpmError`.
 //!
-//! The kind follows the `cpm` command's exit codes ([`cpm::cli::exit_kind`]): 2 usage, 3 bad
+//! The kind follows the `cpm` command's exit codes ([`cpm_workflow::error::exit_kind`]): 2 usage, 3 bad
 //! input file, 4 I/O, 1 (and anything else) the computation. The message is the command's
-//! (`file:line: field name: what`, [`cpm::cli::render_error`]).
-use cpm::cli::{exit_kind, render_error, ExitKind};
+//! (`file:line: field name: what`, [`cpm_workflow::error::render_error`]).
 use cpm_io::{InputError, ReadError};
+use cpm_workflow::error::{exit_kind, render_error, ExitKind};
 use pyo3::prelude::*;
 use pyo3::types::PyTuple;
 

@@ -1,13 +1,14 @@
 //! `cpm._cpm`: the Python extension module of cpm (PyO3, abi3, rust-numpy), built by maturin
 //! from `python/pyproject.toml`.
 //!
-//! The binding is thin: it converts and calls. The commands run the very functions of the
-//! `cpm` command (`cpm::cli`): their arguments are parsed from an argument vector by the
-//! command's own parser (so the options, their names, defaults and usage errors are the
-//! command's), the fit of `calibrate` is [`cpm::cli::calibrate::fit_with`] and its outputs
-//! (`calibration.json`, `report.md`, `report.html`, `calibrated.toml`, figures) are the staged
-//! files of the command. The solver is `cpm-lm` itself ([`lm`]). The pure-Python layer
-//! (`python/cpm/`) builds the argument vectors from keyword arguments and wraps the results.
+//! The binding is thin: it converts and calls. The commands are the workflow's jobs
+//! ([`cpm_workflow`]), as the `cpm` command runs them, with their options by name
+//! ([`commands::by_name`]: the command's options, names and defaults, without the
+//! command-line parser): `calibrate` on a campaign in memory ([`commands::calibrate_memory`]),
+//! the others through [`jobs::job`]. The solver is `cpm-lm` itself ([`lm`]). The pure-Python
+//! layer (`python/cpm/`) gathers the options from keyword arguments and wraps the results.
+//! The `cpm` command itself comes with the `cli` feature (`cli::main`), which the wheel
+//! turns on for its `cpm` script; without it the crate does not depend on clap.
 //!
 //! Errors become the exceptions of `cpm.errors` ([`errors`]); no panic crosses into Python
 //! (work runs on a worker thread that catches panics, [`blocking`]).
@@ -19,9 +20,12 @@
 use pyo3::prelude::*;
 
 pub mod blocking;
+#[cfg(feature = "cli")]
+pub mod cli;
 pub mod commands;
 pub mod data;
 pub mod errors;
+pub mod jobs;
 pub mod lm;
 pub mod robot;
 
@@ -37,10 +41,10 @@ fn _cpm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(data::read_file, m)?)?;
     m.add_function(wrap_pyfunction!(data::read_text, m)?)?;
     m.add_function(wrap_pyfunction!(data::gauge_rows, m)?)?;
-    m.add_function(wrap_pyfunction!(data::tracker_csv, m)?)?;
-    m.add_function(wrap_pyfunction!(commands::run_command, m)?)?;
-    m.add_function(wrap_pyfunction!(commands::main, m)?)?;
-    m.add_function(wrap_pyfunction!(commands::calibrate, m)?)?;
+    m.add_function(wrap_pyfunction!(data::tracker_rows, m)?)?;
+    #[cfg(feature = "cli")]
+    m.add_function(wrap_pyfunction!(cli::main, m)?)?;
+    m.add_function(wrap_pyfunction!(jobs::job, m)?)?;
     m.add_function(wrap_pyfunction!(commands::calibrate_memory, m)?)?;
     m.add_function(wrap_pyfunction!(commands::effect_names, m)?)?;
     m.add_function(wrap_pyfunction!(commands::render_html, m)?)?;

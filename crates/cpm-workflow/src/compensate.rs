@@ -38,7 +38,7 @@ use crate::progress::{check_cancelled, Progress};
 use crate::report::commands::CompensateSummary;
 
 /// The options of `cpm compensate`. [`CompensateOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CompensateOptions {
     /// The (calibrated) robot description.
     pub robot: PathBuf,
@@ -172,10 +172,20 @@ pub fn compensate(
     options: &CompensateOptions,
     progress: &dyn Progress,
 ) -> anyhow::Result<Compensated> {
+    compensate_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`compensate`] with the robot held in memory (as loaded: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+pub fn compensate_in(
+    options: &CompensateOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Compensated> {
     options.check_out()?;
     check_cancelled(progress)?;
     progress.stage("reading the robot description");
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     let file = options.poses.display().to_string();
     let targets = io::read_pose_list_file(&options.poses)?;
     io::campaign::check_pose_list_units(&targets, &file, &robot)?;

@@ -28,8 +28,9 @@ use crate::io::Robot;
 use crate::progress::{check_cancelled, Progress};
 
 /// Export formats.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum Format {
     #[default]
     /// LinuxCNC genhexkins HAL settings (`setp genhexkins.base.0.x ...`).
@@ -37,8 +38,9 @@ pub enum Format {
 }
 
 /// Length units of the exported controller settings.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum Units {
     /// Millimetres (LinuxCNC `LINEAR_UNITS = mm`), the default.
     #[default]
@@ -232,7 +234,7 @@ pub fn linuxcnc_ini(robot: &Robot, units: Units) -> String {
 }
 
 /// The options of `cpm export`. [`ExportOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ExportOptions {
     /// The robot description (usually a `calibrated.toml`).
     pub robot: PathBuf,
@@ -288,9 +290,19 @@ pub struct Exported {
 
 /// `cpm export`: the robot's settings for the controller in `options.format`.
 pub fn export(options: &ExportOptions, progress: &dyn Progress) -> anyhow::Result<Exported> {
+    export_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`export`] with the robot held in memory (as loaded: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+pub fn export_in(
+    options: &ExportOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Exported> {
     options.validate()?;
     check_cancelled(progress)?;
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     let hal = match options.format {
         Format::Linuxcnc => {
             if robot.num_links() != 6 {

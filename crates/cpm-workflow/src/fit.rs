@@ -19,8 +19,9 @@ pub use crate::report::residuals::residuals_csv;
 
 /// Whether each kind of observation is weighed by the noise its own residual shows
 /// (`--noise-per-kind`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum NoisePerKind {
     /// Per kind when two or more kinds are present and one of them is undeclared.
     Auto,
@@ -31,8 +32,9 @@ pub enum NoisePerKind {
 }
 
 /// The residuals of 6-D tracker poses (`--tracker-residuals`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum TrackerResiduals {
     /// Chosen out of sample.
     Auto,
@@ -45,7 +47,7 @@ pub enum TrackerResiduals {
 /// The options every fit (`calibrate`, `refine`) takes: the robot, the data, the effects,
 /// the noise, the solver and the output directory. [`FitOptions::new`] gives the defaults of
 /// `cpm calibrate` (each field says its own).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitOptions {
     /// The robot description (TOML, docs/robot-description.md).
     pub robot: PathBuf,
@@ -1020,9 +1022,10 @@ impl Inputs {
 }
 
 /// The options of `cpm calibrate`: the fit's, the formulation, and the write-back.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CalibrateOptions {
     /// Robot, data, effects, noise, solver and output directory.
+    #[serde(flatten)]
     pub fit: FitOptions,
     /// Kept for compatibility (calibrated.toml always holds the fit's complete point);
     /// default false.

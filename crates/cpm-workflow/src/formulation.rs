@@ -7,8 +7,9 @@ pub use crate::calib::fit::formulation::{
 use crate::calib::{Campaign, IdentifyOptions, MeasurementModel};
 
 /// Which formulation a fit uses.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum FormulationArg {
     /// Implicit from [`IMPLICIT_FROM_READINGS`] readings when it applies, nested otherwise.
     #[default]

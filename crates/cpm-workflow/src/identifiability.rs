@@ -26,7 +26,7 @@ use crate::report::fit::{IdentifiabilityDoc, IdentifiabilityReport};
 
 /// The options of `cpm identifiability`: the robot and either measurement files or a plan.
 /// [`IdentifiabilityOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct IdentifiabilityOptions {
     /// The robot description.
     pub robot: PathBuf,
@@ -34,6 +34,7 @@ pub struct IdentifiabilityOptions {
     pub data: Vec<PathBuf>,
     /// The plan (where the poses come from) when there are no measurement files; default: no
     /// source ([`PlanOptions::default`]).
+    #[serde(flatten)]
     pub plan: PlanOptions,
     /// The effects modelled beside the installation errors, comma-separated (`none` for
     /// none); default `None`: the description's `[calibration] effects`.
@@ -77,7 +78,7 @@ impl IdentifiabilityOptions {
     /// Checks what needs no file (usage errors): the rank threshold, one source of poses
     /// (measurement files or a plan, `sensors` with a plan only), the noise.
     pub fn validate(&self) -> anyhow::Result<()> {
-        self.check_rank_and_source()?;
+        self.check_rank_and_source(!self.data.is_empty())?;
         if let Some(s) = self.sigma_um.filter(|s| !(s.is_finite() && *s > 0.0)) {
             return Err(usage_error(format!("--sigma-um must be > 0, got {s}")));
         }
@@ -85,11 +86,11 @@ impl IdentifiabilityOptions {
     }
 
     /// The checks the job makes once the robot is read (in the order the command makes them).
-    fn check_rank_and_source(&self) -> anyhow::Result<()> {
+    fn check_rank_and_source(&self, has_data: bool) -> anyhow::Result<()> {
         if !(self.rank_rtol > 0.0 && self.rank_rtol < 1.0) {
             return Err(usage_error("--rank-rtol must be in (0, 1)"));
         }
-        match (self.data.is_empty(), self.plan.given()) {
+        match (!has_data, self.plan.given()) {
             (false, false) if !self.plan.sensors.is_empty() => {
                 Err(usage_error("--sensors applies to a plan, not to --data"))
             }
@@ -131,25 +132,32 @@ pub fn identifiability(
     options: &IdentifiabilityOptions,
     progress: &dyn Progress,
 ) -> anyhow::Result<Identified> {
+    identifiability_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`identifiability`] with inputs held in memory (the robot as loaded, the measurements:
+/// see [`InMemory`](crate::memory::InMemory)) in place of the files the options name.
+pub fn identifiability_in(
+    options: &IdentifiabilityOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Identified> {
     check_cancelled(progress)?;
     progress.stage("reading the robot description");
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     crate::load::require_six_links(&robot)?;
     let effects = crate::load::resolve_effects(options.effects.as_deref(), &robot)?;
     let model = robot.model(&effects);
-    options.check_rank_and_source()?;
-    let from_data = !options.data.is_empty();
+    let sources = held.sources_or(&options.data);
+    let from_data = !sources.is_empty();
+    options.check_rank_and_source(from_data)?;
     let (campaign, source) = if from_data {
         progress.stage("reading the measurements");
         let read = crate::load::read_options(&model);
         let registration = crate::load::registration_options(&model);
-        let merged = crate::load::load_data(&options.data, &robot, &read, &registration)?;
+        let merged = crate::memory::read_sources(&sources, &robot, &read, &registration)?;
         crate::load::warn_excluded(progress, &merged.excluded);
-        let names: Vec<String> = options
-            .data
-            .iter()
-            .map(|p| p.display().to_string())
-            .collect();
+        let names: Vec<String> = sources.iter().map(crate::memory::Source::name).collect();
         (merged.campaign, names.join(", "))
     } else {
         progress.stage("building the plan");

@@ -112,7 +112,7 @@ fn registered<E: From<InputError>>(
 
 /// Registers the files as read: each point file roughly ([`register_point_files`]), the
 /// tracker files together ([`register_tracker_files`]).
-fn register_files(
+pub(crate) fn register_files(
     files: &mut [DataFile],
     robot: &Robot,
     options: &ReadOptions,
@@ -228,6 +228,9 @@ pub fn read_data_files(
 /// tracker row: the pose reachable, the link readings consistent with it. Files already
 /// checked are left alone. Errors name the file, line and field, and the registration when it
 /// is the likely cause.
+///
+/// The stages: [`register_sessions`] (the frames and offsets, recorded in each file's
+/// `registration`), [`check_tracker_rows`], then the commanded poses of the rows.
 pub fn register_tracker_files(
     files: &mut [DataFile],
     robot: &Robot,
@@ -240,26 +243,67 @@ pub fn register_tracker_files(
     if idx.is_empty() {
         return Ok(());
     }
-    let known = registration
-        .known_tracker_frame
-        .map(|q| cpm_calib::effects::tracker_registration(&q));
-    // The measured pose with the known registration taken out, and put back.
-    let unknown = |p: &Pose| match &known {
-        Some((t, r)) => Pose::new(r.inverse() * (p.position_mm - t), r.inverse() * p.rotation),
-        None => *p,
-    };
-    let known_applied = |p: &Pose| match &known {
-        Some((t, r)) => Pose::new(r * p.position_mm + t, r * p.rotation),
-        None => *p,
-    };
-    // The lengths the registration works with: the readings through the reading models,
-    // plus the robot's known link effects (a calibrated description's link offsets and
-    // scales, backlash, ...), evaluated in the file's order with the link forces of the home
-    // pose (the registration is rough; the fit and `cpm validate` refine the frame through
-    // the full model).
-    let known_model = robot.model(&[]);
-    let known_shifts = |f: &DataFile| -> Vec<Vec<f64>> {
-        if known_model.known_effects.is_empty() {
+    let lengths = KnownLengths::new(robot);
+    if registration.register_tracker {
+        register_sessions(files, &idx, robot, registration, &lengths);
+    }
+    check_tracker_rows(files, &idx, robot, options, &lengths)?;
+    commanded_poses_of_tracker_rows(files, &idx, robot);
+    Ok(())
+}
+
+/// A tracker frame known beforehand (`[calibration] tracker_frame` of a calibrated
+/// description): taken out of the measured poses before the registration, put back after.
+struct KnownFrame(Option<(nalgebra::Vector3<f64>, nalgebra::Rotation3<f64>)>);
+
+impl KnownFrame {
+    fn new(registration: &RegistrationOptions) -> Self {
+        KnownFrame(
+            registration
+                .known_tracker_frame
+                .map(|q| cpm_calib::effects::tracker_registration(&q)),
+        )
+    }
+
+    /// The measured pose with the known registration taken out.
+    fn taken_out(&self, p: &Pose) -> Pose {
+        match &self.0 {
+            Some((t, r)) => Pose::new(r.inverse() * (p.position_mm - t), r.inverse() * p.rotation),
+            None => *p,
+        }
+    }
+
+    /// The pose with the known registration put back.
+    fn put_back(&self, p: &Pose) -> Pose {
+        match &self.0 {
+            Some((t, r)) => Pose::new(r * p.position_mm + t, r * p.rotation),
+            None => *p,
+        }
+    }
+}
+
+/// The lengths the registration works with: the readings through the reading models, plus
+/// the robot's known link effects (a calibrated description's link offsets and scales,
+/// backlash, ...), evaluated in the file's order with the link forces of the home pose (the
+/// registration is rough; the fit and `cpm validate` refine the frame through the full
+/// model).
+struct KnownLengths<'r> {
+    robot: &'r Robot,
+    model: cpm_calib::MeasurementModel,
+}
+
+impl<'r> KnownLengths<'r> {
+    fn new(robot: &'r Robot) -> Self {
+        KnownLengths {
+            robot,
+            model: robot.model(&[]),
+        }
+    }
+
+    /// The known link effects' shift of each row's links (mm; empty when the robot has none).
+    fn shifts(&self, f: &DataFile) -> Vec<Vec<f64>> {
+        let robot = self.robot;
+        if self.model.known_effects.is_empty() {
             return Vec::new();
         }
         let home = robot.table.home;
@@ -273,9 +317,12 @@ pub fn register_tracker_files(
                     .enumerate()
                     .map(|(i, v)| robot.length_mm(i, *v))
                     .collect();
-                match known_model.pose_context(&home, l, previous.as_ref(), None, None) {
+                match self
+                    .model
+                    .pose_context(&home, l, previous.as_ref(), None, None)
+                {
                     Ok(ctx) => {
-                        let d = known_model.known_link_shift_at(&ctx, &home, 0.0);
+                        let d = self.model.known_link_shift_at(&ctx, &home, 0.0);
                         previous = Some(ctx);
                         d
                     }
@@ -283,9 +330,12 @@ pub fn register_tracker_files(
                 }
             })
             .collect()
-    };
-    let raw_lengths = |f: &DataFile| -> Vec<Vec<f64>> {
-        let known = known_shifts(f);
+    }
+
+    /// Each row's link lengths (mm): its readings through the reading models plus the
+    /// known shifts.
+    fn raw(&self, f: &DataFile) -> Vec<Vec<f64>> {
+        let known = self.shifts(f);
         f.tracker_rows
             .iter()
             .enumerate()
@@ -293,114 +343,138 @@ pub fn register_tracker_files(
                 r.readings
                     .iter()
                     .enumerate()
-                    .map(|(i, v)| robot.length_mm(i, *v) + known.get(q).map_or(0.0, |k| k[i]))
+                    .map(|(i, v)| self.robot.length_mm(i, *v) + known.get(q).map_or(0.0, |k| k[i]))
                     .collect()
             })
             .collect()
-    };
-    if registration.register_tracker {
-        let sessions: Vec<cpm_calib::registration::Session> = idx
-            .iter()
-            .map(|&k| {
-                // Rows measured in full register the session.
-                let f = &files[k];
-                let full: Vec<bool> = f.tracker_rows.iter().map(TrackerRow::complete).collect();
-                cpm_calib::registration::Session {
-                    lengths_mm: raw_lengths(f)
-                        .into_iter()
-                        .zip(&full)
-                        .filter(|(_, c)| **c)
-                        .map(|(l, _)| l)
-                        .collect(),
-                    measured: f
-                        .tracker_rows
-                        .iter()
-                        .filter(|r| r.complete())
-                        .map(|r| unknown(&r.measured))
-                        .collect(),
-                }
-            })
-            .collect();
-        let finite = sessions
-            .iter()
-            .all(|s| s.lengths_mm.iter().flatten().all(|v| v.is_finite()));
-        // The model's joint clearance shifts the effective link lengths with the link forces:
-        // the registration uses it too.
-        let model = robot.model(&[]);
-        let n = robot.num_links();
-        let clearance = |p: &Pose| {
-            model
-                .clearance
-                .link_corrections_mm(&model.nominal, p, &model.load)
-                .unwrap_or_else(|_| vec![0.0; n])
-        };
-        let result = if finite {
-            cpm_calib::registration::register_with_corrections(
-                &robot.table,
-                &sessions,
-                &cpm_calib::registration::RegistrationOptions {
-                    estimate_link_offsets: registration.register_link_offsets,
-                    ..Default::default()
-                },
-                &clearance,
-            )
-            .map_err(|e| e.to_string())
-        } else {
-            Err("a link reading gives a length that is not a finite number".to_string())
-        };
-        match result {
-            Ok(reg) => {
-                let largest_offset = reg
-                    .link_offset_mm
-                    .iter()
-                    .fold(0.0_f64, |a, o| a.max(o.abs()));
-                let offsets_applied =
-                    reg.offsets_estimated && largest_offset > REGISTRATION_APPLY_MM;
-                let mut report = RegistrationReport {
-                    sessions: Vec::new(),
-                    link_offset_mm: reg.link_offset_mm.clone(),
-                    link_offset_sd_mm: reg.link_offset_sd_mm.clone(),
-                    offsets_estimated: reg.offsets_estimated,
-                    offsets_applied,
-                    variance_factor: reg.variance_factor,
-                    failure: None,
-                };
-                for (s, (&k, frame)) in sessions.iter().zip(idx.iter().zip(&reg.frames)) {
-                    let largest_move_mm = s
-                        .measured
-                        .iter()
-                        .map(|q| (frame.to_base(q).position_mm - q.position_mm).norm())
-                        .fold(0.0_f64, f64::max);
-                    let applied = largest_move_mm > REGISTRATION_APPLY_MM;
-                    report.sessions.push(SessionRegistration {
-                        file: files[k].file.clone(),
-                        frame: frame.clone(),
-                        applied,
-                        largest_move_mm,
-                    });
-                }
-                for (s, &k) in report.sessions.iter().zip(&idx) {
-                    let offsets = offsets_applied.then_some(report.link_offset_mm.as_slice());
-                    apply_registration(&mut files[k], s, offsets, &unknown, &known_applied);
-                }
-                for &k in &idx {
-                    files[k].registration = Some(report.clone());
-                }
-            }
-            Err(why) => {
-                let report = failed_registration(why);
-                for &k in &idx {
-                    files[k].registration = Some(report.clone());
-                }
-            }
-        }
     }
-    // The checks, after registration. A measured pose is where the real machine went: the
-    // nominal inverse kinematics of it misses the true link lengths by the machine's errors,
-    // so its link limits are checked widened by the consistency tolerance
-    // ([`CONSISTENCY_MM`]), which only catches gross errors (units, frames, link mapping).
+}
+
+/// The registration of the tracker files `files[idx]` together (their rows measured in
+/// full): each file's frame and the shared reading offsets, applied where large and recorded
+/// in each file's `registration` (a failed registration is recorded too, with why).
+fn register_sessions(
+    files: &mut [DataFile],
+    idx: &[usize],
+    robot: &Robot,
+    registration: &RegistrationOptions,
+    lengths: &KnownLengths<'_>,
+) {
+    let known = KnownFrame::new(registration);
+    let sessions: Vec<cpm_calib::registration::Session> = idx
+        .iter()
+        .map(|&k| {
+            // Rows measured in full register the session.
+            let f = &files[k];
+            let full: Vec<bool> = f.tracker_rows.iter().map(TrackerRow::complete).collect();
+            cpm_calib::registration::Session {
+                lengths_mm: lengths
+                    .raw(f)
+                    .into_iter()
+                    .zip(&full)
+                    .filter(|(_, c)| **c)
+                    .map(|(l, _)| l)
+                    .collect(),
+                measured: f
+                    .tracker_rows
+                    .iter()
+                    .filter(|r| r.complete())
+                    .map(|r| known.taken_out(&r.measured))
+                    .collect(),
+            }
+        })
+        .collect();
+    let finite = sessions
+        .iter()
+        .all(|s| s.lengths_mm.iter().flatten().all(|v| v.is_finite()));
+    // The model's joint clearance shifts the effective link lengths with the link forces:
+    // the registration uses it too.
+    let model = robot.model(&[]);
+    let n = robot.num_links();
+    let clearance = |p: &Pose| {
+        model
+            .clearance
+            .link_corrections_mm(&model.nominal, p, &model.load)
+            .unwrap_or_else(|_| vec![0.0; n])
+    };
+    let result = if finite {
+        cpm_calib::registration::register_with_corrections(
+            &robot.table,
+            &sessions,
+            &cpm_calib::registration::RegistrationOptions {
+                estimate_link_offsets: registration.register_link_offsets,
+                ..Default::default()
+            },
+            &clearance,
+        )
+        .map_err(|e| e.to_string())
+    } else {
+        Err("a link reading gives a length that is not a finite number".to_string())
+    };
+    let reg = match result {
+        Ok(reg) => reg,
+        Err(why) => {
+            let report = failed_registration(why);
+            for &k in idx {
+                files[k].registration = Some(report.clone());
+            }
+            return;
+        }
+    };
+    let largest_offset = reg
+        .link_offset_mm
+        .iter()
+        .fold(0.0_f64, |a, o| a.max(o.abs()));
+    let offsets_applied = reg.offsets_estimated && largest_offset > REGISTRATION_APPLY_MM;
+    let mut report = RegistrationReport {
+        sessions: Vec::new(),
+        link_offset_mm: reg.link_offset_mm.clone(),
+        link_offset_sd_mm: reg.link_offset_sd_mm.clone(),
+        offsets_estimated: reg.offsets_estimated,
+        offsets_applied,
+        variance_factor: reg.variance_factor,
+        failure: None,
+    };
+    for (s, (&k, frame)) in sessions.iter().zip(idx.iter().zip(&reg.frames)) {
+        let largest_move_mm = s
+            .measured
+            .iter()
+            .map(|q| (frame.to_base(q).position_mm - q.position_mm).norm())
+            .fold(0.0_f64, f64::max);
+        let applied = largest_move_mm > REGISTRATION_APPLY_MM;
+        report.sessions.push(SessionRegistration {
+            file: files[k].file.clone(),
+            frame: frame.clone(),
+            applied,
+            largest_move_mm,
+        });
+    }
+    let unknown = |p: &Pose| known.taken_out(p);
+    let known_applied = |p: &Pose| known.put_back(p);
+    for (s, &k) in report.sessions.iter().zip(idx) {
+        let offsets = offsets_applied.then_some(report.link_offset_mm.as_slice());
+        apply_registration(&mut files[k], s, offsets, &unknown, &known_applied);
+    }
+    for &k in idx {
+        files[k].registration = Some(report.clone());
+    }
+}
+
+/// The checks of every row of the tracker files `files[idx]`, after registration: the pose
+/// reachable (else left out, or the file refused when too many are), the link readings
+/// consistent with it. A measured pose is where the real machine went: the nominal inverse
+/// kinematics of it misses the true link lengths by the machine's errors, so its link limits
+/// are checked widened by the consistency tolerance ([`CONSISTENCY_MM`]), which only catches
+/// gross errors (units, frames, link mapping).
+fn check_tracker_rows(
+    files: &mut [DataFile],
+    idx: &[usize],
+    robot: &Robot,
+    options: &ReadOptions,
+    lengths: &KnownLengths<'_>,
+) -> Result<(), InputError> {
     let measured_table = widened(&robot.table, CONSISTENCY_MM);
-    for &k in &idx {
+    for &k in idx {
         let f = &mut files[k];
         let note = registration_note(f);
         let offsets = f
@@ -408,7 +482,7 @@ pub fn register_tracker_files(
             .as_ref()
             .filter(|r| r.offsets_applied)
             .map(|r| r.link_offset_mm.clone());
-        let known = known_shifts(f);
+        let known = lengths.shifts(f);
         let mut unusable = Vec::new();
         for (q, row) in f.tracker_rows.iter().enumerate() {
             let pose = f.campaign.poses[f.campaign.pose_measurements[q].pose];
@@ -454,7 +528,6 @@ pub fn register_tracker_files(
         exclude_poses(f, unusable)?;
         f.checked = true;
     }
-    commanded_poses_of_tracker_rows(files, &idx, robot);
     Ok(())
 }
 

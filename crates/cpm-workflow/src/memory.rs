@@ -17,7 +17,7 @@ use std::sync::Arc;
 
 use crate::fit::{CalibrateOptions, Calibrated, FitOptions, Inputs};
 use crate::ingest::RegistrationOptions;
-use crate::io::rows::GaugeRows;
+use crate::io::rows::{GaugeRows, TrackerRows};
 use crate::io::{self, DataFile, FileKind, Merged, ReadOptions, Robot};
 use crate::progress::{check_cancelled, Progress};
 
@@ -41,11 +41,15 @@ pub enum Given {
     Text(Arc<str>),
     /// Length-sensor readings as values ([`GaugeRows`]: no text).
     GaugeRows(Arc<GaugeRows>),
+    /// Tracker pose measurements as values ([`TrackerRows`]: no text).
+    TrackerRows(Arc<TrackerRows>),
 }
 
 impl Given {
     /// Reads them against `robot` (`name` stands for the file of a text), as
-    /// [`ingest::read_data`](crate::ingest::read_data) reads a file's text.
+    /// [`ingest::read_data`](crate::ingest::read_data) reads a file's text: read
+    /// ([`read_unregistered`](Self::read_unregistered)), then a tracker or point set registered
+    /// on its own.
     pub fn read(
         &self,
         name: &str,
@@ -53,9 +57,23 @@ impl Given {
         options: &ReadOptions,
         registration: &RegistrationOptions,
     ) -> Result<DataFile, io::InputError> {
+        let mut f = self.read_unregistered(name, robot, options)?;
+        crate::ingest::register_files(std::slice::from_mut(&mut f), robot, options, registration)?;
+        Ok(f)
+    }
+
+    /// Reads them against `robot` as the readers do, without registering tracker or point
+    /// sets ([`io::read_data`]): for a campaign registered together.
+    pub fn read_unregistered(
+        &self,
+        name: &str,
+        robot: &Robot,
+        options: &ReadOptions,
+    ) -> Result<DataFile, io::InputError> {
         match self {
-            Given::Text(text) => crate::ingest::read_data(text, name, robot, options, registration),
+            Given::Text(text) => io::read_data(text, name, robot, options),
             Given::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options),
+            Given::TrackerRows(rows) => io::rows::read_tracker_rows(rows, robot, options),
         }
     }
 }
@@ -77,6 +95,8 @@ pub enum Source {
     },
     /// Length-sensor readings as values, to read (their `file` names them).
     GaugeRows(Arc<GaugeRows>),
+    /// Tracker pose measurements as values, to read and register (their `file` names them).
+    TrackerRows(Arc<TrackerRows>),
 }
 
 impl Source {
@@ -87,30 +107,59 @@ impl Source {
             Source::Read(r) => r.data.file.clone(),
             Source::Text { name, .. } => name.clone(),
             Source::GaugeRows(rows) => rows.file.clone(),
+            Source::TrackerRows(rows) => rows.file.clone(),
         }
     }
 }
 
-/// The error of a campaign that has two or more tracker pose sets of which some are held in
-/// memory: tracker sets are registered together (reading offsets shared) only when read
-/// from files ([`ingest::read_data_files`](crate::ingest::read_data_files)). Write them to
-/// files, or give one set at a time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct NeedsFiles;
-
-impl std::fmt::Display for NeedsFiles {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("two or more tracker measurement sets are registered together only when read from files")
-    }
+/// What a caller holds in memory for a job, in place of the files its options name: the
+/// robot as loaded (for the options' `robot` path) and the measurements (for their `data`
+/// paths). What is `None` is read from the options' paths, as the command reads it.
+#[derive(Debug, Clone, Default)]
+pub struct InMemory {
+    /// The robot as loaded.
+    pub robot: Option<Robot>,
+    /// The measurements.
+    pub data: Option<Vec<Source>>,
 }
 
-impl std::error::Error for NeedsFiles {}
+impl InMemory {
+    /// Nothing held: every input is read from the options' paths.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// True when nothing is held.
+    pub fn is_empty(&self) -> bool {
+        self.robot.is_none() && self.data.is_none()
+    }
+
+    /// The robot held, else the one at `path` ([`load_robot`](crate::load::load_robot)).
+    pub fn robot_or_load(
+        &mut self,
+        path: &std::path::Path,
+        progress: &dyn Progress,
+    ) -> anyhow::Result<Robot> {
+        match self.robot.take() {
+            Some(r) => Ok(r),
+            None => crate::load::load_robot(path, progress),
+        }
+    }
+
+    /// The measurements held, else the files at `paths`.
+    pub fn sources_or(&mut self, paths: &[PathBuf]) -> Vec<Source> {
+        self.data
+            .take()
+            .unwrap_or_else(|| paths.iter().cloned().map(Source::Path).collect())
+    }
+}
 
 /// Reads and merges the sources with `options` and `registration` (the read and registration
 /// options of the job's model): files only are read as
 /// [`load::load_data`](crate::load::load_data) reads them; measurements already read with the
 /// same options are taken as they are, others read again from their
-/// text. [`NeedsFiles`] for two or more tracker sets when one is in memory.
+/// text. Tracker and point sets are registered as [`load::load_data`](crate::load::load_data)
+/// registers files: two or more tracker sets together, whatever their source.
 pub fn read_sources(
     sources: &[Source],
     robot: &Robot,
@@ -127,20 +176,20 @@ pub fn read_sources(
     if paths.len() == sources.len() {
         return crate::load::load_data(&paths, robot, options, registration);
     }
+    // Read as the readers read, registered afterwards all together (as files are): a set
+    // already read and registered on its own is read again from what was given when it has
+    // to be registered with others (two or more tracker sets).
     let mut files = Vec::with_capacity(sources.len());
     for s in sources {
         let f = match s {
-            Source::Path(p) => crate::ingest::read_data_file(p, robot, options, registration)?,
+            Source::Path(p) => io::read_data_file(p, robot, options)?,
             Source::Read(r) if r.options == *options && r.registration == *registration => {
                 DataFile::clone(&r.data)
             }
-            Source::Read(r) => r.given.read(&r.data.file, robot, options, registration)?,
-            Source::Text { name, text } => {
-                Given::Text(text.clone()).read(name, robot, options, registration)?
-            }
-            Source::GaugeRows(rows) => {
-                Given::GaugeRows(rows.clone()).read(&rows.file, robot, options, registration)?
-            }
+            Source::Read(r) => r.given.read_unregistered(&r.data.file, robot, options)?,
+            Source::Text { name, text } => io::read_data(text, name, robot, options)?,
+            Source::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options)?,
+            Source::TrackerRows(rows) => io::rows::read_tracker_rows(rows, robot, options)?,
         };
         files.push(f);
     }
@@ -149,8 +198,15 @@ pub fn read_sources(
         .filter(|f| f.kind == FileKind::PoseMeasurements)
         .count();
     if trackers > 1 {
-        return Err(NeedsFiles.into());
+        for (k, s) in sources.iter().enumerate() {
+            if let Source::Read(r) = s {
+                if files[k].kind == FileKind::PoseMeasurements && files[k].checked {
+                    files[k] = r.given.read_unregistered(&r.data.file, robot, options)?;
+                }
+            }
+        }
     }
+    crate::ingest::register_files(&mut files, robot, options, registration)?;
     let merged = io::merge(files, robot);
     if options.check_sensor_lengths {
         crate::gauges::check_readings(robot, &merged)?;
@@ -347,5 +403,110 @@ mod tests {
         assert_eq!(a.residuals_um, b.residuals_um);
         assert!(b.simulated);
         assert_eq!(from_rows.inputs.merged.campaign.readings.len(), 90);
+    }
+    /// A tracker campaign given as values (numpy arrays in Python) and the same
+    /// measurements in their file: the same registration and calibration, bit for bit.
+    #[test]
+    fn tracker_rows_and_file_give_the_same_fit() {
+        let robot_path = ex("hexapod_66.toml");
+        let dir =
+            std::env::temp_dir().join(format!("cpm-memory-tracker-rows-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut o = crate::simulate::SimulateOptions::new(&robot_path);
+        o.plan.random = Some(30);
+        o.plan.seed = 7;
+        o.paper_table2 = true;
+        o.measure = crate::simulate::Measure::Poses;
+        o.noise = Some("gaussian:5".to_string());
+        o.tracker_frame = Some("900,-200,30,0.3,-0.2,20".to_string());
+        let text = crate::simulate::simulate(&o, &crate::Silent).unwrap().text;
+        let data_path = dir.join("tracker.csv");
+        std::fs::write(&data_path, &text).unwrap();
+        let out = dir.join("cal");
+        let options = CalibrateOptions::new(&robot_path, vec![data_path.clone()], &out);
+        let from_file = crate::fit::calibrate(&options, &crate::Silent).unwrap();
+        // The file's columns as values.
+        let robot = Robot::load(&robot_path).unwrap();
+        let links = robot.num_links();
+        let mut t = io::table::Table::parse(&text, "tracker").unwrap();
+        let (mut labels, mut readings, mut poses) = (vec![], vec![], vec![]);
+        let number =
+            |t: &io::table::Table<&[u8]>, r: &io::table::Row, c: &str| t.number(r, c).unwrap();
+        let mut simulated = t.simulated_mark;
+        while let Some(r) = t.next_row().unwrap() {
+            labels.push(t.text(&r, "pose").unwrap().to_string());
+            readings.extend((1..=links).map(|k| number(&t, &r, &format!("reading_{k}"))));
+            let cols = ["x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg"];
+            poses.push(cols.map(|c| number(&t, &r, c)));
+            simulated |= t.optional_bool(&r, "simulated").unwrap() == Some(true);
+        }
+        let mut rows = TrackerRows::new(
+            "tracker as values",
+            labels,
+            links,
+            readings,
+            io::rows::TrackerPoses::Rpy(poses),
+        );
+        rows.simulated = simulated;
+        let sources = [Source::TrackerRows(Arc::new(rows))];
+        let from_rows = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
+        let registration = |c: &Calibrated| {
+            let mut r = c.inputs.merged.registration.clone().expect("registered");
+            r.sessions.iter_mut().for_each(|s| s.file.clear());
+            format!("{r:?}")
+        };
+        assert_eq!(registration(&from_file), registration(&from_rows));
+        let (a, b) = (&from_file.fitted.cal, &from_rows.fitted.cal);
+        assert_eq!(a.estimate_um, b.estimate_um);
+        assert_eq!(a.std_um, b.std_um);
+        assert_eq!(a.residuals_um, b.residuals_um);
+        assert!(b.simulated);
+        assert_eq!(from_rows.inputs.merged.campaign.pose_measurements.len(), 30);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Two tracker sessions, each in a frame of its own, registered together whether read
+    /// from files or given as text: the same registration and fit, bit for bit (a campaign
+    /// of several tracker sets in memory needs no files).
+    #[test]
+    fn two_tracker_sets_in_memory_are_registered_together_as_files_are() {
+        let robot_path = ex("hexapod_66.toml");
+        let dir =
+            std::env::temp_dir().join(format!("cpm-memory-two-trackers-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut paths = Vec::new();
+        let mut sources = Vec::new();
+        for (k, frame) in ["1200,-300,40,0.5,-0.3,30", "-800,900,-20,-0.4,0.2,-120"]
+            .iter()
+            .enumerate()
+        {
+            let mut o = crate::simulate::SimulateOptions::new(&robot_path);
+            o.plan.random = Some(30);
+            o.plan.seed = 40 + k as u64;
+            o.paper_table2 = true;
+            o.measure = crate::simulate::Measure::Poses;
+            o.noise = Some("gaussian:5".to_string());
+            o.tracker_frame = Some(frame.to_string());
+            let text = crate::simulate::simulate(&o, &crate::Silent).unwrap().text;
+            let path = dir.join(format!("session{k}.csv"));
+            std::fs::write(&path, &text).unwrap();
+            sources.push(Source::Text {
+                name: path.display().to_string(),
+                text: text.into(),
+            });
+            paths.push(path);
+        }
+        let out = dir.join("cal");
+        let options = CalibrateOptions::new(&robot_path, paths.clone(), &out);
+        let from_files = crate::fit::calibrate(&options, &crate::Silent).unwrap();
+        let robot = Robot::load(&robot_path).unwrap();
+        let from_text = calibrate(&options, robot, &sources, &crate::Silent).unwrap();
+        let registration = |c: &Calibrated| format!("{:?}", c.inputs.merged.registration);
+        assert!(from_files.inputs.merged.registration.is_some());
+        assert_eq!(registration(&from_files), registration(&from_text));
+        let (a, b) = (&from_files.fitted.cal, &from_text.fitted.cal);
+        assert_eq!(a.estimate_um, b.estimate_um);
+        assert_eq!(a.residuals_um, b.residuals_um);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -11,7 +11,7 @@ use crate::io::{self, ReadOptions, Robot};
 /// [`circle`](Self::circle) and [`random`](Self::random). [`PlanOptions::default`] gives the
 /// defaults (no source; a circle of 36 poses of radius 100 mm; random poses within 50 mm and
 /// 10 degrees of home; every sensor; seed 1).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PlanOptions {
     /// A CSV list of poses (`--plan`); default `None`.
     pub plan: Option<PathBuf>,

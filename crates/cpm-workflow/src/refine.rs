@@ -13,9 +13,10 @@ use crate::report::fit::FitReport;
 use crate::report::refine::{RefineDoc, RefineReport};
 
 /// The options of `cpm refine`. [`RefineOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RefineOptions {
     /// Robot, data, effects, noise, solver and output directory: as for calibrate.
+    #[serde(flatten)]
     pub fit: FitOptions,
     /// Candidate effects, comma-separated; default `None`: every effect of the library that
     /// can act on the data.
@@ -99,13 +100,33 @@ impl Refined {
 /// (an error, nothing staged) when the refined model predicts held-out data worse than plain
 /// calibration.
 pub fn refine(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Result<Refined> {
-    crate::progress::unless_cancelled(refine_job(options, progress), progress)
+    refine_in(options, crate::memory::InMemory::none(), progress)
 }
 
-fn refine_job(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Result<Refined> {
+/// [`refine`] with inputs held in memory (the robot as loaded, the measurements: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the files the options name.
+pub fn refine_in(
+    options: &RefineOptions,
+    held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Refined> {
+    crate::progress::unless_cancelled(refine_job(options, held, progress), progress)
+}
+
+fn refine_job(
+    options: &RefineOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Refined> {
     options.validate()?;
     let args = options;
-    let inputs = args.fit.load(progress)?;
+    let inputs = if held.is_empty() {
+        args.fit.load(progress)?
+    } else {
+        let robot = held.robot_or_load(&args.fit.robot, progress)?;
+        let sources = held.sources_or(&args.fit.data);
+        crate::memory::load(&args.fit, robot, &sources, progress)?
+    };
     check_cancelled(progress)?;
     let campaign = &inputs.merged.campaign;
     // The library's effects that can act on these data (an explicit list is taken as given).

@@ -36,8 +36,9 @@ use crate::report::commands::SimulateSummary;
 use crate::truth::truth_effect_for;
 
 /// What the simulated campaign measures.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "kebab-case")]
 pub enum Measure {
     /// Length-sensor readings (every plan sensor at every pose).
     Lengths,
@@ -59,12 +60,13 @@ impl Measure {
 }
 
 /// The options of `cpm simulate`. [`SimulateOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SimulateOptions {
     /// The robot description.
     pub robot: PathBuf,
     /// The plan: where the poses come from (exactly one source); default: no source
     /// ([`PlanOptions::default`]). Its seed is also the noise's.
+    #[serde(flatten)]
     pub plan: PlanOptions,
     /// The true machine: a robot description whose geometry (joints plus
     /// `[installation_errors_um]`), link reading models and sensor sockets differ from
@@ -737,13 +739,23 @@ fn measure(
 /// `cpm simulate`: reads the robot (and the truth and plan files), builds the true machine
 /// and the plan, and simulates the campaign.
 pub fn simulate(options: &SimulateOptions, progress: &dyn Progress) -> anyhow::Result<Simulated> {
+    simulate_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`simulate`] with the robot held in memory (as loaded: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+pub fn simulate_in(
+    options: &SimulateOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Simulated> {
     options.check_out()?;
     if options.paper_table2 && options.truth.is_some() {
         return Err(usage_error("--truth and --paper-table2 exclude each other"));
     }
     check_cancelled(progress)?;
     progress.stage("reading the robot description");
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     let declared = crate::load::resolve_effects(options.effects.as_deref(), &robot)?;
     let noise = match options.parse_noise()? {
         Some(noise) => noise,

@@ -31,7 +31,7 @@ use crate::report::validate::{
 pub use crate::report::validate::{SessionCheck, SessionFrame};
 
 /// The options of `cpm validate`. [`ValidateOptions::new`] gives the defaults.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct ValidateOptions {
     /// The calibrated robot description; not used with `commands`.
     pub robot: Option<PathBuf>,

@@ -20,9 +20,68 @@ use crate::report::format::tidy_csv;
 
 pub mod instruments;
 
+/// The criterion and the gauge of [`DesignJobOptions`] by the names `cpm design` gives them
+/// (`--criterion a|d|e`, `--gauge telescoping|ballbar`), for options given by name.
+mod named {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    /// Unknown names as serde's error, listing the known ones.
+    fn unknown<E: serde::de::Error>(name: &str, known: &'static [&'static str]) -> E {
+        E::unknown_variant(name, known)
+    }
+
+    pub mod criterion {
+        use super::*;
+        use crate::calib::design::Criterion;
+
+        const NAMES: &[&str] = &["a", "d", "e"];
+
+        pub fn serialize<S: Serializer>(c: &Criterion, s: S) -> Result<S::Ok, S::Error> {
+            s.serialize_str(match c {
+                Criterion::AOptimal => "a",
+                Criterion::DOptimal => "d",
+                Criterion::EOptimal => "e",
+            })
+        }
+
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Criterion, D::Error> {
+            let name = String::deserialize(d)?;
+            match name.as_str() {
+                "a" => Ok(Criterion::AOptimal),
+                "d" => Ok(Criterion::DOptimal),
+                "e" => Ok(Criterion::EOptimal),
+                other => Err(unknown(other, NAMES)),
+            }
+        }
+    }
+
+    pub mod gauge {
+        use super::*;
+        use crate::calib::design::GaugeKind;
+
+        const NAMES: &[&str] = &["telescoping", "ballbar"];
+
+        pub fn serialize<S: Serializer>(g: &Option<GaugeKind>, s: S) -> Result<S::Ok, S::Error> {
+            match g {
+                None => s.serialize_none(),
+                Some(g) => s.serialize_str(g.name()),
+            }
+        }
+
+        pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<GaugeKind>, D::Error> {
+            match Option::<String>::deserialize(d)?.as_deref() {
+                None => Ok(None),
+                Some("telescoping") => Ok(Some(GaugeKind::Telescoping)),
+                Some("ballbar") => Ok(Some(GaugeKind::Ballbar)),
+                Some(other) => Err(unknown(other, NAMES)),
+            }
+        }
+    }
+}
+
 /// The options of [`design`], as `cpm design` takes them (defaults: those of
 /// [`DesignJobOptions::new`]).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DesignJobOptions {
     /// The robot description.
     pub robot: PathBuf,
@@ -45,7 +104,8 @@ pub struct DesignJobOptions {
     pub range_mm: f64,
     /// Half range of candidate roll, pitch, yaw about home, deg. Default 10.
     pub range_deg: f64,
-    /// Selection criterion. Default A-optimal.
+    /// Selection criterion. Default A-optimal. By name (`a`, `d`, `e`), as `--criterion`.
+    #[serde(with = "named::criterion")]
     pub criterion: Criterion,
     /// Sensor noise for the reported bounds, um; default `None`: the description's, else 1.
     pub sigma_um: Option<f64>,
@@ -57,6 +117,7 @@ pub struct DesignJobOptions {
     /// The description's `[[gauge]]` to design for; default its first.
     pub gauge_name: Option<String>,
     /// Kind of gauge; default the description's gauge, else telescoping.
+    #[serde(with = "named::gauge")]
     pub gauge: Option<GaugeKind>,
     /// Shortest socket-to-socket length the gauge reads, mm; default the description's
     /// gauge, else 150 (100 for a ballbar).
@@ -167,9 +228,19 @@ pub fn sockets_of(robot: &Robot) -> SocketCandidates {
 /// Runs the design job: reads the description (and the sockets file), chooses the
 /// sockets and poses (or the poses of `instruments`), and stages every output.
 pub fn design(options: &DesignJobOptions, progress: &dyn Progress) -> anyhow::Result<Designed> {
+    design_in(options, crate::memory::InMemory::none(), progress)
+}
+
+/// [`design`] with the robot held in memory (as loaded: see
+/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+pub fn design_in(
+    options: &DesignJobOptions,
+    mut held: crate::memory::InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Designed> {
     options.validate()?;
     progress.stage("reading the robot description");
-    let robot = crate::load::load_robot(&options.robot, progress)?;
+    let robot = held.robot_or_load(&options.robot, progress)?;
     crate::load::require_six_links(&robot)?;
     if let Some(list) = &options.instruments {
         let sigma = gauge_sigma_um(options, &robot)?;
