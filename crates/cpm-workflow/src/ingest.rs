@@ -229,8 +229,8 @@ pub fn read_data_files(
 /// checked are left alone. Errors name the file, line and field, and the registration when it
 /// is the likely cause.
 ///
-/// The stages: [`register_sessions`] (the frames and offsets, recorded in each file's
-/// `registration`), [`check_tracker_rows`], then the commanded poses of the rows.
+/// The stages: `register_sessions` (the frames and offsets, recorded in each file's
+/// `registration`), `check_tracker_rows`, then the commanded poses of the rows.
 pub fn register_tracker_files(
     files: &mut [DataFile],
     robot: &Robot,
