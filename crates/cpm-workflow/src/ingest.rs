@@ -180,9 +180,9 @@ pub fn read_data_file_for_two(
     Ok((first_reading(read, first, options, registration)?, theirs))
 }
 
-/// The first robot's reading of a file read for two ([`io::read_data_file_for_first`]
-/// (crate::io::read_data_file_for_first)), registered and checked with it: as
-/// [`read_data_file_for_two`] gives it.
+/// The first robot's reading of a file read for two
+/// ([`read_data_file_for_first`](crate::io::read_data_file_for_first)), registered and
+/// checked with it: as [`read_data_file_for_two`] gives it.
 pub fn first_reading(
     read: ReadForTwo,
     first: &Robot,

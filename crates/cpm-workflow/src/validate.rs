@@ -1288,7 +1288,7 @@ mod tests {
             let files = errors_of(
                 &robot,
                 &reference,
-                std::slice::from_ref(&path),
+                &[Source::Path(path.clone())],
                 false,
                 (campaign.pose_sigma(), campaign.orientation_sigma()),
                 false,
