@@ -12,11 +12,13 @@ they are made in memory.
 Interrupting (Ctrl-C) raises ``KeyboardInterrupt`` at once and cancels the job: a fit stops
 inside its iterations, and nothing is written.
 
-:func:`calibrate` runs on the campaign in memory (``cpm_workflow::memory``): the robot as
-loaded, measurements made from arrays or tables as they were read, files by their paths; no
-scratch file. For the other commands, measurements made from arrays or tables (and robots
-made from text) reach the job as files in a scratch directory; errors and reports name them
-by their names (and rows).
+:func:`calibrate`, :func:`refine`, :func:`validate` and :func:`identifiability` run on the
+campaign in memory (``cpm_workflow::memory``): robots as loaded (from a file or from text),
+measurements made from arrays or tables as they were read, files by their paths; every
+command takes its robot as loaded. What still reaches a job as a file in a scratch directory:
+pose arrays given as a plan or as targets (``plan=``, :func:`compensate`'s ``poses``), and
+the robots and measurements of a compensation check (``validate(None, ...)``) or a ``truth=``
+made from text; errors and reports name them by their names (and rows).
 """
 from __future__ import annotations
 
@@ -154,11 +156,10 @@ def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
 
 def _job(command: str, scratch: Scratch, options: Dict[str, Any],
          out: Optional[PathLike] = None, robot: Optional[Robot] = None,
-         data: Optional[List[Any]] = None) -> Dict[str, Any]:
+         data: Optional[List[Any]] = None, reference: Optional[Robot] = None) -> Dict[str, Any]:
     """Runs ``command`` as the workflow's job with ``options`` by name; its outputs are
-    committed to ``out`` when given (all or nothing). ``robot`` goes to the job in memory
-    (every job but ``validate``), ``data`` too (``refine``, ``identifiability``), not as
-    files. Trouble (the command's exit
+    committed to ``out`` when given (all or nothing). ``robot``, ``data`` and ``reference``
+    go to the job in memory, not as files. Trouble (the command's exit
     code 1, outputs written) is a :class:`cpm.CpmWarning`."""
     text = _by_name(scratch, options)
     target = os.fspath(out) if out is not None else None
@@ -168,6 +169,8 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
         held["robot"] = robot._h
         if data is not None:
             held["data"], arrays = _sources(robot, data)
+    if reference is not None:
+        held["reference"] = reference._h
     try:
         d = dict(_cpm.job(command, text, target, out is not None, **held))
     except InputError as e:
@@ -482,9 +485,13 @@ def validate(robot: Optional[Union[Robot, PathLike]], reference: Union[Robot, Pa
     rob = None if robot is None else _robot(robot)
     with Scratch() as scratch:
         m = None if data is None else _data(data, rob if rob is not None else ref)
-        opts: Dict[str, Any] = dict(robot=rob, reference=ref, data=m)
-        opts.update(options)
-        d = _job("validate", scratch, opts, out)
+        if rob is None:
+            # A compensation checked on a simulated machine: the reference by its file.
+            opts: Dict[str, Any] = dict(reference=ref, data=m)
+            opts.update(options)
+            d = _job("validate", scratch, opts, out)
+        else:
+            d = _job("validate", scratch, dict(options), out, robot=rob, data=m, reference=ref)
         doc = scratch.named(json.loads(d["summary"]))
     return ValidationResult(doc, d["files"])
 

@@ -334,3 +334,36 @@ def test_two_tracker_sets_from_arrays_are_registered_together(hexapod, tmp_path,
     assert len(a.registration["sessions"]) == 2 and len(b.registration["sessions"]) == 2
     np.testing.assert_allclose(b.estimates_um, a.estimates_um, rtol=1e-9, atol=1e-9,
                                equal_nan=True)
+
+
+def test_validate_takes_robots_and_arrays_in_memory(hexapod, tmp_path, monkeypatch):
+    """Issue 36: ``validate`` runs on a calibrated robot made from text, its reference and
+    held-out measurements made from arrays, in memory (no scratch file), and gives what the
+    files give."""
+    later = HEXAPOD.parent / "hexapod_66_later.csv"
+    cal = cpm.calibrate(hexapod, HEXAPOD_READINGS, out=tmp_path / "cal")
+    from_files = cpm.validate(tmp_path / "cal" / "calibrated.toml", HEXAPOD, later)
+    header, rows = _rows(later)
+    col = {c: header.index(c) for c in header}
+    poses = np.array([[float(r[col[c]]) for c in ("x_mm", "y_mm", "z_mm", "roll_deg",
+                                                   "pitch_deg", "yaw_deg")] for r in rows])
+    m = cpm.gauge_readings(hexapod, poses, [r[col["sensor"]] for r in rows],
+                           np.array([float(r[col["length_mm"]]) for r in rows]),
+                           pose_labels=[r[col["pose"]] for r in rows], simulated=True,
+                           name="later readings")
+    text_robot = cal.calibrated_robot
+    assert text_robot.path is None
+    from cpm import _robot
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_robot.Scratch, "write", no_scratch)
+        in_memory = cpm.validate(text_robot, hexapod, m)
+    assert in_memory.calibrated_rms_um == from_files.calibrated_rms_um
+    assert in_memory.reference_rms_um == from_files.reference_rms_um
+    assert in_memory.calibrated_rms_um < in_memory.reference_rms_um / 5
+    assert in_memory.summary["data"] == ["later readings"]
+    assert "residuals.csv" in in_memory.files and "later readings" in in_memory.text(
+        "residuals.csv")

@@ -123,13 +123,14 @@ fn write_one(
 
 /// Runs `cpm COMMAND` as the workflow's job: `options` by name (JSON text; paths for the
 /// robot, the data and the other files), `out` where the outputs go (committed there when
-/// `commit`, else only staged). Every job but `validate` also takes the robot as loaded (for
-/// its `robot` option); `refine` and `identifiability` the measurements in memory (read, or
-/// paths) for their `data`.
+/// `commit`, else only staged). The jobs also take the robot as loaded (for their `robot`
+/// option), `validate` its reference too (for `reference`), and `refine`, `identifiability`
+/// and `validate` the measurements in memory (read, or paths) for their `data`.
 /// Returns a dict: `summary` (what the command prints with `--json`), `trouble`, `files`
 /// (name -> bytes), `text` (the single-file output), `ini`, `written`.
 #[pyfunction]
-#[pyo3(signature = (command, options, out=None, commit=false, robot=None, data=None))]
+#[pyo3(signature = (command, options, out=None, commit=false, robot=None, data=None, reference=None))]
+#[allow(clippy::too_many_arguments)]
 pub fn job<'py>(
     py: Python<'py>,
     command: &str,
@@ -138,9 +139,12 @@ pub fn job<'py>(
     commit: bool,
     robot: Option<&crate::robot::PyRobot>,
     data: Option<Vec<Bound<'py, PyAny>>>,
+    reference: Option<&crate::robot::PyRobot>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let commit = commit && out.is_some();
     let mut held = InMemory::none();
+    let reference_path = reference.and_then(|r| r.path.clone());
+    held.reference = reference.map(|r| r.robot.clone());
     // Paths of inputs an output may not replace (the robot's file, when it has one).
     let mut robot_path = None;
     if let Some(r) = robot {
@@ -155,8 +159,12 @@ pub fn job<'py>(
             let (dir, staged) = out_dir(py, out.as_deref(), "validation")?;
             let mut o = by_name(py, command, &validate::ValidateOptions::default(), options)?;
             o.out = Some(dir.clone());
+            // The files of robots held in memory, when they have one (an output may not
+            // replace them).
+            o.robot = o.robot.or(robot_path);
+            o.reference = o.reference.or(reference_path);
             (
-                run(py, move |a, p| run_validate(&o, &dir, commit, a, p))?,
+                run(py, move |a, p| run_validate(&o, held, &dir, commit, a, p))?,
                 staged,
             )
         }
@@ -254,6 +262,7 @@ where
 
 fn run_validate(
     o: &validate::ValidateOptions,
+    held: InMemory,
     dir: &Path,
     commit_to_dir: bool,
     abandoned: &AtomicBool,
@@ -264,7 +273,7 @@ fn run_validate(
         let c = validate::check_compensation(o, progress)?;
         (c.report.to_json()?, c.set)
     } else {
-        let v = validate::validate(o, progress)?;
+        let v = validate::validate_in(o, held, progress)?;
         (v.report.to_json()?, v.set)
     };
     let mut r = Ran {

@@ -100,6 +100,34 @@ pub enum Source {
 }
 
 impl Source {
+    /// Reads the measurements against `robot` with `options`, tracker and point sets
+    /// registered on their own: a file as [`ingest::read_data_file`](crate::ingest::read_data_file)
+    /// reads it, what is held in memory from what was given ([`Given::read`]).
+    pub fn read(
+        &self,
+        robot: &Robot,
+        options: &ReadOptions,
+        registration: &RegistrationOptions,
+    ) -> anyhow::Result<DataFile> {
+        let given = match self {
+            Source::Path(p) => {
+                return Ok(crate::ingest::read_data_file(
+                    p,
+                    robot,
+                    options,
+                    registration,
+                )?)
+            }
+            Source::Read(r) => {
+                return Ok(r.given.read(&r.data.file, robot, options, registration)?)
+            }
+            Source::Text { text, .. } => Given::Text(text.clone()),
+            Source::GaugeRows(rows) => Given::GaugeRows(rows.clone()),
+            Source::TrackerRows(rows) => Given::TrackerRows(rows.clone()),
+        };
+        Ok(given.read(&self.name(), robot, options, registration)?)
+    }
+
     /// The name of the source in messages and outputs.
     pub fn name(&self) -> String {
         match self {
@@ -121,6 +149,8 @@ pub struct InMemory {
     pub robot: Option<Robot>,
     /// The measurements.
     pub data: Option<Vec<Source>>,
+    /// `validate`'s reference robot as loaded (for its `reference` path).
+    pub reference: Option<Robot>,
 }
 
 impl InMemory {
@@ -131,7 +161,7 @@ impl InMemory {
 
     /// True when nothing is held.
     pub fn is_empty(&self) -> bool {
-        self.robot.is_none() && self.data.is_none()
+        self.robot.is_none() && self.data.is_none() && self.reference.is_none()
     }
 
     /// The robot held, else the one at `path` ([`load_robot`](crate::load::load_robot)).

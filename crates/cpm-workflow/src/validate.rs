@@ -22,6 +22,7 @@ use crate::calib::{Campaign, MeasurementModel};
 use crate::error::{input_error, trouble, usage_error};
 use crate::ingest::RegistrationOptions;
 use crate::io::{FileKind, ReadOptions, Robot};
+use crate::memory::{InMemory, Source};
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
 use crate::report::validate::{
@@ -171,13 +172,13 @@ fn fitted_pose_map_range(robot: &Robot) -> Option<crate::calib::refine::PoseRang
 /// One held-out file read against `robot`: commanded lengths from `controller` where the file
 /// logged none, the tracker weights `tracker` (position um, orientation urad; 0: default).
 fn read_held_out(
-    path: &std::path::Path,
+    source: &Source,
     robot: &Robot,
     controller: &Robot,
     options: &ReadOptions,
     tracker: (f64, f64),
 ) -> anyhow::Result<crate::io::DataFile> {
-    let mut file = crate::ingest::read_data_file(path, robot, options, &held_out_registration())?;
+    let mut file = source.read(robot, options, &held_out_registration())?;
     held_out(&mut file, robot, controller, tracker)?;
     Ok(file)
 }
@@ -627,7 +628,7 @@ impl<'r> RobotGather<'r> {
 fn errors_of(
     robot: &Robot,
     controller: &Robot,
-    paths: &[PathBuf],
+    paths: &[Source],
     strict: bool,
     tracker: (f64, f64),
     residuals: bool,
@@ -651,7 +652,7 @@ fn errors_of(
 fn errors_of_both(
     robot: &Robot,
     reference: &Robot,
-    paths: &[PathBuf],
+    paths: &[Source],
     tracker: (f64, f64),
     residuals: bool,
 ) -> anyhow::Result<(Predicted, anyhow::Result<RobotErrors>)> {
@@ -659,7 +660,20 @@ fn errors_of_both(
     let mut g = RobotGather::new(robot, residuals);
     // The reference's gathering, until its first error (kept for after `robot`'s files).
     let mut r: anyhow::Result<RobotGather> = Ok(RobotGather::new(reference, false));
-    for path in paths {
+    for source in paths {
+        let Source::Path(path) = source else {
+            // Held in memory: each robot reads it on its own.
+            let file = read_held_out(source, robot, reference, &options, tracker)?;
+            if let Ok(rg) = &mut r {
+                let done = read_held_out(source, reference, reference, &options, tracker)
+                    .and_then(|f| rg.take(f));
+                if let Err(e) = done {
+                    r = Err(e);
+                }
+            }
+            g.take(file)?;
+            continue;
+        };
         let (mut file, second) = crate::ingest::read_data_file_for_two(
             path,
             robot,
@@ -670,7 +684,7 @@ fn errors_of_both(
         if let Ok(rg) = &mut r {
             use crate::io::SecondReading;
             let done = match second {
-                None => read_held_out(path, reference, reference, &options, tracker)
+                None => read_held_out(source, reference, reference, &options, tracker)
                     .and_then(|f| rg.take(f)),
                 Some(Err(e)) => Err(e.into()),
                 Some(Ok(SecondReading::File(mut f))) => {
@@ -921,16 +935,34 @@ pub fn check_compensation(
 /// `cpm validate`: the calibrated robot and the reference predict the held-out data; the
 /// report compares them. With `options.out`, the result directory is staged (not written).
 pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::Result<Validated> {
+    validate_in(options, InMemory::none(), progress)
+}
+
+/// [`validate`] with inputs held in memory (the calibrated robot, the reference, the held-out
+/// measurements: see [`InMemory`]) in place of the files the options name.
+pub fn validate_in(
+    options: &ValidateOptions,
+    mut held: InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<Validated> {
     options.validate()?;
     progress.stage("reading the robot descriptions");
-    let Some(robot) = &options.robot else {
-        return Err(usage_error(
-            "--robot is required (unless --commands is given)",
-        ));
+    let robot = match (held.robot.take(), &options.robot) {
+        (Some(r), _) => r,
+        (None, Some(path)) => crate::load::load_robot(path, progress)?,
+        (None, None) => {
+            return Err(usage_error(
+                "--robot is required (unless --commands is given)",
+            ))
+        }
     };
-    let robot = crate::load::load_robot(robot, progress)?;
-    let reference_path = reference_path(options.reference.as_deref(), &robot, progress)?;
-    let reference = crate::load::load_robot(&reference_path, progress)?;
+    let reference = match held.reference.take() {
+        Some(r) => r,
+        None => {
+            let reference_path = reference_path(options.reference.as_deref(), &robot, progress)?;
+            crate::load::load_robot(&reference_path, progress)?
+        }
+    };
     if robot.num_links() != reference.num_links() {
         return Err(input_error(format!(
             "{} has {} links, the reference {} has {}",
@@ -957,7 +989,8 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
     }
     check_cancelled(progress)?;
     progress.stage("predicting the held-out measurements");
-    let data = &options.data;
+    let sources = held.sources_or(&options.data);
+    let data = &sources;
     // Each file read once for both robots where the readers can share it.
     let ((mut cal_errors, mut cal_rows), ref_errors) =
         errors_of_both(&robot, &reference, data, tracker, options.out.is_some())?;
@@ -1011,7 +1044,7 @@ pub fn validate(options: &ValidateOptions, progress: &dyn Progress) -> anyhow::R
     let report = ValidateReport::new(
         &robot.file,
         &reference.file,
-        data.iter().map(|p| p.display().to_string()).collect(),
+        data.iter().map(Source::name).collect(),
         &cal_errors,
         &ref_errors,
     );
@@ -1136,7 +1169,10 @@ pub fn file_reproduces_fit(
         Some(e) => e,
         // Measurements held in memory alone: no file to read again.
         None if data.is_empty() => return Ok(None),
-        None => errors_of(&robot, reference, data, false, tracker, false, excluded)?.0,
+        None => {
+            let files: Vec<Source> = data.iter().cloned().map(Source::Path).collect();
+            errors_of(&robot, reference, &files, false, tracker, false, excluded)?.0
+        }
     };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
     let _ = sigma_um;
@@ -1205,7 +1241,7 @@ mod tests {
             let files = errors_of(
                 &robot,
                 &reference,
-                std::slice::from_ref(&path),
+                &[Source::Path(path.clone())],
                 false,
                 (campaign.pose_sigma(), campaign.orientation_sigma()),
                 false,
