@@ -172,14 +172,14 @@ pub fn compensate(
     options: &CompensateOptions,
     progress: &dyn Progress,
 ) -> anyhow::Result<Compensated> {
-    compensate_in(options, crate::memory::InMemory::none(), progress)
+    compensate_in(options, crate::sources::InMemory::none(), progress)
 }
 
 /// [`compensate`] with the robot held in memory (as loaded: see
-/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+/// [`InMemory`](crate::sources::InMemory)) in place of the description the options name.
 pub fn compensate_in(
     options: &CompensateOptions,
-    mut held: crate::memory::InMemory,
+    mut held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Compensated> {
     options.check_out()?;

@@ -290,14 +290,14 @@ pub struct Exported {
 
 /// `cpm export`: the robot's settings for the controller in `options.format`.
 pub fn export(options: &ExportOptions, progress: &dyn Progress) -> anyhow::Result<Exported> {
-    export_in(options, crate::memory::InMemory::none(), progress)
+    export_in(options, crate::sources::InMemory::none(), progress)
 }
 
 /// [`export`] with the robot held in memory (as loaded: see
-/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+/// [`InMemory`](crate::sources::InMemory)) in place of the description the options name.
 pub fn export_in(
     options: &ExportOptions,
-    mut held: crate::memory::InMemory,
+    mut held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Exported> {
     options.validate()?;

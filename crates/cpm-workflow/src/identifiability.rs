@@ -132,14 +132,14 @@ pub fn identifiability(
     options: &IdentifiabilityOptions,
     progress: &dyn Progress,
 ) -> anyhow::Result<Identified> {
-    identifiability_in(options, crate::memory::InMemory::none(), progress)
+    identifiability_in(options, crate::sources::InMemory::none(), progress)
 }
 
 /// [`identifiability`] with inputs held in memory (the robot as loaded, the measurements:
-/// see [`InMemory`](crate::memory::InMemory)) in place of the files the options name.
+/// see [`InMemory`](crate::sources::InMemory)) in place of the files the options name.
 pub fn identifiability_in(
     options: &IdentifiabilityOptions,
-    mut held: crate::memory::InMemory,
+    mut held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Identified> {
     check_cancelled(progress)?;
@@ -155,9 +155,9 @@ pub fn identifiability_in(
         progress.stage("reading the measurements");
         let read = crate::load::read_options(&model);
         let registration = crate::load::registration_options(&model);
-        let merged = crate::memory::read_sources(&sources, &robot, &read, &registration)?;
+        let merged = crate::sources::read_sources(&sources, &robot, &read, &registration)?;
         crate::load::warn_excluded(progress, &merged.excluded);
-        let names: Vec<String> = sources.iter().map(crate::memory::Source::name).collect();
+        let names: Vec<String> = sources.iter().map(crate::sources::Source::name).collect();
         (merged.campaign, names.join(", "))
     } else {
         progress.stage("building the plan");

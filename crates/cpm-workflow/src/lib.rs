@@ -9,6 +9,8 @@
 //!   committing a result directory;
 //! - [`fit`]: [`calibrate`](fit::calibrate) with [`CalibrateOptions`](fit::CalibrateOptions),
 //!   and the stages every fit shares (the read-back check of `calibrated.toml` among them);
+//! - [`sources`]: the measurements and robots a caller holds in memory ([`sources::Source`],
+//!   [`sources::InMemory`]), read and registered as files are;
 //! - [`memory`]: [`calibrate`](memory::calibrate) a campaign held in memory (the robot
 //!   as loaded, measurements already read, or given as values: [`io::rows`]), for the Python
 //!   binding;
@@ -84,6 +86,7 @@ pub mod plan;
 pub mod progress;
 pub mod refine;
 pub mod simulate;
+pub mod sources;
 pub mod truth;
 pub mod validate;
 

@@ -100,14 +100,14 @@ impl Refined {
 /// (an error, nothing staged) when the refined model predicts held-out data worse than plain
 /// calibration.
 pub fn refine(options: &RefineOptions, progress: &dyn Progress) -> anyhow::Result<Refined> {
-    refine_in(options, crate::memory::InMemory::none(), progress)
+    refine_in(options, crate::sources::InMemory::none(), progress)
 }
 
 /// [`refine`] with inputs held in memory (the robot as loaded, the measurements: see
-/// [`InMemory`](crate::memory::InMemory)) in place of the files the options name.
+/// [`InMemory`](crate::sources::InMemory)) in place of the files the options name.
 pub fn refine_in(
     options: &RefineOptions,
-    held: crate::memory::InMemory,
+    held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Refined> {
     crate::progress::unless_cancelled(refine_job(options, held, progress), progress)
@@ -115,7 +115,7 @@ pub fn refine_in(
 
 fn refine_job(
     options: &RefineOptions,
-    mut held: crate::memory::InMemory,
+    mut held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Refined> {
     options.validate()?;

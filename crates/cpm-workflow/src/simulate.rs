@@ -739,14 +739,14 @@ fn measure(
 /// `cpm simulate`: reads the robot (and the truth and plan files), builds the true machine
 /// and the plan, and simulates the campaign.
 pub fn simulate(options: &SimulateOptions, progress: &dyn Progress) -> anyhow::Result<Simulated> {
-    simulate_in(options, crate::memory::InMemory::none(), progress)
+    simulate_in(options, crate::sources::InMemory::none(), progress)
 }
 
 /// [`simulate`] with the robot held in memory (as loaded: see
-/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+/// [`InMemory`](crate::sources::InMemory)) in place of the description the options name.
 pub fn simulate_in(
     options: &SimulateOptions,
-    mut held: crate::memory::InMemory,
+    mut held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Simulated> {
     options.check_out()?;

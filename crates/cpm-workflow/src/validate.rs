@@ -22,7 +22,6 @@ use crate::calib::{Campaign, MeasurementModel};
 use crate::error::{input_error, trouble, usage_error};
 use crate::ingest::RegistrationOptions;
 use crate::io::{FileKind, ReadOptions, Robot};
-use crate::memory::{InMemory, Source};
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
 use crate::report::validate::{
@@ -30,6 +29,7 @@ use crate::report::validate::{
     ReachedSummary, TargetError, ValidateReport,
 };
 pub use crate::report::validate::{SessionCheck, SessionFrame};
+use crate::sources::{InMemory, Source};
 
 /// The options of `cpm validate`. [`ValidateOptions::new`] gives the defaults.
 #[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]

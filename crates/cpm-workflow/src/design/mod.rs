@@ -228,14 +228,14 @@ pub fn sockets_of(robot: &Robot) -> SocketCandidates {
 /// Runs the design job: reads the description (and the sockets file), chooses the
 /// sockets and poses (or the poses of `instruments`), and stages every output.
 pub fn design(options: &DesignJobOptions, progress: &dyn Progress) -> anyhow::Result<Designed> {
-    design_in(options, crate::memory::InMemory::none(), progress)
+    design_in(options, crate::sources::InMemory::none(), progress)
 }
 
 /// [`design`] with the robot held in memory (as loaded: see
-/// [`InMemory`](crate::memory::InMemory)) in place of the description the options name.
+/// [`InMemory`](crate::sources::InMemory)) in place of the description the options name.
 pub fn design_in(
     options: &DesignJobOptions,
-    mut held: crate::memory::InMemory,
+    mut held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Designed> {
     options.validate()?;

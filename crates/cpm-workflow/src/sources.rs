@@ -1,0 +1,235 @@
+//! Measurements and robots a caller holds in memory for a job (the Python binding): the
+//! sources of a campaign ([`Source`]: files, measurements already read, text, values), read
+//! and registered as files are ([`read_sources`]), and what a job takes in place of the
+//! files its options name ([`InMemory`]). The jobs on a campaign in memory are
+//! [`crate::memory`]'s and each job's `*_in` function.
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use crate::ingest::RegistrationOptions;
+use crate::io::rows::{GaugeRows, TrackerRows};
+use crate::io::{self, DataFile, FileKind, Merged, ReadOptions, Robot};
+use crate::progress::Progress;
+
+/// Measurements a job reads from memory, with how they were read.
+#[derive(Debug, Clone)]
+pub struct ReadData {
+    /// The measurements as read (with `options`, against the job's robot).
+    pub data: Arc<DataFile>,
+    /// The read options they were read with.
+    pub options: ReadOptions,
+    /// The registration options they were read with (tracker files).
+    pub registration: RegistrationOptions,
+    /// What they were read from, read again when the job needs other read options.
+    pub given: Given,
+}
+
+/// Measurements as given in memory, before reading.
+#[derive(Debug, Clone)]
+pub enum Given {
+    /// The text of a measurement file.
+    Text(Arc<str>),
+    /// Length-sensor readings as values ([`GaugeRows`]: no text).
+    GaugeRows(Arc<GaugeRows>),
+    /// Tracker pose measurements as values ([`TrackerRows`]: no text).
+    TrackerRows(Arc<TrackerRows>),
+}
+
+impl Given {
+    /// Reads them against `robot` (`name` stands for the file of a text), as
+    /// [`ingest::read_data`](crate::ingest::read_data) reads a file's text: read
+    /// ([`read_unregistered`](Self::read_unregistered)), then a tracker or point set registered
+    /// on its own.
+    pub fn read(
+        &self,
+        name: &str,
+        robot: &Robot,
+        options: &ReadOptions,
+        registration: &RegistrationOptions,
+    ) -> Result<DataFile, io::InputError> {
+        let mut f = self.read_unregistered(name, robot, options)?;
+        crate::ingest::register_files(std::slice::from_mut(&mut f), robot, options, registration)?;
+        Ok(f)
+    }
+
+    /// Reads them against `robot` as the readers do, without registering tracker or point
+    /// sets ([`io::read_data`]): for a campaign registered together.
+    pub fn read_unregistered(
+        &self,
+        name: &str,
+        robot: &Robot,
+        options: &ReadOptions,
+    ) -> Result<DataFile, io::InputError> {
+        match self {
+            Given::Text(text) => io::read_data(text, name, robot, options),
+            Given::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options),
+            Given::TrackerRows(rows) => io::rows::read_tracker_rows(rows, robot, options),
+        }
+    }
+}
+
+/// One set of measurements of a campaign.
+#[derive(Debug, Clone)]
+pub enum Source {
+    /// A file, read as `cpm calibrate --data PATH` reads it.
+    Path(PathBuf),
+    /// Measurements already read against the job's robot (the caller checks that it is the
+    /// same robot: else give them as [`Source::Text`]).
+    Read(ReadData),
+    /// Measurement text to read (its name stands for the file).
+    Text {
+        /// The name in messages and outputs.
+        name: String,
+        /// The text, as a measurement file holds it.
+        text: Arc<str>,
+    },
+    /// Length-sensor readings as values, to read (their `file` names them).
+    GaugeRows(Arc<GaugeRows>),
+    /// Tracker pose measurements as values, to read and register (their `file` names them).
+    TrackerRows(Arc<TrackerRows>),
+}
+
+impl Source {
+    /// Reads the measurements against `robot` with `options`, tracker and point sets
+    /// registered on their own: a file as [`ingest::read_data_file`](crate::ingest::read_data_file)
+    /// reads it, what is held in memory from what was given ([`Given::read`]).
+    pub fn read(
+        &self,
+        robot: &Robot,
+        options: &ReadOptions,
+        registration: &RegistrationOptions,
+    ) -> anyhow::Result<DataFile> {
+        let given = match self {
+            Source::Path(p) => {
+                return Ok(crate::ingest::read_data_file(
+                    p,
+                    robot,
+                    options,
+                    registration,
+                )?)
+            }
+            Source::Read(r) => {
+                return Ok(r.given.read(&r.data.file, robot, options, registration)?)
+            }
+            Source::Text { text, .. } => Given::Text(text.clone()),
+            Source::GaugeRows(rows) => Given::GaugeRows(rows.clone()),
+            Source::TrackerRows(rows) => Given::TrackerRows(rows.clone()),
+        };
+        Ok(given.read(&self.name(), robot, options, registration)?)
+    }
+
+    /// The name of the source in messages and outputs.
+    pub fn name(&self) -> String {
+        match self {
+            Source::Path(p) => p.display().to_string(),
+            Source::Read(r) => r.data.file.clone(),
+            Source::Text { name, .. } => name.clone(),
+            Source::GaugeRows(rows) => rows.file.clone(),
+            Source::TrackerRows(rows) => rows.file.clone(),
+        }
+    }
+}
+
+/// What a caller holds in memory for a job, in place of the files its options name: the
+/// robot as loaded (for the options' `robot` path) and the measurements (for their `data`
+/// paths). What is `None` is read from the options' paths, as the command reads it.
+#[derive(Debug, Clone, Default)]
+pub struct InMemory {
+    /// The robot as loaded.
+    pub robot: Option<Robot>,
+    /// The measurements.
+    pub data: Option<Vec<Source>>,
+    /// `validate`'s reference robot as loaded (for its `reference` path).
+    pub reference: Option<Robot>,
+}
+
+impl InMemory {
+    /// Nothing held: every input is read from the options' paths.
+    pub fn none() -> Self {
+        Self::default()
+    }
+
+    /// True when nothing is held.
+    pub fn is_empty(&self) -> bool {
+        self.robot.is_none() && self.data.is_none() && self.reference.is_none()
+    }
+
+    /// The robot held, else the one at `path` ([`load_robot`](crate::load::load_robot)).
+    pub fn robot_or_load(
+        &mut self,
+        path: &std::path::Path,
+        progress: &dyn Progress,
+    ) -> anyhow::Result<Robot> {
+        match self.robot.take() {
+            Some(r) => Ok(r),
+            None => crate::load::load_robot(path, progress),
+        }
+    }
+
+    /// The measurements held, else the files at `paths`.
+    pub fn sources_or(&mut self, paths: &[PathBuf]) -> Vec<Source> {
+        self.data
+            .take()
+            .unwrap_or_else(|| paths.iter().cloned().map(Source::Path).collect())
+    }
+}
+
+/// Reads and merges the sources with `options` and `registration` (the read and registration
+/// options of the job's model): files only are read as
+/// [`load::load_data`](crate::load::load_data) reads them; measurements already read with the
+/// same options are taken as they are, others read again from their
+/// text. Tracker and point sets are registered as [`load::load_data`](crate::load::load_data)
+/// registers files: two or more tracker sets together, whatever their source.
+pub fn read_sources(
+    sources: &[Source],
+    robot: &Robot,
+    options: &ReadOptions,
+    registration: &RegistrationOptions,
+) -> anyhow::Result<Merged> {
+    let paths: Vec<PathBuf> = sources
+        .iter()
+        .filter_map(|s| match s {
+            Source::Path(p) => Some(p.clone()),
+            _ => None,
+        })
+        .collect();
+    if paths.len() == sources.len() {
+        return crate::load::load_data(&paths, robot, options, registration);
+    }
+    // Read as the readers read, registered afterwards all together (as files are): a set
+    // already read and registered on its own is read again from what was given when it has
+    // to be registered with others (two or more tracker sets).
+    let mut files = Vec::with_capacity(sources.len());
+    for s in sources {
+        let f = match s {
+            Source::Path(p) => io::read_data_file(p, robot, options)?,
+            Source::Read(r) if r.options == *options && r.registration == *registration => {
+                DataFile::clone(&r.data)
+            }
+            Source::Read(r) => r.given.read_unregistered(&r.data.file, robot, options)?,
+            Source::Text { name, text } => io::read_data(text, name, robot, options)?,
+            Source::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options)?,
+            Source::TrackerRows(rows) => io::rows::read_tracker_rows(rows, robot, options)?,
+        };
+        files.push(f);
+    }
+    let trackers = files
+        .iter()
+        .filter(|f| f.kind == FileKind::PoseMeasurements)
+        .count();
+    if trackers > 1 {
+        for (k, s) in sources.iter().enumerate() {
+            if let Source::Read(r) = s {
+                if files[k].kind == FileKind::PoseMeasurements && files[k].checked {
+                    files[k] = r.given.read_unregistered(&r.data.file, robot, options)?;
+                }
+            }
+        }
+    }
+    crate::ingest::register_files(&mut files, robot, options, registration)?;
+    let merged = io::merge(files, robot);
+    if options.check_sensor_lengths {
+        crate::gauges::check_readings(robot, &merged)?;
+    }
+    Ok(merged)
+}
