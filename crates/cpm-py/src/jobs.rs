@@ -66,6 +66,15 @@ fn files_of(set: &OutputSet, dir: &Path) -> Vec<(String, Vec<u8>)> {
         .collect()
 }
 
+/// The input files that have a path (a robot held in memory may have none).
+fn named_files<'a>(inputs: &[&'a Path]) -> Vec<&'a Path> {
+    inputs
+        .iter()
+        .copied()
+        .filter(|p| !p.as_os_str().is_empty())
+        .collect()
+}
+
 /// Commits `set` to `dir` (all or nothing, as the command does) unless the caller left.
 fn commit(
     set: OutputSet,
@@ -77,11 +86,7 @@ fn commit(
     if abandoned.load(Ordering::SeqCst) {
         anyhow::bail!("interrupted");
     }
-    let inputs: Vec<&Path> = inputs
-        .iter()
-        .copied()
-        .filter(|p| !p.as_os_str().is_empty())
-        .collect();
+    let inputs = named_files(inputs);
     Ok(
         load::commit_dir(set, dir, &inputs, command, &cpm_workflow::Silent)?
             .iter()
@@ -110,11 +115,7 @@ fn write_one(
     if abandoned.load(Ordering::SeqCst) {
         anyhow::bail!("interrupted");
     }
-    let inputs: Vec<&Path> = inputs
-        .iter()
-        .copied()
-        .filter(|p| !p.as_os_str().is_empty())
-        .collect();
+    let inputs = named_files(inputs);
     load::out_target(option, path, &inputs)?;
     cpm_workflow::output::write_file(path, text.as_bytes())
         .map_err(|e| anyhow::Error::new(e).context(format!("writing {}", path.display())))?;
@@ -369,17 +370,9 @@ fn run_simulate(
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
     let job = simulate::simulate_in(o, held, progress)?;
-    let mut r = Ran::default();
-    if let Some(out) = &o.out {
-        r.written = vec![write_one(out, "--out", &o.inputs(), &job.text, abandoned)?];
-    }
-    let named = o
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("simulated.csv"));
-    r.summary = job.summary(&named).to_json();
-    r.text = Some(job.text);
-    Ok(r)
+    let named = o.out.as_deref().unwrap_or(Path::new("simulated.csv"));
+    let summary = job.summary(named).to_json();
+    one_file(o.out.as_deref(), &o.inputs(), job.text, summary, abandoned)
 }
 
 fn run_compensate(
@@ -389,17 +382,30 @@ fn run_compensate(
     progress: &dyn Progress,
 ) -> anyhow::Result<Ran> {
     let job = compensate::compensate_in(o, held, progress)?;
-    let mut r = Ran::default();
-    if let Some(out) = &o.out {
-        r.written = vec![write_one(out, "--out", &o.inputs(), &job.csv, abandoned)?];
-    }
-    let named = o
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("commands.csv"));
-    r.summary = job.summary(&named).to_json();
-    r.text = Some(job.csv);
-    Ok(r)
+    let named = o.out.as_deref().unwrap_or(Path::new("commands.csv"));
+    let summary = job.summary(named).to_json();
+    one_file(o.out.as_deref(), &o.inputs(), job.csv, summary, abandoned)
+}
+
+/// What a job with a single-file output gives: `text` (written to `out` when given) and its
+/// `summary`.
+fn one_file(
+    out: Option<&Path>,
+    inputs: &[&Path],
+    text: String,
+    summary: String,
+    abandoned: &AtomicBool,
+) -> anyhow::Result<Ran> {
+    let written = match out {
+        Some(out) => vec![write_one(out, "--out", inputs, &text, abandoned)?],
+        None => Vec::new(),
+    };
+    Ok(Ran {
+        summary,
+        text: Some(text),
+        written,
+        ..Ran::default()
+    })
 }
 
 fn run_export(
