@@ -118,8 +118,10 @@ fn commanded_lengths(
     controller: &Robot,
     poses: &[crate::geometry::Pose],
 ) -> Vec<Vec<f64>> {
+    use rayon::prelude::*;
     poses
-        .iter()
+        .par_iter()
+        .with_min_len(256)
         .map(|p| {
             crate::kinematics::ik::inverse_lengths(&controller.table, p)
                 .iter()
