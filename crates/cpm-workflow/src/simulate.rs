@@ -742,8 +742,9 @@ pub fn simulate(options: &SimulateOptions, progress: &dyn Progress) -> anyhow::R
     simulate_in(options, crate::sources::InMemory::none(), progress)
 }
 
-/// [`simulate`] with the robot held in memory (as loaded: see
-/// [`InMemory`](crate::sources::InMemory)) in place of the description the options name.
+/// [`simulate`] with the robot and the plan's poses held in memory (the robot as loaded, the
+/// poses as values: see [`InMemory`](crate::sources::InMemory)) in place of the files the
+/// options name.
 pub fn simulate_in(
     options: &SimulateOptions,
     mut held: crate::sources::InMemory,
@@ -770,7 +771,8 @@ pub fn simulate_in(
     let truth = truth(options, &robot, declared)?;
     check_cancelled(progress)?;
     progress.stage("building the plan");
-    let spec = crate::plan::build_plan(&options.plan, &robot, options.measure == Measure::Lengths)?;
+    let lengths = options.measure == Measure::Lengths;
+    let spec = crate::plan::build_plan_in(&options.plan, held.poses.as_deref(), &robot, lengths)?;
     check_cancelled(progress)?;
     progress.stage(&format!("simulating {} poses", spec.plan.poses.len()));
     // Inclinometer noise is in urad.
