@@ -129,3 +129,61 @@ def test_the_cpm_module_runs_the_command(in_root, tmp_path, capfd):
     assert _cpm.main(["cpm", "compensate", "--robot", HEX, "--nosuch"]) == 2
     assert _cpm.main(["cpm", "compensate", "--robot", "nosuch.toml", "--poses",
                       "examples/targets.csv"]) == 4
+
+
+def _pose_csv(path, poses):
+    """A pose list file of ``poses`` (labelled from 1, numbers exact)."""
+    lines = ["pose,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg"]
+    lines += [",".join([str(k + 1)] + [repr(float(v)) for v in row])
+              for k, row in enumerate(poses)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_pose_arrays_go_to_the_jobs_in_memory(in_root, tmp_path, monkeypatch):
+    """Issue 36: a plan (simulate, identifiability) and compensate's targets given as arrays
+    reach the job in memory (no scratch file is written) and give what their file gives."""
+    from cpm import _robot
+
+    poses = cpm.simulate(HEX, random=8, truth=TRUTH, noise="none", seed=2).poses
+    f = _pose_csv(tmp_path / "plan.csv", poses)
+    text_robot = cpm.Robot.from_text(open(HEX).read(), "hexapod from text")
+    on_file = (cpm.simulate(HEX, plan=f, truth=TRUTH, noise="gaussian:1", seed=3),
+               cpm.identifiability(HEX, plan=f),
+               cpm.compensate(TRUTH, f, from_home=True))
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_robot.Scratch, "write", no_scratch)
+        s = cpm.simulate(text_robot, plan=poses, truth=TRUTH, noise="gaussian:1", seed=3)
+        i = cpm.identifiability(text_robot, plan=poses)
+        c = cpm.compensate(TRUTH, poses, from_home=True)
+        c_robot = cpm.compensate(cpm.Robot.from_toml(TRUTH), poses, from_home=True)
+    np.testing.assert_array_equal(s.lengths_mm, on_file[0].lengths_mm)
+    np.testing.assert_array_equal(s.poses, on_file[0].poses)
+    assert i == on_file[1]
+    assert c.csv == on_file[2].csv.replace(str(f), "poses")
+    assert c_robot.csv == c.csv
+    np.testing.assert_array_equal(c.readings, on_file[2].readings)
+
+
+def test_a_bad_pose_array_names_its_row(in_root, tmp_path):
+    """A bad pose of a plan or of the targets given as an array is the error of its file,
+    named ``poses``, with the row of the array."""
+    poses = cpm.simulate(HEX, random=5, truth=TRUTH, noise="none", seed=2).poses
+    poses[3, 4] = 0.5 * np.pi * 1e3  # an angle out of range
+    f = _pose_csv(tmp_path / "bad.csv", poses)
+    with pytest.raises(cpm.InputError) as on_file:
+        cpm.compensate(TRUTH, f)
+    for run in (lambda: cpm.compensate(TRUTH, poses),
+                lambda: cpm.simulate(HEX, plan=poses, truth=TRUTH),
+                lambda: cpm.identifiability(HEX, plan=poses)):
+        with pytest.raises(cpm.InputError) as e:
+            run()
+        assert (e.value.file, e.value.line, e.value.row, e.value.field) == \
+            ("poses", 5, 3, "pitch_deg")
+        assert str(e.value) == str(on_file.value).replace(str(f), "poses")
+    with pytest.raises(cpm.UsageError, match="exactly one of"):
+        cpm.simulate(HEX, plan=poses[:2], circle=True)
