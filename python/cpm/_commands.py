@@ -18,9 +18,11 @@ measurements made from arrays or tables as they were read, files by their paths;
 command takes its robot as loaded. Pose arrays given as a plan (``plan=`` of
 :func:`simulate` and :func:`identifiability`) or as :func:`compensate`'s targets go to the
 job in memory too, named ``poses`` and read with the checks of a pose list file (an error's
-``row`` is the row of the array). What still reaches a job as a file in a scratch directory:
-the robots and measurements of a compensation check (``validate(None, ...)``) and a
-``truth=`` made from text; errors and reports name them by their names (and rows).
+``row`` is the row of the array). A ``truth=`` robot made from text, and the robots of a
+compensation check (``validate(None, ...)``, which reads no measurements: of ``data`` only
+the files are passed on), go as loaded. What still reaches a job as a file in a scratch
+directory: a robot or measurements made in memory given as an option other than these
+(the other options take paths); errors and reports name them by their names (and rows).
 """
 from __future__ import annotations
 
@@ -159,11 +161,11 @@ def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
 def _job(command: str, scratch: Scratch, options: Dict[str, Any],
          out: Optional[PathLike] = None, robot: Optional[Robot] = None,
          data: Optional[List[Any]] = None, reference: Optional[Robot] = None,
-         poses: Optional[np.ndarray] = None) -> Dict[str, Any]:
+         poses: Optional[np.ndarray] = None, truth: Optional[Robot] = None) -> Dict[str, Any]:
     """Runs ``command`` as the workflow's job with ``options`` by name; its outputs are
-    committed to ``out`` when given (all or nothing). ``robot``, ``data``, ``reference`` and
-    ``poses`` (a plan's or compensate's targets, an array ``(n, 6)``) go to the job in
-    memory, not as files. Trouble (the command's exit code 1, outputs written) is a
+    committed to ``out`` when given (all or nothing). ``robot``, ``data``, ``reference``,
+    ``truth`` and ``poses`` (a plan's or compensate's targets, an array ``(n, 6)``) go to the
+    job in memory, not as files. Trouble (the command's exit code 1, outputs written) is a
     :class:`cpm.CpmWarning`."""
     text = _by_name(scratch, options)
     target = os.fspath(out) if out is not None else None
@@ -175,6 +177,8 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
             held["data"], arrays = _sources(robot, data)
     if reference is not None:
         held["reference"] = reference._h
+    if truth is not None:
+        held["truth"] = truth._h
     if poses is not None:
         held["poses"] = poses
         arrays.add("poses")
@@ -214,6 +218,32 @@ def _pose_list(poses: Any) -> Union[str, np.ndarray]:
     if a.ndim != 2 or a.shape[1] != 6:
         raise UsageError(f"poses has shape {a.shape}, expected (n, 6)")
     return a
+
+
+def _held_truth(options: Dict[str, Any]) -> Optional[Robot]:
+    """A ``truth=`` robot that no file holds (made from text, or its file changed since),
+    taken out of ``options``: it goes to the job in memory (a robot read from its file goes
+    by its path)."""
+    t = options.get("truth")
+    if isinstance(t, Robot) and t._file() is None:
+        del options["truth"]
+        return t
+    return None
+
+
+def _files_of(items: Optional[List[Any]]) -> Optional[List[Any]]:
+    """The files among measurements (paths, and the sources read from files): what a
+    compensation check, which reads no measurements, keeps of them (an output may not
+    replace them)."""
+    if items is None:
+        return None
+    files: List[Any] = []
+    for item in items:
+        if isinstance(item, Measurements):
+            files += [s.path for s in item.sources if s.path is not None]
+        else:
+            files.append(item)
+    return files or None
 
 
 def _plan(options: Dict[str, Any]) -> Optional[np.ndarray]:
@@ -505,10 +535,12 @@ def validate(robot: Optional[Union[Robot, PathLike]], reference: Union[Robot, Pa
     with Scratch() as scratch:
         m = None if data is None else _data(data, rob if rob is not None else ref)
         if rob is None:
-            # A compensation checked on a simulated machine: the reference by its file.
-            opts: Dict[str, Any] = dict(reference=ref, data=m)
+            # A compensation checked on a simulated machine: the reference and the truth
+            # as loaded; of the measurements (it reads none) only their files.
+            opts: Dict[str, Any] = dict(data=_files_of(m))
             opts.update(options)
-            d = _job("validate", scratch, opts, out)
+            truth = _held_truth(opts)
+            d = _job("validate", scratch, opts, out, reference=ref, truth=truth)
         else:
             d = _job("validate", scratch, dict(options), out, robot=rob, data=m, reference=ref)
         doc = scratch.named(json.loads(d["summary"]))
@@ -602,8 +634,9 @@ def simulate(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     ``robot``); with ``out`` the file is written there."""
     r = _robot(robot)
     plan = _plan(options)
+    truth = _held_truth(options)
     with Scratch() as scratch:
-        d = _job("simulate", scratch, dict(options), out, robot=r, poses=plan)
+        d = _job("simulate", scratch, dict(options), out, robot=r, poses=plan, truth=truth)
     if out is not None:
         from ._data import read_measurements
 

@@ -187,3 +187,34 @@ def test_a_bad_pose_array_names_its_row(in_root, tmp_path):
         assert str(e.value) == str(on_file.value).replace(str(f), "poses")
     with pytest.raises(cpm.UsageError, match="exactly one of"):
         cpm.simulate(HEX, plan=poses[:2], circle=True)
+
+
+def test_robots_from_text_go_to_simulate_and_the_compensation_check_in_memory(
+        in_root, tmp_path, monkeypatch):
+    """Issue 36: a ``truth=`` made from text (simulate, a compensation check) and the
+    reference of a compensation check reach the job as loaded (no scratch file is written),
+    with the results of their files, named by their names."""
+    from cpm import _robot
+
+    truth = cpm.Robot.from_text(open(TRUTH).read(), "truth from text")
+    ref = cpm.Robot.from_text(open(HEX).read(), "reference from text")
+    commands = tmp_path / "commands.csv"
+    cpm.compensate(TRUTH, "examples/targets.csv", out=commands)
+    on_file = (cpm.simulate(HEX, random=6, truth=TRUTH, noise="gaussian:1", seed=3),
+               cpm.validate(None, HEX, commands=commands, truth=TRUTH))
+    fit = cpm.simulate(HEX, random=6, truth=TRUTH, noise="none", seed=1)
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_robot.Scratch, "write", no_scratch)
+        s = cpm.simulate(HEX, random=6, truth=truth, noise="gaussian:1", seed=3)
+        v = cpm.validate(None, ref, fit, commands=commands, truth=truth)
+    np.testing.assert_array_equal(s.lengths_mm, on_file[0].lengths_mm)
+    assert v.summary["truth"] == "truth from text"
+    assert v.summary["reference_robot"] == "reference from text"
+    for key in ("compensated", "reference", "targets", "simulated"):
+        assert v.summary[key] == on_file[1].summary[key], key
+    with pytest.raises(cpm.UsageError, match="exclude each other"):
+        cpm.simulate(HEX, random=3, truth=truth, paper_table2=True)

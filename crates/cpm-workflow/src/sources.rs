@@ -141,6 +141,9 @@ pub struct InMemory {
     pub data: Option<Vec<Source>>,
     /// `validate`'s reference robot as loaded (for its `reference` path).
     pub reference: Option<Robot>,
+    /// The true machine as loaded (for the `truth` path of `simulate` and of `validate`'s
+    /// compensation check).
+    pub truth: Option<Robot>,
     /// A list of poses as values, for the pose list file the options name (a plan's `plan`,
     /// `compensate`'s `poses`): read with the checks of that file ([`pose_list`]).
     pub poses: Option<Arc<PoseRows>>,
@@ -157,6 +160,7 @@ impl InMemory {
         self.robot.is_none()
             && self.data.is_none()
             && self.reference.is_none()
+            && self.truth.is_none()
             && self.poses.is_none()
     }
 
@@ -315,6 +319,56 @@ mod tests {
                 .starts_with("targets in memory:4: field y_mm:"),
             "{e}"
         );
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    /// A truth and a reference held in memory simulate and check a compensation as their
+    /// files do (named by their names).
+    #[test]
+    fn robots_held_in_memory_are_their_files() {
+        let (rows, path) = targets("truth");
+        let (robot, truth) = (ex("hexapod_66.toml"), ex("hexapod_66_truth.toml"));
+        let mut options = simulate::SimulateOptions::new(&robot);
+        options.plan.plan = Some(path.clone());
+        let mut on_file = options.clone();
+        on_file.truth = Some(truth.clone());
+        let held_truth = || InMemory {
+            truth: Some(Robot::load(&truth).unwrap()),
+            ..InMemory::none()
+        };
+        let file = simulate::simulate(&on_file, &Silent).unwrap();
+        let mem = simulate::simulate_in(&options, held_truth(), &Silent).unwrap();
+        assert_eq!(mem.campaign.readings, file.campaign.readings);
+        assert_eq!(mem.truth.what, file.truth.what);
+        let c = compensate::compensate_in(
+            &compensate::CompensateOptions::new(&truth, PathBuf::new()),
+            held(&rows),
+            &Silent,
+        )
+        .unwrap();
+        let commands = path.with_file_name("commands.csv");
+        std::fs::write(&commands, &c.csv).unwrap();
+        let mut options = crate::validate::ValidateOptions {
+            commands: Some(commands),
+            ..Default::default()
+        };
+        let mut on_file = options.clone();
+        on_file.reference = Some(robot.clone());
+        on_file.truth = Some(truth.clone());
+        let file = crate::validate::check_compensation(&on_file, &Silent).unwrap();
+        let mut held = held_truth();
+        held.reference = Some(Robot::load(&robot).unwrap());
+        let mem = crate::validate::check_compensation_in(&options, held, &Silent).unwrap();
+        let json = |r: &crate::report::validate::CompensationReport| r.to_json().unwrap();
+        assert_eq!(json(&mem.report), json(&file.report));
+        // Without a truth, held or named: the command's usage error.
+        options.truth = None;
+        let e = crate::validate::check_compensation_in(&options, InMemory::none(), &Silent);
+        assert!(e
+            .err()
+            .unwrap()
+            .to_string()
+            .contains("--commands needs --truth"));
         let _ = std::fs::remove_dir_all(path.parent().unwrap());
     }
 
