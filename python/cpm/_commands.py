@@ -15,10 +15,14 @@ inside its iterations, and nothing is written.
 :func:`calibrate`, :func:`refine`, :func:`validate` and :func:`identifiability` run on the
 campaign in memory (``cpm_workflow::memory``): robots as loaded (from a file or from text),
 measurements made from arrays or tables as they were read, files by their paths; every
-command takes its robot as loaded. What still reaches a job as a file in a scratch directory:
-pose arrays given as a plan or as targets (``plan=``, :func:`compensate`'s ``poses``), and
-the robots and measurements of a compensation check (``validate(None, ...)``) or a ``truth=``
-made from text; errors and reports name them by their names (and rows).
+command takes its robot as loaded. Pose arrays given as a plan (``plan=`` of
+:func:`simulate` and :func:`identifiability`) or as :func:`compensate`'s targets go to the
+job in memory too, named ``poses`` and read with the checks of a pose list file (an error's
+``row`` is the row of the array). A ``truth=`` robot made from text, and the robots of a
+compensation check (``validate(None, ...)``, which reads no measurements: of ``data`` only
+the files are passed on), go as loaded. What still reaches a job as a file in a scratch
+directory: a robot or measurements made in memory given as an option other than these
+(the other options take paths); errors and reports name them by their names (and rows).
 """
 from __future__ import annotations
 
@@ -156,11 +160,13 @@ def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
 
 def _job(command: str, scratch: Scratch, options: Dict[str, Any],
          out: Optional[PathLike] = None, robot: Optional[Robot] = None,
-         data: Optional[List[Any]] = None, reference: Optional[Robot] = None) -> Dict[str, Any]:
+         data: Optional[List[Any]] = None, reference: Optional[Robot] = None,
+         poses: Optional[np.ndarray] = None, truth: Optional[Robot] = None) -> Dict[str, Any]:
     """Runs ``command`` as the workflow's job with ``options`` by name; its outputs are
-    committed to ``out`` when given (all or nothing). ``robot``, ``data`` and ``reference``
-    go to the job in memory, not as files. Trouble (the command's exit
-    code 1, outputs written) is a :class:`cpm.CpmWarning`."""
+    committed to ``out`` when given (all or nothing). ``robot``, ``data``, ``reference``,
+    ``truth`` and ``poses`` (a plan's or compensate's targets, an array ``(n, 6)``) go to the
+    job in memory, not as files. Trouble (the command's exit code 1, outputs written) is a
+    :class:`cpm.CpmWarning`."""
     text = _by_name(scratch, options)
     target = os.fspath(out) if out is not None else None
     arrays: set = set()
@@ -171,6 +177,11 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
             held["data"], arrays = _sources(robot, data)
     if reference is not None:
         held["reference"] = reference._h
+    if truth is not None:
+        held["truth"] = truth._h
+    if poses is not None:
+        held["poses"] = poses
+        arrays.add("poses")
     try:
         d = dict(_cpm.job(command, text, target, out is not None, **held))
     except InputError as e:
@@ -197,17 +208,55 @@ def _columns(text: str, names: Sequence[str]) -> np.ndarray:
         len(rows), len(names))
 
 
-def _poses_file(poses: Any, scratch: Scratch) -> str:
-    """A pose list file for ``poses``: a path, or an array ``(n, 6)`` (x, y, z mm; roll,
-    pitch, yaw deg)."""
+def _pose_list(poses: Any) -> Union[str, np.ndarray]:
+    """A pose list: the path of its file, or an array ``(n, 6)`` (x, y, z mm; roll, pitch,
+    yaw deg) that goes to the job in memory (named ``poses``, labelled from 1, read with the
+    checks of a pose list file; an error's ``row`` is the row of the array)."""
     if isinstance(poses, (str, os.PathLike)):
         return os.fspath(poses)
     a = np.asarray(poses, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != 6:
         raise UsageError(f"poses has shape {a.shape}, expected (n, 6)")
-    lines = ["pose,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg"]
-    lines += [",".join([str(k + 1)] + [repr(float(v)) for v in row]) for k, row in enumerate(a)]
-    return scratch.write("poses.csv", "\n".join(lines) + "\n", "poses", arrays=True)
+    return a
+
+
+def _held_truth(options: Dict[str, Any]) -> Optional[Robot]:
+    """A ``truth=`` robot that no file holds (made from text, or its file changed since),
+    taken out of ``options``: it goes to the job in memory (a robot read from its file goes
+    by its path)."""
+    t = options.get("truth")
+    if isinstance(t, Robot) and t._file() is None:
+        del options["truth"]
+        return t
+    return None
+
+
+def _files_of(items: Optional[List[Any]]) -> Optional[List[Any]]:
+    """The files among measurements (paths, and the sources read from files): what a
+    compensation check, which reads no measurements, keeps of them (an output may not
+    replace them)."""
+    if items is None:
+        return None
+    files: List[Any] = []
+    for item in items:
+        if isinstance(item, Measurements):
+            files += [s.path for s in item.sources if s.path is not None]
+        else:
+            files.append(item)
+    return files or None
+
+
+def _plan(options: Dict[str, Any]) -> Optional[np.ndarray]:
+    """A plan given as an array, taken out of ``options`` (it goes to the job in memory); a
+    plan file stays in them by its path."""
+    if options.get("plan") is None:
+        return None
+    plan = _pose_list(options["plan"])
+    if isinstance(plan, str):
+        options["plan"] = plan
+        return None
+    del options["plan"]
+    return plan
 
 
 def _iframe(page: str, height: int = 720) -> str:
@@ -486,10 +535,12 @@ def validate(robot: Optional[Union[Robot, PathLike]], reference: Union[Robot, Pa
     with Scratch() as scratch:
         m = None if data is None else _data(data, rob if rob is not None else ref)
         if rob is None:
-            # A compensation checked on a simulated machine: the reference by its file.
-            opts: Dict[str, Any] = dict(reference=ref, data=m)
+            # A compensation checked on a simulated machine: the reference and the truth
+            # as loaded; of the measurements (it reads none) only their files.
+            opts: Dict[str, Any] = dict(data=_files_of(m))
             opts.update(options)
-            d = _job("validate", scratch, opts, out)
+            truth = _held_truth(opts)
+            d = _job("validate", scratch, opts, out, reference=ref, truth=truth)
         else:
             d = _job("validate", scratch, dict(options), out, robot=rob, data=m, reference=ref)
         doc = scratch.named(json.loads(d["summary"]))
@@ -524,9 +575,12 @@ def compensate(robot: Union[Robot, PathLike], poses: Any, *, out: Optional[PathL
     file, or an array ``(n, 6)``: x, y, z mm; roll, pitch, yaw deg); options
     ``temperature_c``, ``from_home``."""
     r = _robot(robot)
+    targets = _pose_list(poses)
     with Scratch() as scratch:
-        d = _job("compensate", scratch, dict(poses=_poses_file(poses, scratch), **options), out,
-                 robot=r)
+        if isinstance(targets, str):
+            d = _job("compensate", scratch, dict(poses=targets, **options), out, robot=r)
+        else:
+            d = _job("compensate", scratch, dict(options), out, robot=r, poses=targets)
     return CompensationResult(d["text"], json.loads(d["summary"]), r.num_links)
 
 
@@ -579,10 +633,10 @@ def simulate(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     ``plan`` may be a pose array ``(n, 6)``. Returns the measurements (read back against
     ``robot``); with ``out`` the file is written there."""
     r = _robot(robot)
+    plan = _plan(options)
+    truth = _held_truth(options)
     with Scratch() as scratch:
-        if "plan" in options and options["plan"] is not None:
-            options["plan"] = _poses_file(options["plan"], scratch)
-        d = _job("simulate", scratch, dict(options), out, robot=r)
+        d = _job("simulate", scratch, dict(options), out, robot=r, poses=plan, truth=truth)
     if out is not None:
         from ._data import read_measurements
 
@@ -598,11 +652,10 @@ def identifiability(robot: Union[Robot, PathLike], data: Any = None,
     Cramér-Rao bounds, for measurements (``data``) or a plan (``plan``, ``circle``,
     ``random``)."""
     r = _robot(robot)
+    plan = _plan(options)
     with Scratch() as scratch:
         m = None if data is None else _data(data, r)
-        if options.get("plan") is not None:
-            options["plan"] = _poses_file(options["plan"], scratch)
-        d = _job("identifiability", scratch, dict(options), robot=r, data=m)
+        d = _job("identifiability", scratch, dict(options), robot=r, data=m, poses=plan)
         return scratch.named(json.loads(d["summary"]))
 
 

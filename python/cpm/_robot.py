@@ -138,9 +138,8 @@ class Robot:
         """The whole description as a dict (every table and key)."""
         return json.loads(self._h.description_json())
 
-    def _cli_path(self, scratch: "Scratch") -> str:
-        """A file holding this description for a command: the file it was read from when
-        that still holds the same text, else a copy in the scratch directory."""
+    def _file(self) -> Optional[str]:
+        """The file it was read from when that still holds the same text, else None."""
         p = self.path
         if p is not None:
             try:
@@ -149,6 +148,14 @@ class Robot:
                     return os.fspath(p)
             except OSError:
                 pass
+        return None
+
+    def _cli_path(self, scratch: "Scratch") -> str:
+        """A file holding this description for a command: the file it was read from when
+        that still holds the same text, else a copy in the scratch directory."""
+        p = self._file()
+        if p is not None:
+            return p
         base = Path(self.file).name or "robot.toml"
         if not base.endswith(".toml"):
             base += ".toml"

@@ -129,3 +129,92 @@ def test_the_cpm_module_runs_the_command(in_root, tmp_path, capfd):
     assert _cpm.main(["cpm", "compensate", "--robot", HEX, "--nosuch"]) == 2
     assert _cpm.main(["cpm", "compensate", "--robot", "nosuch.toml", "--poses",
                       "examples/targets.csv"]) == 4
+
+
+def _pose_csv(path, poses):
+    """A pose list file of ``poses`` (labelled from 1, numbers exact)."""
+    lines = ["pose,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg"]
+    lines += [",".join([str(k + 1)] + [repr(float(v)) for v in row])
+              for k, row in enumerate(poses)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_pose_arrays_go_to_the_jobs_in_memory(in_root, tmp_path, monkeypatch):
+    """Issue 36: a plan (simulate, identifiability) and compensate's targets given as arrays
+    reach the job in memory (no scratch file is written) and give what their file gives."""
+    from cpm import _robot
+
+    poses = cpm.simulate(HEX, random=8, truth=TRUTH, noise="none", seed=2).poses
+    f = _pose_csv(tmp_path / "plan.csv", poses)
+    text_robot = cpm.Robot.from_text(open(HEX).read(), "hexapod from text")
+    on_file = (cpm.simulate(HEX, plan=f, truth=TRUTH, noise="gaussian:1", seed=3),
+               cpm.identifiability(HEX, plan=f),
+               cpm.compensate(TRUTH, f, from_home=True))
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_robot.Scratch, "write", no_scratch)
+        s = cpm.simulate(text_robot, plan=poses, truth=TRUTH, noise="gaussian:1", seed=3)
+        i = cpm.identifiability(text_robot, plan=poses)
+        c = cpm.compensate(TRUTH, poses, from_home=True)
+        c_robot = cpm.compensate(cpm.Robot.from_toml(TRUTH), poses, from_home=True)
+    np.testing.assert_array_equal(s.lengths_mm, on_file[0].lengths_mm)
+    np.testing.assert_array_equal(s.poses, on_file[0].poses)
+    assert i == on_file[1]
+    assert c.csv == on_file[2].csv.replace(str(f), "poses")
+    assert c_robot.csv == c.csv
+    np.testing.assert_array_equal(c.readings, on_file[2].readings)
+
+
+def test_a_bad_pose_array_names_its_row(in_root, tmp_path):
+    """A bad pose of a plan or of the targets given as an array is the error of its file,
+    named ``poses``, with the row of the array."""
+    poses = cpm.simulate(HEX, random=5, truth=TRUTH, noise="none", seed=2).poses
+    poses[3, 4] = 0.5 * np.pi * 1e3  # an angle out of range
+    f = _pose_csv(tmp_path / "bad.csv", poses)
+    with pytest.raises(cpm.InputError) as on_file:
+        cpm.compensate(TRUTH, f)
+    for run in (lambda: cpm.compensate(TRUTH, poses),
+                lambda: cpm.simulate(HEX, plan=poses, truth=TRUTH),
+                lambda: cpm.identifiability(HEX, plan=poses)):
+        with pytest.raises(cpm.InputError) as e:
+            run()
+        assert (e.value.file, e.value.line, e.value.row, e.value.field) == \
+            ("poses", 5, 3, "pitch_deg")
+        assert str(e.value) == str(on_file.value).replace(str(f), "poses")
+    with pytest.raises(cpm.UsageError, match="exactly one of"):
+        cpm.simulate(HEX, plan=poses[:2], circle=True)
+
+
+def test_robots_from_text_go_to_simulate_and_the_compensation_check_in_memory(
+        in_root, tmp_path, monkeypatch):
+    """Issue 36: a ``truth=`` made from text (simulate, a compensation check) and the
+    reference of a compensation check reach the job as loaded (no scratch file is written),
+    with the results of their files, named by their names."""
+    from cpm import _robot
+
+    truth = cpm.Robot.from_text(open(TRUTH).read(), "truth from text")
+    ref = cpm.Robot.from_text(open(HEX).read(), "reference from text")
+    commands = tmp_path / "commands.csv"
+    cpm.compensate(TRUTH, "examples/targets.csv", out=commands)
+    on_file = (cpm.simulate(HEX, random=6, truth=TRUTH, noise="gaussian:1", seed=3),
+               cpm.validate(None, HEX, commands=commands, truth=TRUTH))
+    fit = cpm.simulate(HEX, random=6, truth=TRUTH, noise="none", seed=1)
+
+    def no_scratch(*args, **kwargs):
+        raise AssertionError("a scratch file was written")
+
+    with monkeypatch.context() as mp:
+        mp.setattr(_robot.Scratch, "write", no_scratch)
+        s = cpm.simulate(HEX, random=6, truth=truth, noise="gaussian:1", seed=3)
+        v = cpm.validate(None, ref, fit, commands=commands, truth=truth)
+    np.testing.assert_array_equal(s.lengths_mm, on_file[0].lengths_mm)
+    assert v.summary["truth"] == "truth from text"
+    assert v.summary["reference_robot"] == "reference from text"
+    for key in ("compensated", "reference", "targets", "simulated"):
+        assert v.summary[key] == on_file[1].summary[key], key
+    with pytest.raises(cpm.UsageError, match="exclude each other"):
+        cpm.simulate(HEX, random=3, truth=truth, paper_table2=True)

@@ -367,3 +367,24 @@ def test_validate_takes_robots_and_arrays_in_memory(hexapod, tmp_path, monkeypat
     assert in_memory.summary["data"] == ["later readings"]
     assert "residuals.csv" in in_memory.files and "later readings" in in_memory.text(
         "residuals.csv")
+
+
+def test_a_label_longer_than_a_line_is_refused_as_in_a_file(hexapod, readings):
+    """Issue 36: a pose label (or a sensor name) that makes its row longer than the CSV
+    reader takes (1 MiB) is refused from arrays as in a file, naming its row."""
+    poses, sensors, lengths, labels = _arrays(readings)
+    labels = list(labels)
+    labels[4] = "x" * (1 << 20)
+    with pytest.raises(cpm.InputError) as e:
+        cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels)
+    assert e.value.row == 4 and e.value.line == 6
+    assert "the line is longer than 1048576 bytes" in str(e.value)
+    sensors = list(sensors)
+    sensors[2] = "s" * (1 << 20)
+    with pytest.raises(cpm.InputError, match="line is longer") as e:
+        cpm.gauge_readings(hexapod, poses, sensors, lengths)
+    assert e.value.row == 2
+    with pytest.raises(cpm.InputError, match="line is longer") as e:
+        cpm.tracker_measurements(hexapod, np.zeros((2, 6)), np.tile([0, 0, 300, 1, 0, 0, 0],
+                                 (2, 1)), pose_labels=["a", "b" * (1 << 20)])
+    assert e.value.row == 1

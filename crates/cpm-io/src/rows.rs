@@ -15,6 +15,14 @@
 //! [`TrackerRows::to_csv`], in the same way (unregistered: the fit side registers tracker
 //! sets, `cpm_workflow::ingest`).
 //!
+//! [`PoseRows`] holds the columns of a pose list (a plan, compensation targets), one row per
+//! pose; [`read_pose_rows`] gives what [`read_pose_list`](crate::read_pose_list) gives for the
+//! text of [`PoseRows::to_csv`], in the same way.
+//!
+//! A row whose line in that text would be longer than the CSV reader takes
+//! ([`MAX_LINE_BYTES`](crate::table::MAX_LINE_BYTES): a label or a sensor name of a megabyte)
+//! is refused as that reader refuses the line.
+//!
 //! ```
 //! use cpm_io::rows::{read_gauge_rows, GaugeRows};
 //! use cpm_io::{ReadOptions, Robot};
@@ -40,9 +48,9 @@ use cpm_geometry::Pose;
 use crate::campaign::{
     check_angle_units, check_pose_value, exclude_poses, pose_from_raw, reading_name, robot_checks,
     same_pose_as_before, too_many_rows_at, tracker_link_columns, unknown_sensor, DataFile,
-    Orientation, RawPose, ReadOptions, TrackerRead, TrackerRow,
+    Orientation, PoseRow, RawPose, ReadOptions, TrackerRead, TrackerRow, MAX_ROWS,
 };
-use crate::table::{field, parse_number};
+use crate::table::{field, line_too_long, parse_number, MAX_LINE_BYTES};
 use crate::{InputError, Robot};
 
 /// The number of rows of rows given as values (their labels': the reader, named, checks the
@@ -115,20 +123,25 @@ impl GaugeRows {
         let mut s = String::from("pose,sensor,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg,length_mm");
         end_header(&mut s, self.time_s.is_some());
         for k in 0..self.len() {
-            let label = self.pose_labels.get(k).map_or("", String::as_str);
-            let sensor = self.sensors.get(k).map_or("", String::as_str);
-            let _ = write!(s, "{},{}", field(label), field(sensor));
-            for v in self.poses.get(k).copied().unwrap_or([f64::NAN; 6]) {
-                let _ = write!(s, ",{v}");
-            }
-            let _ = write!(
-                s,
-                ",{}",
-                self.lengths_mm.get(k).copied().unwrap_or(f64::NAN)
-            );
-            end_row(&mut s, self.time_s.as_ref(), k, self.simulated);
+            self.write_row(&mut s, k);
         }
         s
+    }
+
+    /// Row `k` of [`to_csv`](Self::to_csv), with its line break.
+    fn write_row(&self, s: &mut String, k: usize) {
+        let label = self.pose_labels.get(k).map_or("", String::as_str);
+        let sensor = self.sensors.get(k).map_or("", String::as_str);
+        let _ = write!(s, "{},{}", field(label), field(sensor));
+        for v in self.poses.get(k).copied().unwrap_or([f64::NAN; 6]) {
+            let _ = write!(s, ",{v}");
+        }
+        let _ = write!(
+            s,
+            ",{}",
+            self.lengths_mm.get(k).copied().unwrap_or(f64::NAN)
+        );
+        end_row(s, self.time_s.as_ref(), k, self.simulated);
     }
 
     /// Checks that every column has a value per row.
@@ -249,6 +262,37 @@ fn one_line(file: &str, line: usize, texts: &[(&str, &str)]) -> Result<(), Input
     }
 }
 
+/// The most bytes a number takes in the CSV of rows (`{v}` of an `f64` writes every digit:
+/// a subnormal number takes some 330).
+const NUMBER_BYTES: usize = 400;
+
+/// Refuses a row whose line in its CSV is longer than the CSV reader takes
+/// ([`MAX_LINE_BYTES`], its line break included), as that reader refuses the line: `texts`
+/// are the row's texts, `numbers` how many numbers it has, `row` writes the row as its CSV
+/// does (only when the texts are long enough for the line to be too long). A text with a
+/// line break ends the line there.
+fn fits_line(
+    file: &str,
+    line: usize,
+    texts: &[&str],
+    numbers: usize,
+    row: impl FnOnce(&mut String),
+) -> Result<(), InputError> {
+    // A text is at most doubled by quoting, plus its quotes and comma; the rest of the line
+    // (the `simulated` column) is short.
+    let most = texts.iter().map(|t| 2 * t.len() + 3).sum::<usize>() + numbers * NUMBER_BYTES + 16;
+    if most < MAX_LINE_BYTES {
+        return Ok(());
+    }
+    let mut text = String::new();
+    row(&mut text);
+    let first = text.find('\n').map_or(text.len(), |end| end + 1);
+    if first > MAX_LINE_BYTES {
+        return Err(line_too_long(file, line));
+    }
+    Ok(())
+}
+
 /// A required text column: non-empty.
 fn required<'a>(file: &str, line: usize, name: &str, v: &'a str) -> Result<&'a str, InputError> {
     if v.is_empty() {
@@ -287,6 +331,9 @@ pub fn read_gauge_rows(
                 ("pose", &*rows.pose_labels[k]),
                 ("sensor", &*rows.sensors[k]),
             ];
+            fits_line(file, line, &[texts[0].1, texts[1].1], 8, |s| {
+                rows.write_row(s, k)
+            })?;
             one_line(file, line, &texts)?;
             if reading_lines.len() >= options.max_rows {
                 return Err(too_many_rows_at(file, line, options.max_rows));
@@ -506,20 +553,25 @@ impl TrackerRows {
             let _ = write!(s, ",{c}");
         }
         end_header(&mut s, self.time_s.is_some());
-        let missing = [f64::NAN; 7];
         for k in 0..self.len() {
-            s.push_str(&field(&self.pose_labels[k]));
-            let readings = self.row_readings(k);
-            for c in 0..self.links {
-                let _ = write!(s, ",{}", readings.get(c).copied().unwrap_or(f64::NAN));
-            }
-            let pose = self.poses.row(k).unwrap_or(&missing);
-            for v in &pose[..self.poses.columns().len()] {
-                let _ = write!(s, ",{v}");
-            }
-            end_row(&mut s, self.time_s.as_ref(), k, self.simulated);
+            self.write_row(&mut s, k);
         }
         s
+    }
+
+    /// Row `k` of [`to_csv`](Self::to_csv), with its line break.
+    fn write_row(&self, s: &mut String, k: usize) {
+        s.push_str(&field(&self.pose_labels[k]));
+        let readings = self.row_readings(k);
+        for c in 0..self.links {
+            let _ = write!(s, ",{}", readings.get(c).copied().unwrap_or(f64::NAN));
+        }
+        let missing = [f64::NAN; 7];
+        let pose = self.poses.row(k).unwrap_or(&missing);
+        for v in &pose[..self.poses.columns().len()] {
+            let _ = write!(s, ",{v}");
+        }
+        end_row(s, self.time_s.as_ref(), k, self.simulated);
     }
 
     /// Checks that every column has a value per row (and `links` link readings).
@@ -559,6 +611,10 @@ pub fn read_tracker_rows(
     let mut read = TrackerRead::new(rows.simulated);
     for k in 0..rows.len() {
         let line = row_line(k);
+        let numbers = rows.links + 8;
+        fits_line(file, line, &[&rows.pose_labels[k]], numbers, |s| {
+            rows.write_row(s, k)
+        })?;
         one_line(file, line, &[("pose", &rows.pose_labels[k])])?;
         read.check_more(file, line, options.max_rows)?;
         let label = required(file, line, "pose", &rows.pose_labels[k])?;
@@ -582,6 +638,97 @@ pub fn read_tracker_rows(
         read.push(robot, row, &raw, (time_s, None), rows.simulated);
     }
     read.finish(file, robot)
+}
+
+/// A list of poses as values, one row per pose: the columns of a pose list (`docs/formats.md`,
+/// "Pose lists": a plan, compensation targets) with the orientation as roll, pitch, yaw.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseRows {
+    /// The name that stands for the file in messages and outputs.
+    pub file: String,
+    /// Each row's pose label.
+    pub pose_labels: Vec<String>,
+    /// Each row's pose: x, y, z mm; roll, pitch, yaw deg (`R = Rz(yaw) Ry(pitch) Rx(roll)`).
+    pub poses: Vec<[f64; 6]>,
+}
+
+impl PoseRows {
+    /// The rows of `poses`, labelled by their numbers from 1 (as a pose list without a `pose`
+    /// column is).
+    pub fn new(file: impl Into<String>, poses: Vec<[f64; 6]>) -> PoseRows {
+        PoseRows {
+            file: file.into(),
+            pose_labels: (1..=poses.len()).map(|k| k.to_string()).collect(),
+            poses,
+        }
+    }
+
+    rows_by_label!("read_pose_rows");
+
+    /// The rows as the CSV of a pose list (header on line 1, row `k` on line `k + 2`), every
+    /// number in its shortest form that reads back to the same `f64`.
+    pub fn to_csv(&self) -> String {
+        let mut s = String::from("pose,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n");
+        for k in 0..self.len() {
+            self.write_row(&mut s, k);
+        }
+        s
+    }
+
+    /// Row `k` of [`to_csv`](Self::to_csv), with its line break.
+    fn write_row(&self, s: &mut String, k: usize) {
+        s.push_str(&field(&self.pose_labels[k]));
+        for v in self.poses.get(k).copied().unwrap_or([f64::NAN; 6]) {
+            let _ = write!(s, ",{v}");
+        }
+        s.push('\n');
+    }
+}
+
+/// Reads a list of poses given as values: what [`read_pose_list`](crate::read_pose_list)
+/// gives for the text of [`PoseRows::to_csv`] (the same rows to the last bit, the same first
+/// error: row `k` is line `k + 2`), read directly. Like that reader it checks the numbers
+/// (finite, positions within 1 km, angles within 360 degrees), the labels (non-empty, on one
+/// line) and the angle units (radians refused); the caller checks the positions against the
+/// robot ([`check_pose_list_units`](crate::campaign::check_pose_list_units)).
+pub fn read_pose_rows(rows: &PoseRows) -> Result<Vec<PoseRow>, InputError> {
+    let file = rows.file.as_str();
+    check_columns(
+        file,
+        rows.len(),
+        &[("x_mm .. yaw_deg", rows.poses.len(), 1)],
+    )?;
+    let mut out = Vec::with_capacity(rows.len());
+    let mut angles = Vec::new();
+    for (k, label) in rows.pose_labels.iter().enumerate() {
+        let line = row_line(k);
+        fits_line(file, line, &[label], 6, |s| rows.write_row(s, k))?;
+        one_line(file, line, &[("pose", label)])?;
+        if out.len() >= MAX_ROWS {
+            return Err(too_many_rows_at(file, line, MAX_ROWS));
+        }
+        let label = required(file, line, "pose", label)?;
+        let v = rows.poses[k];
+        let raw = raw_pose(file, line, &POSE_COLUMNS, &v)?;
+        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+            angles.push((line, *name, *v));
+        }
+        out.push(PoseRow {
+            line,
+            label: label.to_string(),
+            pose: pose_from_raw(file, line, Orientation::Rpy, &raw)?,
+            time_s: None,
+            temperature_c: None,
+        });
+    }
+    if out.is_empty() {
+        return Err(InputError::file(
+            file,
+            "no poses: the file has a header but no rows",
+        ));
+    }
+    check_angle_units(file, &angles)?;
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -619,24 +766,29 @@ mod tests {
         [5.0, 5.0, 20.0, 0.5, 4.0, 1.0],
     ];
 
+    /// The pose `o` (x, y, z mm; roll, pitch, yaw deg) away from the robot's home.
+    fn about_home(robot: &Robot, o: [f64; 6]) -> [f64; 6] {
+        let home = robot.table.home;
+        let [r, p, y] = home.rpy_deg();
+        let x = home.position_mm;
+        [
+            x.x + o[0],
+            x.y + o[1],
+            x.z + o[2],
+            r + o[3],
+            p + o[4],
+            y + o[5],
+        ]
+    }
+
     /// Rows of the example hexapod with faults: the reading from values and the CSV reader
     /// of their text agree on every campaign and every first error.
     fn rows_of(draw: &[(usize, usize, usize, f64, u8)], times: bool) -> GaugeRows {
         let robot = robot();
-        let home = robot.table.home;
-        let [r0, p0, y0] = home.rpy_deg();
         let mut rows = GaugeRows::new("arrays", vec![], vec![], vec![], vec![]);
         let mut t = Vec::new();
         for (k, &(label, sensor, offset, noise, fault)) in draw.iter().enumerate() {
-            let o = OFFSETS[(offset + label) % 4];
-            let mut pose = [
-                home.position_mm.x + o[0],
-                home.position_mm.y + o[1],
-                home.position_mm.z + o[2],
-                r0 + o[3],
-                p0 + o[4],
-                y0 + o[5],
-            ];
+            let mut pose = about_home(&robot, OFFSETS[(offset + label) % 4]);
             let mut sensor = robot.table.sensors[sensor].name.clone();
             let p =
                 Pose::from_xyz_rpy_deg([pose[0], pose[1], pose[2]], [pose[3], pose[4], pose[5]]);
@@ -660,6 +812,8 @@ mod tests {
                 11 => pose[1] = -0.0,
                 12 => label.insert(0, '\n'),
                 13 => sensor.push_str("\nx"),
+                14 => label = long_text(k),
+                15 => sensor = long_text(k),
                 _ => {}
             }
             rows.pose_labels.push(label);
@@ -713,6 +867,154 @@ mod tests {
             ));
             prop_assert_eq!(direct, csv, "text:\n{}", text);
         }
+    }
+
+    /// A text near the CSV reader's line limit: its row's line a little shorter or longer
+    /// than [`MAX_LINE_BYTES`] (by the row's numbers); some with a line break late in it.
+    fn long_text(k: usize) -> String {
+        let mut t = "x".repeat(MAX_LINE_BYTES - 40 - 13 * (k % 16));
+        if k.is_multiple_of(5) {
+            t.insert(t.len() - 3, '\n');
+        }
+        t
+    }
+
+    /// One pose row: a label of a few (some awkward for CSV), an offset from home, and a
+    /// fault drawn now and then.
+    fn pose_row() -> impl Strategy<Value = (usize, usize, u8)> {
+        (0..7usize, 0..4usize, 0..60u8)
+    }
+
+    /// Pose rows about the example hexapod's home with faults; `radians` gives every angle in
+    /// radians (refused for all of them).
+    fn pose_rows_of(draw: &[(usize, usize, u8)], radians: bool) -> PoseRows {
+        let robot = robot();
+        let mut rows = PoseRows::new("poses", vec![]);
+        for (k, &(label, offset, fault)) in draw.iter().enumerate() {
+            let mut pose = about_home(&robot, OFFSETS[offset]);
+            if radians {
+                pose[3..]
+                    .iter_mut()
+                    .for_each(|a| *a = a.to_radians() / 10.0);
+            }
+            let mut label = format!("{}{}", LABELS[label], k % 3);
+            match fault {
+                0 => pose[k % 6] = f64::NAN,
+                1 => pose[k % 6] = f64::NEG_INFINITY,
+                2 => pose[3 + k % 3] = 400.0,
+                3 => pose[k % 3] = 2e6,
+                4 => label.clear(),
+                5 => label.insert(1, '\n'),
+                6 => pose[1] = -0.0,
+                7 => label = long_text(k),
+                8 => pose[k % 6] = 5e-324,
+                _ => {}
+            }
+            rows.pose_labels.push(label);
+            rows.poses.push(pose);
+        }
+        rows
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        #[test]
+        fn pose_rows_read_as_their_csv_reads(
+            draw in proptest::collection::vec(pose_row(), 0..30),
+            radians in prop_oneof![4 => Just(false), 1 => Just(true)],
+        ) {
+            let rows = pose_rows_of(&draw, radians);
+            let direct = format!("{:?}", read_pose_rows(&rows));
+            let text = rows.to_csv();
+            let csv = format!("{:?}", crate::read_pose_list(&text, "poses"));
+            prop_assert_eq!(direct, csv, "text:\n{}", text);
+        }
+    }
+
+    /// A label (or sensor name) that makes its row's line longer than the CSV reader takes is
+    /// refused as that reader refuses the line, naming the line; one byte less is read.
+    #[test]
+    fn a_row_longer_than_a_line_is_refused_as_its_csv_is() {
+        let robot = robot();
+        let options = ReadOptions::default();
+        let home = robot.table.home;
+        let [r, p, y] = home.rpy_deg();
+        let x = home.position_mm;
+        let pose = [x.x, x.y, x.z, r, p, y];
+        let length = robot.table.sensors[0].length_mm(&home);
+        let sensor = robot.table.sensors[0].name.clone();
+        let tracker_pose = TrackerPoses::Rpy(vec![pose; 2]);
+        for over in [0, 1] {
+            // Rows "a" then the long one; the long row's line with its break is
+            // MAX_LINE_BYTES + over bytes (the most the reader takes, and one more).
+            let mut poses = PoseRows::new("poses", vec![pose; 2]);
+            let short = poses.to_csv().lines().nth(2).unwrap().len() - 1;
+            poses.pose_labels[1] = "y".repeat(MAX_LINE_BYTES - 1 + over - short);
+            let direct = read_pose_rows(&poses);
+            let csv = crate::read_pose_list(&poses.to_csv(), "poses");
+            assert_eq!(format!("{direct:?}"), format!("{csv:?}"));
+            let e = direct.err().map(|e| e.to_string());
+            assert_eq!(
+                e.is_some(),
+                over == 1,
+                "{:?}",
+                e.map(|e| e[..80].to_string())
+            );
+            if over == 1 {
+                assert!(e.unwrap().starts_with("poses:3: the line is longer than"));
+            }
+            let mut gauge = GaugeRows::new(
+                "log",
+                vec!["a".into(), "b".into()],
+                vec![sensor.clone(); 2],
+                vec![pose; 2],
+                vec![length; 2],
+            );
+            // The line less its sensor name, then the name made long.
+            let short = gauge.to_csv().lines().nth(2).unwrap().len() - sensor.len();
+            let more = MAX_LINE_BYTES - 1 + over - short - sensor.len();
+            gauge.sensors[1] = format!("{sensor}{}", "z".repeat(more));
+            let direct = outcome(read_gauge_rows(&gauge, &robot, &options));
+            let csv = outcome(crate::read_readings(
+                &gauge.to_csv(),
+                "log",
+                &robot,
+                &options,
+            ));
+            assert_eq!(direct, csv);
+            assert_eq!(direct.contains("log:3: the line is longer than"), over == 1);
+            let links = robot.num_links();
+            let readings = vec![0.0; 2 * links];
+            let labels = vec!["a".into(), "b".into()];
+            let mut tracker = TrackerRows::new("t", labels, links, readings, tracker_pose.clone());
+            let short = tracker.to_csv().lines().nth(2).unwrap().len() - 1;
+            tracker.pose_labels[1] = "w".repeat(MAX_LINE_BYTES - 1 + over - short);
+            let direct = outcome(read_tracker_rows(&tracker, &robot, &options));
+            let text = tracker.to_csv();
+            let csv = outcome(crate::campaign::read_pose_measurements(
+                &text, "t", &robot, &options,
+            ));
+            assert_eq!(direct, csv);
+            assert_eq!(direct.contains("t:3: the line is longer than"), over == 1);
+        }
+    }
+
+    /// Pose rows: the text is a pose list; columns of different lengths are refused.
+    #[test]
+    fn pose_rows_csv_and_columns() {
+        let mut rows = PoseRows::new("targets", vec![[1.5, -0.0, 3.0, 0.0, 10.0, 0.25]]);
+        assert_eq!(
+            rows.to_csv(),
+            "pose,x_mm,y_mm,z_mm,roll_deg,pitch_deg,yaw_deg\n1,1.5,-0,3,0,10,0.25\n"
+        );
+        let read = read_pose_rows(&rows).unwrap();
+        assert_eq!((read[0].line, read[0].label.as_str()), (2, "1"));
+        rows.pose_labels.push("2".into());
+        let e = read_pose_rows(&rows).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "targets: 1 values of x_mm .. yaw_deg for 2 pose labels: every row needs one"
+        );
     }
 
     /// Columns of different lengths are refused, naming the column.
@@ -808,6 +1110,7 @@ mod tests {
                 9 => pq[3..].iter_mut().for_each(|v| *v = -*v),
                 10 => pq[3..].iter_mut().for_each(|v| *v *= 1.0005),
                 11 => label.push('\n'),
+                12 => label = long_text(k),
                 _ => {}
             }
             labels.push(label);

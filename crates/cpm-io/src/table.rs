@@ -18,6 +18,16 @@ pub const SIMULATED_MARK: &str = "# simulated by cpm";
 /// The longest line a CSV file may have, bytes (1 MiB): longer means it is not a table.
 pub const MAX_LINE_BYTES: usize = 1 << 20;
 
+/// The error of a line longer than [`MAX_LINE_BYTES`] (with its line break), on `line` of
+/// `file`.
+pub(crate) fn line_too_long(file: &str, line: usize) -> InputError {
+    InputError::line(
+        file,
+        line,
+        format!("the line is longer than {MAX_LINE_BYTES} bytes: this is not a CSV table of cpm"),
+    )
+}
+
 /// What a file holds, told from its header row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FileKind {
@@ -379,13 +389,7 @@ impl<R: Read> Lines<R> {
             return Ok(false);
         }
         if self.buf.len() > MAX_LINE_BYTES {
-            return Err(InputError::line(
-                &header.file,
-                self.line + 1,
-                format!(
-                    "the line is longer than {MAX_LINE_BYTES} bytes: this is not a CSV table of cpm"
-                ),
-            ));
+            return Err(line_too_long(&header.file, self.line + 1));
         }
         self.line += 1;
         while matches!(self.buf.last(), Some(b'\n' | b'\r')) {

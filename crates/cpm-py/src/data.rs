@@ -242,6 +242,24 @@ pub fn read_text<'py>(
     with_handle(py, f, (options, registration), given, robot)
 }
 
+/// A list of poses given as an array `(n, 6)` (x, y, z mm; roll, pitch, yaw deg), labelled
+/// from 1, named `name` (read by the job with the checks of a pose list file:
+/// [`cpm_io::rows::read_pose_rows`], row `k` on line `k + 2`).
+pub fn pose_rows(
+    py: Python<'_>,
+    poses: PyReadonlyArray2<'_, f64>,
+    name: &str,
+) -> PyResult<cpm_io::rows::PoseRows> {
+    let poses = poses.as_array();
+    check_shape(py, "poses", poses.shape(), poses.shape()[0], Some(6))?;
+    let values = poses
+        .rows()
+        .into_iter()
+        .map(|r| std::array::from_fn(|c| r[c]))
+        .collect();
+    Ok(cpm_io::rows::PoseRows::new(name, values))
+}
+
 /// Checks that an array has `n` rows (and `cols` columns); a usage error naming it otherwise.
 fn check_shape(
     py: Python<'_>,

@@ -126,11 +126,15 @@ fn write_one(
 /// robot, the data and the other files), `out` where the outputs go (committed there when
 /// `commit`, else only staged). The jobs also take the robot as loaded (for their `robot`
 /// option), `validate` its reference too (for `reference`), and `refine`, `identifiability`
-/// and `validate` the measurements in memory (read, or paths) for their `data`.
+/// and `validate` the measurements in memory (read, or paths) for their `data`; `simulate`
+/// and `identifiability` a plan's poses (`poses`, an array `(n, 6)`: x, y, z mm; roll,
+/// pitch, yaw deg; named "poses", row `k` on line `k + 2`) for their `plan`, `compensate`
+/// its targets for its `poses`; `simulate` and `validate` (a compensation check) the true
+/// machine as loaded (`truth`) for their `truth`.
 /// Returns a dict: `summary` (what the command prints with `--json`), `trouble`, `files`
 /// (name -> bytes), `text` (the single-file output), `ini`, `written`.
 #[pyfunction]
-#[pyo3(signature = (command, options, out=None, commit=false, robot=None, data=None, reference=None))]
+#[pyo3(signature = (command, options, out=None, commit=false, robot=None, data=None, reference=None, poses=None, truth=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn job<'py>(
     py: Python<'py>,
@@ -141,9 +145,15 @@ pub fn job<'py>(
     robot: Option<&crate::robot::PyRobot>,
     data: Option<Vec<Bound<'py, PyAny>>>,
     reference: Option<&crate::robot::PyRobot>,
+    poses: Option<numpy::PyReadonlyArray2<'py, f64>>,
+    truth: Option<&crate::robot::PyRobot>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let commit = commit && out.is_some();
     let mut held = InMemory::none();
+    held.truth = truth.map(|r| r.robot.clone());
+    if let Some(p) = poses {
+        held.poses = Some(Arc::new(crate::data::pose_rows(py, p, "poses")?));
+    }
     let reference_path = reference.and_then(|r| r.path.clone());
     held.reference = reference.map(|r| r.robot.clone());
     // Paths of inputs an output may not replace (the robot's file, when it has one).
@@ -271,7 +281,7 @@ fn run_validate(
 ) -> anyhow::Result<Ran> {
     o.validate()?;
     let (summary, set) = if o.commands.is_some() {
-        let c = validate::check_compensation(o, progress)?;
+        let c = validate::check_compensation_in(o, held, progress)?;
         (c.report.to_json()?, c.set)
     } else {
         let v = validate::validate_in(o, held, progress)?;

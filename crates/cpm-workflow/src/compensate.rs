@@ -175,8 +175,9 @@ pub fn compensate(
     compensate_in(options, crate::sources::InMemory::none(), progress)
 }
 
-/// [`compensate`] with the robot held in memory (as loaded: see
-/// [`InMemory`](crate::sources::InMemory)) in place of the description the options name.
+/// [`compensate`] with the robot and the targets held in memory (the robot as loaded, the
+/// targets as values: see [`InMemory`](crate::sources::InMemory)) in place of the files the
+/// options name.
 pub fn compensate_in(
     options: &CompensateOptions,
     mut held: crate::sources::InMemory,
@@ -186,8 +187,7 @@ pub fn compensate_in(
     check_cancelled(progress)?;
     progress.stage("reading the robot description");
     let robot = held.robot_or_load(&options.robot, progress)?;
-    let file = options.poses.display().to_string();
-    let targets = io::read_pose_list_file(&options.poses)?;
+    let (targets, file) = crate::sources::pose_list(&options.poses, held.poses.as_deref())?;
     io::campaign::check_pose_list_units(&targets, &file, &robot)?;
     progress.stage(&format!("computing commands for {} targets", targets.len()));
     let ratio = ReadOptions::default().max_condition_ratio;

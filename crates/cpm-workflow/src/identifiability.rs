@@ -78,19 +78,20 @@ impl IdentifiabilityOptions {
     /// Checks what needs no file (usage errors): the rank threshold, one source of poses
     /// (measurement files or a plan, `sensors` with a plan only), the noise.
     pub fn validate(&self) -> anyhow::Result<()> {
-        self.check_rank_and_source(!self.data.is_empty())?;
+        self.check_rank_and_source(!self.data.is_empty(), false)?;
         if let Some(s) = self.sigma_um.filter(|s| !(s.is_finite() && *s > 0.0)) {
             return Err(usage_error(format!("--sigma-um must be > 0, got {s}")));
         }
         Ok(())
     }
 
-    /// The checks the job makes once the robot is read (in the order the command makes them).
-    fn check_rank_and_source(&self, has_data: bool) -> anyhow::Result<()> {
+    /// The checks the job makes once the robot is read (in the order the command makes them);
+    /// `held_plan`: the plan's poses are held in memory (a plan given).
+    fn check_rank_and_source(&self, has_data: bool, held_plan: bool) -> anyhow::Result<()> {
         if !(self.rank_rtol > 0.0 && self.rank_rtol < 1.0) {
             return Err(usage_error("--rank-rtol must be in (0, 1)"));
         }
-        match (!has_data, self.plan.given()) {
+        match (!has_data, self.plan.given() || held_plan) {
             (false, false) if !self.plan.sensors.is_empty() => {
                 Err(usage_error("--sensors applies to a plan, not to --data"))
             }
@@ -150,7 +151,7 @@ pub fn identifiability_in(
     let model = robot.model(&effects);
     let sources = held.sources_or(&options.data);
     let from_data = !sources.is_empty();
-    options.check_rank_and_source(from_data)?;
+    options.check_rank_and_source(from_data, held.poses.is_some())?;
     let (campaign, source) = if from_data {
         progress.stage("reading the measurements");
         let read = crate::load::read_options(&model);
@@ -161,7 +162,7 @@ pub fn identifiability_in(
         (merged.campaign, names.join(", "))
     } else {
         progress.stage("building the plan");
-        let spec = crate::plan::build_plan(&options.plan, &robot, true)?;
+        let spec = crate::plan::build_plan_in(&options.plan, held.poses.as_deref(), &robot, true)?;
         (spec.skeleton(), "plan".to_string())
     };
     check_cancelled(progress)?;

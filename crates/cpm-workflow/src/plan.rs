@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use crate::calib::{campaign::circle, Plan};
 use crate::error::{input_error, usage_error};
+use crate::io::rows::PoseRows;
 use crate::io::{self, ReadOptions, Robot};
 
 /// Where the poses of a plan come from: exactly one of [`plan`](Self::plan),
@@ -126,7 +127,20 @@ pub fn build_plan(
     robot: &Robot,
     need_sensors: bool,
 ) -> anyhow::Result<PlanSpec> {
-    let given = [args.plan.is_some(), args.circle, args.random.is_some()]
+    build_plan_in(args, None, robot, need_sensors)
+}
+
+/// [`build_plan`] with the poses of the plan file held in memory (`poses`, read with the
+/// file's checks: [`crate::sources::pose_list`]) in place of the file `args.plan` names; the
+/// plan is then given by them.
+pub fn build_plan_in(
+    args: &PlanOptions,
+    poses: Option<&PoseRows>,
+    robot: &Robot,
+    need_sensors: bool,
+) -> anyhow::Result<PlanSpec> {
+    let from_list = args.plan.is_some() || poses.is_some();
+    let given = [from_list, args.circle, args.random.is_some()]
         .iter()
         .filter(|g| **g)
         .count();
@@ -152,9 +166,9 @@ pub fn build_plan(
             )));
         }
     }
-    if let Some(path) = &args.plan {
-        let file = path.display().to_string();
-        let rows = io::read_pose_list_file(path)?;
+    if from_list {
+        let path = args.plan.clone().unwrap_or_default();
+        let (rows, file) = crate::sources::pose_list(&path, poses)?;
         io::campaign::check_pose_list_units(&rows, &file, robot)?;
         for r in &rows {
             io::campaign::check_reachable(table, &r.pose, ratio, &file, r.line, &r.label)?;

@@ -417,9 +417,11 @@ fn truth_file(
     })
 }
 
-/// The true machine of `options` on `robot`, with the `declared` effects modelled.
+/// The true machine of `options` on `robot`, with the `declared` effects modelled; `held`:
+/// the truth description as loaded, in place of the file `options.truth` names.
 pub fn truth(
     options: &SimulateOptions,
+    held: Option<Robot>,
     robot: &Robot,
     declared: Vec<Effect>,
 ) -> anyhow::Result<Truth> {
@@ -450,8 +452,12 @@ pub fn truth(
         installation = InstallationErrors::paper_table2().to_vec_um();
         what = "the paper's Table 2".into();
     }
-    if let Some(path) = &options.truth {
-        let t = Robot::load(path)?;
+    let t = match (held, &options.truth) {
+        (Some(t), _) => Some(t),
+        (None, Some(path)) => Some(Robot::load(path)?),
+        (None, None) => None,
+    };
+    if let Some(t) = t {
         what = truth_file(
             robot,
             &t,
@@ -742,15 +748,16 @@ pub fn simulate(options: &SimulateOptions, progress: &dyn Progress) -> anyhow::R
     simulate_in(options, crate::sources::InMemory::none(), progress)
 }
 
-/// [`simulate`] with the robot held in memory (as loaded: see
-/// [`InMemory`](crate::sources::InMemory)) in place of the description the options name.
+/// [`simulate`] with the robot, the truth and the plan's poses held in memory (the robots as
+/// loaded, the poses as values: see [`InMemory`](crate::sources::InMemory)) in place of the files the
+/// options name.
 pub fn simulate_in(
     options: &SimulateOptions,
     mut held: crate::sources::InMemory,
     progress: &dyn Progress,
 ) -> anyhow::Result<Simulated> {
     options.check_out()?;
-    if options.paper_table2 && options.truth.is_some() {
+    if options.paper_table2 && (options.truth.is_some() || held.truth.is_some()) {
         return Err(usage_error("--truth and --paper-table2 exclude each other"));
     }
     check_cancelled(progress)?;
@@ -767,10 +774,11 @@ pub fn simulate_in(
     options.check_orientation_noise()?;
     options.parse_tracker_frame()?;
     options.parse_base_tilt()?;
-    let truth = truth(options, &robot, declared)?;
+    let truth = truth(options, held.truth.take(), &robot, declared)?;
     check_cancelled(progress)?;
     progress.stage("building the plan");
-    let spec = crate::plan::build_plan(&options.plan, &robot, options.measure == Measure::Lengths)?;
+    let lengths = options.measure == Measure::Lengths;
+    let spec = crate::plan::build_plan_in(&options.plan, held.poses.as_deref(), &robot, lengths)?;
     check_cancelled(progress)?;
     progress.stage(&format!("simulating {} poses", spec.plan.poses.len()));
     // Inclinometer noise is in urad.

@@ -1,13 +1,13 @@
 //! Measurements and robots a caller holds in memory for a job (the Python binding): the
 //! sources of a campaign ([`Source`]: files, measurements already read, text, values), read
 //! and registered as files are ([`read_sources`]), and what a job takes in place of the
-//! files its options name ([`InMemory`]). The jobs on a campaign in memory are
+//! files its options name ([`InMemory`]: with a list of poses as values, [`pose_list`]). The jobs on a campaign in memory are
 //! [`crate::memory`]'s and each job's `*_in` function.
 use std::path::PathBuf;
 use std::sync::Arc;
 
 use crate::ingest::RegistrationOptions;
-use crate::io::rows::{GaugeRows, TrackerRows};
+use crate::io::rows::{GaugeRows, PoseRows, TrackerRows};
 use crate::io::{self, DataFile, FileKind, Merged, ReadOptions, Robot};
 use crate::progress::Progress;
 
@@ -141,6 +141,12 @@ pub struct InMemory {
     pub data: Option<Vec<Source>>,
     /// `validate`'s reference robot as loaded (for its `reference` path).
     pub reference: Option<Robot>,
+    /// The true machine as loaded (for the `truth` path of `simulate` and of `validate`'s
+    /// compensation check).
+    pub truth: Option<Robot>,
+    /// A list of poses as values, for the pose list file the options name (a plan's `plan`,
+    /// `compensate`'s `poses`): read with the checks of that file ([`pose_list`]).
+    pub poses: Option<Arc<PoseRows>>,
 }
 
 impl InMemory {
@@ -151,7 +157,11 @@ impl InMemory {
 
     /// True when nothing is held.
     pub fn is_empty(&self) -> bool {
-        self.robot.is_none() && self.data.is_none() && self.reference.is_none()
+        self.robot.is_none()
+            && self.data.is_none()
+            && self.reference.is_none()
+            && self.truth.is_none()
+            && self.poses.is_none()
     }
 
     /// The robot held, else the one at `path` ([`load_robot`](crate::load::load_robot)).
@@ -171,6 +181,19 @@ impl InMemory {
         self.data
             .take()
             .unwrap_or_else(|| paths.iter().cloned().map(Source::Path).collect())
+    }
+}
+
+/// A list of poses: the rows held (`held`, read with the checks of a pose list file,
+/// [`read_pose_rows`](io::rows::read_pose_rows)), else the file at `path`; with the name that
+/// stands for it in messages and outputs.
+pub fn pose_list(
+    path: &std::path::Path,
+    held: Option<&PoseRows>,
+) -> Result<(Vec<io::PoseRow>, String), io::ReadError> {
+    match held {
+        Some(rows) => Ok((io::rows::read_pose_rows(rows)?, rows.file.clone())),
+        None => Ok((io::read_pose_list_file(path)?, path.display().to_string())),
     }
 }
 
@@ -232,4 +255,142 @@ pub fn read_sources(
         crate::gauges::check_readings(robot, &merged)?;
     }
     Ok(merged)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{compensate, identifiability, simulate, Silent};
+    use std::path::Path;
+
+    fn ex(f: &str) -> PathBuf {
+        PathBuf::from("../../examples").join(f)
+    }
+
+    /// The targets of the example as values (named "targets in memory"), and their CSV
+    /// written to a file in `dir`.
+    fn targets(dir: &str) -> (Arc<PoseRows>, PathBuf) {
+        let list = io::read_pose_list_file(&ex("targets.csv")).unwrap();
+        let poses = list
+            .iter()
+            .map(|r| {
+                let (p, a) = (r.pose.position_mm, r.pose.rpy_deg());
+                [p.x, p.y, p.z, a[0], a[1], a[2]]
+            })
+            .collect();
+        let mut rows = PoseRows::new("targets in memory", poses);
+        rows.pose_labels = list.iter().map(|r| r.label.clone()).collect();
+        let dir = std::env::temp_dir().join(format!("cpm-sources-{dir}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("targets.csv");
+        std::fs::write(&path, rows.to_csv()).unwrap();
+        (Arc::new(rows), path)
+    }
+
+    fn held(poses: &Arc<PoseRows>) -> InMemory {
+        InMemory {
+            poses: Some(poses.clone()),
+            ..InMemory::none()
+        }
+    }
+
+    /// Targets held in memory give the commands of their file (the file named by their name).
+    #[test]
+    fn compensation_targets_in_memory_are_their_file() {
+        let (rows, path) = targets("compensate");
+        let robot = ex("hexapod_66_truth.toml");
+        let file =
+            compensate::compensate(&compensate::CompensateOptions::new(&robot, &path), &Silent)
+                .unwrap();
+        let options = compensate::CompensateOptions::new(&robot, PathBuf::new());
+        let mem = compensate::compensate_in(&options, held(&rows), &Silent).unwrap();
+        assert_eq!(mem.targets, file.targets);
+        assert_eq!(mem.readings, file.readings);
+        let named = file
+            .csv
+            .replace(&path.display().to_string(), "targets in memory");
+        assert_eq!(mem.csv, named);
+        // A bad row is named as in the file, by the name and the line.
+        let mut bad = PoseRows::clone(&rows);
+        bad.poses[2][1] = f64::NAN;
+        let e = compensate::compensate_in(&options, held(&Arc::new(bad)), &Silent).unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("targets in memory:4: field y_mm:"),
+            "{e}"
+        );
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    /// A truth and a reference held in memory simulate and check a compensation as their
+    /// files do (named by their names).
+    #[test]
+    fn robots_held_in_memory_are_their_files() {
+        let (rows, path) = targets("truth");
+        let (robot, truth) = (ex("hexapod_66.toml"), ex("hexapod_66_truth.toml"));
+        let mut options = simulate::SimulateOptions::new(&robot);
+        options.plan.plan = Some(path.clone());
+        let mut on_file = options.clone();
+        on_file.truth = Some(truth.clone());
+        let held_truth = || InMemory {
+            truth: Some(Robot::load(&truth).unwrap()),
+            ..InMemory::none()
+        };
+        let file = simulate::simulate(&on_file, &Silent).unwrap();
+        let mem = simulate::simulate_in(&options, held_truth(), &Silent).unwrap();
+        assert_eq!(mem.campaign.readings, file.campaign.readings);
+        assert_eq!(mem.truth.what, file.truth.what);
+        let c = compensate::compensate_in(
+            &compensate::CompensateOptions::new(&truth, PathBuf::new()),
+            held(&rows),
+            &Silent,
+        )
+        .unwrap();
+        let commands = path.with_file_name("commands.csv");
+        std::fs::write(&commands, &c.csv).unwrap();
+        let mut options = crate::validate::ValidateOptions {
+            commands: Some(commands),
+            ..Default::default()
+        };
+        let mut on_file = options.clone();
+        on_file.reference = Some(robot.clone());
+        on_file.truth = Some(truth.clone());
+        let file = crate::validate::check_compensation(&on_file, &Silent).unwrap();
+        let mut held = held_truth();
+        held.reference = Some(Robot::load(&robot).unwrap());
+        let mem = crate::validate::check_compensation_in(&options, held, &Silent).unwrap();
+        let json = |r: &crate::report::validate::CompensationReport| r.to_json().unwrap();
+        assert_eq!(json(&mem.report), json(&file.report));
+        // Without a truth, held or named: the command's usage error.
+        options.truth = None;
+        let e = crate::validate::check_compensation_in(&options, InMemory::none(), &Silent);
+        assert!(e
+            .err()
+            .unwrap()
+            .to_string()
+            .contains("--commands needs --truth"));
+        let _ = std::fs::remove_dir_all(path.parent().unwrap());
+    }
+
+    /// A plan held in memory is simulated and analysed as its file is.
+    #[test]
+    fn a_plan_in_memory_is_its_file() {
+        let (rows, path) = targets("plan");
+        let robot = ex("hexapod_66.toml");
+        let mut options = simulate::SimulateOptions::new(&robot);
+        options.truth = Some(ex("hexapod_66_truth.toml"));
+        let mut on_file = options.clone();
+        on_file.plan.plan = Some(path.clone());
+        let file = simulate::simulate(&on_file, &Silent).unwrap();
+        let mem = simulate::simulate_in(&options, held(&rows), &Silent).unwrap();
+        assert_eq!(mem.text, file.text);
+        let options = identifiability::IdentifiabilityOptions::new(&robot);
+        let mut on_file = options.clone();
+        on_file.plan.plan = Some(path.clone());
+        let file = identifiability::identifiability(&on_file, &Silent).unwrap();
+        let mem = identifiability::identifiability_in(&options, held(&rows), &Silent).unwrap();
+        let json = |d| serde_json::to_string(d).unwrap();
+        assert_eq!(json(&mem.doc), json(&file.doc));
+        let _ = std::fs::remove_dir_all(Path::new(&path).parent().unwrap());
+    }
 }

@@ -852,16 +852,34 @@ pub fn check_compensation(
     options: &ValidateOptions,
     progress: &dyn Progress,
 ) -> anyhow::Result<CompensationChecked> {
-    let (Some(commands), Some(truth)) = (&options.commands, &options.truth) else {
+    check_compensation_in(options, InMemory::none(), progress)
+}
+
+/// [`check_compensation`] with the reference robot and the truth held in memory (as loaded:
+/// [`InMemory::reference`], [`InMemory::truth`]) in place of the descriptions the options
+/// name.
+pub fn check_compensation_in(
+    options: &ValidateOptions,
+    held: InMemory,
+    progress: &dyn Progress,
+) -> anyhow::Result<CompensationChecked> {
+    let truth_given = options.truth.is_some() || held.truth.is_some();
+    let (Some(commands), true) = (&options.commands, truth_given) else {
         return Err(usage_error("--commands needs --truth"));
     };
-    let Some(reference) = &options.reference else {
+    let load = |r: Option<Robot>, path: &Option<PathBuf>| match (r, path) {
+        (Some(r), _) => Ok(Some(r)),
+        (None, Some(p)) => crate::load::load_robot(p, progress).map(Some),
+        (None, None) => Ok(None),
+    };
+    let Some(reference) = load(held.reference, &options.reference)? else {
         return Err(usage_error(
             "--commands needs --reference (the robot whose inverse kinematics commands the uncompensated machine)",
         ));
     };
-    let reference = crate::load::load_robot(reference, progress)?;
-    let mut truth = crate::load::load_robot(truth, progress)?;
+    let Some(mut truth) = load(held.truth, &options.truth)? else {
+        return Err(usage_error("--commands needs --truth"));
+    };
     crate::truth::add_truth_effects(&mut truth, &options.truth_effect)?;
     if truth.num_links() != reference.num_links() {
         return Err(input_error(format!(
