@@ -1,8 +1,8 @@
 //! Measurements and robots a caller holds in memory for a job (the Python binding): the
 //! sources of a campaign ([`Source`]: files, measurements already read, text, values), read
 //! and registered as files are ([`read_sources`]), and what a job takes in place of the
-//! files its options name ([`InMemory`]: with a list of poses as values, [`pose_list`]). The jobs on a campaign in memory are
-//! [`crate::memory`]'s and each job's `*_in` function.
+//! files its options name ([`InMemory`]: with a list of poses as values, [`pose_list`]).
+//! The jobs on a campaign in memory are [`crate::memory`]'s and each job's `*_in` function.
 use std::path::PathBuf;
 use std::sync::Arc;
 
