@@ -118,10 +118,8 @@ fn commanded_lengths(
     controller: &Robot,
     poses: &[crate::geometry::Pose],
 ) -> Vec<Vec<f64>> {
-    use rayon::prelude::*;
     poses
-        .par_iter()
-        .with_min_len(256)
+        .iter()
         .map(|p| {
             crate::kinematics::ik::inverse_lengths(&controller.table, p)
                 .iter()

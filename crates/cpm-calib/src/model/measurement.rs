@@ -361,30 +361,12 @@ impl MeasurementModel {
         temperature_c: Option<f64>,
         time_s: Option<f64>,
     ) -> Result<PoseContext, cpm_clearance::ClearanceError> {
-        let forces_n = self.pose_forces_n(pose)?;
-        Ok(self.context_after(commanded_mm, forces_n, previous, temperature_c, time_s))
-    }
-
-    /// The axial link forces (N) the effects read at `pose` (zeros when none reads them).
-    fn pose_forces_n(&self, pose: &Pose) -> Result<Vec<f64>, cpm_clearance::ClearanceError> {
-        if self.needs_forces() {
-            cpm_clearance::link_forces_n(self.statics_table(), pose, &self.load)
-        } else {
-            Ok(vec![0.0; self.nominal.num_links()])
-        }
-    }
-
-    /// [`pose_context`](Self::pose_context) with the pose's link forces `forces_n` found:
-    /// what depends on the pose visited before (the motion direction, the home lengths).
-    fn context_after(
-        &self,
-        commanded_mm: Vec<f64>,
-        forces_n: Vec<f64>,
-        previous: Option<&PoseContext>,
-        temperature_c: Option<f64>,
-        time_s: Option<f64>,
-    ) -> PoseContext {
         let n = self.nominal.num_links();
+        let forces_n = if self.needs_forces() {
+            cpm_clearance::link_forces_n(self.statics_table(), pose, &self.load)?
+        } else {
+            vec![0.0; n]
+        };
         // A link that did not move keeps the direction of its last motion.
         let motion_sign = match previous {
             Some(prev) => (0..n)
@@ -404,14 +386,14 @@ impl MeasurementModel {
             Some(prev) => prev.home_mm.clone(),
             None => cpm_kinematics::inverse_lengths(self.statics_table(), &self.nominal.home),
         };
-        PoseContext {
+        Ok(PoseContext {
             commanded_mm,
             home_mm,
             forces_n,
             motion_sign,
             temperature_c,
             time_s,
-        }
+        })
     }
 
     /// Number of installation-error parameters (6 per link).
@@ -1155,9 +1137,10 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
     (n > 0).then(|| s / n as f64)
 }
 
-/// Each pose's context ([`MeasurementModel::pose_context`]): what a pose needs on its own
-/// (its commanded lengths, logged temperature and time, link forces) found in parallel,
-/// then the motion directions pose after pose; the first error in pose order.
+/// Each pose's context ([`MeasurementModel::pose_context`]), pose after pose (the motion
+/// directions follow the poses visited); the first error in pose order. (Found in parallel,
+/// the contexts' small vectors spread over the allocator's thread arenas and the peak memory
+/// of `cpm validate --out` on 10^6 readings grew by 20 MB for 15 ms: kept in one pass.)
 fn contexts(
     model: &MeasurementModel,
     campaign: &Campaign,
@@ -1166,54 +1149,41 @@ fn contexts(
     by_pose: &[Vec<usize>],
     measurements_by_pose: &[Vec<usize>],
 ) -> Result<Vec<PoseContext>, CalibError> {
-    use rayon::prelude::*;
-    type Own = (Vec<f64>, Option<f64>, Option<f64>, Vec<f64>);
-    let own: Vec<Result<Own, CalibError>> = campaign
-        .poses
-        .par_iter()
-        .enumerate()
-        .with_min_len(256)
-        .map(|(j, pose)| {
-            // The commanded lengths: logged, or the nominal inverse kinematics (never the
-            // effective lengths, which carry the clearance shift: an effect that reads the
-            // commanded length must see the same value whether the controller logged it or
-            // not).
-            let commanded_mm = match commanded {
-                Some(c) => c[j].clone(),
-                None if model.clearance.radius_um == 0.0 => effective_mm[j].clone(),
-                None => cpm_kinematics::inverse_lengths(&model.nominal, pose),
-            };
-            let rs = &by_pose[j];
-            let measured = || {
-                measurements_by_pose[j]
-                    .iter()
-                    .map(|&q| &campaign.pose_measurements[q])
-            };
-            let temperature_c = mean(
-                rs.iter()
-                    .filter_map(|&k| campaign.readings[k].temperature_c),
-            )
-            .or_else(|| mean(measured().filter_map(|p| p.temperature_c)));
-            let time_s = mean(
-                rs.iter()
-                    .filter_map(|&k| campaign.readings[k].time_s)
-                    .chain(measured().filter_map(|p| p.time_s)),
-            );
-            let forces_n = model
-                .pose_forces_n(pose)
-                .map_err(|source| CalibError::Clearance { pose: j, source })?;
-            Ok((commanded_mm, temperature_c, time_s, forces_n))
-        })
-        .collect();
     let mut out: Vec<PoseContext> = Vec::with_capacity(campaign.poses.len());
-    for (j, own) in own.into_iter().enumerate() {
-        let (commanded_mm, temperature_c, time_s, forces_n) = own?;
+    for (j, pose) in campaign.poses.iter().enumerate() {
+        // The commanded lengths: logged, or the nominal inverse kinematics (never the
+        // effective lengths, which carry the clearance shift: an effect that reads the
+        // commanded length must see the same value whether the controller logged it or not).
+        let commanded_mm = match commanded {
+            Some(c) => c[j].clone(),
+            None if model.clearance.radius_um == 0.0 => effective_mm[j].clone(),
+            None => cpm_kinematics::inverse_lengths(&model.nominal, pose),
+        };
+        let rs = &by_pose[j];
+        // The pose's tracker measurements, in the campaign's order.
+        let measured = || {
+            measurements_by_pose[j]
+                .iter()
+                .map(|&q| &campaign.pose_measurements[q])
+        };
+        let temperature_c = mean(
+            rs.iter()
+                .filter_map(|&k| campaign.readings[k].temperature_c),
+        )
+        .or_else(|| mean(measured().filter_map(|p| p.temperature_c)));
+        let time_s = mean(
+            rs.iter()
+                .filter_map(|&k| campaign.readings[k].time_s)
+                .chain(measured().filter_map(|p| p.time_s)),
+        );
         let previous = if campaign.starts_session(j) {
             None
         } else {
             out.last()
         };
-        let ctx = model.context_after(commanded_mm, forces_n, previous, temperature_c, time_s);
+        let ctx = model
+            .pose_context(pose, commanded_mm, previous, temperature_c, time_s)
+            .map_err(|source| CalibError::Clearance { pose: j, source })?;
         out.push(ctx);
     }
     Ok(out)
