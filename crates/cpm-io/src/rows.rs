@@ -20,7 +20,7 @@
 //! text of [`PoseRows::to_csv`], in the same way.
 //!
 //! A row whose line in that text would be longer than the CSV reader takes
-//! ([`MAX_LINE_BYTES`](crate::table::MAX_LINE_BYTES): a label or a sensor name of a megabyte)
+//! ([`MAX_LINE_BYTES`]: a label or a sensor name of a megabyte)
 //! is refused as that reader refuses the line.
 //!
 //! ```
