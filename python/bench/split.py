@@ -5,6 +5,10 @@ measurements, then calibrated in memory. Prints the seconds of each part: inside
 results for Python). Not a test: no time is asserted.
 
     python python/bench/split.py [POSES] [--effects a,b]
+
+Measure with the extension built in release, as the wheel is (`pip install` of the wheel, or
+`cargo build --release -p cpm-py --features cli` copied into a copy of python/cpm): a dev
+build (opt-level 2 with debug assertions) makes the fit slower and the split misleading.
 """
 from __future__ import annotations
 
