@@ -1072,10 +1072,7 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     let mut unusable: Vec<Unusable> = Vec::new();
     let mut excluding: Vec<bool> = Vec::new();
     // One row after the other, its strings reused.
-    let mut next = Row {
-        line: 0,
-        fields: Vec::new(),
-    };
+    let mut next = Row::default();
     // The columns, looked up once (check_columns and orientation made sure they exist).
     let col = |name: &str| t.column(name).expect("a checked column");
     let (pose_col, sensor_col, length_col) = (col("pose"), col("sensor"), col("length_mm"));
@@ -1122,7 +1119,7 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 && pose_columns
                     .iter()
                     .zip(&previous_cells)
-                    .all(|((_, c), p)| row.fields[*c] == *p);
+                    .all(|((_, c), p)| row.get(*c) == Some(p.as_str()));
             let known = match previous {
                 Some(j) if labels[j] == label => Some(j),
                 _ => by_label.get(label).copied(),
@@ -1142,7 +1139,8 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 // The previous cells' strings reused (one row after the other).
                 previous_cells.resize_with(pose_columns.len(), String::new);
                 for (p, (_, c)) in previous_cells.iter_mut().zip(&pose_columns) {
-                    p.clone_from(&row.fields[*c]);
+                    p.clear();
+                    p.push_str(row.get(*c).unwrap_or(""));
                 }
                 (raw, pose)
             };

@@ -58,13 +58,45 @@ impl FileKind {
     }
 }
 
-/// One data row.
-#[derive(Debug, Clone)]
+/// One data row: its line, held once, and where each of its fields is in it.
+#[derive(Debug, Clone, Default)]
 pub struct Row {
     /// 1-based line of the row in the file.
     pub line: usize,
-    /// Its fields, trimmed, in header order.
-    pub fields: Vec<String>,
+    /// The line's text (a plain line, taken as it was read), or its fields unquoted one
+    /// after the other (a line with a quoted field).
+    text: String,
+    /// Where each field, trimmed, is in `text`, in header order.
+    spans: Vec<(usize, usize)>,
+}
+
+impl Row {
+    /// Its number of fields.
+    pub fn len(&self) -> usize {
+        self.spans.len()
+    }
+
+    /// True when it has no field.
+    pub fn is_empty(&self) -> bool {
+        self.spans.is_empty()
+    }
+
+    /// Field `k` (trimmed), `None` past the last.
+    pub fn get(&self, k: usize) -> Option<&str> {
+        self.spans.get(k).and_then(|&(a, b)| self.text.get(a..b))
+    }
+
+    /// Its fields (trimmed), in header order.
+    pub fn fields(&self) -> impl Iterator<Item = &str> + '_ {
+        self.spans
+            .iter()
+            .map(|&(a, b)| self.text.get(a..b).unwrap_or(""))
+    }
+
+    /// Its fields as owned strings.
+    pub fn to_fields(&self) -> Vec<String> {
+        self.fields().map(str::to_string).collect()
+    }
 }
 
 /// The header of a table: file name, header line, column names; reads typed fields of rows.
@@ -178,7 +210,7 @@ impl<R: Read> Table<R> {
             ));
         };
         t.header.header_line = first.line;
-        for (i, h) in first.fields.iter().enumerate() {
+        for (i, h) in first.fields().enumerate() {
             if h.is_empty() {
                 return Err(InputError::line(
                     file,
@@ -186,7 +218,7 @@ impl<R: Read> Table<R> {
                     format!("column {} of the header has no name", i + 1),
                 ));
             }
-            if t.header.index.insert(h.clone(), i).is_some() {
+            if t.header.index.insert(h.to_string(), i).is_some() {
                 return Err(InputError::field(
                     file,
                     first.line,
@@ -195,16 +227,13 @@ impl<R: Read> Table<R> {
                 ));
             }
         }
-        t.header.headers = first.fields;
+        t.header.headers = first.to_fields();
         Ok(t)
     }
 
     /// The next data row, `None` at the end; every row has as many fields as the header.
     pub fn next_row(&mut self) -> Result<Option<Row>, InputError> {
-        let mut row = Row {
-            line: 0,
-            fields: Vec::new(),
-        };
+        let mut row = Row::default();
         Ok(self.next_row_into(&mut row)?.then_some(row))
     }
 
@@ -214,7 +243,7 @@ impl<R: Read> Table<R> {
         if !self.next_record_into(row)? {
             return Ok(false);
         }
-        let (len, expected) = (row.fields.len(), self.header.headers.len());
+        let (len, expected) = (row.len(), self.header.headers.len());
         if len != expected {
             return Err(InputError::line(
                 &self.header.file,
@@ -239,10 +268,7 @@ impl<R: Read> Table<R> {
 
     /// The next line that is neither a comment nor blank, split into trimmed UTF-8 fields.
     fn next_record(&mut self) -> Result<Option<Row>, InputError> {
-        let mut row = Row {
-            line: 0,
-            fields: Vec::new(),
-        };
+        let mut row = Row::default();
         Ok(self.next_record_into(&mut row)?.then_some(row))
     }
 
@@ -281,10 +307,7 @@ impl<R: Read + Send + 'static> Table<R> {
                     let (mut len, mut end) = (0, None);
                     while len < BATCH_ROWS {
                         if rows.len() == len {
-                            rows.push(Row {
-                                line: 0,
-                                fields: Vec::new(),
-                            });
+                            rows.push(Row::default());
                         }
                         match lines.next_record_into(&mut header, &mut rows[len]) {
                             Ok(true) => len += 1,
@@ -427,26 +450,26 @@ impl<R: Read> Lines<R> {
                     None => InputError::line(&header.file, line, format!("column {col}: {m}")),
                 }
             })?;
+            let what = "not UTF-8 text (save the file as UTF-8)";
             row.line = line;
-            row.fields.truncate(self.ends.len());
+            row.spans.clear();
             let mut start = 0;
             for (k, &end) in self.ends.iter().enumerate() {
-                let Ok(text) = std::str::from_utf8(&self.unquoted[start..end]) else {
-                    let what = "not UTF-8 text (save the file as UTF-8)";
+                if std::str::from_utf8(&self.unquoted[start..end]).is_err() {
                     return Err(match header.headers.get(k) {
                         Some(name) => InputError::field(&header.file, line, name, what),
                         None => InputError::line(&header.file, line, what),
                     });
-                };
-                match row.fields.get_mut(k) {
-                    Some(f) => {
-                        f.clear();
-                        f.push_str(text);
-                    }
-                    None => row.fields.push(text.to_string()),
                 }
+                row.spans.push((start, end));
                 start = end;
             }
+            // The fields are UTF-8 text one by one, so all of them together are.
+            let Ok(text) = std::str::from_utf8(&self.unquoted) else {
+                return Err(InputError::line(&header.file, line, what));
+            };
+            row.text.clear();
+            row.text.push_str(text);
             return Ok(true);
         }
     }
@@ -456,13 +479,19 @@ impl<R: Read> Lines<R> {
     /// bytes. False (nothing done) otherwise: the general splitting reads it, and says what is
     /// wrong.
     fn plain_fields_into(&mut self, row: &mut Row) -> bool {
-        let Ok(text) = std::str::from_utf8(&self.buf) else {
-            return false;
+        // The line as text (no copy), given back to the buffer when it is not plain.
+        let text = match String::from_utf8(std::mem::take(&mut self.buf)) {
+            Ok(text) => text,
+            Err(e) => {
+                self.buf = e.into_bytes();
+                return false;
+            }
         };
-        let (bytes, mut k, mut start) = (text.as_bytes(), 0, 0);
+        let (bytes, mut start) = (text.as_bytes(), 0);
         // Split at the commas (ASCII: the pieces of UTF-8 text between them are UTF-8 text),
         // found eight bytes at a time.
         commas(bytes, &mut self.ends);
+        row.spans.clear();
         let mut next_comma = 0;
         while start <= bytes.len() {
             let end = self.ends.get(next_comma).copied().unwrap_or(bytes.len());
@@ -474,21 +503,24 @@ impl<R: Read> Lines<R> {
                 .position(|b| !matches!(b, b' ' | b'\t'))
                 .unwrap_or(piece.len());
             if piece.get(blanks) == Some(&b'"') {
-                // Fields before it may be overwritten: the general splitting fills them again.
+                // The row's fields so far are made again by the general splitting.
+                self.buf = text.into_bytes();
                 return false;
             }
-            let field = text[start..end].trim_ascii();
+            // Trimmed as `str::trim_ascii` trims (ASCII whitespace at both ends).
+            let lead = piece
+                .iter()
+                .position(|b| !b.is_ascii_whitespace())
+                .unwrap_or(piece.len());
+            let trail = piece[lead..]
+                .iter()
+                .rposition(|b| !b.is_ascii_whitespace())
+                .map_or(lead, |p| lead + p + 1);
+            row.spans.push((start + lead, start + trail));
             start = end + 1;
-            match row.fields.get_mut(k) {
-                Some(f) => {
-                    f.clear();
-                    f.push_str(field);
-                }
-                None => row.fields.push(field.to_string()),
-            }
-            k += 1;
         }
-        row.fields.truncate(k);
+        // The line becomes the row's text, the row's previous text the next line's buffer.
+        self.buf = std::mem::replace(&mut row.text, text).into_bytes();
         row.line = self.line;
         true
     }
@@ -662,8 +694,7 @@ impl Header {
 
     /// The raw text of a field (`None` when the table has no such column).
     pub fn text<'a>(&self, row: &'a Row, name: &str) -> Option<&'a str> {
-        self.column(name)
-            .and_then(|i| row.fields.get(i).map(String::as_str))
+        self.column(name).and_then(|i| row.get(i))
     }
 
     /// A required text field: present and non-empty.
@@ -700,7 +731,7 @@ impl Header {
     /// [`required_text`](Self::required_text) of column `col` (an index from
     /// [`column`](Self::column): a reader that looks up its columns once).
     pub fn required_text_at<'a>(&self, row: &'a Row, col: usize) -> Result<&'a str, InputError> {
-        match row.fields.get(col).map(String::as_str) {
+        match row.get(col) {
             Some(t) if !t.is_empty() => Ok(t),
             _ => Err(self.err(row, &self.headers[col], "missing value")),
         }
@@ -719,7 +750,7 @@ impl Header {
         col: Option<usize>,
     ) -> Result<Option<f64>, InputError> {
         let Some(col) = col else { return Ok(None) };
-        match row.fields.get(col).map(String::as_str) {
+        match row.get(col) {
             None | Some("") => Ok(None),
             Some(t) => parse_number(t)
                 .map(Some)
@@ -735,7 +766,7 @@ impl Header {
     ) -> Result<Option<bool>, InputError> {
         let Some(col) = col else { return Ok(None) };
         let name = &self.headers[col];
-        match row.fields.get(col).map(String::as_str) {
+        match row.get(col) {
             None | Some("") => Ok(None),
             Some(t)
                 if t.eq_ignore_ascii_case("true") || t.eq_ignore_ascii_case("yes") || t == "1" =>
@@ -854,13 +885,10 @@ mod tests {
     /// error behind it).
     fn all_rows<R: Read>(mut t: Table<R>) -> (Vec<(usize, Vec<String>)>, String, bool) {
         let mut rows = Vec::new();
-        let mut row = Row {
-            line: 0,
-            fields: Vec::new(),
-        };
+        let mut row = Row::default();
         let end = loop {
             match t.next_row_into(&mut row) {
-                Ok(true) => rows.push((row.line, row.fields.clone())),
+                Ok(true) => rows.push((row.line, row.to_fields())),
                 Ok(false) => break "end".to_string(),
                 Err(e) => break e.to_string(),
             }
@@ -972,7 +1000,7 @@ mod tests {
         assert_eq!(h.headers, ["a", "b"]);
         assert_eq!(h.header_line, 2);
         assert_eq!(r.iter().map(|r| r.line).collect::<Vec<_>>(), [5, 7]);
-        assert_eq!(r[1].fields[1], "4");
+        assert_eq!(r[1].get(1), Some("4"));
     }
 
     /// Plain lines (split in one pass) and lines with quoted fields (the general splitting)
@@ -981,7 +1009,7 @@ mod tests {
     fn plain_and_quoted_lines_agree() {
         let (_, r) =
             rows(b"a,b,c\n 1 ,\t2\t,\n\"1\", \"2\" ,\"\"\n3,\"x,y\",z\"q\n\t4,5 ,6\n").unwrap();
-        let fields: Vec<&[String]> = r.iter().map(|r| r.fields.as_slice()).collect();
+        let fields: Vec<Vec<String>> = r.iter().map(Row::to_fields).collect();
         assert_eq!(fields[0], ["1", "2", ""]);
         assert_eq!(fields[1], ["1", "2", ""]);
         assert_eq!(fields[2], ["3", "x,y", "z\"q"]);
@@ -1003,7 +1031,7 @@ mod tests {
             "t.csv:3: field b: not UTF-8 text (save the file as UTF-8)"
         );
         let (_, r) = rows(b"a, b\n\"x, \"\"y\"\"\" , 2\n").unwrap();
-        assert_eq!(r[0].fields, ["x, \"y\"", "2"]);
+        assert_eq!(r[0].to_fields(), ["x, \"y\"", "2"]);
         let e = rows(b"a,b\n\"x,2\n").unwrap_err();
         assert!(
             e.to_string()
