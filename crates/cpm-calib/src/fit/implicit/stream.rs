@@ -168,9 +168,7 @@ impl Implicit<'_> {
 
 /// Partial sums of the reduce pass over a chunk of poses.
 pub(super) struct Reduced {
-    /// `sum (G_j^T G_j - Z_j^T Z_j)` (without the global damping), `ng x ng` column-major,
-    /// its lower triangle only (row >= column; the upper is zero): the Cholesky factor and
-    /// the symmetric eigen-decomposition read no other part.
+    /// `sum (G_j^T G_j - Z_j^T Z_j)` (without the global damping), `ng x ng` column-major.
     pub(super) s: Vec<f64>,
     /// `-sum Z_j^T z_j`.
     rhs: Vec<f64>,
@@ -268,7 +266,6 @@ pub(super) fn reduce(
             let mut b = Block::default();
             let mut rows: Vec<usize> = Vec::new();
             let mut ys: Vec<Vector6<f64>> = Vec::new();
-            let mut spans: Vec<(usize, usize)> = Vec::new();
             for (t, dj) in dc.chunks_mut(6).enumerate() {
                 let j = j0 + t;
                 p.fill_block(&x[6 * j..6 * j + 6], globals, table, j, &mut b);
@@ -317,14 +314,6 @@ pub(super) fn reduce(
                         ys.push(y);
                     }
                 }
-                // Each row's smallest and largest global (a pair of rows whose entries all
-                // fall above the diagonal is skipped whole).
-                spans.clear();
-                spans.extend(rows.iter().map(|&k| {
-                    let cols = b.globals(k).0;
-                    let lo = cols.iter().copied().min().unwrap_or(0);
-                    (lo, cols.iter().copied().max().unwrap_or(0))
-                }));
                 for (ka, &k) in rows.iter().enumerate() {
                     let (ck, vk) = b.globals(k);
                     if factor.is_some() {
@@ -334,24 +323,16 @@ pub(super) fn reduce(
                         }
                     }
                     for (kb, &k2) in rows.iter().enumerate() {
-                        if spans[kb].1 < spans[ka].0 {
-                            continue;
-                        }
                         let mut w = if k == k2 { 1.0 } else { 0.0 };
                         if factor.is_some() {
                             w -= ys[ka].dot(&ys[kb]);
                         }
                         let (ck2, vk2) = b.globals(k2);
-                        let whole = spans[kb].0 >= spans[ka].1;
                         for (&c, &v) in ck.iter().zip(vk) {
                             let wv = w * v;
                             let col = &mut acc.s[c * ng..(c + 1) * ng];
-                            // The lower triangle only (row c2 >= column c), each entry's
-                            // terms added in the same order as over the whole matrix.
                             for (&c2, &v2) in ck2.iter().zip(vk2) {
-                                if whole || c2 >= c {
-                                    col[c2] += wv * v2;
-                                }
+                                col[c2] += wv * v2;
                             }
                         }
                     }
