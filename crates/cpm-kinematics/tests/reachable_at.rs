@@ -129,3 +129,111 @@ fn the_first_step_made_once_changes_nothing() {
     // Accepted, and refused for the link limits, the condition number, the assembly mode.
     assert_eq!(kinds.len(), 4, "{kinds:?}");
 }
+
+/// The rule of `reachable_at` written out in its first order (forward kinematics from home
+/// first, then det J1's sign, then a start near the pose), independently of the library's
+/// code, which starts near the pose first when det J1 has home's sign: both must give the
+/// same verdict and the same distances, on poses of all kinds (reachable, other assembly
+/// modes, near singular, outside the length limits).
+fn reachable_at_in_first_order(
+    t: &JointTable,
+    p: &Pose,
+    max_condition: f64,
+) -> Result<(), Unreachable> {
+    use nalgebra::{Matrix6, Vector6};
+    let lengths = inverse_lengths(t, p);
+    for (i, (l, len)) in t.links.iter().zip(&lengths).enumerate() {
+        if !len.is_finite() {
+            return Err(Unreachable::Invalid);
+        }
+        if let Some((lo, hi)) = l.length_limits_mm {
+            if !(*len >= lo && *len <= hi) {
+                return Err(Unreachable::LengthLimit {
+                    link: i,
+                    length_mm: *len,
+                    limits_mm: (lo, hi),
+                });
+            }
+        }
+    }
+    let c = cpm_kinematics::workspace::j1_condition(t, p).map_err(Unreachable::Svd)?;
+    if !(c <= max_condition) {
+        return Err(Unreachable::NearSingular { condition: c });
+    }
+    let radius = t
+        .links
+        .iter()
+        .map(|l| l.platform_mm.norm())
+        .fold(1.0f64, f64::max);
+    let distance = |start: &Pose| match forward(t, &lengths, start, &ForwardOptions::default()) {
+        Ok((q, _)) => {
+            let d = p.difference(&q);
+            d.fixed_rows::<3>(0).norm() + d.fixed_rows::<3>(3).norm() * radius
+        }
+        Err(_) => f64::INFINITY,
+    };
+    let from_home_mm = distance(&t.home);
+    if from_home_mm <= 1e-3 {
+        return Ok(());
+    }
+    let det = |q: &Pose| {
+        let j = cpm_kinematics::j1(t, q);
+        Matrix6::from_fn(|r, c| j[(r, c)]).determinant()
+    };
+    if !(det(p) * det(&t.home) > 0.0) {
+        return Err(Unreachable::AssemblyModeChange { at: 1.0 });
+    }
+    let near = p.perturbed(&Vector6::new(0.3, -0.2, 0.25, 2e-3, -1.5e-3, 1e-3));
+    let from_near_mm = distance(&near);
+    if from_near_mm <= 1e-3 {
+        return Ok(());
+    }
+    Err(Unreachable::ForwardMismatch {
+        from_home_mm,
+        from_near_mm,
+    })
+}
+
+#[test]
+fn the_verdicts_are_those_of_the_rule_in_its_first_order() {
+    let mut rng = StdRng::seed_from_u64(36);
+    for (t, z, r) in [
+        (JointTable::paper_cubic(), 430.0, 150.0),
+        (JointTable::hexapod_66(), 300.0, 50.0),
+    ] {
+        let at = cpm_kinematics::ReachableAt::new(&t);
+        let mut kinds = std::collections::BTreeMap::new();
+        for _ in 0..3000 {
+            let mut u = || rng.random_range(-1.0..1.0);
+            // A wide box: the cube's other assembly modes and near-singular poses among them.
+            let p = Pose::from_xyz_rpy_deg(
+                [r * u(), r * u(), z + r * 1.6 * u()],
+                [70.0 * u(), 70.0 * u(), 70.0 * u()],
+            );
+            for bound in [1e4, 1e2] {
+                let expected = reachable_at_in_first_order(&t, &p, bound);
+                assert_eq!(reachable_at(&t, &p, bound), expected, "{p:?}");
+                assert_eq!(at.check(&p, bound), expected, "{p:?}");
+                let kind = match expected {
+                    Ok(()) => "reachable",
+                    Err(Unreachable::LengthLimit { .. }) => "length",
+                    Err(Unreachable::NearSingular { .. }) => "singular",
+                    Err(Unreachable::AssemblyModeChange { .. }) => "mode",
+                    Err(Unreachable::ForwardMismatch { .. }) => "mismatch",
+                    Err(_) => "other",
+                };
+                *kinds.entry(kind).or_insert(0) += 1;
+            }
+        }
+        // The box holds poses of each kind the rule tells apart (the cube has no limits).
+        assert!(
+            kinds.get("reachable").copied().unwrap_or(0) > 100,
+            "{kinds:?}"
+        );
+        assert!(
+            kinds.get("singular").copied().unwrap_or(0) > 10,
+            "{kinds:?}"
+        );
+        assert!(kinds.len() >= 3, "{kinds:?}");
+    }
+}
