@@ -1745,6 +1745,83 @@ fn check_tracker_position_units(
     ))
 }
 
+/// Where each reading of a merged campaign comes from: its file, named once for all its
+/// readings (the files' readings follow each other), and its line.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ReadingOrigins {
+    /// Each file and the index of its first reading, in reading order (a file without
+    /// readings is not listed).
+    files: Vec<(std::sync::Arc<str>, usize)>,
+    /// Per reading, its line.
+    lines: Vec<usize>,
+}
+
+impl ReadingOrigins {
+    /// Of readings of the files, file after file: each file's name and its readings' lines.
+    pub fn from_files(files: impl IntoIterator<Item = (std::sync::Arc<str>, Vec<usize>)>) -> Self {
+        let mut o = ReadingOrigins::default();
+        for (file, lines) in files {
+            o.push_file(file, lines);
+        }
+        o
+    }
+
+    /// The readings of one more file, on `lines` (moved in when they are the first).
+    pub fn push_file(&mut self, file: std::sync::Arc<str>, lines: Vec<usize>) {
+        if lines.is_empty() {
+            return;
+        }
+        self.files.push((file, self.lines.len()));
+        if self.lines.is_empty() {
+            self.lines = lines;
+        } else {
+            self.lines.extend(lines);
+        }
+    }
+
+    /// How many readings.
+    pub fn len(&self) -> usize {
+        self.lines.len()
+    }
+
+    /// True without readings.
+    pub fn is_empty(&self) -> bool {
+        self.lines.is_empty()
+    }
+
+    /// File and line of reading `k`, `None` past the last.
+    pub fn get(&self, k: usize) -> Option<(&str, usize)> {
+        let line = *self.lines.get(k)?;
+        let f = self.files.partition_point(|(_, first)| *first <= k);
+        Some((&*self.files[f - 1].0, line))
+    }
+
+    /// File and line of every reading, in order.
+    pub fn iter(&self) -> impl Iterator<Item = (&str, usize)> + '_ {
+        self.files
+            .iter()
+            .enumerate()
+            .flat_map(move |(i, (file, first))| {
+                let end = self.files.get(i + 1).map_or(self.lines.len(), |f| f.1);
+                self.lines[*first..end].iter().map(move |l| (&**file, *l))
+            })
+    }
+
+    /// The origins of the readings `keep` says to keep (given each reading's index).
+    fn kept(&self, mut keep: impl FnMut(usize) -> bool) -> Self {
+        let mut o = ReadingOrigins::default();
+        for (i, (file, first)) in self.files.iter().enumerate() {
+            let end = self.files.get(i + 1).map_or(self.lines.len(), |f| f.1);
+            let lines: Vec<usize> = (*first..end)
+                .filter(|&k| keep(k))
+                .map(|k| self.lines[k])
+                .collect();
+            o.push_file(file.clone(), lines);
+        }
+        o
+    }
+}
+
 /// Several measurement files merged into one campaign, with where each pose came from.
 #[derive(Debug, Clone)]
 pub struct Merged {
@@ -1752,9 +1829,9 @@ pub struct Merged {
     pub campaign: Campaign,
     /// Per campaign pose: (file, first line, label).
     pub pose_origin: Vec<(String, usize, String)>,
-    /// Per reading: (file, line); the file's name is shared by its readings (no string of
-    /// its own per reading).
-    pub reading_origin: Vec<(std::sync::Arc<str>, usize)>,
+    /// Per reading: file and line ([`ReadingOrigins`]: the file's name once per file, the
+    /// lines as the reader gave them).
+    pub reading_origin: ReadingOrigins,
     /// Per point measurement: (file, line).
     pub point_origin: Vec<(String, usize)>,
     /// Per tilt measurement: (file, line).
@@ -1805,11 +1882,7 @@ impl Merged {
         Merged {
             campaign: c.without_poses(|j| j == pose),
             pose_origin: kept(&self.pose_origin, 0..c.poses.len(), pose),
-            reading_origin: kept(
-                &self.reading_origin,
-                c.readings.iter().map(|r| r.pose),
-                pose,
-            ),
+            reading_origin: self.reading_origin.kept(|k| c.readings[k].pose != pose),
             point_origin: kept(
                 &self.point_origin,
                 c.point_measurements.iter().map(|m| m.pose),
@@ -1844,7 +1917,7 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
     let mut out = Campaign::default();
     let mut commanded = Vec::new();
     let mut pose_origin = Vec::new();
-    let mut reading_origin = Vec::new();
+    let mut reading_origin = ReadingOrigins::default();
     let mut point_origin = Vec::new();
     let mut tilt_origin = Vec::new();
     let mut tilt_sessions = 0;
@@ -1931,11 +2004,10 @@ pub fn merge(files: Vec<DataFile>, robot: &Robot) -> Merged {
                 ..*m
             }));
         tilt_sessions += sessions;
-        for (line, label) in f.pose_lines.iter().zip(&f.pose_labels) {
-            pose_origin.push((f.file.clone(), *line, label.clone()));
+        for (line, label) in f.pose_lines.iter().zip(f.pose_labels) {
+            pose_origin.push((f.file.clone(), *line, label));
         }
-        let file: std::sync::Arc<str> = f.file.as_str().into();
-        reading_origin.extend(f.reading_lines.iter().map(|l| (file.clone(), *l)));
+        reading_origin.push_file(f.file.as_str().into(), f.reading_lines);
         excluded.extend(f.excluded);
     }
     if any_commanded {

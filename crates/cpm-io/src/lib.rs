@@ -79,8 +79,8 @@ pub use campaign::{
     max_excluded_poses, merge, read_commands_file, read_pose_list, read_pose_list_file,
     read_pose_list_from, read_pose_measurements, read_readings, write_commands, write_pose_list,
     write_pose_measurements, write_readings, DataFile, ExcludedPose, Merged, PoseRow, ReadOptions,
-    RegistrationReport, SessionRegistration, TrackerRow, MAX_ROWS, POSES_PER_EXCLUDED_POSE,
-    REGISTRATION_APPLY_MM,
+    ReadingOrigins, RegistrationReport, SessionRegistration, TrackerRow, MAX_ROWS,
+    POSES_PER_EXCLUDED_POSE, REGISTRATION_APPLY_MM,
 };
 pub use error::{read_text, InputError, ReadError};
 pub use read::{

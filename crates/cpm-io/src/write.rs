@@ -146,6 +146,11 @@ impl OutputSet {
             .push((path.into(), Contents::Bytes(contents.into())));
     }
 
+    /// Stages the files of `other` after those staged here, in its order.
+    pub fn append(&mut self, other: OutputSet) {
+        self.files.extend(other.files);
+    }
+
     /// Stages a file whose contents `produce` writes when the file is written.
     pub fn add_streamed(&mut self, path: impl Into<PathBuf>, produce: Producer) {
         self.files.push((path.into(), Contents::Streamed(produce)));

@@ -128,8 +128,8 @@ fn without_pose_keeps_the_origins_aligned() {
     let aligned = |m: &cpm_io::Merged| {
         assert_eq!(m.pose_origin.len(), m.campaign.poses.len());
         assert_eq!(m.reading_origin.len(), m.campaign.readings.len());
-        for (r, (_, line)) in m.campaign.readings.iter().zip(&m.reading_origin) {
-            assert_eq!(label_on(*line), m.pose_origin[r.pose].2);
+        for (r, (_, line)) in m.campaign.readings.iter().zip(m.reading_origin.iter()) {
+            assert_eq!(label_on(line), m.pose_origin[r.pose].2);
         }
         for (_, line, label) in &m.pose_origin {
             assert_eq!(label_on(*line), label);

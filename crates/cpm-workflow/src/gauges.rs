@@ -81,10 +81,7 @@ pub fn check_readings(robot: &Robot, merged: &Merged) -> Result<(), InputError> 
         let Some(Some(w)) = windows.get(r.sensor) else {
             continue;
         };
-        let (file, line) = merged
-            .reading_origin
-            .get(k)
-            .map_or(("<data>", 0), |(f, l)| (&**f, *l));
+        let (file, line) = merged.reading_origin.get(k).unwrap_or(("<data>", 0));
         let l = r.length_mm;
         let (lo, hi) = w.window_mm;
         if !(l >= lo - WINDOW_TOLERANCE_MM && l <= hi + WINDOW_TOLERANCE_MM) {

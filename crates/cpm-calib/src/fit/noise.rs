@@ -132,30 +132,51 @@ pub fn by_kind(model: &MeasurementModel, campaign: &Campaign, cal: &Calibration)
     let m = cal.residuals_um.len();
     let mean_leverage = cal.identifiability.rank as f64 / m.max(1) as f64;
     let h = |i: usize| cal.leverages.get(i).copied().unwrap_or(mean_leverage);
-    let kinds: Vec<Kind> = campaign
-        .observation_kinds()
-        .into_iter()
-        .map(|k| Kind::of(campaign, k))
-        .collect();
-    let mut distinct = kinds.clone();
-    distinct.sort_unstable();
-    distinct.dedup();
+    let observation_kinds = campaign.observation_kinds();
+    let kinds = || observation_kinds.iter().map(|k| Kind::of(campaign, *k));
+    // The kinds met, in order (a few: each run of one kind looked up once).
+    let distinct: Vec<Kind> = {
+        let mut set = std::collections::BTreeSet::new();
+        let mut last = None;
+        for k in kinds() {
+            if last != Some(k) {
+                set.insert(k);
+                last = Some(k);
+            }
+        }
+        set.into_iter().collect()
+    };
+    // Each kind's totals in one pass over the observations, in their order (each kind's sums
+    // add its terms in the order a pass over that kind alone would).
+    let mut totals = vec![(0.0f64, 0.0f64, 0usize, 0usize); distinct.len()];
+    let mut aside_at = cal.set_aside.iter().copied().peekable();
+    let mut last: Option<(Kind, usize)> = None;
+    for (i, kind) in kinds().enumerate() {
+        let j = match last {
+            Some((k, j)) if k == kind => j,
+            _ => {
+                let j = distinct.binary_search(&kind).expect("a kind of the list");
+                last = Some((kind, j));
+                j
+            }
+        };
+        while aside_at.next_if(|&a| a < i).is_some() {}
+        let t = &mut totals[j];
+        if aside_at.next_if_eq(&i).is_some() {
+            t.3 += 1;
+            continue;
+        }
+        t.0 += cal.residuals_um[i].powi(2);
+        t.1 += (1.0 - h(i)).max(0.0);
+        t.2 += 1;
+    }
     // Residuals are in um of the reference noise `sigma_ref`: a kind assumed at `s` (native)
     // was weighed by `sigma_ref / s`.
     let sigma_ref = cal.sigma_ref_um;
     distinct
         .into_iter()
-        .map(|kind| {
-            let (mut ssr, mut red, mut n, mut aside) = (0.0, 0.0, 0, 0);
-            for (i, _) in kinds.iter().enumerate().filter(|(_, k)| **k == kind) {
-                if cal.set_aside.binary_search(&i).is_ok() {
-                    aside += 1;
-                    continue;
-                }
-                ssr += cal.residuals_um[i].powi(2);
-                red += (1.0 - h(i)).max(0.0);
-                n += 1;
-            }
+        .zip(totals)
+        .map(|(kind, (ssr, red, n, aside))| {
             let assumed = assumed_sigma(campaign, kind, sigma_ref);
             let estimated = (red >= 1.0).then(|| (ssr / red).sqrt() * assumed / sigma_ref);
             let rms = (ssr / n.max(1) as f64).sqrt() * assumed / sigma_ref;

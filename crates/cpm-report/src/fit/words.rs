@@ -183,7 +183,7 @@ pub fn write_observation_origin<'m>(
             .get(r.sensor)
             .map_or("?", |s| s.name.as_str());
         let _ = write!(what, "sensor {sensor} at pose {label:?}");
-        Some((file, *line))
+        Some((file, line))
     } else if k >= c.first_tilt_observation() {
         let q = k - c.first_tilt_observation();
         let t = c.tilt_measurements.get(q)?;
