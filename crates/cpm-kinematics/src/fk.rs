@@ -1,8 +1,6 @@
 //! Forward kinematics: link lengths to pose by Newton-Raphson with the analytic J1.
 use cpm_geometry::{JointTable, Pose};
-use nalgebra::{DMatrix, Matrix6, Vector3, Vector6};
-
-use crate::lu6::Lu6;
+use nalgebra::{DMatrix, Matrix6, Vector3, Vector6, LU, U6};
 
 use crate::linalg::SvdError;
 use crate::KinematicsError;
@@ -111,12 +109,12 @@ fn singular(iteration: usize, jac: &Mat6, links: usize) -> KinematicsError {
 /// Solves `a x = b` by nalgebra's fixed-size LU with partial pivoting (allocation-free).
 /// `None` when a pivot is zero or anything is not finite.
 fn solve6(a: &Mat6, b: &[f64; 6]) -> Option<Vector6<f64>> {
-    solve_lu(&Lu6::new(a), b)
+    solve_lu(&Matrix6::from_fn(|i, j| a[i][j]).lu(), b)
 }
 
 /// [`solve6`] with the LU factors of `a`.
-fn solve_lu(lu: &Lu6, b: &[f64; 6]) -> Option<Vector6<f64>> {
-    let x = Vector6::from(lu.solve(b)?);
+fn solve_lu(lu: &LU<f64, U6, U6>, b: &[f64; 6]) -> Option<Vector6<f64>> {
+    let x = lu.solve(&Vector6::from(*b))?;
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
@@ -130,7 +128,7 @@ pub struct ForwardStart {
     options: ForwardOptions,
     lengths_mm: [f64; 6],
     jac: Mat6,
-    lu: Lu6,
+    lu: LU<f64, U6, U6>,
     surely_acceptable: bool,
 }
 
@@ -150,7 +148,7 @@ impl ForwardStart {
             options: *options,
             lengths_mm: rhs.map(|r| -r),
             jac,
-            lu: Lu6::new(&jac),
+            lu: m.lu(),
             surely_acceptable: condition_at_most(&m, options.max_condition),
         })
     }

@@ -30,7 +30,6 @@ pub mod fk;
 pub mod ik;
 pub mod jacobian;
 pub mod linalg;
-pub mod lu6;
 pub mod sensor;
 pub mod workspace;
 

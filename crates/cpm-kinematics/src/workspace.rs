@@ -97,12 +97,8 @@ pub fn j1_condition(table: &JointTable, pose: &Pose) -> Result<f64, SvdError> {
 
 /// Checks every link's length limits at `pose` (links without limits always pass).
 pub fn within_length_limits(table: &JointTable, pose: &Pose) -> Result<(), Unreachable> {
-    lengths_within_limits(table, &inverse_lengths(table, pose))
-}
-
-/// [`within_length_limits`] of the link lengths at a pose (its inverse kinematics).
-fn lengths_within_limits(table: &JointTable, lengths: &[f64]) -> Result<(), Unreachable> {
-    for (i, (l, len)) in table.links.iter().zip(lengths).enumerate() {
+    let lengths = inverse_lengths(table, pose);
+    for (i, (l, len)) in table.links.iter().zip(&lengths).enumerate() {
         if !len.is_finite() {
             return Err(Unreachable::Invalid);
         }
@@ -190,7 +186,7 @@ pub fn reachable_at(
     pose: &Pose,
     max_condition: f64,
 ) -> Result<(), Unreachable> {
-    judge(table, None, None, pose, max_condition)
+    judge(table, None, pose, max_condition)
 }
 
 /// [`reachable_at`] for many poses of one table: forward kinematics' first step from home
@@ -200,8 +196,6 @@ pub fn reachable_at(
 pub struct ReachableAt<'t> {
     table: &'t JointTable,
     home: Option<ForwardStart>,
-    /// det J1 at home (six links), what [`reachable_at`] computes at every pose.
-    home_det: Option<f64>,
 }
 
 impl<'t> ReachableAt<'t> {
@@ -210,36 +204,26 @@ impl<'t> ReachableAt<'t> {
         ReachableAt {
             table,
             home: ForwardStart::new(table, &table.home, &ForwardOptions::default()),
-            home_det: (table.num_links() == 6).then(|| det6(table, &table.home)),
         }
     }
 
     /// [`reachable_at`] of `pose` on the table.
     pub fn check(&self, pose: &Pose, max_condition: f64) -> Result<(), Unreachable> {
-        judge(
-            self.table,
-            self.home.as_ref(),
-            self.home_det,
-            pose,
-            max_condition,
-        )
+        judge(self.table, self.home.as_ref(), pose, max_condition)
     }
 }
 
-/// [`reachable_at`], forward kinematics from home started with `home` and det J1 at home
-/// `home_det` when given.
+/// [`reachable_at`], forward kinematics from home started with `home` when given.
 fn judge(
     table: &JointTable,
     home: Option<&ForwardStart>,
-    home_det: Option<f64>,
     pose: &Pose,
     max_condition: f64,
 ) -> Result<(), Unreachable> {
     if table.num_links() < 6 || !pose.is_finite() {
         return Err(Unreachable::Invalid);
     }
-    let lengths = inverse_lengths(table, pose);
-    lengths_within_limits(table, &lengths)?;
+    within_length_limits(table, pose)?;
     // The condition number (an SVD) only when a cheap upper bound of it exceeds the limit.
     let j = j1(table, pose);
     let surely_acceptable = j.shape() == (6, 6)
@@ -254,6 +238,7 @@ fn judge(
             return Err(Unreachable::NearSingular { condition: c });
         }
     }
+    let lengths = inverse_lengths(table, pose);
     let radius_mm = table
         .links
         .iter()
@@ -270,49 +255,21 @@ fn judge(
             Err(_) => f64::INFINITY,
         }
     };
-    let from_home = || {
-        distance(match home {
-            Some(h) => forward_from(table, &lengths, h),
-            None => forward(table, &lengths, &table.home, &ForwardOptions::default()),
-        })
-    };
-    let from_near = || {
-        let near = pose.perturbed(&Vector6::from(NEAR_START));
-        distance(forward(table, &lengths, &near, &ForwardOptions::default()))
-    };
-    let square = table.num_links() == 6;
-    // det J1 at the pose from the J1 above (what det6 computes).
-    let same_sign = square && {
-        let det = Matrix6::from_iterator(j.iter().copied()).determinant();
-        det * home_det.unwrap_or_else(|| det6(table, &table.home)) > 0.0 // false for NaN
-    };
-    if same_sign {
-        // The same verdict and the same distances as the order below, cheaper: a pose with
-        // home's sign that a start near it returns passes whatever the start at home finds,
-        // and the start near the pose takes two or three Newton steps where the start at
-        // home takes five or more.
-        let from_near_mm = from_near();
-        if from_near_mm <= RETURN_TOLERANCE_MM {
-            return Ok(());
-        }
-        let from_home_mm = from_home();
-        if from_home_mm <= RETURN_TOLERANCE_MM {
-            return Ok(());
-        }
-        return Err(Unreachable::ForwardMismatch {
-            from_home_mm,
-            from_near_mm,
-        });
-    }
-    let from_home_mm = from_home();
+    let from_home_mm = distance(match home {
+        Some(h) => forward_from(table, &lengths, h),
+        None => forward(table, &lengths, &table.home, &ForwardOptions::default()),
+    });
     if from_home_mm <= RETURN_TOLERANCE_MM {
         return Ok(());
     }
-    if square {
-        // Not home's sign (or NaN): another assembly mode.
-        return Err(Unreachable::AssemblyModeChange { at: 1.0 });
+    if table.num_links() == 6 {
+        let same_sign = det6(table, pose) * det6(table, &table.home) > 0.0; // false for NaN
+        if !same_sign {
+            return Err(Unreachable::AssemblyModeChange { at: 1.0 });
+        }
     }
-    let from_near_mm = from_near();
+    let near = pose.perturbed(&Vector6::from(NEAR_START));
+    let from_near_mm = distance(forward(table, &lengths, &near, &ForwardOptions::default()));
     if from_near_mm <= RETURN_TOLERANCE_MM {
         return Ok(());
     }

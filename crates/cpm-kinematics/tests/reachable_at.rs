@@ -130,12 +130,11 @@ fn the_first_step_made_once_changes_nothing() {
     assert_eq!(kinds.len(), 4, "{kinds:?}");
 }
 
-/// The rule of `reachable_at` written out in its first order (forward kinematics from home
-/// first, then det J1's sign, then a start near the pose), independently of the library's
-/// code, which starts near the pose first when det J1 has home's sign: both must give the
-/// same verdict and the same distances, on poses of all kinds (reachable, other assembly
-/// modes, near singular, outside the length limits).
-fn reachable_at_in_first_order(
+/// The rule of `reachable_at` (see its module doc) written out here, independently of the
+/// library's code: forward kinematics from home first, then det J1's sign, then a start near
+/// the pose. The library must give the same verdict and the same distances on poses of all
+/// kinds (reachable, other assembly modes, near singular, outside the length limits).
+fn reachable_at_as_written(
     t: &JointTable,
     p: &Pose,
     max_condition: f64,
@@ -195,7 +194,7 @@ fn reachable_at_in_first_order(
 }
 
 #[test]
-fn the_verdicts_are_those_of_the_rule_in_its_first_order() {
+fn the_verdicts_are_those_of_the_rule_written_out() {
     let mut rng = StdRng::seed_from_u64(36);
     for (t, z, r) in [
         (JointTable::paper_cubic(), 430.0, 150.0),
@@ -211,7 +210,7 @@ fn the_verdicts_are_those_of_the_rule_in_its_first_order() {
                 [70.0 * u(), 70.0 * u(), 70.0 * u()],
             );
             for bound in [1e4, 1e2] {
-                let expected = reachable_at_in_first_order(&t, &p, bound);
+                let expected = reachable_at_as_written(&t, &p, bound);
                 assert_eq!(reachable_at(&t, &p, bound), expected, "{p:?}");
                 assert_eq!(at.check(&p, bound), expected, "{p:?}");
                 let kind = match expected {
