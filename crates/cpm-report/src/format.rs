@@ -274,42 +274,28 @@ fn push_rounded_twelve(out: &mut String, v: f64) -> bool {
     if n as f64 / scale == a {
         return false;
     }
-    let mut digits = [0u8; 20];
-    let mut len = 0;
-    let mut m = n;
-    while m > 0 {
-        digits[len] = b'0' + (m % 10) as u8;
-        m /= 10;
-        len += 1;
-    }
-    digits[..len].reverse();
-    let digits = &digits[..len];
+    let mut buf = itoa::Buffer::new();
+    let digits: &str = buf.format(n);
+    let len = digits.len();
     if v < 0.0 {
         out.push('-');
     }
-    // Integer part, then the decimals without their trailing zeros.
-    let (int, frac): (&[u8], usize) = if len > d {
-        (&digits[..len - d], d)
-    } else {
-        (b"0", d)
-    };
-    for &b in int {
-        out.push(b as char);
-    }
-    let mut decimals = [b'0'; 32];
+    // Integer part, then the `d` decimals without their trailing zeros.
     if len > d {
-        decimals[..d].copy_from_slice(&digits[len - d..]);
+        out.push_str(&digits[..len - d]);
+        let decimals = digits[len - d..].trim_end_matches('0');
+        if !decimals.is_empty() {
+            out.push('.');
+            out.push_str(decimals);
+        }
     } else {
-        decimals[d - len..d].copy_from_slice(digits);
-    }
-    let kept = decimals[..frac]
-        .iter()
-        .rposition(|b| *b != b'0')
-        .map_or(0, |i| i + 1);
-    if kept > 0 {
-        out.push('.');
-        for &b in &decimals[..kept] {
-            out.push(b as char);
+        out.push('0');
+        // The decimals are `d - len` zeros, then the digits.
+        let decimals = digits.trim_end_matches('0');
+        if !decimals.is_empty() {
+            out.push('.');
+            out.extend(std::iter::repeat_n('0', d - len));
+            out.push_str(decimals);
         }
     }
     true

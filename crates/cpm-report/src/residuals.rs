@@ -82,10 +82,22 @@ fn residual_rows(
     let mut chunk = String::with_capacity(64 * residuals.len());
     // The file field of the previous row, as written (rows of one file follow each other).
     let (mut file_of_field, mut file_field) = (None::<&str>, String::new());
+    // Which sensors have a plain name (see `plain`), for the gauge readings' rows.
+    let plain_sensor: Vec<bool> = robot.table.sensors.iter().map(|s| plain(&s.name)).collect();
     for (i, r) in residuals.iter().enumerate() {
         let k = start + i;
-        let origin = write_observation_origin(robot, merged, k, &mut what);
-        let (file, line) = origin.unwrap_or(("", 0));
+        // A gauge reading of a sensor and a pose with plain names: its `what` written
+        // quoted as it is (see `push_reading_what`), without the general formatting.
+        let reading = c.readings.get(k).and_then(|rd| {
+            let label = &merged.pose_origin.get(rd.pose)?.2;
+            let sensor = &robot.table.sensors.get(rd.sensor)?.name;
+            let origin = merged.reading_origin.get(k)?;
+            (plain_sensor[rd.sensor] && plain(label)).then_some((origin, sensor, label))
+        });
+        let (file, line) = match reading {
+            Some((origin, _, _)) => origin,
+            None => write_observation_origin(robot, merged, k, &mut what).unwrap_or(("", 0)),
+        };
         if file_of_field != Some(file) {
             file_field.clear();
             push_tidy_quoted(&mut file_field, file, &mut field);
@@ -105,7 +117,10 @@ fn residual_rows(
         chunk.push(',');
         push_integer(&mut chunk, line);
         chunk.push(',');
-        push_tidy_quoted(&mut chunk, &what, &mut field);
+        match reading {
+            Some((_, sensor, label)) => push_reading_what(&mut chunk, sensor, label),
+            None => push_tidy_quoted(&mut chunk, &what, &mut field),
+        }
         chunk.push(',');
         chunk.push_str(unit);
         chunk.push(',');
@@ -115,19 +130,28 @@ fn residual_rows(
     chunk
 }
 
+/// Whether `s` is printable ASCII without a quote, a backslash or a comma: written as it is
+/// by `{:?}` between its quotes, and by CSV quoting and tidying.
+fn plain(s: &str) -> bool {
+    s.bytes()
+        .all(|b| (b' '..=b'~').contains(&b) && !matches!(b, b'"' | b'\\' | b','))
+}
+
+/// The `what` field of a gauge reading (`sensor NAME at pose "LABEL"`, as
+/// [`write_observation_origin`] writes it) quoted as [`push_tidy_quoted`] quotes it, for a
+/// sensor and a label that are [`plain`]: the text has no comma, so tidying leaves it, and
+/// its only quotes are the label's two, doubled.
+fn push_reading_what(out: &mut String, sensor: &str, label: &str) {
+    out.push_str("\"sensor ");
+    out.push_str(sensor);
+    out.push_str(" at pose \"\"");
+    out.push_str(label);
+    out.push_str("\"\"\"");
+}
+
 /// `n` in decimal digits (as `{n}` writes it), appended to `out`.
 fn push_integer(out: &mut String, n: usize) {
-    let mut digits = [0u8; 20];
-    let (mut m, mut i) = (n, digits.len());
-    loop {
-        i -= 1;
-        digits[i] = b'0' + (m % 10) as u8;
-        m /= 10;
-        if m == 0 {
-            break;
-        }
-    }
-    out.push_str(std::str::from_utf8(&digits[i..]).expect("ASCII digits"));
+    out.push_str(itoa::Buffer::new().format(n));
 }
 
 /// `s` as a quoted CSV field, tidied as [`crate::format::tidy_csv`] tidies it in its line
@@ -194,6 +218,43 @@ fn in_tracker_axes<'a>(merged: &Merged, residuals: &'a [f64]) -> Cow<'a, [f64]> 
 #[cfg(test)]
 mod tests {
     use super::push_quoted;
+    use proptest::prelude::*;
+
+    /// A name: mostly plain ASCII, sometimes with what `{:?}`, CSV quoting or tidying
+    /// change (quotes, backslashes, commas, control characters, non-ASCII, blanks).
+    fn name() -> impl Strategy<Value = String> {
+        prop_oneof![
+            4 => "[a-zA-Z0-9 _.:;#()+-]{0,12}",
+            1 => "[a-z0-9\"\\\\, \t\n\u{7f}\u{e9}\u{301}\u{1f600}]{0,8}",
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+        /// A gauge reading's `what` written the short way is what the general way writes
+        /// (`write_observation_origin`'s text, quoted and tidied), whenever the short way is
+        /// taken; it is taken for plain names only.
+        #[test]
+        fn a_reading_s_what_is_written_as_the_general_way_writes_it(
+            sensor in name(),
+            label in name(),
+        ) {
+            use std::fmt::Write as _;
+            let (mut what, mut work, mut general) = (String::new(), String::new(), String::new());
+            let _ = write!(what, "sensor {sensor} at pose {label:?}");
+            super::push_tidy_quoted(&mut general, &what, &mut work);
+            if super::plain(&sensor) && super::plain(&label) {
+                let mut short = String::new();
+                super::push_reading_what(&mut short, &sensor, &label);
+                prop_assert_eq!(short, general);
+            } else {
+                let odd = |s: &str| {
+                    s.contains([',', '"', '\\']) || !s.bytes().all(|b| (b' '..=b'~').contains(&b))
+                };
+                prop_assert!(odd(&sensor) || odd(&label));
+            }
+        }
+    }
 
     /// A row written field by field is the row `tidy_csv` makes of the plain row, even when
     /// a quoted text holds commas and pieces that look like numbers.
