@@ -56,8 +56,8 @@ fn simulated(robot: &Robot, poses: Vec<Pose>, logged: bool, timed: bool) -> Camp
     }
     if timed {
         for (k, r) in skeleton.readings.iter_mut().enumerate() {
-            r.time_s = Some(10.0 * k as f64);
-            r.temperature_c = Some(20.0 + 0.01 * k as f64);
+            r.time_s = Some(10.0 * k as f64).into();
+            r.temperature_c = Some(20.0 + 0.01 * k as f64).into();
         }
     }
     let truth = cpm::geometry::InstallationErrors::paper_table2().to_vec_um();

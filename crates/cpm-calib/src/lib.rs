@@ -97,7 +97,7 @@ pub mod instruments {
 
 pub use accuracy::{accuracy, AccuracyReport, PoseErrorStats};
 pub use campaign::{
-    Campaign, InstrumentMeasurement, ObservationKind, Plan, PointMeasurement, Reading,
+    Campaign, InstrumentMeasurement, Logged, ObservationKind, Plan, PointMeasurement, Reading,
     TiltMeasurement,
 };
 pub use effects::{Channel, Effect, EffectInput, EffectModel, EffectSettings, KnownEffect};

@@ -20,8 +20,8 @@ fn timed_campaign(model: &MeasurementModel, poses: usize, seed: u64) -> Campaign
     };
     let mut c = plan.skeleton();
     for r in c.readings.iter_mut() {
-        r.time_s = Some(60.0 * r.pose as f64);
-        r.temperature_c = Some(20.0 + 0.05 * r.pose as f64 + (r.pose as f64 * 0.7).sin());
+        r.time_s = Some(60.0 * r.pose as f64).into();
+        r.temperature_c = Some(20.0 + 0.05 * r.pose as f64 + (r.pose as f64 * 0.7).sin()).into();
     }
     // A tracker measures every other pose (slightly off the commanded pose).
     for j in (0..c.poses.len()).step_by(2) {

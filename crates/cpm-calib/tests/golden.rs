@@ -34,8 +34,8 @@ fn campaign(model: &MeasurementModel) -> Campaign {
     };
     let mut c = plan.skeleton();
     for r in c.readings.iter_mut() {
-        r.time_s = Some(45.0 * r.pose as f64 + 10.0);
-        r.temperature_c = Some(21.0 + 0.4 * r.pose as f64);
+        r.time_s = Some(45.0 * r.pose as f64 + 10.0).into();
+        r.temperature_c = Some(21.0 + 0.4 * r.pose as f64).into();
     }
     for j in [0, 2] {
         let twist = nalgebra::Vector6::new(0.02, -0.01, 0.012, 2e-4, -1e-4, 7e-5);

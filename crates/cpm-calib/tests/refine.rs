@@ -34,8 +34,8 @@ fn campaign_sized(
     // Log time and temperature along the acquisition.
     let mut skeleton = plan.skeleton();
     for r in skeleton.readings.iter_mut() {
-        r.time_s = Some(30.0 * r.pose as f64);
-        r.temperature_c = Some(20.0 + 3.0 * (r.pose as f64 / poses as f64));
+        r.time_s = Some(30.0 * r.pose as f64).into();
+        r.temperature_c = Some(20.0 + 3.0 * (r.pose as f64 / poses as f64)).into();
     }
     let sim = SimulationOptions {
         noise: Noise::Gaussian { sigma_um: SIGMA },

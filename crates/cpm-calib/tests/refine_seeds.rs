@@ -93,8 +93,8 @@ fn gauge_campaign(truth: &Truth, n: usize, seed: u64) -> Campaign {
                     + offset
                     + sockets
                     + noise.sample(&mut rng) * 1e-3,
-                time_s: None,
-                temperature_c: None,
+                time_s: cpm_calib::Logged::NONE,
+                temperature_c: cpm_calib::Logged::NONE,
             });
         }
     }

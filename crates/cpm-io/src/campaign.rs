@@ -1244,8 +1244,8 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 pose: j,
                 sensor,
                 length_mm,
-                time_s,
-                temperature_c,
+                time_s: time_s.into(),
+                temperature_c: temperature_c.into(),
             });
             reading_lines.push(row.line);
         }
@@ -2117,10 +2117,10 @@ pub fn write_readings(campaign: &Campaign, robot: &Robot, note: &str) -> String 
             num(r.length_mm)
         ));
         if has_time {
-            s.push_str(&format!(",{}", opt(r.time_s)));
+            s.push_str(&format!(",{}", opt(r.time_s.get())));
         }
         if has_temp {
-            s.push_str(&format!(",{}", opt(r.temperature_c)));
+            s.push_str(&format!(",{}", opt(r.temperature_c.get())));
         }
         if let Some(l) = logged {
             for (i, len) in l[r.pose].iter().enumerate() {

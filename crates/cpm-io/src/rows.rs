@@ -403,8 +403,8 @@ pub fn read_gauge_rows(
                 pose: j,
                 sensor,
                 length_mm,
-                time_s,
-                temperature_c: None,
+                time_s: time_s.into(),
+                temperature_c: cpm_calib::Logged::NONE,
             });
             reading_lines.push(line);
         }

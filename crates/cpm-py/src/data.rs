@@ -134,7 +134,12 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
     d.set_item("reading_lines", f.reading_lines.clone())?;
     d.set_item(
         "time_s",
-        PyArray1::from_iter(py, c.readings.iter().map(|r| r.time_s.unwrap_or(f64::NAN))),
+        PyArray1::from_iter(
+            py,
+            c.readings
+                .iter()
+                .map(|r| r.time_s.get().unwrap_or(f64::NAN)),
+        ),
     )?;
     d.set_item(
         "temperature_c",
@@ -142,7 +147,7 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
             py,
             c.readings
                 .iter()
-                .map(|r| r.temperature_c.unwrap_or(f64::NAN)),
+                .map(|r| r.temperature_c.get().unwrap_or(f64::NAN)),
         ),
     )?;
     match &c.commanded_lengths_mm {

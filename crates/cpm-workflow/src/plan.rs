@@ -74,8 +74,8 @@ impl PlanSpec {
         let mut c = self.plan.skeleton();
         for r in c.readings.iter_mut() {
             let (t, temp) = self.conditions[r.pose];
-            r.time_s = t;
-            r.temperature_c = temp;
+            r.time_s = t.into();
+            r.temperature_c = temp.into();
         }
         c
     }

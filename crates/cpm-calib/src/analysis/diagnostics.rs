@@ -535,8 +535,8 @@ mod tests {
                 pose: k / 2,
                 sensor: k % 2,
                 length_mm: 0.0,
-                time_s: None,
-                temperature_c: None,
+                time_s: crate::Logged::NONE,
+                temperature_c: crate::Logged::NONE,
             })
             .collect();
         let c = Campaign {

@@ -12,9 +12,87 @@ pub struct Reading {
     /// The reading (average of its repeats), mm.
     pub length_mm: f64,
     /// Acquisition time, s, if logged.
-    pub time_s: Option<f64>,
+    pub time_s: Logged,
     /// Temperature, deg C, if logged.
-    pub temperature_c: Option<f64>,
+    pub temperature_c: Logged,
+}
+
+/// A value a log may or may not hold (a reading's time or temperature): an `Option<f64>` in
+/// 8 bytes, not 16 (10^6 readings: 16 MB less), NaN standing for "not logged" (the readers
+/// refuse a number that is not finite, so no logged value is NaN; [`Logged::new`] of
+/// `Some(NaN)` is not logged). Serialised as the `Option<f64>` it stands for.
+///
+/// ```
+/// use cpm_calib::campaign::Logged;
+/// let t = Logged::new(Some(12.5));
+/// assert_eq!(t.get(), Some(12.5));
+/// assert_eq!(Logged::NONE.get(), None);
+/// assert_eq!(Logged::new(None), Logged::NONE);
+/// assert_eq!(std::mem::size_of::<Logged>(), 8);
+/// ```
+#[derive(Clone, Copy)]
+pub struct Logged(f64);
+
+impl Logged {
+    /// Not logged.
+    pub const NONE: Logged = Logged(f64::NAN);
+
+    /// Of an optional value.
+    pub fn new(v: Option<f64>) -> Self {
+        Logged(v.unwrap_or(f64::NAN))
+    }
+
+    /// The value, `None` when not logged.
+    pub fn get(self) -> Option<f64> {
+        (!self.0.is_nan()).then_some(self.0)
+    }
+
+    /// True when logged.
+    pub fn is_some(self) -> bool {
+        !self.0.is_nan()
+    }
+}
+
+impl Default for Logged {
+    fn default() -> Self {
+        Logged::NONE
+    }
+}
+
+impl From<Option<f64>> for Logged {
+    fn from(v: Option<f64>) -> Self {
+        Logged::new(v)
+    }
+}
+
+impl From<Logged> for Option<f64> {
+    fn from(v: Logged) -> Self {
+        v.get()
+    }
+}
+
+impl PartialEq for Logged {
+    fn eq(&self, other: &Self) -> bool {
+        self.get() == other.get()
+    }
+}
+
+impl std::fmt::Debug for Logged {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.get().fmt(f)
+    }
+}
+
+impl Serialize for Logged {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.get().serialize(s)
+    }
+}
+
+impl<'de> Deserialize<'de> for Logged {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        Option::<f64>::deserialize(d).map(Logged::new)
+    }
 }
 
 /// A platform pose measured by a tracker (laser tracker, motion capture) in the tracker's frame.
@@ -415,7 +493,7 @@ impl Campaign {
     pub fn first_time_s(&self) -> Option<f64> {
         self.readings
             .iter()
-            .filter_map(|r| r.time_s)
+            .filter_map(|r| r.time_s.get())
             .reduce(f64::min)
     }
 
@@ -643,8 +721,8 @@ impl Plan {
                     pose: p,
                     sensor: s,
                     length_mm: 0.0,
-                    time_s: None,
-                    temperature_c: None,
+                    time_s: Logged::NONE,
+                    temperature_c: Logged::NONE,
                 });
             }
         }
@@ -692,8 +770,8 @@ mod tests {
             pose,
             sensor: 0,
             length_mm: pose as f64,
-            time_s: None,
-            temperature_c: None,
+            time_s: Logged::NONE,
+            temperature_c: Logged::NONE,
         }
     }
 

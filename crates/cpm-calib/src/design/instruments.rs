@@ -159,8 +159,8 @@ impl Instruments {
                     pose: j,
                     sensor: s,
                     length_mm: 0.0,
-                    time_s: None,
-                    temperature_c: None,
+                    time_s: crate::Logged::NONE,
+                    temperature_c: crate::Logged::NONE,
                 });
             }
             if self.tracker {

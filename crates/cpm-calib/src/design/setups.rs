@@ -226,8 +226,8 @@ impl SetupDesign {
                     pose: poses.len(),
                     sensor: k,
                     length_mm: 0.0,
-                    time_s: None,
-                    temperature_c: None,
+                    time_s: crate::Logged::NONE,
+                    temperature_c: crate::Logged::NONE,
                 });
                 poses.push(*p);
             }

@@ -1168,12 +1168,12 @@ fn contexts(
         };
         let temperature_c = mean(
             rs.iter()
-                .filter_map(|&k| campaign.readings[k].temperature_c),
+                .filter_map(|&k| campaign.readings[k].temperature_c.get()),
         )
         .or_else(|| mean(measured().filter_map(|p| p.temperature_c)));
         let time_s = mean(
             rs.iter()
-                .filter_map(|&k| campaign.readings[k].time_s)
+                .filter_map(|&k| campaign.readings[k].time_s.get())
                 .chain(measured().filter_map(|p| p.time_s)),
         );
         let previous = if campaign.starts_session(j) {

@@ -107,7 +107,7 @@ pub fn residuals_vs_time(
         campaign,
         sensor_names,
         residuals_um,
-        |k| campaign.readings[k].time_s,
+        |k| campaign.readings[k].time_s.get(),
         |q| campaign.pose_measurements[q].time_s,
         |q| campaign.point_measurements[q].time_s,
     );
