@@ -989,6 +989,35 @@ impl MeasurementModel {
     }
 }
 
+/// The measurements of one kind grouped by pose: `by_pose[j]` lists the indices of those
+/// taken at pose j (in the campaign's order). A kind the campaign has none of holds nothing,
+/// not an empty list per pose (10^5 poses: 2.4 MB each).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ByPose(Vec<Vec<usize>>);
+
+impl ByPose {
+    /// The measurements taken at each of `poses` poses, from the pose of each measurement in
+    /// order.
+    pub fn group(poses: usize, pose_of: impl ExactSizeIterator<Item = usize>) -> Self {
+        if pose_of.len() == 0 {
+            return ByPose::default();
+        }
+        let mut out = vec![Vec::new(); poses];
+        for (q, j) in pose_of.enumerate() {
+            out[j].push(q);
+        }
+        ByPose(out)
+    }
+}
+
+impl std::ops::Index<usize> for ByPose {
+    type Output = [usize];
+    /// The measurements taken at pose `j` (none past the poses of a kind without any).
+    fn index(&self, j: usize) -> &[usize] {
+        self.0.get(j).map_or(&[], Vec::as_slice)
+    }
+}
+
 /// Per-pose data that does not depend on the parameters, computed once per campaign.
 #[derive(Debug, Clone)]
 pub struct Prepared {
@@ -1002,13 +1031,13 @@ pub struct Prepared {
     /// Readings grouped by pose: `by_pose[j]` lists reading indices taken at pose j.
     pub by_pose: Vec<Vec<usize>>,
     /// Pose measurements grouped by pose.
-    pub measurements_by_pose: Vec<Vec<usize>>,
+    pub measurements_by_pose: ByPose,
     /// Point measurements grouped by pose.
-    pub points_by_pose: Vec<Vec<usize>>,
+    pub points_by_pose: ByPose,
     /// Tilt measurements grouped by pose.
-    pub tilts_by_pose: Vec<Vec<usize>>,
+    pub tilts_by_pose: ByPose,
     /// Instrument measurements grouped by pose.
-    pub instruments_by_pose: Vec<Vec<usize>>,
+    pub instruments_by_pose: ByPose,
     /// The observation index of the first value of each instrument measurement
     /// ([`Campaign::instrument_observation_rows`]).
     pub instrument_rows: Vec<usize>,
@@ -1056,22 +1085,13 @@ impl Prepared {
         for (k, r) in campaign.readings.iter().enumerate() {
             by_pose[r.pose].push(k);
         }
-        let mut measurements_by_pose = vec![Vec::new(); campaign.poses.len()];
-        for (q, pm) in campaign.pose_measurements.iter().enumerate() {
-            measurements_by_pose[pm.pose].push(q);
-        }
-        let mut points_by_pose = vec![Vec::new(); campaign.poses.len()];
-        for (q, pm) in campaign.point_measurements.iter().enumerate() {
-            points_by_pose[pm.pose].push(q);
-        }
-        let mut tilts_by_pose = vec![Vec::new(); campaign.poses.len()];
-        for (q, t) in campaign.tilt_measurements.iter().enumerate() {
-            tilts_by_pose[t.pose].push(q);
-        }
-        let mut instruments_by_pose = vec![Vec::new(); campaign.poses.len()];
-        for (q, m) in campaign.instrument_measurements.iter().enumerate() {
-            instruments_by_pose[m.pose].push(q);
-        }
+        let n = campaign.poses.len();
+        let measurements_by_pose =
+            ByPose::group(n, campaign.pose_measurements.iter().map(|m| m.pose));
+        let points_by_pose = ByPose::group(n, campaign.point_measurements.iter().map(|m| m.pose));
+        let tilts_by_pose = ByPose::group(n, campaign.tilt_measurements.iter().map(|m| m.pose));
+        let instruments_by_pose =
+            ByPose::group(n, campaign.instrument_measurements.iter().map(|m| m.pose));
         let contexts = contexts(
             model,
             campaign,
@@ -1147,7 +1167,7 @@ fn contexts(
     commanded: Option<&[Vec<f64>]>,
     effective_mm: &[Vec<f64>],
     by_pose: &[Vec<usize>],
-    measurements_by_pose: &[Vec<usize>],
+    measurements_by_pose: &ByPose,
 ) -> Result<Vec<PoseContext>, CalibError> {
     let mut out: Vec<PoseContext> = Vec::with_capacity(campaign.poses.len());
     for (j, pose) in campaign.poses.iter().enumerate() {
