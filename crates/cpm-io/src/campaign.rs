@@ -1089,15 +1089,6 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     // The pose cells of the previous row as written: a row of the same pose that repeats
     // them exactly has the same numbers, already checked.
     let mut previous_cells: Vec<String> = Vec::new();
-    // When the pose columns follow each other in the header: the previous row's text over
-    // them, when it was a line without quotes (one comparison in place of one a cell).
-    let pose_span = {
-        let cols: Vec<usize> = pose_columns.iter().map(|(_, c)| *c).collect();
-        let consecutive = cols.windows(2).all(|w| w[1] == w[0] + 1);
-        (consecutive && !cols.is_empty()).then(|| (cols[0], cols[cols.len() - 1]))
-    };
-    let mut previous_span = String::new();
-    let mut previous_span_kept = false;
     // Without logged link readings, the robot's checks come after the rows (see above).
     let deferred = !logged;
     // The sensor of the previous row; whether the robot's sensor names are all different
@@ -1124,13 +1115,11 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
             let sensor = next_sensor
                 .or_else(|| robot.table.sensor_index(sensor_name))
                 .ok_or_else(|| unknown_sensor(&t.file, row.line, robot, sensor_name))?;
-            let span = pose_span.and_then(|(a, b)| row.fields_text(a, b));
             let same_as_previous = previous.is_some_and(|j| labels[j] == label)
-                && (span.is_some_and(|s| previous_span_kept && s == previous_span)
-                    || pose_columns
-                        .iter()
-                        .zip(&previous_cells)
-                        .all(|((_, c), p)| row.get(*c) == Some(p.as_str())));
+                && pose_columns
+                    .iter()
+                    .zip(&previous_cells)
+                    .all(|((_, c), p)| row.get(*c) == Some(p.as_str()));
             let known = match previous {
                 Some(j) if labels[j] == label => Some(j),
                 _ => by_label.get(label).copied(),
@@ -1153,9 +1142,6 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                     p.clear();
                     p.push_str(row.get(*c).unwrap_or(""));
                 }
-                previous_span.clear();
-                previous_span.push_str(span.unwrap_or(""));
-                previous_span_kept = span.is_some();
                 (raw, pose)
             };
             let length_mm = t.number_at(row, length_col)?;
@@ -1773,15 +1759,6 @@ pub struct ReadingOrigins {
 }
 
 impl ReadingOrigins {
-    /// Of readings of the files, file after file: each file's name and its readings' lines.
-    pub fn from_files(files: impl IntoIterator<Item = (std::sync::Arc<str>, Vec<usize>)>) -> Self {
-        let mut o = ReadingOrigins::default();
-        for (file, lines) in files {
-            o.push_file(file, lines);
-        }
-        o
-    }
-
     /// The readings of one more file, on `lines` (moved in when they are the first).
     pub fn push_file(&mut self, file: std::sync::Arc<str>, lines: Vec<usize>) {
         if lines.is_empty() {

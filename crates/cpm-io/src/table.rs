@@ -68,9 +68,6 @@ pub struct Row {
     text: String,
     /// Where each field, trimmed, is in `text`, in header order.
     spans: Vec<(usize, usize)>,
-    /// Whether `text` is the line itself (its fields apart at commas), not unquoted fields
-    /// one after the other.
-    separated: bool,
 }
 
 impl Row {
@@ -94,17 +91,6 @@ impl Row {
         self.spans
             .iter()
             .map(|&(a, b)| self.text.get(a..b).unwrap_or(""))
-    }
-
-    /// The line's text from field `first` to field `last` (trimmed at both ends), commas
-    /// and blanks between them included, when the row is a line without a quoted field
-    /// (else `None`): two such rows with the same text there have the same fields there.
-    pub(crate) fn fields_text(&self, first: usize, last: usize) -> Option<&str> {
-        if !self.separated || first > last {
-            return None;
-        }
-        let (a, b) = (self.spans.get(first)?.0, self.spans.get(last)?.1);
-        self.text.get(a..b)
     }
 
     /// Its fields as owned strings.
@@ -466,7 +452,6 @@ impl<R: Read> Lines<R> {
             })?;
             let what = "not UTF-8 text (save the file as UTF-8)";
             row.line = line;
-            row.separated = false;
             row.spans.clear();
             let mut start = 0;
             for (k, &end) in self.ends.iter().enumerate() {
@@ -546,7 +531,6 @@ impl<R: Read> Lines<R> {
         // The line becomes the row's text, the row's previous text the next line's buffer.
         self.buf = std::mem::replace(&mut row.text, text).into_bytes();
         row.line = self.line;
-        row.separated = true;
         true
     }
 }
@@ -1040,20 +1024,6 @@ mod tests {
         assert_eq!(fields[2], ["3", "x,y", "z\"q"]);
         assert_eq!(fields[3], ["4", "5", "6"]);
         assert_eq!(r.iter().map(|r| r.line).collect::<Vec<_>>(), [2, 3, 4, 5]);
-    }
-
-    /// The text over a range of fields is the line's own for a line without quotes, and
-    /// none for a line with a quoted field (its text holds the fields unquoted, without the
-    /// commas: `"1","23"` and `"12","3"` would read alike).
-    #[test]
-    fn the_text_over_fields_is_the_line_s_own_or_none() {
-        let (_, r) = rows(b"a,b,c,d\n x , 1,23 ,y\n\"12\",3,4,5\n,,,\n").unwrap();
-        assert_eq!(r[0].fields_text(1, 2), Some("1,23"));
-        assert_eq!(r[0].fields_text(0, 3), Some("x , 1,23 ,y"));
-        assert_eq!(r[0].fields_text(2, 1), None);
-        assert_eq!(r[0].fields_text(2, 4), None);
-        assert_eq!(r[1].fields_text(0, 1), None);
-        assert_eq!(r[2].fields_text(0, 3), Some(",,,"));
     }
 
     #[test]

@@ -138,7 +138,7 @@ fn plain(s: &str) -> bool {
 }
 
 /// The `what` field of a gauge reading (`sensor NAME at pose "LABEL"`, as
-/// [`write_observation_origin`] writes it) quoted as [`push_tidy_quoted`] quotes it, for a
+/// `write_reading_what` writes it) quoted as [`push_tidy_quoted`] quotes it, for a
 /// sensor and a label that are [`plain`]: the text has no comma, so tidying leaves it, and
 /// its only quotes are the label's two, doubled.
 fn push_reading_what(out: &mut String, sensor: &str, label: &str) {
@@ -232,16 +232,16 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(2000))]
         /// A gauge reading's `what` written the short way is what the general way writes
-        /// (`write_observation_origin`'s text, quoted and tidied), whenever the short way is
+        /// (`write_observation_origin`'s text, `write_reading_what`, quoted and tidied),
+        /// whenever the short way is
         /// taken; it is taken for plain names only.
         #[test]
         fn a_reading_s_what_is_written_as_the_general_way_writes_it(
             sensor in name(),
             label in name(),
         ) {
-            use std::fmt::Write as _;
             let (mut what, mut work, mut general) = (String::new(), String::new(), String::new());
-            let _ = write!(what, "sensor {sensor} at pose {label:?}");
+            crate::fit::write_reading_what(&mut what, &sensor, &label);
             super::push_tidy_quoted(&mut general, &what, &mut work);
             if super::plain(&sensor) && super::plain(&label) {
                 let mut short = String::new();

@@ -132,37 +132,24 @@ pub fn by_kind(model: &MeasurementModel, campaign: &Campaign, cal: &Calibration)
     let m = cal.residuals_um.len();
     let mean_leverage = cal.identifiability.rank as f64 / m.max(1) as f64;
     let h = |i: usize| cal.leverages.get(i).copied().unwrap_or(mean_leverage);
-    let observation_kinds = campaign.observation_kinds();
-    let kinds = || observation_kinds.iter().map(|k| Kind::of(campaign, *k));
-    // The kinds met, in order (a few: each run of one kind looked up once).
-    let distinct: Vec<Kind> = {
-        let mut set = std::collections::BTreeSet::new();
-        let mut last = None;
-        for k in kinds() {
-            if last != Some(k) {
-                set.insert(k);
-                last = Some(k);
-            }
+    // Each kind's totals (squared residuals, redundancy, observations, set aside) in one pass
+    // over the observations: each kind's sums add its terms in observation order, as a pass
+    // over that kind alone would. The kinds are few; a run of one kind finds its totals once.
+    let mut totals: Vec<(Kind, (f64, f64, usize, usize))> = Vec::new();
+    let mut at = 0;
+    for (i, k) in campaign.observation_kinds().into_iter().enumerate() {
+        let kind = Kind::of(campaign, k);
+        if totals.get(at).is_none_or(|(k, _)| *k != kind) {
+            at = match totals.iter().position(|(k, _)| *k == kind) {
+                Some(p) => p,
+                None => {
+                    totals.push((kind, (0.0, 0.0, 0, 0)));
+                    totals.len() - 1
+                }
+            };
         }
-        set.into_iter().collect()
-    };
-    // Each kind's totals in one pass over the observations, in their order (each kind's sums
-    // add its terms in the order a pass over that kind alone would).
-    let mut totals = vec![(0.0f64, 0.0f64, 0usize, 0usize); distinct.len()];
-    let mut aside_at = cal.set_aside.iter().copied().peekable();
-    let mut last: Option<(Kind, usize)> = None;
-    for (i, kind) in kinds().enumerate() {
-        let j = match last {
-            Some((k, j)) if k == kind => j,
-            _ => {
-                let j = distinct.binary_search(&kind).expect("a kind of the list");
-                last = Some((kind, j));
-                j
-            }
-        };
-        while aside_at.next_if(|&a| a < i).is_some() {}
-        let t = &mut totals[j];
-        if aside_at.next_if_eq(&i).is_some() {
+        let t = &mut totals[at].1;
+        if cal.set_aside.binary_search(&i).is_ok() {
             t.3 += 1;
             continue;
         }
@@ -170,12 +157,12 @@ pub fn by_kind(model: &MeasurementModel, campaign: &Campaign, cal: &Calibration)
         t.1 += (1.0 - h(i)).max(0.0);
         t.2 += 1;
     }
+    totals.sort_by_key(|(k, _)| *k);
     // Residuals are in um of the reference noise `sigma_ref`: a kind assumed at `s` (native)
     // was weighed by `sigma_ref / s`.
     let sigma_ref = cal.sigma_ref_um;
-    distinct
+    totals
         .into_iter()
-        .zip(totals)
         .map(|(kind, (ssr, red, n, aside))| {
             let assumed = assumed_sigma(campaign, kind, sigma_ref);
             let estimated = (red >= 1.0).then(|| (ssr / red).sqrt() * assumed / sigma_ref);

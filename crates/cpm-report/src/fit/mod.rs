@@ -18,6 +18,8 @@ pub use crate::identifiability::{
 
 pub mod prior;
 mod words;
+#[cfg(test)]
+pub(crate) use words::write_reading_what;
 pub use words::{
     describe_loss, describe_model, effect_list, misfit, misfit_message, observation_origin,
     warnings, write_observation_origin, Formulation, ObservationOrigin,

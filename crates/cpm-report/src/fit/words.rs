@@ -158,6 +158,14 @@ pub fn observation_origin(robot: &Robot, merged: &Merged, k: usize) -> Option<Ob
     })
 }
 
+/// What a gauge reading observed, as [`write_observation_origin`] writes it: `sensor NAME at
+/// pose "LABEL"` (the label as `{:?}` writes it), appended to `what`.
+pub(crate) fn write_reading_what(what: &mut String, sensor: &str, label: &str) {
+    use std::fmt::Write as _;
+    // Writing into a String cannot fail.
+    let _ = write!(what, "sensor {sensor} at pose {label:?}");
+}
+
 /// [`observation_origin`] without a string of its own: what was observed is written into
 /// `what` (cleared first; a buffer reused from observation to observation), the file and the
 /// line are returned (the file borrowed from `merged`). `None` when `k` has no origin
@@ -182,7 +190,7 @@ pub fn write_observation_origin<'m>(
             .sensors
             .get(r.sensor)
             .map_or("?", |s| s.name.as_str());
-        let _ = write!(what, "sensor {sensor} at pose {label:?}");
+        write_reading_what(what, sensor, label);
         Some((file, line))
     } else if k >= c.first_tilt_observation() {
         let q = k - c.first_tilt_observation();
