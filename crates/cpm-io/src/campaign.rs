@@ -1020,7 +1020,7 @@ pub(crate) fn read_readings_table<R: Read>(
     robot: &Robot,
     options: &ReadOptions,
 ) -> Result<DataFile, InputError> {
-    let (mut f, unusable) = read_readings_unexcluded(t, robot, options)?;
+    let (mut f, unusable, _) = read_readings_unexcluded(t, robot, None, options)?;
     exclude_poses(&mut f, unusable)?;
     Ok(f)
 }
@@ -1032,11 +1032,15 @@ pub(crate) fn read_readings_table<R: Read>(
 /// reachability, sensor lengths: [`robot_checks`]) are made after the rows are read, the
 /// reachability of the poses in parallel, with the errors they would have given row by row:
 /// when a row is refused, the checks of the rows before it come first.
+///
+/// With a `second` robot, its checks of the same rows too when they can be made on the rows
+/// `robot` read (see [`SecondChecks`]), beside `robot`'s.
 pub(crate) fn read_readings_unexcluded<R: Read>(
     t: &mut Table<R>,
     robot: &Robot,
+    second: Option<&Robot>,
     options: &ReadOptions,
-) -> Result<(DataFile, Vec<Unusable>), InputError> {
+) -> Result<(DataFile, Vec<Unusable>, SecondChecks), InputError> {
     let n = robot.num_links();
     let o = orientation(t)?;
     t.check_columns(
@@ -1238,10 +1242,20 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
         Ok(())
     };
     let read = rows();
+    let mut theirs = None;
     if deferred {
-        // The robot's checks of the rows read (all, or those before the refused one) first.
-        let (c, lines) = (&campaign, &reading_lines);
-        unusable = robot_checks(&t.file, robot, options, &c.poses, &c.readings, lines)?;
+        // The robot's checks of the rows read (all, or those before the refused one) first;
+        // the second robot's beside them (used only when the rows are all read).
+        let (c, lines, file) = (&campaign, &reading_lines, t.file.as_str());
+        let checks = |r: &Robot| robot_checks(file, r, options, &c.poses, &c.readings, lines);
+        unusable = match second.filter(|s| same_sensor_names(robot, s)) {
+            Some(s) => {
+                let (mine, second) = rayon::join(|| checks(robot), || checks(s));
+                theirs = Some(second);
+                mine
+            }
+            None => checks(robot),
+        }?;
     }
     read?;
     if campaign.readings.is_empty() {
@@ -1256,7 +1270,7 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     }
     let pose_lines = entries.iter().map(|e| e.line).collect();
     let f = DataFile::readings(t.file.clone(), campaign, labels, pose_lines, reading_lines);
-    Ok((f, unusable))
+    Ok((f, unusable, theirs))
 }
 
 /// The commanded lengths of a pose from its logged link readings `u` (its first row, on
@@ -1408,34 +1422,17 @@ pub(crate) fn robot_checks(
     Ok(unusable)
 }
 
-/// A readings file read for a second robot from what the first robot's reading made of it
-/// (`first`, its poses all kept): the robot's own checks ([`robot_checks`]) and exclusions.
-/// `None` when the first reading cannot be shared: another kind of file, logged link
-/// readings (turned into lengths by each robot's reading models), or sensors named otherwise
-/// (the rows name them).
-pub(crate) fn readings_for_second_robot(
-    first: &DataFile,
-    first_robot: &Robot,
-    robot: &Robot,
-    options: &ReadOptions,
-) -> Option<Result<Vec<Unusable>, InputError>> {
-    let (a, b) = (&first_robot.table.sensors, &robot.table.sensors);
-    let same_names = a.len() == b.len() && a.iter().zip(b).all(|(a, b)| a.name == b.name);
-    if first.kind != FileKind::Readings
-        || first.campaign.commanded_lengths_mm.is_some()
-        || !same_names
-    {
-        return None;
-    }
-    let c = &first.campaign;
-    Some(robot_checks(
-        &first.file,
-        robot,
-        options,
-        &c.poses,
-        &c.readings,
-        &first.reading_lines,
-    ))
+/// The second robot's checks of a readings file (see [`read_readings_unexcluded`]): the
+/// poses to exclude for it, or the error [`read_readings_table`] would give it; `None` when
+/// they cannot be made on the rows the first robot read (the file logged link readings,
+/// or the robots do not name the same sensors in the same order): read the file for it on
+/// its own.
+pub(crate) type SecondChecks = Option<Result<Vec<Unusable>, InputError>>;
+
+/// Whether robots `a` and `b` name the same sensors in the same order.
+fn same_sensor_names(a: &Robot, b: &Robot) -> bool {
+    let (a, b) = (&a.table.sensors, &b.table.sensors);
+    a.len() == b.len() && a.iter().zip(b).all(|(a, b)| a.name == b.name)
 }
 
 /// Checks that a row of a pose already given (on line `line`) repeats its commanded pose and

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use crate::campaign::{
     exclude_poses, finish, open, read_pose_measurements_table, read_readings_table,
-    read_readings_unexcluded, readings_for_second_robot, DataFile, ReadOptions,
+    read_readings_unexcluded, DataFile, ReadOptions,
 };
 use crate::points::{read_point_measurements_table, read_tilt_measurements_table};
 use crate::table::{FileKind, Table};
@@ -104,10 +104,9 @@ pub fn read_data_file_for_two(
         return Ok((read_data_file(path, first, options)?, None));
     }
     let mut t = t.read_ahead();
-    let (all, unusable) =
-        read_readings_unexcluded(&mut t, first, options).map_err(|e| finish(&mut t, e))?;
+    let (all, unusable, theirs) = read_readings_unexcluded(&mut t, first, Some(second), options)
+        .map_err(|e| finish(&mut t, e))?;
     drop(t);
-    let theirs = readings_for_second_robot(&all, first, second, options);
     let same = |u: &[crate::campaign::Unusable]| {
         u.len() == unusable.len()
             && u.iter()

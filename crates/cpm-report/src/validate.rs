@@ -260,24 +260,48 @@ pub struct RobotText {
     pub outside_pose_map: usize,
 }
 
+/// Lists taken one after the other as one: [`rms`] and [`max_abs`] of them, in the same
+/// order (the same figures, bit for bit), without the list.
+#[derive(Clone)]
+struct Chained<I>(I);
+
+impl<'a, I: Iterator<Item = &'a [f64]> + Clone> Chained<I> {
+    fn values(&self) -> impl Iterator<Item = f64> + use<'a, I> {
+        self.0.clone().flat_map(|v| v.iter().copied())
+    }
+
+    fn len(&self) -> usize {
+        self.0.clone().map(<[f64]>::len).sum()
+    }
+
+    /// [`rms`] of the values.
+    fn rms(&self) -> f64 {
+        match self.len() {
+            0 => f64::NAN,
+            n => (self.values().map(|x| x * x).sum::<f64>() / n as f64).sqrt(),
+        }
+    }
+
+    /// [`max_abs`] of the values.
+    fn max_abs(&self) -> f64 {
+        self.values().fold(
+            f64::NAN,
+            |m, x| if m.is_nan() { x.abs() } else { m.max(x.abs()) },
+        )
+    }
+}
+
 impl RobotSummary {
     fn new(e: &PredictionErrors) -> (Self, RobotText) {
-        let all: Vec<f64> = e
-            .groups
-            .iter()
-            .flat_map(|g| g.values_um.iter().copied())
-            .collect();
-        let rot: Vec<f64> = e
-            .groups
-            .iter()
-            .flat_map(|g| g.orientation_urad.iter().copied())
-            .collect();
+        // Every group's values one after the other, as one list would hold them.
+        let all = Chained(e.groups.iter().map(|g| g.values_um.as_slice()));
+        let rot = Chained(e.groups.iter().map(|g| g.orientation_urad.as_slice()));
         let (mean, sd) = mean_sd(&e.position_norm_um);
         let poses = !e.position_norm_um.is_empty();
         let summary = Self {
-            rms_um: rms(&all),
-            max_um: max_abs(&all),
-            orientation_rms_urad: rms_of(&rot),
+            rms_um: all.rms(),
+            max_um: all.max_abs(),
+            orientation_rms_urad: (rot.len() > 0).then(|| rot.rms()),
             link_rms_mm: rms_of(&e.link_mm),
             position_error_mean_um: poses.then_some(mean),
             position_error_sd_um: poses.then_some(sd),
@@ -288,7 +312,7 @@ impl RobotSummary {
         let text = RobotText {
             observations: all.len(),
             angles: rot.len(),
-            orientation_max_urad: max_abs(&rot),
+            orientation_max_urad: rot.max_abs(),
             tracker_poses: e.tracker_poses,
             outside_pose_map: e.outside_pose_map,
         };

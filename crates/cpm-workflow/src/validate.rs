@@ -681,6 +681,8 @@ fn errors_of_both(
             &options,
             &held_out_registration(),
         )?;
+        // `robot`'s predictions, when made beside the reference's.
+        let mut native = None;
         if let Ok(rg) = &mut r {
             use crate::io::SecondReading;
             let done = match second {
@@ -692,10 +694,22 @@ fn errors_of_both(
                 }
                 Some(Ok(SecondReading::SameAsFirst)) => {
                     // Gauge readings alone, the file as `robot` read it (no logged link
-                    // readings), predicted with the reference's commanded lengths (those
-                    // `held_out` would give it).
-                    let theirs = commanded_lengths(reference, reference, &file.campaign.poses);
-                    rg.file_commanded(&file, Some(&theirs)).map(drop)
+                    // readings): both robots predict it side by side, each with the commanded
+                    // lengths `held_out` gives it (the reference's from its own controller,
+                    // `robot`'s from the reference's). Nothing else `held_out` changes is read
+                    // by a prediction of gauge readings alone.
+                    let poses = &file.campaign.poses;
+                    let (theirs, ours) = rayon::join(
+                        || commanded_lengths(reference, reference, poses),
+                        || commanded_lengths(robot, reference, poses),
+                    );
+                    let (done, mine) = rayon::join(
+                        || rg.file_commanded(&file, Some(&theirs)).map(drop),
+                        || g.file_commanded(&file, Some(&ours)),
+                    );
+                    file.campaign.commanded_lengths_mm = Some(ours);
+                    native = Some(mine);
+                    done
                 }
             };
             if let Err(e) = done {
@@ -703,7 +717,10 @@ fn errors_of_both(
             }
         }
         held_out(&mut file, robot, reference, tracker)?;
-        g.take(file)?;
+        match native {
+            Some(native) => g.rows(file, native?)?,
+            None => g.take(file)?,
+        }
     }
     Ok((g.finish(), r.map(|r| r.finish().0)))
 }
