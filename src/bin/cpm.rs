@@ -1,4 +1,9 @@
 //! The `cpm` command: calibration of parallel manipulators (see `docs/cli.md`).
+
+/// The command's allocator (see the `mimalloc` dependency in Cargo.toml).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 fn main() {
     std::process::exit(cpm::cli::run(std::env::args_os()));
 }
