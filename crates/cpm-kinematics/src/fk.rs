@@ -236,7 +236,7 @@ pub fn forward(
     start: &Pose,
     options: &ForwardOptions,
 ) -> Result<(Pose, ForwardReport), KinematicsError> {
-    newton(table, lengths_mm, start, options, None)
+    newton(table, lengths_mm, start, options, None, None)
 }
 
 /// [`forward`] from the pose and with the options `start` was made with, on the table it was
@@ -246,16 +246,71 @@ pub fn forward_from(
     lengths_mm: &[f64],
     start: &ForwardStart,
 ) -> Result<(Pose, ForwardReport), KinematicsError> {
-    newton(table, lengths_mm, &start.pose, &start.options, Some(start))
+    newton(
+        table,
+        lengths_mm,
+        &start.pose,
+        &start.options,
+        Some(start),
+        None,
+    )
 }
 
-/// [`forward`], the first step from `first` when given (six links).
+/// How close to a known solution an iterate of [`forward_from_toward`] must come to stop
+/// there: its position within this many mm and its rotation matrix within this much
+/// (Frobenius norm) times the platform's joint radius. A billionth of the millimetres that
+/// separate Newton's basins at a regular solution: from there Newton converges to it.
+pub const NEAR_SOLUTION_MM: f64 = 1e-6;
+
+/// [`forward_from`] where a solution `near` is known (the pose whose inverse kinematics gave
+/// `lengths_mm`), to learn whether Newton from the start lands there: the same iterates, up
+/// to the first that comes within [`NEAR_SOLUTION_MM`] of `near`, where Newton would go on to
+/// converge to `near` (it is then returned, one or two iterations early, with the report's
+/// residual that of the iterate before it). Otherwise [`forward_from`]'s result.
+pub fn forward_from_toward(
+    table: &JointTable,
+    lengths_mm: &[f64],
+    start: &ForwardStart,
+    near: &Pose,
+) -> Result<(Pose, ForwardReport), KinematicsError> {
+    newton(
+        table,
+        lengths_mm,
+        &start.pose,
+        &start.options,
+        Some(start),
+        Some(near),
+    )
+}
+
+/// [`forward_from_toward`] from `start` with `options` (no first step made).
+pub(crate) fn forward_toward(
+    table: &JointTable,
+    lengths_mm: &[f64],
+    start: &Pose,
+    options: &ForwardOptions,
+    near: &Pose,
+) -> Result<(Pose, ForwardReport), KinematicsError> {
+    newton(table, lengths_mm, start, options, None, Some(near))
+}
+
+/// Whether `pose` is within [`NEAR_SOLUTION_MM`] of `near` (see there), `radius_mm` the
+/// platform's joint radius.
+fn is_near(pose: &Pose, near: &Pose, radius_mm: f64) -> bool {
+    let dt = (pose.position_mm - near.position_mm).norm();
+    let dr = (pose.rotation.matrix() - near.rotation.matrix()).norm();
+    dt + dr * radius_mm <= NEAR_SOLUTION_MM // false for NaN
+}
+
+/// [`forward`], the first step from `first` when given (six links), stopping at an iterate
+/// near `near` when given (see [`forward_from_toward`]).
 fn newton(
     table: &JointTable,
     lengths_mm: &[f64],
     start: &Pose,
     options: &ForwardOptions,
     first: Option<&ForwardStart>,
+    near: Option<&Pose>,
 ) -> Result<(Pose, ForwardReport), KinematicsError> {
     let n = table.num_links();
     if n < 6 || lengths_mm.len() != n {
@@ -336,6 +391,15 @@ fn newton(
             }
         }
         pose = pose.perturbed(&(step * scale));
+        if near.is_some_and(|p| is_near(&pose, p, radius_mm)) {
+            return Ok((
+                pose,
+                ForwardReport {
+                    iterations: it + 1,
+                    residual_mm: worst,
+                },
+            ));
+        }
         if n > 6 && scale == 1.0 && dt.norm() + dw.norm() * radius_mm <= options.tolerance_mm {
             // Least-squares closure of redundant links: stationary, the residual need not vanish.
             let worst = residual_and_jacobian(table, &pose, lengths_mm, &mut jac, &mut rhs);

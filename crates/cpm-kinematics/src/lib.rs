@@ -34,7 +34,9 @@ pub mod sensor;
 pub mod workspace;
 
 pub use error::KinematicsError;
-pub use fk::{forward, forward_from, ForwardOptions, ForwardReport, ForwardStart};
+pub use fk::{
+    forward, forward_from, forward_from_toward, ForwardOptions, ForwardReport, ForwardStart,
+};
 pub use ik::{inverse, inverse_lengths, inverse_lengths_into, LinkState};
 pub use jacobian::{first_order_pose_error, j1, j2};
 pub use sensor::{sensor_length_mm, sensor_pose_gradient};

@@ -29,7 +29,7 @@
 use cpm_geometry::{JointTable, Pose};
 use nalgebra::{Matrix6, Vector6};
 
-use crate::fk::{forward_from, ForwardStart};
+use crate::fk::{forward_from_toward, forward_toward, ForwardStart};
 use crate::linalg::SvdError;
 use crate::{forward, inverse_lengths, j1, ForwardOptions, ForwardReport, KinematicsError};
 
@@ -255,9 +255,16 @@ fn judge(
             Err(_) => f64::INFINITY,
         }
     };
+    // Newton from home stops when it comes near the pose: it would converge to it from there.
     let from_home_mm = distance(match home {
-        Some(h) => forward_from(table, &lengths, h),
-        None => forward(table, &lengths, &table.home, &ForwardOptions::default()),
+        Some(h) => forward_from_toward(table, &lengths, h, pose),
+        None => forward_toward(
+            table,
+            &lengths,
+            &table.home,
+            &ForwardOptions::default(),
+            pose,
+        ),
     });
     if from_home_mm <= RETURN_TOLERANCE_MM {
         return Ok(());

@@ -175,14 +175,16 @@ fn check_quadratic(t: &JointTable, p: &Pose, e: &InstallationErrors) -> Result<(
     }
     // And eq. 12 is a good approximation at the paper's error size.
     let first = exact_pose_error(t, p, e).fixed_rows::<3>(0).norm();
-    // Within 3 %: the second-order term grows with J1's conditioning, and random reachable
-    // poses reach condition numbers where 100 um errors give ~1 % (seen: 1.05 %).
+    // Within 5 %: the second-order term grows with J1's conditioning, and random reachable
+    // poses reach condition numbers where 100 um errors give ~1 % (seen: 1.05 %), and more
+    // where the errors are amplified (seen: 3.2 %, paper cube, 83 um joint errors moving the
+    // platform 0.25 mm; its case is in the regression file).
     // Near singular poses amplify the errors (seen: 0.1 mm of joint errors moving the
     // platform 1.5 mm, with a 12 % second-order term); there eq. 12 holds only for smaller
     // errors, which the decade ratios above check.
     let largest_mm = e.to_vec_um().iter().fold(0.0f64, |m, v| m.max(v.abs())) * 1e-3;
     let well_conditioned = first <= 5.0 * largest_mm;
-    let small = !well_conditioned || d[0].0 < 3e-2 * first.max(1e-3);
+    let small = !well_conditioned || d[0].0 < 5e-2 * first.max(1e-3);
     if !small {
         return Err(format!("discrepancy {:e} vs error {first:e}", d[0].0));
     }

@@ -236,3 +236,60 @@ fn the_verdicts_are_those_of_the_rule_written_out() {
         assert!(kinds.len() >= 3, "{kinds:?}");
     }
 }
+
+/// `forward_from_toward` (Newton from home stopping near a known solution, as `ReachableAt`
+/// uses it) lands where `forward_from` lands, on poses of every kind: at the pose when
+/// `forward_from` returns it (within the 1e-3 mm `reachable_at` asks for), elsewhere or
+/// nowhere when it does not; and when it stops early, in fewer iterations.
+#[test]
+fn stopping_near_the_pose_lands_where_newton_lands() {
+    use cpm_kinematics::fk::NEAR_SOLUTION_MM;
+    use cpm_kinematics::{forward_from, forward_from_toward, ForwardStart};
+    let mut rng = StdRng::seed_from_u64(37);
+    for (t, z, r) in [
+        (JointTable::paper_cubic(), 430.0, 150.0),
+        (JointTable::hexapod_66(), 300.0, 50.0),
+    ] {
+        let start = ForwardStart::new(&t, &t.home, &ForwardOptions::default()).unwrap();
+        let radius = t
+            .links
+            .iter()
+            .map(|l| l.platform_mm.norm())
+            .fold(1.0, f64::max);
+        let (mut early, mut elsewhere) = (0, 0);
+        for _ in 0..3000 {
+            let mut u = || rng.random_range(-1.0..1.0);
+            let p = Pose::from_xyz_rpy_deg(
+                [r * u(), r * u(), z + r * 1.6 * u()],
+                [70.0 * u(), 70.0 * u(), 70.0 * u()],
+            );
+            let lengths = inverse_lengths(&t, &p);
+            if !lengths.iter().all(|l| l.is_finite()) {
+                continue;
+            }
+            let distance = |q: &Pose| {
+                let d = p.difference(q);
+                d.fixed_rows::<3>(0).norm() + d.fixed_rows::<3>(3).norm() * radius
+            };
+            let full = forward_from(&t, &lengths, &start);
+            let toward = forward_from_toward(&t, &lengths, &start, &p);
+            let lands = |r: &Result<(Pose, cpm_kinematics::ForwardReport), _>| {
+                r.as_ref().is_ok_and(|(q, _)| distance(q) <= 1e-3)
+            };
+            assert_eq!(lands(&full), lands(&toward), "{p:?}");
+            match (&full, &toward) {
+                (Ok((_, a)), Ok((s, b))) if lands(&full) => {
+                    assert!(distance(s) <= 2.0 * NEAR_SOLUTION_MM, "{p:?}");
+                    assert!(b.iterations <= a.iterations, "{p:?}");
+                    early += usize::from(b.iterations < a.iterations);
+                }
+                _ => {
+                    assert_eq!(full.is_ok(), toward.is_ok(), "{p:?}");
+                    elsewhere += 1;
+                }
+            }
+        }
+        assert!(early > 300, "{early} early stops");
+        assert!(elsewhere > 30, "{elsewhere} poses not returned");
+    }
+}
