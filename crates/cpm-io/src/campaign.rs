@@ -1105,6 +1105,13 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
     };
     let mut rows = || -> Result<(), InputError> {
         while t.next_row_into(&mut next)? {
+            if reading_lines.is_empty() {
+                // The lists sized once for about the rows the file holds (its size over the
+                // first row's length), not grown row by row.
+                let rows = t.rows_like(&next).unwrap_or(0).min(options.max_rows);
+                campaign.readings.reserve(rows);
+                reading_lines.reserve(rows);
+            }
             let row = &next;
             let t: &Header = t;
             if reading_lines.len() >= options.max_rows {

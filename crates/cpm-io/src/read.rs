@@ -32,11 +32,14 @@ pub fn read_data_file(
     options: &ReadOptions,
 ) -> Result<DataFile, ReadError> {
     let file = path.display().to_string();
-    read_data_table(
-        Table::from_reader(open(path)?, &file)?.read_ahead(),
-        robot,
-        options,
-    )
+    read_data_table(opened(path, &file)?.read_ahead(), robot, options)
+}
+
+/// The table of the file at `path` (named `file` in messages), told the file's size.
+fn opened(path: &Path, file: &str) -> Result<Table<std::fs::File>, ReadError> {
+    let f = open(path)?;
+    let size = f.metadata().ok().map(|m| m.len());
+    Ok(Table::from_reader(f, file)?.with_size_bytes(size))
 }
 
 /// Reads a measurement file of either kind (told from the header) from a reader, row by row:
@@ -98,7 +101,7 @@ pub fn read_data_file_for_two(
     options: &ReadOptions,
 ) -> Result<(DataFile, Option<Result<SecondReading, ReadError>>), ReadError> {
     let file = path.display().to_string();
-    let t = Table::from_reader(open(path)?, &file)?;
+    let t = opened(path, &file)?;
     if !matches!(t.kind(), Ok(FileKind::Readings)) {
         drop(t);
         return Ok((read_data_file(path, first, options)?, None));

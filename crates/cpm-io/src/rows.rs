@@ -316,11 +316,14 @@ pub fn read_gauge_rows(
     // Per pose: the numbers of its first row, its first line.
     let mut first: Vec<(RawPose, usize)> = Vec::new();
     let mut labels: Vec<String> = Vec::new();
+    // The lists sized once for the rows (at most `max_rows` of them are read), not grown.
+    let capacity = rows.len().min(options.max_rows.saturating_add(1));
     let mut campaign = Campaign {
         simulated: rows.simulated,
+        readings: Vec::with_capacity(capacity),
         ..Campaign::default()
     };
-    let mut reading_lines = Vec::new();
+    let mut reading_lines = Vec::with_capacity(capacity);
     let mut angles = Vec::new();
     // The pose and numbers of the previous row (rows of one pose usually follow each other).
     let mut previous: Option<(usize, [f64; 6])> = None;

@@ -121,6 +121,8 @@ pub struct Table<R: Read> {
     /// The header.
     pub header: Header,
     source: Source<R>,
+    /// The size of what is read, bytes, when known: a reader sizes its lists from it.
+    size_bytes: Option<u64>,
 }
 
 /// Where a table's rows come from.
@@ -178,7 +180,7 @@ impl<R: Read> std::ops::Deref for Table<R> {
 impl<'a> Table<&'a [u8]> {
     /// A table over CSV text in memory.
     pub fn parse(text: &'a str, file: &str) -> Result<Self, InputError> {
-        Table::from_reader(text.as_bytes(), file)
+        Ok(Table::from_reader(text.as_bytes(), file)?.with_size_bytes(Some(text.len() as u64)))
     }
 }
 
@@ -202,6 +204,7 @@ impl<R: Read> Table<R> {
                 line: 0,
                 io_error: None,
             }),
+            size_bytes: None,
         };
         let Some(first) = t.next_record()? else {
             return Err(InputError::file(
@@ -229,6 +232,19 @@ impl<R: Read> Table<R> {
         }
         t.header.headers = first.to_fields();
         Ok(t)
+    }
+
+    /// The table, told the size of what it reads (bytes; `None`: not known).
+    pub fn with_size_bytes(mut self, size_bytes: Option<u64>) -> Self {
+        self.size_bytes = size_bytes;
+        self
+    }
+
+    /// About how many rows like `row` the table holds, from its size when known: the size
+    /// over the row's length (its line, ending included). `None` when the size is not known.
+    pub fn rows_like(&self, row: &Row) -> Option<usize> {
+        let size = usize::try_from(self.size_bytes?).ok()?;
+        Some(size / (row.text.len() + 1))
     }
 
     /// The next data row, `None` at the end; every row has as many fields as the header.
@@ -330,11 +346,13 @@ impl<R: Read + Send + 'static> Table<R> {
             return Table {
                 header: self.header,
                 source: Source::Here(lines),
+                size_bytes: self.size_bytes,
             };
         }
         match give.send(lines) {
             Ok(()) => Table {
                 header: self.header,
+                size_bytes: self.size_bytes,
                 source: Source::Ahead(Ahead {
                     batch: Batch {
                         rows: Vec::new(),
@@ -350,6 +368,7 @@ impl<R: Read + Send + 'static> Table<R> {
             Err(std::sync::mpsc::SendError(lines)) => Table {
                 header: self.header,
                 source: Source::Here(lines),
+                size_bytes: self.size_bytes,
             },
         }
     }
@@ -921,6 +940,29 @@ mod tests {
             self.left -= n;
             Ok(n)
         }
+    }
+
+    /// A table knows about how many rows like its first it holds when told its size (read
+    /// ahead or not), and nothing when not told.
+    #[test]
+    fn rows_like_counts_rows_from_the_size() {
+        let mut text = String::from("a,b\n");
+        for k in 0..1000 {
+            text.push_str(&format!("{},x\n", 100 + k % 900));
+        }
+        let mut t = Table::parse(&text, "t.csv").unwrap();
+        let row = t.next_row().unwrap().unwrap();
+        // 1000 rows of 6 bytes and a header of 4: the size over a row's 6 bytes.
+        assert_eq!(t.rows_like(&row), Some(1000));
+        let mut t = Table::from_reader(text.as_bytes(), "t.csv").unwrap();
+        let row = t.next_row().unwrap().unwrap();
+        assert_eq!(t.rows_like(&row), None);
+        let told = Table::from_reader(std::io::Cursor::new(text.clone().into_bytes()), "t.csv")
+            .unwrap()
+            .with_size_bytes(Some(text.len() as u64));
+        let mut t = told.read_ahead();
+        let row = t.next_row().unwrap().unwrap();
+        assert_eq!(t.rows_like(&row), Some(1000));
     }
 
     /// A table read ahead by a thread gives the rows, line numbers and first error (a bad
