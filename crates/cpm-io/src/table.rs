@@ -796,6 +796,8 @@ impl Header {
         let name = &self.headers[col];
         match row.get(col) {
             None | Some("") => Ok(None),
+            // As written by cpm (every row of a simulated file), before the general cases.
+            Some("true") => Ok(Some(true)),
             Some(t)
                 if t.eq_ignore_ascii_case("true") || t.eq_ignore_ascii_case("yes") || t == "1" =>
             {
