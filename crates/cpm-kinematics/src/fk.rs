@@ -258,8 +258,9 @@ pub fn forward_from(
 
 /// How close to a known solution an iterate of [`forward_from_toward`] must come to stop
 /// there: its position within this many mm and its rotation matrix within this much
-/// (Frobenius norm) times the platform's joint radius. A billionth of the millimetres that
-/// separate Newton's basins at a regular solution: from there Newton converges to it.
+/// (Frobenius norm) times the platform's joint radius. A millionth of a millimetre: far
+/// inside Newton's basin of a regular solution (whose size is of millimetres), so that from
+/// there Newton converges to it.
 pub const NEAR_SOLUTION_MM: f64 = 1e-6;
 
 /// [`forward_from`] where a solution `near` is known (the pose whose inverse kinematics gave
