@@ -1,8 +1,9 @@
 //! Forward kinematics: link lengths to pose by Newton-Raphson with the analytic J1.
 use cpm_geometry::{JointTable, Pose};
-use nalgebra::{DMatrix, Matrix6, Vector3, Vector6, LU, U6};
+use nalgebra::{DMatrix, Matrix6, Vector3, Vector6};
 
 use crate::linalg::SvdError;
+use crate::lu6::Lu6;
 use crate::KinematicsError;
 
 /// Options of the forward kinematics solver.
@@ -68,7 +69,7 @@ pub fn condition_number(m: &Matrix6<f64>) -> Result<f64, SvdError> {
 /// inverse rather than an SVD. False when that bound exceeds `bound` (the condition number
 /// may still be below: compute it), or `m` is singular or not finite.
 pub fn condition_at_most(m: &Matrix6<f64>, bound: f64) -> bool {
-    let Some(inv) = m.try_inverse() else {
+    let Some(inv) = crate::lu6::try_inverse6(m) else {
         return false;
     };
     m.norm() * inv.norm() <= bound // false for NaN
@@ -106,14 +107,14 @@ fn singular(iteration: usize, jac: &Mat6, links: usize) -> KinematicsError {
     })
 }
 
-/// Solves `a x = b` by nalgebra's fixed-size LU with partial pivoting (allocation-free).
-/// `None` when a pivot is zero or anything is not finite.
+/// Solves `a x = b` by the LU with partial pivoting of [`crate::lu6`] (nalgebra's, bit for
+/// bit; allocation-free). `None` when a pivot is zero or anything is not finite.
 fn solve6(a: &Mat6, b: &[f64; 6]) -> Option<Vector6<f64>> {
-    solve_lu(&Matrix6::from_fn(|i, j| a[i][j]).lu(), b)
+    solve_lu(&Lu6::from_rows(a), b)
 }
 
 /// [`solve6`] with the LU factors of `a`.
-fn solve_lu(lu: &LU<f64, U6, U6>, b: &[f64; 6]) -> Option<Vector6<f64>> {
+fn solve_lu(lu: &Lu6, b: &[f64; 6]) -> Option<Vector6<f64>> {
     let x = lu.solve(&Vector6::from(*b))?;
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
@@ -128,7 +129,7 @@ pub struct ForwardStart {
     options: ForwardOptions,
     lengths_mm: [f64; 6],
     jac: Mat6,
-    lu: LU<f64, U6, U6>,
+    lu: Lu6,
     surely_acceptable: bool,
 }
 
@@ -148,7 +149,7 @@ impl ForwardStart {
             options: *options,
             lengths_mm: rhs.map(|r| -r),
             jac,
-            lu: m.lu(),
+            lu: Lu6::new(&m),
             surely_acceptable: condition_at_most(&m, options.max_condition),
         })
     }

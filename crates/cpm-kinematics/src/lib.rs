@@ -30,6 +30,7 @@ pub mod fk;
 pub mod ik;
 pub mod jacobian;
 pub mod linalg;
+pub mod lu6;
 pub mod sensor;
 pub mod workspace;
 

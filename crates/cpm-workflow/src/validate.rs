@@ -350,12 +350,26 @@ impl Gather {
         observed: &[f64],
         predicted: &[f64],
     ) {
+        // Each sensor's list grows once, to its number of readings (not by doubling: a
+        // million readings would touch twice the memory they fill).
+        let mut per_sensor = vec![0usize; self.sensor_group.len()];
+        for r in &campaign.readings {
+            if let Some(n) = per_sensor.get_mut(r.sensor) {
+                *n += 1;
+            }
+        }
+        for (s, &n) in per_sensor.iter().enumerate() {
+            if let Some(g) = self.sensor_group[s] {
+                self.out.groups[g].values_um.reserve(n);
+            }
+        }
         for (k, r) in campaign.readings.iter().enumerate() {
             let g = match self.sensor_group[r.sensor] {
                 Some(g) => g,
                 None => {
                     let name = robot.table.sensors[r.sensor].name.clone();
                     let g = self.group(name);
+                    self.out.groups[g].values_um.reserve(per_sensor[r.sensor]);
                     *self.sensor_group[r.sensor].insert(g)
                 }
             };
@@ -1151,10 +1165,18 @@ fn readings_in_memory(
     let observed = c.observations();
     let mut out = RobotErrors::default();
     let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
+    // Each sensor's list made at its size (see `Gather::readings`).
+    let mut per_sensor = vec![0usize; robot.table.sensors.len()];
+    for r in &c.readings {
+        per_sensor[r.sensor] += 1;
+    }
     for (k, r) in c.readings.iter().enumerate() {
         let g = *sensor_group[r.sensor].get_or_insert_with(|| {
             out.names.push(robot.table.sensors[r.sensor].name.clone());
-            out.groups.push(Errors::default());
+            out.groups.push(Errors {
+                values_um: Vec::with_capacity(per_sensor[r.sensor]),
+                ..Errors::default()
+            });
             out.names.len() - 1
         });
         out.groups[g]

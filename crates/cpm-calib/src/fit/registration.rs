@@ -686,7 +686,7 @@ fn linearise(
                 );
             }
             if n == 6 {
-                if let Some(inv) = j1.try_inverse() {
+                if let Some(inv) = cpm_kinematics::lu6::try_inverse6(&j1) {
                     let k0 = 6 * sessions.len();
                     for i in 0..n {
                         let tw = inv.column(i);

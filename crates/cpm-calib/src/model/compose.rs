@@ -83,7 +83,7 @@ pub(crate) struct Kin {
     links: Vec<LinkState>,
     j1: Matrix6<f64>,
     /// LU of J1^T, for `v = J1^-T g` of every reading at the pose.
-    lu_t: nalgebra::LU<f64, nalgebra::U6, nalgebra::U6>,
+    lu_t: cpm_kinematics::lu6::Lu6,
     rt: Matrix3<f64>,
     /// exp(twist) and the left Jacobian of SO(3) at the twist's rotation.
     e: Matrix3<f64>,
@@ -106,7 +106,7 @@ impl Kin {
         let w = Vector3::new(at.twist[3], at.twist[4], at.twist[5]);
         Self {
             links,
-            lu_t: j1.transpose().lu(),
+            lu_t: cpm_kinematics::lu6::Lu6::new(&j1.transpose()),
             j1,
             rt: fk.rotation.matrix().transpose(),
             e: *Rotation3::new(w).matrix(),
@@ -426,7 +426,7 @@ impl<'a> Channels<'a> {
         // dx = -J1^-1 J2 de: the right-hand sides are sparse (an installation error touches
         // one link, an effect's coefficient one link each), so each column is a column of
         // J1^-1 scaled, summed over the links it touches.
-        let inv = kin.j1.try_inverse().ok_or_else(|| kin.singular())?;
+        let inv = cpm_kinematics::lu6::try_inverse6(&kin.j1).ok_or_else(|| kin.singular())?;
         let mut dx = DMatrix::zeros(6, np);
         for p in 0..(6 * n).min(np) {
             let (i, a) = (p / 6, p % 6);

@@ -1,0 +1,109 @@
+//! `Lu6` and `try_inverse6` give nalgebra's numbers bit for bit: random matrices of every
+//! scale, small integers (ties between pivot candidates), zero columns, repeated rows and
+//! non-finite entries.
+use cpm_kinematics::lu6::{try_inverse6, Lu6};
+use nalgebra::{Matrix6, Vector6};
+use proptest::prelude::*;
+
+/// Bit equality, with any NaN equal to any NaN (the payload is not part of the result).
+fn same(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan())
+}
+
+fn same_vector(a: Option<Vector6<f64>>, b: Option<Vector6<f64>>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => a.iter().zip(b.iter()).all(|(x, y)| same(*x, *y)),
+        _ => false,
+    }
+}
+
+fn same_matrix(a: Option<Matrix6<f64>>, b: Option<Matrix6<f64>>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => a.iter().zip(b.iter()).all(|(x, y)| same(*x, *y)),
+        _ => false,
+    }
+}
+
+/// Checks `a` against nalgebra: the solve of `b`, the solve from rows, the inverse.
+fn check(a: &Matrix6<f64>, b: &Vector6<f64>) -> Result<(), TestCaseError> {
+    let ours = Lu6::new(a).solve(b);
+    let theirs = a.lu().solve(b);
+    prop_assert!(
+        same_vector(ours, theirs),
+        "solve of {a} {b}: {ours:?} vs {theirs:?}"
+    );
+    let rows: [[f64; 6]; 6] = std::array::from_fn(|i| std::array::from_fn(|j| a[(i, j)]));
+    prop_assert!(same_vector(Lu6::from_rows(&rows).solve(b), theirs));
+    let (ours, theirs) = (try_inverse6(a), a.try_inverse());
+    prop_assert!(
+        same_matrix(ours, theirs),
+        "inverse of {a}: {ours:?} vs {theirs:?}"
+    );
+    prop_assert!(same_matrix(Lu6::new(a).inverse(), a.lu().try_inverse()));
+    Ok(())
+}
+
+/// An entry: a value of any scale, a small integer (ties), zero, or not finite.
+fn entry() -> impl Strategy<Value = f64> {
+    prop_oneof![
+        6 => (-1.0f64..1.0, -30i32..30).prop_map(|(m, e)| m * 2f64.powi(e)),
+        3 => (-3i32..=3).prop_map(f64::from),
+        1 => Just(0.0),
+        1 => Just(-0.0),
+        1 => prop_oneof![Just(f64::NAN), Just(f64::INFINITY), Just(f64::NEG_INFINITY)],
+    ]
+}
+
+fn matrix() -> impl Strategy<Value = Matrix6<f64>> {
+    (
+        proptest::collection::vec(entry(), 36),
+        0usize..4,
+        0usize..6,
+        0usize..6,
+    )
+        .prop_map(|(v, kind, i, j)| {
+            let mut m = Matrix6::from_iterator(v);
+            match kind {
+                // A zero column: the pivot there is zero.
+                1 => m.set_column(i, &Vector6::zeros()),
+                // Two equal rows: singular in exact arithmetic.
+                2 => {
+                    let r = m.row(i).into_owned();
+                    m.set_row(j, &r);
+                }
+                // Well conditioned: a dominant diagonal.
+                3 => m += Matrix6::identity() * 100.0,
+                _ => {}
+            }
+            m
+        })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(4000))]
+    #[test]
+    fn the_numbers_are_nalgebras(a in matrix(), b in proptest::collection::vec(entry(), 6)) {
+        check(&a, &Vector6::from_iterator(b))?;
+    }
+
+    #[test]
+    fn finite_matrices_of_random_scale(
+        v in proptest::collection::vec(-1.0f64..1.0, 36),
+        b in proptest::collection::vec(-1e3f64..1e3, 6),
+        scale in -20i32..20,
+    ) {
+        let a = Matrix6::from_iterator(v) * 2f64.powi(scale);
+        check(&a, &Vector6::from_iterator(b))?;
+    }
+}
+
+#[test]
+fn a_zero_pivot_fails_as_nalgebra_does() {
+    let mut a = Matrix6::<f64>::identity();
+    a[(3, 3)] = 0.0;
+    assert!(Lu6::new(&a).solve(&Vector6::repeat(1.0)).is_none());
+    assert!(a.lu().solve(&Vector6::repeat(1.0)).is_none());
+    assert!(try_inverse6(&a).is_none() && a.try_inverse().is_none());
+}
