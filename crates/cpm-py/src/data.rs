@@ -10,9 +10,11 @@ use std::path::PathBuf;
 use cpm_io::{DataFile, FileKind, ReadOptions};
 use cpm_workflow::ingest::RegistrationOptions;
 use cpm_workflow::memory::Given;
-use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyList, PyString};
 
 use crate::robot::PyRobot;
 
@@ -100,19 +102,20 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
         },
     )?;
     d.set_item("simulated", c.simulated)?;
-    let pose_row = |p: &cpm_workflow::geometry::Pose| {
+    // One flat list of numbers per array (no list per pose).
+    let mut poses = Vec::with_capacity(6 * c.poses.len());
+    for p in &c.poses {
         let r = p.rpy_deg();
-        vec![
+        poses.extend([
             p.position_mm.x,
             p.position_mm.y,
             p.position_mm.z,
             r[0],
             r[1],
             r[2],
-        ]
-    };
-    let poses: Vec<Vec<f64>> = c.poses.iter().map(pose_row).collect();
-    d.set_item("poses", array2(py, &poses, 6)?)?;
+        ]);
+    }
+    d.set_item("poses", flat_array2(py, poses, 6)?)?;
     d.set_item("pose_labels", f.pose_labels.clone())?;
     d.set_item("pose_lines", f.pose_lines.clone())?;
     let names = &robot.robot.table.sensors;
@@ -120,12 +123,18 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
         "reading_pose",
         PyArray1::from_iter(py, c.readings.iter().map(|r| r.pose as i64)),
     )?;
+    // Each sensor's name made once as a Python string, shared by its readings.
+    let name_objects: Vec<Bound<'py, PyString>> =
+        names.iter().map(|s| PyString::new(py, &s.name)).collect();
+    let unknown = PyString::new(py, "?");
     d.set_item(
         "reading_sensor",
-        c.readings
-            .iter()
-            .map(|r| names.get(r.sensor).map_or("?", |s| s.name.as_str()))
-            .collect::<Vec<_>>(),
+        PyList::new(
+            py,
+            c.readings
+                .iter()
+                .map(|r| name_objects.get(r.sensor).unwrap_or(&unknown)),
+        )?,
     )?;
     d.set_item(
         "lengths_mm",
@@ -157,16 +166,13 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
         )?,
         None => d.set_item("commanded_lengths_mm", py.None())?,
     }
-    let measured: Vec<Vec<f64>> = c
-        .pose_measurements
-        .iter()
-        .map(|m| {
-            let q = m.measured.quaternion();
-            let p = m.measured.position_mm;
-            vec![p.x, p.y, p.z, q[0], q[1], q[2], q[3]]
-        })
-        .collect();
-    d.set_item("measured_poses", array2(py, &measured, 7)?)?;
+    let mut measured = Vec::with_capacity(7 * c.pose_measurements.len());
+    for m in &c.pose_measurements {
+        let q = m.measured.quaternion();
+        let p = m.measured.position_mm;
+        measured.extend([p.x, p.y, p.z, q[0], q[1], q[2], q[3]]);
+    }
+    d.set_item("measured_poses", flat_array2(py, measured, 7)?)?;
     d.set_item(
         "measured_pose_index",
         PyArray1::from_iter(py, c.pose_measurements.iter().map(|m| m.pose as i64)),
@@ -176,6 +182,18 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
         f.registration.as_ref().and_then(|r| r.failure.clone()),
     )?;
     Ok(d)
+}
+
+/// `values`, `width` numbers per row one row after the other, as an `(n, width)` array.
+fn flat_array2(
+    py: Python<'_>,
+    values: Vec<f64>,
+    width: usize,
+) -> PyResult<Bound<'_, PyArray2<f64>>> {
+    let rows = values.len() / width;
+    PyArray1::from_vec(py, values)
+        .reshape([rows, width])
+        .map_err(|e| crate::errors::internal(py, e.to_string()))
 }
 
 /// Rows of `width` numbers as an `(n, width)` array (`(0, width)` when empty).
