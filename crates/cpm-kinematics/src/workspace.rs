@@ -97,8 +97,12 @@ pub fn j1_condition(table: &JointTable, pose: &Pose) -> Result<f64, SvdError> {
 
 /// Checks every link's length limits at `pose` (links without limits always pass).
 pub fn within_length_limits(table: &JointTable, pose: &Pose) -> Result<(), Unreachable> {
-    let lengths = inverse_lengths(table, pose);
-    for (i, (l, len)) in table.links.iter().zip(&lengths).enumerate() {
+    lengths_within_limits(table, &inverse_lengths(table, pose))
+}
+
+/// [`within_length_limits`] of the link lengths at a pose.
+fn lengths_within_limits(table: &JointTable, lengths: &[f64]) -> Result<(), Unreachable> {
+    for (i, (l, len)) in table.links.iter().zip(lengths).enumerate() {
         if !len.is_finite() {
             return Err(Unreachable::Invalid);
         }
@@ -223,14 +227,23 @@ fn judge(
     if table.num_links() < 6 || !pose.is_finite() {
         return Err(Unreachable::Invalid);
     }
-    within_length_limits(table, pose)?;
+    // The links at the pose, once: their lengths (those of `inverse_lengths`) and J1 (that
+    // of `j1`) come from the same numbers.
+    let links = crate::inverse(table, pose);
+    let lengths: Vec<f64> = links.iter().map(|l| l.length_mm).collect();
+    lengths_within_limits(table, &lengths)?;
     // The condition number (an SVD) only when a cheap upper bound of it exceeds the limit.
-    let j = j1(table, pose);
-    let surely_acceptable = j.shape() == (6, 6)
-        && crate::fk::condition_at_most(
-            &nalgebra::Matrix6::from_iterator(j.iter().copied()),
-            max_condition,
-        );
+    let surely_acceptable = links.len() == 6 && {
+        let j = Matrix6::from_fn(|r, c| {
+            let l = &links[r];
+            if c < 3 {
+                l.unit[c]
+            } else {
+                l.s_mm.cross(&l.unit)[c - 3]
+            }
+        });
+        crate::fk::condition_at_most(&j, max_condition)
+    };
     if !surely_acceptable {
         let c = j1_condition(table, pose).map_err(Unreachable::Svd)?;
         let acceptable = c <= max_condition; // false for NaN
@@ -238,7 +251,6 @@ fn judge(
             return Err(Unreachable::NearSingular { condition: c });
         }
     }
-    let lengths = inverse_lengths(table, pose);
     let radius_mm = table
         .links
         .iter()
