@@ -83,8 +83,7 @@ pub(crate) fn link_force_signs_if_certain(
     if table.num_links() != 6 {
         return None;
     }
-    let j1: DMatrix<f64> = cpm_kinematics::j1(table, pose);
-    let a = nalgebra::Matrix6::from_fn(|r, c| j1[(c, r)]);
+    let a = cpm_kinematics::j1_of_six(&cpm_kinematics::inverse(table, pose))?.transpose();
     let inv = cpm_kinematics::lu6::Lu6::new(&a).inverse()?;
     // cond_2 <= cond_F: below 1e9 the pose is well inside the SVD's acceptance.
     let cond_f = a.norm() * inv.norm();

@@ -1,9 +1,9 @@
 //! The Jacobians J1 (pose) and J2 (installation errors) of eq. 10-11, and eq. 12.
 use cpm_geometry::{JointTable, Pose};
-use nalgebra::{DMatrix, DVector, Vector6};
+use nalgebra::{DMatrix, DVector, Matrix6, Vector6};
 
 use crate::linalg::Svd;
-use crate::{inverse, KinematicsError};
+use crate::{inverse, KinematicsError, LinkState};
 
 /// `J1` (N x 6): row i is `[z_i^T, (s_i x z_i)^T]`, so `dl = J1 [dt; dw]`.
 ///
@@ -26,6 +26,29 @@ pub fn j1(table: &JointTable, pose: &Pose) -> DMatrix<f64> {
         }
     }
     j
+}
+
+/// [`j1`] of six links as a 6x6 matrix on the stack, from the links at the pose
+/// ([`inverse`]): the same numbers, without the dynamic matrix. `None` unless there are six.
+///
+/// ```
+/// use cpm_geometry::JointTable;
+/// use cpm_kinematics::{inverse, j1, j1_of_six};
+/// let t = JointTable::paper_cubic();
+/// let j = j1_of_six(&inverse(&t, &t.home)).unwrap();
+/// assert_eq!(j.as_slice(), j1(&t, &t.home).as_slice());
+/// ```
+pub fn j1_of_six(links: &[LinkState]) -> Option<Matrix6<f64>> {
+    (links.len() == 6).then(|| {
+        Matrix6::from_fn(|r, c| {
+            let l = &links[r];
+            if c < 3 {
+                l.unit[c]
+            } else {
+                l.s_mm.cross(&l.unit)[c - 3]
+            }
+        })
+    })
 }
 
 /// `J2` (N x 6N): `dl_i = -z_i^T db_i + z_i^T R dp_i`, columns ordered link by link, base then

@@ -39,6 +39,6 @@ pub use fk::{
     forward, forward_from, forward_from_toward, ForwardOptions, ForwardReport, ForwardStart,
 };
 pub use ik::{inverse, inverse_lengths, inverse_lengths_into, LinkState};
-pub use jacobian::{first_order_pose_error, j1, j2};
+pub use jacobian::{first_order_pose_error, j1, j1_of_six, j2};
 pub use sensor::{sensor_length_mm, sensor_pose_gradient};
 pub use workspace::{reachable_at, reachable_from_home, ReachableAt, Unreachable};

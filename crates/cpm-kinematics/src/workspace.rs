@@ -233,17 +233,8 @@ fn judge(
     let lengths: Vec<f64> = links.iter().map(|l| l.length_mm).collect();
     lengths_within_limits(table, &lengths)?;
     // The condition number (an SVD) only when a cheap upper bound of it exceeds the limit.
-    let surely_acceptable = links.len() == 6 && {
-        let j = Matrix6::from_fn(|r, c| {
-            let l = &links[r];
-            if c < 3 {
-                l.unit[c]
-            } else {
-                l.s_mm.cross(&l.unit)[c - 3]
-            }
-        });
-        crate::fk::condition_at_most(&j, max_condition)
-    };
+    let surely_acceptable =
+        crate::j1_of_six(&links).is_some_and(|j| crate::fk::condition_at_most(&j, max_condition));
     if !surely_acceptable {
         let c = j1_condition(table, pose).map_err(Unreachable::Svd)?;
         let acceptable = c <= max_condition; // false for NaN
