@@ -350,14 +350,7 @@ impl Gather {
         observed: &[f64],
         predicted: &[f64],
     ) {
-        // Each sensor's list grows once, to its number of readings (not by doubling: a
-        // million readings would touch twice the memory they fill).
-        let mut per_sensor = vec![0usize; self.sensor_group.len()];
-        for r in &campaign.readings {
-            if let Some(n) = per_sensor.get_mut(r.sensor) {
-                *n += 1;
-            }
-        }
+        let per_sensor = readings_per_sensor(campaign, self.sensor_group.len());
         for (s, &n) in per_sensor.iter().enumerate() {
             if let Some(g) = self.sensor_group[s] {
                 self.out.groups[g].values_um.reserve(n);
@@ -1165,11 +1158,7 @@ fn readings_in_memory(
     let observed = c.observations();
     let mut out = RobotErrors::default();
     let mut sensor_group: Vec<Option<usize>> = vec![None; robot.table.sensors.len()];
-    // Each sensor's list made at its size (see `Gather::readings`).
-    let mut per_sensor = vec![0usize; robot.table.sensors.len()];
-    for r in &c.readings {
-        per_sensor[r.sensor] += 1;
-    }
+    let per_sensor = readings_per_sensor(&c, robot.table.sensors.len());
     for (k, r) in c.readings.iter().enumerate() {
         let g = *sensor_group[r.sensor].get_or_insert_with(|| {
             out.names.push(robot.table.sensors[r.sensor].name.clone());
@@ -1184,6 +1173,17 @@ fn readings_in_memory(
             .push((observed[k] - predicted[k]) * 1e3);
     }
     Ok(Some(out))
+}
+
+/// The number of readings of each of `sensors` sensors: each sensor's list of errors is made
+/// at its size once (not grown by doubling: a million readings would touch twice the memory
+/// they fill).
+fn readings_per_sensor(campaign: &Campaign, sensors: usize) -> Vec<usize> {
+    let mut n = vec![0usize; sensors];
+    for r in &campaign.readings {
+        n[r.sensor] += 1;
+    }
+    n
 }
 
 /// The check every fitting command makes before it writes: the calibrated description it
