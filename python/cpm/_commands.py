@@ -38,7 +38,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _cpm
-from ._data import Measurements, _Source, as_measurements
+from ._data import Measurements, _Info, _Source, as_measurements
 from ._robot import PathLike, Robot, Scratch
 from .errors import CpmError, CpmWarning, InputError, UsageError
 
@@ -643,7 +643,7 @@ def simulate(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
         return read_measurements(out, r)
     text = d["text"]
     info = _cpm.read_text(text, "simulated.csv", r._h)
-    return Measurements([_Source("simulated.csv", None, text, dict(info))])
+    return Measurements([_Source("simulated.csv", None, text, _Info(info))])
 
 
 def identifiability(robot: Union[Robot, PathLike], data: Any = None,

@@ -45,8 +45,10 @@ class RobotHandle:
 class DataHandle:
     """Measurements as read (``read_text``'s, ``gauge_rows``' or ``tracker_rows``'
     ``handle``), taken from memory by ``calibrate_memory``; ``csv()`` gives their text as
-    a measurement file (for a command that reads files)."""
+    a measurement file (for a command that reads files); ``summary()`` the dict of
+    ``read_file`` (made when asked)."""
     def csv(self) -> str: ...
+    def summary(self) -> Dict[str, Any]: ...
 
 class ObservationOrigins:
     def __len__(self) -> int: ...

@@ -25,6 +25,56 @@ __all__ = [
 ]
 
 
+class _Info(dict):  # type: ignore[type-arg]
+    """The dict of measurements read from text or arrays: ``file``, ``kind``, ``simulated``
+    and ``handle`` at once, the arrays (the handle's ``summary()``) when first asked for."""
+
+    def __init__(self, brief: Dict[str, Any]) -> None:
+        super().__init__(brief)
+        self._full = "handle" not in brief
+
+    def _fill(self) -> None:
+        if not self._full:
+            self._full = True
+            self.update(dict.__getitem__(self, "handle").summary())
+
+    def __missing__(self, key: str) -> Any:
+        if self._full:
+            raise KeyError(key)
+        self._fill()
+        return self[key]
+
+    def get(self, key: str, default: Any = None) -> Any:
+        try:
+            return self[key]
+        except KeyError:
+            return default
+
+    def __contains__(self, key: object) -> bool:
+        self._fill()
+        return dict.__contains__(self, key)
+
+    def __iter__(self) -> Any:
+        self._fill()
+        return dict.__iter__(self)
+
+    def __len__(self) -> int:
+        self._fill()
+        return dict.__len__(self)
+
+    def keys(self) -> Any:
+        self._fill()
+        return dict.keys(self)
+
+    def items(self) -> Any:
+        self._fill()
+        return dict.items(self)
+
+    def values(self) -> Any:
+        self._fill()
+        return dict.values(self)
+
+
 @dataclass
 class _Source:
     name: str
@@ -161,7 +211,7 @@ def _from_text(text: str, name: str, robot: Robot, arrays: bool) -> Measurements
         if arrays:
             raise _row_error(e) from None
         raise
-    return Measurements([_Source(name, None, text, dict(info), arrays)])
+    return Measurements([_Source(name, None, text, _Info(info), arrays)])
 
 
 def _from_arrays(read: Any, name: str) -> Measurements:
@@ -171,7 +221,7 @@ def _from_arrays(read: Any, name: str) -> Measurements:
         info = read()
     except InputError as e:
         raise _row_error(e) from None
-    return Measurements([_Source(name, None, None, dict(info), True)])
+    return Measurements([_Source(name, None, None, _Info(info), True)])
 
 
 def _float_array(x: Any, name: str, ndim: int, cols: Optional[int] = None) -> np.ndarray:

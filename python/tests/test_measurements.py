@@ -56,6 +56,23 @@ def test_arrays_go_through_the_same_reader(hexapod, readings):
     np.testing.assert_array_equal(a.std_um, b.std_um)
 
 
+def test_the_arrays_of_measurements_from_arrays_are_made_when_asked(hexapod, readings):
+    """Measurements from arrays hold their file, kind and handle at once; the arrays of a
+    file's summary come when first asked for, the same as the file's."""
+    poses, sensors, lengths, labels = _arrays(readings)
+    m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels,
+                           simulated=True)
+    info = m.sources[0].info
+    assert dict.__contains__(info, "handle") and not dict.__contains__(info, "lengths_mm")
+    assert info["kind"] == "gauge" and info["simulated"] is True
+    assert "reading_lines" in info and set(info) >= set(readings.sources[0].info)
+    np.testing.assert_array_equal(info["reading_pose"], readings.sources[0].info["reading_pose"])
+    assert info["pose_labels"] == readings.sources[0].info["pose_labels"]
+    assert info.get("no such key") is None
+    with pytest.raises(KeyError):
+        info["no such key"]
+
+
 def test_unlabelled_arrays_are_not_marked_simulated(hexapod, readings):
     poses, sensors, lengths, labels = _arrays(readings)
     m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels)

@@ -352,30 +352,34 @@ pub fn read_gauge_rows(
                 Some((j, _)) if labels[j] == label => Some(j),
                 _ => by_label.get(label).copied(),
             };
-            // The previous row's numbers exactly (the same text): its pose's first row's.
-            let same_as_previous = previous.is_some_and(|(j, v)| {
-                labels[j] == label
+            // The previous row's numbers exactly (the same text): its pose, whose numbers
+            // were checked at its first row and agree with them (no checks again).
+            let repeat = previous.and_then(|(j, v)| {
+                let same = labels[j] == label
                     && v.iter()
                         .zip(&values)
-                        .all(|(a, b)| a.to_bits() == b.to_bits())
+                        .all(|(a, b)| a.to_bits() == b.to_bits());
+                same.then_some(j)
             });
-            let (raw, pose) = if same_as_previous {
-                (first[known.expect("the previous row's pose")].0, None)
-            } else {
-                let raw = raw_pose(file, line, &POSE_COLUMNS, &values)?;
-                let pose = match known {
-                    Some(j) if raw.agrees(&first[j].0) => None,
-                    _ => Some(Pose::from_xyz_rpy_deg(
-                        [values[0], values[1], values[2]],
-                        [values[3], values[4], values[5]],
-                    )),
-                };
-                (raw, pose)
+            let seen = match repeat {
+                Some(j) => Ok(j),
+                None => {
+                    let raw = raw_pose(file, line, &POSE_COLUMNS, &values)?;
+                    let pose = match known {
+                        Some(j) if raw.agrees(&first[j].0) => None,
+                        _ => Some(Pose::from_xyz_rpy_deg(
+                            [values[0], values[1], values[2]],
+                            [values[3], values[4], values[5]],
+                        )),
+                    };
+                    Err((raw, pose))
+                }
             };
             let length_mm = finite(file, line, "length_mm", rows.lengths_mm[k])?;
             let time_s = time(file, line, rows.time_s.as_ref(), k)?;
-            let j = match known {
-                Some(j) => {
+            let j = match (seen, known) {
+                (Ok(j), _) => j,
+                (Err((raw, _)), Some(j)) => {
                     let (before, first_line) = &first[j];
                     same_pose_as_before(
                         file,
@@ -387,7 +391,7 @@ pub fn read_gauge_rows(
                     )?;
                     j
                 }
-                None => {
+                (Err((raw, pose)), None) => {
                     let j = first.len();
                     for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
                         angles.push((line, *name, *v));

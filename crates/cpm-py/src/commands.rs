@@ -358,18 +358,34 @@ pub fn calibrate_memory<'py>(
         } else {
             None
         };
-        let files: Vec<(String, Vec<u8>)> = fitted
-            .set
-            .paths()
-            .filter_map(|p| {
-                let name = p.strip_prefix(&dir).unwrap_or(p).display().to_string();
-                fitted.set.bytes(p).map(|b| (name, b.into_owned()))
-            })
-            .collect();
+        let name_of = |p: &Path| p.strip_prefix(&dir).unwrap_or(p).display().to_string();
+        // Staged only: the bytes moved out of the set, not copied (streamed ones made now).
+        let (files, set): (Vec<(String, Vec<u8>)>, _) = if commit {
+            let files = fitted
+                .set
+                .paths()
+                .filter_map(|p| fitted.set.bytes(p).map(|b| (name_of(p), b.into_owned())))
+                .collect();
+            (files, Some(fitted.set))
+        } else {
+            let files = fitted
+                .set
+                .into_files()
+                .into_iter()
+                .map(|(p, contents)| {
+                    let bytes = match contents {
+                        cpm_io::write::Contents::Bytes(b) => b,
+                        streamed => streamed.bytes().into_owned(),
+                    };
+                    (name_of(&p), bytes)
+                })
+                .collect();
+            (files, None)
+        };
         if abandoned.load(std::sync::atomic::Ordering::SeqCst) {
             anyhow::bail!("interrupted");
         }
-        let written = if commit {
+        let written = if let Some(set) = set {
             let inputs_paths: Vec<&Path> = robot_path
                 .iter()
                 .map(|p| p.as_path())
@@ -379,7 +395,7 @@ pub fn calibrate_memory<'py>(
                 }))
                 .collect();
             cpm_workflow::load::commit_dir(
-                fitted.set,
+                set,
                 &dir,
                 &inputs_paths,
                 "calibrate",

@@ -33,6 +33,31 @@ pub struct PyData {
     pub given: Given,
     /// The robot's description text and name they were read against.
     pub robot: (String, String),
+    /// What [`summary`] needs of that robot: its sensors' names and number of links.
+    pub names: Names,
+}
+
+/// What a summary of measurements needs of the robot they were read against: its sensors'
+/// names (readings name their sensor by index) and its number of links.
+#[derive(Debug, Clone)]
+pub struct Names {
+    sensors: Vec<String>,
+    links: usize,
+}
+
+impl Names {
+    fn of(robot: &PyRobot) -> Names {
+        Names {
+            sensors: robot
+                .robot
+                .table
+                .sensors
+                .iter()
+                .map(|s| s.name.clone())
+                .collect(),
+            links: robot.robot.num_links(),
+        }
+    }
 }
 
 impl PyData {
@@ -71,6 +96,13 @@ impl PyData {
             Given::TrackerRows(rows) => rows.to_csv(),
         }
     }
+
+    /// What the measurements hold, as a dict of plain values and numpy arrays (made when
+    /// asked: the dict of `read_text` and of the readers of arrays holds only `file`,
+    /// `kind`, `simulated` and `handle`).
+    fn summary<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        summary(py, &self.data, &self.names)
+    }
 }
 
 /// The read and registration options of `cpm calibrate` for a robot and its declared effects.
@@ -86,10 +118,9 @@ fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<(ReadOptions, Registrati
     ))
 }
 
-/// What a measurement file holds, as a dict of plain values and numpy arrays.
-fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Bound<'py, PyDict>> {
+/// What a measurement file is: its `file` name, `kind` and whether `simulated`.
+fn brief<'py>(py: Python<'py>, f: &DataFile) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    let c = &f.campaign;
     d.set_item("file", &f.file)?;
     d.set_item(
         "kind",
@@ -101,7 +132,15 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
             FileKind::TiltMeasurements => "tilts",
         },
     )?;
-    d.set_item("simulated", c.simulated)?;
+    d.set_item("simulated", f.campaign.simulated)?;
+    Ok(d)
+}
+
+/// What a measurement file holds, as a dict of plain values and numpy arrays: [`brief`]
+/// and every array.
+fn summary<'py>(py: Python<'py>, f: &DataFile, names: &Names) -> PyResult<Bound<'py, PyDict>> {
+    let d = brief(py, f)?;
+    let c = &f.campaign;
     // One flat list of numbers per array (no list per pose).
     let mut poses = Vec::with_capacity(6 * c.poses.len());
     for p in &c.poses {
@@ -118,14 +157,13 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
     d.set_item("poses", flat_array2(py, poses, 6)?)?;
     d.set_item("pose_labels", f.pose_labels.clone())?;
     d.set_item("pose_lines", f.pose_lines.clone())?;
-    let names = &robot.robot.table.sensors;
     d.set_item(
         "reading_pose",
         PyArray1::from_iter(py, c.readings.iter().map(|r| r.pose as i64)),
     )?;
     // Each sensor's name made once as a Python string, shared by its readings.
     let name_objects: Vec<Bound<'py, PyString>> =
-        names.iter().map(|s| PyString::new(py, &s.name)).collect();
+        names.sensors.iter().map(|s| PyString::new(py, s)).collect();
     let unknown = PyString::new(py, "?");
     d.set_item(
         "reading_sensor",
@@ -160,10 +198,7 @@ fn summary<'py>(py: Python<'py>, f: &DataFile, robot: &PyRobot) -> PyResult<Boun
         ),
     )?;
     match &c.commanded_lengths_mm {
-        Some(l) => d.set_item(
-            "commanded_lengths_mm",
-            array2(py, l, robot.robot.num_links())?,
-        )?,
+        Some(l) => d.set_item("commanded_lengths_mm", array2(py, l, names.links)?)?,
         None => d.set_item("commanded_lengths_mm", py.None())?,
     }
     let mut measured = Vec::with_capacity(7 * c.pose_measurements.len());
@@ -226,10 +261,11 @@ pub fn read_file<'py>(
             None,
         ));
     }
-    summary(py, &f, robot)
+    summary(py, &f, &Names::of(robot))
 }
 
-/// The dict of [`summary`] with its `handle`: the measurements as read, how, and from what.
+/// The dict of [`brief`] with its `handle`: the measurements as read, how, and from what
+/// (the handle's `summary()` gives the rest of [`summary`], when asked).
 fn with_handle<'py>(
     py: Python<'py>,
     f: DataFile,
@@ -237,13 +273,14 @@ fn with_handle<'py>(
     given: Given,
     robot: &PyRobot,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let d = summary(py, &f, robot)?;
+    let d = brief(py, &f)?;
     let handle = PyData {
         data: std::sync::Arc::new(f),
         options,
         registration,
         given,
         robot: (robot.text.clone(), robot.robot.file.clone()),
+        names: Names::of(robot),
     };
     d.set_item("handle", Bound::new(py, handle)?)?;
     Ok(d)
