@@ -226,26 +226,36 @@ fn raw_pose(
     values: &[f64],
 ) -> Result<RawPose, InputError> {
     let mut raw = RawPose::default();
-    for (name, v) in columns.iter().zip(values) {
-        let v = finite(file, line, name, *v)?;
-        check_pose_value(file, line, name, v)?;
+    for (name, &v) in columns.iter().zip(values) {
+        // Within 360 (mm or deg) a value passes both checks.
+        if !(v.abs() <= 360.0) {
+            let v = finite(file, line, name, v)?;
+            check_pose_value(file, line, name, v)?;
+        }
         raw.push(name, v);
     }
     Ok(raw)
 }
 
 /// A value of a number column: finite, else the reader's message for its text.
+#[inline]
 fn finite(file: &str, line: usize, name: &str, v: f64) -> Result<f64, InputError> {
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(InputError::field(
-            file,
-            line,
-            name,
-            parse_number(&v.to_string()).expect_err("not finite"),
-        ))
+        Err(not_finite(file, line, name, v))
     }
+}
+
+/// The error of [`finite`]: the reader's message for the text of `v`.
+#[cold]
+fn not_finite(file: &str, line: usize, name: &str, v: f64) -> InputError {
+    InputError::field(
+        file,
+        line,
+        name,
+        parse_number(&v.to_string()).expect_err("not finite"),
+    )
 }
 
 /// Refuses the texts of a row (`(column, text)`, in the order of their columns) that its CSV
@@ -312,19 +322,22 @@ pub fn read_gauge_rows(
 ) -> Result<DataFile, InputError> {
     rows.check_columns()?;
     let file = rows.file.as_str();
-    let mut by_label: HashMap<&str, usize> = HashMap::new();
-    // Per pose: the numbers of its first row, its first line.
-    let mut first: Vec<(RawPose, usize)> = Vec::new();
-    let mut labels: Vec<String> = Vec::new();
-    // The lists sized once for the rows (at most `max_rows` of them are read), not grown.
+    // The lists sized once for the rows (at most `max_rows` of them are read), not grown;
+    // those per pose for a pose read by every sensor (grown when there are more poses).
     let capacity = rows.len().min(options.max_rows.saturating_add(1));
+    let poses = capacity / robot.table.sensors.len().max(1) + 1;
+    let mut by_label: HashMap<&str, usize> = HashMap::with_capacity(poses);
+    // Per pose: the numbers of its first row, its first line.
+    let mut first: Vec<(RawPose, usize)> = Vec::with_capacity(poses);
+    let mut labels: Vec<String> = Vec::with_capacity(poses);
     let mut campaign = Campaign {
         simulated: rows.simulated,
         readings: Vec::with_capacity(capacity),
+        poses: Vec::with_capacity(poses),
         ..Campaign::default()
     };
     let mut reading_lines = Vec::with_capacity(capacity);
-    let mut angles = Vec::new();
+    let mut angles = Vec::with_capacity(3 * poses);
     // The pose and numbers of the previous row (rows of one pose usually follow each other).
     let mut previous: Option<(usize, [f64; 6])> = None;
     let mut read = || -> Result<(), InputError> {
@@ -348,17 +361,19 @@ pub fn read_gauge_rows(
                 .sensor_index(sensor_name)
                 .ok_or_else(|| unknown_sensor(file, line, robot, sensor_name))?;
             let values = rows.poses[k];
-            let known = match previous {
-                Some((j, _)) if labels[j] == label => Some(j),
-                _ => by_label.get(label).copied(),
+            // The previous row's pose when this row has its label.
+            let same_label = previous.filter(|(j, _)| labels[*j] == label);
+            let known = match same_label {
+                Some((j, _)) => Some(j),
+                None => by_label.get(label).copied(),
             };
             // The previous row's numbers exactly (the same text): its pose, whose numbers
             // were checked at its first row and agree with them (no checks again).
-            let repeat = previous.and_then(|(j, v)| {
-                let same = labels[j] == label
-                    && v.iter()
-                        .zip(&values)
-                        .all(|(a, b)| a.to_bits() == b.to_bits());
+            let repeat = same_label.and_then(|(j, v)| {
+                let same = v
+                    .iter()
+                    .zip(&values)
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
                 same.then_some(j)
             });
             let seen = match repeat {
