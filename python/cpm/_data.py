@@ -50,29 +50,22 @@ class _Info(dict):  # type: ignore[type-arg]
         except KeyError:
             return default
 
-    def __contains__(self, key: object) -> bool:
-        self._fill()
-        return dict.__contains__(self, key)
 
-    def __iter__(self) -> Any:
-        self._fill()
-        return dict.__iter__(self)
+def _filled(name: str) -> Any:
+    """``dict``'s method ``name``, on the dict filled first (a whole view of an ``_Info``)."""
+    method = getattr(dict, name)
 
-    def __len__(self) -> int:
+    def call(self: "_Info", *args: Any) -> Any:
         self._fill()
-        return dict.__len__(self)
+        return method(self, *args)
 
-    def keys(self) -> Any:
-        self._fill()
-        return dict.keys(self)
+    call.__name__ = name
+    return call
 
-    def items(self) -> Any:
-        self._fill()
-        return dict.items(self)
 
-    def values(self) -> Any:
-        self._fill()
-        return dict.values(self)
+for _name in ("__contains__", "__iter__", "__len__", "keys", "items", "values"):
+    setattr(_Info, _name, _filled(_name))
+del _name
 
 
 @dataclass
