@@ -33,7 +33,8 @@ pub struct PyData {
     pub given: Given,
     /// The robot's description text and name they were read against.
     pub robot: (String, String),
-    /// What [`summary`] needs of that robot: its sensors' names and number of links.
+    /// What the summary of these measurements needs of that robot: its sensors' names and
+    /// number of links.
     pub names: Names,
 }
 
