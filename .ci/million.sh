@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Issue 34's end-to-end figures, reproducible from the repository alone: 10^6 SIMULATED gauge
-# readings (62,500 random poses x 16 gauges on the paper's cube, as tests/cli_reachability.rs
-# builds it), then `cpm calibrate`, `cpm validate --json` and `cpm validate --out` timed in a
-# random order each round by .ci/interleaved.py (median wall time and peak memory).
+# readings (62,500 random poses x 16 gauges on the paper's cube,
+# tests/data/cube_16_gauges.toml), then `cpm calibrate`, `cpm validate --json` and
+# `cpm validate --out` timed in a random order each round by .ci/interleaved.py (median wall
+# time and peak memory).
 #
 #     .ci/million.sh [ROUNDS] [WORK_DIR]          (defaults: 15, target/million)
 #     OLD=/path/to/old/cpm .ci/million.sh         (the old binary timed beside the new one)
@@ -17,25 +18,7 @@ cargo build --release --bin cpm --quiet
 root=$(pwd)
 cpm=$root/target/release/cpm
 mkdir -p "$work"
-# The paper's cube with 16 gauges: cube_with_16_gauges of tests/cli_reachability.rs, byte for
-# byte (Rust's `{}` of a whole f64 is written without a fraction, as `:g` writes it here).
-python3 - "$work/cube16.toml" <<'EOF'
-import math, sys
-text = open("examples/paper_cubic.toml").read()
-i = text.find("[[sensor]]")
-head, rest = text[:i], text[i:]
-out = head
-for k in range(16):
-    t = math.tau * k / 16
-    ph = math.tau * ((k * 5) % 16) / 16
-    z = 300.0 + 120.0 * (k % 2)
-    zp = 0.0 if k % 3 == 0 else -60.0
-    out += (f'[[sensor]]\nname = "s{k + 1}"\n'
-            f"base_mm = [{520 * math.cos(t):.3f}, {520 * math.sin(t):.3f}, {z:g}]\n"
-            f"platform_mm = [{150 * math.cos(ph):.3f}, {150 * math.sin(ph):.3f}, {zp:g}]\n\n")
-out += rest[rest.find("# Joint clearance"):]
-open(sys.argv[1], "w").write(out)
-EOF
+cp tests/data/cube_16_gauges.toml "$work/cube16.toml"
 cd "$work"
 if [ ! -f m.csv ]; then
     "$cpm" simulate --robot cube16.toml --random 62500 --seed 5 --noise uniform:10 --out m.csv

@@ -155,30 +155,10 @@ proptest! {
 }
 
 /// The paper cube with 16 length gauges instead of the paper's one (base sockets on a
-/// 520 mm circle at two heights, platform sockets on a 150 mm circle).
-fn cube_with_16_gauges(dir: &Path) -> PathBuf {
-    let text = std::fs::read_to_string(example("paper_cubic.toml")).unwrap();
-    let (head, rest) = text.split_at(text.find("[[sensor]]").unwrap());
-    let tail = &rest[rest.find("# Joint clearance").unwrap()..];
-    let mut out = head.to_string();
-    for k in 0..16 {
-        let t = std::f64::consts::TAU * k as f64 / 16.0;
-        let ph = std::f64::consts::TAU * ((k * 5) % 16) as f64 / 16.0;
-        out += &format!(
-            "[[sensor]]\nname = \"s{}\"\nbase_mm = [{:.3}, {:.3}, {}]\nplatform_mm = [{:.3}, {:.3}, {}]\n\n",
-            k + 1,
-            520.0 * t.cos(),
-            520.0 * t.sin(),
-            300.0 + 120.0 * (k % 2) as f64,
-            150.0 * ph.cos(),
-            150.0 * ph.sin(),
-            if k % 3 == 0 { 0.0 } else { -60.0 },
-        );
-    }
-    out += tail;
-    let path = dir.join("cube16.toml");
-    std::fs::write(&path, out).unwrap();
-    path
+/// 520 mm circle at two heights, platform sockets on a 150 mm circle): the robot of the
+/// 10^6-reading benchmark too (`.ci/million.sh`).
+fn cube_with_16_gauges() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cube_16_gauges.toml")
 }
 
 /// 10^6 readings (62,500 poses x 16 gauges on the paper cube, Table 2 errors, 0.5 um
@@ -188,7 +168,7 @@ fn cube_with_16_gauges(dir: &Path) -> PathBuf {
 #[ignore]
 fn a_million_readings_round_trip() {
     let d = scratch("reach", "million");
-    let robot = p(&cube_with_16_gauges(&d));
+    let robot = p(&cube_with_16_gauges());
     let data = d.join("data.csv");
     ok(&[
         "simulate",

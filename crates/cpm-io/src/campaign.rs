@@ -393,11 +393,21 @@ pub(crate) fn check_pose_cell(t: &Header, row: &Row, c: &str, v: f64) -> Result<
     check_pose_value(&t.file, row.line, c, v)
 }
 
+/// The largest angle of a pose cell, degrees (either sign).
+const MAX_ANGLE_DEG: f64 = 360.0;
+
+/// Whether pose value `v` passes [`check_pose_value`] (and is finite) whatever its column:
+/// within both limits. The common case, told without the column's name.
+#[inline]
+pub(crate) fn surely_valid_pose_value(v: f64) -> bool {
+    const _: () = assert!(MAX_POSITION_MM >= MAX_ANGLE_DEG);
+    v.abs() <= MAX_ANGLE_DEG // false for NaN
+}
+
 /// [`check_pose_cell`] of a value of column `c` on `line` of `file`.
 pub(crate) fn check_pose_value(file: &str, line: usize, c: &str, v: f64) -> Result<(), InputError> {
-    const _: () = assert!(MAX_POSITION_MM >= 360.0);
-    if v.abs() <= 360.0 {
-        return Ok(()); // within both limits, whatever the column
+    if surely_valid_pose_value(v) {
+        return Ok(());
     }
     if c.ends_with("_mm") && v.abs() > MAX_POSITION_MM {
         return Err(InputError::field(
@@ -407,7 +417,7 @@ pub(crate) fn check_pose_value(file: &str, line: usize, c: &str, v: f64) -> Resu
             format!("{v:e} mm is implausibly far (over 1 km): positions are in mm"),
         ));
     }
-    if c.ends_with("_deg") && v.abs() > 360.0 {
+    if c.ends_with("_deg") && v.abs() > MAX_ANGLE_DEG {
         return Err(InputError::field(
             file,
             line,

@@ -47,8 +47,9 @@ use cpm_geometry::Pose;
 
 use crate::campaign::{
     check_angle_units, check_pose_value, exclude_poses, pose_from_raw, reading_name, robot_checks,
-    same_pose_as_before, too_many_rows_at, tracker_link_columns, unknown_sensor, DataFile,
-    Orientation, PoseRow, RawPose, ReadOptions, TrackerRead, TrackerRow, MAX_ROWS,
+    same_pose_as_before, surely_valid_pose_value, too_many_rows_at, tracker_link_columns,
+    unknown_sensor, DataFile, Orientation, PoseRow, RawPose, ReadOptions, TrackerRead, TrackerRow,
+    MAX_ROWS,
 };
 use crate::table::{field, line_too_long, parse_number, MAX_LINE_BYTES};
 use crate::{InputError, Robot};
@@ -227,8 +228,7 @@ fn raw_pose(
 ) -> Result<RawPose, InputError> {
     let mut raw = RawPose::default();
     for (name, &v) in columns.iter().zip(values) {
-        // Within 360 (mm or deg) a value passes both checks.
-        if !(v.abs() <= 360.0) {
+        if !surely_valid_pose_value(v) {
             let v = finite(file, line, name, v)?;
             check_pose_value(file, line, name, v)?;
         }
