@@ -1,6 +1,6 @@
 """Type stubs of the extension module ``cpm._cpm`` (crates/cpm-py). Use the ``cpm`` package;
 this module is its Rust side."""
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -60,11 +60,11 @@ def read_file(path: str, robot: RobotHandle) -> Dict[str, Any]: ...
 def read_text(text: str, name: str, robot: RobotHandle) -> Dict[str, Any]: ...
 def gauge_rows(
     poses: npt.NDArray[np.float64],
-    sensors: List[str],
+    sensors: Sequence[Any],
     lengths_mm: npt.NDArray[np.float64],
     robot: RobotHandle,
     name: str,
-    pose_labels: Optional[List[str]] = None,
+    pose_labels: Optional[Sequence[Any]] = None,
     time_s: Optional[npt.NDArray[np.float64]] = None,
     simulated: bool = False,
 ) -> Dict[str, Any]: ...
@@ -73,7 +73,7 @@ def tracker_rows(
     poses: npt.NDArray[np.float64],
     robot: RobotHandle,
     name: str,
-    pose_labels: Optional[List[str]] = None,
+    pose_labels: Optional[Sequence[Any]] = None,
     time_s: Optional[npt.NDArray[np.float64]] = None,
     simulated: bool = False,
 ) -> Dict[str, Any]: ...

@@ -230,10 +230,6 @@ def _float_array(x: Any, name: str, ndim: int, cols: Optional[int] = None) -> np
     return a
 
 
-def _labels(labels: Optional[Sequence[Any]]) -> Optional[List[str]]:
-    return None if labels is None else [str(v) for v in labels]
-
-
 def gauge_readings(
     robot: Robot,
     poses: Any,
@@ -255,10 +251,10 @@ def gauge_readings(
     p = _float_array(poses, "poses", 2, 6)
     n = p.shape[0]
     lengths = _float_array(lengths_mm, "lengths_mm", 1)
-    names = [sensors] * n if isinstance(sensors, str) else [str(s) for s in sensors]
+    names = [sensors] * n if isinstance(sensors, str) else sensors
     t = None if time_s is None else _float_array(time_s, "time_s", 1)
     return _from_arrays(lambda: _cpm.gauge_rows(p, names, lengths, robot._h, name,
-                                                _labels(pose_labels), t, bool(simulated)),
+                                                pose_labels, t, bool(simulated)),
                         name)
 
 
@@ -287,7 +283,7 @@ def tracker_measurements(
         raise UsageError(f"poses has shape {p.shape}, expected (n, 7) (x, y, z mm, qw, qx, qy, "
                          "qz) or (n, 6) (x, y, z mm, roll, pitch, yaw deg)")
     t = None if time_s is None else _float_array(time_s, "time_s", 1)
-    return _from_arrays(lambda: _cpm.tracker_rows(r, p, robot._h, name, _labels(pose_labels),
+    return _from_arrays(lambda: _cpm.tracker_rows(r, p, robot._h, name, pose_labels,
                                                   t, bool(simulated)),
                         name)
 

@@ -105,6 +105,46 @@ def test_float32_and_non_contiguous_input(hexapod, readings):
     np.testing.assert_array_equal(m4.lengths_mm, rev)
 
 
+def test_labels_and_sensors_are_taken_as_their_str(hexapod, readings):
+    """Labels and sensor names of any sequence are their items' ``str()``: numpy arrays,
+    integers, a generator, one object shared by many rows or a new object per row give the
+    same measurements as lists of ``str``."""
+    poses, sensors, lengths, labels = _arrays(readings)
+    ref = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels)
+    as_int = [int(v) for v in labels]
+    assert all(str(v) == t for v, t in zip(as_int, labels))  # the file's labels are integers
+
+    class Named:
+        def __init__(self, text):
+            self.text = text
+
+        def __str__(self):
+            return self.text
+
+    shared = {t: t for t in set(labels)}
+    variants = [
+        (np.array(sensors), np.array(as_int)),
+        (tuple(sensors), (v for v in as_int)),
+        ([Named(t) for t in sensors], [shared[t] for t in labels]),
+        ([(t + ".")[:-1] for t in sensors], [np.int64(v) for v in as_int]),
+    ]
+    for names, labs in variants:
+        m = cpm.gauge_readings(hexapod, poses, names, lengths, pose_labels=labs)
+        assert m.reading_sensor == ref.reading_sensor
+        assert m.sources[0].info["pose_labels"] == ref.sources[0].info["pose_labels"]
+        np.testing.assert_array_equal(m.sources[0].info["reading_pose"],
+                                      ref.sources[0].info["reading_pose"])
+        np.testing.assert_array_equal(m.poses, ref.poses)
+
+    class Broken:
+        def __str__(self):
+            raise ValueError("no text for this label")
+
+    with pytest.raises(ValueError, match="no text for this label"):
+        cpm.gauge_readings(hexapod, poses, sensors, lengths,
+                           pose_labels=[Broken()] * len(labels))
+
+
 @pytest.mark.parametrize("bad,match", [
     ("poses5", r"poses has shape \(\d+, 5\), expected \(n, 6\)"),
     ("poses1d", r"poses has shape \(\d+,\), expected \(n, 6\)"),

@@ -343,14 +343,40 @@ fn check_shape(
     ))
 }
 
-/// Optional labels and times, checked against `n` rows.
+/// The texts of a sequence as Python's `str()` gives them (a `str` as it is, anything else
+/// through `str()`), converted here rather than by a list comprehension in Python: a run of
+/// the same object (a label shared by the rows of a pose) is converted once.
+fn texts(items: &Bound<'_, PyAny>) -> PyResult<Vec<String>> {
+    let mut out = Vec::with_capacity(items.len().unwrap_or(0));
+    // The previous item, held (so its address cannot be taken by another object), and its text.
+    let mut previous: Option<Bound<'_, PyAny>> = None;
+    for item in items.try_iter()? {
+        let item = item?;
+        if let (Some(p), Some(last)) = (&previous, out.last()) {
+            if p.is(&item) {
+                let again = String::clone(last);
+                out.push(again);
+                continue;
+            }
+        }
+        let text = match item.downcast::<PyString>() {
+            Ok(s) => s.to_str()?.to_owned(),
+            Err(_) => item.str()?.to_str()?.to_owned(),
+        };
+        out.push(text);
+        previous = Some(item);
+    }
+    Ok(out)
+}
+
+/// Optional labels (any values, as their `str()`) and times, checked against `n` rows.
 fn labels_and_times(
     py: Python<'_>,
     n: usize,
-    labels: Option<Vec<String>>,
+    labels: Option<&Bound<'_, PyAny>>,
     time_s: Option<PyReadonlyArray1<'_, f64>>,
 ) -> PyResult<(Vec<String>, Option<Vec<f64>>)> {
-    let labels = match labels {
+    let labels = match labels.map(texts).transpose()? {
         Some(l) => {
             check_shape(py, "pose_labels", &[l.len()], n, None)?;
             l
@@ -369,8 +395,8 @@ fn labels_and_times(
 
 /// Reads gauge readings given as arrays (no text: [`cpm_io::rows::read_gauge_rows`], the
 /// checks and errors of the CSV reader, row `k` on line `k + 2`): `poses` `(n, 6)` (x, y,
-/// z mm; roll, pitch, yaw deg), `sensors` `n` names, `lengths_mm` `(n,)`; rows with the same
-/// label share a pose (default: every row its own pose, labelled from 1). `name` stands for
+/// z mm; roll, pitch, yaw deg), `sensors` `n` names (any sequence, its items' `str()`),
+/// `lengths_mm` `(n,)`; rows with the same label (any sequence, as `str()`) share a pose (default: every row its own pose, labelled from 1). `name` stands for
 /// the file in messages and outputs. Returns the dict of [`read_text`], with its `handle`.
 #[pyfunction]
 #[pyo3(signature = (poses, sensors, lengths_mm, robot, name, pose_labels=None, time_s=None, simulated=false))]
@@ -378,17 +404,18 @@ fn labels_and_times(
 pub fn gauge_rows<'py>(
     py: Python<'py>,
     poses: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<String>,
+    sensors: &Bound<'py, PyAny>,
     lengths_mm: PyReadonlyArray1<'py, f64>,
     robot: &PyRobot,
     name: &str,
-    pose_labels: Option<Vec<String>>,
+    pose_labels: Option<&Bound<'py, PyAny>>,
     time_s: Option<PyReadonlyArray1<'py, f64>>,
     simulated: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let poses = poses.as_array();
     let n = poses.shape()[0];
     check_shape(py, "poses", poses.shape(), n, Some(6))?;
+    let sensors = texts(sensors)?;
     check_shape(py, "sensors", &[sensors.len()], n, None)?;
     check_shape(py, "lengths_mm", lengths_mm.shape(), n, None)?;
     let (pose_labels, time_s) = labels_and_times(py, n, pose_labels, time_s)?;
@@ -429,7 +456,7 @@ pub fn tracker_rows<'py>(
     poses: PyReadonlyArray2<'py, f64>,
     robot: &PyRobot,
     name: &str,
-    pose_labels: Option<Vec<String>>,
+    pose_labels: Option<&Bound<'py, PyAny>>,
     time_s: Option<PyReadonlyArray1<'py, f64>>,
     simulated: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
