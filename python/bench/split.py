@@ -14,13 +14,9 @@ from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
-
-import numpy as np
 
 import cpm
-
-ROOT = Path(__file__).resolve().parents[2]
+from _campaign import campaign
 
 
 def main() -> None:
@@ -31,16 +27,7 @@ def main() -> None:
         effects = args[i + 1].split(",")
         del args[i:i + 2]
     poses = int(args[0]) if args else 33334
-    robot = cpm.Robot.from_toml(ROOT / "examples" / "hexapod_66.toml")
-    sim = cpm.simulate(robot, random=poses, truth=str(ROOT / "examples" / "hexapod_66_truth.toml"),
-                       noise="gaussian:1", seed=7)
-    # The simulated campaign as arrays, one row per reading.
-    info = sim.sources[0].info
-    k = np.asarray(info["reading_pose"], dtype=int)
-    p = np.asarray(info["poses"])[k]
-    sensors = list(info["reading_sensor"])
-    lengths = np.asarray(info["lengths_mm"])
-    labels = [info["pose_labels"][j] for j in k]
+    robot, p, sensors, lengths, labels = campaign(poses)
     print(f"{len(lengths)} readings at {poses} poses, effects {effects or 'declared'}")
     for run in range(3):
         t0 = time.perf_counter()

@@ -1268,7 +1268,7 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
         // The robot's checks of the rows read (all, or those before the refused one) first;
         // the second robot's beside them (used only when the rows are all read).
         let (c, lines, file) = (&campaign, &reading_lines, t.file.as_str());
-        let checks = |r: &Robot| robot_checks(file, r, options, &c.poses, &c.readings, lines);
+        let checks = |r: &Robot| robot_checks(file, r, options, &c.poses, &c.readings, lines, None);
         unusable = match second.filter(|s| same_sensor_names(robot, s)) {
             Some(s) => {
                 let (mine, second) = rayon::join(|| checks(robot), || checks(s));
@@ -1354,6 +1354,39 @@ impl PoseChecks {
     }
 }
 
+/// How a robot judges the reachability of poses for a reader ([`robot_checks`]): its table
+/// with the link limits widened by the read options' margin, and the condition bound.
+pub(crate) struct PoseJudge {
+    table: JointTable,
+    bound: (f64, f64),
+}
+
+impl PoseJudge {
+    /// The judge of `robot` with `options`; `None` when the options judge no pose (no
+    /// condition limit) or the bound cannot be found (then [`robot_checks`] refuses the file
+    /// at its first row).
+    pub(crate) fn new(robot: &Robot, options: &ReadOptions) -> Option<PoseJudge> {
+        if !options.max_condition_ratio.is_finite() {
+            return None;
+        }
+        let bound = condition_bound(&robot.table, options.max_condition_ratio, "", 0).ok()?;
+        Some(PoseJudge {
+            table: widened(&robot.table, options.link_limit_margin_mm),
+            bound,
+        })
+    }
+
+    /// A judge of many poses (see [`ReachableAt`]).
+    pub(crate) fn at(&self) -> ReachableAt<'_> {
+        ReachableAt::new(&self.table)
+    }
+
+    /// Why `pose` is to be excluded, if it is: what [`robot_checks`] finds of it.
+    pub(crate) fn why(&self, at: &ReachableAt<'_>, pose: &Pose) -> Option<String> {
+        why_unreachable(at.check(pose, self.bound.0), pose, self.bound)
+    }
+}
+
 /// The checks of a readings file read without logged link readings that depend on the
 /// robot, in the order the rows give them: at each pose's first row its position (mm, not
 /// metres), J1's condition number at home (at the first pose) and its reachability (an
@@ -1361,6 +1394,9 @@ impl PoseChecks {
 /// sensor's length against the nominal. The reachability of all the poses is found first,
 /// in parallel (it depends on the pose alone), then the first row whose sensor length is
 /// refused, in parallel too (whether its pose is kept depends on the pose alone).
+///
+/// The poses' judgements ([`PoseJudge::why`] of each pose, in order; at least those of the
+/// poses read) are taken from `judged` when it holds them, else made here.
 pub(crate) fn robot_checks(
     file: &str,
     robot: &Robot,
@@ -1368,6 +1404,7 @@ pub(crate) fn robot_checks(
     poses: &[Pose],
     readings: &[Reading],
     reading_lines: &[usize],
+    judged: Option<Vec<Option<String>>>,
 ) -> Result<Vec<Unusable>, InputError> {
     use rayon::prelude::*;
     // Poses are numbered in the order of their first rows.
@@ -1381,14 +1418,15 @@ pub(crate) fn robot_checks(
             reading_lines[0],
         )
     });
-    let why: Vec<Option<String>> = match &bound {
-        Some(Ok(b)) => {
-            let table = widened(&robot.table, options.link_limit_margin_mm);
-            let reach = ReachableAt::new(&table);
-            poses[..met]
-                .par_iter()
-                .map(|p| why_unreachable(reach.check(p, b.0), p, *b))
-                .collect()
+    let why: Vec<Option<String>> = match (&bound, judged) {
+        (Some(Ok(_)), Some(why)) if why.len() >= met => why,
+        (Some(Ok(b)), _) => {
+            let judge = PoseJudge {
+                table: widened(&robot.table, options.link_limit_margin_mm),
+                bound: *b,
+            };
+            let at = judge.at();
+            poses[..met].par_iter().map(|p| judge.why(&at, p)).collect()
         }
         _ => Vec::new(),
     };

@@ -41,6 +41,7 @@
 //! ```
 use std::collections::HashMap;
 use std::fmt::Write as _;
+use std::sync::OnceLock;
 
 use cpm_calib::{Campaign, Reading};
 use cpm_geometry::Pose;
@@ -48,8 +49,8 @@ use cpm_geometry::Pose;
 use crate::campaign::{
     check_angle_units, check_pose_value, exclude_poses, pose_from_raw, reading_name, robot_checks,
     same_pose_as_before, surely_valid_pose_value, too_many_rows_at, tracker_link_columns,
-    unknown_sensor, DataFile, Orientation, PoseRow, RawPose, ReadOptions, TrackerRead, TrackerRow,
-    MAX_ROWS,
+    unknown_sensor, DataFile, Orientation, PoseJudge, PoseRow, RawPose, ReadOptions, TrackerRead,
+    TrackerRow, MAX_ROWS,
 };
 use crate::table::{field, line_too_long, parse_number, MAX_LINE_BYTES};
 use crate::{InputError, Robot};
@@ -312,6 +313,10 @@ fn required<'a>(file: &str, line: usize, name: &str, v: &'a str) -> Result<&'a s
     }
 }
 
+/// How many new poses of gauge rows are judged together while the rows are read
+/// ([`read_gauge_rows`]).
+const JUDGE_CHUNK: usize = 2048;
+
 /// Reads length-sensor readings given as values: what
 /// [`read_readings`](crate::read_readings) gives for the text of
 /// [`GaugeRows::to_csv`] (see the module's documentation), read directly.
@@ -340,99 +345,138 @@ pub fn read_gauge_rows(
     let mut angles = Vec::with_capacity(3 * poses);
     // The pose and numbers of the previous row (rows of one pose usually follow each other).
     let mut previous: Option<(usize, [f64; 6])> = None;
-    let mut read = || -> Result<(), InputError> {
-        for k in 0..rows.len() {
-            let line = GaugeRows::line(k);
-            let texts = [
-                ("pose", &*rows.pose_labels[k]),
-                ("sensor", &*rows.sensors[k]),
-            ];
-            fits_line(file, line, &[texts[0].1, texts[1].1], 8, |s| {
-                rows.write_row(s, k)
-            })?;
-            one_line(file, line, &texts)?;
-            if reading_lines.len() >= options.max_rows {
-                return Err(too_many_rows_at(file, line, options.max_rows));
-            }
-            let label = required(file, line, "pose", &rows.pose_labels[k])?;
-            let sensor_name = required(file, line, "sensor", &rows.sensors[k])?;
-            let sensor = robot
-                .table
-                .sensor_index(sensor_name)
-                .ok_or_else(|| unknown_sensor(file, line, robot, sensor_name))?;
-            let values = rows.poses[k];
-            // The previous row's pose when this row has its label.
-            let same_label = previous.filter(|(j, _)| labels[*j] == label);
-            let known = match same_label {
-                Some((j, _)) => Some(j),
-                None => by_label.get(label).copied(),
-            };
-            // The previous row's numbers exactly (the same text): its pose, whose numbers
-            // were checked at its first row and agree with them (no checks again).
-            let repeat = same_label.and_then(|(j, v)| {
-                let same = v
-                    .iter()
-                    .zip(&values)
-                    .all(|(a, b)| a.to_bits() == b.to_bits());
-                same.then_some(j)
-            });
-            let seen = match repeat {
-                Some(j) => Ok(j),
-                None => {
-                    let raw = raw_pose(file, line, &POSE_COLUMNS, &values)?;
-                    let pose = match known {
-                        Some(j) if raw.agrees(&first[j].0) => None,
-                        _ => Some(Pose::from_xyz_rpy_deg(
-                            [values[0], values[1], values[2]],
-                            [values[3], values[4], values[5]],
-                        )),
-                    };
-                    Err((raw, pose))
+    // The reachability of the poses (what `robot_checks` finds of them), judged on the
+    // pool's other threads while the rows are read: each chunk of JUDGE_CHUNK new poses as
+    // soon as it is complete, into its own slot; the rest after the rows.
+    let judge = PoseJudge::new(robot, options);
+    let at = judge.as_ref().map(PoseJudge::at);
+    let slots: Vec<OnceLock<Vec<Option<String>>>> = (0..capacity / JUDGE_CHUNK + 1)
+        .map(|_| OnceLock::new())
+        .collect();
+    let mut judged_upto = 0;
+    let read = rayon::scope(|scope| {
+        let mut read = || -> Result<(), InputError> {
+            for k in 0..rows.len() {
+                let line = GaugeRows::line(k);
+                let texts = [
+                    ("pose", &*rows.pose_labels[k]),
+                    ("sensor", &*rows.sensors[k]),
+                ];
+                fits_line(file, line, &[texts[0].1, texts[1].1], 8, |s| {
+                    rows.write_row(s, k)
+                })?;
+                one_line(file, line, &texts)?;
+                if reading_lines.len() >= options.max_rows {
+                    return Err(too_many_rows_at(file, line, options.max_rows));
                 }
-            };
-            let length_mm = finite(file, line, "length_mm", rows.lengths_mm[k])?;
-            let time_s = time(file, line, rows.time_s.as_ref(), k)?;
-            let j = match (seen, known) {
-                (Ok(j), _) => j,
-                (Err((raw, _)), Some(j)) => {
-                    let (before, first_line) = &first[j];
-                    same_pose_as_before(
-                        file,
-                        line,
-                        label,
-                        (&raw, &None),
-                        (before, &None),
-                        *first_line,
-                    )?;
-                    j
-                }
-                (Err((raw, pose)), None) => {
-                    let j = first.len();
-                    for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
-                        angles.push((line, *name, *v));
+                let label = required(file, line, "pose", &rows.pose_labels[k])?;
+                let sensor_name = required(file, line, "sensor", &rows.sensors[k])?;
+                let sensor = robot
+                    .table
+                    .sensor_index(sensor_name)
+                    .ok_or_else(|| unknown_sensor(file, line, robot, sensor_name))?;
+                let values = rows.poses[k];
+                // The previous row's pose when this row has its label.
+                let same_label = previous.filter(|(j, _)| labels[*j] == label);
+                let known = match same_label {
+                    Some((j, _)) => Some(j),
+                    None => by_label.get(label).copied(),
+                };
+                // The previous row's numbers exactly (the same text): its pose, whose numbers
+                // were checked at its first row and agree with them (no checks again).
+                let repeat = same_label.and_then(|(j, v)| {
+                    let same = v
+                        .iter()
+                        .zip(&values)
+                        .all(|(a, b)| a.to_bits() == b.to_bits());
+                    same.then_some(j)
+                });
+                let seen = match repeat {
+                    Some(j) => Ok(j),
+                    None => {
+                        let raw = raw_pose(file, line, &POSE_COLUMNS, &values)?;
+                        let pose = match known {
+                            Some(j) if raw.agrees(&first[j].0) => None,
+                            _ => Some(Pose::from_xyz_rpy_deg(
+                                [values[0], values[1], values[2]],
+                                [values[3], values[4], values[5]],
+                            )),
+                        };
+                        Err((raw, pose))
                     }
-                    by_label.insert(label, j);
-                    first.push((raw, line));
-                    labels.push(label.to_string());
-                    campaign
-                        .poses
-                        .push(pose.expect("a new pose is made from its numbers"));
-                    j
-                }
-            };
-            previous = Some((j, values));
-            campaign.readings.push(Reading {
-                pose: j,
-                sensor,
-                length_mm,
-                time_s: time_s.into(),
-                temperature_c: cpm_calib::Logged::NONE,
-            });
-            reading_lines.push(line);
+                };
+                let length_mm = finite(file, line, "length_mm", rows.lengths_mm[k])?;
+                let time_s = time(file, line, rows.time_s.as_ref(), k)?;
+                let j = match (seen, known) {
+                    (Ok(j), _) => j,
+                    (Err((raw, _)), Some(j)) => {
+                        let (before, first_line) = &first[j];
+                        same_pose_as_before(
+                            file,
+                            line,
+                            label,
+                            (&raw, &None),
+                            (before, &None),
+                            *first_line,
+                        )?;
+                        j
+                    }
+                    (Err((raw, pose)), None) => {
+                        let j = first.len();
+                        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+                            angles.push((line, *name, *v));
+                        }
+                        by_label.insert(label, j);
+                        first.push((raw, line));
+                        labels.push(label.to_string());
+                        campaign
+                            .poses
+                            .push(pose.expect("a new pose is made from its numbers"));
+                        let complete = campaign.poses.len() - judged_upto == JUDGE_CHUNK;
+                        let slot = slots.get(judged_upto / JUDGE_CHUNK);
+                        if let (true, Some(judge), Some(at), Some(slot)) =
+                            (complete, &judge, &at, slot)
+                        {
+                            let chunk = campaign.poses[judged_upto..].to_vec();
+                            scope.spawn(move |_| {
+                                let why = chunk.iter().map(|p| judge.why(at, p)).collect();
+                                // The slot is this chunk's alone: it cannot be full already.
+                                let _ = slot.set(why);
+                            });
+                            judged_upto += JUDGE_CHUNK;
+                        }
+                        j
+                    }
+                };
+                previous = Some((j, values));
+                campaign.readings.push(Reading {
+                    pose: j,
+                    sensor,
+                    length_mm,
+                    time_s: time_s.into(),
+                    temperature_c: cpm_calib::Logged::NONE,
+                });
+                reading_lines.push(line);
+            }
+            Ok(())
+        };
+        read()
+    });
+    // The judgements of the chunks (all made: the scope waits for its tasks), then of the
+    // poses after them.
+    let judged = judge.as_ref().zip(at.as_ref()).and_then(|(judge, at)| {
+        use rayon::prelude::*;
+        let mut why: Vec<Option<String>> = Vec::with_capacity(campaign.poses.len());
+        for slot in slots.into_iter().take(judged_upto / JUDGE_CHUNK) {
+            why.extend(slot.into_inner()?);
         }
-        Ok(())
-    };
-    let read = read();
+        why.par_extend(
+            campaign.poses[judged_upto..]
+                .par_iter()
+                .map(|p| judge.why(at, p)),
+        );
+        Some(why)
+    });
     // The robot's checks of the rows read (all, or those before the refused one) first, as
     // the CSV reader makes them.
     let unusable = robot_checks(
@@ -442,6 +486,7 @@ pub fn read_gauge_rows(
         &campaign.poses,
         &campaign.readings,
         &reading_lines,
+        judged,
     )?;
     read?;
     if campaign.readings.is_empty() {
@@ -888,6 +933,58 @@ mod tests {
                 &text, "tracker arrays", &robot, &options,
             ));
             prop_assert_eq!(direct, csv, "text:\n{}", text);
+        }
+    }
+
+    /// Enough poses for several chunks of them (`JUDGE_CHUNK` each) to be judged while the
+    /// rows are read, some unreachable in every chunk, read whole, refused by a row after
+    /// some chunks and cut by `max_rows` within one: the same as the CSV reader of their text.
+    #[test]
+    fn many_poses_read_as_their_csv_reads() {
+        let robot = robot();
+        let n = 2 * JUDGE_CHUNK + JUDGE_CHUNK / 2 + 7;
+        let mut rows = GaugeRows::new("arrays", vec![], vec![], vec![], vec![]);
+        let mut unreachable = 0;
+        for k in 0..n {
+            let o = OFFSETS[k % 4];
+            let step = (k % 13) as f64 * 0.1;
+            let mut pose = about_home(&robot, [o[0] + step, o[1], o[2], o[3], o[4], o[5]]);
+            if k % 397 == 5 {
+                pose[2] += 1000.0; // links far beyond their limits
+                unreachable += 1;
+            }
+            let p =
+                Pose::from_xyz_rpy_deg([pose[0], pose[1], pose[2]], [pose[3], pose[4], pose[5]]);
+            let s = &robot.table.sensors[k % robot.table.sensors.len()];
+            rows.pose_labels.push(format!("p{k}"));
+            rows.sensors.push(s.name.clone());
+            rows.poses.push(pose);
+            rows.lengths_mm.push(s.length_mm(&p));
+        }
+        assert!(unreachable >= 2 * (n / JUDGE_CHUNK));
+        let broken = 2 * JUDGE_CHUNK + 3;
+        for (max_rows, broken) in [
+            (crate::MAX_ROWS, None),
+            (crate::MAX_ROWS, Some(broken)),
+            (JUDGE_CHUNK + 100, None),
+        ] {
+            let mut r = rows.clone();
+            if let Some(b) = broken {
+                r.lengths_mm[b] = f64::NAN;
+            }
+            let options = ReadOptions {
+                max_rows,
+                ..ReadOptions::default()
+            };
+            let read = read_gauge_rows(&r, &robot, &options);
+            if max_rows == crate::MAX_ROWS && broken.is_none() {
+                let f = read.as_ref().expect("read");
+                assert_eq!(f.excluded.len(), unreachable, "{:?}", f.excluded);
+            } else {
+                assert!(read.is_err());
+            }
+            let csv = crate::read_readings(&r.to_csv(), "arrays", &robot, &options);
+            assert_eq!(outcome(read), outcome(csv));
         }
     }
 
