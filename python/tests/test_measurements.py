@@ -136,6 +136,16 @@ def test_labels_and_sensors_are_taken_as_their_str(hexapod, readings):
                                       ref.sources[0].info["reading_pose"])
         np.testing.assert_array_equal(m.poses, ref.poses)
 
+    class Tagged(str):
+        def __str__(self):
+            return "x" + str.__str__(self)
+
+    # A subclass of str is its str() too, as str(v) in Python gives it.
+    m = cpm.gauge_readings(hexapod, poses, sensors, lengths,
+                           pose_labels=[Tagged(t) for t in labels])
+    assert m.sources[0].info["pose_labels"] == [
+        "x" + t for t in ref.sources[0].info["pose_labels"]]
+
     class Broken:
         def __str__(self):
             raise ValueError("no text for this label")

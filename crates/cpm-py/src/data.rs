@@ -343,8 +343,8 @@ fn check_shape(
     ))
 }
 
-/// The texts of a sequence as Python's `str()` gives them (a `str` as it is, anything else
-/// through `str()`), converted here rather than by a list comprehension in Python: a run of
+/// The texts of a sequence as Python's `str()` gives them (an exact `str` as it is,
+/// anything else, a subclass of `str` too, through `str()`), converted here rather than by a list comprehension in Python: a run of
 /// the same object (a label shared by the rows of a pose) is converted once.
 fn texts(items: &Bound<'_, PyAny>) -> PyResult<Vec<String>> {
     let mut out = Vec::with_capacity(items.len().unwrap_or(0));
@@ -359,7 +359,7 @@ fn texts(items: &Bound<'_, PyAny>) -> PyResult<Vec<String>> {
                 continue;
             }
         }
-        let text = match item.downcast::<PyString>() {
+        let text = match item.downcast_exact::<PyString>() {
             Ok(s) => s.to_str()?.to_owned(),
             Err(_) => item.str()?.to_str()?.to_owned(),
         };
@@ -396,8 +396,9 @@ fn labels_and_times(
 /// Reads gauge readings given as arrays (no text: [`cpm_io::rows::read_gauge_rows`], the
 /// checks and errors of the CSV reader, row `k` on line `k + 2`): `poses` `(n, 6)` (x, y,
 /// z mm; roll, pitch, yaw deg), `sensors` `n` names (any sequence, its items' `str()`),
-/// `lengths_mm` `(n,)`; rows with the same label (any sequence, as `str()`) share a pose (default: every row its own pose, labelled from 1). `name` stands for
-/// the file in messages and outputs. Returns the dict of [`read_text`], with its `handle`.
+/// `lengths_mm` `(n,)`; rows with the same label (any sequence, as `str()`) share a pose
+/// (default: every row its own pose, labelled from 1). `name` stands for the file in
+/// messages and outputs. Returns the dict of [`read_text`], with its `handle`.
 #[pyfunction]
 #[pyo3(signature = (poses, sensors, lengths_mm, robot, name, pose_labels=None, time_s=None, simulated=false))]
 #[allow(clippy::too_many_arguments)]
