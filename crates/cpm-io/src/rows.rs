@@ -354,113 +354,109 @@ pub fn read_gauge_rows(
         .map(|_| OnceLock::new())
         .collect();
     let mut judged_upto = 0;
-    let read = rayon::scope(|scope| {
-        let mut read = || -> Result<(), InputError> {
-            for k in 0..rows.len() {
-                let line = GaugeRows::line(k);
-                let texts = [
-                    ("pose", &*rows.pose_labels[k]),
-                    ("sensor", &*rows.sensors[k]),
-                ];
-                fits_line(file, line, &[texts[0].1, texts[1].1], 8, |s| {
-                    rows.write_row(s, k)
-                })?;
-                one_line(file, line, &texts)?;
-                if reading_lines.len() >= options.max_rows {
-                    return Err(too_many_rows_at(file, line, options.max_rows));
-                }
-                let label = required(file, line, "pose", &rows.pose_labels[k])?;
-                let sensor_name = required(file, line, "sensor", &rows.sensors[k])?;
-                let sensor = robot
-                    .table
-                    .sensor_index(sensor_name)
-                    .ok_or_else(|| unknown_sensor(file, line, robot, sensor_name))?;
-                let values = rows.poses[k];
-                // The previous row's pose when this row has its label.
-                let same_label = previous.filter(|(j, _)| labels[*j] == label);
-                let known = match same_label {
-                    Some((j, _)) => Some(j),
-                    None => by_label.get(label).copied(),
-                };
-                // The previous row's numbers exactly (the same text): its pose, whose numbers
-                // were checked at its first row and agree with them (no checks again).
-                let repeat = same_label.and_then(|(j, v)| {
-                    let same = v
-                        .iter()
-                        .zip(&values)
-                        .all(|(a, b)| a.to_bits() == b.to_bits());
-                    same.then_some(j)
-                });
-                let seen = match repeat {
-                    Some(j) => Ok(j),
-                    None => {
-                        let raw = raw_pose(file, line, &POSE_COLUMNS, &values)?;
-                        let pose = match known {
-                            Some(j) if raw.agrees(&first[j].0) => None,
-                            _ => Some(Pose::from_xyz_rpy_deg(
-                                [values[0], values[1], values[2]],
-                                [values[3], values[4], values[5]],
-                            )),
-                        };
-                        Err((raw, pose))
-                    }
-                };
-                let length_mm = finite(file, line, "length_mm", rows.lengths_mm[k])?;
-                let time_s = time(file, line, rows.time_s.as_ref(), k)?;
-                let j = match (seen, known) {
-                    (Ok(j), _) => j,
-                    (Err((raw, _)), Some(j)) => {
-                        let (before, first_line) = &first[j];
-                        same_pose_as_before(
-                            file,
-                            line,
-                            label,
-                            (&raw, &None),
-                            (before, &None),
-                            *first_line,
-                        )?;
-                        j
-                    }
-                    (Err((raw, pose)), None) => {
-                        let j = first.len();
-                        for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
-                            angles.push((line, *name, *v));
-                        }
-                        by_label.insert(label, j);
-                        first.push((raw, line));
-                        labels.push(label.to_string());
-                        campaign
-                            .poses
-                            .push(pose.expect("a new pose is made from its numbers"));
-                        let complete = campaign.poses.len() - judged_upto == JUDGE_CHUNK;
-                        let slot = slots.get(judged_upto / JUDGE_CHUNK);
-                        if let (true, Some(judge), Some(at), Some(slot)) =
-                            (complete, &judge, &at, slot)
-                        {
-                            let chunk = campaign.poses[judged_upto..].to_vec();
-                            scope.spawn(move |_| {
-                                let why = chunk.iter().map(|p| judge.why(at, p)).collect();
-                                // The slot is this chunk's alone: it cannot be full already.
-                                let _ = slot.set(why);
-                            });
-                            judged_upto += JUDGE_CHUNK;
-                        }
-                        j
-                    }
-                };
-                previous = Some((j, values));
-                campaign.readings.push(Reading {
-                    pose: j,
-                    sensor,
-                    length_mm,
-                    time_s: time_s.into(),
-                    temperature_c: cpm_calib::Logged::NONE,
-                });
-                reading_lines.push(line);
+    let read = rayon::scope(|scope| -> Result<(), InputError> {
+        for k in 0..rows.len() {
+            let line = GaugeRows::line(k);
+            let texts = [
+                ("pose", &*rows.pose_labels[k]),
+                ("sensor", &*rows.sensors[k]),
+            ];
+            fits_line(file, line, &[texts[0].1, texts[1].1], 8, |s| {
+                rows.write_row(s, k)
+            })?;
+            one_line(file, line, &texts)?;
+            if reading_lines.len() >= options.max_rows {
+                return Err(too_many_rows_at(file, line, options.max_rows));
             }
-            Ok(())
-        };
-        read()
+            let label = required(file, line, "pose", &rows.pose_labels[k])?;
+            let sensor_name = required(file, line, "sensor", &rows.sensors[k])?;
+            let sensor = robot
+                .table
+                .sensor_index(sensor_name)
+                .ok_or_else(|| unknown_sensor(file, line, robot, sensor_name))?;
+            let values = rows.poses[k];
+            // The previous row's pose when this row has its label.
+            let same_label = previous.filter(|(j, _)| labels[*j] == label);
+            let known = match same_label {
+                Some((j, _)) => Some(j),
+                None => by_label.get(label).copied(),
+            };
+            // The previous row's numbers exactly (the same text): its pose, whose numbers
+            // were checked at its first row and agree with them (no checks again).
+            let repeat = same_label.and_then(|(j, v)| {
+                let same = v
+                    .iter()
+                    .zip(&values)
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+                same.then_some(j)
+            });
+            let seen = match repeat {
+                Some(j) => Ok(j),
+                None => {
+                    let raw = raw_pose(file, line, &POSE_COLUMNS, &values)?;
+                    let pose = match known {
+                        Some(j) if raw.agrees(&first[j].0) => None,
+                        _ => Some(Pose::from_xyz_rpy_deg(
+                            [values[0], values[1], values[2]],
+                            [values[3], values[4], values[5]],
+                        )),
+                    };
+                    Err((raw, pose))
+                }
+            };
+            let length_mm = finite(file, line, "length_mm", rows.lengths_mm[k])?;
+            let time_s = time(file, line, rows.time_s.as_ref(), k)?;
+            let j = match (seen, known) {
+                (Ok(j), _) => j,
+                (Err((raw, _)), Some(j)) => {
+                    let (before, first_line) = &first[j];
+                    same_pose_as_before(
+                        file,
+                        line,
+                        label,
+                        (&raw, &None),
+                        (before, &None),
+                        *first_line,
+                    )?;
+                    j
+                }
+                (Err((raw, pose)), None) => {
+                    let j = first.len();
+                    for (name, v) in raw.iter().filter(|(n, _)| n.ends_with("_deg")) {
+                        angles.push((line, *name, *v));
+                    }
+                    by_label.insert(label, j);
+                    first.push((raw, line));
+                    labels.push(label.to_string());
+                    campaign
+                        .poses
+                        .push(pose.expect("a new pose is made from its numbers"));
+                    let complete = campaign.poses.len() - judged_upto == JUDGE_CHUNK;
+                    let slot = slots.get(judged_upto / JUDGE_CHUNK);
+                    if let (true, Some(judge), Some(at), Some(slot)) = (complete, &judge, &at, slot)
+                    {
+                        let chunk = campaign.poses[judged_upto..].to_vec();
+                        scope.spawn(move |_| {
+                            let why = chunk.iter().map(|p| judge.why(at, p)).collect();
+                            // The slot is this chunk's alone: it cannot be full already.
+                            let _ = slot.set(why);
+                        });
+                        judged_upto += JUDGE_CHUNK;
+                    }
+                    j
+                }
+            };
+            previous = Some((j, values));
+            campaign.readings.push(Reading {
+                pose: j,
+                sensor,
+                length_mm,
+                time_s: time_s.into(),
+                temperature_c: cpm_calib::Logged::NONE,
+            });
+            reading_lines.push(line);
+        }
+        Ok(())
     });
     // The judgements of the chunks (all made: the scope waits for its tasks), then of the
     // poses after them.
