@@ -189,11 +189,8 @@ impl Fingerprint {
     }
 }
 
-/// Contents of at least this many bytes (and streamed contents) are fingerprinted on a
-/// thread of their own while they are written ([`write_fingerprinted`]).
-const HASH_ASIDE_BYTES: usize = 1 << 20;
-
-/// Bytes handed to the fingerprinting thread at a time.
+/// Bytes handed to the fingerprinting thread at a time ([`write_fingerprinted`]); contents
+/// smaller than one chunk (and not streamed) are fingerprinted in line.
 const HASH_CHUNK: usize = 1 << 20;
 
 /// Writes `contents` to `path` (synced, [`write_contents_synced`]) and returns how many bytes
@@ -206,7 +203,7 @@ const HASH_CHUNK: usize = 1 << 20;
 /// so the same fingerprint. Without a thread (none can be started) it is done in line.
 fn write_fingerprinted(path: &Path, contents: &Contents) -> std::io::Result<(usize, u64)> {
     let large = match contents {
-        Contents::Bytes(b) => b.len() >= HASH_ASIDE_BYTES,
+        Contents::Bytes(b) => b.len() >= HASH_CHUNK,
         Contents::Streamed(_) => true,
     };
     let in_line = || -> std::io::Result<(usize, u64)> {
@@ -618,8 +615,9 @@ mod tests {
     fn fingerprints_made_aside_are_those_of_the_bytes_written() {
         let dir = std::env::temp_dir().join(format!("cpm-fingerprint-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        // Streamed in uneven pieces across several hash chunks (aside), a large buffer
-        // (aside), a small one (in line), and nothing at all.
+        // Streamed across several hash chunks (aside; in the writer's pieces, 1 MiB by direct
+        // I/O, row by row through the page cache), a large buffer not a whole number of
+        // chunks (aside), a small one (in line), and nothing at all.
         let streamed = Contents::Streamed(Box::new(|out: &mut dyn std::io::Write| {
             for i in 0..200_000u32 {
                 writeln!(out, "{i},{}", i.wrapping_mul(2_654_435_761))?;
