@@ -555,7 +555,7 @@ pub fn identify_implicit(
     let mut no_scale = vec![0.0; g0];
     let red = stream::reduce(&problem, &x, &table, 0.0, &mut no_scale, None, true);
     drop(no_scale);
-    let s = DMatrix::<f64>::from_fn(ng, ng, |r, c| red.s[c * ng + r]);
+    let s = red.symmetric(ng, |_| 0.0);
     let eig = nalgebra::SymmetricEigen::new(s);
     let mut pseudo = DMatrix::<f64>::zeros(ng, ng);
     for c in 0..ng {

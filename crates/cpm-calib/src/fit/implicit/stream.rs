@@ -178,7 +178,11 @@ impl Implicit<'_> {
 
 /// Partial sums of the reduce pass over a chunk of poses.
 pub(super) struct Reduced {
-    /// `sum (G_j^T G_j - Z_j^T Z_j)` (without the global damping), `ng x ng` column-major.
+    /// `sum (G_j^T G_j - Z_j^T Z_j)` (without the global damping), `ng x ng` column-major:
+    /// its lower triangle (row >= column), the upper left at zero. The matrix is symmetric
+    /// and its readers (nalgebra's Cholesky and symmetric eigen decomposition) read the
+    /// lower triangle alone: summing the upper too was half the reduce pass's updates.
+    /// [`Reduced::symmetric`] gives the whole matrix.
     pub(super) s: Vec<f64>,
     /// `-sum Z_j^T z_j`.
     rhs: Vec<f64>,
@@ -202,6 +206,15 @@ impl Reduced {
             ss: 0.0,
             failed: false,
         }
+    }
+
+    /// The whole `ng x ng` matrix `s` stands for (its lower triangle mirrored), plus
+    /// `diagonal[k]` on the diagonal.
+    pub(super) fn symmetric(&self, ng: usize, diagonal: impl Fn(usize) -> f64) -> DMatrix<f64> {
+        DMatrix::from_fn(ng, ng, |r, c| {
+            let (r, c) = (r.max(c), r.min(c));
+            self.s[c * ng + r] + if r == c { diagonal(r) } else { 0.0 }
+        })
     }
 
     fn add(&mut self, o: &Reduced) {
@@ -337,15 +350,22 @@ pub(super) fn reduce(
                         }
                     }
                     for (kb, &k2) in rows.iter().enumerate() {
+                        let (ck2, vk2) = b.globals(k2);
+                        // Only the lower triangle is summed (see `Reduced::s`): a pair of
+                        // runs whose rows all lie above the columns adds nothing.
+                        if let (Some(a), Some(b2)) = (runs[ka], runs[kb]) {
+                            if b2 + vk2.len() <= a {
+                                continue;
+                            }
+                        }
                         let mut w = if k == k2 { 1.0 } else { 0.0 };
                         if factor.is_some() {
                             w -= ys[ka].dot(&ys[kb]);
                         }
-                        let (ck2, vk2) = b.globals(k2);
                         for (&c, &v) in ck.iter().zip(vk) {
                             let wv = w * v;
                             let col = &mut acc.s[c * ng..(c + 1) * ng];
-                            add_scaled(col, runs[kb], ck2, vk2, wv);
+                            add_scaled(col, c, runs[kb], ck2, vk2, wv);
                         }
                     }
                 }
@@ -368,16 +388,23 @@ fn run_start(cols: &[usize]) -> Option<usize> {
     consecutive.then_some(first)
 }
 
-/// `col[cols[k]] += wv * vals[k]` for every `k`, in order: over a slice of `col` when the
-/// columns are consecutive from `run` (six of them, a closure's, in fixed-size arrays),
-/// otherwise one index after the other. The same products and sums either way, so the
-/// same bits; the slices let the compiler drop the bounds checks and use vector
-/// instructions (the scattered update was the fit's hottest line, a third of `calibrate`'s
-/// fit on 10^6 readings).
+/// `col[cols[k]] += wv * vals[k]` for every `k` with `cols[k] >= lo` (the rows on and
+/// below the diagonal of column `lo`), in order: over a slice of `col` when the columns are
+/// consecutive from `run` (six of them, a closure's, in fixed-size arrays), otherwise one
+/// index after the other. The same products and sums either way, so the same bits; the
+/// slices let the compiler drop the bounds checks (the scattered update was the fit's
+/// hottest line, a third of `calibrate`'s fit on 10^6 readings).
 #[inline(always)]
-fn add_scaled(col: &mut [f64], run: Option<usize>, cols: &[usize], vals: &[f64], wv: f64) {
+fn add_scaled(
+    col: &mut [f64],
+    lo: usize,
+    run: Option<usize>,
+    cols: &[usize],
+    vals: &[f64],
+    wv: f64,
+) {
     match run {
-        Some(c0) => {
+        Some(c0) if c0 >= lo => {
             let dst = &mut col[c0..c0 + vals.len()];
             if let (Ok(dst), Ok(vals)) = (
                 <&mut [f64; 6]>::try_from(&mut *dst),
@@ -392,9 +419,18 @@ fn add_scaled(col: &mut [f64], run: Option<usize>, cols: &[usize], vals: &[f64],
                 }
             }
         }
+        Some(c0) => {
+            let skip = (lo - c0).min(vals.len());
+            let dst = &mut col[c0 + skip..c0 + vals.len()];
+            for (d, &v2) in dst.iter_mut().zip(&vals[skip..]) {
+                *d += wv * v2;
+            }
+        }
         None => {
             for (&c2, &v2) in cols.iter().zip(vals) {
-                col[c2] += wv * v2;
+                if c2 >= lo {
+                    col[c2] += wv * v2;
+                }
             }
         }
     }
@@ -580,14 +616,7 @@ impl NormalEquations for Streamed<'_, '_> {
         let (hl, dg) = h.split_at_mut(nl);
         dg.fill(0.0);
         if ng > 0 {
-            let s = DMatrix::from_fn(ng, ng, |r, c| {
-                red.s[c * ng + r]
-                    + if r == c {
-                        mu * d[nl + r] * d[nl + r]
-                    } else {
-                        0.0
-                    }
-            });
+            let s = red.symmetric(ng, |r| mu * d[nl + r] * d[nl + r]);
             let diag: Vec<f64> = (0..ng).map(|b| s[(b, b)]).collect();
             let Some(ch) = s.cholesky() else {
                 return Ok(None);
@@ -675,8 +704,9 @@ mod tests {
     }
 
     /// The mirrored triangle of `local_normal` is nalgebra's `ger` sum bit for bit, and
-    /// `add_scaled` over a run of columns the scattered update bit for bit (runs of six and
-    /// of other lengths, and columns that are not consecutive), on rows of wide range.
+    /// `add_scaled` over a run of columns the scattered update of the rows from `lo` on bit
+    /// for bit (runs of six and of other lengths, columns that are not consecutive, `lo`
+    /// before, inside and after them), on rows of wide range.
     #[test]
     fn local_normal_and_add_scaled_are_the_general_sums_bit_for_bit() {
         use rand::{Rng, SeedableRng};
@@ -708,13 +738,23 @@ mod tests {
             let vals: Vec<f64> = cols.iter().map(|_| wide()).collect();
             let start: Vec<f64> = (0..36).map(|_| wide()).collect();
             let wv = wide();
-            let (mut fast, mut plain) = (start.clone(), start);
-            add_scaled(&mut fast, run_start(&cols), &cols, &vals, wv);
-            add_scaled(&mut plain, None, &cols, &vals, wv);
             let consecutive = cols.windows(2).all(|w| w[1] == w[0] + 1) && !cols.is_empty();
             assert_eq!(run_start(&cols).is_some(), consecutive, "{cols:?}");
             let bits = |m: &[f64]| m.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-            assert_eq!(bits(&fast), bits(&plain), "{cols:?}");
+            for lo in [0, 3, 5, 13, 15, 17, 18, 40] {
+                let (mut fast, mut plain) = (start.clone(), start.clone());
+                add_scaled(&mut fast, lo, run_start(&cols), &cols, &vals, wv);
+                add_scaled(&mut plain, lo, None, &cols, &vals, wv);
+                assert_eq!(bits(&fast), bits(&plain), "{cols:?} from {lo}");
+                // The scattered update by hand: the rows from `lo` on, the others as they were.
+                let mut by_hand = start.clone();
+                for (&c2, &v2) in cols.iter().zip(&vals) {
+                    if c2 >= lo {
+                        by_hand[c2] += wv * v2;
+                    }
+                }
+                assert_eq!(bits(&plain), bits(&by_hand), "{cols:?} from {lo}");
+            }
         }
     }
 }
