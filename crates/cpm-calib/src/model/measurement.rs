@@ -1149,12 +1149,33 @@ fn campaign_t0_s(model: &MeasurementModel, campaign: &Campaign) -> f64 {
 }
 
 fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
-    let (mut s, mut n) = (0.0, 0usize);
+    let mut m = Mean::default();
     for x in v {
-        s += x;
-        n += 1;
+        m.add(Some(x));
     }
-    (n > 0).then(|| s / n as f64)
+    m.get()
+}
+
+/// A mean summed value after value ([`mean`] of the values given).
+#[derive(Default)]
+struct Mean {
+    sum: f64,
+    count: usize,
+}
+
+impl Mean {
+    /// Adds `x` when it is given.
+    fn add(&mut self, x: Option<f64>) {
+        if let Some(x) = x {
+            self.sum += x;
+            self.count += 1;
+        }
+    }
+
+    /// The mean, `None` of no value.
+    fn get(&self) -> Option<f64> {
+        (self.count > 0).then(|| self.sum / self.count as f64)
+    }
 }
 
 /// Each pose's context ([`MeasurementModel::pose_context`]), pose after pose (the motion
@@ -1186,16 +1207,21 @@ fn contexts(
                 .iter()
                 .map(|&q| &campaign.pose_measurements[q])
         };
-        let temperature_c = mean(
-            rs.iter()
-                .filter_map(|&k| campaign.readings[k].temperature_c.get()),
-        )
-        .or_else(|| mean(measured().filter_map(|p| p.temperature_c)));
-        let time_s = mean(
-            rs.iter()
-                .filter_map(|&k| campaign.readings[k].time_s.get())
-                .chain(measured().filter_map(|p| p.time_s)),
-        );
+        // The means of the readings' temperatures and times in one pass over the readings
+        // (the same sums, in the same order, as one pass for each).
+        let (mut temperature, mut time) = (Mean::default(), Mean::default());
+        for &k in rs {
+            let r = &campaign.readings[k];
+            temperature.add(r.temperature_c.get());
+            time.add(r.time_s.get());
+        }
+        let temperature_c = temperature
+            .get()
+            .or_else(|| mean(measured().filter_map(|p| p.temperature_c)));
+        for p in measured() {
+            time.add(p.time_s);
+        }
+        let time_s = time.get();
         let previous = if campaign.starts_session(j) {
             None
         } else {
