@@ -1125,21 +1125,12 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 let rows = t.rows_like(&next).unwrap_or(0).min(options.max_rows);
                 campaign.readings.reserve(rows);
                 reading_lines.reserve(rows);
-                // Those per pose for poses read by every sensor (grown when there are more
-                // poses): doubling them from empty copied ~25 MB into fresh pages on 62,500
-                // poses, 40 ms of `cpm validate`'s reading.
+                // The largest per-pose lists for poses read by every sensor (not doubled).
                 let poses = rows / sensors.len().max(1) + 1;
                 entries.reserve(poses);
-                labels.reserve(poses);
                 campaign.poses.reserve(poses);
-                excluding.reserve(poses);
                 by_label.reserve(poses);
-                if o == Orientation::Rpy {
-                    angles.reserve(3 * poses);
-                }
-                if logged {
-                    commanded.reserve(poses);
-                }
+                angles.reserve(3 * poses);
             }
             let row = &next;
             let t: &Header = t;
