@@ -1130,7 +1130,7 @@ pub(crate) fn read_readings_unexcluded<R: Read>(
                 entries.reserve(poses);
                 campaign.poses.reserve(poses);
                 by_label.reserve(poses);
-                angles.reserve(3 * poses);
+                angles.reserve(if o == Orientation::Rpy { 3 * poses } else { 0 });
             }
             let row = &next;
             let t: &Header = t;

@@ -404,8 +404,10 @@ fn add_scaled(
     wv: f64,
 ) {
     match run {
-        Some(c0) if c0 >= lo => {
-            let dst = &mut col[c0..c0 + vals.len()];
+        Some(c0) => {
+            // The columns from `lo` on: all six of a closure's in fixed-size arrays (unrolled).
+            let skip = lo.saturating_sub(c0).min(vals.len());
+            let (dst, vals) = (&mut col[c0 + skip..c0 + vals.len()], &vals[skip..]);
             if let (Ok(dst), Ok(vals)) = (
                 <&mut [f64; 6]>::try_from(&mut *dst),
                 <&[f64; 6]>::try_from(vals),
@@ -417,13 +419,6 @@ fn add_scaled(
                 for (d, &v2) in dst.iter_mut().zip(vals) {
                     *d += wv * v2;
                 }
-            }
-        }
-        Some(c0) => {
-            let skip = (lo - c0).min(vals.len());
-            let dst = &mut col[c0 + skip..c0 + vals.len()];
-            for (d, &v2) in dst.iter_mut().zip(&vals[skip..]) {
-                *d += wv * v2;
             }
         }
         None => {
