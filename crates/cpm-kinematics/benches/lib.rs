@@ -52,6 +52,23 @@ fn benches(c: &mut Criterion) {
     c.bench_function("lu6/nalgebra inverse (J1)", |b| {
         b.iter(|| black_box(&a).try_inverse())
     });
+    // The condition shortcut of the reachability judge and the forward solver: |J1|_F
+    // |J1^-1|_F from the LU with reciprocal pivots, against the same bound from the full
+    // inverse (what it was before session 29).
+    c.bench_function("lu6/condition_at_most (J1)", |b| {
+        b.iter(|| cpm_kinematics::fk::condition_at_most(black_box(&a), black_box(1e3)))
+    });
+    c.bench_function("lu6/condition bound from the inverse (J1)", |b| {
+        b.iter(|| {
+            cpm_kinematics::lu6::try_inverse6(black_box(&a))
+                .is_some_and(|inv| a.norm() * inv.norm() <= black_box(1e3))
+        })
+    });
+    // One pose judged as the readers judge each pose of a file.
+    let at = cpm_kinematics::workspace::ReachableAt::new(&table);
+    c.bench_function("workspace/reachable_at (20 mm, 5 deg from home)", |b| {
+        b.iter(|| at.check(black_box(&target), black_box(1e3)))
+    });
 }
 
 criterion_group!(kinematics, benches);

@@ -66,14 +66,23 @@ pub fn condition_number(m: &Matrix6<f64>) -> Result<f64, SvdError> {
 
 /// True when the 2-norm condition number of `m` is certainly at most `bound`:
 /// `|m|_F |m^-1|_F` bounds it from above (and is at most 6 times it), at the cost of an
-/// inverse rather than an SVD. False when that bound exceeds `bound` (the condition number
-/// may still be below: compute it), or `m` is singular or not finite.
+/// LU factorisation rather than an SVD ([`crate::lu6::Lu6::inverse_norm`]), with a margin
+/// of [`BOUND_MARGIN`] for its rounding. False when that bound exceeds `bound` (the
+/// condition number may still be below: compute it), or `m` is singular or not finite.
+///
+/// Every caller computes the condition number itself when this is false, so a verdict never
+/// rests on the rounding of this bound, only the time taken to reach it.
 pub fn condition_at_most(m: &Matrix6<f64>, bound: f64) -> bool {
-    let Some(inv) = crate::lu6::try_inverse6(m) else {
+    let Some(inv_norm) = crate::lu6::Lu6::new(m).inverse_norm() else {
         return false;
     };
-    m.norm() * inv.norm() <= bound // false for NaN
+    m.norm() * inv_norm * BOUND_MARGIN <= bound // false for NaN
 }
+
+/// The factor [`condition_at_most`] widens its bound by: above the relative rounding of
+/// `|m^-1|_F` (about the condition number times 10^-16, so 10^-6 at the forward solver's
+/// default limit of 10^10), far below the slack of the bound itself (up to 6).
+pub const BOUND_MARGIN: f64 = 1.0 + 1e-4;
 
 /// A 6x6 matrix as rows, for the allocation-free solver.
 type Mat6 = [[f64; 6]; 6];

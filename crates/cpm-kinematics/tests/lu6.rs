@@ -107,3 +107,61 @@ fn a_zero_pivot_fails_as_nalgebra_does() {
     assert!(a.lu().solve(&Vector6::repeat(1.0)).is_none());
     assert!(try_inverse6(&a).is_none() && a.try_inverse().is_none());
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+    /// `inverse_norm` (reciprocal pivots, no row swaps) is the Frobenius norm of nalgebra's
+    /// inverse to the rounding a condition number allows, and fails where the inverse does.
+    #[test]
+    fn inverse_norm_is_the_inverses_norm(
+        v in proptest::collection::vec(-1.0f64..1.0, 36),
+        scale in -20i32..20,
+        kind in 0usize..3,
+        i in 0usize..6,
+    ) {
+        let mut a = Matrix6::from_iterator(v) * 2f64.powi(scale);
+        if kind == 1 {
+            a.set_column(i, &Vector6::zeros());
+        } else if kind == 2 {
+            a += Matrix6::identity() * 2f64.powi(scale);
+        }
+        let ours = Lu6::new(&a).inverse_norm();
+        match a.try_inverse() {
+            None => prop_assert!(ours.is_none(), "{a}: {ours:?} for a singular matrix"),
+            Some(inv) => {
+                let (ours, theirs) = (ours.expect("an inverse"), inv.norm());
+                let kappa = a.norm() * theirs;
+                prop_assert!(
+                    (ours - theirs).abs() <= 1e-14 * kappa * theirs,
+                    "{a}: {ours} vs {theirs} (condition bound {kappa})"
+                );
+            }
+        }
+    }
+}
+
+/// `condition_at_most` passes a well conditioned matrix, refuses one beyond the bound and a
+/// singular one, and never passes a matrix whose condition number exceeds the bound.
+#[test]
+fn condition_at_most_is_a_sound_shortcut() {
+    use cpm_kinematics::fk::condition_at_most;
+    let good = Matrix6::<f64>::identity() * 3.0;
+    assert!(condition_at_most(&good, 10.0)); // |I|_F |I^-1|_F = 6
+    assert!(!condition_at_most(&good, 5.9));
+    let mut bad = Matrix6::<f64>::identity();
+    bad[(2, 2)] = 1e-9;
+    assert!(!condition_at_most(&bad, 1e8));
+    bad[(2, 2)] = 0.0;
+    assert!(!condition_at_most(&bad, f64::INFINITY));
+    for k in 0..200u32 {
+        let a = Matrix6::from_fn(|r, c| ((r * 7 + c * 13 + k as usize * 31) % 17) as f64 - 8.0)
+            + Matrix6::identity() * f64::from(k % 5);
+        let sv = a.singular_values();
+        let kappa = sv.max() / sv.min();
+        for bound in [10.0, 100.0, 1e3, 1e6] {
+            if condition_at_most(&a, bound) {
+                assert!(kappa <= bound, "{a}: condition {kappa} passed for {bound}");
+            }
+        }
+    }
+}
