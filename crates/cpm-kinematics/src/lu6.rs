@@ -10,6 +10,9 @@
 //! nalgebra (tested on random, singular, zero-column and non-finite matrices in
 //! `tests/lu6.rs`) keeps every forward solve, verdict and written output as it was.
 //!
+//! [`Lu6::inverse_norm`] is the one exception: a bound for condition checks, not
+//! nalgebra's operations (see there).
+//!
 //! The operations are nalgebra's, in its order: the pivot is the first entry of largest
 //! absolute value at or below the diagonal (a NaN never wins); a column whose pivot is zero
 //! is skipped (and the solve then fails); the multipliers are scaled by the reciprocal of the
