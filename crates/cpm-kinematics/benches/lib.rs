@@ -69,6 +69,30 @@ fn benches(c: &mut Criterion) {
     c.bench_function("workspace/reachable_at (20 mm, 5 deg from home)", |b| {
         b.iter(|| at.check(black_box(&target), black_box(1e3)))
     });
+    // The judge's workload in a campaign: 1000 random poses within +-100 mm and +-25 deg of
+    // home (as `cpm simulate --random` draws them), each judged once.
+    let batch: Vec<Pose> = {
+        use rand::{rngs::StdRng, Rng, SeedableRng};
+        let mut rng = StdRng::seed_from_u64(5);
+        (0..1000)
+            .map(|_| {
+                let mut u = |r: f64| rng.random_range(-r..r);
+                let d = Vector6::new(u(100.0), u(100.0), u(100.0), u(0.436), u(0.436), u(0.436));
+                home.perturbed(&d)
+            })
+            .collect()
+    };
+    c.bench_function(
+        "workspace/reachable_at (1000 random poses, 100 mm, 25 deg)",
+        |b| {
+            b.iter(|| {
+                batch
+                    .iter()
+                    .filter(|p| at.check(black_box(p), black_box(1e3)).is_ok())
+                    .count()
+            })
+        },
+    );
 }
 
 criterion_group!(kinematics, benches);

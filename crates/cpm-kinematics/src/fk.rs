@@ -73,7 +73,12 @@ pub fn condition_number(m: &Matrix6<f64>) -> Result<f64, SvdError> {
 /// Every caller computes the condition number itself when this is false, so a verdict never
 /// rests on the rounding of this bound, only the time taken to reach it.
 pub fn condition_at_most(m: &Matrix6<f64>, bound: f64) -> bool {
-    let Some(inv_norm) = crate::lu6::Lu6::new(m).inverse_norm() else {
+    condition_at_most_factored(m, &crate::lu6::Lu6::new(m), bound)
+}
+
+/// [`condition_at_most`] of `m` whose factors `lu` (`Lu6::new(m)`) are at hand.
+pub fn condition_at_most_factored(m: &Matrix6<f64>, lu: &crate::lu6::Lu6, bound: f64) -> bool {
+    let Some(inv_norm) = lu.inverse_norm() else {
         return false;
     };
     m.norm() * inv_norm * BOUND_MARGIN <= bound // false for NaN

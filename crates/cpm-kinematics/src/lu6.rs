@@ -93,6 +93,27 @@ impl Lu6 {
         Some(inv)
     }
 
+    /// The determinant (nalgebra's `LU::determinant`): the product of U's diagonal, in order
+    /// from 1, negated for an odd number of row swaps; the same bits as nalgebra's
+    /// `Matrix6::determinant`, zero when a pivot is zero.
+    pub fn determinant(&self) -> f64 {
+        let mut d = 1.0;
+        for i in 0..6 {
+            d *= self.lu[i][i];
+        }
+        let swaps = self
+            .swaps
+            .iter()
+            .enumerate()
+            .filter(|(i, p)| i != *p)
+            .count();
+        if swaps % 2 == 0 {
+            d
+        } else {
+            d * -1.0
+        }
+    }
+
     /// The Frobenius norm of the inverse, for bounds (not nalgebra's operations): the row
     /// swaps left out (they permute the inverse's columns, which keeps its norm), each
     /// column of `L^-1` made from its first non-zero entry on, and the back substitution by

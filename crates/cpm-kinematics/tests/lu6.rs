@@ -1,6 +1,6 @@
-//! `Lu6` and `try_inverse6` give nalgebra's numbers bit for bit: random matrices of every
-//! scale, small integers (ties between pivot candidates), zero columns, repeated rows and
-//! non-finite entries.
+//! `Lu6` and `try_inverse6` give nalgebra's numbers bit for bit (solve, inverse,
+//! determinant): random matrices of every scale, small integers (ties between pivot
+//! candidates), zero columns, repeated rows and non-finite entries.
 use cpm_kinematics::lu6::{try_inverse6, Lu6};
 use nalgebra::{Matrix6, Vector6};
 use proptest::prelude::*;
@@ -42,6 +42,8 @@ fn check(a: &Matrix6<f64>, b: &Vector6<f64>) -> Result<(), TestCaseError> {
         "inverse of {a}: {ours:?} vs {theirs:?}"
     );
     prop_assert!(same_matrix(Lu6::new(a).inverse(), a.lu().try_inverse()));
+    let (ours, theirs) = (Lu6::new(a).determinant(), a.determinant());
+    prop_assert!(same(ours, theirs), "determinant of {a}: {ours} vs {theirs}");
     Ok(())
 }
 
