@@ -113,7 +113,7 @@ pub fn simulate(
     plan: &Plan,
     options: &SimulationOptions,
 ) -> Result<Campaign, CalibError> {
-    simulate_campaign(model, truth_um, &plan.skeleton(), options)
+    simulate_into(model, truth_um, plan.skeleton(), options)
 }
 
 /// Simulates new readings for an existing campaign (its poses, logged commands, times and
@@ -124,10 +124,20 @@ pub fn simulate_campaign(
     skeleton: &Campaign,
     options: &SimulationOptions,
 ) -> Result<Campaign, CalibError> {
+    simulate_into(model, truth_um, skeleton.clone(), options)
+}
+
+/// [`simulate_campaign`] of a skeleton the caller gives away: its readings receive the
+/// simulated lengths in place (no second copy of a campaign of millions of readings).
+fn simulate_into(
+    model: &MeasurementModel,
+    truth_um: &[f64],
+    mut campaign: Campaign,
+    options: &SimulationOptions,
+) -> Result<Campaign, CalibError> {
     if options.repeats == 0 {
         return Err(CalibError::invalid("repeats", "must be at least 1"));
     }
-    let mut campaign = skeleton.clone();
     for r in campaign.readings.iter_mut() {
         r.length_mm = 0.0;
     }
