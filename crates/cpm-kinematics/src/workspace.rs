@@ -241,7 +241,8 @@ fn home_det(table: &JointTable) -> f64 {
 /// The rule accepts a pose (within its limits and condition bound) when Newton from home
 /// returns it, or when det J1 keeps home's sign there and Newton from near it returns it.
 /// The second test is tried first: it is the cheaper one (about two Newton steps from near
-/// the pose against four or five from home) and accepts almost every pose of a campaign.
+/// the pose against four or five from home); on random poses of a campaign the judge takes
+/// about a quarter less time so (bench `workspace/reachable_at (1000 random poses, ...)`).
 /// When it does not accept, the rule runs in its written order, so every refusal and its
 /// distances are the written rule's.
 fn judge(
