@@ -110,7 +110,7 @@ impl Lu6 {
         if swaps % 2 == 0 {
             d
         } else {
-            d * -1.0
+            -d
         }
     }
 
