@@ -240,10 +240,12 @@ fn register_held_out(
     model: &MeasurementModel,
     prepared: &Prepared,
     file: &crate::io::DataFile,
+    keep_outliers: bool,
     fail: &dyn Fn(crate::calib::CalibError) -> anyhow::Error,
 ) -> anyhow::Result<(Vec<f64>, [f64; 6], SessionCheck)> {
     let campaign = &file.campaign;
-    let s = crate::calib::session::register_session(model, campaign).map_err(fail)?;
+    let s = crate::calib::session::register_session_keeping(model, campaign, keep_outliers)
+        .map_err(fail)?;
     let before = predict(
         model,
         prepared,
@@ -487,6 +489,9 @@ struct RobotGather<'r> {
     gather: Gather,
     /// The rows of `residuals.csv` so far, when it is asked for.
     residuals: Option<Vec<(crate::io::Merged, Vec<f64>)>>,
+    /// Register each session on every observation, gross outliers included (as a fit that
+    /// kept them did), instead of setting them aside by the fit's rule. Default false.
+    keep_outliers: bool,
 }
 
 /// `residuals.csv` of the files one robot predicted, written when the file is (10^6 readings
@@ -525,6 +530,7 @@ impl<'r> RobotGather<'r> {
                 sensor_group: vec![None; robot.table.sensors.len()],
             },
             residuals: residuals.then(Vec::new),
+            keep_outliers: false,
         }
     }
 
@@ -541,6 +547,7 @@ impl<'r> RobotGather<'r> {
         file: &crate::io::DataFile,
         commanded: Option<&[Vec<f64>]>,
     ) -> anyhow::Result<Vec<f64>> {
+        let keep_outliers = self.keep_outliers;
         let (robot, model, gather) = (self.robot, &self.model, &mut self.gather);
         gather.out.excluded.extend(file.excluded.iter().cloned());
         let campaign: &Campaign = &file.campaign;
@@ -562,7 +569,8 @@ impl<'r> RobotGather<'r> {
                 None,
             )
         } else {
-            let (predicted, frame, check) = register_held_out(model, &prepared, file, &fail)?;
+            let (predicted, frame, check) =
+                register_held_out(model, &prepared, file, keep_outliers, &fail)?;
             gather.out.sessions.push(check);
             (predicted, Some(frame))
         };
@@ -632,6 +640,8 @@ impl<'r> RobotGather<'r> {
 ///
 /// The poses `leave_out` names (file and label) are left out of the files as read, with all
 /// their rows, as the fit left them out (those the reading leaves out itself are gone already).
+/// With `keep_outliers`, each session is registered on every observation (as a fit that kept
+/// its gross outliers registered it), else gross outliers are set aside by the fit's rule.
 fn errors_of(
     robot: &Robot,
     controller: &Robot,
@@ -640,9 +650,11 @@ fn errors_of(
     tracker: (f64, f64),
     residuals: bool,
     leave_out: &[crate::io::ExcludedPose],
+    keep_outliers: bool,
 ) -> anyhow::Result<Predicted> {
     let options = held_out_read_options(strict);
     let mut g = RobotGather::new(robot, residuals);
+    g.keep_outliers = keep_outliers;
     for path in paths {
         g.take(without_left_out(
             read_held_out(path, robot, controller, &options, tracker)?,
@@ -1069,8 +1081,12 @@ pub fn validate_in(
             tracker,
             options.out.is_some(),
             &union,
+            false,
         )?;
-        ref_errors = errors_of(&reference, &reference, data, true, tracker, false, &union)?.0;
+        ref_errors = errors_of(
+            &reference, &reference, data, true, tracker, false, &union, false,
+        )?
+        .0;
     }
     let mut excluded = cal_errors.excluded.clone();
     excluded.extend(only_reference);
@@ -1228,7 +1244,14 @@ pub fn file_reproduces_fit(
         None if data.is_empty() => return Ok(None),
         None => {
             let files: Vec<Source> = data.iter().cloned().map(Source::Path).collect();
-            errors_of(&robot, reference, &files, false, tracker, false, excluded)?.0
+            // Each session registered as the fit registered it: what a least-squares fit
+            // set aside by its rule is set aside again by the same rule; a fit that set
+            // nothing aside (outliers kept, a robust loss, leg residuals) used every one.
+            let keep = cal.set_aside.is_empty();
+            errors_of(
+                &robot, reference, &files, false, tracker, false, excluded, keep,
+            )?
+            .0
         }
     };
     // The fit's own reference and weights (each kind by its own noise, gauges included).
@@ -1303,6 +1326,7 @@ mod tests {
                 (campaign.pose_sigma(), campaign.orientation_sigma()),
                 false,
                 &[],
+                false,
             )
             .unwrap()
             .0;

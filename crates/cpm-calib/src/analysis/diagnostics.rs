@@ -251,6 +251,37 @@ pub fn outliers_by_kind_beyond(
     out
 }
 
+/// The observations a least-squares fit sets aside as gross outliers: those more than
+/// [`SET_ASIDE_SIGMAS`](crate::SET_ASIDE_SIGMAS) robust standard deviations of their kind off
+/// ([`outliers_by_kind_beyond`]), a reflector point set aside whole (its three coordinates
+/// are one measurement, and a glitch of the point in the tracker's frame reaches every
+/// coordinate of the base frame's residual). One rule for the fit and for a session
+/// registered afresh ([`crate::session::register_session`]), so that a description read back
+/// registers its fit's sessions as the fit did.
+pub fn to_set_aside(
+    residuals_um: &[f64],
+    campaign: &Campaign,
+    sigma_um: Option<f64>,
+) -> Vec<usize> {
+    let mut out =
+        outliers_by_kind_beyond(residuals_um, campaign, sigma_um, crate::SET_ASIDE_SIGMAS);
+    let p0 = campaign.first_point_observation();
+    let whole: Vec<usize> = out
+        .iter()
+        .filter_map(|&k| match campaign.observation_kind(k) {
+            crate::ObservationKind::Point(q, _) => Some(q),
+            _ => None,
+        })
+        .flat_map(|q| (0..3).map(move |a| p0 + 3 * q + a))
+        .collect();
+    if !whole.is_empty() {
+        out.extend(whole);
+        out.sort_unstable();
+        out.dedup();
+    }
+    out
+}
+
 /// The element `n / 2` of `values` in ascending order (`total_cmp`), found in linear time:
 /// the upper median, what a sort would give at `n / 2`. `values` is reordered.
 fn upper_median(values: &mut [f64]) -> f64 {

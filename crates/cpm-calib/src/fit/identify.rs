@@ -977,12 +977,8 @@ fn fit_setting_aside(
         for _ in 0..MAX_SET_ASIDE_ROUNDS {
             problem.evaluate(theta)?;
             let r = r0_of(&problem.cached_y, campaign, weights);
-            let flagged = crate::analysis::diagnostics::outliers_by_kind_beyond(
-                &r,
-                campaign,
-                options.sigma_um,
-                SET_ASIDE_SIGMAS,
-            );
+            let flagged =
+                crate::analysis::diagnostics::to_set_aside(&r, campaign, options.sigma_um);
             if flagged == set_aside {
                 break;
             }
@@ -1037,8 +1033,12 @@ fn fit_end(
         // The sessions' own parameters (tracker and point frames, base tilts) registered
         // again in pose space with the machine held fixed, as `validate` registers a session:
         // the written machine then reproduces the fit to the solver's precision, whatever
-        // the prior did to the rest.
+        // the prior did to the rest. What the fit set aside stays aside here too (weight
+        // zero), as `validate` sets it aside by the same rule: a glitch must not drive the
+        // frame the other observations are judged in.
+        problem.weights.clone_from(&fit_weights);
         e_hat = reregister_frames(problem, e_hat, &options.lm)?;
+        problem.weights.clone_from(&w.weights);
         theta = vec![0.0; problem.basis.ncols()];
     }
     problem.evaluate(&theta)?;

@@ -66,6 +66,11 @@ pub struct SessionFit {
     pub model: MeasurementModel,
     /// The solver's report.
     pub solver: cpm_lm::Report,
+    /// The observations set aside as gross outliers (indices into
+    /// [`Campaign::observations`]): more than [`SET_ASIDE_SIGMAS`](crate::SET_ASIDE_SIGMAS)
+    /// robust standard deviations of their kind off, by the rule the fit sets them aside
+    /// with; the frame is fitted without them (their predictions are still given).
+    pub set_aside: Vec<usize>,
 }
 
 struct FrameProblem<'a> {
@@ -142,6 +147,16 @@ pub fn register_session(
     machine: &MeasurementModel,
     campaign: &Campaign,
 ) -> Result<SessionFit, CalibError> {
+    register_session_keeping(machine, campaign, false)
+}
+
+/// [`register_session`], with the gross outliers fitted too when `keep_outliers` (as a fit
+/// with `--keep-outliers` fits them) instead of set aside.
+pub fn register_session_keeping(
+    machine: &MeasurementModel,
+    campaign: &Campaign,
+    keep_outliers: bool,
+) -> Result<SessionFit, CalibError> {
     let mut model = machine.clone();
     model.tracker_frame_sessions.clear();
     let nf = if !campaign.pose_measurements.is_empty() {
@@ -187,18 +202,48 @@ pub fn register_session(
         gtol: 1e-15,
         ..cpm_lm::Options::default()
     };
-    let solver = cpm_lm::minimize(&mut problem, &mut x, &options)?;
+    let mut solver = cpm_lm::minimize(&mut problem, &mut x, &options)?;
+    // Gross outliers set aside (weight zero) by the rule the fit sets them aside with, until
+    // the set settles: one glitch must not drive the frame every other observation is
+    // judged in, and a description read back registers its fit's sessions as the fit did.
+    let mut set_aside: Vec<usize> = Vec::new();
+    if !keep_outliers {
+        let all = campaign.observation_weights(campaign.pose_sigma());
+        for _ in 0..crate::MAX_SET_ASIDE_ROUNDS {
+            // Every observation's residual, at its full weight.
+            let kept = std::mem::replace(&mut problem.weights, all.clone());
+            let got = problem.residuals(&x, &mut r);
+            problem.weights = kept;
+            got.map_err(|e| CalibError::invalid("session model", e.to_string()))?;
+            let flagged = crate::analysis::diagnostics::to_set_aside(&r, campaign, None);
+            if flagged == set_aside {
+                break;
+            }
+            set_aside = flagged;
+            problem.weights.clone_from(&all);
+            for &k in &set_aside {
+                problem.weights[k] = 0.0;
+            }
+            solver = cpm_lm::minimize(&mut problem, &mut x, &options)?;
+        }
+    }
     problem
         .residuals(&x, &mut r)
         .map_err(|e| CalibError::invalid("session model", e.to_string()))?;
-    let rms_after_um = rms(&r);
+    // Over the observations the frame was fitted to (those set aside are zero in `r`).
+    let kept = m - set_aside.len();
+    let rms_after_um = if set_aside.is_empty() {
+        rms(&r)
+    } else {
+        (r.iter().map(|v| v * v).sum::<f64>() / kept.max(1) as f64).sqrt()
+    };
     // Covariance: s^2 (J^T J)^-1 with s^2 the weighted residual variance.
     let mut j = faer::Mat::<f64>::zeros(m, nf);
     problem
         .jacobian(&x, j.as_mut())
         .map_err(|e| CalibError::invalid("session model", e.to_string()))?;
     let jn = DMatrix::from_fn(m, nf, |a, b| j[(a, b)]);
-    let s2 = r.iter().map(|v| v * v).sum::<f64>() / (m.saturating_sub(nf).max(1)) as f64;
+    let s2 = r.iter().map(|v| v * v).sum::<f64>() / (kept.saturating_sub(nf).max(1)) as f64;
     let mut frames_sd = vec![f64::NAN; nf];
     if let Some(ch) = (jn.transpose() * &jn).cholesky() {
         let inv = ch.inverse();
@@ -224,6 +269,7 @@ pub fn register_session(
         params,
         model,
         solver,
+        set_aside,
     })
 }
 
