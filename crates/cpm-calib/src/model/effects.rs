@@ -86,7 +86,6 @@
 //! let r = refine(&model, &data, &options).unwrap();
 //! assert_eq!(r.steps[0].effect, effect);
 //! ```
-use std::collections::HashMap;
 use std::sync::{Arc, OnceLock, RwLock};
 
 use cpm_geometry::Pose;
@@ -577,16 +576,4 @@ pub fn is_link_effect(effect: Effect) -> bool {
 pub fn sensor_coefficient(effect: Effect, k: usize, sensor: usize, length_mm: f64) -> f64 {
     let (gain, offset) = effect.model().sensor_coefficients(k, sensor);
     gain * length_mm + offset
-}
-
-/// Interned names (`&'static str`) of generated effects such as pose map terms.
-pub(crate) fn intern(name: String) -> &'static str {
-    static NAMES: OnceLock<RwLock<HashMap<String, &'static str>>> = OnceLock::new();
-    let names = NAMES.get_or_init(|| RwLock::new(HashMap::new()));
-    if let Some(s) = names.read().expect("names").get(&name) {
-        return s;
-    }
-    let mut w = names.write().expect("names");
-    w.entry(name.clone())
-        .or_insert_with(|| Box::leak(name.into_boxed_str()))
 }

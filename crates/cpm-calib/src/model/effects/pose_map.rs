@@ -18,11 +18,11 @@
 //! range it was fitted on is reported ([`crate::fit::refine::Refinement::pose_range`]) and a pose
 //! outside it should not be compensated with the map.
 use std::collections::HashMap;
-use std::sync::{OnceLock, RwLock};
+use std::sync::OnceLock;
 
 use nalgebra::Vector6;
 
-use super::{intern, Channel, EffectInput, EffectModel};
+use super::{Channel, EffectInput, EffectModel};
 
 /// Length scale of the position variables, mm.
 pub const POSE_LENGTH_SCALE_MM: f64 = 100.0;
@@ -31,11 +31,39 @@ pub const POSE_ANGLE_SCALE_DEG: f64 = 10.0;
 
 const VARS: [&str; 6] = ["x", "y", "z", "roll", "pitch", "yaw"];
 
-/// A monomial in the commanded pose: exponents of (x, y, z, roll, pitch, yaw).
+/// A monomial in the commanded pose: exponents of (x, y, z, roll, pitch, yaw), of degree 1
+/// to 3 (made by [`PoseTerm::all`] or [`PoseTerm::parse`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct PoseTerm(pub [u8; 6]);
+pub struct PoseTerm([u8; 6]);
+
+/// Every term of degree 1 to 3 with its effect model, made once: a term's model and name are
+/// borrowed from here (nothing is leaked, and the table never grows).
+struct Table {
+    maps: Vec<PoseMap>,
+    index: HashMap<PoseTerm, usize>,
+}
+
+fn table() -> &'static Table {
+    static TABLE: OnceLock<Table> = OnceLock::new();
+    TABLE.get_or_init(|| {
+        let maps: Vec<PoseMap> = PoseTerm::all(3)
+            .into_iter()
+            .map(|term| PoseMap {
+                term,
+                name: term.spelled(),
+            })
+            .collect();
+        let index = maps.iter().enumerate().map(|(i, m)| (m.term, i)).collect();
+        Table { maps, index }
+    })
+}
 
 impl PoseTerm {
+    /// The exponents of (x, y, z, roll, pitch, yaw).
+    pub fn exponents(&self) -> [u8; 6] {
+        self.0
+    }
+
     /// The term's degree.
     pub fn degree(&self) -> u8 {
         self.0.iter().sum()
@@ -70,6 +98,11 @@ impl PoseTerm {
 
     /// The name, e.g. `pose_map_y`, `pose_map_y2`, `pose_map_x_roll`.
     pub fn name(&self) -> &'static str {
+        &self.model().name
+    }
+
+    /// The name spelled out from the exponents.
+    fn spelled(&self) -> String {
         let parts: Vec<String> = self
             .0
             .iter()
@@ -83,7 +116,7 @@ impl PoseTerm {
                 }
             })
             .collect();
-        intern(format!("pose_map_{}", parts.join("_")))
+        format!("pose_map_{}", parts.join("_"))
     }
 
     /// Parses a name such as `pose_map_y2` or `pose_map_x_roll` (degree 1 to 3).
@@ -144,32 +177,22 @@ impl PoseTerm {
 
     /// The term's effect model.
     pub fn model(&self) -> &'static PoseMap {
-        static MAPS: OnceLock<RwLock<HashMap<PoseTerm, &'static PoseMap>>> = OnceLock::new();
-        let maps = MAPS.get_or_init(|| RwLock::new(HashMap::new()));
-        if let Some(m) = maps.read().expect("pose maps").get(self) {
-            return m;
-        }
-        let mut w = maps.write().expect("pose maps");
-        w.entry(*self).or_insert_with(|| {
-            Box::leak(Box::new(PoseMap {
-                term: *self,
-                name: self.name(),
-            }))
-        })
+        let t = table();
+        &t.maps[t.index[self]]
     }
 }
 
 /// The effect of one pose map term.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct PoseMap {
     /// The monomial.
     pub term: PoseTerm,
-    name: &'static str,
+    name: String,
 }
 
 impl EffectModel for PoseMap {
     fn name(&self) -> &str {
-        self.name
+        &self.name
     }
     fn num_params(&self, _: usize, _: usize) -> usize {
         6
