@@ -283,6 +283,19 @@ fn a_set_aside_reflector_glitch_leaves_the_frame_alone() {
     assert_eq!(set_aside.len(), 3, "{:?}", b["outliers"]);
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let (ra, mut rb) = (residual_column(&cal_clean), residual_column(&cal_glitch));
+    // An outlier's residual is its row of residuals.csv (measured minus predicted, in the
+    // tracker's axes), sign and all: the glitch is +50 mm along the tracker's x (issue 60,
+    // item 5: the table printed the opposite sign, in the base frame's axes).
+    for o in &set_aside {
+        let k = o["observation"].as_u64().unwrap() as usize - 1;
+        let r = o["residual"].as_f64().unwrap();
+        assert!(
+            (r - rb[k]).abs() <= 1e-6 * rb[k].abs().max(1.0),
+            "{o} vs {}",
+            rb[k]
+        );
+    }
+    assert!((set_aside[0]["residual"].as_f64().unwrap() - 50_000.0).abs() < 100.0);
     // The glitched row's three coordinates are the largest; the others as in the clean file.
     rb.sort_by(|p, q| p.abs().total_cmp(&q.abs()));
     rb.truncate(rb.len() - 3);

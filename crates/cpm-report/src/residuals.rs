@@ -187,7 +187,7 @@ fn push_quoted(out: &mut String, s: &str) {
 
 /// The residuals with tracker positions, orientations and point coordinates turned into
 /// the tracker's own axes (borrowed as they are when nothing turns).
-fn in_tracker_axes<'a>(merged: &Merged, residuals: &'a [f64]) -> Cow<'a, [f64]> {
+pub(crate) fn in_tracker_axes<'a>(merged: &Merged, residuals: &'a [f64]) -> Cow<'a, [f64]> {
     let c = &merged.campaign;
     if c.pose_measurements.is_empty() && c.point_measurements.is_empty() {
         return Cow::Borrowed(residuals);

@@ -121,8 +121,15 @@ impl Default for Tolerances {
     }
 }
 
+/// A tolerance at or above this (in its group's unit) frees the group, as `inf` does: its
+/// prior weight, squared beside the Jacobian's columns, would overflow the fit's arithmetic
+/// (from about 1e150 the fit found no parameter at all), and no physical tolerance comes near
+/// it.
+pub const FREE_FROM: f64 = 1e100;
+
 impl Tolerances {
-    /// Sets a group's tolerance (checked: finite and > 0, or infinite to free it).
+    /// Sets a group's tolerance (checked: finite and > 0, or infinite to free it; from
+    /// [`FREE_FROM`] on, infinite).
     pub fn set(&mut self, group: &str, value: f64) -> Result<(), CalibError> {
         if !(value > 0.0) || value.is_nan() {
             return Err(CalibError::invalid(
@@ -130,6 +137,11 @@ impl Tolerances {
                 format!("{group} = {value}: a tolerance must be > 0 (inf frees the group; hold it to keep it at nominal)"),
             ));
         }
+        let value = if value >= FREE_FROM {
+            f64::INFINITY
+        } else {
+            value
+        };
         self.by_group.insert(group.to_string(), value);
         Ok(())
     }

@@ -138,10 +138,11 @@ pub struct Outlier {
     pub line: Option<usize>,
     /// What it is.
     pub what: Option<String>,
-    /// Its residual as weighed by the fit, um of the reference noise (a length for lengths
-    /// of the reference noise; see `residual` for its own unit).
+    /// Its residual (measured minus predicted) as weighed by the fit, um of the reference
+    /// noise (a length for lengths of the reference noise; see `residual` for its own unit).
     pub residual_um: Option<f64>,
-    /// Its residual in its own unit (`unit`).
+    /// Its residual in its own unit (`unit`): measured minus predicted, the value of its row
+    /// of `residuals.csv` (tracker positions and points in the tracker's own axes).
     pub residual: Option<f64>,
     /// The unit of `residual`: `um` or `urad`.
     pub unit: Option<String>,
@@ -515,16 +516,31 @@ fn effect_estimates(model: &MeasurementModel, cal: &Calibration) -> Vec<EffectEs
 
 /// The flagged outliers with the file, line and what each observed.
 fn outliers(inputs: &FitInputs<'_>, model: &MeasurementModel, cal: &Calibration) -> Vec<Outlier> {
-    let native = cpm_calib::noise::native_residuals(
+    let campaign = &inputs.merged.campaign;
+    // The units of each kind; the values are residuals.csv's (measured minus predicted, in
+    // the own unit, tracker positions and points in the tracker's axes), number for number.
+    let units = cpm_calib::noise::native_residuals(
         model,
-        &inputs.merged.campaign,
+        campaign,
         cal.sigma_ref_um,
         &cal.residuals_um,
         &cal.outliers,
     );
+    let in_csv = if cal.outliers.is_empty() {
+        Vec::new()
+    } else {
+        let w = campaign.observation_weights(cal.sigma_ref_um);
+        let native: Vec<f64> = cal
+            .residuals_um
+            .iter()
+            .zip(&w)
+            .map(|(r, w)| -r / w)
+            .collect();
+        crate::residuals::in_tracker_axes(inputs.merged, &native).into_owned()
+    };
     cal.outliers
         .iter()
-        .zip(native)
+        .zip(units)
         .map(|(&k, native)| {
             let o = observation_origin(inputs.robot, inputs.merged, k);
             Outlier {
@@ -532,8 +548,8 @@ fn outliers(inputs: &FitInputs<'_>, model: &MeasurementModel, cal: &Calibration)
                 file: o.as_ref().map(|o| o.file.clone()),
                 line: o.as_ref().map(|o| o.line),
                 what: o.as_ref().map(|o| o.what.clone()),
-                residual_um: finite(cal.residuals_um.get(k).copied()),
-                residual: finite(native.as_ref().map(|n| n.0)),
+                residual_um: finite(cal.residuals_um.get(k).map(|r| -r)),
+                residual: finite(native.as_ref().and(in_csv.get(k).copied())),
                 unit: native.map(|n| n.1),
                 set_aside: cal.set_aside.binary_search(&k).is_ok(),
             }

@@ -1,0 +1,55 @@
+//! The estimator's numbers under its options, on the command line (issue 60): each test holds
+//! one item that once gave a number a metrologist would act on wrongly.
+#[path = "common/cli.rs"]
+mod cli;
+
+use cli::{calibrate_json, example, scratch};
+use std::path::Path;
+
+/// Every number (null: NaN) under `value`, depth first.
+fn numbers(value: &serde_json::Value, out: &mut Vec<f64>) {
+    match value {
+        serde_json::Value::Array(v) => v.iter().for_each(|x| numbers(x, out)),
+        serde_json::Value::Object(m) => m.values().for_each(|x| numbers(x, out)),
+        serde_json::Value::Null => out.push(f64::NAN),
+        x => out.push(x.as_f64().unwrap_or(f64::NAN)),
+    }
+}
+
+/// The estimates of a calibration.json: the written point, the determined estimates and their
+/// standard deviations, as numbers (null: NaN).
+fn estimates(report: &serde_json::Value) -> Vec<f64> {
+    let mut out = Vec::new();
+    for k in ["minimum_norm_um", "installation_errors_um", "std_um"] {
+        assert!(!report[k].is_null(), "{k} in {report}");
+        numbers(&report[k], &mut out);
+    }
+    out
+}
+
+/// A finite tolerance too large for the fit's arithmetic is the same as `inf` (item 7: from
+/// about 1e155 the fit ended with "empty problem: 0 parameters", exit 1).
+#[test]
+fn a_huge_finite_tolerance_is_the_same_as_inf() {
+    let dir = scratch("estimator", "huge-tolerance");
+    let (robot, data) = (
+        example("hexapod_66.toml"),
+        example("hexapod_66_readings.csv"),
+    );
+    let (robot, data) = (Path::new(&robot), Path::new(&data));
+    let fit = |value: &str| {
+        let spec = format!("installation_errors={value}");
+        calibrate_json(robot, &[data], &["--tolerance", &spec], &dir.join(value))
+    };
+    let free = estimates(&fit("inf"));
+    for value in ["1e155", "1e308"] {
+        let huge = estimates(&fit(value));
+        assert_eq!(huge.len(), free.len());
+        for (a, b) in huge.iter().zip(&free) {
+            assert!(
+                a == b || (a.is_nan() && b.is_nan()),
+                "{value}: {a} against inf's {b}"
+            );
+        }
+    }
+}
