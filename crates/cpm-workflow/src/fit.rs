@@ -841,13 +841,11 @@ pub fn solver_options(
 /// Stages `residuals.csv` of a fit (its weighted residuals brought back to each
 /// observation's own unit).
 pub fn stage_residuals(set: &mut OutputSet, dir: &Path, inputs: &Inputs, cal: &Calibration) {
-    let w = inputs.merged.campaign.observation_weights(cal.sigma_ref_um);
-    let native: Vec<f64> = cal
-        .residuals_um
-        .iter()
-        .zip(&w)
-        .map(|(r, w)| -r / w)
-        .collect();
+    let native = crate::calib::noise::measured_minus_predicted(
+        &inputs.merged.campaign,
+        cal.sigma_ref_um,
+        &cal.residuals_um,
+    );
     // Written as the file is (10^6 rows are 80 MB of text), from the numbers.
     let (robot, merged) = (inputs.robot.clone(), inputs.merged.clone());
     set.add_streamed(

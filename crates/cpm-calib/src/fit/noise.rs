@@ -219,6 +219,19 @@ pub fn native_residuals(
         .collect()
 }
 
+/// Every observation's residual in its own unit, measured minus predicted (um for lengths,
+/// positions and points, urad for angles; in the fit's axes), from the fit's weighted
+/// residuals `residuals_um` (predicted minus measured, um of the reference `sigma_ref_um`):
+/// what `residuals.csv` writes.
+pub fn measured_minus_predicted(
+    campaign: &Campaign,
+    sigma_ref_um: f64,
+    residuals_um: &[f64],
+) -> Vec<f64> {
+    let w = campaign.observation_weights(sigma_ref_um);
+    residuals_um.iter().zip(&w).map(|(r, w)| -r / w).collect()
+}
+
 /// The kinds whose estimated noise differs from the assumed one by more than a factor
 /// `factor`, with at least [`MIN_REDUNDANCY`] degrees of freedom each.
 pub fn mismatched(kinds: &[KindNoise], factor: f64) -> Vec<&KindNoise> {

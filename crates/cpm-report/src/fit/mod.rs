@@ -529,13 +529,11 @@ fn outliers(inputs: &FitInputs<'_>, model: &MeasurementModel, cal: &Calibration)
     let in_csv = if cal.outliers.is_empty() {
         Vec::new()
     } else {
-        let w = campaign.observation_weights(cal.sigma_ref_um);
-        let native: Vec<f64> = cal
-            .residuals_um
-            .iter()
-            .zip(&w)
-            .map(|(r, w)| -r / w)
-            .collect();
+        let native = cpm_calib::noise::measured_minus_predicted(
+            campaign,
+            cal.sigma_ref_um,
+            &cal.residuals_um,
+        );
         crate::residuals::in_tracker_axes(inputs.merged, &native).into_owned()
     };
     cal.outliers
