@@ -613,6 +613,20 @@ const CASES: &[Case] = &[
         "expected 3 numbers, got 4",
     ),
     case(
+        "robot_clearance_without_load.toml",
+        Toml,
+        Some(1),
+        Some("load"),
+        "missing: [clearance] (radius 10 um) is applied along each link's force, which only a declared load gives",
+    ),
+    case(
+        "robot_com_far.toml",
+        Toml,
+        Some(56),
+        Some("load.platform_com_mm"),
+        "implausibly far from the platform's origin: 1.000000e6 mm, over 100 times the machine's size (347.0 mm",
+    ),
+    case(
         "robot_heavy_load.toml",
         Toml,
         Some(55),

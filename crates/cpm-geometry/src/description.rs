@@ -723,6 +723,9 @@ pub const MIN_LINK_LENGTH_MM: f64 = 1.0;
 pub const MAX_INSTALLATION_ERROR_UM: f64 = 1e5;
 /// The largest plausible joint clearance, um (10 mm).
 pub const MAX_CLEARANCE_UM: f64 = 1e4;
+/// The farthest plausible centre of mass of `[load]`, in multiples of the machine's size (the
+/// largest joint distance from the base or platform origin).
+pub const MAX_COM_SIZES: f64 = 100.0;
 
 /// A finite position within [`MAX_COORDINATE_MM`] of the origin.
 fn position3(v: &[f64; 3], path: &[Seg]) -> Result<(), Problem> {
@@ -1125,6 +1128,15 @@ impl RobotDescription {
                 ));
             }
             non_negative(c.smooth_force_n, &[Key("clearance"), Key("smooth_force_n")])?;
+            if c.radius_um > 0.0 && self.load.is_none() {
+                return Err(Problem::new(
+                    &[Key("load")],
+                    format!(
+                        "missing: [clearance] (radius {} um) is applied along each link's force, which only a declared load gives; declare [load], or leave [clearance] out",
+                        c.radius_um
+                    ),
+                ));
+            }
         }
         if let Some(l) = &self.load {
             let at = |k: &'static str| [Key("load"), Key(k)];
@@ -1132,6 +1144,29 @@ impl RobotDescription {
             non_negative(l.payload_mass_kg, &at("payload_mass_kg"))?;
             finite3(&l.platform_com_mm, &at("platform_com_mm"))?;
             finite3(&l.payload_com_mm, &at("payload_com_mm"))?;
+            // A centre of mass far beyond the machine is a unit slip (m for mm, a typo).
+            let size = self
+                .links
+                .iter()
+                .flat_map(|k| [&k.base_mm, &k.platform_mm])
+                .map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt())
+                .fold(0.0, f64::max);
+            for key in ["platform_com_mm", "payload_com_mm"] {
+                let v = if key == "platform_com_mm" {
+                    l.platform_com_mm
+                } else {
+                    l.payload_com_mm
+                };
+                let far = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+                if size > 0.0 && far > MAX_COM_SIZES * size {
+                    return Err(Problem::new(
+                        &at(key),
+                        format!(
+                            "implausibly far from the platform's origin: {far:.6e} mm, over {MAX_COM_SIZES} times the machine's size ({size:.1} mm; centres of mass are in mm in {{P}})"
+                        ),
+                    ));
+                }
+            }
             finite3(&l.gravity_mm_s2, &at("gravity_mm_s2"))?;
             finite3(&l.external_force_n, &at("external_force_n"))?;
             finite3(&l.external_moment_nmm, &at("external_moment_nmm"))?;
