@@ -1214,13 +1214,14 @@ impl cpm::calib::effects::EffectModel for HeightGrowth {
 }
 
 /// A user effect round-trips too: fitted through the library, written by cpm-io as a known
-/// effect of `calibrated.toml`, read back (by name, in the program that registered it): the
-/// file predicts every reading the fit predicted, to 1e-9 mm.
+/// effect of `calibrated.toml`, read back (by name, by a reader given the effect: nothing
+/// global knows it, so a reader without it refuses the file naming the field): the file
+/// predicts every reading the fit predicted, to 1e-9 mm.
 #[test]
 fn a_user_effect_round_trips_through_calibrated_toml() {
     use cpm::calib::model::{predict, Prepared};
     use cpm::calib::{simulate_campaign, IdentifyOptions, Noise, Plan, SimulationOptions};
-    let user = Effect::register(std::sync::Arc::new(HeightGrowth)).unwrap();
+    let user = Effect::user(&HeightGrowth).unwrap();
     let robot = cpm::io::Robot::load(Path::new(&example("hexapod_66.toml"))).unwrap();
     let truth = cpm::io::Robot::load(Path::new(&example("hexapod_66_truth.toml"))).unwrap();
     let mut model = robot.model(&[user]);
@@ -1265,7 +1266,13 @@ fn a_user_effect_round_trips_through_calibrated_toml() {
     );
     let text = desc.to_toml_string().unwrap();
     assert!(text.contains("height_growth"), "{text}");
-    let back = cpm::io::Robot::from_toml(&text, "calibrated.toml").unwrap();
+    let alone = cpm::io::Robot::from_toml(&text, "calibrated.toml").unwrap_err();
+    assert_eq!(
+        alone.field.as_deref(),
+        Some("calibration.known_effects.height_growth"),
+        "{alone}"
+    );
+    let back = cpm::io::Robot::from_toml_among(&text, "calibrated.toml", &[user]).unwrap();
     model = back.model(&[]);
     assert!(model.known(user).is_some());
     let zeros = vec![0.0; model.num_params()];

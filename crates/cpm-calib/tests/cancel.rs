@@ -44,7 +44,7 @@ fn setup() -> (MeasurementModel, Campaign, Arc<AtomicBool>) {
     let flag = FLAG
         .get_or_init(|| Arc::new(AtomicBool::new(false)))
         .clone();
-    let tripwire = Effect::register(Arc::new(Tripwire)).unwrap();
+    let tripwire = Effect::user(&Tripwire).unwrap();
     let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
     model.nominal.sensors = designed_sensors();
     let poses = random_workspace_poses(&model.nominal, 30, 100.0, 25.0, 3.0, 11);

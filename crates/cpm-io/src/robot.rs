@@ -31,6 +31,9 @@ pub struct Robot {
     pub table: JointTable,
     /// True when `[installation_errors_um]` was applied to the joints.
     pub errors_applied: bool,
+    /// The user effects ([`Effect::user`]) its `[calibration]` may name beside the library's:
+    /// none for a description read on its own ([`Robot::from_toml_among`] gives them).
+    pub user_effects: Vec<Effect>,
 }
 
 impl Robot {
@@ -43,6 +46,13 @@ impl Robot {
 
     /// Parses and checks a description.
     pub fn from_toml(text: &str, file: &str) -> Result<Robot, InputError> {
+        Self::from_toml_among(text, file, &[])
+    }
+
+    /// [`from_toml`](Self::from_toml) for a description whose `[calibration]` may name the
+    /// user effects `user` (a calibration of one's own effect, read back by the program that
+    /// has it).
+    pub fn from_toml_among(text: &str, file: &str, user: &[Effect]) -> Result<Robot, InputError> {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let description =
             RobotDescription::from_toml_str(text, file).map_err(|e| describe(file, e))?;
@@ -51,13 +61,24 @@ impl Robot {
             .as_ref()
             .map(|c| c.effects.clone())
             .unwrap_or_default();
-        Self::from_description(description, file).map_err(|e| locate_effect_error(text, &names, e))
+        Self::from_description_among(description, file, user)
+            .map_err(|e| locate_effect_error(text, &names, e))
     }
 
     /// A robot from a description already in memory.
     pub fn from_description(
         description: RobotDescription,
         file: &str,
+    ) -> Result<Robot, InputError> {
+        Self::from_description_among(description, file, &[])
+    }
+
+    /// [`from_description`](Self::from_description) whose `[calibration]` may name the user
+    /// effects `user`.
+    pub fn from_description_among(
+        description: RobotDescription,
+        file: &str,
+        user: &[Effect],
     ) -> Result<Robot, InputError> {
         let nominal = description.joint_table().map_err(|e| describe(file, e))?;
         let errors = description
@@ -73,6 +94,11 @@ impl Robot {
             description,
             table,
             errors_applied,
+            user_effects: user
+                .iter()
+                .copied()
+                .filter(|e| matches!(e, Effect::User(_)))
+                .collect(),
         };
         robot.known_effects()?;
         robot.declared_effects()?;
@@ -132,7 +158,7 @@ impl Robot {
             .iter()
             .enumerate()
             .map(|(k, n)| {
-                Effect::parse(n).map_err(|m| InputError {
+                Effect::parse_among(n, &self.user_effects).map_err(|m| InputError {
                     file: self.file.clone(),
                     line: None,
                     field: Some(format!("calibration.effects[{}]", k + 1)),
@@ -157,7 +183,7 @@ impl Robot {
                 field: Some(format!("calibration.known_effects.{name}")),
                 message,
             };
-            let effect = Effect::parse(name).map_err(err)?;
+            let effect = Effect::parse_among(name, &self.user_effects).map_err(err)?;
             let need = effect.num_params(n, s);
             if values.len() != need {
                 return Err(err(format!(

@@ -33,7 +33,7 @@
 //! Bonferroni correction of the round counts every scanned term. A model with a pose map
 //! describes the poses it was fitted on only: [`Refinement::pose_range`] reports them.
 //!
-//! User effects ([`Effect::register`]) are candidates like the built-ins: list them in
+//! User effects ([`Effect::user`]) are candidates like the built-ins: list them in
 //! [`RefineOptions::candidates`].
 //!
 //! Rounds stop when no candidate is significant, when the residual is white and consistent with

@@ -42,12 +42,12 @@
 //! Every effect is a type implementing [`EffectModel`]: its name, parameter names and units,
 //! the [`Channel`]s it acts through, and its coefficients (linear in its parameters) given a
 //! pose's [`EffectInput`]. [`Effect`] is the copyable catalogue id the model, the files and the
-//! command line use: the twelve built-ins, the pose-map terms, and user effects registered with
-//! [`Effect::register`]. The measurement model composes the channels, so a new effect is one type
-//! in one file:
+//! command line use: the twelve built-ins, the pose-map terms, and user effects
+//! ([`Effect::user`]: the effect carries its model; nothing is registered anywhere, and a
+//! reader of files that name it is given it, [`Effect::parse_among`]). The measurement model
+//! composes the channels, so a new effect is one type in one file:
 //!
 //! ```
-//! use std::sync::Arc;
 //! use cpm_calib::effects::{Channel, EffectInput, EffectModel};
 //! use cpm_calib::paper::{designed_sensors, random_workspace_poses};
 //! use cpm_calib::{model::Predictions, *};
@@ -66,7 +66,10 @@
 //!         if k == link { 1e-3 * dz / 100.0 } else { 0.0 }
 //!     }
 //! }
-//! let effect = Effect::register(Arc::new(HeightGrowth)).unwrap();
+//! static HEIGHT_GROWTH: HeightGrowth = HeightGrowth;
+//! let effect = Effect::user(&HEIGHT_GROWTH).unwrap();
+//! assert_eq!(Effect::parse_among("height_growth", &[effect]), Ok(effect));
+//! assert!(Effect::parse("height_growth").is_err()); // nothing global knows it
 //! let mut model = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
 //! model.nominal.sensors = designed_sensors();
 //! model.effects = vec![effect];
@@ -86,7 +89,6 @@
 //! let r = refine(&model, &data, &options).unwrap();
 //! assert_eq!(r.steps[0].effect, effect);
 //! ```
-use std::sync::{Arc, OnceLock, RwLock};
 
 use cpm_geometry::Pose;
 use nalgebra::{Rotation3, Vector3, Vector6};
@@ -242,15 +244,43 @@ pub enum Effect {
     /// One term of the pose error map: a monomial in the commanded pose acting on the
     /// platform pose's six components.
     PoseMap(PoseTerm),
-    /// A user effect registered with [`Effect::register`] (index in the registry).
-    User(u32),
+    /// A user effect ([`Effect::user`]): it carries its model, so it goes wherever the
+    /// model's effects go, and a file names it only where its reader is given it
+    /// ([`Effect::parse_among`]). Nothing global holds it.
+    User(UserEffect),
 }
 
-type Registry = RwLock<Vec<(&'static str, &'static dyn EffectModel)>>;
+/// A user effect's model, as an [`Effect`] carries it: a `'static` value of the user's (a
+/// `static`, or a value the user owns for the program's life). Two are the same effect when
+/// they have the same name.
+#[derive(Clone, Copy)]
+pub struct UserEffect(&'static dyn EffectModel);
 
-fn registry() -> &'static Registry {
-    static R: OnceLock<Registry> = OnceLock::new();
-    R.get_or_init(|| RwLock::new(Vec::new()))
+impl UserEffect {
+    /// The effect's model.
+    pub fn model(&self) -> &'static dyn EffectModel {
+        self.0
+    }
+}
+
+impl PartialEq for UserEffect {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.name() == other.0.name()
+    }
+}
+
+impl Eq for UserEffect {}
+
+impl std::hash::Hash for UserEffect {
+    fn hash<H: std::hash::Hasher>(&self, h: &mut H) {
+        self.0.name().hash(h);
+    }
+}
+
+impl std::fmt::Debug for UserEffect {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "UserEffect({:?})", self.0.name())
+    }
 }
 
 impl Effect {
@@ -298,37 +328,26 @@ impl Effect {
             .collect()
     }
 
-    /// Registers a user effect and returns its id; registering a model under a name already
-    /// registered replaces it (same id). Fails when the name is a built-in's, a pose map
-    /// term's, empty, or holds whitespace or a comma.
-    pub fn register(model: Arc<dyn EffectModel>) -> Result<Effect, String> {
-        let name = model.name().to_string();
+    /// A user effect of `model` (a `static` of the user's, or a value that lives as long as
+    /// the program: `Box::leak` in the user's own code). Fails when the name is a
+    /// built-in's, a pose map term's, empty, or holds whitespace or a comma.
+    ///
+    /// Nothing is registered anywhere: the effect carries its model into the
+    /// [`MeasurementModel`](crate::MeasurementModel) it is put in, and a reader of files
+    /// that name it is given it ([`Effect::parse_among`]).
+    pub fn user(model: &'static dyn EffectModel) -> Result<Effect, String> {
+        let name = model.name();
         if name.is_empty() || name.contains(|c: char| c.is_whitespace() || c == ',') {
             return Err(format!(
                 "effect name `{name}` must be non-empty, without spaces or commas"
             ));
         }
-        if Effect::ALL
-            .iter()
-            .chain(&Effect::INSTRUMENTS)
-            .chain(&Effect::TRACKER)
-            .any(|e| e.name() == name)
-            || PoseTerm::parse(&name).is_some()
-        {
+        if Effect::parse(name).is_ok() {
             return Err(format!(
                 "effect name `{name}` is taken by a built-in effect"
             ));
         }
-        let leaked: &'static dyn EffectModel = &**Box::leak(Box::new(model));
-        let mut reg = registry()
-            .write()
-            .map_err(|_| "effect registry poisoned".to_string())?;
-        if let Some(i) = reg.iter().position(|(n, _)| *n == name) {
-            reg[i].1 = leaked;
-            return Ok(Effect::User(i as u32));
-        }
-        reg.push((Box::leak(name.into_boxed_str()), leaked));
-        Ok(Effect::User(reg.len() as u32 - 1))
+        Ok(Effect::User(UserEffect(model)))
     }
 
     /// The effect's model (its name, parameters, channels and coefficients).
@@ -352,14 +371,7 @@ impl Effect {
             Effect::InclinometerMount => &InclinometerMount,
             Effect::BaseTilt => &BaseTilt,
             Effect::PoseMap(t) => t.model(),
-            Effect::User(i) => {
-                registry()
-                    .read()
-                    .expect("effect registry")
-                    .get(*i as usize)
-                    .expect("registered effect")
-                    .1
-            }
+            Effect::User(u) => u.model(),
         }
     }
 
@@ -367,21 +379,20 @@ impl Effect {
     pub fn name(&self) -> &'static str {
         match self {
             Effect::PoseMap(t) => t.name(),
-            Effect::User(i) => {
-                registry()
-                    .read()
-                    .expect("effect registry")
-                    .get(*i as usize)
-                    .expect("registered effect")
-                    .0
-            }
+            Effect::User(u) => u.model().name(),
             e => e.model().name(),
         }
     }
 
-    /// Parses a name (a built-in, a pose map term such as `pose_map_y2` or `pose_map_x_roll`,
-    /// or a registered user effect); the error lists the known names.
+    /// Parses a name of the library's (a built-in, a pose map term such as `pose_map_y2` or
+    /// `pose_map_x_roll`); the error lists the known names. User effects:
+    /// [`Effect::parse_among`].
     pub fn parse(name: &str) -> Result<Effect, String> {
+        Effect::parse_among(name, &[])
+    }
+
+    /// [`Effect::parse`], or one of the user effects among `user` by its name.
+    pub fn parse_among(name: &str, user: &[Effect]) -> Result<Effect, String> {
         if let Some(e) = Effect::ALL
             .iter()
             .chain(&Effect::INSTRUMENTS)
@@ -394,14 +405,23 @@ impl Effect {
         if let Some(t) = PoseTerm::parse(name) {
             return Ok(Effect::PoseMap(t));
         }
-        if let Ok(reg) = registry().read() {
-            if let Some(i) = reg.iter().position(|(n, _)| *n == name) {
-                return Ok(Effect::User(i as u32));
-            }
+        let users: Vec<Effect> = user
+            .iter()
+            .copied()
+            .filter(|e| matches!(e, Effect::User(_)))
+            .collect();
+        if let Some(e) = users.iter().find(|e| e.name() == name) {
+            return Ok(*e);
         }
+        let users: Vec<&str> = users.iter().map(|e| e.name()).collect();
         Err(format!(
-            "unknown effect `{name}` (known: {}, marker_frame, and pose map terms pose_map_<monomial> such as pose_map_y, pose_map_y2, pose_map_x_roll)",
-            Effect::ALL.map(|e| e.name()).join(", ")
+            "unknown effect `{name}` (known: {}, marker_frame, {}and pose map terms pose_map_<monomial> such as pose_map_y, pose_map_y2, pose_map_x_roll)",
+            Effect::ALL.map(|e| e.name()).join(", "),
+            if users.is_empty() {
+                String::new()
+            } else {
+                format!("the user effects {}, ", users.join(", "))
+            }
         ))
     }
 
