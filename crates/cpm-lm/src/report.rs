@@ -219,9 +219,10 @@ pub struct BoxOptimality {
     /// `sqrt(red_j / cost)`, `red_j` the reduction the Gauss-Newton model predicts from
     /// moving parameter `j` alone to its best place in the box. In the interior this is the
     /// cosine of MINPACK's gradient test, `|g_j| / (||J e_j|| ||r||)`; against a bound that
-    /// the gradient pushes on it is zero. Moves below `1e-10` of the scaled parameters do not
-    /// count (at a zero residual the model still predicts the whole cost, along a move at
-    /// the rounding level of `x`). Zero at a zero cost.
+    /// the gradient pushes on it is zero. At a zero residual the model still predicts the
+    /// whole cost, along a move at the rounding level of `x`: moves below `1e-10` of the
+    /// parameter's value do not count, and a cost below `(32 eps sqrt(m))^2` times the
+    /// start's measures zero.
     pub measure: f64,
     /// SciPy's `active_mask`: `-1` for a parameter on its lower bound, `1` on its upper
     /// bound, `0` otherwise.

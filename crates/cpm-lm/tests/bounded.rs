@@ -157,10 +157,11 @@ fn the_report_carries_the_box_optimality_and_a_stall_is_no_success() {
     assert!(report.final_cost < report.initial_cost);
     let o = report.optimality.as_ref().expect("bounded");
     assert!(!o.optimal && o.measure > 1e-3, "{o:?}");
-    // A loose xtol meets the step test far from the minimum: a stall, not a success.
+    // A loose gtol holds at the start (the cosines there are 0.91 and 0.89), far from the
+    // minimum: a stall, not a success.
     let mut x = case.x0.clone();
     let loose = Options {
-        xtol: 0.5,
+        gtol: 0.95,
         ..options(&case)
     };
     let report = minimize(&mut problem, &mut x, &loose).unwrap();

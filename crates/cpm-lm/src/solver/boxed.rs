@@ -20,15 +20,19 @@
 //! Gauss-Newton model from moving that parameter alone to its best place in the box,
 //! relative to the cost, square-rooted. In the interior it is the cosine of MINPACK's
 //! gradient test, `|g_j| / (||J e_j|| ||r||)`; at a bound that the gradient pushes against
-//! it is zero. Moves below [`STEP_TOL`] of the scaled parameters do not count (at a zero
-//! residual reached by Gauss-Newton steps the model still predicts the whole cost, along a
-//! move at the rounding level of `x`).
+//! it is zero. At a zero residual the model still predicts the whole cost, along a move at
+//! the rounding level of `x`: moves below [`STEP_TOL`] of the parameter's own value do not
+//! count, and a cost at the rounding level of the start's (below `(32 eps sqrt(m))^2` times
+//! it) measures zero. (Relative to each parameter's own value, not to the scaled `||D x||`
+//! of the step test: after a start where one column was huge, Marquardt's running maximum
+//! would make every other parameter's move look negligible.)
 
 use crate::bounds::Bounds;
 use crate::solver::jacobian::Jacobian;
 use crate::solver::small::dot;
 
-/// Relative size (of `||D x||`) below which a parameter's move does not count in [`measure`].
+/// Relative size (of the parameter's value) below which its move does not count in
+/// [`measure`].
 pub(crate) const STEP_TOL: f64 = 1e-10;
 
 /// The largest [`measure`] at which a point of the box counts as first-order optimal.
@@ -104,33 +108,26 @@ impl CutStep<'_> {
 }
 
 /// The first-order optimality measure at `x` (see the module documentation) from the
-/// gradient `g`, the squared column norms `norms2` and the scaling `d` there, and the cost.
-/// Zero at a zero cost.
+/// gradient `g` and the squared column norms `norms2` there, and the cost. Zero at a cost
+/// not above `zero_cost` (the rounding level of the start's).
 pub(crate) fn measure(
     x: &[f64],
     g: &[f64],
     norms2: &[f64],
-    d: &[f64],
     bounds: &Bounds,
     cost: f64,
+    zero_cost: f64,
 ) -> f64 {
-    if !(cost > 0.0) {
+    if !(cost > zero_cost) {
         return 0.0;
     }
-    let xn = x
-        .iter()
-        .zip(d)
-        .map(|(a, b)| (a * b) * (a * b))
-        .sum::<f64>()
-        .sqrt();
-    let floor = STEP_TOL * (xn + STEP_TOL);
     let mut worst = 0.0f64;
     for j in 0..x.len() {
         if !(norms2[j] > 0.0) {
             continue;
         }
         let t = bounds.clamp_move(j, x[j], -g[j] / norms2[j]);
-        if !((d[j] * t).abs() > floor) {
+        if !(t.abs() > STEP_TOL * x[j].abs()) {
             continue;
         }
         let red = -g[j] * t - 0.5 * norms2[j] * t * t;
@@ -208,9 +205,8 @@ mod tests {
     fn the_measure_is_the_gradient_cosine_inside_and_zero_against_a_bound() {
         let x = [-1.2, 1.0];
         let (_, g, n2, cost) = rosenbrock(&x);
-        let d = [1.0, 1.0];
         let wide = Bounds::new(2, Some(&[-1e9, -1e9]), Some(&[1e9, 1e9])).unwrap();
-        let m = measure(&x, &g, &n2, &d, &wide, cost);
+        let m = measure(&x, &g, &n2, &wide, cost, 0.0);
         let cosine = (0..2)
             .map(|j| g[j].abs() / (n2[j].sqrt() * (2.0 * cost).sqrt()))
             .fold(0.0, f64::max);
@@ -221,9 +217,14 @@ mod tests {
         let (_, g, n2, cost) = rosenbrock(&x);
         assert!(g[0] < 0.0);
         let cut = Bounds::new(2, Some(&[-2.0, -2.0]), Some(&[0.5, 2.0])).unwrap();
-        assert_eq!(measure(&x, &g, &n2, &d, &cut, cost), 0.0);
-        assert!(measure(&x, &g, &n2, &d, &wide, cost) > 0.05);
+        assert_eq!(measure(&x, &g, &n2, &cut, cost, 0.0), 0.0);
+        assert!(measure(&x, &g, &n2, &wide, cost, 0.0) > 0.05);
         assert_eq!(projected_gradient(&x, &g, &cut), 0.0);
         assert!(projected_gradient(&x, &g, &wide) > 0.1);
+        // At a cost below the zero level, and for a move negligible beside x.
+        assert_eq!(measure(&x, &g, &n2, &wide, cost, cost), 0.0);
+        let (_, g, n2, cost) = rosenbrock(&[1.0 + 1e-13, 1.0 + 2e-13]);
+        assert!(cost > 0.0);
+        assert_eq!(measure(&[1.0, 1.0], &g, &n2, &wide, cost, 0.0), 0.0);
     }
 }

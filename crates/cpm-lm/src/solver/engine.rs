@@ -961,6 +961,12 @@ struct Solve<'w> {
     grad_inf: f64,
     /// Parameters held at a bound (empty without bounds).
     frozen: Vec<bool>,
+    /// Bounded solves: whether a parameter was held because the solved step pushed it out
+    /// ([`Solve::hold_blocked`]) since the last linearisation.
+    held: bool,
+    /// Bounded solves: no such holding until the next accepted step (the held parameters
+    /// left no step: the next linearisation leaves the choice to [`Solve::cut`]).
+    no_hold: bool,
     any_frozen: bool,
     records: Vec<IterationRecord>,
     residual_evaluations: usize,
@@ -1007,6 +1013,8 @@ impl<'w> Solve<'w> {
             need_jac: true,
             grad_inf: 0.0,
             frozen,
+            held: false,
+            no_hold: false,
             any_frozen: false,
             records,
             residual_evaluations: 0,
@@ -1074,7 +1082,7 @@ impl<'w> Solve<'w> {
         }
         let iteration = self.records.len() + 1;
         let (mut solved, mut mu) = self.solve_step(backend, x, iteration)?;
-        if let Some(b) = bounds {
+        if let Some(b) = bounds.filter(|_| !self.no_hold) {
             (solved, mu) = self.hold_blocked(backend, x, b, iteration, solved, mu)?;
         }
         if !solved {
@@ -1098,6 +1106,13 @@ impl<'w> Solve<'w> {
             };
         let proposal = match self.propose(backend, options, x, bounds, alpha) {
             Ok(p) => p,
+            Err(_) if self.held && !self.no_hold => {
+                // The parameters held for the step left none: linearise again at x and let
+                // the box's candidates choose the step from the whole gradient.
+                self.no_hold = true;
+                self.need_jac = true;
+                return Ok(None);
+            }
             Err(t) => return Ok(Some(t)),
         };
         let trial = self.evaluate(backend, options, alpha, accelerated, &proposal, iteration)?;
@@ -1121,6 +1136,7 @@ impl<'w> Solve<'w> {
         // Each pass holds at least one more parameter: at most n passes.
         while solved && b.block(x, self.v.h, &mut self.frozen) {
             self.any_frozen = true;
+            self.held = true;
             backend.hold(&self.frozen, self.v.g, self.v.norms2)?;
             (solved, mu) = self.solve_step(backend, x, iteration)?;
         }
@@ -1211,6 +1227,7 @@ impl<'w> Solve<'w> {
             &mut self.clock,
         )?;
         self.jacobian_evaluations += 1;
+        self.held = false;
         let Some(rnorm) = rnorm else {
             return Ok(Some(TerminationReason::NonFinite));
         };
@@ -1416,7 +1433,9 @@ impl<'w> Solve<'w> {
             xn2 += (v.d[j] * x[j]).powi(2);
             s2 += v.step[j] * v.step[j];
         }
-        if dx2.sqrt() <= options.xtol * (xn2.sqrt() + options.xtol) {
+        if dx2.sqrt() <= options.xtol * (xn2.sqrt() + options.xtol)
+            && !self.box_step_counts(x, bounds, s2)
+        {
             return Err(TerminationReason::ConvergedXtol);
         }
         Ok(Proposal {
@@ -1537,6 +1556,7 @@ impl<'w> Solve<'w> {
             // Jacobian is not reweighted).
             backend.accept(p.dx2 <= f64::EPSILON * p.xn2);
             self.accepted_steps += 1;
+            self.no_hold = false;
             self.damping.accepted(trial.rho, trial.line);
         } else {
             self.rejected_steps += 1;
@@ -1572,6 +1592,20 @@ impl<'w> Solve<'w> {
         }
     }
 
+    /// Bounded solves, when the step test holds: whether the step is still taken, because it
+    /// is above the rounding level of `x` (`||s||^2 = s2`) and the first-order measure at
+    /// `x` is above [`OPTIMALITY_TOL`]. (The scaled step test can hold far from a solution:
+    /// after a start where a column was huge, Marquardt's running maximum makes every later
+    /// step look negligible beside `||D x||`.)
+    fn box_step_counts(&self, x: &[f64], bounds: Option<&Bounds>, s2: f64) -> bool {
+        let Some(b) = bounds else {
+            return false;
+        };
+        let v = &self.v;
+        s2 > f64::EPSILON * f64::EPSILON * norm2(x)
+            && boxed::measure(x, v.g, v.norms2, b, self.cost, self.zero_cost()) > OPTIMALITY_TOL
+    }
+
     /// Bounded solves, when the cost test holds: whether the box still allows progress, so
     /// that the solve goes on (the damping grows, the trust region shrinks) instead of
     /// ending. A rejected cut step that the model did not even predict to descend, or a
@@ -1592,7 +1626,13 @@ impl<'w> Solve<'w> {
             return true;
         }
         let v = &self.v;
-        boxed::measure(x, v.g, v.norms2, v.d, b, self.cost) > OPTIMALITY_TOL
+        boxed::measure(x, v.g, v.norms2, b, self.cost, self.zero_cost()) > OPTIMALITY_TOL
+    }
+
+    /// The cost at the rounding level of the start's, `(32 eps sqrt(m))^2` times it: the
+    /// optimality measure takes it for zero.
+    fn zero_cost(&self) -> f64 {
+        self.noise * self.noise * self.initial_cost
     }
 
     /// Bounded solves, at the end: the first-order optimality at `x` (the Jacobian evaluated
@@ -1615,7 +1655,7 @@ impl<'w> Solve<'w> {
         let v = &self.v;
         let (measure, projected_gradient) = if finite {
             (
-                boxed::measure(x, v.g, v.norms2, v.d, b, self.cost),
+                boxed::measure(x, v.g, v.norms2, b, self.cost, self.zero_cost()),
                 boxed::projected_gradient(x, v.g, b),
             )
         } else {
