@@ -11,7 +11,9 @@ Differences from SciPy, all deliberate:
 
 - ``method``: cpm-lm is a Levenberg-Marquardt solver; ``method="lm"`` (default) is accepted,
   ``"trf"``/``"dogbox"`` raise :class:`cpm.UsageError`. Unlike SciPy's ``lm``, bounds and
-  robust losses work with it (projected steps; Triggs' correction).
+  robust losses work with it (an active set and a step that knows the box; Triggs'
+  correction). A bounded solve reports ``success`` only at a first-order optimal point of
+  the box; one that met a tolerance elsewhere ends ``"Stalled"`` (``status`` 0).
 - ``ftol``, ``xtol``, ``gtol`` default to cpm-lm's (1e-15, i.e. to the rounding level), not
   SciPy's 1e-8; ``max_nfev`` is cpm-lm's ``max_evaluations`` (default 10,000).
 - ``loss``: ``"linear"``, ``"huber"``, ``"cauchy"`` (SciPy's definitions with ``f_scale``)
@@ -21,7 +23,12 @@ Differences from SciPy, all deliberate:
   differences, central by default; ``diff_step`` is the relative step).
 - The result has SciPy's fields plus ``covariance`` (``sigma^2 (J^T J)^+``), ``std``,
   ``correlation``, ``rank``, ``singular_values``, ``termination`` (cpm-lm's reason),
-  ``nit`` and ``report``. ``fun``, ``jac`` and ``grad`` are evaluated once more at the
+  ``nit``, ``usable`` (the point can be used: Ceres' ``IsSolutionUsable``) and ``report``.
+  ``optimality`` is the gradient's infinity norm, with bounds the projected gradient's,
+  ``||x - clip(x - grad, lb, ub)||_inf``; ``active_mask`` marks the parameters on a bound
+  (-1 lower, 1 upper). A bounded solve also gives cpm-lm's ``projected_gradient``,
+  ``first_order_measure`` (scale-free: the cosine of MINPACK's gradient test in the
+  interior) and ``first_order_optimal``. ``fun``, ``jac`` and ``grad`` are evaluated once more at the
   solution (not counted in ``nfev``); the evaluation at ``x0`` that sizes the problem is not
   counted either.
 """
@@ -47,6 +54,7 @@ _STATUS = {
     "NonFinite": -1,
     "SingularSystem": -1,
     "UserStop": -1,
+    "Stalled": 0,
 }
 
 
@@ -185,13 +193,18 @@ def least_squares(
     else:
         w = np.ones_like(z)
     res["grad"] = res["jac"].T @ (w * res["fun"])
-    res["optimality"] = float(np.max(np.abs(res["grad"]))) if n else 0.0
-    active = np.zeros(n, dtype=int)
-    if lower is not None:
-        active[xs <= np.asarray(lower)] = -1
-    if upper is not None:
-        active[xs >= np.asarray(upper)] = 1
-    res["active_mask"] = active
+    lb = np.asarray(lower, dtype=np.float64) if lower is not None else np.full(n, -np.inf)
+    ub = np.asarray(upper, dtype=np.float64) if upper is not None else np.full(n, np.inf)
+    # The projected gradient (the gradient itself without bounds), as SciPy's optimality.
+    pg = xs - np.clip(xs - res["grad"], lb, ub)
+    res["optimality"] = float(np.max(np.abs(pg))) if n else 0.0
+    if "active_mask" in res:
+        res["active_mask"] = np.asarray(res["active_mask"], dtype=int)
+    else:
+        active = np.zeros(n, dtype=int)
+        active[xs <= lb] = -1
+        active[xs >= ub] = 1
+        res["active_mask"] = active
     res["status"] = _STATUS.get(res["termination"], -1)
     if verbose:
         print(res["report_full"] if verbose >= 2 else res["report"])

@@ -12,6 +12,10 @@
 //!   `levenberg-marquardt` crate with default options, on the same problem code (the crate
 //!   through a dynamic-size adapter). `benches/ratios.py` reads criterion's estimates and
 //!   prints the time ratio per case and their geometric mean.
+//! * `bounded/<case>`: the bound-constrained set of `tests/bounded.rs` (Rosenbrock boxes,
+//!   Moré-Garbow-Hillstrom problems with boxes active and inactive at the solution, NIST fits
+//!   with positivity bounds; `tests/data/bounded_reference.tsv`), each case one solve with
+//!   default options and its box. `cargo bench -p cpm-lm --bench lib -- bounded/` runs it.
 //! * `bundle/<solver>/<N>`: a bundle-shaped sparse problem, N blocks of 6 local parameters
 //!   sharing 40 global ones, 12 residuals per block, solved with the Schur complement and
 //!   with the sparse Cholesky solver.
@@ -35,6 +39,9 @@ mod loops;
 
 #[path = "../tests/common/mgh.rs"]
 mod mgh;
+
+#[path = "../tests/common/bounded.rs"]
+mod bounded;
 
 /// NIST problems: cpm-lm against the `levenberg-marquardt` crate.
 mod nist_vs_lm {
@@ -456,6 +463,33 @@ mod bundle {
     }
 }
 
+/// The bound-constrained set, one solve per case.
+mod bounded_set {
+    use super::*;
+    use bounded::{cases, Bounded};
+    use cpm_lm::{minimize, Options};
+
+    pub fn bench(c: &mut Criterion) {
+        let mut group = c.benchmark_group("bounded");
+        for case in cases() {
+            let mut problem = Bounded::new(&case.problem);
+            let options = Options {
+                lower: Some(case.lower.clone()),
+                upper: Some(case.upper.clone()),
+                ..Options::default()
+            };
+            group.bench_function(case.name.as_str(), |b| {
+                b.iter(|| {
+                    let mut x = case.x0.clone();
+                    black_box(minimize(&mut problem, &mut x, &options).unwrap());
+                    x
+                })
+            });
+        }
+        group.finish();
+    }
+}
+
 /// The calibration-shaped problem (Schur complement), both damping strategies.
 mod calibration_shape {
     use super::*;
@@ -498,6 +532,7 @@ criterion_group!(
     minpack_vs_lm::bench,
     nist_vs_lm::bench,
     nist_vs_lm::boxbod,
+    bounded_set::bench,
     bundle::bench,
     calibration_shape::bench
 );

@@ -251,7 +251,11 @@
 //!
 //! ## Bounds and robust losses
 //!
-//! `Options::lower` / `Options::upper` keep the parameters in a box (projected steps).
+//! `Options::lower` / `Options::upper` keep the parameters in a box: an active set of the
+//! parameters a bound holds, a step the box cuts replaced by the best of three candidates
+//! (projected, shortened to the boundary, projected Cauchy), and success only at a point
+//! that is first-order optimal in the box ([`Report::optimality`], [`BoxOptimality`];
+//! otherwise [`TerminationReason::Stalled`]).
 //! [`Loss`] (Huber, Cauchy, Tukey) reduces the pull of outliers, folded into the
 //! least-squares step with Triggs' correction as in Ceres (see [`loss`]).
 //!
@@ -369,7 +373,7 @@ pub use options::{
 pub use problem::{
     DampedStep, DenseJacobian, Linearization, ModelError, NormalEquations, Problem, SparseJacobian,
 };
-pub use report::{IterationRecord, Report, TerminationReason, Timings};
+pub use report::{BoxOptimality, IterationRecord, Report, TerminationReason, Timings};
 pub use solver::{
     minimize, minimize_normal, minimize_sparse, IterationCallback, LinearSolver, Solver,
 };

@@ -164,7 +164,10 @@ pub enum StatisticsMode {
 /// A parameter `j` counts as evaporated when the squared norm of its Jacobian column at the
 /// last linearisation is below `threshold` times the largest it has been during the solve.
 /// Not applied with a robust loss, the cubic-interpolation damping, geodesic acceleration
-/// already on, bounds, or to [`NormalEquations`](crate::NormalEquations) problems.
+/// already on, or to [`NormalEquations`](crate::NormalEquations) problems. With bounds the
+/// rerun is not abandoned on the plateau (NIST's BoxBOD from its first start with `b >= 0`
+/// meets the plain solve's plateau cost exactly on its way to the minimum), and an
+/// accelerated step whose probe `x + fd_step v` would leave the box is taken plain.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Evaporation {
     /// Relative squared column norm below which a parameter has evaporated. Default:
@@ -217,8 +220,15 @@ pub struct Options {
     /// Maximum number of residual evaluations, the initial one included. Default: `10_000`.
     pub max_evaluations: usize,
     /// Lower bounds on the parameters (length `num_params`; `f64::NEG_INFINITY` for none).
-    /// Steps are projected onto the box and parameters held at a bound by the gradient are
-    /// frozen for the step. Default: `None`.
+    /// The start is projected onto the box and every evaluation stays in it. A parameter on
+    /// a bound that the gradient, or the solved step, pushes outwards is held there for the
+    /// step (an active set); a step the box still cuts is replaced by the best, by the
+    /// model's predicted reduction, of its projection, itself shortened to the boundary, and
+    /// the projected Cauchy step (never one that can only go uphill). A bounded solve ends
+    /// with its first-order optimality in [`Report::optimality`](crate::Report::optimality),
+    /// and a tolerance met where that fails ends as
+    /// [`TerminationReason::Stalled`](crate::TerminationReason::Stalled), not as a success.
+    /// Default: `None`.
     pub lower: Option<Vec<f64>>,
     /// Upper bounds on the parameters (length `num_params`; `f64::INFINITY` for none).
     /// Default: `None`.

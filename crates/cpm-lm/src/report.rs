@@ -29,6 +29,10 @@ pub enum TerminationReason {
     SingularSystem,
     /// The iteration callback asked to stop.
     UserStop,
+    /// A bounded solve stopped making progress (the cost, step or gradient test held) at a
+    /// point that is not first-order optimal in the box: [`Report::optimality`] says how far
+    /// from it. The point is the best found and can be used, but it is not a solution.
+    Stalled,
 }
 
 impl TerminationReason {
@@ -56,6 +60,9 @@ impl fmt::Display for TerminationReason {
             TerminationReason::NonFinite => "failed: non-finite residuals or Jacobian",
             TerminationReason::SingularSystem => "failed: singular damped system",
             TerminationReason::UserStop => "stopped by the iteration callback",
+            TerminationReason::Stalled => {
+                "stalled: no progress at a point that is not first-order optimal in the box"
+            }
         })
     }
 }
@@ -144,6 +151,10 @@ pub struct Report {
     /// [`Evaporation::threshold`](crate::Evaporation::threshold) of its largest (empty when
     /// not checked).
     pub evaporated: Vec<usize>,
+    /// First-order optimality at the returned point of a bounded solve (`None` without
+    /// bounds): the projected gradient, a scale-free measure and the parameters on a bound.
+    /// A bounded solve reports success only where [`BoxOptimality::optimal`] holds.
+    pub optimality: Option<BoxOptimality>,
     /// Number of restarts (see [`Evaporation`](crate::Evaporation)): the counts of steps and
     /// evaluations and the timings include every run; the termination, the costs, the
     /// iteration records and the statistics are those of the run returned.
@@ -153,6 +164,71 @@ pub struct Report {
     pub(crate) statistics: OnceLock<Statistics>,
     /// What the statistics are computed from, when kept.
     pub(crate) fit: Option<FitAtSolution>,
+}
+
+/// First-order optimality of a point in the box `lower <= x <= upper`, with the gradient
+/// `g = J^T r` there (reweighted with a robust loss).
+///
+/// ```
+/// use cpm_lm::{minimize, DenseJacobian, ModelError, Options, Problem};
+///
+/// /// Rosenbrock: r = [10 (x1 - x0^2), 1 - x0].
+/// struct Rosenbrock;
+/// impl Problem for Rosenbrock {
+///     fn num_params(&self) -> usize { 2 }
+///     fn num_residuals(&self) -> usize { 2 }
+///     fn residuals(&mut self, x: &[f64], r: &mut [f64]) -> Result<(), ModelError> {
+///         r[0] = 10.0 * (x[1] - x[0] * x[0]);
+///         r[1] = 1.0 - x[0];
+///         Ok(())
+///     }
+/// }
+/// impl DenseJacobian for Rosenbrock {
+///     fn jacobian(&mut self, x: &[f64], mut j: faer::MatMut<'_, f64>) -> Result<(), ModelError> {
+///         j[(0, 0)] = -20.0 * x[0];
+///         j[(0, 1)] = 10.0;
+///         j[(1, 0)] = -1.0;
+///         j[(1, 1)] = 0.0;
+///         Ok(())
+///     }
+/// }
+///
+/// // x0 <= 0.5 cuts the valley: the constrained minimum is (0.5, 0.25), cost 0.125.
+/// let options = Options {
+///     lower: Some(vec![-2.0, -2.0]),
+///     upper: Some(vec![0.5, 2.0]),
+///     ..Options::default()
+/// };
+/// let mut x = [-1.2, 1.0];
+/// let report = minimize(&mut Rosenbrock, &mut x, &options)?;
+/// assert!(report.was_successful(), "{report:#}");
+/// assert!((report.final_cost - 0.125).abs() < 1e-12);
+/// let opt = report.optimality.as_ref().expect("a bounded solve");
+/// assert!(opt.optimal);
+/// assert_eq!(opt.active, vec![1, 0]); // x0 on its upper bound
+/// assert!(opt.projected_gradient < 1e-9);
+/// # Ok::<(), cpm_lm::LmError>(())
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoxOptimality {
+    /// `||x - P(x - g)||_inf`, `P` the projection onto the box: SciPy's `optimality` for a
+    /// bounded problem in its plainest form (in the units of `g` away from the bounds, of
+    /// `x` next to them).
+    pub projected_gradient: f64,
+    /// The scale-free first-order measure: the largest over the parameters of
+    /// `sqrt(red_j / cost)`, `red_j` the reduction the Gauss-Newton model predicts from
+    /// moving parameter `j` alone to its best place in the box. In the interior this is the
+    /// cosine of MINPACK's gradient test, `|g_j| / (||J e_j|| ||r||)`; against a bound that
+    /// the gradient pushes on it is zero. At a zero residual the model still predicts the
+    /// whole cost, along a move at the rounding level of `x`: moves below `1e-10` of the
+    /// parameter's value do not count, and a cost below `(32 eps sqrt(m))^2` times the
+    /// start's measures zero.
+    pub measure: f64,
+    /// SciPy's `active_mask`: `-1` for a parameter on its lower bound, `1` on its upper
+    /// bound, `0` otherwise.
+    pub active: Vec<i8>,
+    /// Whether the point is first-order optimal: `measure <= 1e-6`.
+    pub optimal: bool,
 }
 
 /// The (reweighted) Jacobian and residuals at the solution, kept for the statistics.
@@ -178,9 +254,18 @@ impl FitAtSolution {
 }
 
 impl Report {
-    /// Whether the solve converged (see [`TerminationReason::was_successful`]).
+    /// Whether the solve converged (see [`TerminationReason::was_successful`]). A bounded
+    /// solve that met a tolerance at a point that is not first-order optimal in the box ends
+    /// as [`TerminationReason::Stalled`], not as a success.
     pub fn was_successful(&self) -> bool {
         self.termination.was_successful()
+    }
+
+    /// Whether the returned point can be used (Ceres' `IsSolutionUsable`): the solve
+    /// converged, or it stopped short (a limit, a stall, the callback, a singular system) at a
+    /// point of finite cost, the best it found. Not after non-finite residuals or Jacobians.
+    pub fn is_solution_usable(&self) -> bool {
+        self.termination != TerminationReason::NonFinite && self.final_cost.is_finite()
     }
 
     /// Rank, covariance and standard deviations at the solution (see
@@ -265,6 +350,17 @@ impl Report {
             "cost: initial {:.10e}, final {:.10e}",
             self.initial_cost, self.final_cost
         );
+        if let Some(o) = &self.optimality {
+            let _ = writeln!(
+                s,
+                "first-order optimality in the box: {} (measure {:.3e}, projected gradient {:.3e}, {} of {} parameters on a bound)",
+                if o.optimal { "yes" } else { "no" },
+                o.measure,
+                o.projected_gradient,
+                o.active.iter().filter(|a| **a != 0).count(),
+                o.active.len()
+            );
+        }
         let _ = writeln!(
             s,
             "steps: {} accepted, {} rejected; evaluations: {} residual, {} Jacobian",

@@ -119,21 +119,31 @@ fn boxbod_start_1_plateau_and_geodesic_acceleration() {
         );
         assert_eq!(report.restarts, usize::from(options.acceleration.is_none()));
     }
-    // With bounds (no restart) the evaporated parameter is still reported; the run
-    // without the restart above watched nothing.
-    let mut x = d.start1.clone();
-    let mut q = NistProblem::new(&d);
-    let report = minimize(
-        &mut q,
-        &mut x,
-        &Options {
-            upper: Some(vec![f64::INFINITY; 2]),
-            ..Options::default()
-        },
-    )
-    .unwrap();
-    assert_eq!(report.evaporated, vec![1], "{report:#}");
-    assert_eq!(report.restarts, 0);
+    // With bounds (issue 62: the solve used to end on the plateau claiming convergence, the
+    // restart off): b >= 0 and an inactive upper bound both reach the certified minimum.
+    for (lower, upper) in [
+        (Some(vec![0.0; 2]), None),
+        (None, Some(vec![f64::INFINITY; 2])),
+    ] {
+        let mut x = d.start1.clone();
+        let mut q = NistProblem::new(&d);
+        let report = minimize(
+            &mut q,
+            &mut x,
+            &Options {
+                lower,
+                upper,
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let rss = lre(2.0 * report.final_cost, d.certified_rss);
+        let params = min_lre(&x, &d.certified);
+        assert!(
+            rss >= 6.0 && params >= 6.0 && report.was_successful(),
+            "RSS LRE {rss:.2}, parameter LRE {params:.2}\n{report:#}"
+        );
+    }
 }
 
 #[test]

@@ -267,6 +267,18 @@ pub fn least_squares<'py>(
     d.set_item("nfev", report.residual_evaluations)?;
     d.set_item("njev", report.jacobian_evaluations)?;
     d.set_item("nit", report.num_iterations())?;
+    d.set_item("usable", report.is_solution_usable())?;
+    if let Some(o) = &report.optimality {
+        // A bounded solve: SciPy's active_mask, and cpm-lm's first-order verdict in the box
+        // (the Python layer computes `optimality` from the gradient at the solution).
+        d.set_item(
+            "active_mask",
+            PyArray1::from_iter(py, o.active.iter().map(|a| i64::from(*a))),
+        )?;
+        d.set_item("projected_gradient", o.projected_gradient)?;
+        d.set_item("first_order_measure", o.measure)?;
+        d.set_item("first_order_optimal", o.optimal)?;
+    }
     d.set_item("report", report.brief())?;
     d.set_item("report_full", report.full())?;
     if let Some(st) = report.statistics() {

@@ -8,8 +8,11 @@
 //!
 //! Per linearisation: robust reweighting of the rows, gradient `g = J^T r`, freezing of
 //! parameters held at a bound, update of the scaling `D`, the damping-independent part of
-//! the linear solve, and the gradient test. Per trial step: solve the damped system, project
-//! onto the bounds, step test, evaluate, gain ratio, accept or reject, cost test.
+//! the linear solve, and the gradient test. Per trial step: solve the damped system (with
+//! bounds, again while the step pushes a parameter on a bound out of the box), a step that
+//! the box cuts replaced by the best candidate of [`boxed`](crate::solver::boxed), step
+//! test, evaluate, gain ratio, accept or reject, cost test. A bounded solve ends with the
+//! first-order optimality at its point, and a tolerance met where it fails is a stall.
 
 use std::ops::ControlFlow;
 use std::sync::OnceLock;
@@ -20,7 +23,10 @@ use crate::damping::{Damping, DampingState, LineInfo};
 use crate::error::{EvalStage, LmError};
 use crate::options::{Options, ScaleUpdate, StatisticsMode};
 use crate::problem::{Linearization, NormalEquations};
-use crate::report::{FitAtSolution, IterationRecord, Report, TerminationReason, Timings};
+use crate::report::{
+    BoxOptimality, FitAtSolution, IterationRecord, Report, TerminationReason, Timings,
+};
+use crate::solver::boxed::{self, CutStep, OPTIMALITY_TOL};
 use crate::solver::jacobian::Jacobian;
 use crate::solver::model::Model;
 use crate::solver::small::{dot, norm2};
@@ -429,6 +435,66 @@ impl<'p, M: Model> Backend<'p, M> {
         }
     }
 
+    /// Bounded solves: zeroes the Jacobian columns and gradient entries of the `frozen`
+    /// parameters and prepares the linear system again (a normal-equations problem takes no
+    /// bounds).
+    fn hold(&mut self, frozen: &[bool], g: &mut [f64], norms2: &mut [f64]) -> Result<(), LmError> {
+        let Backend::Stored(s) = self else {
+            return Ok(());
+        };
+        s.jac.zero_cols(frozen);
+        for j in 0..g.len() {
+            if frozen[j] {
+                g[j] = 0.0;
+                norms2[j] = 0.0;
+            }
+        }
+        let rw: &[f64] = if s.robust {
+            &s.rw
+        } else {
+            slot(&s.rbuf, s.cur, s.m)
+        };
+        s.linear
+            .as_dyn()
+            .prepare(&s.jac, rw)
+            .map_err(LmError::Numerical)
+    }
+
+    /// Bounded solves, at the end: the gradient and squared column norms at `x` of the whole
+    /// Jacobian (no parameter frozen), evaluated again unless the stored one is that.
+    /// Returns whether a Jacobian was evaluated and whether it is finite.
+    fn final_gradient(
+        &mut self,
+        options: &Options,
+        x: &[f64],
+        stale: bool,
+        iteration: usize,
+        g: &mut [f64],
+        norms2: &mut [f64],
+    ) -> Result<(bool, bool), LmError> {
+        let Backend::Stored(s) = self else {
+            return Ok((false, true));
+        };
+        if !stale {
+            return Ok((false, true));
+        }
+        s.model
+            .jacobian(x, &mut s.jac)
+            .map_err(model_error(iteration, EvalStage::Jacobian))?;
+        if !s.jac.is_finite() {
+            s.jac_current = false;
+            return Ok((true, false));
+        }
+        let r = slot(&s.rbuf, s.cur, s.m);
+        if s.robust {
+            weigh(options, r, &mut s.rw, &mut s.row_scale, Some(&mut s.jac));
+        }
+        let rw: &[f64] = if s.robust { &s.rw } else { r };
+        s.jac.gradient_and_norms(rw, g, norms2);
+        s.jac_current = true;
+        Ok((true, true))
+    }
+
     /// `||J s||^2` for the step `s = alpha h` taken along the solved direction `h`
     /// (`scratch`: length `n`).
     fn step_norm2(&mut self, step: &[f64], alpha: f64) -> f64 {
@@ -633,11 +699,18 @@ pub(crate) fn run_stored<M: Model>(
         evaporation_restart: None,
         ..options.clone()
     };
-    let abandon = options.evaporation_restart.map(|e| Abandon {
-        threshold: e.threshold,
-        cost: first.final_cost,
-        evaporated: first.evaporated.clone(),
-    });
+    // With bounds the rerun is not abandoned on the plateau: the accelerated steps can
+    // leave it once there (NIST's BoxBOD from its first start with b >= 0 reaches the
+    // plain solve's plateau cost exactly, then the minimum).
+    let bounded = options.lower.is_some() || options.upper.is_some();
+    let abandon = options
+        .evaporation_restart
+        .filter(|_| !bounded)
+        .map(|e| Abandon {
+            threshold: e.threshold,
+            cost: first.final_cost,
+            evaporated: first.evaporated.clone(),
+        });
     let second = run(
         Backend::stored(model),
         &mut *x0,
@@ -668,15 +741,13 @@ pub(crate) fn run_stored<M: Model>(
 const SMALL_START: usize = 16;
 
 /// Whether the globalisation of [`Evaporation`](crate::Evaporation) applies: a stored
-/// problem solved with plain steps, plain least squares, a damping other than the cubic
-/// control, and no bounds.
+/// problem solved with plain steps, plain least squares and a damping other than the cubic
+/// control (with or without bounds).
 fn globalised(options: &Options) -> bool {
     options.evaporation_restart.is_some()
         && options.acceleration.is_none()
         && options.loss.is_squared()
         && options.damping != Damping::CubicInterpolation
-        && options.lower.is_none()
-        && options.upper.is_none()
 }
 
 /// Residual evaluations after which a globalised solve of `n` parameters that has not
@@ -742,7 +813,7 @@ pub(crate) fn run<M: Model>(
             &mut callback,
         )?;
     }
-    solve.finish(backend, options, x, termination)
+    solve.finish(backend, options, x, bounds.as_ref(), termination)
 }
 
 /// The checks before a solve (a problem with parameters and residuals, a start of the
@@ -890,6 +961,12 @@ struct Solve<'w> {
     grad_inf: f64,
     /// Parameters held at a bound (empty without bounds).
     frozen: Vec<bool>,
+    /// Bounded solves: whether a parameter was held because the solved step pushed it out
+    /// ([`Solve::hold_blocked`]) since the last linearisation.
+    held: bool,
+    /// Bounded solves: no such holding until the next accepted step (the held parameters
+    /// left no step: the next linearisation leaves the choice to [`Solve::cut`]).
+    no_hold: bool,
     any_frozen: bool,
     records: Vec<IterationRecord>,
     residual_evaluations: usize,
@@ -936,6 +1013,8 @@ impl<'w> Solve<'w> {
             need_jac: true,
             grad_inf: 0.0,
             frozen,
+            held: false,
+            no_hold: false,
             any_frozen: false,
             records,
             residual_evaluations: 0,
@@ -1002,18 +1081,10 @@ impl<'w> Solve<'w> {
             }
         }
         let iteration = self.records.len() + 1;
-        let v = &mut self.v;
-        let (solved, mu) = backend.solve(
-            x,
-            iteration,
-            &mut self.damping,
-            v.d,
-            v.g,
-            v.h,
-            v.wa,
-            &mut self.timings,
-            &mut self.clock,
-        )?;
+        let (mut solved, mut mu) = self.solve_step(backend, x, iteration)?;
+        if let Some(b) = bounds.filter(|_| !self.no_hold) {
+            (solved, mu) = self.hold_blocked(backend, x, b, iteration, solved, mu)?;
+        }
         if !solved {
             self.timings.linear_solver += self.clock.lap();
             self.rejected_steps += 1;
@@ -1027,19 +1098,105 @@ impl<'w> Solve<'w> {
             ));
         }
         let alpha = self.damping.step_length();
-        let accelerated = match self.accelerate(backend, x, mu, alpha, iteration, callback)? {
-            Velocity::Rejected(t) => return Ok(t),
-            Velocity::Accelerated => true,
-            Velocity::Plain => false,
-        };
-        let proposal = match self.propose(options, x, bounds, alpha) {
+        let accelerated =
+            match self.accelerate(backend, x, bounds, mu, alpha, iteration, callback)? {
+                Velocity::Rejected(t) => return Ok(t),
+                Velocity::Accelerated => true,
+                Velocity::Plain => false,
+            };
+        let proposal = match self.propose(backend, options, x, bounds, alpha) {
             Ok(p) => p,
+            Err(_) if self.held && !self.no_hold => {
+                // The parameters held for the step left none: linearise again at x and let
+                // the box's candidates choose the step from the whole gradient.
+                self.no_hold = true;
+                self.need_jac = true;
+                return Ok(None);
+            }
             Err(t) => return Ok(Some(t)),
         };
         let trial = self.evaluate(backend, options, alpha, accelerated, &proposal, iteration)?;
         Ok(self.conclude(
-            backend, options, x, trial, &proposal, mu, alpha, iteration, callback,
+            backend, options, x, bounds, trial, &proposal, mu, alpha, iteration, callback,
         ))
+    }
+
+    /// Bounded solves: while the solved step pushes a parameter on a bound out of the box,
+    /// holds that parameter there (an active set, as a projected Newton method) and solves
+    /// again. Returns whether the last system was solved and its damping.
+    fn hold_blocked<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        x: &[f64],
+        b: &Bounds,
+        iteration: usize,
+        mut solved: bool,
+        mut mu: f64,
+    ) -> Result<(bool, f64), LmError> {
+        // Each pass holds at least one more parameter: at most n passes.
+        while solved && b.block(x, self.v.h, &mut self.frozen) {
+            self.any_frozen = true;
+            self.held = true;
+            backend.hold(&self.frozen, self.v.g, self.v.norms2)?;
+            (solved, mu) = self.solve_step(backend, x, iteration)?;
+        }
+        Ok((solved, mu))
+    }
+
+    /// Solves the damped system for the step `h` ([`Backend::solve`]).
+    fn solve_step<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        x: &[f64],
+        iteration: usize,
+    ) -> Result<(bool, f64), LmError> {
+        let v = &mut self.v;
+        backend.solve(
+            x,
+            iteration,
+            &mut self.damping,
+            v.d,
+            v.g,
+            v.h,
+            v.wa,
+            &mut self.timings,
+            &mut self.clock,
+        )
+    }
+
+    /// Bounded solves: replaces the trial point `P(x + alpha h)`, which the box cut, by
+    /// `x` plus the best candidate step of [`CutStep`].
+    fn cut<M: Model>(&mut self, backend: &mut Backend<'_, M>, x: &[f64], b: &Bounds, alpha: f64) {
+        let Backend::Stored(s) = backend else {
+            return;
+        };
+        let (n, v) = (self.n, &mut self.v);
+        let mut dh2 = 0.0;
+        for j in 0..n {
+            v.step[j] = v.x_trial[j] - x[j];
+            // The solved step alpha h, in the trial point's storage for the choice.
+            v.x_trial[j] = alpha * v.h[j];
+            dh2 += (v.d[j] * v.x_trial[j]).powi(2);
+        }
+        let radius = if self.damping.is_trust_region() {
+            self.damping.radius()
+        } else {
+            dh2.sqrt()
+        };
+        let mut cut = CutStep {
+            jac: &s.jac,
+            scratch: jstep(&mut s.rbuf, s.m),
+            bounds: b,
+            x,
+            g: v.g,
+            d: v.d,
+            radius,
+        };
+        cut.choose(v.x_trial, v.step, v.wa);
+        for j in 0..n {
+            v.x_trial[j] = x[j] + v.step[j];
+        }
+        b.project(v.x_trial);
     }
 
     /// Linearises at `x` (gradient, column norms, scales), sets the damping at the first
@@ -1070,6 +1227,7 @@ impl<'w> Solve<'w> {
             &mut self.clock,
         )?;
         self.jacobian_evaluations += 1;
+        self.held = false;
         let Some(rnorm) = rnorm else {
             return Ok(Some(TerminationReason::NonFinite));
         };
@@ -1175,25 +1333,32 @@ impl<'w> Solve<'w> {
     /// 2 ||D a|| / ||D v|| <= max_ratio; a larger ratio rejects the trial. Not for a
     /// velocity below sqrt(eps) of the scaled parameters: there the finite difference
     /// r_vv is rounding noise (its error grows as 1 / ||v||, so each rejection, shortening
-    /// v, would make the next ratio larger), and the plain step is taken.
+    /// v, would make the next ratio larger), and the plain step is taken. Nor where the
+    /// probe `x + fd v` would leave the box (the model is never evaluated outside it).
     fn accelerate<M: Model>(
         &mut self,
         backend: &mut Backend<'_, M>,
         x: &[f64],
+        bounds: Option<&Bounds>,
         mu: f64,
         alpha: f64,
         iteration: usize,
         callback: &mut Callback<'_, '_>,
     ) -> Result<Velocity, LmError> {
         let (n, v) = (self.n, &mut self.v);
-        let resolvable = self.accel.is_some() && {
-            let (mut dv2, mut dx2) = (0.0, 0.0);
-            for j in 0..n {
-                dv2 += (v.d[j] * v.h[j]).powi(2);
-                dx2 += (v.d[j] * x[j]).powi(2);
+        let resolvable = self.accel.is_some()
+            && {
+                let (mut dv2, mut dx2) = (0.0, 0.0);
+                for j in 0..n {
+                    dv2 += (v.d[j] * v.h[j]).powi(2);
+                    dx2 += (v.d[j] * x[j]).powi(2);
+                }
+                dv2 > f64::EPSILON * dx2
             }
-            dv2 > f64::EPSILON * dx2
-        };
+            && match (bounds, self.accel) {
+                (Some(b), Some(ga)) => b.holds(x, v.h, ga.fd_step),
+                _ => true,
+            };
         let (Some(ga), Backend::Stored(s), true) = (self.accel, backend, resolvable) else {
             return Ok(Velocity::Plain);
         };
@@ -1238,10 +1403,11 @@ impl<'w> Solve<'w> {
         Ok(Velocity::Accelerated)
     }
 
-    /// The trial point `x + alpha h`, projected onto the bounds, and its step; the step
-    /// test's termination when the step is negligible.
-    fn propose(
+    /// The trial point `x + alpha h` (when the box cuts it, see [`Solve::cut`]) and its step;
+    /// the step test's termination when the step is negligible.
+    fn propose<M: Model>(
         &mut self,
+        backend: &mut Backend<'_, M>,
         options: &Options,
         x: &[f64],
         bounds: Option<&Bounds>,
@@ -1255,7 +1421,11 @@ impl<'w> Solve<'w> {
         if let Some(b) = bounds {
             b.project(v.x_trial);
             clipped = (0..n).any(|j| v.x_trial[j] != x[j] + alpha * v.h[j]);
+            if clipped {
+                self.cut(backend, x, b, alpha);
+            }
         }
+        let v = &mut self.v;
         let (mut dx2, mut xn2, mut s2) = (0.0, 0.0, 0.0);
         for j in 0..n {
             v.step[j] = v.x_trial[j] - x[j];
@@ -1263,7 +1433,9 @@ impl<'w> Solve<'w> {
             xn2 += (v.d[j] * x[j]).powi(2);
             s2 += v.step[j] * v.step[j];
         }
-        if dx2.sqrt() <= options.xtol * (xn2.sqrt() + options.xtol) {
+        if dx2.sqrt() <= options.xtol * (xn2.sqrt() + options.xtol)
+            && !self.box_step_counts(x, bounds, s2)
+        {
             return Err(TerminationReason::ConvergedXtol);
         }
         Ok(Proposal {
@@ -1289,7 +1461,7 @@ impl<'w> Solve<'w> {
         // With acceleration the prediction is the linear model's for the velocity (GSL's
         // convention): the acceleration is a correction the model does not see.
         let (js2, gs) = match (&mut *backend, accelerated) {
-            (Backend::Stored(s), true) => {
+            (Backend::Stored(s), true) if !p.clipped => {
                 for j in 0..n {
                     v.wa[j] = v.step[j] - 0.5 * alpha * s.acc[j];
                 }
@@ -1365,6 +1537,7 @@ impl<'w> Solve<'w> {
         backend: &mut Backend<'_, M>,
         options: &Options,
         x: &mut [f64],
+        bounds: Option<&Bounds>,
         trial: Trial,
         p: &Proposal,
         mu: f64,
@@ -1383,6 +1556,7 @@ impl<'w> Solve<'w> {
             // Jacobian is not reweighted).
             backend.accept(p.dx2 <= f64::EPSILON * p.xn2);
             self.accepted_steps += 1;
+            self.no_hold = false;
             self.damping.accepted(trial.rho, trial.line);
         } else {
             self.rejected_steps += 1;
@@ -1408,6 +1582,7 @@ impl<'w> Solve<'w> {
             && ((actred.abs() <= options.ftol * cost_before && rho <= 2.0)
                 || actred.abs() <= self.noise * cost_before
                 || actred <= 0.0)
+            && !self.box_progress_possible(x, bounds, accept, p, pred)
         {
             Some(TerminationReason::ConvergedFtol)
         } else if let Some(cb) = callback.as_mut() {
@@ -1417,13 +1592,91 @@ impl<'w> Solve<'w> {
         }
     }
 
+    /// Bounded solves, when the step test holds: whether the step is still taken, because it
+    /// is above the rounding level of `x` (`||s||^2 = s2`) and the first-order measure at
+    /// `x` is above [`OPTIMALITY_TOL`]. (The scaled step test can hold far from a solution:
+    /// after a start where a column was huge, Marquardt's running maximum makes every later
+    /// step look negligible beside `||D x||`.)
+    fn box_step_counts(&self, x: &[f64], bounds: Option<&Bounds>, s2: f64) -> bool {
+        let Some(b) = bounds else {
+            return false;
+        };
+        let v = &self.v;
+        s2 > f64::EPSILON * f64::EPSILON * norm2(x)
+            && boxed::measure(x, v.g, v.norms2, b, self.cost, self.zero_cost()) > OPTIMALITY_TOL
+    }
+
+    /// Bounded solves, when the cost test holds: whether the box still allows progress, so
+    /// that the solve goes on (the damping grows, the trust region shrinks) instead of
+    /// ending. A rejected cut step that the model did not even predict to descend, or a
+    /// point whose first-order measure (at the last linearisation) is above
+    /// [`OPTIMALITY_TOL`], is not the end.
+    fn box_progress_possible(
+        &self,
+        x: &[f64],
+        bounds: Option<&Bounds>,
+        accept: bool,
+        p: &Proposal,
+        pred: f64,
+    ) -> bool {
+        let Some(b) = bounds else {
+            return false;
+        };
+        if !accept && p.clipped && pred <= 0.0 {
+            return true;
+        }
+        let v = &self.v;
+        boxed::measure(x, v.g, v.norms2, b, self.cost, self.zero_cost()) > OPTIMALITY_TOL
+    }
+
+    /// The cost at the rounding level of the start's, `(32 eps sqrt(m))^2` times it: the
+    /// optimality measure takes it for zero.
+    fn zero_cost(&self) -> f64 {
+        self.noise * self.noise * self.initial_cost
+    }
+
+    /// Bounded solves, at the end: the first-order optimality at `x` (the Jacobian evaluated
+    /// again when the stored one is not the whole Jacobian at `x`).
+    fn box_optimality<M: Model>(
+        &mut self,
+        backend: &mut Backend<'_, M>,
+        options: &Options,
+        x: &[f64],
+        b: &Bounds,
+    ) -> Result<BoxOptimality, LmError> {
+        let stale = self.need_jac || self.any_frozen;
+        let v = &mut self.v;
+        let (evaluated, finite) =
+            backend.final_gradient(options, x, stale, self.records.len(), v.g, v.norms2)?;
+        if evaluated {
+            self.jacobian_evaluations += 1;
+            self.any_frozen = false;
+        }
+        let v = &self.v;
+        let (measure, projected_gradient) = if finite {
+            (
+                boxed::measure(x, v.g, v.norms2, b, self.cost, self.zero_cost()),
+                boxed::projected_gradient(x, v.g, b),
+            )
+        } else {
+            (f64::NAN, f64::NAN)
+        };
+        Ok(BoxOptimality {
+            projected_gradient,
+            measure,
+            active: b.active(x),
+            optimal: measure <= OPTIMALITY_TOL,
+        })
+    }
+
     /// The end of a solve: the parameters that evaporated, the statistics at the solution
     /// (when kept) and the report.
     fn finish<M: Model>(
         mut self,
-        backend: Backend<'_, M>,
+        mut backend: Backend<'_, M>,
         options: &Options,
         x: &[f64],
+        bounds: Option<&Bounds>,
         termination: Option<TerminationReason>,
     ) -> Result<Report, LmError> {
         // What the last lap left (a preparation not followed by a solve).
@@ -1431,8 +1684,27 @@ impl<'w> Solve<'w> {
             Backend::Stored(_) => self.timings.linear_solver += self.clock.lap(),
             Backend::Normal(_) => self.timings.jacobian += self.clock.lap(),
         }
-        let termination = termination.unwrap_or(TerminationReason::MaxIterations);
+        let mut termination = termination.unwrap_or(TerminationReason::MaxIterations);
         let evaporated = self.evaporated(options);
+        let optimality = match bounds {
+            Some(b) if self.jacobian_evaluations > 0 => {
+                let o = self.box_optimality(&mut backend, options, x, b)?;
+                // A tolerance met short of a first-order point is a stall, not a success.
+                if !o.optimal
+                    && matches!(
+                        termination,
+                        TerminationReason::ConvergedFtol
+                            | TerminationReason::ConvergedXtol
+                            | TerminationReason::ConvergedGtol
+                    )
+                {
+                    termination = TerminationReason::Stalled;
+                }
+                self.timings.jacobian += self.clock.lap();
+                Some(o)
+            }
+            _ => None,
+        };
         let keep = options.statistics != StatisticsMode::Off
             && self.n <= options.statistics_max_params
             && termination != TerminationReason::NonFinite;
@@ -1458,6 +1730,7 @@ impl<'w> Solve<'w> {
             damping: options.damping.name(),
             linear_solver: options.linear_solver.name(),
             evaporated,
+            optimality,
             restarts: 0,
             statistics,
             fit,

@@ -11,6 +11,7 @@ use crate::options::Options;
 use crate::problem::{DenseJacobian, NormalEquations, SparseJacobian};
 use crate::report::{IterationRecord, Report};
 
+mod boxed;
 mod dense_cholesky;
 mod dense_qr;
 mod engine;
