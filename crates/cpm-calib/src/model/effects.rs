@@ -329,7 +329,7 @@ impl Effect {
     }
 
     /// A user effect of `model` (a `static` of the user's, or a value that lives as long as
-    /// the program: `Box::leak` in the user's own code). Fails when the name is a
+    /// the program, leaked on purpose in the user's own code). Fails when the name is a
     /// built-in's, a pose map term's, empty, or holds whitespace or a comma.
     ///
     /// Nothing is registered anywhere: the effect carries its model into the
