@@ -322,7 +322,7 @@ pub fn outliers_beyond(residuals_um: &[f64], sigmas: f64) -> Vec<usize> {
 
 fn normal_two_sided(z: f64) -> f64 {
     let n = Normal::new(0.0, 1.0).expect("standard normal");
-    2.0 * (1.0 - n.cdf(z.abs()))
+    2.0 * n.sf(z.abs())
 }
 
 /// Diagnoses residuals (um, in acquisition order) with `dof` degrees of freedom.
@@ -382,9 +382,7 @@ pub fn diagnose(
         .sum::<f64>()
         * n as f64
         * (n as f64 + 2.0);
-    let ljung_box_p = ChiSquared::new(lags as f64)
-        .map(|d| 1.0 - d.cdf(q))
-        .unwrap_or(1.0);
+    let ljung_box_p = ChiSquared::new(lags as f64).map(|d| d.sf(q)).unwrap_or(1.0);
     let outliers = outliers(residuals_um);
     // Correlations.
     let mut correlations: Vec<Correlation> = regressors
@@ -394,7 +392,7 @@ pub fn diagnose(
             let r = pearson(&g.values, residuals_um);
             let t = r * ((n as f64 - 2.0) / (1.0 - r * r).max(1e-300)).sqrt();
             let p = StudentsT::new(0.0, 1.0, n as f64 - 2.0)
-                .map(|d| 2.0 * (1.0 - d.cdf(t.abs())))
+                .map(|d| 2.0 * d.sf(t.abs()))
                 .unwrap_or(1.0);
             Correlation {
                 regressor: g.name.clone(),
@@ -508,7 +506,7 @@ pub fn pose_map_scan(
         let explained = (q.transpose() * &r).norm_squared().min(rss);
         let f = (explained / dk as f64) / ((rss - explained).max(1e-300) / (m - k0 - dk) as f64);
         let p_value = FisherSnedecor::new(dk as f64, (m - k0 - dk) as f64)
-            .map(|d| 1.0 - d.cdf(f))
+            .map(|d| d.sf(f))
             .unwrap_or(1.0);
         out.push(PoseStructure {
             effect: *e,
@@ -529,6 +527,24 @@ pub fn pose_map_scan(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Small p-values are numbers, from the survival functions (issue 61: `1 - cdf` printed
+    /// "< 1e-300" for a Ljung-Box p of about 1e-17): a slowly drifting residual gives a
+    /// Ljung-Box statistic whose upper tail is far below 1e-16 yet above zero, equal to the
+    /// chi-squared survival function at it; the runs test's the same.
+    #[test]
+    fn small_p_values_come_from_the_survival_function() {
+        let r: Vec<f64> = (0..60)
+            .map(|k| (k as f64 * 0.05).sin() + 0.01 * (k % 3) as f64)
+            .collect();
+        let d = diagnose(&r, 50, None, &[], 0.05);
+        assert!(
+            d.ljung_box_p > 0.0 && d.ljung_box_p < 1e-16,
+            "{}",
+            d.ljung_box_p
+        );
+        assert!(d.runs_p > 0.0 && d.runs_p < 1e-10, "{}", d.runs_p);
+    }
 
     /// The linear-time median is the element a sort puts at `n / 2`, ties, signed zeros and
     /// all; the robust spread follows it.

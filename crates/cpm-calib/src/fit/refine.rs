@@ -1135,7 +1135,7 @@ impl Rounds<'_> {
                 let dk = k1 - k0;
                 let f = ((rss0 - rss1).max(0.0) / dk) / (rss1 / (m as f64 - k1));
                 let p = FisherSnedecor::new(dk, m as f64 - k1)
-                    .map(|d| 1.0 - d.cdf(f))
+                    .map(|d| d.sf(f))
                     .unwrap_or(1.0);
                 let db = bic(rss1, m, k1) - bic0;
                 score.p_value = Some(p);
