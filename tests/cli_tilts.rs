@@ -233,6 +233,20 @@ fn a_mixed_campaign_gauges_points_and_tilts_in_one_fit() {
         ],
         &cal,
     );
+    // Every kind is counted, in calibration.json and report.md alike (issue 61: a tilt
+    // campaign was 'Data: 0 length readings and 0 tracker pose measurements at 285 poses').
+    let (n_points, n_tilts) = (
+        report["point_measurements"].as_u64().unwrap(),
+        report["tilt_measurements"].as_u64().unwrap(),
+    );
+    // 40 poses of three reflectors; 100 poses of a two-axis inclinometer.
+    assert_eq!((n_points, n_tilts), (120, 200));
+    let md = std::fs::read_to_string(cal.join("report.md")).unwrap();
+    let line = format!(
+        "- Data: {} length readings, 0 tracker pose measurements, {n_points} reflector points ({} coordinates) and {n_tilts} inclinometer angles at",
+        report["readings"], 3 * n_points
+    );
+    assert!(md.contains(&line), "{line}\n{md}");
     // Together the instruments determine every parameter: the gauges fix what the frames and
     // the levelling leave free.
     let id = &report["identifiability"];

@@ -396,6 +396,15 @@ pub struct FitReport {
     pub readings: usize,
     /// Tracker pose measurements.
     pub pose_measurements: usize,
+    /// Reflector point measurements (three coordinates each); absent when none.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub point_measurements: usize,
+    /// Inclinometer angles (one per axis and pose); absent when none.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub tilt_measurements: usize,
+    /// Measurements of one's own instruments; absent when none.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub instrument_measurements: usize,
     /// Poses.
     pub poses: usize,
     /// Installation errors, um.
@@ -701,6 +710,9 @@ impl FitReport {
             data: inputs.provenance.data.clone(),
             readings: campaign.readings.len(),
             pose_measurements: campaign.pose_measurements.len(),
+            point_measurements: campaign.point_measurements.len(),
+            tilt_measurements: campaign.tilt_measurements.len(),
+            instrument_measurements: campaign.instrument_measurements.len(),
             poses: campaign.poses.len(),
             installation_errors_um: PerJoint::new(&cal.estimate_um[..ni]),
             std_um: PerJoint::new(&cal.std_um[..ni]),
@@ -798,10 +810,31 @@ impl FitReport {
             t.sensors,
             short(t.clearance_um)
         ));
+        // Every kind counted: the gauges and the tracker always, the others where present.
+        let mut kinds = vec![
+            format!("{} length readings", self.readings),
+            format!("{} tracker pose measurements", self.pose_measurements),
+        ];
+        if self.point_measurements > 0 {
+            kinds.push(format!(
+                "{} reflector points ({} coordinates)",
+                self.point_measurements,
+                3 * self.point_measurements
+            ));
+        }
+        if self.tilt_measurements > 0 {
+            kinds.push(format!("{} inclinometer angles", self.tilt_measurements));
+        }
+        if self.instrument_measurements > 0 {
+            kinds.push(format!(
+                "{} measurements of one's own instruments",
+                self.instrument_measurements
+            ));
+        }
+        let last = kinds.pop().expect("two kinds at least");
         s.push_str(&format!(
-            "- Data: {} length readings and {} tracker pose measurements at {} poses{}.\n",
-            self.readings,
-            self.pose_measurements,
+            "- Data: {} and {last} at {} poses{}.\n",
+            kinds.join(", "),
             self.poses,
             if self.simulated {
                 " (**SIMULATED**)"
@@ -1155,4 +1188,9 @@ mod tests {
             assert!(s.contains(want), "{want:?} not in\n{s}");
         }
     }
+}
+
+/// For `skip_serializing_if`: a count of zero is left out.
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
