@@ -96,14 +96,13 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
     write!(o, "{}", ident.summary())?;
     writeln!(
         o,
-        "Cramér-Rao bounds for sensor noise {sigma} um{}: RMS {}, worst {}",
+        "Cramér-Rao bounds for sensor noise {sigma} um{}: {}",
         if !sigma_declared {
             " (none declared: bounds per um of noise)"
         } else {
             ""
         },
-        fmt_opt(ident.crlb_rms_um()),
-        fmt_opt(ident.crlb_max_um())
+        doc.analysis.crlb_words(|v| format!("{v:.3}"))
     )?;
     if let Some(a) = &against {
         writeln!(
@@ -154,8 +153,4 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
         )?;
     }
     Ok(Outcome::Done)
-}
-
-fn fmt_opt(v: Option<f64>) -> String {
-    v.map_or("n.d.".to_string(), |x| format!("{x:.3}"))
 }

@@ -54,11 +54,45 @@ pub struct IdentifiabilityReport {
     pub crlb_rms_um: Option<f64>,
     /// Largest of them, um.
     pub crlb_max_um: Option<f64>,
+    /// The bounds per unit where the determined parameters have several units (link offsets
+    /// in um beside scales in ppm): an RMS over mixed units means nothing; absent with one.
+    #[serde(skip_serializing_if = "one_unit")]
+    pub crlb_per_unit: Vec<cpm_calib::identifiability::CrlbOfUnit>,
     /// Per parameter.
     pub per_parameter: Vec<ParameterIdentifiability>,
 }
 
 impl IdentifiabilityReport {
+    /// The Cramér-Rao bounds in words, each figure with its unit: `RMS 17.1 um, worst 28.6 um`
+    /// (the form `fmt` gives a figure), or one such pair per unit where the determined
+    /// parameters have several (`RMS 17.1 um, worst 28.6 um (36 in um); RMS 41.0 ppm, worst
+    /// 55.2 ppm (6 in ppm)`); `n.d.` for none determined.
+    pub fn crlb_words(&self, fmt: impl Fn(f64) -> String) -> String {
+        if self.crlb_per_unit.len() > 1 {
+            return self
+                .crlb_per_unit
+                .iter()
+                .map(|g| {
+                    format!(
+                        "RMS {} {u}, worst {} {u} ({} in {u})",
+                        fmt(g.rms),
+                        fmt(g.worst),
+                        g.determined,
+                        u = g.unit
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("; ");
+        }
+        let unit = self
+            .crlb_per_unit
+            .first()
+            .map_or("um".to_string(), |g| g.unit.clone());
+        let f =
+            |v: Option<f64>| v.map_or_else(|| "n.d.".to_string(), |v| format!("{} {unit}", fmt(v)));
+        format!("RMS {}, worst {}", f(self.crlb_rms_um), f(self.crlb_max_um))
+    }
+
     /// The report of an analysis whose parameters are named `names`.
     pub fn new(id: &cpm_calib::Identifiability, names: &[String]) -> Self {
         Self {
@@ -81,6 +115,13 @@ impl IdentifiabilityReport {
             sigma_um: id.sigma_um,
             crlb_rms_um: finite(id.crlb_rms_um()),
             crlb_max_um: finite(id.crlb_max_um()),
+            crlb_per_unit: {
+                let units: Vec<String> = names
+                    .iter()
+                    .map(|n| cpm_calib::model::unit_of_parameter(n).to_string())
+                    .collect();
+                id.crlb_per_unit(&units)
+            },
             per_parameter: names
                 .iter()
                 .enumerate()
@@ -141,4 +182,9 @@ impl AgainstTolerances {
                 .collect(),
         }
     }
+}
+
+/// For `skip_serializing_if`: the bounds of one unit (or none) are `crlb_rms_um` already.
+fn one_unit(v: &[cpm_calib::identifiability::CrlbOfUnit]) -> bool {
+    v.len() <= 1
 }

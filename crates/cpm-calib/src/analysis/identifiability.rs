@@ -48,6 +48,20 @@ pub struct BlindDirection {
     pub dimensions: usize,
 }
 
+/// The Cramér-Rao bounds of the determined parameters of one unit
+/// ([`Identifiability::crlb_per_unit`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CrlbOfUnit {
+    /// The unit (`um`, `ppm`, `urad`, ...).
+    pub unit: String,
+    /// Determined parameters of this unit.
+    pub determined: usize,
+    /// RMS of their standard deviations, in the unit.
+    pub rms: f64,
+    /// The largest of them, in the unit.
+    pub worst: f64,
+}
+
 /// The result of an identifiability analysis.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Identifiability {
@@ -105,6 +119,36 @@ impl Identifiability {
         } else {
             Some((v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt())
         }
+    }
+
+    /// The Cramér-Rao bounds of the determined parameters per unit (`units`: one per
+    /// parameter, [`MeasurementModel::parameter_units`](crate::MeasurementModel::parameter_units)),
+    /// in the order the units first appear: no RMS over parameters of different units.
+    pub fn crlb_per_unit(&self, units: &[String]) -> Vec<CrlbOfUnit> {
+        let mut out: Vec<CrlbOfUnit> = Vec::new();
+        for (sd, unit) in self.crlb_std_um.iter().zip(units) {
+            let Some(sd) = sd else { continue };
+            let k = match out.iter().position(|g| &g.unit == unit) {
+                Some(k) => k,
+                None => {
+                    out.push(CrlbOfUnit {
+                        unit: unit.clone(),
+                        determined: 0,
+                        rms: 0.0,
+                        worst: 0.0,
+                    });
+                    out.len() - 1
+                }
+            };
+            let g = &mut out[k];
+            g.determined += 1;
+            g.rms += sd * sd;
+            g.worst = g.worst.max(*sd);
+        }
+        for g in &mut out {
+            g.rms = (g.rms / g.determined as f64).sqrt();
+        }
+        out
     }
 
     /// The worst Cramér-Rao standard deviation among determined parameters, um.

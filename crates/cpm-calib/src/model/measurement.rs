@@ -102,6 +102,13 @@ pub struct Block {
     pub len: usize,
 }
 
+/// The unit of a parameter named as [`MeasurementModel::parameter_names`] names it (the text
+/// in its last brackets: `link 2 platform dy [um]` is in `um`); empty when it names none.
+pub fn unit_of_parameter(name: &str) -> &str {
+    name.rsplit_once('[')
+        .map_or("", |(_, u)| u.trim_end_matches(']'))
+}
+
 impl MeasurementModel {
     /// The model of a nominal table with the paper's example clearance and load: the same as
     /// [`with_paper_clearance`](Self::with_paper_clearance), which says so in its name.
@@ -446,6 +453,15 @@ impl MeasurementModel {
             o += len;
         }
         out
+    }
+
+    /// The unit of every parameter (`um`, `ppm`, `urad`, ...), as its name in
+    /// [`parameter_names`](Self::parameter_names) gives it.
+    pub fn parameter_units(&self) -> Vec<String> {
+        self.parameter_names()
+            .iter()
+            .map(|n| unit_of_parameter(n).to_string())
+            .collect()
     }
 
     /// Names of all parameters, with units, e.g. `link 2 platform dy [um]`,

@@ -952,11 +952,8 @@ impl FitReport {
             }
         }
         s.push_str(&format!(
-            "\nCramér-Rao bounds: RMS {} um, worst {} um over the determined parameters.\n\n",
-            id.crlb_rms_um
-                .map_or_else(|| "n.d.".to_string(), |v| sig(v, 3)),
-            id.crlb_max_um
-                .map_or_else(|| "n.d.".to_string(), |v| sig(v, 3))
+            "\nCramér-Rao bounds: {} over the determined parameters.\n\n",
+            id.crlb_words(|v| sig(v, 3))
         ));
         if let Some(p) = &self.prior {
             p.markdown(s);
