@@ -507,4 +507,40 @@ mod tests {
             "{e}"
         );
     }
+
+    #[test]
+    fn refine_options_by_name_read_the_typed_values_through_the_flattened_fit() {
+        let mut v =
+            serde_json::to_value(crate::refine::RefineOptions::new("R", vec![], "O")).unwrap();
+        assert_eq!(v["effects"], serde_json::Value::Null);
+        assert_eq!(v["tolerance"], serde_json::json!([]));
+        v["effects"] = serde_json::json!(["link_offset"]);
+        v["robust"] = serde_json::json!("cauchy:2");
+        v["tolerance"] = serde_json::json!([
+            {"group": "link_offset", "value": 50},
+            "installation_errors=inf"
+        ]);
+        v["hold"] = serde_json::json!(["link_scale"]);
+        v["candidates"] = serde_json::json!("backlash,link_scale");
+        let o: crate::refine::RefineOptions = serde_json::from_value(v.clone()).unwrap();
+        assert_eq!(o.fit.effects, Some(vec![Effect::LinkOffset]));
+        assert_eq!(o.fit.robust, Some(Loss::Cauchy(2.0)));
+        assert_eq!(
+            o.fit.tolerance,
+            vec![
+                Tolerance::new("link_offset", 50.0).unwrap(),
+                Tolerance::new("installation_errors", f64::INFINITY).unwrap()
+            ]
+        );
+        assert_eq!(o.fit.hold, vec![Group::from("link_scale")]);
+        assert_eq!(
+            o.candidates,
+            Some(vec![Effect::Backlash, Effect::LinkScale])
+        );
+        v["robust"] = serde_json::json!("pink:3");
+        let e = serde_json::from_value::<crate::refine::RefineOptions>(v)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("--robust \"pink:3\": unknown loss"), "{e}");
+    }
 }
