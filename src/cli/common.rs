@@ -242,7 +242,7 @@ impl FitArgs {
             sigma_um: self.sigma_um,
             pose_sigma_um: self.pose_sigma_um,
             orientation_sigma_urad: self.orientation_sigma_urad,
-            robust: self.robust.clone(),
+            robust: self.robust,
             keep_outliers: self.keep_outliers,
             max_iterations: self.max_iterations,
             out: self.out.clone(),
