@@ -884,6 +884,32 @@ fn bad_options_exit_2_and_missing_files_exit_4_leaving_earlier_results() {
             2,
             "error: --effects: unknown effect `nosuch`",
         ),
+        // Typed values parsed at the edge (cpm_workflow::options), refused in the same words.
+        (
+            cal(&["--effects", "link_offset,link_offset"]),
+            2,
+            "error: --effects: effect `link_offset` given twice",
+        ),
+        (
+            cal(&["--tolerance", "x"]),
+            2,
+            "error: --tolerance \"x\": expected GROUP=VALUE, e.g. installation_errors=2000",
+        ),
+        (
+            cal(&["--tolerance", "link_scale=big"]),
+            2,
+            "error: --tolerance \"link_scale=big\": \"big\" is not a number",
+        ),
+        (
+            cal(&["--tolerance", "installation_errors=-1"]),
+            2,
+            "error: --tolerance \"installation_errors=-1\": invalid `tolerance`: installation_errors = -1: a tolerance must be > 0",
+        ),
+        (
+            cal(&["--hold", "nosuch"]),
+            2,
+            "`nosuch` is not a parameter group of this fit",
+        ),
         (
             cal(&["--pose-sigma-um=-1"]),
             2,

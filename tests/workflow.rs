@@ -168,7 +168,7 @@ impl cpm::calib::EffectModel for Tripwire {
 
 #[test]
 fn a_job_cancelled_inside_its_fit_stops_there_and_writes_nothing() {
-    cpm::calib::Effect::register(std::sync::Arc::new(Tripwire)).unwrap();
+    let tripwire = cpm::calib::Effect::user(&Tripwire).unwrap();
     let d = scratch("workflow", "cancel-inside");
     let out = d.join("never");
     let progress = Collect::default();
@@ -178,7 +178,7 @@ fn a_job_cancelled_inside_its_fit_stops_there_and_writes_nothing() {
         vec![example("hexapod_66_readings.csv").into()],
         &out,
     );
-    options.fit.effects = Some("workflow_tripwire".into());
+    options.fit.effects = Some(vec![tripwire]);
     let err = fit::calibrate(&options, &progress)
         .err()
         .expect("cancelled");
@@ -300,7 +300,7 @@ fn the_library_simulates_as_the_command_does() {
     options.plan.random = Some(15);
     options.plan.seed = 7;
     options.truth = Some(PathBuf::from(&truth));
-    options.effects = Some("link_offset".into());
+    options.effects = Some(vec![cpm::calib::Effect::LinkOffset]);
     options.noise = Some("gaussian:2".into());
     options.validate().unwrap();
     let job = simulate::simulate(&options, &Silent).unwrap();

@@ -49,10 +49,6 @@ __all__ = [
     "DesignResult", "Identifiability",
 ]
 
-# Options whose value is one comma-separated list (a Python list is joined).
-_JOINED = {"effects", "candidates"}
-
-
 def effect_names() -> List[str]:
     """The effects ``effects=[...]`` knows (besides the pose map terms ``pose_map_*``)."""
     return list(_cpm.effect_names())
@@ -126,10 +122,15 @@ def _value(key: str, value: Any, scratch: Scratch) -> Any:
         for v in value:
             v = _value(key, v, scratch)
             items += v if isinstance(v, list) else [v]
-        if key in _JOINED:
-            return ",".join(str(v) for v in items) if items else "none"
         return items
     return value
+
+
+def _tolerance_value(v: Any) -> Any:
+    """A tolerance's value as JSON holds it: a number, or "inf" (any infinity frees the
+    group) and "nan" (refused by the job as no tolerance > 0)."""
+    v = float(v)
+    return v if np.isfinite(v) else ("inf" if np.isinf(v) else "nan")
 
 
 def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
@@ -140,9 +141,10 @@ def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
         if value is None or value is False:
             continue
         if key == "tolerances" and isinstance(value, dict):
-            # {"link_scale": 20000, "installation_errors": float("inf")} -> tolerance G=V
+            # {"link_scale": 20000, "installation_errors": float("inf")} -> the typed
+            # tolerances, {"group": G, "value": V} (JSON has no infinity: "inf").
             key = "tolerance"
-            value = [f"{k}={'inf' if np.isinf(v) else repr(float(v))}" for k, v in value.items()]
+            value = [{"group": str(k), "value": _tolerance_value(v)} for k, v in value.items()]
         elif key == "truth_effect" and isinstance(value, dict):
             value = [f"{k}=" + ",".join(repr(float(v)) for v in np.atleast_1d(vs))
                      for k, vs in value.items()]

@@ -11,6 +11,7 @@ use crate::calib::Effect;
 use crate::io::Robot;
 use cpm_workflow::fit::{FitOptions, Inputs, NoisePerKind, TrackerResiduals};
 pub use cpm_workflow::load::*;
+use cpm_workflow::options::{self, Group, Tolerance};
 
 /// The robot description argument.
 #[derive(Debug, Clone, Args)]
@@ -26,14 +27,34 @@ pub struct EffectsArg {
     /// Effects to model beside the 36 installation errors, comma-separated (e.g.
     /// link_offset,link_scale); overrides `[calibration] effects` of the robot description;
     /// `none` for none.
-    #[arg(long, value_name = "LIST")]
-    pub effects: Option<String>,
+    #[arg(long, value_name = "LIST", value_parser = effects_value)]
+    pub effects: Option<EffectList>,
+}
+
+/// A list of effects as one value of an option (`--effects`, `--candidates`): clap would take
+/// an `Option<Vec<_>>` for an option given any number of times.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EffectList(pub Vec<Effect>);
+
+/// `--effects`' value parser ([`options::parse_effects`]).
+fn effects_value(list: &str) -> Result<EffectList, options::OptionError> {
+    options::parse_effects(list).map(EffectList)
+}
+
+/// `--candidates`' value parser ([`options::parse_candidates`]).
+pub fn candidate_list(list: &str) -> Result<EffectList, options::OptionError> {
+    options::parse_candidates(list).map(EffectList)
 }
 
 impl EffectsArg {
+    /// The effects given (`None`: the description's).
+    pub fn given(&self) -> Option<Vec<Effect>> {
+        self.effects.as_ref().map(|l| l.0.clone())
+    }
+
     /// The effects: the command line's, else the description's.
     pub fn resolve(&self, robot: &Robot) -> anyhow::Result<Vec<Effect>> {
-        resolve_effects(self.effects.as_deref(), robot)
+        resolve_effects(self.given().as_deref(), robot)
     }
 }
 
@@ -147,8 +168,8 @@ pub struct FitArgs {
     /// reading (where the loss departs from the square; e.g. 3 x the noise), or none (least
     /// squares, the default). Readings more than 5 robust standard deviations off are
     /// flagged in report.md and calibration.json either way.
-    #[arg(long, value_name = "LOSS:K")]
-    pub robust: Option<String>,
+    #[arg(long, value_name = "LOSS:K", value_parser = options::parse_loss)]
+    pub robust: Option<crate::lm::Loss>,
     /// Fit the gross outliers too. By default a least-squares fit sets the observations more
     /// than 10 robust standard deviations off (per kind of observation) aside, continues
     /// without them and lists them under "Outliers" (one glitch in a log never drags the
@@ -188,12 +209,12 @@ pub struct FitArgs {
     /// is held near nominal and named in the report (a maximum a posteriori fit; see
     /// docs/estimation.md). Default: `[calibration.tolerances]` of the description, else
     /// cpm-calib's defaults scaled to the machine.
-    #[arg(long = "tolerance", value_name = "GROUP=VALUE")]
-    pub tolerance: Vec<String>,
+    #[arg(long = "tolerance", value_name = "GROUP=VALUE", value_parser = options::parse_tolerance)]
+    pub tolerance: Vec<Tolerance>,
     /// Groups of parameters held at nominal and not fitted (comma-separated group names,
     /// e.g. `installation_errors` to fit only the effects). Default: `[calibration] hold`.
     #[arg(long, value_delimiter = ',', value_name = "GROUP")]
-    pub hold: Vec<String>,
+    pub hold: Vec<Group>,
     /// No prior: the plain least-squares fit in every direction the data see at all (the fit
     /// may then run off along directions the noise hides).
     #[arg(long)]
@@ -217,11 +238,11 @@ impl FitArgs {
         FitOptions {
             robot: self.robot.robot.clone(),
             data: self.data.clone(),
-            effects: self.effects.effects.clone(),
+            effects: self.effects.given(),
             sigma_um: self.sigma_um,
             pose_sigma_um: self.pose_sigma_um,
             orientation_sigma_urad: self.orientation_sigma_urad,
-            robust: self.robust.clone(),
+            robust: self.robust,
             keep_outliers: self.keep_outliers,
             max_iterations: self.max_iterations,
             out: self.out.clone(),

@@ -40,11 +40,11 @@ pub struct IdentifiabilityArgs {
     /// A-priori tolerance of a group, GROUP=VALUE in its unit (as for `cpm calibrate`);
     /// repeatable. With the noise, says which directions a fit would determine and which it
     /// would hold near nominal (docs/estimation.md).
-    #[arg(long = "tolerance", value_name = "GROUP=VALUE")]
-    pub tolerance: Vec<String>,
+    #[arg(long = "tolerance", value_name = "GROUP=VALUE", value_parser = cpm_workflow::options::parse_tolerance)]
+    pub tolerance: Vec<cpm_workflow::options::Tolerance>,
     /// Groups held at nominal (comma-separated), as for `cpm calibrate`.
     #[arg(long, value_delimiter = ',', value_name = "GROUP")]
-    pub hold: Vec<String>,
+    pub hold: Vec<cpm_workflow::options::Group>,
 }
 
 impl IdentifiabilityArgs {
@@ -54,7 +54,7 @@ impl IdentifiabilityArgs {
             robot: self.robot.robot.clone(),
             data: self.data.clone(),
             plan: self.plan.options(),
-            effects: self.effects.effects.clone(),
+            effects: self.effects.given(),
             sigma_um: self.sigma_um,
             rank_rtol: self.rank_rtol,
             tolerance: self.tolerance.clone(),

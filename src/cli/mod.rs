@@ -207,6 +207,12 @@ where
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
+            // A value the workflow's parsers refuse (`--robust pink:3`) says so in their
+            // words, as the job would: `error: --robust "pink:3": unknown loss ...`.
+            if let Some(refused) = option_error(&e) {
+                eprintln!("error: {refused}");
+                return ExitKind::Usage as i32;
+            }
             let _ = e.print();
             return e.exit_code();
         }
@@ -244,6 +250,15 @@ where
             exit_kind(&e) as i32
         }
     }
+}
+
+/// The workflow's refusal of an option's value ([`cpm_workflow::options`]) behind a clap
+/// error, if that is what it is.
+fn option_error(e: &clap::Error) -> Option<&cpm_workflow::options::OptionError> {
+    if e.kind() != clap::error::ErrorKind::ValueValidation {
+        return None;
+    }
+    std::error::Error::source(e)?.downcast_ref()
 }
 
 /// Whether descriptor 1 was open when the process started, as recorded by

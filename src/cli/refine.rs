@@ -18,8 +18,8 @@ pub struct RefineArgs {
     #[command(flatten)]
     pub fit: FitArgs,
     /// Candidate effects, comma-separated (default: the whole library).
-    #[arg(long, value_name = "LIST")]
-    pub candidates: Option<String>,
+    #[arg(long, value_name = "LIST", value_parser = common::candidate_list)]
+    pub candidates: Option<common::EffectList>,
     /// Most effects added.
     #[arg(long, value_name = "N", default_value_t = 4)]
     pub max_steps: usize,
@@ -40,7 +40,7 @@ impl RefineArgs {
     pub fn options(&self) -> RefineOptions {
         RefineOptions {
             fit: self.fit.options(),
-            candidates: self.candidates.clone(),
+            candidates: self.candidates.as_ref().map(|l| l.0.clone()),
             max_steps: self.max_steps,
             alpha: self.alpha,
             folds: self.folds,

@@ -79,7 +79,7 @@ impl SimulateArgs {
             truth: self.truth.clone(),
             paper_table2: self.paper_table2,
             truth_effect: self.truth_effect.clone(),
-            effects: self.effects.effects.clone(),
+            effects: self.effects.given(),
             noise: self.noise.clone(),
             orientation_noise_urad: self.orientation_noise_urad,
             tracker_frame: self.tracker_frame.clone(),

@@ -5,8 +5,10 @@
 //! become the job's options struct ([`by_name`]): every option of a command is a field of its
 //! options under the same name (`--sigma-um` is `sigma_um`; `tests/workflow.rs` checks that
 //! fields and defaults are the command's), so a Python call takes exactly the command's
-//! options with the command's defaults. Unknown options and values of the wrong type are
-//! usage errors naming the option.
+//! options with the command's defaults. The typed values are parsed there, once, by
+//! [`cpm_workflow::options`] (`{"effects": ["link_offset"]}`, `{"robust": "huber:1.5"}`,
+//! `{"tolerance": [{"group": "link_scale", "value": 2000}]}`). Unknown options and values of
+//! the wrong type are usage errors naming the option.
 //!
 //! [`calibrate_memory`] runs the fit on a campaign in memory ([`cpm_workflow::memory`]) and
 //! hands back the calibration itself: estimates, standard deviations, the Cramér-Rao
@@ -55,9 +57,16 @@ pub fn by_name<T: Serialize + DeserializeOwned>(
         let mut one = base.clone();
         one.insert(key.clone(), value.clone());
         if let Err(e) = serde_json::from_value::<T>(Value::Object(one)) {
+            // A value the workflow's parsers refuse (cpm_workflow::options) is told in the
+            // command's words, which name the option: `--robust "pink:3": unknown loss ...`.
+            let e = e.to_string();
             return Err(crate::errors::usage(
                 py,
-                format!("invalid value {value} for '{flag}' ({key}): {e}"),
+                if e.starts_with(&flag) {
+                    e
+                } else {
+                    format!("invalid value {value} for '{flag}' ({key}): {e}")
+                },
             ));
         }
         all.insert(key, value);

@@ -1,12 +1,13 @@
 //! Errors of the jobs and the exit code each gives: a job returns `anyhow::Error`s whose
-//! chain holds a typed cause ([`JobError`], [`Cancelled`], cpm-io's [`ReadError`] and
-//! [`InputError`], cpm-calib's [`CalibError`], [`OutputError`], I/O); [`exit_kind`] reads the
-//! first cause that says what kind of failure it is.
+//! chain holds a typed cause ([`JobError`], [`OptionError`], [`Cancelled`], cpm-io's
+//! [`ReadError`] and [`InputError`], cpm-calib's [`CalibError`], [`OutputError`], I/O);
+//! [`exit_kind`] reads the first cause that says what kind of failure it is.
 //!
 //! [`ReadError`]: crate::io::ReadError
 //! [`InputError`]: crate::io::InputError
 //! [`CalibError`]: crate::calib::CalibError
 //! [`OutputError`]: crate::output::OutputError
+//! [`OptionError`]: crate::options::OptionError
 
 /// Exit codes of `cpm` (`docs/cli.md`), and the kinds of failure of a job.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -73,6 +74,9 @@ pub fn exit_kind(err: &anyhow::Error) -> ExitKind {
     for cause in err.chain() {
         if let Some(c) = cause.downcast_ref::<JobError>() {
             return c.kind;
+        }
+        if cause.is::<crate::options::OptionError>() {
+            return ExitKind::Usage;
         }
         if cause.is::<Cancelled>() {
             return ExitKind::Trouble;

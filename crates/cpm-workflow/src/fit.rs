@@ -4,10 +4,12 @@
 //! `calibrated.toml` checked by reading it back), and [`calibrate`], the whole job.
 use std::path::{Path, PathBuf};
 
+use crate::calib::Effect;
 use crate::calib::{Calibration, Campaign, IdentifyOptions, MeasurementModel};
 use crate::error::{trouble, usage_error};
 use crate::ingest::RegistrationOptions;
 use crate::io::{self, Merged, Provenance, Robot};
+use crate::options::{Group, Tolerance};
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
 use crate::report::calibrate::{CalibrateReport, CalibratedFile};
@@ -16,6 +18,7 @@ pub use crate::report::fit::{
 };
 use crate::report::fit::{FitInputs, FitReport};
 pub use crate::report::residuals::residuals_csv;
+use cpm_lm::Loss;
 
 /// Whether each kind of observation is weighed by the noise its own residual shows
 /// (`--noise-per-kind`).
@@ -53,9 +56,11 @@ pub struct FitOptions {
     pub robot: PathBuf,
     /// Measurement files (length readings or tracker poses, docs/formats.md), in order.
     pub data: Vec<PathBuf>,
-    /// Effects to model beside the installation errors, comma-separated (`none` for none);
-    /// default `None`: `[calibration] effects` of the description.
-    pub effects: Option<String>,
+    /// Effects to model beside the installation errors (`Some(vec![])` for none; by name:
+    /// a list, or `--effects`' text, [`crate::options::parse_effects`]); default `None`:
+    /// `[calibration] effects` of the description.
+    #[serde(with = "crate::options::effects")]
+    pub effects: Option<Vec<Effect>>,
     /// Sensor noise standard deviation, um; default `None`: `[calibration]
     /// sensor_noise_um` of the description, else estimated from the residual.
     pub sigma_um: Option<f64>,
@@ -64,9 +69,10 @@ pub struct FitOptions {
     /// Tracker orientation and inclinometer angle noise, urad; default `None`: the
     /// description's, else cpm-calib's.
     pub orientation_sigma_urad: Option<f64>,
-    /// Robust loss, `huber:K`, `cauchy:K`, `tukey:K` (K in um) or `none`; default `None`
-    /// (least squares).
-    pub robust: Option<String>,
+    /// Robust loss (K in um; by name `huber:K`, `cauchy:K`, `tukey:K` or `none`,
+    /// [`crate::options::parse_loss`]); default `None` (least squares).
+    #[serde(with = "crate::options::robust")]
+    pub robust: Option<Loss>,
     /// Fit gross outliers too instead of setting them aside; default false.
     pub keep_outliers: bool,
     /// Most solver iterations per fit; default `None` (cpm-lm's 1000).
@@ -76,11 +82,12 @@ pub struct FitOptions {
     pub out: PathBuf,
     /// Noise per kind of observation; default [`NoisePerKind::Auto`].
     pub noise_per_kind: NoisePerKind,
-    /// A-priori tolerances, `GROUP=VALUE` in the group's unit; default none (the
-    /// description's, else cpm-calib's defaults).
-    pub tolerance: Vec<String>,
-    /// Groups held at nominal; default none (`[calibration] hold`).
-    pub hold: Vec<String>,
+    /// A-priori tolerances, each in its group's unit (by name `GROUP=VALUE`,
+    /// [`crate::options::parse_tolerance`]); default none (the description's, else
+    /// cpm-calib's defaults).
+    pub tolerance: Vec<Tolerance>,
+    /// Groups held at nominal, on top of the description's `[calibration] hold`; default none.
+    pub hold: Vec<Group>,
     /// No prior (plain least squares in every direction the data see); default false.
     pub no_prior: bool,
     /// Tolerances an undetermined parameter may reach before it is held there
@@ -120,7 +127,7 @@ impl FitOptions {
         crate::load::check_out_dir(&self.out)?;
         solver_options(
             &mut IdentifyOptions::default(),
-            self.robust.as_deref(),
+            self.robust.as_ref(),
             self.max_iterations,
         )?;
         if let Some(s) = self.sigma_um.filter(|s| !(s.is_finite() && *s > 0.0)) {
@@ -164,7 +171,7 @@ impl FitOptions {
     pub fn prepare(&self, mut inputs: Inputs, progress: &dyn Progress) -> anyhow::Result<Inputs> {
         solver_options(
             &mut inputs.identify,
-            self.robust.as_deref(),
+            self.robust.as_ref(),
             self.max_iterations,
         )?;
         inputs.identify.keep_outliers = self.keep_outliers;
@@ -411,35 +418,24 @@ pub(crate) fn load_inputs_with(
     })
 }
 
-/// The tolerances of a description's `[calibration]`, then `--tolerance GROUP=VALUE` and
-/// `--hold GROUP` options on top, and `--no-prior`.
+/// The tolerances of a description's `[calibration]`, then the `--tolerance` and `--hold`
+/// options on top, and `--no-prior`.
 pub fn tolerances_of(
     robot: &Robot,
-    tolerance: &[String],
-    hold: &[String],
+    tolerance: &[Tolerance],
+    hold: &[Group],
     no_prior: bool,
 ) -> anyhow::Result<crate::calib::Tolerances> {
     let mut t = robot
         .tolerances()
         .map_err(|e| anyhow::Error::new(crate::io::ReadError::from(e)))?;
-    for spec in tolerance {
-        let (group, value) = spec.split_once('=').ok_or_else(|| {
-            usage_error(format!(
-                "--tolerance {spec:?}: expected GROUP=VALUE, e.g. installation_errors=2000"
-            ))
-        })?;
-        let v: f64 = match value.trim() {
-            "inf" | "infinity" => f64::INFINITY,
-            x => x
-                .parse()
-                .map_err(|_| usage_error(format!("--tolerance {spec:?}: {x:?} is not a number")))?,
-        };
-        t.set(group.trim(), v)
-            .map_err(|e| usage_error(format!("--tolerance {spec:?}: {e}")))?;
+    for given in tolerance {
+        t.set(given.group.as_str(), given.value)
+            .map_err(|e| usage_error(format!("--tolerance {:?}: {e}", given.to_string())))?;
     }
     for h in hold {
-        if !t.hold.contains(h) {
-            t.hold.push(h.clone());
+        if !t.hold.iter().any(|g| g == h.as_str()) {
+            t.hold.push(h.0.clone());
         }
     }
     t.off = no_prior;
@@ -840,12 +836,12 @@ pub fn reproduces(fit: f64, file: f64) -> bool {
 /// Sets the solver options of `--robust` and `--max-iterations` (usage errors when bad).
 pub fn solver_options(
     identify: &mut IdentifyOptions,
-    robust: Option<&str>,
+    robust: Option<&Loss>,
     max_iterations: Option<usize>,
 ) -> anyhow::Result<()> {
-    if let Some(spec) = robust {
-        identify.lm.loss =
-            crate::load::parse_loss(spec).map_err(|m| usage_error(format!("--robust {m}")))?;
+    if let Some(loss) = robust {
+        crate::options::check_loss(loss)?;
+        identify.lm.loss = *loss;
     }
     if let Some(n) = max_iterations {
         if n == 0 {

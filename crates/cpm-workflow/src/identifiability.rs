@@ -36,20 +36,23 @@ pub struct IdentifiabilityOptions {
     /// source ([`PlanOptions::default`]).
     #[serde(flatten)]
     pub plan: PlanOptions,
-    /// The effects modelled beside the installation errors, comma-separated (`none` for
-    /// none); default `None`: the description's `[calibration] effects`.
-    pub effects: Option<String>,
+    /// The effects modelled beside the installation errors (`Some(vec![])` for none; by
+    /// name: a list, or `--effects`' text); default `None`: the description's
+    /// `[calibration] effects`.
+    #[serde(with = "crate::options::effects")]
+    pub effects: Option<Vec<crate::calib::Effect>>,
     /// Noise standard deviation for the Cramér-Rao bounds, um; default `None`: the
     /// description's `[calibration] sensor_noise_um`, else 1 (bounds per um of noise).
     pub sigma_um: Option<f64>,
     /// Relative rank threshold, in (0, 1): singular values below it times the largest count as
     /// zero; default 1e-4.
     pub rank_rtol: f64,
-    /// A-priori tolerances, `GROUP=VALUE` in the group's unit; default empty: the
-    /// description's, else cpm-calib's.
-    pub tolerance: Vec<String>,
-    /// Groups held at nominal; default empty: the description's `[calibration] hold`.
-    pub hold: Vec<String>,
+    /// A-priori tolerances, each in its group's unit (by name `GROUP=VALUE`); default empty:
+    /// the description's, else cpm-calib's.
+    pub tolerance: Vec<crate::options::Tolerance>,
+    /// Groups held at nominal, on top of the description's `[calibration] hold`; default
+    /// empty.
+    pub hold: Vec<crate::options::Group>,
 }
 
 impl IdentifiabilityOptions {

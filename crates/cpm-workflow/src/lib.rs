@@ -24,6 +24,8 @@
 //! - [`compensate`]: [`compensate`](compensate::compensate), the commands for target poses;
 //! - [`simulate`]: [`simulate`](simulate::simulate) a measurement campaign with
 //!   [`SimulateOptions`](simulate::SimulateOptions);
+//! - [`options`]: the typed values of the options given as text (effects, robust loss,
+//!   tolerances, held groups), parsed once for clap and for options by name;
 //! - [`progress`]: the [`Progress`] trait (stages, notes, cancellation);
 //! - [`error`]: the kinds of failure and the exit code each gives;
 //! - [`output`]: outputs that never destroy (staged sets committed as one step).
@@ -81,6 +83,7 @@ pub mod identifiability;
 pub mod ingest;
 pub mod load;
 pub mod memory;
+pub mod options;
 pub mod output;
 pub mod plan;
 pub mod progress;

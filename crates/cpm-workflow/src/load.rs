@@ -12,13 +12,11 @@ use crate::ingest::RegistrationOptions;
 use crate::io::{self, merge, Merged, ReadOptions, Robot};
 use crate::progress::Progress;
 
-/// The effects modelled beside the installation errors: `list` (comma-separated names,
-/// `none` or empty for none; a usage error naming `--effects` when unknown), else the
-/// description's `[calibration] effects`.
-pub fn resolve_effects(list: Option<&str>, robot: &Robot) -> anyhow::Result<Vec<Effect>> {
-    match list.map(str::trim) {
-        Some("none") | Some("") => Ok(Vec::new()),
-        Some(list) => io::parse_effects(list).map_err(|m| usage_error(format!("--effects: {m}"))),
+/// The effects modelled beside the installation errors: the options' (`Some`, parsed at the
+/// edge: [`crate::options::parse_effects`]), else the description's `[calibration] effects`.
+pub fn resolve_effects(given: Option<&[Effect]>, robot: &Robot) -> anyhow::Result<Vec<Effect>> {
+    match given {
+        Some(effects) => Ok(effects.to_vec()),
         None => Ok(robot.declared_effects()?),
     }
 }
@@ -143,31 +141,6 @@ pub fn locate(err: CalibError, merged: &Merged) -> anyhow::Error {
     match error_pose(&err).and_then(|p| merged.pose_location(p)) {
         Some(loc) => anyhow::Error::new(err).context(loc),
         None => anyhow::Error::new(err),
-    }
-}
-
-/// A robust loss from `huber:K`, `cauchy:K`, `tukey:K` (K in um of reading, > 0) or `none`.
-pub fn parse_loss(spec: &str) -> Result<cpm_lm::Loss, String> {
-    let spec = spec.trim();
-    if spec == "none" || spec == "squared" {
-        return Ok(cpm_lm::Loss::Squared);
-    }
-    let (kind, value) = spec.split_once(':').ok_or_else(|| {
-        format!("{spec:?}: expected huber:K, cauchy:K or tukey:K (K in um, > 0) or none")
-    })?;
-    let k: f64 = value
-        .trim()
-        .parse()
-        .ok()
-        .filter(|v: &f64| v.is_finite() && *v > 0.0)
-        .ok_or_else(|| format!("{spec:?}: K = {value:?} must be a number of um > 0"))?;
-    match kind.trim() {
-        "huber" => Ok(cpm_lm::Loss::Huber(k)),
-        "cauchy" => Ok(cpm_lm::Loss::Cauchy(k)),
-        "tukey" => Ok(cpm_lm::Loss::Tukey(k)),
-        other => Err(format!(
-            "{spec:?}: unknown loss {other:?} (huber, cauchy, tukey, none)"
-        )),
     }
 }
 

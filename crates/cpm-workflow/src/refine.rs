@@ -5,7 +5,6 @@
 use crate::calib::{Effect, RefineOptions as CalibRefineOptions};
 use crate::error::{input_error, trouble, usage_error};
 use crate::fit::{provenance_lines, stage_calibrated, stage_figures, FitOptions, Inputs};
-use crate::io::parse_effects;
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
 use crate::report::calibrate::CalibratedFile;
@@ -18,9 +17,10 @@ pub struct RefineOptions {
     /// Robot, data, effects, noise, solver and output directory: as for calibrate.
     #[serde(flatten)]
     pub fit: FitOptions,
-    /// Candidate effects, comma-separated; default `None`: every effect of the library that
-    /// can act on the data.
-    pub candidates: Option<String>,
+    /// Candidate effects (by name: a list, or `--candidates`' text); default `None`: every
+    /// effect of the library that can act on the data.
+    #[serde(with = "crate::options::candidates")]
+    pub candidates: Option<Vec<Effect>>,
     /// Most effects added; default 4.
     pub max_steps: usize,
     /// Significance level of the F-test (before the Bonferroni correction); default 0.01.
@@ -131,10 +131,7 @@ fn refine_job(
     let campaign = &inputs.merged.campaign;
     // The library's effects that can act on these data (an explicit list is taken as given).
     let (candidates, not_applicable) = match &args.candidates {
-        Some(list) => (
-            parse_effects(list).map_err(|m| usage_error(format!("--candidates: {m}")))?,
-            Vec::new(),
-        ),
+        Some(list) => (list.clone(), Vec::new()),
         None => applicable(campaign),
     };
     // No hidden load: without a declared [load], the effects whose direction the link

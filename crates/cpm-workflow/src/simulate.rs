@@ -77,9 +77,10 @@ pub struct SimulateOptions {
     /// True values of effects, `EFFECT=V1,V2,..` in the effect's unit, one per parameter;
     /// default empty.
     pub truth_effect: Vec<String>,
-    /// The effects modelled, comma-separated (`none` for none); default `None`: the
-    /// description's `[calibration] effects`.
-    pub effects: Option<String>,
+    /// The effects modelled (`Some(vec![])` for none; by name: a list, or `--effects`'
+    /// text); default `None`: the description's `[calibration] effects`.
+    #[serde(with = "crate::options::effects")]
+    pub effects: Option<Vec<Effect>>,
     /// The noise: `none`, `uniform:HALF_WIDTH_UM` or `gaussian:SIGMA_UM` (urad for
     /// [`Measure::Tilts`]); default `None`: gaussian with the description's
     /// `[calibration] sensor_noise_um`, else none.
