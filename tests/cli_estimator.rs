@@ -3,7 +3,7 @@
 #[path = "common/cli.rs"]
 mod cli;
 
-use cli::{calibrate_json, example, scratch};
+use cli::{calibrate_json, cpm, example, scratch};
 use std::path::Path;
 
 /// Every number (null: NaN) under `value`, depth first.
@@ -51,5 +51,41 @@ fn a_huge_finite_tolerance_is_the_same_as_inf() {
                 "{value}: {a} against inf's {b}"
             );
         }
+    }
+}
+
+/// Conflicting options are refused, exit 2, naming both (item 12: `--no-prior --tolerance
+/// installation_errors=5` gave exit 0 and ignored the tolerance), and nothing is written.
+#[test]
+fn no_prior_with_a_tolerance_is_refused() {
+    let dir = scratch("estimator", "no-prior-tolerance");
+    let (robot, data) = (
+        example("hexapod_66.toml"),
+        example("hexapod_66_readings.csv"),
+    );
+    let out = dir.join("never");
+    for extra in [
+        ["--tolerance", "installation_errors=5"],
+        ["--tolerance-limit", "2"],
+    ] {
+        let mut args = vec![
+            "calibrate",
+            "--robot",
+            &robot,
+            "--data",
+            &data,
+            "--no-prior",
+        ];
+        args.extend(extra);
+        let o_s = out.display().to_string();
+        args.extend(["--out", &o_s]);
+        let o = cpm(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{err}");
+        assert!(
+            err.contains(&format!("--no-prior conflicts with {}", extra[0])),
+            "{err}"
+        );
+        assert!(!out.exists());
     }
 }

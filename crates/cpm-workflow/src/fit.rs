@@ -146,6 +146,21 @@ impl FitOptions {
                 "--tolerance-limit must be > 0 (a number of tolerances; inf for no limit), got {l}"
             )));
         }
+        // A prior switched off has no tolerances to take: say so rather than ignore them.
+        if self.no_prior {
+            let given = if !self.tolerance.is_empty() {
+                Some("--tolerance")
+            } else if self.tolerance_limit.is_some() {
+                Some("--tolerance-limit")
+            } else {
+                None
+            };
+            if let Some(option) = given {
+                return Err(usage_error(format!(
+                    "--no-prior conflicts with {option}: without a prior no tolerance is used (give one or the other; --hold keeps a group at nominal in either)"
+                )));
+            }
+        }
         Ok(())
     }
     /// The tolerances of the fit: the description's, then the options'.
