@@ -51,3 +51,30 @@ fn identifiability_bounds_carry_their_units_and_never_mix_them() {
         "{mixed}"
     );
 }
+
+/// The fold scheme of the tracker residuals' choice is said in words (it printed "Blocks").
+#[test]
+fn the_fold_scheme_is_said_in_words() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/jugglebot");
+    let dir = cli::scratch("outputs", "folds");
+    let o = cli::cpm(&[
+        "calibrate",
+        "--robot",
+        &cli::p(&root.join("robot.toml")),
+        "--data",
+        &cli::p(&root.join("session_108.csv")),
+        "--out",
+        &cli::p(&dir.join("cal")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let line = err
+        .lines()
+        .find(|l| l.contains("tracker residuals:"))
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!(
+        line.contains("cross-validated, contiguous blocks in acquisition order:"),
+        "{line}"
+    );
+    assert!(!line.contains("Blocks"), "{line}");
+}

@@ -247,7 +247,7 @@ impl FitOptions {
             if let Some(c) = choice {
                 inputs.identify.leg_space = c.leg_space;
                 progress.note(&format!(
-                    "tracker residuals: {} (cross-validated over {:?} folds: pose residuals {:.3}, leg residuals {:.3}, weighted RMS in um of the reference; --tracker-residuals chooses)",
+                    "tracker residuals: {} (cross-validated, {}: pose residuals {:.3}, leg residuals {:.3}, weighted RMS in um of the reference; --tracker-residuals chooses)",
                     if c.leg_space { "legs" } else { "pose" },
                     c.folds,
                     c.pose_cv_rms,

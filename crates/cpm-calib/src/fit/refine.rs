@@ -452,6 +452,18 @@ pub enum FoldKind {
     Blocks,
 }
 
+/// The fold scheme in words, for reports: `one fold per session (file)`,
+/// `leave-position-out folds` or `contiguous blocks in acquisition order`.
+impl std::fmt::Display for FoldKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            FoldKind::Sessions => "one fold per session (file)",
+            FoldKind::Positions => "leave-position-out folds (whole commanded positions left out)",
+            FoldKind::Blocks => "contiguous blocks in acquisition order",
+        })
+    }
+}
+
 /// The folds of a cross-validation: their kind, count and each pose's fold.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Folds {
