@@ -1920,6 +1920,44 @@ impl Merged {
         })
     }
 
+    /// Residuals in observation order with tracker positions, orientations and point
+    /// coordinates turned into the tracker's own axes (borrowed as they are when nothing
+    /// turns): what `residuals.csv` and the outlier table give.
+    pub fn in_tracker_axes<'a>(&self, residuals: &'a [f64]) -> std::borrow::Cow<'a, [f64]> {
+        let merged = self;
+        let c = &merged.campaign;
+        if c.pose_measurements.is_empty() && c.point_measurements.is_empty() {
+            return std::borrow::Cow::Borrowed(residuals);
+        }
+        let mut residuals = residuals.to_vec();
+        let mut to_tracker = |rows: &[Option<usize>], file: &str| {
+            let Some(r) = merged.tracker_axes(file) else {
+                return;
+            };
+            if let [Some(a), Some(b), Some(k)] = *rows {
+                let v = r * cpm_geometry::Vector3::new(residuals[a], residuals[b], residuals[k]);
+                (residuals[a], residuals[b], residuals[k]) = (v.x, v.y, v.z);
+            }
+        };
+        for (q, rows) in c.pose_observation_rows().iter().enumerate() {
+            let pose = c.pose_measurements[q].pose;
+            let Some((file, ..)) = merged.pose_origin.get(pose) else {
+                continue;
+            };
+            to_tracker(&rows[..3], file);
+            to_tracker(&rows[3..], file);
+        }
+        let p0 = c.first_point_observation();
+        for (q, pm) in c.point_measurements.iter().enumerate() {
+            let Some((file, ..)) = merged.pose_origin.get(pm.pose) else {
+                continue;
+            };
+            let o = p0 + 3 * q;
+            to_tracker(&[Some(o), Some(o + 1), Some(o + 2)], file);
+        }
+        std::borrow::Cow::Owned(residuals)
+    }
+
     /// The merged data without campaign pose `pose` and every observation taken at it, the
     /// poses after it renumbered: the campaign ([`Campaign::without_poses`]) and the origins
     /// of what is left stay aligned (each remaining pose keeps its file, line and label).

@@ -4,7 +4,6 @@
 //! The rows are written one after the other into any writer ([`write_residual_rows`]): the
 //! texts of an observation (file, line, what) exist only while its row is written, in
 //! buffers reused from row to row; the residuals stay numbers until then.
-use std::borrow::Cow;
 
 use cpm_io::{Merged, Robot};
 
@@ -38,7 +37,7 @@ pub fn write_residual_rows<W: std::io::Write>(
     first: usize,
 ) -> std::io::Result<()> {
     use rayon::prelude::*;
-    let residuals = in_tracker_axes(merged, residuals);
+    let residuals = merged.in_tracker_axes(residuals);
     // Blocks of rows made in parallel, a batch of them at a time (so that at most two
     // batches' text is held beside what `out` keeps), written in order: each batch is made
     // while the one before it is written (`out` may take its time: a file, fingerprinted as it
@@ -183,42 +182,6 @@ fn push_quoted(out: &mut String, s: &str) {
         out.push_str(part);
     }
     out.push('"');
-}
-
-/// The residuals with tracker positions, orientations and point coordinates turned into
-/// the tracker's own axes (borrowed as they are when nothing turns).
-pub(crate) fn in_tracker_axes<'a>(merged: &Merged, residuals: &'a [f64]) -> Cow<'a, [f64]> {
-    let c = &merged.campaign;
-    if c.pose_measurements.is_empty() && c.point_measurements.is_empty() {
-        return Cow::Borrowed(residuals);
-    }
-    let mut residuals = residuals.to_vec();
-    let mut to_tracker = |rows: &[Option<usize>], file: &str| {
-        let Some(r) = merged.tracker_axes(file) else {
-            return;
-        };
-        if let [Some(a), Some(b), Some(k)] = *rows {
-            let v = r * cpm_geometry::Vector3::new(residuals[a], residuals[b], residuals[k]);
-            (residuals[a], residuals[b], residuals[k]) = (v.x, v.y, v.z);
-        }
-    };
-    for (q, rows) in c.pose_observation_rows().iter().enumerate() {
-        let pose = c.pose_measurements[q].pose;
-        let Some((file, ..)) = merged.pose_origin.get(pose) else {
-            continue;
-        };
-        to_tracker(&rows[..3], file);
-        to_tracker(&rows[3..], file);
-    }
-    let p0 = c.first_point_observation();
-    for (q, pm) in c.point_measurements.iter().enumerate() {
-        let Some((file, ..)) = merged.pose_origin.get(pm.pose) else {
-            continue;
-        };
-        let o = p0 + 3 * q;
-        to_tracker(&[Some(o), Some(o + 1), Some(o + 2)], file);
-    }
-    Cow::Owned(residuals)
 }
 
 #[cfg(test)]

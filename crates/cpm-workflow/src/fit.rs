@@ -781,7 +781,7 @@ pub fn stage_calibrated(
     let text = io::calibrated_toml(&desc, &notes, &header).map_err(trouble)?;
     // The file must load back.
     // (The user effects the fit modelled are the reader's too: nothing global knows them.)
-    let user = user_effects_of(&inputs.robot, model);
+    let user = crate::load::user_effects_of(&inputs.robot, model);
     io::Robot::from_toml_among(&text, "calibrated.toml", &user).map_err(|e| {
         trouble(format!(
             "the calibrated description does not load back: {e}"
@@ -814,23 +814,6 @@ pub fn stage_calibrated(
     }
     set.add(dir.join("calibrated.toml"), text);
     Ok(notes)
-}
-
-/// The user effects a description written from `model` may name: the robot's own and those
-/// the model estimates or knows (a reader is given them; nothing global knows them).
-pub fn user_effects_of(robot: &Robot, model: &MeasurementModel) -> Vec<crate::calib::Effect> {
-    let mut out = robot.user_effects.clone();
-    let used = model
-        .effects
-        .iter()
-        .copied()
-        .chain(model.known_effects.iter().map(|k| k.effect));
-    for e in used.filter(|e| matches!(e, crate::calib::Effect::User(_))) {
-        if !out.contains(&e) {
-            out.push(e);
-        }
-    }
-    out
 }
 
 /// Whether the weighted residual RMS `file` of the fit's own data predicted from the

@@ -289,3 +289,20 @@ pub fn simulated(robot: &Robot) -> bool {
         .as_ref()
         .is_some_and(|c| c.simulated)
 }
+
+/// The user effects a description written from `model` may name: the robot's own and those
+/// the model estimates or knows (a reader is given them; nothing global knows them).
+pub fn user_effects_of(robot: &Robot, model: &MeasurementModel) -> Vec<Effect> {
+    let mut out = robot.user_effects.clone();
+    let used = model
+        .effects
+        .iter()
+        .copied()
+        .chain(model.known_effects.iter().map(|k| k.effect));
+    for e in used.filter(|e| matches!(e, Effect::User(_))) {
+        if !out.contains(&e) {
+            out.push(e);
+        }
+    }
+    out
+}

@@ -1232,7 +1232,7 @@ pub fn file_reproduces_fit(
     {
         return Ok(None);
     }
-    let user = crate::fit::user_effects_of(reference, model);
+    let user = crate::load::user_effects_of(reference, model);
     let robot = Robot::from_toml_among(text, "calibrated.toml", &user).map_err(|e| {
         trouble(format!(
             "the calibrated description does not load back: {e}"

@@ -543,7 +543,7 @@ fn outliers(inputs: &FitInputs<'_>, model: &MeasurementModel, cal: &Calibration)
             cal.sigma_ref_um,
             &cal.residuals_um,
         );
-        crate::residuals::in_tracker_axes(inputs.merged, &native).into_owned()
+        inputs.merged.in_tracker_axes(&native).into_owned()
     };
     cal.outliers
         .iter()
