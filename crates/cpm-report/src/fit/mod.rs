@@ -18,6 +18,11 @@ pub use crate::identifiability::{
 
 pub mod prior;
 mod words;
+/// For `skip_serializing_if`: a count of zero is left out.
+fn is_zero(n: &usize) -> bool {
+    *n == 0
+}
+
 #[cfg(test)]
 pub(crate) use words::write_reading_what;
 pub use words::{
@@ -1185,9 +1190,4 @@ mod tests {
             assert!(s.contains(want), "{want:?} not in\n{s}");
         }
     }
-}
-
-/// For `skip_serializing_if`: a count of zero is left out.
-fn is_zero(n: &usize) -> bool {
-    *n == 0
 }
