@@ -89,3 +89,36 @@ fn no_prior_with_a_tolerance_is_refused() {
         assert!(!out.exists());
     }
 }
+
+/// Every group held is a usage error naming it (item 6: exit 1, "the readings do not depend on
+/// any installation error", as if the data were at fault), and nothing is written.
+#[test]
+fn every_group_held_is_refused_as_such() {
+    let dir = scratch("estimator", "all-held");
+    let (robot, data) = (
+        example("hexapod_66.toml"),
+        example("hexapod_66_readings.csv"),
+    );
+    let out = dir.join("never");
+    let o_s = out.display().to_string();
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &data,
+        "--effects",
+        "link_offset",
+        "--hold",
+        "installation_errors,link_offset",
+        "--out",
+        &o_s,
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("every group is held (installation_errors, link_offset)"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}

@@ -251,6 +251,15 @@ pub fn prior_std(
             ));
         }
     }
+    if !names.is_empty() && names.iter().all(|n| tolerances.hold.contains(n)) {
+        return Err(CalibError::invalid(
+            "tolerances",
+            format!(
+                "every group is held ({}): nothing is left to fit; hold fewer",
+                names.join(", ")
+            ),
+        ));
+    }
     let mut out = vec![f64::INFINITY; model.num_params()];
     for (b, name) in blocks.iter().zip(&names) {
         let t = if tolerances.hold.contains(name) {
