@@ -146,7 +146,7 @@ pub struct FitArgs {
     /// The robot description.
     #[command(flatten)]
     pub robot: RobotArg,
-    /// Measurement files (length readings or tracker poses, docs/formats.md); repeatable.
+    /// Measurement files (length readings, tracker poses, reflector points or inclinometer angles; docs/formats.md); repeatable.
     #[arg(long, value_name = "DATA.csv", required = true)]
     pub data: Vec<PathBuf>,
     /// The effects modelled.

@@ -142,12 +142,13 @@ fn round_trip_with_every_section() {
     assert!(back.lengths_from_readings(&[0.0; 5]).is_err());
 
     // Through a file too.
-    let dir = std::env::temp_dir().join(format!("cpm-geometry-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("robot.toml");
+    let dir = tempfile::Builder::new()
+        .prefix("cpm-geometry-test-")
+        .tempdir()
+        .unwrap();
+    let path = dir.path().join("robot.toml");
     d.save(&path).unwrap();
     assert_eq!(RobotDescription::load(&path).unwrap(), d);
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]

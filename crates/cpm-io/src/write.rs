@@ -412,11 +412,12 @@ impl OutputSet {
 mod tests {
     use super::*;
 
-    fn scratch(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("cpm-output-{name}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).unwrap();
-        d
+    /// A scratch folder, removed when dropped (even when the test fails).
+    fn scratch(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("cpm-output-{name}-"))
+            .tempdir()
+            .unwrap()
     }
 
     fn listing(d: &Path) -> Vec<String> {
@@ -430,7 +431,8 @@ mod tests {
 
     #[test]
     fn a_failed_rename_puts_every_earlier_file_back() {
-        let d = scratch("rollback");
+        let scratch_dir = scratch("rollback");
+        let d = scratch_dir.path();
         std::fs::write(d.join("a.txt"), "old a").unwrap();
         std::fs::write(d.join("b.txt"), "old b").unwrap();
         for fail_at in 0..3 {
@@ -454,7 +456,8 @@ mod tests {
 
     #[test]
     fn a_failure_while_staging_leaves_nothing() {
-        let d = scratch("staging");
+        let scratch_dir = scratch("staging");
+        let d = scratch_dir.path();
         std::fs::write(d.join("a.txt"), "old a").unwrap();
         std::fs::create_dir_all(d.join("b.txt")).unwrap(); // a directory in the way
         let mut set = OutputSet::new();
@@ -473,7 +476,8 @@ mod tests {
     /// writes of every size, streamed and as bytes.
     #[test]
     fn large_files_are_written_byte_for_byte() {
-        let d = scratch("direct");
+        let scratch_dir = scratch("direct");
+        let d = scratch_dir.path();
         for size in [
             0,
             1,
@@ -518,7 +522,8 @@ mod tests {
     /// the file again through the page cache, every byte once.
     #[test]
     fn a_refused_direct_write_falls_back_to_the_page_cache() {
-        let d = scratch("refused");
+        let scratch_dir = scratch("refused");
+        let d = scratch_dir.path();
         let path = d.join("f.bin");
         let Some(file) = open_direct(&path) else {
             return; // no direct I/O here: nothing to fall back from
@@ -539,7 +544,8 @@ mod tests {
     /// when asked for; only staged bytes are `contents`.
     #[test]
     fn a_streamed_file_is_written_as_produced() {
-        let d = scratch("streamed");
+        let scratch_dir = scratch("streamed");
+        let d = scratch_dir.path();
         let mut set = OutputSet::new();
         set.add(d.join("a.txt"), "bytes");
         set.add_streamed(

@@ -32,7 +32,8 @@ fn data_file(robot: &Robot, name: &str) -> PathBuf {
         &SimulationOptions::default(),
     )
     .expect("simulate");
-    let dir = std::env::temp_dir().join(format!("cpm-io-read-for-two-{}", std::process::id()));
+    // Under the target directory, not the system's temporary one (nothing is left there).
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("cpm-io-read-for-two");
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(name);
     std::fs::write(&path, write_readings(&data, robot, "test")).unwrap();

@@ -54,7 +54,7 @@ pub enum TrackerResiduals {
 pub struct FitOptions {
     /// The robot description (TOML, docs/robot-description.md).
     pub robot: PathBuf,
-    /// Measurement files (length readings or tracker poses, docs/formats.md), in order.
+    /// Measurement files (length readings, tracker poses, reflector points or inclinometer angles; docs/formats.md), in order.
     pub data: Vec<PathBuf>,
     /// Effects to model beside the installation errors (`Some(vec![])` for none; by name:
     /// a list, or `--effects`' text, [`crate::options::parse_effects`]); default `None`:
@@ -630,7 +630,16 @@ pub fn stage_figures(
     campaign: &Campaign,
     cal: &Calibration,
 ) -> anyhow::Result<Vec<&'static str>> {
-    let sensors: Vec<String> = robot.table.sensors.iter().map(|s| s.name.clone()).collect();
+    let names = crate::report::figures::fit::ResidualNames::new(
+        robot.table.sensors.iter().map(|s| s.name.clone()).collect(),
+        model,
+    );
+    // As residuals.csv: measured minus predicted, each kind in its own unit.
+    let native = crate::calib::noise::measured_minus_predicted(
+        campaign,
+        cal.sigma_ref_um,
+        &cal.residuals_um,
+    );
     let sim = if campaign.simulated {
         " (SIMULATED)"
     } else {
@@ -642,15 +651,15 @@ pub fn stage_figures(
         crate::report::figures::fit::residuals_vs_pose(
             &format!("Residual after the fit against pose{sim}"),
             campaign,
-            &sensors,
-            &cal.residuals_um,
+            &names,
+            &native,
         )?,
     );
     if let Some(svg) = crate::report::figures::fit::residuals_vs_time(
         &format!("Residual after the fit against time{sim}"),
         campaign,
-        &sensors,
-        &cal.residuals_um,
+        &names,
+        &native,
     ) {
         set.add(dir.join("residuals_time.svg"), svg?);
         files.push("residuals_time.svg");

@@ -11,7 +11,7 @@ use crate::calib::{Campaign, IdentifyOptions, MeasurementModel};
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum FormulationArg {
-    /// Implicit from [`IMPLICIT_FROM_READINGS`] readings when it applies, nested otherwise.
+    /// Implicit from 100000 readings (`IMPLICIT_FROM_READINGS`) when it applies, nested otherwise.
     #[default]
     Auto,
     /// Always nested.

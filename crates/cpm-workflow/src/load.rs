@@ -263,22 +263,35 @@ pub fn instruments_note(m: &MeasurementModel) -> String {
     let mut v = Vec::new();
     if m.point_sessions > 0 {
         v.push(format!(
-            "the {} targets' platform positions and a tracker frame per point session ({} sessions; target_position, point_frame)",
-            m.targets.len(),
-            m.point_sessions
+            "{} platform {} and a tracker frame per point session ({}; target_position, point_frame)",
+            counted(m.targets.len(), "the target's", "targets'"),
+            if m.targets.len() == 1 { "position" } else { "positions" },
+            counted(m.point_sessions, "session", "sessions")
         ));
     }
     if m.tilt_sessions > 0 {
         v.push(format!(
-            "the {} inclinometers' mount rotations and the base's tilt per inclinometer session ({} sessions; inclinometer_mount, base_tilt)",
-            m.inclinometers.len(),
-            m.tilt_sessions
+            "{} mount {} and the base's tilt per inclinometer session ({}; inclinometer_mount, base_tilt)",
+            counted(m.inclinometers.len(), "inclinometer's", "inclinometers'"),
+            if m.inclinometers.len() == 1 { "rotation" } else { "rotations" },
+            counted(m.tilt_sessions, "session", "sessions")
         ));
     }
     format!(
         "instruments: {} are estimated with the machine",
         v.join("; ")
     )
+}
+
+/// `n` and its noun, singular for one: "the target's" or "the 3 targets'" for a noun given
+/// with "the ", "1 session" or "3 sessions" otherwise.
+fn counted(n: usize, one: &str, many: &str) -> String {
+    match (n, one.strip_prefix("the ")) {
+        (1, Some(_)) => one.to_string(),
+        (_, Some(_)) => format!("the {n} {many}"),
+        (1, None) => format!("1 {one}"),
+        _ => format!("{n} {many}"),
+    }
 }
 
 /// True when the robot's calibration was fitted to simulated data (`[calibration] simulated`).
@@ -305,4 +318,24 @@ pub fn user_effects_of(robot: &Robot, model: &MeasurementModel) -> Vec<Effect> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::counted;
+
+    /// One is singular ("the 1 inclinometers' ... (1 sessions" read wrong).
+    #[test]
+    fn one_is_singular() {
+        assert_eq!(
+            counted(1, "the inclinometer's", "inclinometers'"),
+            "the inclinometer's"
+        );
+        assert_eq!(
+            counted(2, "the inclinometer's", "inclinometers'"),
+            "the 2 inclinometers'"
+        );
+        assert_eq!(counted(1, "session", "sessions"), "1 session");
+        assert_eq!(counted(3, "session", "sessions"), "3 sessions");
+    }
 }

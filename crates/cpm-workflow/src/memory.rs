@@ -219,9 +219,11 @@ mod tests {
     #[test]
     fn tracker_rows_and_file_give_the_same_fit() {
         let robot_path = ex("hexapod_66.toml");
-        let dir =
-            std::env::temp_dir().join(format!("cpm-memory-tracker-rows-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("cpm-memory-tracker-rows-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let mut o = crate::simulate::SimulateOptions::new(&robot_path);
         o.plan.random = Some(30);
         o.plan.seed = 7;
@@ -272,7 +274,6 @@ mod tests {
         assert_eq!(a.residuals_um, b.residuals_um);
         assert!(b.simulated);
         assert_eq!(from_rows.inputs.merged.campaign.pose_measurements.len(), 30);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     /// Two tracker sessions, each in a frame of its own, registered together whether read
@@ -281,9 +282,11 @@ mod tests {
     #[test]
     fn two_tracker_sets_in_memory_are_registered_together_as_files_are() {
         let robot_path = ex("hexapod_66.toml");
-        let dir =
-            std::env::temp_dir().join(format!("cpm-memory-two-trackers-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("cpm-memory-two-trackers-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         let mut paths = Vec::new();
         let mut sources = Vec::new();
         for (k, frame) in ["1200,-300,40,0.5,-0.3,30", "-800,900,-20,-0.4,0.2,-120"]
@@ -317,6 +320,5 @@ mod tests {
         let (a, b) = (&from_files.fitted.cal, &from_text.fitted.cal);
         assert_eq!(a.estimate_um, b.estimate_um);
         assert_eq!(a.residuals_um, b.residuals_um);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

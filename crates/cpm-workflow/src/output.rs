@@ -613,8 +613,11 @@ mod tests {
 
     #[test]
     fn fingerprints_made_aside_are_those_of_the_bytes_written() {
-        let dir = std::env::temp_dir().join(format!("cpm-fingerprint-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let scratch = tempfile::Builder::new()
+            .prefix("cpm-fingerprint-")
+            .tempdir()
+            .unwrap();
+        let dir = scratch.path();
         // Streamed across several hash chunks (aside; in the writer's pieces, 1 MiB by direct
         // I/O, row by row through the page cache), a large buffer not a whole number of
         // chunks (aside), a small one (in line), and nothing at all.
@@ -639,6 +642,5 @@ mod tests {
             assert_eq!(made, on_disk(&path), "{name}");
         }
         assert!(on_disk(&dir.join("streamed.csv")).0 > 2 * HASH_CHUNK);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -247,8 +247,26 @@ fn refine_job(
                 }
             ),
             campaign,
-            &r.initial_residuals_um,
-            &cal.residuals_um,
+            &crate::report::figures::fit::ResidualNames::new(
+                inputs
+                    .robot
+                    .table
+                    .sensors
+                    .iter()
+                    .map(|s| s.name.clone())
+                    .collect(),
+                &r.model,
+            ),
+            &crate::calib::noise::measured_minus_predicted(
+                campaign,
+                r.initial_sigma_ref_um,
+                &r.initial_residuals_um,
+            ),
+            &crate::calib::noise::measured_minus_predicted(
+                campaign,
+                cal.sigma_ref_um,
+                &cal.residuals_um,
+            ),
         )?,
     );
     figures.push("residuals_before_after.svg");

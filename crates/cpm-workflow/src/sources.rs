@@ -268,8 +268,8 @@ mod tests {
     }
 
     /// The targets of the example as values (named "targets in memory"), and their CSV
-    /// written to a file in `dir`.
-    fn targets(dir: &str) -> (Arc<PoseRows>, PathBuf) {
+    /// written to a file in a scratch folder named after `dir` (removed when dropped).
+    fn targets(dir: &str) -> (Arc<PoseRows>, tempfile::TempDir, PathBuf) {
         let list = io::read_pose_list_file(&ex("targets.csv")).unwrap();
         let poses = list
             .iter()
@@ -280,11 +280,13 @@ mod tests {
             .collect();
         let mut rows = PoseRows::new("targets in memory", poses);
         rows.pose_labels = list.iter().map(|r| r.label.clone()).collect();
-        let dir = std::env::temp_dir().join(format!("cpm-sources-{dir}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("targets.csv");
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("cpm-sources-{dir}-"))
+            .tempdir()
+            .unwrap();
+        let path = dir.path().join("targets.csv");
         std::fs::write(&path, rows.to_csv()).unwrap();
-        (Arc::new(rows), path)
+        (Arc::new(rows), dir, path)
     }
 
     fn held(poses: &Arc<PoseRows>) -> InMemory {
@@ -297,7 +299,7 @@ mod tests {
     /// Targets held in memory give the commands of their file (the file named by their name).
     #[test]
     fn compensation_targets_in_memory_are_their_file() {
-        let (rows, path) = targets("compensate");
+        let (rows, _dir, path) = targets("compensate");
         let robot = ex("hexapod_66_truth.toml");
         let file =
             compensate::compensate(&compensate::CompensateOptions::new(&robot, &path), &Silent)
@@ -326,7 +328,7 @@ mod tests {
     /// files do (named by their names).
     #[test]
     fn robots_held_in_memory_are_their_files() {
-        let (rows, path) = targets("truth");
+        let (rows, _dir, path) = targets("truth");
         let (robot, truth) = (ex("hexapod_66.toml"), ex("hexapod_66_truth.toml"));
         let mut options = simulate::SimulateOptions::new(&robot);
         options.plan.plan = Some(path.clone());
@@ -375,7 +377,7 @@ mod tests {
     /// A plan held in memory is simulated and analysed as its file is.
     #[test]
     fn a_plan_in_memory_is_its_file() {
-        let (rows, path) = targets("plan");
+        let (rows, _dir, path) = targets("plan");
         let robot = ex("hexapod_66.toml");
         let mut options = simulate::SimulateOptions::new(&robot);
         options.truth = Some(ex("hexapod_66_truth.toml"));

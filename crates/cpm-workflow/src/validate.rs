@@ -841,7 +841,7 @@ fn reference_path(
     let here = std::path::Path::new(&robot.file)
         .parent()
         .unwrap_or(std::path::Path::new(""));
-    match recorded.map(|p| here.join(p)) {
+    match recorded.map(|p| tidy(here.join(p))) {
         Some(p) if p.exists() => {
             reference_changed(robot, &p, progress);
             Ok(p)
@@ -856,6 +856,38 @@ fn reference_path(
             "--reference is required: {} does not record the description it was calibrated from",
             robot.file
         ))),
+    }
+}
+
+/// `path` as printed: [`lexically_normal`] when that is the same file (a symbolic link on the
+/// way keeps the path as joined).
+fn tidy(path: PathBuf) -> PathBuf {
+    let normal = lexically_normal(&path);
+    match (normal.canonicalize(), path.canonicalize()) {
+        (Ok(a), Ok(b)) if a == b => normal,
+        _ => path,
+    }
+}
+
+/// `path` with `a/..` pairs and `.` taken out as written, not through the file system
+/// (`out/../robot.toml` reads `robot.toml`); leading `..` stay.
+fn lexically_normal(path: &std::path::Path) -> PathBuf {
+    use std::path::Component;
+    let mut out: Vec<Component> = Vec::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            Component::ParentDir if matches!(out.last(), Some(Component::RootDir)) => {}
+            _ => out.push(c),
+        }
+    }
+    if out.is_empty() {
+        PathBuf::from(".")
+    } else {
+        out.iter().collect()
     }
 }
 
@@ -1292,6 +1324,20 @@ pub fn file_reproduces_fit(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Paths print as written, without `a/..` ("mocap_ref72/../mocap/robot.toml").
+    #[test]
+    fn paths_are_printed_normal() {
+        let n = |p: &str| super::lexically_normal(std::path::Path::new(p));
+        assert_eq!(
+            n("mocap_ref72/../mocap/robot.toml"),
+            PathBuf::from("mocap/robot.toml")
+        );
+        assert_eq!(n("./a/./b/../c"), PathBuf::from("a/c"));
+        assert_eq!(n("../a/b/../../c"), PathBuf::from("../c"));
+        assert_eq!(n("/../a"), PathBuf::from("/a"));
+        assert_eq!(n("a/.."), PathBuf::from("."));
+    }
 
     /// The read-back check predicts the fit's gauge readings from the campaign in memory as
     /// reading the files again does (the same errors, number for number), and a description

@@ -171,8 +171,13 @@ pub struct Refinement {
     /// Regressors the final residual still follows (no library effect explained them), and
     /// pose map terms it still follows (`pose map pose_map_y2`).
     pub unexplained_structure: Vec<String>,
-    /// Residuals of the first fit, um (for plots).
+    /// Residuals of the first fit, um (for plots): weighted as the first fit weighed them,
+    /// predicted minus measured ([`Calibration::residuals_um`]).
     pub initial_residuals_um: Vec<f64>,
+    /// The reference noise the first fit's residuals are weighted by, um
+    /// ([`Calibration::sigma_ref_um`]): [`crate::noise::measured_minus_predicted`] gives them in
+    /// their own units.
+    pub initial_sigma_ref_um: f64,
     /// The candidates of the last round when it added nothing (empty when the rounds ended
     /// otherwise): which were skipped as confounded with the model (novelty below
     /// [`RefineOptions::min_novelty`]) and which were not significant.
@@ -893,6 +898,7 @@ fn refine_effects(
         identify(&current, &reduced, &options.identify)?
     };
     let initial_residuals_um = first.residuals_um.clone();
+    let initial_sigma_ref_um = first.sigma_ref_um;
     let initial_diagnostics = rounds.diagnostics(&current, &cal)?;
     let mut diag = initial_diagnostics.clone();
     let mut cv_err = cross_validated_errors(
@@ -970,6 +976,7 @@ fn refine_effects(
         final_cv_rms_um: cv,
         unexplained_structure,
         initial_residuals_um,
+        initial_sigma_ref_um,
         last_round,
         outliers_before,
         outliers_explained,

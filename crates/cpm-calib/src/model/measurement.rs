@@ -527,7 +527,9 @@ impl MeasurementModel {
                 } else {
                     e.param_name(k, &sensors)
                 };
-                out.push(format!("{} {} [{}]", e.name(), name, e.unit()));
+                // Each parameter in its own unit (a frame's translation in um, its rotation
+                // in urad), never the group's list of units.
+                out.push(format!("{} {} [{}]", e.name(), name, e.param_unit(k)));
             }
         }
         out

@@ -2,143 +2,210 @@
 //! bars (SVG, plotters).
 use plotters::prelude::*;
 
-use cpm_calib::{Calibration, Campaign, MeasurementModel};
+use cpm_calib::{Calibration, Campaign, MeasurementModel, ObservationKind};
 
-use super::{err, scatter, PlotError};
+use super::{err, scatter_panels, Panel, PlotError};
 
-/// Residual series per sensor (and tracker) against `x(reading)`.
-fn residual_series(
-    campaign: &Campaign,
-    sensor_names: &[String],
-    residuals_um: &[f64],
-    x: impl Fn(usize) -> Option<f64>,
-    x_tracker: impl Fn(usize) -> Option<f64>,
-    x_point: impl Fn(usize) -> Option<f64>,
-) -> Vec<(String, Vec<(f64, f64)>)> {
-    let mut series: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    // Series index per sensor index (series in the order sensors first appear).
-    let mut slot: Vec<Option<usize>> = Vec::new();
-    for (k, r) in campaign.readings.iter().enumerate() {
-        let (Some(res), Some(xv)) = (residuals_um.get(k), x(k)) else {
-            continue;
-        };
-        if slot.len() <= r.sensor {
-            slot.resize(r.sensor + 1, None);
-        }
-        let i = *slot[r.sensor].get_or_insert_with(|| {
-            let name = format!(
-                "sensor {}",
-                sensor_names.get(r.sensor).cloned().unwrap_or_default()
-            );
-            // Two sensors of the same name share a series, as before.
-            match series.iter().position(|s| s.0 == name) {
-                Some(i) => i,
-                None => {
-                    series.push((name, Vec::new()));
-                    series.len() - 1
-                }
-            }
-        });
-        series[i].1.push((xv, *res));
-    }
-    if residuals_um.len() == campaign.len() && !campaign.point_measurements.is_empty() {
-        let p0 = campaign.first_point_observation();
-        let mut pts = Vec::new();
-        for q in 0..campaign.point_measurements.len() {
-            let Some(xv) = x_point(q) else { continue };
-            for a in 0..3 {
-                pts.push((xv, residuals_um[p0 + 3 * q + a]));
-            }
-        }
-        series.push(("point targets".to_string(), pts));
-    }
-    if residuals_um.len() == campaign.len() && !campaign.pose_measurements.is_empty() {
-        let mut pos = Vec::new();
-        for (q, rows) in campaign.pose_observation_rows().iter().enumerate() {
-            let Some(xv) = x_tracker(q) else { continue };
-            for r in rows[..3].iter().flatten() {
-                pos.push((xv, residuals_um[*r]));
-            }
-        }
-        series.push(("tracker position".to_string(), pos));
-    }
-    series
+/// What the residual figures need to name the observations: the gauges' sensor names, and
+/// each own instrument's name and unit (in the model's order).
+#[derive(Debug, Clone, Default)]
+pub struct ResidualNames {
+    /// Sensor names, by sensor index.
+    pub sensors: Vec<String>,
+    /// Each instrument's name and unit, by instrument index.
+    pub instruments: Vec<(String, String)>,
 }
 
-/// Residual against the pose number (from 1), one series per sensor.
+impl ResidualNames {
+    /// The names of `model`'s instruments beside `sensors`.
+    pub fn new(sensors: Vec<String>, model: &MeasurementModel) -> Self {
+        ResidualNames {
+            sensors,
+            instruments: model
+                .instruments
+                .iter()
+                .map(|i| (i.name().to_string(), i.unit().to_string()))
+                .collect(),
+        }
+    }
+}
+
+/// The panel and the series of observation `kind`: (panel caption, y label with the unit,
+/// series name). One panel per kind of observation, each in its own unit.
+fn panel_of(kind: ObservationKind, campaign: &Campaign, names: &ResidualNames) -> [String; 3] {
+    const AXES: [&str; 3] = ["x", "y", "z"];
+    let s = |a: &str, b: &str, c: String| [a.to_string(), b.to_string(), c];
+    match kind {
+        ObservationKind::Reading(i) => s(
+            "gauge readings",
+            "length residual (um)",
+            format!(
+                "sensor {}",
+                names
+                    .sensors
+                    .get(campaign.readings[i].sensor)
+                    .cloned()
+                    .unwrap_or_default()
+            ),
+        ),
+        ObservationKind::TrackerPosition(_, a) => s(
+            "tracker positions",
+            "position residual (um)",
+            format!("tracker {}", AXES[a]),
+        ),
+        ObservationKind::TrackerOrientation(_, a) => s(
+            "tracker orientations",
+            "orientation residual (urad)",
+            format!("about {}", AXES[a]),
+        ),
+        ObservationKind::Point(q, a) => s(
+            "reflector points",
+            "point residual (um)",
+            format!(
+                "target {} {}",
+                campaign.point_measurements[q].target + 1,
+                AXES[a]
+            ),
+        ),
+        ObservationKind::Tilt(q) => {
+            let t = &campaign.tilt_measurements[q];
+            s(
+                "inclinometer angles",
+                "angle residual (urad)",
+                format!("inclinometer {} axis {}", t.inclinometer + 1, t.axis + 1),
+            )
+        }
+        ObservationKind::Instrument(q, _) => {
+            let m = &campaign.instrument_measurements[q];
+            let (name, unit) = names
+                .instruments
+                .get(m.instrument)
+                .cloned()
+                .unwrap_or_else(|| (format!("instrument {}", m.instrument + 1), String::new()));
+            [
+                format!("instrument {name}"),
+                format!("residual ({unit})"),
+                format!("channel {}", m.channel + 1),
+            ]
+        }
+    }
+}
+
+/// The residual panels against `x(observation)` (observations where it is `None` are left
+/// out): one panel per kind of observation, in its own unit, a series per sensor, axis or
+/// channel. `residuals` are measured minus predicted, each in its own unit (as
+/// `residuals.csv`); `tag` prefixes the series names (before/after).
+fn residual_panels(
+    campaign: &Campaign,
+    names: &ResidualNames,
+    runs: &[(&str, &[f64])],
+    x: impl Fn(usize, ObservationKind) -> Option<f64>,
+) -> Vec<Panel> {
+    let mut panels: Vec<Panel> = Vec::new();
+    let kinds = campaign.observation_kinds();
+    for (tag, residuals) in runs {
+        for (k, kind) in kinds.iter().enumerate() {
+            let (Some(r), Some(xv)) = (residuals.get(k), x(k, *kind)) else {
+                continue;
+            };
+            let [caption, y_label, name] = panel_of(*kind, campaign, names);
+            let name = if tag.is_empty() {
+                name
+            } else if runs.len() > 1 {
+                tag.to_string()
+            } else {
+                format!("{tag} {name}")
+            };
+            let p = match panels.iter().position(|p| p.caption == caption) {
+                Some(p) => p,
+                None => {
+                    panels.push(Panel {
+                        caption,
+                        y_label,
+                        series: Vec::new(),
+                    });
+                    panels.len() - 1
+                }
+            };
+            let series = &mut panels[p].series;
+            match series.iter().position(|s| s.0 == name) {
+                Some(i) => series[i].1.push((xv, *r)),
+                None => series.push((name, vec![(xv, *r)])),
+            }
+        }
+    }
+    panels
+}
+
+/// The panels titled: the figure's title over the first, each panel its kind.
+fn titled(title: &str, mut panels: Vec<Panel>) -> Vec<Panel> {
+    for p in &mut panels {
+        p.caption = format!("{title}: {}", p.caption);
+    }
+    panels
+}
+
+/// Residual (measured minus predicted, each kind in its own unit, as `residuals.csv`)
+/// against the pose number (from 1): one panel per kind of observation.
 pub fn residuals_vs_pose(
     title: &str,
     campaign: &Campaign,
-    sensor_names: &[String],
-    residuals_um: &[f64],
+    names: &ResidualNames,
+    residuals: &[f64],
 ) -> Result<String, PlotError> {
-    let series = residual_series(
-        campaign,
-        sensor_names,
-        residuals_um,
-        |k| Some(campaign.readings[k].pose as f64 + 1.0),
-        |q| Some(campaign.pose_measurements[q].pose as f64 + 1.0),
-        |q| Some(campaign.point_measurements[q].pose as f64 + 1.0),
-    );
-    scatter(title, "pose", "residual (um)", &series)
+    let panels = residual_panels(campaign, names, &[("", residuals)], |k, _| {
+        Some(campaign.observation_pose(k) as f64 + 1.0)
+    });
+    scatter_panels(title, "pose", &titled(title, panels))
 }
 
-/// Residual against the logged time, when every reading has one.
+/// The logged time of observation `k` of kind `kind`, if any.
+fn time_of(campaign: &Campaign, kind: ObservationKind) -> Option<f64> {
+    match kind {
+        ObservationKind::Reading(i) => campaign.readings[i].time_s.get(),
+        ObservationKind::TrackerPosition(q, _) | ObservationKind::TrackerOrientation(q, _) => {
+            campaign.pose_measurements[q].time_s
+        }
+        ObservationKind::Point(q, _) => campaign.point_measurements[q].time_s,
+        ObservationKind::Tilt(q) => campaign.tilt_measurements[q].time_s,
+        ObservationKind::Instrument(..) => None,
+    }
+}
+
+/// Residual against the logged time, when every observation has one (as
+/// [`residuals_vs_pose`], one panel per kind).
 pub fn residuals_vs_time(
     title: &str,
     campaign: &Campaign,
-    sensor_names: &[String],
-    residuals_um: &[f64],
+    names: &ResidualNames,
+    residuals: &[f64],
 ) -> Option<Result<String, PlotError>> {
-    let all_timed = campaign.readings.iter().all(|r| r.time_s.is_some())
-        && campaign
-            .pose_measurements
-            .iter()
-            .all(|m| m.time_s.is_some())
-        && campaign
-            .point_measurements
-            .iter()
-            .all(|m| m.time_s.is_some())
-        && !campaign.is_empty();
-    if !all_timed {
+    let kinds = campaign.observation_kinds();
+    if kinds.is_empty() || kinds.iter().any(|k| time_of(campaign, *k).is_none()) {
         return None;
     }
-    let series = residual_series(
-        campaign,
-        sensor_names,
-        residuals_um,
-        |k| campaign.readings[k].time_s.get(),
-        |q| campaign.pose_measurements[q].time_s,
-        |q| campaign.point_measurements[q].time_s,
-    );
-    Some(scatter(title, "time (s)", "residual (um)", &series))
+    let panels = residual_panels(campaign, names, &[("", residuals)], |_, kind| {
+        time_of(campaign, kind)
+    });
+    Some(scatter_panels(title, "time (s)", &titled(title, panels)))
 }
 
-/// Before/after residuals against the pose number (refinement).
+/// Before/after residuals (measured minus predicted, each kind in its own unit) against the
+/// pose number (refinement): one panel per kind, the two runs as two series.
 pub fn residuals_before_after(
     title: &str,
     campaign: &Campaign,
-    before_um: &[f64],
-    after_um: &[f64],
+    names: &ResidualNames,
+    before: &[f64],
+    after: &[f64],
 ) -> Result<String, PlotError> {
-    let at = |k: usize| -> f64 {
-        if k < campaign.len() {
-            campaign.observation_pose(k) as f64 + 1.0
-        } else {
-            f64::NAN
-        }
-    };
-    let pts =
-        |r: &[f64]| -> Vec<(f64, f64)> { r.iter().enumerate().map(|(k, v)| (at(k), *v)).collect() };
-    scatter(
-        title,
-        "pose",
-        "residual (um)",
-        &[
-            ("before".to_string(), pts(before_um)),
-            ("after".to_string(), pts(after_um)),
-        ],
-    )
+    let panels = residual_panels(
+        campaign,
+        names,
+        &[("before", before), ("after", after)],
+        |k, _| Some(campaign.observation_pose(k) as f64 + 1.0),
+    );
+    scatter_panels(title, "pose", &titled(title, panels))
 }
 
 /// A physical group of estimates in one panel: its axis label with the unit (`installation

@@ -521,72 +521,121 @@ pub fn scatter(
     y_label: &str,
     series: &[(String, Vec<(f64, f64)>)],
 ) -> Result<String, PlotError> {
-    let (series, drawn, total) = thin_extremes(series, MAX_SCATTER_POINTS);
-    let series = &series[..];
+    scatter_panels(
+        title,
+        x_label,
+        &[Panel {
+            caption: title.to_string(),
+            y_label: y_label.to_string(),
+            series: series.to_vec(),
+        }],
+    )
+}
+
+/// One panel of [`scatter_panels`]: its caption, its y axis (with the unit) and its series.
+#[derive(Debug, Clone)]
+pub struct Panel {
+    /// The panel's caption.
+    pub caption: String,
+    /// The y axis label, with its unit.
+    pub y_label: String,
+    /// The series drawn.
+    pub series: Series,
+}
+
+/// Scatter plots stacked one above the other, one per [`Panel`] (one unit each: lengths in
+/// um above angles in urad, say), on a common x axis label; each panel as [`scatter`] draws
+/// one, thinned on its own.
+pub fn scatter_panels(title: &str, x_label: &str, panels: &[Panel]) -> Result<String, PlotError> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1000, 500)).into_drawing_area();
+        let n = panels.len().max(1);
+        let root = SVGBackend::with_string(&mut svg, (1000, 500 * n as u32)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(title, e))?;
-        let mut entries: Vec<(String, Key)> = series
-            .iter()
-            .enumerate()
-            .map(|(i, s)| (s.0.clone(), Key::Marker(style(i).0, style(i).1)))
-            .collect();
-        if drawn < total {
-            entries.push((String::new(), Key::Note));
-            entries.push((format!("thinned: {drawn} of {total} points"), Key::Note));
-            entries.push(("drawn: lowest and highest".to_string(), Key::Note));
-            entries.push(("residual per series in each".to_string(), Key::Note));
-            entries.push(("of equal bins along the x axis".to_string(), Key::Note));
-        }
-        let area = split_with_legend(&root, title, &entries)?;
-        let pts: Vec<(f64, f64)> = series
-            .iter()
-            .flat_map(|s| s.1.iter().copied())
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
-            .collect();
-        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-        for (x, y) in &pts {
-            x0 = x0.min(*x);
-            x1 = x1.max(*x);
-            y0 = y0.min(*y);
-            y1 = y1.max(*y);
-        }
-        if pts.is_empty() {
-            (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
-        }
-        let px = (x1 - x0).abs().max(1e-9) * 0.05;
-        let py = (y1 - y0).abs().max(1e-9) * 0.1;
-        let mut chart = ChartBuilder::on(&area)
-            .caption(title, ("sans-serif", 18))
-            .margin(10)
-            .x_label_area_size(40)
-            .y_label_area_size(60)
-            .build_cartesian_2d((x0 - px)..(x1 + px), (y0 - py)..(y1 + py))
-            .map_err(|e| err(title, e))?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .x_label_formatter(&|x| crate::format::short(*x))
-            .y_label_formatter(&|y| crate::format::short(*y))
-            .draw()
-            .map_err(|e| err(title, e))?;
-        for (si, (_, vals)) in series.iter().enumerate() {
-            let (c, m) = style(si);
-            chart
-                .draw_series(
-                    vals.iter()
-                        .filter(|(x, y)| x.is_finite() && y.is_finite())
-                        .map(|p| {
-                            EmptyElement::at(*p) + marker_element::<SVGBackend>(m, (0, 0), 3, c)
-                        }),
-                )
-                .map_err(|e| err(title, e))?;
+        let areas = root.split_evenly((n, 1));
+        let empty = Panel {
+            caption: title.to_string(),
+            y_label: String::new(),
+            series: Vec::new(),
+        };
+        let panels: Vec<&Panel> = if panels.is_empty() {
+            vec![&empty]
+        } else {
+            panels.iter().collect()
+        };
+        for (panel, area) in panels.iter().zip(&areas) {
+            scatter_on(area, title, x_label, panel)?;
         }
         root.present().map_err(|e| err(title, e))?;
     }
     Ok(svg)
+}
+
+/// Draws `panel` on `root` (see [`scatter`]); `title` names the figure in errors.
+fn scatter_on<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
+    title: &str,
+    x_label: &str,
+    panel: &Panel,
+) -> Result<(), PlotError> {
+    let (series, drawn, total) = thin_extremes(&panel.series, MAX_SCATTER_POINTS);
+    let series = &series[..];
+    let mut entries: Vec<(String, Key)> = series
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (s.0.clone(), Key::Marker(style(i).0, style(i).1)))
+        .collect();
+    if drawn < total {
+        entries.push((String::new(), Key::Note));
+        entries.push((format!("thinned: {drawn} of {total} points"), Key::Note));
+        entries.push(("drawn: lowest and highest".to_string(), Key::Note));
+        entries.push(("residual per series in each".to_string(), Key::Note));
+        entries.push(("of equal bins along the x axis".to_string(), Key::Note));
+    }
+    let area = split_with_legend(root, title, &entries)?;
+    let pts: Vec<(f64, f64)> = series
+        .iter()
+        .flat_map(|s| s.1.iter().copied())
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for (x, y) in &pts {
+        x0 = x0.min(*x);
+        x1 = x1.max(*x);
+        y0 = y0.min(*y);
+        y1 = y1.max(*y);
+    }
+    if pts.is_empty() {
+        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+    }
+    let px = (x1 - x0).abs().max(1e-9) * 0.05;
+    let py = (y1 - y0).abs().max(1e-9) * 0.1;
+    let mut chart = ChartBuilder::on(&area)
+        .caption(panel.caption.as_str(), ("sans-serif", 18))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d((x0 - px)..(x1 + px), (y0 - py)..(y1 + py))
+        .map_err(|e| err(title, e))?;
+    chart
+        .configure_mesh()
+        .x_desc(x_label)
+        .y_desc(panel.y_label.as_str())
+        .x_label_formatter(&|x| crate::format::short(*x))
+        .y_label_formatter(&|y| crate::format::short(*y))
+        .draw()
+        .map_err(|e| err(title, e))?;
+    for (si, (_, vals)) in series.iter().enumerate() {
+        let (c, m) = style(si);
+        chart
+            .draw_series(
+                vals.iter()
+                    .filter(|(x, y)| x.is_finite() && y.is_finite())
+                    .map(|p| EmptyElement::at(*p) + marker_element::<DB>(m, (0, 0), 3, c)),
+            )
+            .map_err(|e| err(title, e))?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
