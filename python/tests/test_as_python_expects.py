@@ -79,6 +79,17 @@ def test_a_result_written_with_out_saves_elsewhere(near_tmp, tmp_path):
     assert v.calibrated_rms_um < v.reference_rms_um
 
 
+def test_a_refined_result_records_a_path_that_exists(near_tmp, tmp_path):
+    """refine's calibrated.toml, made in memory, records its origin where it exists too."""
+    robot = cpm.Robot.from_toml(near_tmp / "hexapod_66.toml")
+    refined = cpm.refine(robot, near_tmp / "readings.csv", max_steps=1)
+    assert Path(_recorded(refined.text("calibrated.toml"))).resolve() == \
+        (near_tmp / "hexapod_66.toml").resolve()
+    refined.save(tmp_path / "refined")
+    v = cpm.validate(tmp_path / "refined" / "calibrated.toml", data=LATER)
+    assert v.calibrated_rms_um < v.reference_rms_um
+
+
 # Item 5: inputs.
 
 def test_complex_arrays_are_refused_naming_the_argument(hexapod):
@@ -104,15 +115,18 @@ def test_an_unreachable_pose_is_left_out_with_the_commands_warning(hexapod, tmp_
     frame = cpm.read_measurements(HEXAPOD_READINGS, hexapod).to_pandas()
     frame.loc[0, "z_mm"] = 5000.0
     p = frame[["x_mm", "y_mm", "z_mm", "roll_deg", "pitch_deg", "yaw_deg"]].to_numpy()
-    with pytest.warns(cpm.CpmWarning, match=r'gauge readings:2: pose "1" excluded: link') as w:
+    with pytest.warns(cpm.CpmWarning, match=r'^gauge readings:2: pose "1" excluded: .*z 5000 mm.* '
+                                                r'is not reachable') as w:
         m = cpm.gauge_readings(hexapod, p, list(frame["sensor"]), frame["length_mm"].to_numpy())
     assert m.num_readings == len(frame) - 1
     assert len([x for x in w if issubclass(x.category, cpm.CpmWarning)]) == 1
     # The fit says it too (the command warns there).
     with pytest.warns(cpm.CpmWarning, match=r'pose "1" excluded'):
         cpm.calibrate(hexapod, m)
-    # The same words as the command's warning, for the same file.
+    # The same words as the command's warning, for the same readings in a file (each row
+    # its own pose, as the arrays without labels).
     f = tmp_path / "far.csv"
+    frame["pose"] = np.arange(1, len(frame) + 1)
     frame.drop(columns=["file", "line"]).to_csv(f, index=False)
     run = subprocess.run([str(cpm_bin), "calibrate", "--robot", str(HEXAPOD), "--data", str(f),
                           "--out", str(tmp_path / "cal")], capture_output=True, text=True)
@@ -178,4 +192,4 @@ def test_errors_name_the_python_keywords(hexapod):
     assert "'sigma_um'" in str(e.value) and "--" not in str(e.value), e.value
     with pytest.raises(cpm.UsageError) as e:
         cpm.simulate(hexapod, random=12, measure="sound")
-    assert str(e.value).startswith("measure ") and "--" not in str(e.value), e.value
+    assert "'measure'" in str(e.value) and "--" not in str(e.value), e.value
