@@ -31,16 +31,15 @@ import html as _html
 import io
 import json
 import os
-import warnings as _warnings
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _cpm
-from ._data import Measurements, _Info, _Source, as_measurements
+from ._data import Measurements, _Info, _Source, _float_array, _real, as_measurements
 from ._robot import PathLike, Robot, Scratch
-from .errors import CpmError, CpmWarning, InputError, UsageError
+from .errors import CpmError, InputError, UsageError, _in_keywords, _warn
 
 __all__ = [
     "calibrate", "refine", "validate", "compensate", "design", "simulate",
@@ -58,15 +57,34 @@ def _robot(r: Union[Robot, PathLike]) -> Robot:
     return r if isinstance(r, Robot) else Robot.from_toml(r)
 
 
-def _data(data: Any, robot: Robot) -> Any:
+def _renamed(options: Dict[str, Any]) -> Dict[str, str]:
+    """The jobs' option names that the Python keywords given spell otherwise (messages name
+    the keyword): ``tolerances={...}`` is the job's ``tolerance``."""
+    return {"tolerance": "tolerances"} if "tolerances" in options else {}
+
+
+def _said(d: Dict[str, Any], renamed: Dict[str, str]) -> None:
+    """The job's warnings (the command's ``warning:`` lines: a pose left out, ...) and its
+    trouble (the command's exit code 1, outputs written) as :class:`cpm.CpmWarning`."""
+    for message in d.get("warned") or ():
+        _warn(message, renamed)
+    if d.get("trouble"):
+        _warn(d["trouble"], renamed)
+
+
+def _data(data: Any, robot: Optional[Robot]) -> Any:
     """Measurements for ``data``: paths go to the job as they are (it reads them, with its
-    checks and errors); arrays and tables were read into :class:`Measurements`."""
+    checks and errors); arrays and tables were read into :class:`Measurements` (a pandas
+    DataFrame read as :func:`cpm.measurements_from_frame` reads it)."""
     if isinstance(data, (str, os.PathLike, Measurements)):
         return [data]
     if isinstance(data, (list, tuple)):
         if not data:
             raise UsageError("data: no measurements")
         return list(data)
+    if robot is None:
+        raise UsageError("data: measurements other than files are read against a robot: give "
+                         "robot or reference")
     return [as_measurements(data, robot)]
 
 
@@ -114,9 +132,10 @@ def _value(key: str, value: Any, scratch: Scratch) -> Any:
         return int(value)
     if isinstance(value, np.floating):
         return float(value)
+    if isinstance(value, (complex, np.complexfloating)):
+        _real(value, key)
     if isinstance(value, float) and not np.isfinite(value):
-        raise UsageError(f"invalid value {value!r} for '--{key.replace('_', '-')}': "
-                         "not a finite number")
+        raise UsageError(f"invalid value {value!r} for '{key}': not a finite number")
     if isinstance(value, (list, tuple, np.ndarray)):
         items: List[Any] = []
         for v in value:
@@ -167,9 +186,13 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
     """Runs ``command`` as the workflow's job with ``options`` by name; its outputs are
     committed to ``out`` when given (all or nothing). ``robot``, ``data``, ``reference``,
     ``truth`` and ``poses`` (a plan's or compensate's targets, an array ``(n, 6)``) go to the
-    job in memory, not as files. Trouble (the command's exit code 1, outputs written) is a
-    :class:`cpm.CpmWarning`."""
-    text = _by_name(scratch, options)
+    job in memory, not as files. The job's warnings and its trouble (the command's exit code
+    1, outputs written) are :class:`cpm.CpmWarning`; errors name the Python keywords."""
+    renamed = _renamed(options)
+    try:
+        text = _by_name(scratch, options)
+    except CpmError as e:
+        raise _in_keywords(e, renamed) from None
     target = os.fspath(out) if out is not None else None
     arrays: set = set()
     held: Dict[str, Any] = {}
@@ -189,9 +212,8 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
     except InputError as e:
         raise _row_of(scratch.fix(e), arrays) from None
     except CpmError as e:
-        raise scratch.fix(e) from None
-    if d["trouble"]:
-        _warnings.warn(d["trouble"], CpmWarning, stacklevel=3)
+        raise _in_keywords(scratch.fix(e), renamed) from None
+    _said(d, renamed)
     d["files"] = dict(d["files"])
     return d
 
@@ -210,16 +232,14 @@ def _columns(text: str, names: Sequence[str]) -> np.ndarray:
         len(rows), len(names))
 
 
-def _pose_list(poses: Any) -> Union[str, np.ndarray]:
+def _pose_list(poses: Any, name: str = "poses") -> Union[str, np.ndarray]:
     """A pose list: the path of its file, or an array ``(n, 6)`` (x, y, z mm; roll, pitch,
     yaw deg) that goes to the job in memory (named ``poses``, labelled from 1, read with the
-    checks of a pose list file; an error's ``row`` is the row of the array)."""
+    checks of a pose list file; an error's ``row`` is the row of the array); ``name`` is the
+    argument's, for errors."""
     if isinstance(poses, (str, os.PathLike)):
         return os.fspath(poses)
-    a = np.asarray(poses, dtype=np.float64)
-    if a.ndim != 2 or a.shape[1] != 6:
-        raise UsageError(f"poses has shape {a.shape}, expected (n, 6)")
-    return a
+    return _float_array(poses, name, 2, 6)
 
 
 def _held_truth(options: Dict[str, Any]) -> Optional[Robot]:
@@ -253,7 +273,7 @@ def _plan(options: Dict[str, Any]) -> Optional[np.ndarray]:
     plan file stays in them by its path."""
     if options.get("plan") is None:
         return None
-    plan = _pose_list(options["plan"])
+    plan = _pose_list(options["plan"], "plan")
     if isinstance(plan, str):
         options["plan"] = plan
         return None
@@ -273,6 +293,9 @@ class _Files:
 
     files: Dict[str, bytes]
     _title = "cpm"
+    #: The folder the files were written to (``out``), whose paths they record relative to
+    #: it (``calibrated.toml``'s ``calibrated_from``); None when they live in memory only.
+    _dir: Optional[Path] = None
 
     def text(self, name: str) -> str:
         """One output file as text."""
@@ -297,15 +320,28 @@ class _Files:
         return _iframe(self.html)
 
     def save(self, directory: PathLike) -> List[Path]:
-        """Writes the output files into ``directory`` (created)."""
+        """Writes the output files into ``directory`` (created). ``calibrated.toml`` records
+        the description it was calibrated from as ``cpm calibrate --out directory`` does (a
+        path from ``directory``), so that ``cpm validate`` finds it there."""
         d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
         written = []
         for name, data in self.files.items():
             p = d / name
             p.parent.mkdir(parents=True, exist_ok=True)
+            if name == "calibrated.toml":
+                here = None if self._dir is None else os.fspath(self._dir)
+                data = _cpm.calibrated_from_at(data.decode("utf-8"), here,
+                                               os.fspath(d)).encode("utf-8")
             p.write_bytes(data)
             written.append(p)
         return written
+
+    def _calibrated(self) -> Robot:
+        """``calibrated.toml`` as a robot, named by where it was written (its recorded
+        origin resolves from there, for :func:`validate`'s default reference)."""
+        name = "calibrated.toml" if self._dir is None else os.fspath(self._dir / "calibrated.toml")
+        return Robot.from_text(self.text("calibrated.toml"), name)
 
 
 class Identifiability:
@@ -331,8 +367,9 @@ class CalibrationResult(_Files):
     the covariance, what the data identify, and every output of ``cpm calibrate``
     (``files``; ``to_json()`` is ``calibration.json``, ``_repr_html_`` is ``report.html``)."""
 
-    def __init__(self, d: Dict[str, Any]) -> None:
+    def __init__(self, d: Dict[str, Any], directory: Optional[Path] = None) -> None:
         self._d = d
+        self._dir = directory
         self.files = dict(d["files"])
         self.parameter_names: List[str] = list(d["parameter_names"])
         self.estimates_um: np.ndarray = d["estimates_um"]
@@ -380,7 +417,7 @@ class CalibrationResult(_Files):
     @property
     def calibrated_robot(self) -> Robot:
         """``calibrated.toml``: the calibrated machine as a robot description."""
-        return Robot.from_text(self.text("calibrated.toml"), "calibrated.toml")
+        return self._calibrated()
 
     def to_json(self) -> str:
         """``calibration.json``, as ``cpm calibrate`` writes it."""
@@ -439,17 +476,18 @@ def calibrate(
     sources, arrays = _sources(r, _data(data, r))
     given: Dict[str, Any] = dict(effects=effects, sigma_um=sigma_um, robust=robust)
     given.update(options)
-    with Scratch() as scratch:
-        opts = _by_name(scratch, given)
+    renamed = _renamed(given)
     target = os.fspath(out) if out is not None else None
     try:
-        d = _cpm.calibrate_memory(r._h, sources, opts, target, out is not None)
+        with Scratch() as scratch:
+            opts = _by_name(scratch, given)
+        d = dict(_cpm.calibrate_memory(r._h, sources, opts, target, out is not None))
     except InputError as e:
         raise _row_of(e, arrays) from None
-    result = CalibrationResult(dict(d))
-    if result.trouble:
-        _warnings.warn(result.trouble, CpmWarning, stacklevel=2)
-    return result
+    except CpmError as e:
+        raise _in_keywords(e, renamed) from None
+    _said(d, renamed)
+    return CalibrationResult(d, None if out is None else Path(os.path.abspath(out)))
 
 
 class RefineResult(_Files):
@@ -457,9 +495,11 @@ class RefineResult(_Files):
     ``calibration.json`` (``calibration``), ``calibrated.toml`` (``calibrated_robot``) and the
     figures, among them ``residuals_before_after.svg``."""
 
-    def __init__(self, files: Dict[str, bytes], trouble: Optional[str]) -> None:
+    def __init__(self, files: Dict[str, bytes], trouble: Optional[str],
+                 directory: Optional[Path] = None) -> None:
         self.files = files
         self.trouble = trouble
+        self._dir = directory
         self.doc: Dict[str, Any] = json.loads(self.text("refine.json"))
         self.calibration: Dict[str, Any] = json.loads(self.text("calibration.json"))
 
@@ -470,7 +510,8 @@ class RefineResult(_Files):
 
     @property
     def calibrated_robot(self) -> Robot:
-        return Robot.from_text(self.text("calibrated.toml"), "calibrated.toml")
+        """``calibrated.toml``: the final fit's calibrated machine."""
+        return self._calibrated()
 
     def to_json(self) -> str:
         return self.text("refine.json")
@@ -488,7 +529,8 @@ def refine(robot: Union[Robot, PathLike], data: Any, *, out: Optional[PathLike] 
     r = _robot(robot)
     with Scratch() as scratch:
         d = _job("refine", scratch, dict(options), out, robot=r, data=_data(data, r))
-    return RefineResult(d["files"], d["trouble"])
+    return RefineResult(d["files"], d["trouble"],
+                        None if out is None else Path(os.path.abspath(out)))
 
 
 class ValidationResult(_Files):
@@ -526,16 +568,19 @@ class ValidationResult(_Files):
         return f"<ValidationResult {self.summary.get('compensated')}>"
 
 
-def validate(robot: Optional[Union[Robot, PathLike]], reference: Union[Robot, PathLike],
-             data: Any = None, *, out: Optional[PathLike] = None, **options: Any
-             ) -> ValidationResult:
+def validate(robot: Optional[Union[Robot, PathLike]],
+             reference: Optional[Union[Robot, PathLike]] = None, data: Any = None, *,
+             out: Optional[PathLike] = None, **options: Any) -> ValidationResult:
     """``cpm validate``: the calibrated ``robot`` against ``reference`` on held-out
     ``data``; or, with ``commands=`` and ``truth=`` (and ``robot=None``), a compensation
-    checked end to end on a simulated machine."""
-    ref = _robot(reference)
+    checked end to end on a simulated machine. Without ``reference``, as the command: the
+    description the calibrated robot records it was calibrated from
+    (``[calibration] calibrated_from``)."""
+    ref = None if reference is None else _robot(reference)
     rob = None if robot is None else _robot(robot)
     with Scratch() as scratch:
-        m = None if data is None else _data(data, rob if rob is not None else ref)
+        reader = rob if rob is not None else ref
+        m = None if data is None else _data(data, reader)
         if rob is None:
             # A compensation checked on a simulated machine: the reference and the truth
             # as loaded; of the measurements (it reads none) only their files.

@@ -6,6 +6,7 @@ registration of tracker sets) and the same errors."""
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Union
@@ -14,7 +15,7 @@ import numpy as np
 
 from . import _cpm
 from ._robot import PathLike, Robot, Scratch
-from .errors import InputError, UsageError
+from .errors import InputError, UsageError, _warn
 
 __all__ = [
     "Measurements",
@@ -179,13 +180,45 @@ class Measurements:
                 f"{len(self.measured_poses)} tracker poses{sim})")
 
 
-def read_measurements(path: PathLike, robot: Robot) -> Measurements:
+def _as_robot(robot: Any) -> Robot:
+    """``robot`` as a :class:`Robot`: itself, or the description read from its path."""
+    if isinstance(robot, Robot):
+        return robot
+    if isinstance(robot, (str, os.PathLike)):
+        return Robot.from_toml(robot)
+    raise TypeError("robot: expected a cpm.Robot or the path of a robot description (.toml), "
+                    f"got {type(robot).__name__}")
+
+
+def _is_frame(data: Any) -> bool:
+    """True for a pandas DataFrame (pandas not imported for it)."""
+    pd = sys.modules.get("pandas")
+    return pd is not None and isinstance(data, pd.DataFrame)
+
+
+def _warn_excluded(info: Any) -> None:
+    """The command's warning for each pose left out while reading (unreachable)."""
+    for message in info.get("excluded") or ():
+        _warn(message)
+
+
+def read_measurements(path: PathLike, robot: Union[Robot, PathLike]) -> Measurements:
     """Reads a measurement file (gauge readings or tracker poses, told from its header)
-    against ``robot``, with the checks of ``cpm calibrate --data``; errors are
-    :class:`cpm.InputError` naming the file, line and field."""
+    against ``robot`` (a :class:`Robot` or the path of its description), with the checks of
+    ``cpm calibrate --data``; errors are :class:`cpm.InputError` naming the file, line and
+    field. A pose found unreachable is left out with the command's warning (a
+    :class:`cpm.CpmWarning`)."""
+    if _is_frame(path):
+        raise TypeError("path: a DataFrame is not a file: cpm.measurements_from_frame(frame, "
+                        "robot) reads it (cpm.calibrate takes it as it is)")
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError("path: expected the path of a measurement file (str or os.PathLike), "
+                        f"got {type(path).__name__}")
+    r = _as_robot(robot)
     p = os.fspath(path)
-    info = _cpm.read_file(p, robot._h)
-    return Measurements([_Source(p, p, None, dict(info))])
+    info = dict(_cpm.read_file(p, r._h))
+    _warn_excluded(info)
+    return Measurements([_Source(p, p, None, info)])
 
 
 def _row_error(e: InputError) -> InputError:
@@ -204,6 +237,7 @@ def _from_text(text: str, name: str, robot: Robot, arrays: bool) -> Measurements
         if arrays:
             raise _row_error(e) from None
         raise
+    _warn_excluded(info)
     return Measurements([_Source(name, None, text, _Info(info), arrays)])
 
 
@@ -214,12 +248,21 @@ def _from_arrays(read: Any, name: str) -> Measurements:
         info = read()
     except InputError as e:
         raise _row_error(e) from None
+    _warn_excluded(info)
     return Measurements([_Source(name, None, None, _Info(info), True)])
+
+
+def _real(x: Any, name: str) -> None:
+    """Refuses complex numbers (numpy would drop their imaginary part with a warning)."""
+    if np.iscomplexobj(x):
+        raise UsageError(f"{name}: complex numbers; expected real numbers (give .real if the "
+                         "imaginary part is to be dropped)")
 
 
 def _float_array(x: Any, name: str, ndim: int, cols: Optional[int] = None) -> np.ndarray:
     """``x`` as float64 (float32, integers and non-contiguous arrays are converted), checked
-    for its number of dimensions and columns."""
+    for its number of dimensions and columns; complex numbers are refused."""
+    _real(x, name)
     try:
         a = np.asarray(x, dtype=np.float64)
     except (TypeError, ValueError) as e:
@@ -231,7 +274,7 @@ def _float_array(x: Any, name: str, ndim: int, cols: Optional[int] = None) -> np
 
 
 def gauge_readings(
-    robot: Robot,
+    robot: Union[Robot, PathLike],
     poses: Any,
     sensors: Union[Sequence[str], str],
     lengths_mm: Any,
@@ -247,7 +290,9 @@ def gauge_readings(
     pose). ``simulated=True`` labels simulated data (every result then says so).
 
     Read as values with the checks of the file reader of ``cpm`` and its errors (no text is
-    made); an error's ``row`` is the row of the arrays."""
+    made); an error's ``row`` is the row of the arrays. ``robot`` is a :class:`Robot` or the
+    path of its description."""
+    robot = _as_robot(robot)
     p = _float_array(poses, "poses", 2, 6)
     n = p.shape[0]
     lengths = _float_array(lengths_mm, "lengths_mm", 1)
@@ -259,7 +304,7 @@ def gauge_readings(
 
 
 def tracker_measurements(
-    robot: Robot,
+    robot: Union[Robot, PathLike],
     readings: Any,
     poses: Any,
     *,
@@ -276,7 +321,9 @@ def tracker_measurements(
 
     Read as values with the checks of the file reader of ``cpm`` and its errors (no text is
     made; an error's ``row`` is the row of the arrays), registered and checked as ``cpm`` does
-    a tracker file: the same numbers as a file give the same fit."""
+    a tracker file: the same numbers as a file give the same fit. ``robot`` is a
+    :class:`Robot` or the path of its description."""
+    robot = _as_robot(robot)
     r = _float_array(readings, "readings", 2, robot.num_links)
     p = _float_array(poses, "poses", 2)
     if p.shape[1] not in (6, 7):
@@ -288,22 +335,27 @@ def tracker_measurements(
                         name)
 
 
-def measurements_from_frame(frame: Any, robot: Robot, name: str = "DataFrame") -> Measurements:
+def measurements_from_frame(frame: Any, robot: Union[Robot, PathLike], name: str = "DataFrame") -> Measurements:
     """Measurements from a pandas DataFrame whose columns are those of a measurement file
-    (``docs/formats.md``: e.g. ``pose, sensor, x_mm, .., yaw_deg, length_mm``)."""
+    (``docs/formats.md``: e.g. ``pose, sensor, x_mm, .., yaw_deg, length_mm``); ``robot``
+    a :class:`Robot` or the path of its description."""
     text = frame.to_csv(index=False)
-    return _from_text(text, name, robot, arrays=True)
+    return _from_text(text, name, _as_robot(robot), arrays=True)
 
 
 def as_measurements(data: Any, robot: Robot) -> Measurements:
-    """``data`` as measurements: :class:`Measurements`, a path, or a list of either."""
+    """``data`` as measurements: :class:`Measurements`, a path, a pandas DataFrame
+    (:func:`measurements_from_frame`), or a list of them."""
     if isinstance(data, Measurements):
         return data
     if isinstance(data, (str, os.PathLike)):
         return read_measurements(data, robot)
+    if _is_frame(data):
+        return measurements_from_frame(data, robot)
     if isinstance(data, Iterable):
         out = Measurements()
         for d in data:
             out = out + as_measurements(d, robot)
         return out
-    raise UsageError(f"data: expected Measurements, a path or a list of them, got {type(data)}")
+    raise UsageError("data: expected Measurements, a path, a DataFrame or a list of them, got "
+                     f"{type(data).__name__}")

@@ -13,7 +13,11 @@ the ``cpm`` command (``docs/cli.md``):
 """
 from __future__ import annotations
 
-from typing import Optional
+import os
+import re
+import sys
+import warnings
+from typing import Dict, Optional
 
 __all__ = ["CpmError", "UsageError", "InputError", "SolverError", "CpmIOError", "CpmWarning"]
 
@@ -60,3 +64,46 @@ class CpmIOError(CpmError, OSError):
 class CpmWarning(UserWarning):
     """A result that is returned but says something is wrong (e.g. the solver did not
     converge, the fit is rank-deficient, the model does not fit the declared noise)."""
+
+
+_FLAG = re.compile(r"(?<![\w-])--([a-z][a-z0-9]*(?:-[a-z0-9]+)*)")
+
+
+def _keywords(message: str, renamed: Optional[Dict[str, str]] = None) -> str:
+    """``message`` with the command's flags named as the Python keywords (``--sigma-um`` is
+    ``sigma_um``); ``renamed`` maps a job's option name to the keyword it was given as
+    (``tolerance`` to ``tolerances``)."""
+    renamed = renamed or {}
+
+    def keyword(m: "re.Match[str]") -> str:
+        name = m.group(1).replace("-", "_")
+        return renamed.get(name, name)
+
+    return _FLAG.sub(keyword, message)
+
+
+def _in_keywords(err: CpmError, renamed: Optional[Dict[str, str]] = None) -> CpmError:
+    """A usage or solver error with the command's flags named as the Python keywords (an
+    input or I/O error names files, left as it is)."""
+    if isinstance(err, (InputError, CpmIOError)):
+        return err
+    msg = _keywords(str(err), renamed)
+    if msg == str(err):
+        return err
+    try:
+        return type(err)(msg)
+    except Exception:  # pragma: no cover - an exception type with another signature
+        return err
+
+
+def _warn(message: str, renamed: Optional[Dict[str, str]] = None) -> None:
+    """A :class:`CpmWarning`, shown at the first caller outside the package (the user's
+    line), with the command's flags named as the Python keywords."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    frame = sys._getframe(1)
+    level = 2
+    while frame is not None and os.path.dirname(
+            os.path.abspath(frame.f_code.co_filename)) == here:
+        frame = frame.f_back
+        level += 1
+    warnings.warn(_keywords(message, renamed), CpmWarning, stacklevel=level)

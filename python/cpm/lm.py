@@ -130,6 +130,9 @@ def least_squares(
         raise UsageError(f"method={method!r}: cpm-lm is a Levenberg-Marquardt solver "
                          "(method='lm'); it takes bounds and robust losses itself")
     kwargs = kwargs or {}
+    if np.iscomplexobj(x0):
+        raise UsageError("x0: complex numbers; cpm-lm solves in real numbers (as SciPy's "
+                         "least_squares, which refuses a complex x0)")
     x = np.atleast_1d(np.asarray(x0, dtype=np.float64)).copy()
     if x.ndim != 1:
         raise UsageError(f"x0 must be 1-D, got shape {x.shape}")

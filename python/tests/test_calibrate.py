@@ -78,8 +78,11 @@ def test_python_calibrate_equals_cpm_calibrate(in_root, tmp_path, cpm_bin, name,
         else:
             assert abs(x - y) <= 1e-12 * max(1.0, abs(x)), f"{path}: {x} vs {y}"
     assert count > 50, count  # the comparison saw the estimates, not an empty document
-    # The calibrated description and the report are the command's, byte for byte.
-    assert res.text("calibrated.toml") == (out / "calibrated.toml").read_text()
+    # The calibrated description and the report are the command's, byte for byte: saved
+    # beside the command's folder, calibrated.toml records its origin as the command did.
+    res.save(tmp_path / "py")
+    assert (tmp_path / "py" / "calibrated.toml").read_text() == \
+        (out / "calibrated.toml").read_text()
     assert _untimed(res.markdown) == _untimed((out / "report.md").read_text())
     # The arrays say what calibration.json says: the parameters not determined.
     assert len(cli["not_determined"]) == int((~res.determined).sum())
@@ -262,5 +265,5 @@ def test_tolerances_and_hold_reach_the_fit(in_root):
     prior = json.loads(limited.text("calibration.json"))["prior"]
     assert prior["limit_in_tolerances"] == 2.0
     assert isinstance(prior["held_at_limit"], list)
-    with pytest.raises(cpm.UsageError, match="tolerance-limit"):
+    with pytest.raises(cpm.UsageError, match="^tolerance_limit must be > 0"):
         cpm.calibrate(robot, data, tolerance_limit=0.0)

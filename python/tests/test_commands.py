@@ -30,7 +30,7 @@ def test_simulate_is_labelled_and_follows_its_options(in_root, tmp_path):
     d = cpm.simulate(HEX, plan=poses, truth=TRUTH, noise="none",
                      truth_effect={"link_offset": [5, 0, 0, 0, 0, 0]})
     assert not np.array_equal(d.lengths_mm, p.lengths_mm)
-    with pytest.raises(cpm.UsageError, match="--noise"):
+    with pytest.raises(cpm.UsageError, match="^noise "):
         cpm.simulate(HEX, random=3, noise="pink:3")
 
 

@@ -26,7 +26,9 @@ use serde_json::Value;
 /// The options struct `T` of `command` from options given by name (`given`: a JSON object),
 /// over `defaults` (the struct's `new`). A list option given one value takes it as a list of
 /// one; the options `cpm` splits at commas (`hold`, `sensors`, `bars_mm`) are split alike.
-/// Unknown names and values of the wrong type are usage errors naming the option.
+/// Unknown names and values of the wrong type are usage errors naming the option by its
+/// keyword (`sigma_um`, not `--sigma-um`: the Python layer names the keywords in the
+/// workflow's messages too).
 pub fn by_name<T: Serialize + DeserializeOwned>(
     py: Python<'_>,
     command: &str,
@@ -48,7 +50,7 @@ pub fn by_name<T: Serialize + DeserializeOwned>(
             return Err(crate::errors::usage(
                 py,
                 format!(
-                    "unexpected argument '{flag}' found ({command} takes {})",
+                    "unexpected keyword argument '{key}' ({command} takes {})",
                     known.join(", ")
                 ),
             ));
@@ -65,7 +67,7 @@ pub fn by_name<T: Serialize + DeserializeOwned>(
                 if e.starts_with(&flag) {
                     e
                 } else {
-                    format!("invalid value {value} for '{flag}' ({key}): {e}")
+                    format!("invalid value {value} for '{key}': {e}")
                 },
             ));
         }
@@ -123,6 +125,8 @@ struct Fit {
     origins: Origins,
     /// Seconds spent, by part (the job, its solver, and all of the work with the results).
     timings: Vec<(String, f64)>,
+    /// The job's warnings (the command's `warning:` lines).
+    warned: Vec<String>,
 }
 
 /// Where each observation of a fit came from (file, line, what), told when asked: a list
@@ -234,6 +238,7 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("robust_failed", cal.robust_failed)?;
     d.set_item("warnings", fit.warnings)?;
     d.set_item("trouble", fit.trouble)?;
+    d.set_item("warned", fit.warned)?;
     let files = PyDict::new(py);
     for (name, bytes) in fit.files {
         files.set_item(name, pyo3::types::PyBytes::new(py, &bytes))?;
@@ -259,13 +264,126 @@ pub fn render_html(
     cpm_workflow::report::html::render(title, markdown, |name| svgs.get(name).cloned())
 }
 
-/// The progress of a job run for Python: shows nothing; Ctrl-C (the caller gone) cancels,
-/// inside the fit's iterations too.
-pub struct Cancel(pub std::sync::Arc<std::sync::atomic::AtomicBool>);
+/// The progress of a job run for Python: keeps the job's warnings (the command's
+/// `warning:` lines, which Python raises as `cpm.CpmWarning`), shows nothing else; Ctrl-C
+/// (the caller gone) cancels, inside the fit's iterations too.
+pub struct Cancel {
+    flag: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    warned: std::sync::Mutex<Vec<String>>,
+}
+
+impl Cancel {
+    /// A progress cancelled by `flag`.
+    pub fn new(flag: std::sync::Arc<std::sync::atomic::AtomicBool>) -> Cancel {
+        Cancel {
+            flag,
+            warned: std::sync::Mutex::new(Vec::new()),
+        }
+    }
+
+    /// The warnings the job gave, in order.
+    pub fn warned(&self) -> Vec<String> {
+        self.warned.lock().map(|w| w.clone()).unwrap_or_default()
+    }
+}
 
 impl cpm_workflow::Progress for Cancel {
+    fn warn(&self, message: &str) {
+        if let Ok(mut w) = self.warned.lock() {
+            w.push(message.to_string());
+        }
+    }
     fn cancel_flag(&self) -> Option<std::sync::Arc<std::sync::atomic::AtomicBool>> {
-        Some(self.0.clone())
+        Some(self.flag.clone())
+    }
+}
+
+/// `text` (a `calibrated.toml`) with `[calibration] calibrated_from`, recorded relative to
+/// the folder `here` (or absolute, or relative to the working directory, when `here` is
+/// `None`), recorded for the folder `there` as `cpm calibrate --out there` records it
+/// ([`cpm_workflow::load::calibrated_from`]), or absolute when `there` is `None` (outputs
+/// held in memory: their staging folder is gone). The rest of the text is kept as it is;
+/// a text that records no origin is returned as it is.
+pub fn recorded_for(text: &str, here: Option<&Path>, there: Option<&Path>) -> String {
+    let Some(recorded) = text.parse::<toml::Table>().ok().and_then(|t| {
+        match t.get("calibration")?.get("calibrated_from")? {
+            toml::Value::String(s) => Some(s.clone()),
+            _ => None,
+        }
+    }) else {
+        return text.to_string();
+    };
+    let from = match here {
+        Some(h) => h.join(&recorded),
+        None => PathBuf::from(&recorded),
+    };
+    // Through `..` by name (the staging folder may be gone), then the file itself.
+    let mut from = from.components().fold(PathBuf::new(), |mut p, c| {
+        match c {
+            std::path::Component::ParentDir if p.file_name().is_some() => {
+                p.pop();
+            }
+            std::path::Component::CurDir => {}
+            c => p.push(c),
+        }
+        p
+    });
+    if let Ok(c) = std::fs::canonicalize(&from) {
+        from = c;
+    }
+    let new = match there {
+        Some(d) => cpm_workflow::load::calibrated_from(&from, d),
+        None => std::path::absolute(&from)
+            .unwrap_or(from)
+            .display()
+            .to_string(),
+    };
+    let mut table = "";
+    let mut out = String::with_capacity(text.len() + new.len());
+    for line in text.split_inclusive('\n') {
+        let t = line.trim();
+        if t.starts_with('[') {
+            table = t;
+        }
+        let key = t
+            .strip_prefix("calibrated_from")
+            .is_some_and(|rest| rest.trim_start().starts_with('='));
+        if table == "[calibration]" && key {
+            let end = if line.ends_with("\r\n") {
+                "\r\n"
+            } else if line.ends_with('\n') {
+                "\n"
+            } else {
+                ""
+            };
+            out.push_str(&format!(
+                "calibrated_from = {}{end}",
+                toml::Value::String(new.clone())
+            ));
+        } else {
+            out.push_str(line);
+        }
+    }
+    out
+}
+
+/// [`recorded_for`] for Python (`CalibrationResult.save`): `calibrated.toml`'s text with its
+/// origin recorded from `here` re-recorded for the folder `there`.
+#[pyfunction]
+#[pyo3(signature = (text, here, there))]
+pub fn calibrated_from_at(text: &str, here: Option<PathBuf>, there: Option<PathBuf>) -> String {
+    recorded_for(text, here.as_deref(), there.as_deref())
+}
+
+/// Staged outputs (nothing written) as they are handed to Python: `calibrated.toml` records
+/// its origin absolute, since the staging folder `dir` it was recorded from is removed.
+pub fn unstaged(files: &mut [(String, Vec<u8>)], dir: &Path) {
+    for (name, bytes) in files.iter_mut() {
+        if name == "calibrated.toml" {
+            if let Ok(text) = std::str::from_utf8(bytes) {
+                *bytes = recorded_for(text, Some(dir), None).into_bytes();
+            }
+        }
     }
 }
 
@@ -348,8 +466,9 @@ pub fn calibrate_memory<'py>(
     options.fit.out = dir.clone();
     let bot = robot.robot.clone();
     let robot_path = robot.path.clone();
+    let out_given = out.clone();
     let r = crate::blocking::run(py, move |abandoned| -> anyhow::Result<Fit> {
-        let progress = Cancel(abandoned.clone());
+        let progress = Cancel::new(abandoned.clone());
         let t0 = std::time::Instant::now();
         let job = calibrate_in_memory(&options, bot, &sources, &progress)?;
         let fitted_s = t0.elapsed().as_secs_f64();
@@ -369,7 +488,7 @@ pub fn calibrate_memory<'py>(
         };
         let name_of = |p: &Path| p.strip_prefix(&dir).unwrap_or(p).display().to_string();
         // Staged only: the bytes moved out of the set, not copied (streamed ones made now).
-        let (files, set): (Vec<(String, Vec<u8>)>, _) = if commit {
+        let (mut files, set): (Vec<(String, Vec<u8>)>, _) = if commit {
             let files = fitted
                 .set
                 .paths()
@@ -393,6 +512,9 @@ pub fn calibrate_memory<'py>(
         };
         if abandoned.load(std::sync::atomic::Ordering::SeqCst) {
             anyhow::bail!("interrupted");
+        }
+        if out_given.is_none() {
+            unstaged(&mut files, &dir);
         }
         let written = if let Some(set) = set {
             let inputs_paths: Vec<&Path> = robot_path
@@ -437,6 +559,7 @@ pub fn calibrate_memory<'py>(
             written,
             origins,
             timings,
+            warned: progress.warned(),
         })
     })?;
     drop(staged);

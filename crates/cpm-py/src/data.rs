@@ -119,7 +119,8 @@ fn options(py: Python<'_>, robot: &PyRobot) -> PyResult<(ReadOptions, Registrati
     ))
 }
 
-/// What a measurement file is: its `file` name, `kind` and whether `simulated`.
+/// What a measurement file is: its `file` name, `kind`, whether `simulated`, and the poses
+/// left out while reading it (`excluded`).
 fn brief<'py>(py: Python<'py>, f: &DataFile) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("file", &f.file)?;
@@ -134,6 +135,11 @@ fn brief<'py>(py: Python<'py>, f: &DataFile) -> PyResult<Bound<'py, PyDict>> {
         },
     )?;
     d.set_item("simulated", f.campaign.simulated)?;
+    // The poses left out while reading (unreachable), in the words the commands warn with.
+    d.set_item(
+        "excluded",
+        f.excluded.iter().map(|e| e.to_string()).collect::<Vec<_>>(),
+    )?;
     Ok(d)
 }
 

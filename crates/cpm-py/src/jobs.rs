@@ -35,6 +35,8 @@ struct Ran {
     ini: Option<String>,
     /// The paths written.
     written: Vec<String>,
+    /// The job's warnings (the command's `warning:` lines).
+    warned: Vec<String>,
 }
 
 /// Where a job stages its outputs: `out` when given (and committed there when asked),
@@ -184,12 +186,18 @@ pub fn job<'py>(
             let d = refine::RefineOptions::new(PathBuf::new(), Vec::new(), &dir);
             let mut o = by_name(py, command, &d, options)?;
             o.fit.out = dir.clone();
-            (
-                run(py, move |a, p| {
-                    run_refine(&o, held, robot_path, &dir, commit, a, p)
-                })?,
-                staged,
-            )
+            let staged_only = staged.is_some();
+            let r = run(py, move |a, p| {
+                run_refine(&o, held, robot_path, &dir, commit, a, p).map(|mut r| {
+                    // Staged only: calibrated.toml records its origin absolute (the
+                    // staging folder it was recorded from is removed).
+                    if staged_only {
+                        crate::commands::unstaged(&mut r.files, &dir);
+                    }
+                    r
+                })
+            })?;
+            (r, staged)
         }
         "design" => {
             let (dir, staged) = out_dir(py, out.as_deref(), "design")?;
@@ -255,6 +263,7 @@ pub fn job<'py>(
     d.set_item("text", r.text)?;
     d.set_item("ini", r.ini)?;
     d.set_item("written", r.written)?;
+    d.set_item("warned", r.warned)?;
     Ok(d)
 }
 
@@ -265,8 +274,11 @@ where
     F: FnOnce(&AtomicBool, &dyn Progress) -> anyhow::Result<Ran> + Send + 'static,
 {
     let r = crate::blocking::run(py, move |abandoned: Arc<AtomicBool>| {
-        let progress = Cancel(abandoned.clone());
-        work(&abandoned, &progress)
+        let progress = Cancel::new(abandoned.clone());
+        work(&abandoned, &progress).map(|mut r| {
+            r.warned = progress.warned();
+            r
+        })
     })?;
     r.map_err(|e| crate::errors::to_py(py, &e))
 }

@@ -47,6 +47,7 @@ fn _cpm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(jobs::job, m)?)?;
     m.add_function(wrap_pyfunction!(commands::calibrate_memory, m)?)?;
     m.add_function(wrap_pyfunction!(commands::effect_names, m)?)?;
+    m.add_function(wrap_pyfunction!(commands::calibrated_from_at, m)?)?;
     m.add_function(wrap_pyfunction!(commands::render_html, m)?)?;
     m.add_function(wrap_pyfunction!(lm::least_squares, m)?)?;
     Ok(())

@@ -697,22 +697,7 @@ pub fn stage_calibrated(
     {
         let c = desc.calibration.get_or_insert_with(Default::default);
         let from = std::path::Path::new(&inputs.robot.file);
-        // Relative to the result's folder when the description lies near it (the two then
-        // move together, as in a project folder); far away (a shared library of
-        // descriptions), absolute, so that the result alone can move.
-        let relative = crate::load::relative_to_dir(from, dir);
-        let ups = relative
-            .components()
-            .take_while(|c| matches!(c, std::path::Component::ParentDir))
-            .count();
-        c.calibrated_from = Some(if relative.is_relative() && ups <= 2 {
-            relative.display().to_string()
-        } else {
-            std::fs::canonicalize(from)
-                .unwrap_or_else(|_| from.to_path_buf())
-                .display()
-                .to_string()
-        });
+        c.calibrated_from = Some(crate::load::calibrated_from(from, dir));
         c.calibrated_from_fnv1a64 = std::fs::read(from)
             .ok()
             .map(|b| format!("{:016x}", crate::output::fingerprint(&b)));

@@ -50,6 +50,26 @@ pub fn relative_to_dir(file: &Path, dir: &Path) -> PathBuf {
     rel
 }
 
+/// `[calibration] calibrated_from` of a result in the folder `dir` calibrated from the
+/// description `from`: relative to the result's folder when the description lies near it,
+/// at most two folders up (the two then move together, as in a project folder); far away (a
+/// shared library of descriptions), absolute, so that the result alone can move.
+pub fn calibrated_from(from: &Path, dir: &Path) -> String {
+    let relative = relative_to_dir(from, dir);
+    let ups = relative
+        .components()
+        .take_while(|c| matches!(c, std::path::Component::ParentDir))
+        .count();
+    if relative.is_relative() && ups <= 2 {
+        relative.display().to_string()
+    } else {
+        std::fs::canonicalize(from)
+            .unwrap_or_else(|_| from.to_path_buf())
+            .display()
+            .to_string()
+    }
+}
+
 /// Loads the robot description.
 pub fn load_robot(path: &Path, progress: &dyn Progress) -> anyhow::Result<Robot> {
     let robot = Robot::load(path)?;
