@@ -122,3 +122,38 @@ fn every_group_held_is_refused_as_such() {
     );
     assert!(!out.exists());
 }
+
+/// Gauges declared at 10 um whose residual is about 1 um are noted (issue 60 item 11: they
+/// were weighed at 10 um silently, every standard deviation ten times too large).
+#[test]
+fn a_declared_noise_the_residual_contradicts_is_noted() {
+    let robot = cli::example("hexapod_66.toml");
+    let data = cli::example("hexapod_66_readings.csv");
+    let d = cli::scratch("estimator", "noise-too-small");
+    let o = cli::cpm(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &data,
+        "--sigma-um",
+        "1000",
+        "--out",
+        &cli::p(&d.join("cal")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("Noise smaller than declared"), "{err}");
+    // At the noise the residual shows, no such note.
+    let o = cli::cpm(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &data,
+        "--out",
+        &cli::p(&d.join("estimated")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("Noise smaller than declared"), "{err}");
+}

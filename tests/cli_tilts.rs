@@ -258,3 +258,38 @@ fn a_mixed_campaign_gauges_points_and_tilts_in_one_fit() {
     let c = v["calibrated"]["orientation_rms_urad"].as_f64().unwrap();
     assert!((c - NOISE_URAD).abs() < 0.15 * NOISE_URAD, "{c}");
 }
+
+/// Exact angles (`--noise none`) flag no outlier (one was flagged at 0.0 urad: the robust
+/// spread of exact residuals is rounding), as exact gauge readings flag none.
+#[test]
+fn exact_angles_flag_no_outlier() {
+    let d = scratch("tilts", "exact");
+    let (robot, truth) = robots(&d);
+    let data = d.join("exact.csv");
+    ok(&[
+        "simulate",
+        "--robot",
+        &p(&robot),
+        "--truth",
+        &p(&truth),
+        "--random",
+        "40",
+        "--range-deg",
+        "10",
+        "--measure",
+        "tilts",
+        "--noise",
+        "none",
+        "--seed",
+        "5",
+        "--out",
+        &p(&data),
+    ]);
+    let j = calibrate_json(&robot, &[&data], &[], &d.join("cal"));
+    assert_eq!(
+        j["outliers"].as_array().unwrap().len(),
+        0,
+        "{}",
+        j["outliers"]
+    );
+}

@@ -282,12 +282,14 @@ fn refine_on_the_real_tilt_session_finds_a_load_dependent_leg_effect() {
         joints_mm < 5.0 && scale_pct < 10.0,
         "{joints_mm} mm, {scale_pct} %"
     );
-    // Angles have no length unit: the figures of a fit to them are called weighted.
+    // Angles have no length unit: the figures of a fit to them are weighted, in sigma (issue
+    // 60 item 10: they were "um of the reference noise"), never in um.
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(
-        md.contains("Residual RMS") && md.contains("(weighted, um of the reference noise), white"),
+        md.contains("Residual RMS") && md.contains("(weighted, in sigma), white"),
         "{md}"
     );
+    assert!(!md.contains("um of the reference noise"), "{md}");
     assert!(md.contains("Weighted residual RMS"), "{md}");
     assert!(md.contains("inclinometer angles RMS"), "{md}");
 }

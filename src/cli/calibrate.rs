@@ -92,7 +92,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         };
         writeln!(
             ctx.out,
-            "{}rank {} of {}, {} parameters determined, {residual}; solver: {}",
+            "{}rank {} of {}, parameters: {}; {residual}; solver: {}",
             if cal.simulated {
                 "SIMULATED data: "
             } else {
@@ -100,7 +100,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             },
             cal.identifiability.rank,
             cal.identifiability.num_params,
-            cal.identifiability.num_determined(),
+            report.fit.determination.words(),
             cal.solver.termination
         )?;
         for w in &written {

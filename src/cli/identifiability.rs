@@ -107,7 +107,7 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
     if let Some(a) = &against {
         writeln!(
             o,
-            "Against the tolerances at noise {sigma} um: {} directions determined better than their tolerance, {} a fit holds near nominal{}",
+            "Against the tolerances at noise {sigma} um: {} directions seen by the data better than their tolerance, {} a fit holds near nominal{}",
             a.determined_dimensions,
             a.held_directions.len(),
             if a.held_directions.is_empty() { "" } else { ":" }

@@ -78,10 +78,11 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     if args.fit.json {
         writeln!(ctx.out, "{}", report.doc.to_json()?)?;
     } else {
-        let u = if report.fit.residual_weighted {
-            " (weighted, um of the reference noise)"
+        // Weighted figures in sigma (as report.md), never in um.
+        let (u, scale) = if report.fit.residual_weighted && report.fit.sigma_um > 0.0 {
+            (" (weighted, in sigma)", report.fit.sigma_um)
         } else {
-            " um"
+            (" um", 1.0)
         };
         writeln!(
             ctx.out,
@@ -89,9 +90,9 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             if campaign.simulated { "SIMULATED data: " } else { "" },
             r.steps.len(),
             if r.steps.is_empty() { "none".to_string() } else { r.steps.iter().map(|s| s.effect.name()).collect::<Vec<_>>().join(", ") },
-            r.initial_diagnostics.rms_um,
-            cal.residual_rms_um,
-            r.final_cv_rms_um,
+            r.initial_diagnostics.rms_um / scale,
+            cal.residual_rms_um / scale,
+            r.final_cv_rms_um / scale,
             if r.unexplained_structure.is_empty() { "none".to_string() } else { r.unexplained_structure.join(", ") }
         )?;
         for w in &written {

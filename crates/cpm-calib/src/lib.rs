@@ -109,6 +109,7 @@ pub use identify::{
 };
 pub use instruments::{Instrument, InstrumentInput};
 pub use model::{MeasurementModel, ModelKind};
+pub use prior::Determination;
 pub use refine::{refine, AgainstCalibrate, RefineOptions, Refinement};
 pub use simulate::{
     simulate, simulate_campaign, simulate_pose_measurements, Noise, SimulationOptions,

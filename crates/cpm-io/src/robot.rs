@@ -13,7 +13,7 @@
 //! length_at_zero_mm + 1e-3 o` and `mm_per_unit' = (1 + 1e-6 s) mm_per_unit`.
 use std::path::Path;
 
-use cpm_calib::{Effect, EffectSettings, KnownEffect, MeasurementModel};
+use cpm_calib::{Determination, Effect, EffectSettings, KnownEffect, MeasurementModel};
 use cpm_clearance::{ClearanceModel, Load};
 use cpm_geometry::description::{CalibrationSpec, RobotDescription};
 use cpm_geometry::{InstallationErrors, JointTable};
@@ -501,6 +501,9 @@ pub struct CalibratedNotes {
     /// Effect parameters the data do not determine on their own (written at the fit's
     /// point, like [`undetermined`](Self::undetermined)).
     pub undetermined_effects: Vec<String>,
+    /// Every parameter the data do not determine, named (with its unit), with what holds
+    /// it: held by tolerance, held by user, or blind.
+    pub held: Vec<(Determination, String)>,
     /// Effects written to `[calibration.known_effects]`.
     pub known_effects: Vec<String>,
     /// Effects of the fit that describe a measurement session, not the machine, and are not
@@ -526,21 +529,31 @@ pub struct CalibratedNotes {
 ///   [`CalibratedNotes::session_effects`]);
 /// - `[calibration] effects` is set to `declare` when given.
 ///
-/// `determined[k]` says whether the data determine parameter `k` on their own; those that
-/// are not are named in the notes (their values are still written: a point of the solution
-/// set, never a mix of fitted and nominal components).
+/// `determination[k]` says what gives parameter `k` its value
+/// ([`Calibration::determination`](cpm_calib::Calibration::determination)); those the data
+/// do not determine are named in the notes with their word (their values are still written:
+/// the fit's point, never a mix of fitted and nominal components).
 pub fn calibrated_description(
     robot: &Robot,
     model: &MeasurementModel,
     params: &[f64],
-    determined: &[bool],
+    determination: &[Determination],
     declare: Option<&[Effect]>,
 ) -> (RobotDescription, CalibratedNotes) {
     let mut d = robot.description.clone();
     let mut notes = CalibratedNotes::default();
     let sensor_names: Vec<String> = robot.table.sensors.iter().map(|s| s.name.clone()).collect();
     let ni = model.num_installation_params();
-    let is_determined = |k: usize| determined.get(k).copied().unwrap_or(true);
+    let is_determined = |k: usize| {
+        determination
+            .get(k)
+            .is_none_or(|d| *d == Determination::Determined)
+    };
+    let names = model.parameter_names();
+    notes.held = (0..determination.len().min(names.len()))
+        .filter(|&k| !is_determined(k))
+        .map(|k| (determination[k], names[k].clone()))
+        .collect();
     // Installation errors: the description's own plus the fitted ones.
     let mut errors = vec![0.0; ni];
     if let Some(spec) = &d.installation_errors_um {
@@ -692,14 +705,34 @@ pub fn calibrated_toml(
         s.push_str(&format!("# {h}\n"));
     }
     s.push_str("# The joints are the design joints; [installation_errors_um] holds the calibrated installation errors (every reader applies them).\n");
-    if !notes.undetermined.is_empty() || !notes.undetermined_effects.is_empty() {
-        s.push_str(&format!(
-            "# Not determined by the data on their own ({} installation-error components, {} effect parameters): written at the fit's minimum-norm point of the solution set, which reproduces the fit; they are not measured values. {}{}\n",
-            notes.undetermined.len(),
-            notes.undetermined_effects.len(),
-            notes.undetermined.join(", "),
-            if notes.undetermined_effects.is_empty() { String::new() } else { format!("; {}", notes.undetermined_effects.join(", ")) }
-        ));
+    // What holds each parameter the data do not determine, in the words of every output.
+    for (d, what) in [
+        (
+            Determination::HeldByTolerance,
+            "the data alone do not determine them; written where the fit ends between the data and the tolerance, not measured values",
+        ),
+        (Determination::HeldByUser, "written at their held value"),
+        (
+            Determination::Blind,
+            "neither the data nor a tolerance determine them; written at the fit's minimum-norm point of the solution set, which reproduces the fit; not measured values",
+        ),
+    ] {
+        let names: Vec<&str> = notes
+            .held
+            .iter()
+            .filter(|h| h.0 == d)
+            .map(|h| h.1.as_str())
+            .collect();
+        if !names.is_empty() {
+            let word = d.word();
+            s.push_str(&format!(
+                "# {}{} ({}): {what}. {}\n",
+                word[..1].to_uppercase(),
+                &word[1..],
+                names.len(),
+                names.join(", ")
+            ));
+        }
     }
     if !notes.session_effects.is_empty() {
         s.push_str(&format!(

@@ -425,12 +425,22 @@ impl RefineReport {
     /// report.md.
     pub fn markdown(&self) -> String {
         let d = &self.doc;
-        // A residual that mixes kinds weighed differently (angles, or lengths of different
-        // noise) has no length unit: its figures are weighted, in um of the reference noise.
-        let u = if self.fit.residual_weighted {
-            " (weighted, um of the reference noise)"
+        // A residual that mixes kinds weighed differently has no one unit: its figures are
+        // weighted, in sigma (each residual over its kind's noise at the final fit's noise
+        // scale, as calibration.json's weighted_rms_in_sigma), never in um.
+        let weighted = self.fit.residual_weighted;
+        let sigma = self.fit.sigma_um;
+        let u = if weighted {
+            " (weighted, in sigma)"
         } else {
             " um"
+        };
+        let w = |x: f64, n: usize| {
+            if weighted && sigma > 0.0 {
+                sig(x / sigma, n)
+            } else {
+                sig(x, n)
+            }
         };
         let mut s = String::from("# Refinement report\n\n");
         if d.simulated {
@@ -446,7 +456,7 @@ impl RefineReport {
         s.push_str(&format!(
             "\nStarting model: {}. Residual RMS {}{u}, white: {}.\n\n## Steps\n\n",
             self.starting_model,
-            sig(d.initial.rms_um, 3),
+            w(d.initial.rms_um, 3),
             yes_no(d.initial.residual_white)
         ));
         if !d.not_applicable.is_empty() {
@@ -488,8 +498,8 @@ impl RefineReport {
             s.push_str(&format!(
                 "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {} -> {}{u} (no better).\n",
                 x.effect,
-                sig(x.cv_rms_before_um, 4),
-                sig(x.cv_rms_with_um, 4)
+                w(x.cv_rms_before_um, 4),
+                w(x.cv_rms_with_um, 4)
             ));
         }
         if !d.rejected_by_cross_validation.is_empty() {
@@ -509,10 +519,10 @@ impl RefineReport {
                 st.effect,
                 st.p_value.map_or("n.d.".into(), p_value),
                 st.delta_bic.map_or("n.d.".into(), |b| fixed(b, 1)),
-                sig(st.rms_before_um, 3),
-                sig(st.rms_after_um, 3),
-                sig(st.cv_rms_before_um, 3),
-                sig(st.cv_rms_after_um, 3)
+                w(st.rms_before_um, 3),
+                w(st.rms_after_um, 3),
+                w(st.cv_rms_before_um, 3),
+                w(st.cv_rms_after_um, 3)
             ));
             for p in &st.parameters {
                 let (v, sd) = opt_with_sd(p.value, p.std, 4);
@@ -526,12 +536,12 @@ impl RefineReport {
         s.push_str(&format!(
             "## Final\n\n- Effects: {}\n- RMS {}{u}, cross-validated {}{u}, residual white: {}\n- Unexplained structure: {}\n- Against plain calibration, on the whole campaign with blocked folds (data each fit did not see): {}{u} calibrated, {}{u} refined\n\n",
             self.final_effects,
-            sig(d.final_.rms_um, 3),
-            sig(d.final_.cv_rms_um, 3),
+            w(d.final_.rms_um, 3),
+            w(d.final_.cv_rms_um, 3),
             yes_no(d.final_.residual_white),
             if d.final_.unexplained_structure.is_empty() { "none".to_string() } else { d.final_.unexplained_structure.join(", ") },
-            sig(d.against_calibrate.calibrate_cv_rms_um, 4),
-            sig(d.against_calibrate.refined_cv_rms_um, 4),
+            w(d.against_calibrate.calibrate_cv_rms_um, 4),
+            w(d.against_calibrate.refined_cv_rms_um, 4),
         ));
         if d.final_.effects.iter().any(|e| e.starts_with("pose_map")) {
             let (lo, hi) = (

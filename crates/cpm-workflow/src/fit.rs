@@ -690,7 +690,9 @@ pub fn stage_calibrated(
         &inputs.robot,
         model,
         &cal.minimum_norm_um,
-        &cal.identifiability.determined,
+        &(0..cal.estimate_um.len())
+            .map(|k| cal.determination(k))
+            .collect::<Vec<_>>(),
         declare,
     );
     // Where it came from (validate's default reference) and whether the data were simulated.

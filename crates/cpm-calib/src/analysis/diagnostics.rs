@@ -309,13 +309,22 @@ pub fn outliers(residuals_um: &[f64]) -> Vec<usize> {
     outliers_beyond(residuals_um, OUTLIER_SIGMAS)
 }
 
-/// [`outliers`] beyond `sigmas` robust standard deviations.
+/// The residual, um (weighted), below which no observation is an outlier: rounding, not
+/// measurement (1 pm; exact data fit to about 1e-9 um, and their robust spread is rounding
+/// too: an exact angle was flagged at 0.0 urad).
+pub const NUMERICAL_RESIDUAL_UM: f64 = 1e-6;
+
+/// [`outliers`] beyond `sigmas` robust standard deviations, and beyond
+/// [`NUMERICAL_RESIDUAL_UM`] from the median.
 pub fn outliers_beyond(residuals_um: &[f64], sigmas: f64) -> Vec<usize> {
     let (median, mad) = robust_spread(residuals_um);
     residuals_um
         .iter()
         .enumerate()
-        .filter(|(_, r)| mad > 0.0 && (**r - median).abs() > sigmas * mad)
+        .filter(|(_, r)| {
+            let off = (**r - median).abs();
+            mad > 0.0 && off > sigmas * mad && off > NUMERICAL_RESIDUAL_UM
+        })
         .map(|(k, _)| k)
         .collect()
 }

@@ -60,6 +60,17 @@ impl Misfit {
     pub fn inconsistent(&self) -> bool {
         self.p_value < MISFIT_P && self.chi2_per_dof > MISFIT_CHI2_PER_DOF
     }
+
+    /// True when the residual is smaller than the declared noise beyond chance: a chi2 this
+    /// small has a probability below [`MISFIT_P`] and chi2/dof is below 1 /
+    /// [`MISFIT_CHI2_PER_DOF`]. The standard deviations, which use the declared noise, are
+    /// then too large by about `1 / sqrt(chi2_per_dof)`.
+    pub fn too_small(&self) -> bool {
+        self.chi2_per_dof < 1.0 / MISFIT_CHI2_PER_DOF
+            && ChiSquared::new(self.dof as f64)
+                .map(|c| c.cdf(self.chi2) < MISFIT_P)
+                .unwrap_or(false)
+    }
 }
 
 /// The chi-square test of residuals `residuals_um` (weighted to the noise `sigma_um`) of a

@@ -13,7 +13,7 @@ use crate::analysis::identifiability::{
     physical_patterns, try_analyze, Identifiability, RankOptions,
 };
 pub use crate::fit::prior::Tolerances;
-use crate::fit::prior::{prior_std, summarize, PriorSummary};
+use crate::fit::prior::{prior_std, summarize, Determination, PriorSummary};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, Effect, MeasurementModel};
 
@@ -187,6 +187,60 @@ impl Calibration {
     /// True when the solver stopped normally and a robust fit did not ignore most of the data.
     pub fn succeeded(&self) -> bool {
         self.solver.was_successful() && !self.robust_failed
+    }
+
+    /// What gives parameter `k` its value ([`Determination`]): the data, a tolerance, the
+    /// user's hold, or nothing.
+    pub fn determination(&self, k: usize) -> Determination {
+        let at_limit = self.held_at_limit.binary_search(&k).is_ok();
+        let held = self.prior_std.get(k) == Some(&0.0)
+            || self
+                .prior
+                .as_ref()
+                .is_some_and(|p| p.prior_std.get(k) == Some(&Some(0.0)));
+        if held && !at_limit {
+            Determination::HeldByUser
+        } else if self.estimate_um.get(k).copied().flatten().is_some() {
+            Determination::Determined
+        } else if at_limit
+            || self
+                .prior
+                .as_ref()
+                .is_some_and(|p| p.posterior_std.get(k).copied().flatten().is_some())
+        {
+            Determination::HeldByTolerance
+        } else {
+            Determination::Blind
+        }
+    }
+
+    /// Parameter `k`'s value and the standard deviation that goes with its determination:
+    /// determined, the estimate and its Cramér-Rao bound; held by tolerance, the fitted value
+    /// (the one every command applies) and its posterior standard deviation; held by user,
+    /// the held value and 0; blind, none (model units: um, ppm, ...).
+    pub fn value_and_std(&self, k: usize) -> (Option<f64>, Option<f64>) {
+        let fitted = self.minimum_norm_um.get(k).copied();
+        match self.determination(k) {
+            Determination::Determined => (self.estimate_um[k], self.std_um[k]),
+            Determination::HeldByTolerance => (
+                fitted,
+                self.prior
+                    .as_ref()
+                    .and_then(|p| p.posterior_std.get(k).copied().flatten()),
+            ),
+            Determination::HeldByUser => (fitted, Some(0.0)),
+            Determination::Blind => (None, None),
+        }
+    }
+
+    /// How many parameters each [`Determination`] has, in [`Determination::ALL`]'s order.
+    pub fn determination_counts(&self) -> [usize; 4] {
+        let mut n = [0; 4];
+        for k in 0..self.estimate_um.len() {
+            let d = self.determination(k);
+            n[Determination::ALL.iter().position(|a| *a == d).unwrap_or(3)] += 1;
+        }
+        n
     }
 }
 
@@ -779,16 +833,22 @@ fn identify_uncancelled(
     ident.blind_directions = first.blind_directions.clone();
     ident.unexplained_null_dimensions = (ident.num_params - ident.rank)
         .saturating_sub(first.blind_directions.iter().map(|b| b.dimensions).sum());
-    // A parameter is reported as measured when the data determine it on its own and, under a
+    // A parameter is reported as measured when the data determine it on its own or, under a
     // prior, supply at least half of its determination; its standard deviation is the
-    // Cramér-Rao bound of the data (the posterior one, the prior's share included, is in
-    // `prior.posterior_std`).
-    let measured =
-        |k: usize| ident.determined[k] && prior_summary.as_ref().is_none_or(|p| p.determined(k));
+    // Cramér-Rao bound of the data where the data alone determine it (the posterior one, the
+    // prior's share included, is in `prior.posterior_std`).
+    // Under a prior, a parameter the data supply most of ([`PriorSummary::determined`]) is
+    // determined even where the data alone leave it mixed with others in a blind direction
+    // that the others' tolerances close: its standard deviation is then the posterior one.
+    let measured = |k: usize| match &prior_summary {
+        Some(p) => p.determined(k),
+        None => ident.determined[k],
+    };
     let estimate_um: Vec<Option<f64>> = (0..np).map(|k| measured(k).then_some(e_hat[k])).collect();
     let std_um: Vec<Option<f64>> = (0..np)
         .map(|k| match &prior_summary {
-            Some(_) if measured(k) => ident.crlb_std_um[k],
+            Some(_) if measured(k) && ident.determined[k] => ident.crlb_std_um[k],
+            Some(p) if measured(k) => p.posterior_std[k],
             Some(_) => None,
             None => ident.crlb_std_um[k],
         })

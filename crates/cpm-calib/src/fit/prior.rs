@@ -361,6 +361,54 @@ pub struct PriorSummary {
     pub sigma_um: f64,
 }
 
+/// What gives a fitted parameter its value: one word per meaning, the same in stdout,
+/// report.md, calibration.json and calibrated.toml ([`Determination::word`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Determination {
+    /// "determined": the data determine it on their own (the rank of the data alone) or,
+    /// under a prior, supply at least [`MIN_DATA_SHARE`] of its determination (a free
+    /// parameter: its posterior exists). Its standard deviation is the data's Cramér-Rao
+    /// bound where the data alone determine it, the posterior one otherwise.
+    Determined,
+    /// "held by tolerance": the data supply less than [`MIN_DATA_SHARE`] of its
+    /// determination; its tolerance holds it, or the tolerance limit does. Its value is where the fit ends between the data and the
+    /// tolerance, its standard deviation the posterior one: not a measurement.
+    HeldByTolerance,
+    /// "held by user": held at its nominal value (`--hold`, a held group).
+    HeldByUser,
+    /// "blind": neither the data nor a tolerance determine it. No estimate exists; the
+    /// written model carries the fit's minimum-norm value.
+    Blind,
+}
+
+impl Determination {
+    /// Every determination, in the order reports list them.
+    pub const ALL: [Determination; 4] = [
+        Determination::Determined,
+        Determination::HeldByTolerance,
+        Determination::HeldByUser,
+        Determination::Blind,
+    ];
+
+    /// The word every output uses: `determined`, `held by tolerance`, `held by user`,
+    /// `blind`.
+    pub fn word(self) -> &'static str {
+        match self {
+            Determination::Determined => "determined",
+            Determination::HeldByTolerance => "held by tolerance",
+            Determination::HeldByUser => "held by user",
+            Determination::Blind => "blind",
+        }
+    }
+}
+
+impl std::fmt::Display for Determination {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.word())
+    }
+}
+
 /// The share of the data below which a parameter counts as held by its prior rather than
 /// determined by the data (posterior standard deviation at least `1/sqrt(2)` of the prior's).
 pub const MIN_DATA_SHARE: f64 = 0.5;

@@ -2,7 +2,7 @@
 //! bars (SVG, plotters).
 use plotters::prelude::*;
 
-use cpm_calib::{Calibration, Campaign, MeasurementModel, ObservationKind};
+use cpm_calib::{Calibration, Campaign, Determination, MeasurementModel, ObservationKind};
 
 use super::{err, scatter_panels, Panel, PlotError};
 
@@ -213,15 +213,21 @@ pub fn residuals_before_after(
 pub struct EstimateGroup {
     /// Axis label, with the unit.
     pub label: String,
-    /// The points.
+    /// The points the data determine.
     pub points: Vec<(usize, f64, f64)>,
+    /// The points held by their tolerance (value where the fit ends, posterior standard
+    /// deviation), drawn in another colour.
+    pub held: Vec<(usize, f64, f64)>,
 }
 
 /// Estimates with +-2 sigma error bars, one panel per physical group (so each axis carries
 /// one unit); the parameter numbers match report.md's table. No legend covers the data: the
 /// title says what the bars are.
 pub fn estimates(title: &str, groups: &[EstimateGroup]) -> Result<String, PlotError> {
-    let groups: Vec<&EstimateGroup> = groups.iter().filter(|g| !g.points.is_empty()).collect();
+    let groups: Vec<&EstimateGroup> = groups
+        .iter()
+        .filter(|g| !g.points.is_empty() || !g.held.is_empty())
+        .collect();
     let panel_h = 320u32;
     let height = 50 + panel_h * groups.len().max(1) as u32;
     let mut svg = String::new();
@@ -233,22 +239,24 @@ pub fn estimates(title: &str, groups: &[EstimateGroup]) -> Result<String, PlotEr
             .map_err(|e| err(title, e))?;
         let panels = root.split_evenly((groups.len().max(1), 1));
         let blue = RGBColor(31, 119, 180);
+        let orange = RGBColor(255, 127, 14);
         for (g, area) in groups.iter().zip(&panels) {
             let (mut lo, mut hi) = (0.0f64, 0.0f64);
-            for (_, v, s) in &g.points {
+            for (_, v, s) in g.points.iter().chain(&g.held) {
                 lo = lo.min(v - 2.0 * s);
                 hi = hi.max(v + 2.0 * s);
             }
             let pad = ((hi - lo).abs() * 0.1).max(1e-6);
-            let first = g.points.iter().map(|p| p.0).min().unwrap_or(1) as f64;
-            let last = g.points.iter().map(|p| p.0).max().unwrap_or(1) as f64;
+            let all = || g.points.iter().chain(&g.held).map(|p| p.0);
+            let first = all().min().unwrap_or(1) as f64;
+            let last = all().max().unwrap_or(1) as f64;
             let mut chart = ChartBuilder::on(area)
                 .margin(10)
                 .x_label_area_size(40)
                 .y_label_area_size(70)
                 .build_cartesian_2d((first - 1.0)..(last + 1.0), (lo - pad)..(hi + pad))
                 .map_err(|e| err(title, e))?;
-            let numbers: Vec<usize> = g.points.iter().map(|p| p.0).collect();
+            let numbers: Vec<usize> = all().collect();
             chart
                 .configure_mesh()
                 .x_desc("parameter (numbered as in report.md)")
@@ -264,18 +272,20 @@ pub fn estimates(title: &str, groups: &[EstimateGroup]) -> Result<String, PlotEr
                 .y_label_formatter(&|y| crate::format::short(*y))
                 .draw()
                 .map_err(|e| err(title, e))?;
-            chart
-                .draw_series(g.points.iter().map(|(i, v, s)| {
-                    ErrorBar::new_vertical(
-                        *i as f64,
-                        v - 2.0 * s,
-                        *v,
-                        v + 2.0 * s,
-                        blue.filled(),
-                        6,
-                    )
-                }))
-                .map_err(|e| err(title, e))?;
+            for (points, colour) in [(&g.points, blue), (&g.held, orange)] {
+                chart
+                    .draw_series(points.iter().map(|(i, v, s)| {
+                        ErrorBar::new_vertical(
+                            *i as f64,
+                            v - 2.0 * s,
+                            *v,
+                            v + 2.0 * s,
+                            colour.filled(),
+                            6,
+                        )
+                    }))
+                    .map_err(|e| err(title, e))?;
+            }
             chart
                 .draw_series(LineSeries::new(
                     vec![(first - 1.0, 0.0), (last + 1.0, 0.0)],
@@ -288,36 +298,63 @@ pub fn estimates(title: &str, groups: &[EstimateGroup]) -> Result<String, PlotEr
     Ok(svg)
 }
 
-/// The `estimates.svg` figure: determined installation errors with error bars.
+/// The `estimates.svg` figure: the parameters the data determine (blue, +-2 Cramér-Rao
+/// standard deviations) and those held by tolerance (orange, +-2 posterior standard
+/// deviations), numbered as report.md's Estimates table.
 pub fn estimates_figure(model: &MeasurementModel, cal: &Calibration) -> Result<String, PlotError> {
     // One panel per physical group and unit: the installation errors, then each effect's
-    // parameters of one unit; numbered as the determined rows of report.md's table.
+    // parameters of one unit; numbered as the plotted rows of report.md's table.
     let mut groups: Vec<EstimateGroup> = Vec::new();
     let mut number = 0;
+    let mut any_held = false;
     for b in model.blocks() {
         for k in b.offset..b.offset + b.len {
-            let Some(v) = cal.estimate_um.get(k).copied().flatten() else {
+            let determination = cal.determination(k);
+            let (Some(v), std) = cal.value_and_std(k) else {
                 continue;
             };
+            if !v.is_finite()
+                || !matches!(
+                    determination,
+                    Determination::Determined | Determination::HeldByTolerance
+                )
+            {
+                continue;
+            }
             number += 1;
             let label = match (b.effect, b.instrument) {
                 (Some(e), _) => format!("{}, {}", e.name(), e.param_unit(k - b.offset)),
                 (None, Some(i)) => format!("instrument {}", model.instruments[i].name()),
                 (None, None) => "installation errors, um".to_string(),
             };
-            let point = (number, v, cal.std_um[k].unwrap_or(0.0));
-            match groups.iter_mut().find(|g| g.label == label) {
-                Some(g) => g.points.push(point),
-                None => groups.push(EstimateGroup {
-                    label,
-                    points: vec![point],
-                }),
+            let point = (number, v, std.filter(|s| s.is_finite()).unwrap_or(0.0));
+            let i = match groups.iter().position(|g| g.label == label) {
+                Some(i) => i,
+                None => {
+                    groups.push(EstimateGroup {
+                        label,
+                        points: Vec::new(),
+                        held: Vec::new(),
+                    });
+                    groups.len() - 1
+                }
+            };
+            if determination == Determination::Determined {
+                groups[i].points.push(point);
+            } else {
+                any_held = true;
+                groups[i].held.push(point);
             }
         }
     }
     estimates(
         &format!(
-            "Determined parameters with +-2 std error bars{}",
+            "{} with +-2 std error bars{}",
+            if any_held {
+                "Determined parameters (blue) and held by tolerance (orange, posterior std)"
+            } else {
+                "Determined parameters"
+            },
             if cal.simulated {
                 " (SIMULATED data)"
             } else {

@@ -7,9 +7,8 @@
 use serde::Serialize;
 
 use crate::format::{finite, fixed, opt_fixed, opt_with_sd, short, sig, with_sd};
-use cpm_calib::{Calibration, Effect, MeasurementModel};
+use cpm_calib::{Calibration, Determination, Effect, MeasurementModel};
 use cpm_geometry::InstallationErrors;
-use cpm_io::robot::split_params;
 use cpm_io::{Merged, Provenance, Robot};
 
 pub use crate::identifiability::{
@@ -74,12 +73,15 @@ impl PerJoint {
 pub struct EffectParameter {
     /// Its name (`backlash.1`, ...).
     pub name: String,
-    /// The estimate (`null`: not determined).
+    /// The estimate (`null`: not determined by the data; `determination` says what holds
+    /// it, and `parameters` its value).
     pub value: Option<f64>,
     /// Its standard deviation.
     pub std: Option<f64>,
     /// The unit of both.
     pub unit: String,
+    /// What gives it its value ([`Determination`]).
+    pub determination: Determination,
 }
 
 /// The fitted parameters of one effect.
@@ -280,15 +282,83 @@ pub struct RegistrationSummary {
     pub refined_by_fit: RefinedByFit,
 }
 
-/// One row of the estimates table (every parameter of the model).
-#[derive(Debug, Clone, PartialEq)]
+/// One row of the estimates table (every parameter of the model), and one entry of
+/// `calibration.json`'s `parameters`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ParameterRow {
-    /// Its name.
+    /// Its name, with its unit.
     pub name: String,
-    /// Its estimate, `None` when not determined.
+    /// What gives it its value: `determined`, `held_by_tolerance`, `held_by_user` or
+    /// `blind` ([`Determination`]).
+    pub determination: Determination,
+    /// Its value (the one every command applies; `None`: blind): the data's estimate when
+    /// determined, the fit's value between the data and the tolerance when held by
+    /// tolerance, the held value when held by user.
+    #[serde(rename = "value")]
     pub estimate: Option<f64>,
-    /// Its standard deviation.
+    /// The standard deviation that goes with its determination: the Cramér-Rao bound
+    /// (determined), the posterior one (held by tolerance), 0 (held by user).
     pub std: Option<f64>,
+}
+
+/// How many parameters each [`Determination`] has (`calibration.json` `determination`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+pub struct DeterminationCounts {
+    /// Determined by the data on their own.
+    pub determined: usize,
+    /// Held by their tolerance (or the tolerance limit).
+    pub held_by_tolerance: usize,
+    /// Held by the user at nominal.
+    pub held_by_user: usize,
+    /// Neither determined nor held: no estimate.
+    pub blind: usize,
+}
+
+impl DeterminationCounts {
+    /// The counts of `cal`.
+    pub fn of(cal: &Calibration) -> Self {
+        let [determined, held_by_tolerance, held_by_user, blind] = cal.determination_counts();
+        DeterminationCounts {
+            determined,
+            held_by_tolerance,
+            held_by_user,
+            blind,
+        }
+    }
+
+    /// In words, the zero counts left out but the determined one: `"30 determined, 6 held
+    /// by tolerance"`, the same in stdout and report.md.
+    pub fn words(&self) -> String {
+        let mut v = vec![format!("{} determined", self.determined)];
+        for (n, d) in [
+            (self.held_by_tolerance, Determination::HeldByTolerance),
+            (self.held_by_user, Determination::HeldByUser),
+            (self.blind, Determination::Blind),
+        ] {
+            if n > 0 {
+                v.push(format!("{n} {d}"));
+            }
+        }
+        v.join(", ")
+    }
+}
+
+/// Every parameter of `model` with its determination, value and standard deviation.
+pub fn parameter_rows(model: &MeasurementModel, cal: &Calibration) -> Vec<ParameterRow> {
+    model
+        .parameter_names()
+        .iter()
+        .enumerate()
+        .map(|(k, n)| {
+            let (estimate, std) = cal.value_and_std(k);
+            ParameterRow {
+                name: n.clone(),
+                determination: cal.determination(k),
+                estimate: estimate.filter(|v| v.is_finite()),
+                std: std.filter(|v| v.is_finite()),
+            }
+        })
+        .collect()
 }
 
 /// What report.md says about the fit beyond calibration.json.
@@ -422,6 +492,14 @@ pub struct FitReport {
     pub not_determined: Vec<String>,
     /// The fitted effects.
     pub effects: Vec<EffectEstimates>,
+    /// Every parameter of the model in model order, each with what gives it its value
+    /// (`determined`, `held_by_tolerance`, `held_by_user`, `blind`), the value every command
+    /// applies (what `calibrated.toml` writes; `null` when blind) and the standard deviation
+    /// that goes with it. `installation_errors_um`, `std_um` and `effects` hold the
+    /// determined ones alone.
+    pub parameters: Vec<ParameterRow>,
+    /// How many parameters each determination has.
+    pub determination: DeterminationCounts,
     /// Known values applied in every prediction (the estimates are on top of them).
     pub known_effects: Vec<KnownEffectValues>,
     /// Residual RMS, um (of the reference noise when `residual_weighted`).
@@ -498,7 +576,7 @@ fn named_block(
     )
 }
 
-/// The fitted effects' parameters, named, with their units.
+/// The fitted effects' parameters, named, with their units and determinations.
 fn effect_estimates(model: &MeasurementModel, cal: &Calibration) -> Vec<EffectEstimates> {
     let sensors: Vec<String> = model
         .nominal
@@ -506,22 +584,20 @@ fn effect_estimates(model: &MeasurementModel, cal: &Calibration) -> Vec<EffectEs
         .iter()
         .map(|s| s.name.clone())
         .collect();
-    let est = split_params(model, &cal.estimate_um);
-    let sd = split_params(model, &cal.std_um);
-    est.effects
+    let at = |v: &[Option<f64>], k: usize| finite(v.get(k).copied().flatten());
+    model
+        .blocks()
         .iter()
-        .zip(&sd.effects)
-        .map(|((e, v), (_, s))| EffectEstimates {
+        .filter_map(|b| b.effect.map(|e| (e, b)))
+        .map(|(e, b)| EffectEstimates {
             effect: e.name().to_string(),
-            parameters: v
-                .iter()
-                .zip(s)
-                .enumerate()
-                .map(|(k, (v, s))| EffectParameter {
+            parameters: (0..b.len)
+                .map(|k| EffectParameter {
                     name: e.param_name(k, &sensors),
-                    value: finite(*v),
-                    std: finite(*s),
+                    value: at(&cal.estimate_um, b.offset + k),
+                    std: at(&cal.std_um, b.offset + k),
                     unit: e.param_unit(k).to_string(),
+                    determination: cal.determination(b.offset + k),
                 })
                 .collect(),
         })
@@ -675,16 +751,7 @@ fn fit_text(
         clearance_um: model.clearance.radius_um,
         model: describe_model(model),
         formulation: formulation.map(|f| f.describe().to_string()),
-        parameters: model
-            .parameter_names()
-            .iter()
-            .enumerate()
-            .map(|(k, n)| ParameterRow {
-                name: n.clone(),
-                estimate: cal.estimate_um[k],
-                std: cal.std_um[k],
-            })
-            .collect(),
+        parameters: parameter_rows(model, cal),
         warnings: warnings_md,
         sigma_excludes_outliers_note: cal.sigma_excludes_outliers,
     }
@@ -727,6 +794,8 @@ impl FitReport {
                 .map(InstallationErrors::component_name)
                 .collect(),
             effects: effect_estimates(model, cal),
+            parameters: parameter_rows(model, cal),
+            determination: DeterminationCounts::of(cal),
             known_effects: model
                 .known_effects
                 .iter()
@@ -933,12 +1002,13 @@ impl FitReport {
         let id = &self.identifiability;
         s.push_str("## What the data identify\n\n");
         s.push_str(&format!(
-            "Rank {} of {} from {} readings (threshold {} = rtol x s_max); {} parameters determined on their own.\n\n",
+            "Rank {} of {} from {} readings (threshold {} = rtol x s_max); the data alone see {} parameters on their own. Parameters: {} (see \"Estimates\").\n\n",
             id.rank,
             id.parameters,
             id.observations,
             crate::format::sci(id.threshold, 3),
-            id.determined
+            id.determined,
+            self.determination.words()
         ));
         if id.rank < id.parameters {
             let blind = id.parameters - id.rank;
@@ -963,17 +1033,24 @@ impl FitReport {
         if let Some(p) = &self.prior {
             p.markdown(s);
         }
-        s.push_str("## Estimates\n\nn.d. = not determined by the data: no estimate exists, whatever a solver would print. Each estimate is rounded to two significant digits of its standard deviation. The numbers `#` match `estimates.svg`.\n\n| # | parameter | estimate | std |\n|---|---|---|---|\n");
+        s.push_str("## Estimates\n\nEach parameter says what gives it its value: **determined** (the data determine it on their own; std = its Cramér-Rao bound), **held by tolerance** (the data alone do not determine it; the value is where the fit ends between the data and the tolerance, std = the posterior one: not a measurement), **held by user** (held at its nominal value), **blind** (neither the data nor a tolerance determine it: no estimate exists, `n.d.`, whatever a solver would print). Each value is rounded to two significant digits of its standard deviation. The numbers `#` match `estimates.svg`.\n\n| # | parameter | value | std | determination |\n|---|---|---|---|---|\n");
         let mut plotted = 0;
         for p in &t.parameters {
-            let num = if p.estimate.is_some() {
+            let plots = matches!(
+                p.determination,
+                Determination::Determined | Determination::HeldByTolerance
+            ) && p.estimate.is_some();
+            let num = if plots {
                 plotted += 1;
                 plotted.to_string()
             } else {
                 String::new()
             };
             let (v, sd) = opt_with_sd(p.estimate, p.std, 3);
-            s.push_str(&format!("| {num} | {} | {v} | {sd} |\n", p.name));
+            s.push_str(&format!(
+                "| {num} | {} | {v} | {sd} | {} |\n",
+                p.name, p.determination
+            ));
         }
         s.push('\n');
         self.markdown_excluded(s);
@@ -1137,8 +1214,13 @@ mod tests {
 
     #[test]
     fn markdown_rounds_to_the_deviation_and_shows_no_artefact() {
-        let row = |name: &str, estimate, std| ParameterRow {
+        let row = |name: &str, estimate: Option<f64>, std| ParameterRow {
             name: name.into(),
+            determination: if estimate.is_some() {
+                Determination::Determined
+            } else {
+                Determination::Blind
+            },
             estimate,
             std,
         };

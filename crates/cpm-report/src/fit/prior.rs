@@ -62,6 +62,11 @@ pub struct PriorReport {
     pub limit_in_tolerances: Option<f64>,
     /// The parameters the data pulled beyond the limit, held at it (not measured).
     pub held_at_limit: Vec<String>,
+    /// The parameters that end beyond their tolerance without being held at the limit
+    /// (directions the limit does not act on, such as a frame's gauge freedoms; the
+    /// "Beyond tolerance" warning).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub beyond_tolerance: Vec<String>,
     /// Directions the data determine better than their tolerance.
     pub determined_dimensions: usize,
     /// Effective number of parameters fitted (trace of the hat matrix).
@@ -138,6 +143,10 @@ impl PriorReport {
                 .iter()
                 .map(|&k| names.get(k).cloned().unwrap_or_else(|| format!("#{k}")))
                 .collect(),
+            beyond_tolerance: beyond(cal)
+                .iter()
+                .map(|&(k, _)| names.get(k).cloned().unwrap_or_else(|| format!("#{k}")))
+                .collect(),
             determined_dimensions: p.determined_dimensions,
             effective_params: p.effective_params,
         })
@@ -147,7 +156,7 @@ impl PriorReport {
     pub fn markdown(&self, s: &mut String) {
         s.push_str("## What the data determine at their noise\n\n");
         s.push_str(&format!(
-            "Estimator: {}. {} directions determined better than their tolerance; {} held near nominal by it; {} effective parameters.\n\n",
+            "Estimator: {}. {} directions seen by the data better than their tolerance; {} held near nominal by it; {} effective parameters.\n\n",
             self.method,
             self.determined_dimensions,
             self.held_directions.len(),
@@ -171,8 +180,14 @@ impl PriorReport {
                 "A fitted parameter may reach {} tolerance{} (`[calibration] tolerance_limit`); {}.\n\n",
                 sig(limit, 3),
                 if limit == 1.0 { "" } else { "s" },
-                if self.held_at_limit.is_empty() {
+                if self.held_at_limit.is_empty() && self.beyond_tolerance.is_empty() {
                     "none was pulled beyond it".to_string()
+                } else if self.held_at_limit.is_empty() {
+                    format!(
+                        "none was held at it, but {} end{} beyond the tolerance (the limit holds only what the data do not determine; see \"Beyond tolerance\")",
+                        self.beyond_tolerance.len(),
+                        if self.beyond_tolerance.len() == 1 { "s" } else { "" }
+                    )
                 } else {
                     format!(
                         "the data pulled {} beyond it, held there and not measured: {}",
@@ -272,13 +287,12 @@ pub fn limit_warning(model: &MeasurementModel, cal: &Calibration) -> Option<Stri
     ))
 }
 
-/// The warning when the fit ends with parameters beyond their a-priori tolerance (no limit, or
-/// one a frame's gauge moved past it): the prior is a Gaussian of that standard deviation, so
-/// the data can pull a parameter past it, and a user should know. `None` when every parameter
-/// with a tolerance is within it.
-pub fn beyond_warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
-    cal.prior.as_ref()?;
-    let names = model.parameter_names();
+/// The parameters (index, in tolerances) that end beyond their a-priori tolerance without
+/// being held at the limit, furthest first; none without a prior.
+fn beyond(cal: &Calibration) -> Vec<(usize, f64)> {
+    if cal.prior.is_none() {
+        return Vec::new();
+    }
     let mut beyond: Vec<(usize, f64)> = cal
         .prior_std
         .iter()
@@ -296,6 +310,16 @@ pub fn beyond_warning(model: &MeasurementModel, cal: &Calibration) -> Option<Str
         })
         .collect();
     beyond.sort_by(|a, b| b.1.total_cmp(&a.1));
+    beyond
+}
+
+/// The warning when the fit ends with parameters beyond their a-priori tolerance (no limit, or
+/// one a frame's gauge moved past it): the prior is a Gaussian of that standard deviation, so
+/// the data can pull a parameter past it, and a user should know. `None` when every parameter
+/// with a tolerance is within it.
+pub fn beyond_warning(model: &MeasurementModel, cal: &Calibration) -> Option<String> {
+    let names = model.parameter_names();
+    let beyond = beyond(cal);
     let (worst, ratio) = *beyond.first()?;
     Some(format!(
         "**Beyond tolerance**: {} parameter{} end{} beyond the a-priori tolerance (the largest: {} at {} tolerances); the tolerance is the prior's standard deviation, and the data pulled {} past it. An effect the model lacks (`cpm refine`), a set-up that moved, or a tolerance set too tight can do that; the values are written as fitted.",

@@ -102,12 +102,44 @@ pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     }
     let id = &cal.identifiability;
     if id.rank < id.num_params {
+        let n = super::DeterminationCounts::of(cal);
+        let mut others = Vec::new();
+        if n.held_by_tolerance > 0 {
+            others.push(format!(
+                "{} {} held by tolerance (fitted between the data and the tolerance, not measured)",
+                n.held_by_tolerance,
+                if n.held_by_tolerance == 1 {
+                    "is"
+                } else {
+                    "are"
+                }
+            ));
+        }
+        if n.held_by_user > 0 {
+            others.push(format!(
+                "{} {} held by user",
+                n.held_by_user,
+                if n.held_by_user == 1 { "is" } else { "are" }
+            ));
+        }
+        if n.blind > 0 {
+            others.push(format!(
+                "{} {} blind (no estimate, `n.d.`)",
+                n.blind,
+                if n.blind == 1 { "is" } else { "are" }
+            ));
+        }
         w.push(format!(
-            "**Rank-deficient fit**: the data determine {} of {} parameters on their own (rank {} of {}); the others have no estimate (`n.d.`, see \"What the data identify\").",
-            id.num_determined(),
+            "**Rank-deficient fit**: the data determine {} of {} parameters on their own (rank {} of {}){}; see \"What the data identify\" and \"Estimates\".",
+            n.determined,
             model.num_params(),
             id.rank,
-            id.num_params
+            id.num_params,
+            if others.is_empty() {
+                String::new()
+            } else {
+                format!("; of the others, {}", others.join(", "))
+            }
         ));
     }
     if cal.sigma_estimated && cal.residuals_um.len() <= id.rank {
@@ -133,6 +165,16 @@ pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
     }
     if let Some(m) = misfit(cal).filter(|m| m.inconsistent()) {
         w.push(misfit_message(&m));
+    }
+    if let Some(m) = misfit(cal).filter(|m| m.too_small()) {
+        w.push(format!(
+            "**Noise smaller than declared**: the residual RMS is {} um against the declared noise of {} um (chi2/dof {} on {} degrees of freedom; a residual this small is improbable under the declared noise). The standard deviations use the declared noise and are about {} times too large; declare the noise the instrument shows, or leave it undeclared for the fit to estimate it.",
+            crate::format::sig(m.residual_rms_um, 3),
+            crate::format::sig(m.sigma_um, 3),
+            crate::format::sig(m.chi2_per_dof, 3),
+            m.dof,
+            crate::format::sig(1.0 / m.chi2_per_dof.max(1e-300).sqrt(), 2)
+        ));
     }
     w
 }
