@@ -6,7 +6,9 @@ mod ingest;
 use std::path::{Path, PathBuf};
 
 use cpm::calib::campaign::{circle, PoseMeasurement};
-use cpm::calib::{simulate_campaign, Campaign, Effect, Noise, Plan, SimulationOptions};
+use cpm::calib::{
+    simulate_campaign, Campaign, Determination, Effect, Noise, Plan, SimulationOptions,
+};
 use cpm::geometry::{Pose, RobotDescription};
 use cpm::io::robot::calibrated_description;
 use cpm::io::{
@@ -349,16 +351,21 @@ fn calibrated_description_keeps_link_offset_and_scale_as_known_effects() {
     let robot = encoder_hexapod();
     let model = robot.model(&[Effect::LinkOffset, Effect::LinkScale]);
     let mut params: Vec<f64> = vec![0.0; model.num_params()];
-    let mut determined = vec![true; model.num_params()];
+    let mut determined = vec![Determination::Determined; model.num_params()];
     params[0] = 10.0; // link 1 base dx, um
     params[7] = -4.0; // link 2 base dy: not determined on its own, written all the same
-    determined[7] = false;
+    determined[7] = Determination::Blind;
     let offsets = [12.0, -7.0, 0.0, 3.0, 25.0, -1.0];
     let scales = [100.0, -50.0, 0.0, 20.0, 5.0, 1.0];
     params[36..42].copy_from_slice(&offsets);
     params[42..48].copy_from_slice(&scales);
     let (d, notes) = calibrated_description(&robot, &model, &params, &determined, None);
     assert_eq!(notes.undetermined, vec!["link 2 base dy".to_string()]);
+    // Named with its word in calibrated.toml's comments.
+    assert_eq!(
+        notes.held,
+        vec![(Determination::Blind, "link 2 base dy [um]".to_string())]
+    );
     // The design joints stay; the installation errors carry the fit, undetermined ones too.
     assert_eq!(
         d.links,
@@ -429,13 +436,13 @@ fn calibrated_description_adds_effect_values_to_the_known_ones() {
     let robot = Robot::from_description(d, "known.toml").unwrap();
     let model = robot.model(&[Effect::Backlash, Effect::Compliance]);
     let mut params: Vec<f64> = vec![0.0; model.num_params()];
-    let mut determined = vec![true; model.num_params()];
+    let mut determined = vec![Determination::Determined; model.num_params()];
     let fit = [0.5, -1.0, 0.25, 0.0, 2.0, -3.0];
     for i in 0..6 {
         params[36 + i] = fit[i];
         params[42 + i] = 10.0 * (i as f64 + 1.0);
     }
-    determined[37] = false;
+    determined[37] = Determination::HeldByTolerance;
     let (desc, notes) = calibrated_description(
         &robot,
         &model,

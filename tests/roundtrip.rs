@@ -1261,7 +1261,9 @@ fn a_user_effect_round_trips_through_calibrated_toml() {
         &robot,
         &model,
         &cal.minimum_norm_um,
-        &cal.identifiability.determined,
+        &(0..cal.estimate_um.len())
+            .map(|k| cal.determination(k))
+            .collect::<Vec<_>>(),
         None,
     );
     let text = desc.to_toml_string().unwrap();

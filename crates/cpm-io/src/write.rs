@@ -441,7 +441,7 @@ mod tests {
             set.add(d.join("c.txt"), "new c");
             set.add(d.join("b.txt"), "new b");
             assert!(set.commit_failing_at(Some(fail_at)).is_err());
-            assert_eq!(listing(&d), ["a.txt", "b.txt"], "fail at {fail_at}");
+            assert_eq!(listing(d), ["a.txt", "b.txt"], "fail at {fail_at}");
             assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "old a");
             assert_eq!(std::fs::read_to_string(d.join("b.txt")).unwrap(), "old b");
         }
@@ -449,9 +449,8 @@ mod tests {
         set.add(d.join("a.txt"), "new a");
         set.add(d.join("sub/c.txt"), "new c");
         set.commit().unwrap();
-        assert_eq!(listing(&d), ["a.txt", "b.txt", "sub"]);
+        assert_eq!(listing(d), ["a.txt", "b.txt", "sub"]);
         assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "new a");
-        let _ = std::fs::remove_dir_all(&d);
     }
 
     #[test]
@@ -466,9 +465,8 @@ mod tests {
         set.add(d.join("b.txt"), "new b");
         let e = set.commit().unwrap_err();
         assert!(e.to_string().contains("is a directory"), "{e}");
-        assert_eq!(listing(&d), ["a.txt", "b.txt"]);
+        assert_eq!(listing(d), ["a.txt", "b.txt"]);
         assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "old a");
-        let _ = std::fs::remove_dir_all(&d);
     }
 
     /// Large contents (direct I/O where the file system takes it): every byte, in order, the
@@ -585,6 +583,5 @@ mod tests {
             expected
         );
         assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "bytes");
-        let _ = std::fs::remove_dir_all(&d);
     }
 }
