@@ -837,11 +837,15 @@ fn identify_uncancelled(
     // prior, supply at least half of its determination; its standard deviation is the
     // Cramér-Rao bound of the data where the data alone determine it (the posterior one, the
     // prior's share included, is in `prior.posterior_std`).
-    // Under a prior, a parameter the data supply most of ([`PriorSummary::determined`]) is
-    // determined even where the data alone leave it mixed with others in a blind direction
-    // that the others' tolerances close: its standard deviation is then the posterior one.
+    // Under a prior, a parameter with a tolerance that the data supply most of
+    // ([`PriorSummary::determined`]) is determined even where the data alone leave it mixed
+    // with others in a blind direction: its standard deviation is then the posterior one.
+    // A free parameter (no tolerance of its own) is determined only where the data alone
+    // determine it: one whose posterior exists only because the tolerances of the parameters
+    // it is mixed with close a blind direction is held by those tolerances.
     let measured = |k: usize| match &prior_summary {
-        Some(p) => p.determined(k),
+        Some(p) if p.prior_std[k].is_some() => p.determined(k),
+        Some(p) => ident.determined[k] && p.determined(k),
         None => ident.determined[k],
     };
     let estimate_um: Vec<Option<f64>> = (0..np).map(|k| measured(k).then_some(e_hat[k])).collect();
