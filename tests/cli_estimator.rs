@@ -157,3 +157,105 @@ fn a_declared_noise_the_residual_contradicts_is_noted() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!err.contains("Noise smaller than declared"), "{err}");
 }
+
+/// refine takes the tolerance and the hold of a candidate effect it may add (item 8: `cpm
+/// refine --tolerance link_scale=20000` was "not a parameter group of this fit", exit 2); a
+/// group that is neither in the fit nor a candidate is still refused, naming both; a
+/// description's `[calibration]` may declare tolerances of effects a fit lacks (estimation.md's
+/// own example was refused), and a name that is no group at all is an error of the
+/// description (exit 3, naming the file and the field).
+#[test]
+fn refine_takes_a_candidates_tolerance_and_descriptions_declare_theirs() {
+    let d = scratch("estimator", "candidate-tolerance");
+    let robot = example("hexapod_66.toml");
+    let data = example("hexapod_66_readings.csv");
+    let refine = |robot: &str, extra: &[&str], out: &str| {
+        let out = cli::p(&d.join(out));
+        let mut args = vec!["refine", "--robot", robot, "--data", &data];
+        args.extend_from_slice(extra);
+        args.extend_from_slice(&["--out", &out]);
+        cpm(&args)
+    };
+    let o = refine(
+        &robot,
+        &[
+            "--candidates",
+            "link_offset,link_scale",
+            "--tolerance",
+            "link_scale=20000",
+        ],
+        "taken",
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = refine(
+        &robot,
+        &["--candidates", "link_offset", "--tolerance", "backlash=5"],
+        "refused",
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("neither a parameter group of this fit") && err.contains("link_offset"),
+        "{err}"
+    );
+    // The description declares a tolerance for an effect this fit lacks: left aside.
+    let text = std::fs::read_to_string(&robot).unwrap();
+    let declared = d.join("declared.toml");
+    std::fs::write(
+        &declared,
+        format!(
+            "{text}\n[calibration.tolerances]\nlink_scale = 20000\ninstallation_errors = 500\n"
+        ),
+    )
+    .unwrap();
+    let j = calibrate_json(
+        &declared,
+        &[Path::new(&data)],
+        &["--effects", "none"],
+        &d.join("declared"),
+    );
+    assert_eq!(
+        j["prior"]["groups"][0]["tolerance"], 500.0,
+        "{}",
+        j["prior"]
+    );
+    // estimation.md's own [calibration] example, as written there, is taken.
+    let doc =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/estimation.md"))
+            .unwrap();
+    let block = doc
+        .split("```toml\n[calibration]\n")
+        .nth(1)
+        .and_then(|b| b.split("```").next())
+        .expect("estimation.md's [calibration] example");
+    let example_toml = d.join("example.toml");
+    std::fs::write(&example_toml, format!("{text}\n[calibration]\n{block}")).unwrap();
+    let j = calibrate_json(&example_toml, &[Path::new(&data)], &[], &d.join("example"));
+    assert_eq!(
+        j["prior"]["groups"][0]["treatment"], "held",
+        "{}",
+        j["prior"]
+    );
+    // A name that is no group: the description's error, exit 3, file and field named.
+    let typo = d.join("typo.toml");
+    std::fs::write(
+        &typo,
+        format!("{text}\n[calibration.tolerances]\nlink_scal = 20000\n"),
+    )
+    .unwrap();
+    let o = cpm(&[
+        "calibrate",
+        "--robot",
+        &cli::p(&typo),
+        "--data",
+        &data,
+        "--out",
+        &cli::p(&d.join("typo")),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("typo.toml") && err.contains("calibration.tolerances.link_scal"),
+        "{err}"
+    );
+}

@@ -411,8 +411,20 @@ pub(crate) fn load_inputs_with(
         }
     }
     let tolerances = args.tolerances(&robot)?;
-    crate::calib::prior::prior_std(&model, &tolerances)
-        .map_err(|e| usage_error(format!("tolerances: {e}")))?;
+    check_description_groups(&robot, &model, &tolerances)?;
+    crate::calib::prior::prior_std(&model, &tolerances).map_err(|e| {
+        if args.tolerance.is_empty() && args.hold.is_empty() {
+            // The options name no group: the description's [calibration] is at fault.
+            anyhow::Error::new(crate::io::ReadError::from(crate::io::InputError {
+                file: robot.file.clone(),
+                line: None,
+                field: Some("calibration".to_string()),
+                message: format!("tolerances: {e}"),
+            }))
+        } else {
+            usage_error(format!("tolerances: {e}"))
+        }
+    })?;
     let identify = IdentifyOptions {
         sigma_um: sigma,
         tolerances,
@@ -444,17 +456,63 @@ pub fn tolerances_of(
     let mut t = robot
         .tolerances()
         .map_err(|e| anyhow::Error::new(crate::io::ReadError::from(e)))?;
+    // The description declares the machine's tolerances for every fit it takes part in: a
+    // group this fit lacks is left aside ([`check_description_groups`]); one the options
+    // name must be in the fit.
+    t.optional = t.by_group.keys().chain(&t.hold).cloned().collect();
     for given in tolerance {
         t.set(given.group.as_str(), given.value)
             .map_err(|e| usage_error(format!("--tolerance {:?}: {e}", given.to_string())))?;
+        t.optional.remove(given.group.as_str());
     }
     for h in hold {
         if !t.hold.iter().any(|g| g == h.as_str()) {
             t.hold.push(h.0.clone());
         }
+        t.optional.remove(h.as_str());
     }
     t.off = no_prior;
     Ok(t)
+}
+
+/// The groups the description's `[calibration]` names (its tolerances and holds) that this
+/// fit lacks are left aside, but each must be a group some fit can have: the installation
+/// errors, an effect, or one of the model's instruments. Another name is an error of the
+/// description (exit 3), naming the file and the field.
+pub fn check_description_groups(
+    robot: &Robot,
+    model: &MeasurementModel,
+    tolerances: &crate::calib::Tolerances,
+) -> anyhow::Result<()> {
+    let groups: Vec<String> = model
+        .blocks()
+        .iter()
+        .map(|b| crate::calib::prior::group_name(model, b))
+        .collect();
+    for name in &tolerances.optional {
+        let known = groups.contains(name)
+            || name == crate::calib::prior::INSTALLATION_ERRORS
+            || crate::calib::Effect::parse_among(name, &robot.user_effects).is_ok();
+        if !known {
+            let field = if tolerances.by_group.contains_key(name) {
+                format!("calibration.tolerances.{name}")
+            } else {
+                "calibration.hold".to_string()
+            };
+            return Err(anyhow::Error::new(crate::io::ReadError::from(
+                crate::io::InputError {
+                    file: robot.file.clone(),
+                    line: None,
+                    field: Some(field),
+                    message: format!(
+                        "`{name}` is not a parameter group (installation_errors, an effect, or an instrument of the description; this fit's groups: {})",
+                        groups.join(", ")
+                    ),
+                },
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// True for the effects whose direction the link forces set, and so need a declared `[load]`:

@@ -95,6 +95,62 @@ impl Refined {
     }
 }
 
+/// Puts the options' tolerances and holds of effects (set aside to load) back into the
+/// fit's tolerances: each must name a group of the model or a candidate effect (a usage
+/// error otherwise, naming both), and the candidates' take effect when refine adds them.
+fn candidate_tolerances(
+    args: &RefineOptions,
+    inputs: &mut Inputs,
+    candidates: &[Effect],
+    is_effect: impl Fn(&str) -> bool,
+) -> anyhow::Result<()> {
+    let model = &inputs.model;
+    let groups: Vec<String> = model
+        .blocks()
+        .iter()
+        .map(|b| crate::calib::prior::group_name(model, b))
+        .collect();
+    let t = &mut inputs.identify.tolerances;
+    let names = args
+        .fit
+        .tolerance
+        .iter()
+        .map(|g| (g.group.as_str(), Some((g.value, g.to_string()))))
+        .chain(args.fit.hold.iter().map(|h| (h.as_str(), None)));
+    for (name, value) in names.filter(|(n, _)| is_effect(n)) {
+        let option = if value.is_some() {
+            "--tolerance"
+        } else {
+            "--hold"
+        };
+        if !groups.iter().any(|g| g == name) && !candidates.iter().any(|c| c.name() == name) {
+            return Err(usage_error(format!(
+                "{option} {name}: `{name}` is neither a parameter group of this fit ({}) nor a candidate effect ({})",
+                groups.join(", "),
+                candidates
+                    .iter()
+                    .map(|c| c.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+        match value {
+            Some((v, text)) => t
+                .set(name, v)
+                .map_err(|e| usage_error(format!("--tolerance {text:?}: {e}")))?,
+            None => {
+                if !t.hold.iter().any(|g| g == name) {
+                    t.hold.push(name.to_string());
+                }
+            }
+        }
+        t.optional.insert(name.to_string());
+    }
+    crate::calib::prior::prior_std(model, t)
+        .map_err(|e| usage_error(format!("tolerances: {e}")))?;
+    Ok(())
+}
+
 /// `cpm refine` as a function: checks the options, loads the robot and the data, refines, and
 /// stages every output for `options.fit.out` (nothing is written: commit the set). Refused
 /// (an error, nothing staged) when the refined model predicts held-out data worse than plain
@@ -120,15 +176,23 @@ fn refine_job(
 ) -> anyhow::Result<Refined> {
     options.validate()?;
     let args = options;
-    let inputs = if held.is_empty() {
-        args.fit.load(progress)?
+    // The options' tolerances and holds of effects: the starting model may lack one that
+    // refine can add. They are set aside to load, put back, and checked against the model
+    // and the candidates once those are known (`candidate_tolerances`).
+    let is_effect = |g: &str| Effect::parse(g).is_ok();
+    let mut fit = args.fit.clone();
+    fit.tolerance.retain(|t| !is_effect(t.group.as_str()));
+    fit.hold.retain(|h| !is_effect(h.as_str()));
+    let mut inputs = if held.is_empty() {
+        fit.load(progress)?
     } else {
-        let robot = held.robot_or_load(&args.fit.robot, progress)?;
-        let sources = held.sources_or(&args.fit.data);
-        crate::memory::load(&args.fit, robot, &sources, progress)?
+        let robot = held.robot_or_load(&fit.robot, progress)?;
+        let sources = held.sources_or(&fit.data);
+        crate::memory::load(&fit, robot, &sources, progress)?
     };
     check_cancelled(progress)?;
-    let campaign = &inputs.merged.campaign;
+    let merged = std::sync::Arc::clone(&inputs.merged);
+    let campaign = &merged.campaign;
     // The library's effects that can act on these data (an explicit list is taken as given).
     let (candidates, not_applicable) = match &args.candidates {
         Some(list) => (list.clone(), Vec::new()),
@@ -158,6 +222,7 @@ fn refine_job(
     } else {
         (candidates, not_applicable)
     };
+    candidate_tolerances(args, &mut inputs, &candidates, is_effect)?;
     // An explicit --candidates list is the whole candidate set: the pose map scan joins it
     // only when --pose-map-degree asks for it.
     let pose_map_degree = match (args.pose_map_degree, &args.candidates) {

@@ -93,6 +93,12 @@ pub struct Tolerances {
     /// `f64::INFINITY`: no limit (the Gaussian prior alone). Default [`DEFAULT_LIMIT`] (1).
     #[serde(default = "default_limit")]
     pub limit: f64,
+    /// Groups named here that the model may lack: a description's own (it declares the
+    /// machine's tolerances for every fit it takes part in), and in `cpm refine` the
+    /// candidate effects. Any other group the model lacks is refused by [`prior_std`].
+    /// Default empty.
+    #[serde(skip)]
+    pub optional: std::collections::BTreeSet<String>,
 }
 
 /// The default [`Tolerances::limit`]: an undetermined parameter may reach its tolerance, not
@@ -117,6 +123,7 @@ impl Default for Tolerances {
             hold: Vec::new(),
             off: false,
             limit: DEFAULT_LIMIT,
+            optional: Default::default(),
         }
     }
 }
@@ -241,7 +248,7 @@ pub fn prior_std(
     let blocks = model.blocks();
     let names: Vec<String> = blocks.iter().map(|b| group_name(model, b)).collect();
     for name in tolerances.by_group.keys().chain(&tolerances.hold) {
-        if !names.contains(name) {
+        if !names.contains(name) && !tolerances.optional.contains(name) {
             return Err(CalibError::invalid(
                 "tolerances",
                 format!(
