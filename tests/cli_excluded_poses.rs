@@ -320,14 +320,7 @@ fn instrument_pose_left_out(
         "readings",
         "noise_by_kind",
     ] {
-        // The estimates to 0.1 nm (ppm): a parameter determined through its tolerance (the
-        // data supply most of it, a frame's blind mixture is closed by the prior) ends a few
-        // 1e-5 um apart on the two solver paths; the counts and the residual exactly.
-        let tol = match key {
-            "installation_errors_um" | "std_um" | "effects" => 1e-4,
-            _ => 1e-9,
-        };
-        assert_close(&json[key], &reference[key], tol, &format!("{name}: {key}"));
+        assert_close(&json[key], &reference[key], 1e-9, &format!("{name}: {key}"));
     }
     json
 }

@@ -833,26 +833,18 @@ fn identify_uncancelled(
     ident.blind_directions = first.blind_directions.clone();
     ident.unexplained_null_dimensions = (ident.num_params - ident.rank)
         .saturating_sub(first.blind_directions.iter().map(|b| b.dimensions).sum());
-    // A parameter is reported as measured when the data determine it on its own or, under a
+    // A parameter is reported as measured (determined) when the data determine it on its own
+    // (the rank of the data alone: a prior never makes a blind direction seen) and, under a
     // prior, supply at least half of its determination; its standard deviation is the
-    // Cramér-Rao bound of the data where the data alone determine it (the posterior one, the
-    // prior's share included, is in `prior.posterior_std`).
-    // Under a prior, a parameter with a tolerance that the data supply most of
-    // ([`PriorSummary::determined`]) is determined even where the data alone leave it mixed
-    // with others in a blind direction: its standard deviation is then the posterior one.
-    // A free parameter (no tolerance of its own) is determined only where the data alone
-    // determine it: one whose posterior exists only because the tolerances of the parameters
-    // it is mixed with close a blind direction is held by those tolerances.
-    let measured = |k: usize| match &prior_summary {
-        Some(p) if p.prior_std[k].is_some() => p.determined(k),
-        Some(p) => ident.determined[k] && p.determined(k),
-        None => ident.determined[k],
-    };
+    // Cramér-Rao bound of the data (the posterior one, the prior's share included, is in
+    // `prior.posterior_std`). Every other parameter is held by its tolerance, by the user, or
+    // blind ([`Calibration::determination`]).
+    let measured =
+        |k: usize| ident.determined[k] && prior_summary.as_ref().is_none_or(|p| p.determined(k));
     let estimate_um: Vec<Option<f64>> = (0..np).map(|k| measured(k).then_some(e_hat[k])).collect();
     let std_um: Vec<Option<f64>> = (0..np)
         .map(|k| match &prior_summary {
-            Some(_) if measured(k) && ident.determined[k] => ident.crlb_std_um[k],
-            Some(p) if measured(k) => p.posterior_std[k],
+            Some(_) if measured(k) => ident.crlb_std_um[k],
             Some(_) => None,
             None => ident.crlb_std_um[k],
         })

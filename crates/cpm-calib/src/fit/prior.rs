@@ -373,16 +373,16 @@ pub struct PriorSummary {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Determination {
-    /// "determined": the data determine it on their own (the rank of the data alone) or,
-    /// for a parameter with a tolerance, supply at least [`MIN_DATA_SHARE`] of its
-    /// determination. Its standard deviation is the data's Cramér-Rao bound where the data
-    /// alone determine it, the posterior one otherwise.
+    /// "determined": the data determine it on their own (the rank of the data alone: a
+    /// tolerance never makes a blind direction seen) and, under a prior, supply at least
+    /// [`MIN_DATA_SHARE`] of its determination. Its standard deviation is the data's
+    /// Cramér-Rao bound.
     Determined,
-    /// "held by tolerance": the data supply less than [`MIN_DATA_SHARE`] of its
-    /// determination and its tolerance holds it, or the tolerance limit does; or it is free,
-    /// the data alone leave it mixed with others in a blind direction, and their tolerances
-    /// hold it. Its value is where the fit ends between the data and the
-    /// tolerance, its standard deviation the posterior one: not a measurement.
+    /// "held by tolerance": the data alone do not determine it, or supply less than
+    /// [`MIN_DATA_SHARE`] of its determination, and a tolerance holds it (its own, or those of
+    /// the parameters it is mixed with in a blind direction), or the tolerance limit does.
+    /// Its value is where the fit ends between the data and the tolerances, its standard
+    /// deviation the posterior one: not a measurement.
     HeldByTolerance,
     /// "held by user": held at its nominal value (`--hold`, a held group).
     HeldByUser,
