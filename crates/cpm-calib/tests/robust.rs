@@ -159,7 +159,7 @@ fn refine_adds_nothing_for_a_spike_and_flags_it() {
     for s in &r.steps {
         assert!(s.cv_rms_after_um < s.cv_rms_before_um);
     }
-    for (e, before, after) in &r.rejected_by_cv {
+    for (e, before, after, _) in &r.rejected_by_cv {
         assert!(after >= before, "{e} rejected though CV improved");
     }
 }

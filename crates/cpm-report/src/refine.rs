@@ -141,6 +141,24 @@ pub struct RejectedByCv {
     pub cv_rms_before_um: f64,
     /// Cross-validated RMS with it, um.
     pub cv_rms_with_um: f64,
+    /// The candidate of the same round that predicted held-out poses better (this one lost to
+    /// it, not to the model); absent when none did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lost_to: Option<String>,
+}
+
+impl RejectedByCv {
+    /// Why it was not added, in words: a better candidate of its round, a gain within the
+    /// uncertainty of the difference, or no gain.
+    pub fn why_not(&self) -> String {
+        match &self.lost_to {
+            Some(w) => format!("`{w}` predicted held-out poses better in the same round"),
+            None if self.cv_rms_with_um < self.cv_rms_before_um => {
+                "better, but not by more than the uncertainty of the difference".to_string()
+            }
+            None => "no better".to_string(),
+        }
+    }
 }
 
 /// A pose map term's share of the first residual (the pose map scan).
@@ -312,10 +330,11 @@ impl RefineDoc {
             rejected_by_cross_validation: r
                 .rejected_by_cv
                 .iter()
-                .map(|(e, before, after)| RejectedByCv {
+                .map(|(e, before, after, lost_to)| RejectedByCv {
                     effect: e.name().to_string(),
                     cv_rms_before_um: *before,
                     cv_rms_with_um: *after,
+                    lost_to: lost_to.map(|w| w.name().to_string()),
                 })
                 .collect(),
             against_calibrate: r.against_calibrate,
@@ -496,10 +515,11 @@ impl RefineReport {
         }
         for x in &d.rejected_by_cross_validation {
             s.push_str(&format!(
-                "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {} -> {}{u} (no better).\n",
+                "- `{}` passed the F-test and BIC but was not added: cross-validated RMS {} -> {}{u} ({}).\n",
                 x.effect,
                 w(x.cv_rms_before_um, 4),
-                w(x.cv_rms_with_um, 4)
+                w(x.cv_rms_with_um, 4),
+                x.why_not()
             ));
         }
         if !d.rejected_by_cross_validation.is_empty() {

@@ -5,10 +5,12 @@
 //! - [`ingest`]: measurement files read with [`io`] (parsing only), then the tracker files
 //!   among them registered and checked ([`register_tracker_files`](ingest::register_tracker_files))
 //!   and each point file registered roughly ([`register_point_files`](ingest::register_point_files));
-//! - [`load`]: the robot, the measurement files, the effects; the model for a campaign;
-//!   committing a result directory;
-//! - [`fit`]: [`calibrate`](fit::calibrate) with [`CalibrateOptions`](fit::CalibrateOptions),
-//!   and the stages every fit shares (the read-back check of `calibrated.toml` among them);
+//! - [`load`]: the robot, the measurement files, the effects; the model for a campaign; a
+//!   fit's loaded [`Inputs`](load::Inputs); committing a result directory;
+//! - [`fit`]: [`calibrate`](fit::calibrate) with [`CalibrateOptions`](fit::CalibrateOptions);
+//! - [`staging`]: what every fit stages beside its report (figures, `residuals.csv`,
+//!   `calibrated.toml` and its read-back check), shared by `calibrate` and `refine` (no job
+//!   imports another job's staging: `.ci/command_imports.py`);
 //! - [`sources`]: the measurements and robots a caller holds in memory ([`sources::Source`],
 //!   [`sources::InMemory`]), read and registered as files are;
 //! - [`memory`]: [`calibrate`](memory::calibrate) a campaign held in memory (the robot
@@ -90,6 +92,7 @@ pub mod progress;
 pub mod refine;
 pub mod simulate;
 pub mod sources;
+pub mod staging;
 pub mod truth;
 pub mod validate;
 

@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context as _;
 
-use crate::calib::{CalibError, Effect, MeasurementModel};
+use crate::calib::{CalibError, Effect, IdentifyOptions, MeasurementModel};
 use crate::error::{input_error, usage_error};
 use crate::ingest::RegistrationOptions;
-use crate::io::{self, merge, Merged, ReadOptions, Robot};
+use crate::io::{self, merge, Merged, Provenance, ReadOptions, Robot};
 use crate::progress::Progress;
 
 /// The effects modelled beside the installation errors: the options' (`Some`, parsed at the
@@ -338,6 +338,55 @@ pub fn user_effects_of(robot: &Robot, model: &MeasurementModel) -> Vec<Effect> {
         }
     }
     out
+}
+
+/// The inputs of a fit, loaded and checked.
+pub struct Inputs {
+    /// The robot.
+    pub robot: Robot,
+    /// The model.
+    pub model: MeasurementModel,
+    /// The merged data (shared with the outputs that stream from it, residuals.csv).
+    pub merged: std::sync::Arc<Merged>,
+    /// Identification options.
+    pub identify: IdentifyOptions,
+    /// Where it all came from.
+    pub provenance: Provenance,
+    /// The measurement files as read (the provenance may name them otherwise); empty for
+    /// measurements read from memory.
+    pub data_paths: Vec<PathBuf>,
+}
+
+impl Inputs {
+    /// What a fit's report needs of the inputs.
+    pub fn report_inputs(&self) -> crate::report::fit::FitInputs<'_> {
+        crate::report::fit::FitInputs {
+            robot: &self.robot,
+            merged: &self.merged,
+            provenance: &self.provenance,
+            loss: &self.identify.lm.loss,
+        }
+    }
+}
+
+impl Inputs {
+    /// The inputs without the poses a fit left out (`fit::leaving_out`, in its order),
+    /// recorded in the merged data's `excluded`.
+    pub fn without_poses(&self, excluded: &[(usize, crate::io::ExcludedPose)]) -> Inputs {
+        let mut merged = Merged::clone(&self.merged);
+        for (pose, e) in excluded {
+            merged = merged.without_pose(*pose);
+            merged.excluded.push(e.clone());
+        }
+        Inputs {
+            robot: self.robot.clone(),
+            model: self.model.clone(),
+            merged: std::sync::Arc::new(merged),
+            identify: self.identify.clone(),
+            provenance: self.provenance.clone(),
+            data_paths: self.data_paths.clone(),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -4,12 +4,15 @@
 //! `calibrated.toml`.
 use crate::calib::{Effect, RefineOptions as CalibRefineOptions};
 use crate::error::{input_error, trouble, usage_error};
-use crate::fit::{provenance_lines, stage_calibrated, stage_figures, FitOptions, Inputs};
+use crate::fit::FitOptions;
+use crate::load::Inputs;
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
 use crate::report::calibrate::CalibratedFile;
 use crate::report::fit::FitReport;
 use crate::report::refine::{RefineDoc, RefineReport};
+use crate::staging::provenance_lines;
+use crate::staging::{stage_calibrated, stage_figures, stage_residuals};
 
 /// The options of `cpm refine`. [`RefineOptions::new`] gives the defaults.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -298,7 +301,7 @@ fn refine_job(
     let mut fit = FitReport::new(&inputs.report_inputs(), &r.model, cal, None);
     crate::fit::add_session_warnings(&mut fit, &inputs, &r.model)?;
     set.add(dir.join("calibration.json"), fit.to_json()?);
-    crate::fit::stage_residuals(&mut set, dir, &inputs, cal);
+    stage_residuals(&mut set, dir, &inputs, cal);
     let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;
     set.add(
         dir.join("residuals_before_after.svg"),

@@ -189,9 +189,10 @@ pub struct Refinement {
     /// First-fit outliers that followed a candidate's signature and were kept as signal:
     /// the physical effect whose fit left them within the noise, and how many it explained.
     pub outliers_explained: Option<(Effect, usize)>,
-    /// Candidates that passed the F-test and BIC but were not added because the
-    /// cross-validated RMS did not improve: (effect, CV RMS before, with it), um.
-    pub rejected_by_cv: Vec<(Effect, f64, f64)>,
+    /// Candidates that passed the F-test and BIC but were not added: (effect, CV RMS before,
+    /// with it, um; the candidate of the same round that predicted held-out poses better, when
+    /// one did: it lost to that one, not to the model).
+    pub rejected_by_cv: Vec<(Effect, f64, f64, Option<Effect>)>,
     /// The pose map scan of the first fit's residual (empty when
     /// [`RefineOptions::pose_map_degree`] is 0), most significant first.
     pub initial_pose_structure: Vec<crate::analysis::diagnostics::PoseStructure>,
@@ -1217,7 +1218,7 @@ impl Rounds<'_> {
         mut eligible: Vec<Eligible>,
         cv_err: &CvErrors,
         cv: f64,
-        rejected_by_cv: &mut Vec<(Effect, f64, f64)>,
+        rejected_by_cv: &mut Vec<(Effect, f64, f64, Option<Effect>)>,
     ) -> Result<Option<Chosen>, CalibError> {
         let options = self.options;
         // Physics first: every physical effect (in order of BIC) before any pose map term,
@@ -1262,6 +1263,7 @@ impl Rounds<'_> {
                 }
             }
             let b = pick.expect("a non-empty family");
+            let winner = scores[family[b].0].effect;
             let mut judged: Vec<Option<CvErrors>> = judged.into_iter().map(Some).collect();
             for (f, (i, aug, c1)) in family.into_iter().enumerate() {
                 let e1 = judged[f].take().expect("judged once");
@@ -1269,7 +1271,8 @@ impl Rounds<'_> {
                 if f == b && cv_err.clearly_worse_than(&e1) {
                     best = Some((i, aug, c1, cv1, e1));
                 } else {
-                    rejected_by_cv.push((scores[i].effect, cv, cv1));
+                    let lost_to = (f != b).then_some(winner);
+                    rejected_by_cv.push((scores[i].effect, cv, cv1, lost_to));
                 }
             }
         }
@@ -1333,19 +1336,17 @@ fn null_fraction_holding(
         .collect()
 }
 
-/// True when `e` has a prior (a tolerance) on every one of its parameters in `fitted` and the
-/// data determine none of them ([`PriorSummary::determined`](crate::fit::prior::PriorSummary::determined)).
+/// True when the data determine none of `e`'s parameters in `fitted`: every one is held by
+/// its tolerance (a data share below [`MIN_DATA_SHARE`](crate::fit::prior::MIN_DATA_SHARE))
+/// or, free, left mixed in a blind direction (`n.d.`: a pose map term along the frames'
+/// gauge freedoms was accepted with all six parameters n.d.).
 fn undetermined_effect(model: &MeasurementModel, e: Effect, fitted: &Calibration) -> bool {
-    let (Some(prior), Some(block)) = (
-        fitted.prior.as_ref(),
-        model.blocks().into_iter().find(|b| b.effect == Some(e)),
-    ) else {
+    let Some(block) = model.blocks().into_iter().find(|b| b.effect == Some(e)) else {
         return false;
     };
-    let mut ks = block.offset..block.offset + block.len;
-    let with_tolerance =
-        |k: usize| matches!(prior.prior_std.get(k), Some(Some(t)) if *t > 0.0 && t.is_finite());
-    block.len > 0 && ks.all(|k| with_tolerance(k) && !prior.determined(k))
+    block.len > 0
+        && (block.offset..block.offset + block.len)
+            .all(|k| fitted.determination(k) != crate::fit::prior::Determination::Determined)
 }
 
 /// The novelty below which a candidate is not fitted: a physical effect with a small novelty
