@@ -9,7 +9,7 @@ use clap::Args;
 use super::Ctx;
 use crate::calib::Effect;
 use crate::io::Robot;
-use cpm_workflow::fit::{FitOptions, Inputs, NoisePerKind, TrackerResiduals};
+use cpm_workflow::fit::{FitOptions, NoisePerKind, TrackerResiduals};
 pub use cpm_workflow::load::*;
 use cpm_workflow::options::{self, Group, Tolerance};
 

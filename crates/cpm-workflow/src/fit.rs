@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use crate::calib::Effect;
 use crate::calib::{Calibration, Campaign, IdentifyOptions, MeasurementModel};
-use crate::error::{trouble, usage_error};
+use crate::error::usage_error;
 use crate::ingest::RegistrationOptions;
 use crate::io::{self, Merged, Provenance, Robot};
 pub use crate::load::Inputs;
@@ -17,9 +17,9 @@ use crate::report::calibrate::{CalibrateReport, CalibratedFile};
 pub use crate::report::fit::{
     misfit, misfit_message, observation_origin, warnings, ObservationOrigin,
 };
-use crate::report::fit::{FitInputs, FitReport};
+use crate::report::fit::FitReport;
 pub use crate::report::residuals::residuals_csv;
-pub use crate::staging::provenance_lines;
+pub use crate::staging::{provenance_lines, reproduces};
 use cpm_lm::Loss;
 
 /// Whether each kind of observation is weighed by the noise its own residual shows
@@ -636,6 +636,26 @@ pub fn session_warning(inputs: &Inputs) -> anyhow::Result<Option<String>> {
         worst.beyond_3sd,
         worst.compared
     )))
+}
+
+/// Sets the solver options of `--robust` and `--max-iterations` (usage errors when bad).
+pub fn solver_options(
+    identify: &mut IdentifyOptions,
+    robust: Option<&Loss>,
+    max_iterations: Option<usize>,
+) -> anyhow::Result<()> {
+    if let Some(loss) = robust {
+        crate::options::check_loss(loss)?;
+        identify.lm.loss = *loss;
+    }
+    if let Some(n) = max_iterations {
+        if n == 0 {
+            return Err(usage_error("--max-iterations must be >= 1"));
+        }
+        identify.lm.max_iterations = n;
+        identify.lm.max_evaluations = identify.lm.max_evaluations.max(n.saturating_add(1));
+    }
+    Ok(())
 }
 
 /// A fit and its staged outputs (not yet written).

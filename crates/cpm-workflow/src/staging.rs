@@ -4,8 +4,9 @@
 use std::path::Path;
 
 use crate::calib::{Calibration, Campaign, MeasurementModel};
-use crate::io::{self, Robot};
+use crate::io::{self, Provenance, Robot};
 use crate::load::Inputs;
+use crate::error::trouble;
 use crate::output::OutputSet;
 
 /// Stages the figures of a fit.
@@ -212,26 +213,6 @@ pub fn stage_calibrated(
 pub fn reproduces(fit: f64, file: f64) -> bool {
     let scale = fit.max(1e-3);
     file - fit <= 1e-7 * scale && fit - file <= 1e-3 * scale
-}
-
-/// Sets the solver options of `--robust` and `--max-iterations` (usage errors when bad).
-pub fn solver_options(
-    identify: &mut IdentifyOptions,
-    robust: Option<&Loss>,
-    max_iterations: Option<usize>,
-) -> anyhow::Result<()> {
-    if let Some(loss) = robust {
-        crate::options::check_loss(loss)?;
-        identify.lm.loss = *loss;
-    }
-    if let Some(n) = max_iterations {
-        if n == 0 {
-            return Err(usage_error("--max-iterations must be >= 1"));
-        }
-        identify.lm.max_iterations = n;
-        identify.lm.max_evaluations = identify.lm.max_evaluations.max(n.saturating_add(1));
-    }
-    Ok(())
 }
 
 /// Stages `residuals.csv` of a fit (its weighted residuals brought back to each
