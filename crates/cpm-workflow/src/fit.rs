@@ -14,10 +14,10 @@ use crate::options::{Group, Tolerance};
 use crate::output::OutputSet;
 use crate::progress::{check_cancelled, Progress};
 use crate::report::calibrate::{CalibrateReport, CalibratedFile};
+use crate::report::fit::FitReport;
 pub use crate::report::fit::{
     misfit, misfit_message, observation_origin, warnings, ObservationOrigin,
 };
-use crate::report::fit::FitReport;
 pub use crate::report::residuals::residuals_csv;
 pub use crate::staging::{provenance_lines, reproduces};
 use cpm_lm::Loss;

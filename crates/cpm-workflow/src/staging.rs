@@ -4,9 +4,9 @@
 use std::path::Path;
 
 use crate::calib::{Calibration, Campaign, MeasurementModel};
+use crate::error::trouble;
 use crate::io::{self, Provenance, Robot};
 use crate::load::Inputs;
-use crate::error::trouble;
 use crate::output::OutputSet;
 
 /// Stages the figures of a fit.
