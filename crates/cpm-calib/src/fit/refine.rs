@@ -1336,17 +1336,24 @@ fn null_fraction_holding(
         .collect()
 }
 
-/// True when the data determine none of `e`'s parameters in `fitted`: every one is held by
-/// its tolerance (a data share below [`MIN_DATA_SHARE`](crate::fit::prior::MIN_DATA_SHARE))
-/// or, free, left mixed in a blind direction (`n.d.`: a pose map term along the frames'
-/// gauge freedoms was accepted with all six parameters n.d.).
+/// True when the data determine none of `e`'s parameters in `fitted`: each one with a
+/// tolerance has a data share below [`MIN_DATA_SHARE`](crate::fit::prior::MIN_DATA_SHARE)
+/// ([`PriorSummary::determined`](crate::fit::prior::PriorSummary::determined)), and each
+/// free one is left mixed in a blind direction (`n.d.`: a pose map term along the frames'
+/// gauge freedoms was accepted with all six parameters n.d.). A parameter with a tolerance
+/// that the data supply most of counts as seen even where the data alone leave it mixed (the
+/// rank-deficient inclinometer data see compliance so).
 fn undetermined_effect(model: &MeasurementModel, e: Effect, fitted: &Calibration) -> bool {
     let Some(block) = model.blocks().into_iter().find(|b| b.effect == Some(e)) else {
         return false;
     };
-    block.len > 0
-        && (block.offset..block.offset + block.len)
-            .all(|k| fitted.determination(k) != crate::fit::prior::Determination::Determined)
+    let seen = |k: usize| match fitted.prior.as_ref() {
+        Some(p) if matches!(p.prior_std.get(k), Some(Some(t)) if *t > 0.0 && t.is_finite()) => {
+            p.determined(k)
+        }
+        _ => fitted.estimate_um.get(k).copied().flatten().is_some(),
+    };
+    block.len > 0 && !(block.offset..block.offset + block.len).any(seen)
 }
 
 /// The novelty below which a candidate is not fitted: a physical effect with a small novelty
