@@ -259,3 +259,70 @@ fn refine_takes_a_candidates_tolerance_and_descriptions_declare_theirs() {
         "{err}"
     );
 }
+
+/// A tenth of the readings glitched by 400 standard deviations is set aside, not followed
+/// (item 2: a least-squares residual smeared the glitches until none reached the set-aside
+/// rule: 16 flagged, 0 set aside, the installation errors 684 um from the clean fit). A
+/// robust start finds them; the fit without them lands where the clean file's does.
+#[test]
+fn a_tenth_of_the_readings_glitched_is_set_aside() {
+    let d = scratch("estimator", "glitched-tenth");
+    let robot = example("hexapod_66.toml");
+    let clean = d.join("clean.csv");
+    cli::ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--truth",
+        &example("hexapod_66_truth.toml"),
+        "--random",
+        "60",
+        "--noise",
+        "gaussian:0.5",
+        "--seed",
+        "2",
+        "--out",
+        &cli::p(&clean),
+    ]);
+    // Every 10th reading +200 um (the file: a comment line, the header, then the rows).
+    let text = std::fs::read_to_string(&clean).unwrap();
+    let mut glitched = String::new();
+    for (i, line) in text.lines().enumerate() {
+        if i >= 2 && (i - 2) % 10 == 0 {
+            let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+            let v: f64 = f[8].parse().unwrap();
+            f[8] = format!("{}", v + 0.2);
+            glitched.push_str(&f.join(","));
+        } else {
+            glitched.push_str(line);
+        }
+        glitched.push('\n');
+    }
+    let bad = d.join("glitched.csv");
+    std::fs::write(&bad, glitched).unwrap();
+    let robot = Path::new(&robot);
+    let a = calibrate_json(robot, &[&clean], &[], &d.join("clean"));
+    let b = calibrate_json(robot, &[&bad], &[], &d.join("glitched"));
+    let aside = b["outliers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|o| o["set_aside"] == true)
+        .count();
+    assert_eq!(aside, 18, "{}", b["outliers"]);
+    let (mut ea, mut eb, mut sd) = (Vec::new(), Vec::new(), Vec::new());
+    numbers(&a["installation_errors_um"], &mut ea);
+    numbers(&b["installation_errors_um"], &mut eb);
+    numbers(&a["std_um"], &mut sd);
+    for k in 0..ea.len() {
+        assert!(
+            (ea[k] - eb[k]).abs() <= 4.0 * sd[k],
+            "component {k}: clean {} glitched {} (std {})",
+            ea[k],
+            eb[k],
+            sd[k]
+        );
+    }
+    // The noise is the clean rows' (0.5 um simulated), not the glitches'.
+    assert!(b["sigma_um"].as_f64().unwrap() < 1.0, "{}", b["sigma_um"]);
+}

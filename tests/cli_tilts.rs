@@ -292,4 +292,7 @@ fn exact_angles_flag_no_outlier() {
         "{}",
         j["outliers"]
     );
+    // Nor a weighted RMS of 0.871 sigma for a zero residual: the ratio of two roundings.
+    let md = std::fs::read_to_string(d.join("cal/report.md")).unwrap();
+    assert!(md.contains("the data are fitted exactly"), "{md}");
 }

@@ -83,8 +83,14 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 .map(|k| format!("{} {:.3} {}", k.kind, k.rms, k.unit))
                 .collect();
             format!(
-                "weighted residual RMS {:.3} in sigma (RMS per kind: {})",
-                report.fit.weighted_rms_in_sigma,
+                "weighted residual RMS {} in sigma (RMS per kind: {})",
+                if report.fit.residual_rms_um
+                    < cpm_workflow::calib::diagnostics::NUMERICAL_RESIDUAL_UM
+                {
+                    report.fit.weighted_rms_words()
+                } else {
+                    format!("{:.3}", report.fit.weighted_rms_in_sigma)
+                },
                 kinds.join(", ")
             )
         } else {

@@ -303,6 +303,12 @@ fn robust_spread(residuals_um: &[f64]) -> (f64, f64) {
     (median, upper_median(&mut work) * 1.4826)
 }
 
+/// The robust standard deviation of `residuals_um` (1.4826 x the median absolute deviation
+/// from the median).
+pub fn robust_sd(residuals_um: &[f64]) -> f64 {
+    robust_spread(residuals_um).1
+}
+
 /// Indices of residuals more than 5 robust standard deviations (1.4826 x the median absolute
 /// deviation) from the median.
 pub fn outliers(residuals_um: &[f64]) -> Vec<usize> {

@@ -861,6 +861,18 @@ impl FitReport {
         serde_json::to_string_pretty(&serde_json::to_value(self)?)
     }
 
+    /// The weighted residual RMS in sigma, or, for data fitted exactly (a residual below
+    /// [`NUMERICAL_RESIDUAL_UM`](cpm_calib::analysis::diagnostics::NUMERICAL_RESIDUAL_UM),
+    /// rounding), that: an estimated noise is then rounding too, and the ratio of two
+    /// roundings (0.871 sigma for a zero residual) says nothing.
+    pub fn weighted_rms_words(&self) -> String {
+        if self.residual_rms_um < cpm_calib::analysis::diagnostics::NUMERICAL_RESIDUAL_UM {
+            "0 (the data are fitted exactly: the residual is rounding, below 1 pm)".to_string()
+        } else {
+            sig(self.weighted_rms_in_sigma, 3)
+        }
+    }
+
     /// The warnings as a markdown list (with the note on the noise estimate), then a blank line.
     pub fn markdown_warnings(&self, s: &mut String) {
         for w in &self.text.warnings {
@@ -944,7 +956,7 @@ impl FitReport {
                 .collect();
             s.push_str(&format!(
                 "- Weighted residual RMS {} (in sigma: each residual over its kind's noise at the fit's noise scale; at the start {}); noise scale {}.\n- Residual per kind of observation, in its own unit: {}.\n",
-                sig(self.weighted_rms_in_sigma, 3),
+                self.weighted_rms_words(),
                 sig(self.initial_weighted_rms_in_sigma, 3),
                 if self.sigma_estimated {
                     "estimated from the residual"
