@@ -1062,7 +1062,7 @@ fn fit_setting_aside(
 /// The share of the observations flagged as outliers (beyond
 /// [`OUTLIER_SIGMAS`](crate::analysis::diagnostics::OUTLIER_SIGMAS) robust standard deviations
 /// of their kind, at least [`ROBUST_START_MIN`] of them) from which a least-squares fit is
-/// checked by a robust start ([`robust_start`]): many glitches smear a least-squares residual
+/// checked by a robust start (a Cauchy fit first): many glitches smear a least-squares residual
 /// until none reaches the set-aside rule (a tenth of the readings 400 sd off: 16 flagged,
 /// none set aside, the installation errors 684 um off). A few isolated outliers (the real
 /// inclinometer session's 3 of 570) are left to the least-squares rule.
