@@ -123,8 +123,9 @@ fn every_group_held_is_refused_as_such() {
     assert!(!out.exists());
 }
 
-/// Gauges declared at 10 um whose residual is about 1 um are noted (issue 60 item 11: they
-/// were weighed at 10 um silently, every standard deviation ten times too large).
+/// Gauges declared at 1000 um whose residual is a few um are noted (issue 60 item 11: such a
+/// declaration was weighed silently, every standard deviation far too large), and a noise
+/// that was never declared is said to be estimated.
 #[test]
 fn a_declared_noise_the_residual_contradicts_is_noted() {
     let robot = cli::example("hexapod_66.toml");
@@ -156,6 +157,28 @@ fn a_declared_noise_the_residual_contradicts_is_noted() {
     ]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!err.contains("Noise smaller than declared"), "{err}");
+    // Undeclared, the noise is said to be estimated, how large, and what would test the model
+    // (it was silent); declared, not.
+    assert!(
+        err.contains("Noise estimated, none declared") && err.contains("gauge s1 "),
+        "{err}"
+    );
+    let o = cli::cpm(&[
+        "calibrate",
+        "--robot",
+        &robot,
+        "--data",
+        &data,
+        "--sigma-um",
+        "1000",
+        "--out",
+        &cli::p(&d.join("declared")),
+    ]);
+    assert!(
+        !String::from_utf8_lossy(&o.stderr).contains("Noise estimated"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }
 
 /// refine takes the tolerance and the hold of a candidate effect it may add (item 8: `cpm

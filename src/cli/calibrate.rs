@@ -63,6 +63,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         w.starts_with("Estimates move between sessions")
             || w.starts_with("Tracker frame held fixed")
             || w.starts_with("Noise not as weighed")
+            || w.starts_with("Noise estimated, none declared")
             || w.starts_with("Held near nominal")
             || w.starts_with("Beyond tolerance")
             || w.starts_with("Held at tolerance")

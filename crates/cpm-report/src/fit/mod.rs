@@ -413,6 +413,36 @@ pub struct NoiseKindReport {
 /// relative to what the kind with the most degrees of freedom says (at least 10 each). Kinds all
 /// off by one factor (the gauges of a fit whose noise is estimated from the residual, weighed
 /// with a placeholder) are weighed rightly against each other: no warning.
+/// The note when no noise was declared and the fit estimated it (issue 60 item 11: it said
+/// nothing): how large, per kind in its own unit, and that a declared instrument noise would
+/// test the model. `None` when a noise was declared, or the residual cannot give one (no
+/// degree of freedom, data fitted exactly).
+pub fn estimated_noise_note(
+    kinds: &[cpm_calib::noise::KindNoise],
+    cal: &Calibration,
+) -> Option<String> {
+    if !cal.sigma_estimated
+        || cal.residuals_um.len() <= cal.identifiability.rank
+        || cal.residual_rms_um < cpm_calib::analysis::diagnostics::NUMERICAL_RESIDUAL_UM
+    {
+        return None;
+    }
+    let list: Vec<String> = kinds
+        .iter()
+        .filter_map(|k| {
+            k.estimated
+                .map(|e| format!("{} {} {}", k.name, sig(e, 3), k.unit))
+        })
+        .collect();
+    if list.is_empty() {
+        return None;
+    }
+    Some(format!(
+        "**Noise estimated, none declared**: the fit weighed the observations by the noise their own residual shows ({}); every standard deviation rests on it, and a misfit the model lacks would pass for noise. A known instrument noise, declared (`--sigma-um`, `--pose-sigma-um`, `--orientation-sigma-urad`, or `[calibration]` of the description), lets the chi-square test check the model.",
+        list.join(", ")
+    ))
+}
+
 pub fn noise_warning(kinds: &[cpm_calib::noise::KindNoise]) -> Option<String> {
     let off = cpm_calib::noise::mismatched(kinds, 3.0);
     if off.is_empty() || kinds.len() < 2 {
@@ -772,6 +802,7 @@ impl FitReport {
         let kinds = cpm_calib::noise::by_kind(model, campaign, cal);
         let mut warnings_md = warnings(model, cal);
         warnings_md.extend(noise_warning(&kinds));
+        warnings_md.extend(estimated_noise_note(&kinds, cal));
         warnings_md.extend(prior::warning(model, cal));
         warnings_md.extend(prior::limit_warning(model, cal));
         warnings_md.extend(prior::beyond_warning(model, cal));
