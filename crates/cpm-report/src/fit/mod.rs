@@ -408,11 +408,6 @@ pub struct NoiseKindReport {
     pub set_aside: usize,
 }
 
-/// The warning when the kinds of observation are weighed against each other wrongly: a kind's
-/// residual says a noise more than 3 times above or below the one the fit weighed it with,
-/// relative to what the kind with the most degrees of freedom says (at least 10 each). Kinds all
-/// off by one factor (the gauges of a fit whose noise is estimated from the residual, weighed
-/// with a placeholder) are weighed rightly against each other: no warning.
 /// The note when no noise was declared and the fit estimated it (issue 60 item 11: it said
 /// nothing): how large, per kind in its own unit, and that a declared instrument noise would
 /// test the model. `None` when a noise was declared, or the residual cannot give one (no
@@ -443,6 +438,11 @@ pub fn estimated_noise_note(
     ))
 }
 
+/// The warning when the kinds of observation are weighed against each other wrongly: a kind's
+/// residual says a noise more than 3 times above or below the one the fit weighed it with,
+/// relative to what the kind with the most degrees of freedom says (at least 10 each). Kinds all
+/// off by one factor (the gauges of a fit whose noise is estimated from the residual, weighed
+/// with a placeholder) are weighed rightly against each other: no warning.
 pub fn noise_warning(kinds: &[cpm_calib::noise::KindNoise]) -> Option<String> {
     let off = cpm_calib::noise::mismatched(kinds, 3.0);
     if off.is_empty() || kinds.len() < 2 {
