@@ -91,10 +91,44 @@ fn panel_of(kind: ObservationKind, campaign: &Campaign, names: &ResidualNames) -
     }
 }
 
+/// The series an observation of kind `kind` joins, as a small key (the kind, and the sensor,
+/// axis, target or channel it is of): its words ([`panel_of`]) are made once per key, not
+/// once per observation (10^6 gauge readings).
+fn series_key(kind: ObservationKind, campaign: &Campaign) -> (u8, usize) {
+    match kind {
+        ObservationKind::Reading(i) => (0, campaign.readings[i].sensor),
+        ObservationKind::TrackerPosition(_, a) => (1, a),
+        ObservationKind::TrackerOrientation(_, a) => (2, a),
+        ObservationKind::Point(q, a) => (3, 3 * campaign.point_measurements[q].target + a),
+        ObservationKind::Tilt(q) => {
+            let t = &campaign.tilt_measurements[q];
+            (4, 3 * t.inclinometer + t.axis)
+        }
+        ObservationKind::Instrument(q, _) => {
+            let m = &campaign.instrument_measurements[q];
+            (5 + (m.instrument.min(200) as u8), m.channel)
+        }
+    }
+}
+
+/// Every observation's kind, in order, without a list of them where the campaign's layout
+/// gives each in constant time (no tracker component left unmeasured).
+fn for_each_kind(campaign: &Campaign, mut f: impl FnMut(usize, ObservationKind)) {
+    if campaign.unmeasured.is_empty() {
+        for k in 0..campaign.len() {
+            f(k, campaign.observation_kind(k));
+        }
+    } else {
+        for (k, kind) in campaign.observation_kinds().into_iter().enumerate() {
+            f(k, kind);
+        }
+    }
+}
+
 /// The residual panels against `x(observation)` (observations where it is `None` are left
 /// out): one panel per kind of observation, in its own unit, a series per sensor, axis or
 /// channel. `residuals` are measured minus predicted, each in its own unit (as
-/// `residuals.csv`); `tag` prefixes the series names (before/after).
+/// `residuals.csv`); with two runs (before/after) each run is one series of each panel.
 fn residual_panels(
     campaign: &Campaign,
     names: &ResidualNames,
@@ -102,37 +136,61 @@ fn residual_panels(
     x: impl Fn(usize, ObservationKind) -> Option<f64>,
 ) -> Vec<Panel> {
     let mut panels: Vec<Panel> = Vec::new();
-    let kinds = campaign.observation_kinds();
-    for (tag, residuals) in runs {
-        for (k, kind) in kinds.iter().enumerate() {
-            let (Some(r), Some(xv)) = (residuals.get(k), x(k, *kind)) else {
-                continue;
+    // (run, key) -> (panel, series)
+    let mut slot: std::collections::HashMap<(usize, (u8, usize)), (usize, usize)> =
+        Default::default();
+    for (run, (tag, residuals)) in runs.iter().enumerate() {
+        // The gauge readings' series by sensor index (most observations, looked up directly).
+        let mut by_sensor: Vec<Option<(usize, usize)>> = Vec::new();
+        for_each_kind(campaign, |k, kind| {
+            let (Some(r), Some(xv)) = (residuals.get(k), x(k, kind)) else {
+                return;
             };
-            let [caption, y_label, name] = panel_of(*kind, campaign, names);
-            let name = if tag.is_empty() {
-                name
-            } else if runs.len() > 1 {
-                tag.to_string()
-            } else {
-                format!("{tag} {name}")
-            };
-            let p = match panels.iter().position(|p| p.caption == caption) {
-                Some(p) => p,
-                None => {
-                    panels.push(Panel {
-                        caption,
-                        y_label,
-                        series: Vec::new(),
-                    });
-                    panels.len() - 1
+            let key = (run, series_key(kind, campaign));
+            if key.1 .0 == 0 {
+                if let Some(Some((p, i))) = by_sensor.get(key.1 .1) {
+                    panels[*p].series[*i].1.push((xv, *r));
+                    return;
                 }
-            };
-            let series = &mut panels[p].series;
-            match series.iter().position(|s| s.0 == name) {
-                Some(i) => series[i].1.push((xv, *r)),
-                None => series.push((name, vec![(xv, *r)])),
             }
-        }
+            let (p, i) = *slot.entry(key).or_insert_with(|| {
+                let [caption, y_label, name] = panel_of(kind, campaign, names);
+                let name = if tag.is_empty() {
+                    name
+                } else if runs.len() > 1 {
+                    tag.to_string()
+                } else {
+                    format!("{tag} {name}")
+                };
+                let p = match panels.iter().position(|p| p.caption == caption) {
+                    Some(p) => p,
+                    None => {
+                        panels.push(Panel {
+                            caption,
+                            y_label,
+                            series: Vec::new(),
+                        });
+                        panels.len() - 1
+                    }
+                };
+                let series = &mut panels[p].series;
+                let i = match series.iter().position(|s| s.0 == name) {
+                    Some(i) => i,
+                    None => {
+                        series.push((name, Vec::new()));
+                        series.len() - 1
+                    }
+                };
+                (p, i)
+            });
+            if key.1 .0 == 0 {
+                if by_sensor.len() <= key.1 .1 {
+                    by_sensor.resize(key.1 .1 + 1, None);
+                }
+                by_sensor[key.1 .1] = Some((p, i));
+            }
+            panels[p].series[i].1.push((xv, *r));
+        });
     }
     panels
 }
@@ -180,8 +238,11 @@ pub fn residuals_vs_time(
     names: &ResidualNames,
     residuals: &[f64],
 ) -> Option<Result<String, PlotError>> {
-    let kinds = campaign.observation_kinds();
-    if kinds.is_empty() || kinds.iter().any(|k| time_of(campaign, *k).is_none()) {
+    let mut all_timed = !campaign.is_empty();
+    for_each_kind(campaign, |_, kind| {
+        all_timed = all_timed && time_of(campaign, kind).is_some();
+    });
+    if !all_timed {
         return None;
     }
     let panels = residual_panels(campaign, names, &[("", residuals)], |_, kind| {
