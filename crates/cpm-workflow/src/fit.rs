@@ -249,11 +249,14 @@ impl FitOptions {
             if let Some(c) = choice {
                 inputs.identify.leg_space = c.leg_space;
                 progress.note(&format!(
-                    "tracker residuals: {} (cross-validated, {}: pose residuals {:.3}, leg residuals {:.3}, weighted RMS in um of the reference; --tracker-residuals chooses)",
+                    "tracker residuals: {} (cross-validated, {}: pose residuals {:.3}, leg residuals {:.3}, weighted RMS in um of the reference; the legs' gain in mean squared error {:.4e} +- {:.4e} um^2 is {} its standard error; --tracker-residuals chooses)",
                     if c.leg_space { "legs" } else { "pose" },
                     c.folds,
                     c.pose_cv_rms,
-                    c.leg_cv_rms
+                    c.leg_cv_rms,
+                    c.legs_gain_um2,
+                    c.legs_gain_se_um2,
+                    if c.leg_space { "beyond" } else { "not beyond" }
                 ));
             }
         }

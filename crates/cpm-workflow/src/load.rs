@@ -292,7 +292,7 @@ pub fn instruments_note(m: &MeasurementModel) -> String {
     if m.tilt_sessions > 0 {
         v.push(format!(
             "{} mount {} and the base's tilt per inclinometer session ({}; inclinometer_mount, base_tilt)",
-            counted(m.inclinometers.len(), "inclinometer's", "inclinometers'"),
+            counted(m.inclinometers.len(), "the inclinometer's", "inclinometers'"),
             if m.inclinometers.len() == 1 { "rotation" } else { "rotations" },
             counted(m.tilt_sessions, "session", "sessions")
         ));

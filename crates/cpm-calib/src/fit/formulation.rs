@@ -89,11 +89,22 @@ pub struct TrackerResidualChoice {
     pub leg_cv_rms: f64,
     /// How the folds were made.
     pub folds: crate::fit::refine::FoldKind,
+    /// How much better the leg-space fit predicted the held-out pose residuals: the
+    /// difference of the mean squared errors (pose minus legs; weighted, um^2 of the
+    /// reference), and its standard error over the held-out poses. Legs are chosen only when
+    /// the difference is beyond it.
+    #[serde(default)]
+    pub legs_gain_um2: f64,
+    /// The standard error of [`legs_gain_um2`](Self::legs_gain_um2) (0 when it cannot be
+    /// told: one held-out pose).
+    #[serde(default)]
+    pub legs_gain_se_um2: f64,
 }
 
 /// Pose-space or leg-space residuals for a campaign of full tracker poses: each fitted on the
 /// folds of [`crate::fit::refine::cv_folds`] (acquisition order, sessions or positions) and
-/// judged on the held-out poses' residuals; the lower wins (pose space on a tie). `None` when
+/// judged on the held-out poses' residuals; legs win only when they predict them better by
+/// more than the standard error of the difference (pose space otherwise). `None` when
 /// the leg-space formulation does not apply ([`crate::model::leg_space_applies`]).
 pub fn choose_tracker_residuals(
     model: &MeasurementModel,
@@ -116,10 +127,15 @@ pub fn choose_tracker_residuals(
         crate::fit::refine::cross_validated_errors(model, campaign, &o, folds, &start)
     };
     let (pose, leg) = (score(false)?, score(true)?);
+    let (gain, se) = pose.gain_of(&leg).unwrap_or((0.0, None));
     Ok(Some(TrackerResidualChoice {
-        leg_space: leg.rms() < pose.rms(),
+        // A difference within its standard error decides nothing: pose space, the residual
+        // the tracker measures, stays.
+        leg_space: pose.clearly_worse_than(&leg),
         pose_cv_rms: pose.rms(),
         leg_cv_rms: leg.rms(),
         folds: pose.kind,
+        legs_gain_um2: gain,
+        legs_gain_se_um2: se.unwrap_or(0.0),
     }))
 }

@@ -571,8 +571,20 @@ impl CvErrors {
     /// chosen among many on a small campaign must beat the current model clearly, not by the
     /// luck of the folds.
     pub fn clearly_worse_than(&self, other: &CvErrors) -> bool {
+        match self.gain_of(other) {
+            Some((gain, Some(se))) => gain > se,
+            Some((gain, None)) => gain > 0.0,
+            None => false,
+        }
+    }
+
+    /// How much better `other` predicts the held-out data than `self`: the difference of
+    /// their mean squared errors (positive: `other` better) and its standard error over the
+    /// poses (or positions) as the independent units (`None` with fewer than two). `None`
+    /// when the two were not judged on the same observations.
+    pub fn gain_of(&self, other: &CvErrors) -> Option<(f64, Option<f64>)> {
         if self.squared.len() != other.squared.len() || self.squared.is_empty() {
-            return false;
+            return None;
         }
         let n = self.squared.len() as f64;
         let mut by_pose = std::collections::BTreeMap::<usize, f64>::new();
@@ -583,12 +595,11 @@ impl CvErrors {
         let np = per_pose.len() as f64;
         let gain = per_pose.iter().sum::<f64>() / n;
         if np < 2.0 {
-            return gain > 0.0;
+            return Some((gain, None));
         }
         let mean = per_pose.iter().sum::<f64>() / np;
         let var = per_pose.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (np - 1.0);
-        let se = (np * var).sqrt() / n;
-        gain > se
+        Some((gain, Some((np * var).sqrt() / n)))
     }
 }
 
@@ -1460,6 +1471,34 @@ fn against_calibrate_on(
 
 #[cfg(test)]
 mod tests {
+    /// The gain of one set of held-out errors over another comes with its standard error
+    /// over the poses: a difference within it is not "clearly" better (the tracker residuals'
+    /// choice and refine's candidates decide on it).
+    #[test]
+    fn a_gain_within_its_standard_error_decides_nothing() {
+        use super::{CvErrors, FoldKind};
+        let errors = |squared: Vec<f64>| CvErrors {
+            pose: (0..squared.len()).collect(),
+            squared,
+            kind: FoldKind::Blocks,
+        };
+        let a = errors(vec![4.0, 5.0, 6.0, 7.0]);
+        // Better on every pose by 0.5: a gain of 0.5, standard error 0.
+        let b = errors(vec![3.5, 4.5, 5.5, 6.5]);
+        let (gain, se) = a.gain_of(&b).unwrap();
+        assert!((gain - 0.5).abs() < 1e-12 && se.unwrap() < 1e-12);
+        assert!(a.clearly_worse_than(&b));
+        // Better on average by 0.25, but by +-3 per pose: within its standard error.
+        let c = errors(vec![1.0, 8.0, 3.0, 9.0]);
+        let (gain, se) = a.gain_of(&c).unwrap();
+        assert!(
+            (gain - 0.25).abs() < 1e-12 && se.unwrap() > gain,
+            "{gain} {se:?}"
+        );
+        assert!(!a.clearly_worse_than(&c));
+        // Not judged on the same observations: no gain at all.
+        assert!(a.gain_of(&errors(vec![1.0])).is_none());
+    }
     use super::{AgainstCalibrate, CvErrors, FoldKind};
 
     /// Holding a parameter pins the blind directions it spans: with `p0 + p1` and `p2` seen,
