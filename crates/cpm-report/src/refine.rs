@@ -14,7 +14,7 @@ fn finite(v: f64) -> Option<f64> {
 /// The residual of the starting model.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Initial {
-    /// Residual RMS, um (without the outliers the first fit flagged).
+    /// Residual RMS, um.
     pub rms_um: f64,
     /// The residual passed the whiteness tests.
     pub residual_white: bool,
@@ -105,7 +105,7 @@ pub struct LastRoundCandidate {
 pub struct Final {
     /// Its effects.
     pub effects: Vec<String>,
-    /// Residual RMS, um (as the start's: without the outliers the first fit flagged).
+    /// Residual RMS, um.
     pub rms_um: f64,
     /// Cross-validated RMS, um.
     pub cv_rms_um: f64,
@@ -317,9 +317,7 @@ impl RefineDoc {
                     .iter()
                     .map(|e| e.name().to_string())
                     .collect(),
-                // As the start's: without the outliers the first fit flagged (the final model
-                // is fitted to every observation; calibration.json has that fit's RMS).
-                rms_um: r.final_diagnostics.rms_um,
+                rms_um: cal.residual_rms_um,
                 cv_rms_um: r.final_cv_rms_um,
                 residual_white: r.final_diagnostics.white,
                 consistent_with_noise: r.final_diagnostics.consistent_with_noise,
@@ -511,7 +509,7 @@ impl RefineReport {
         }
         if d.outliers_before > 0 {
             s.push_str(&format!(
-                "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations. The RMS figures of this report leave them out, at the start and at the end alike.\n\n",
+                "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations.\n\n",
                 d.outliers_before
             ));
         }
