@@ -184,7 +184,7 @@ impl PriorReport {
                     "none was pulled beyond it".to_string()
                 } else if self.held_at_limit.is_empty() {
                     format!(
-                        "none was held at it, but {} end{} beyond the tolerance (the limit holds only what the data do not determine; see \"Beyond tolerance\")",
+                        "none was held at it, but {} end{} beyond the tolerance (the limit holds only parameters the data supply less than half of; see \"Beyond tolerance\")",
                         self.beyond_tolerance.len(),
                         if self.beyond_tolerance.len() == 1 { "s" } else { "" }
                     )
