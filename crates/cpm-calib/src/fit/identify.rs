@@ -272,6 +272,17 @@ struct Subspace<'a> {
     cancel: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
+impl Subspace<'_> {
+    /// The observations' weights `weights`, those in `set_aside` at zero.
+    fn set_aside(&mut self, weights: &[f64], set_aside: &[usize]) {
+        self.weights.clear();
+        self.weights.extend_from_slice(weights);
+        for &k in set_aside {
+            self.weights[k] = 0.0;
+        }
+    }
+}
+
 /// Refits the tracker frames of `e` in pose space (the machine held fixed); the problem's
 /// start becomes the result and its directions the frames' (so that `theta = 0` is it).
 fn reregister_frames(
@@ -1032,11 +1043,7 @@ fn fit_setting_aside(
     if !robust && !problem.leg && !options.keep_outliers {
         if let Some(aside) = robust_start(problem, theta, weights, options)? {
             set_aside = aside;
-            problem.weights.clear();
-            problem.weights.extend_from_slice(weights);
-            for &k in &set_aside {
-                problem.weights[k] = 0.0;
-            }
+            problem.set_aside(weights, &set_aside);
             solver = solve_with_noise(problem, theta, estimate_noise, options)?;
         }
         for _ in 0..MAX_SET_ASIDE_ROUNDS {
@@ -1048,11 +1055,7 @@ fn fit_setting_aside(
                 break;
             }
             set_aside = flagged;
-            problem.weights.clear();
-            problem.weights.extend_from_slice(weights);
-            for &k in &set_aside {
-                problem.weights[k] = 0.0;
-            }
+            problem.set_aside(weights, &set_aside);
             solver = solve_with_noise(problem, theta, estimate_noise, options)?;
         }
     }
