@@ -123,8 +123,19 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
             writeln!(o, "  and {} more (--json)", a.held_directions.len() - 12)?;
         }
     }
-    writeln!(o, "\nsingular values:")?;
-    for (k, s) in ident.singular_values.iter().enumerate() {
+    // The rank is decided on the values the threshold applies to: the block-scaled
+    // Jacobian's when its columns were scaled (units differ between blocks).
+    let decided = if ident.scaled_singular_values.is_empty() {
+        writeln!(o, "\nsingular values:")?;
+        &ident.singular_values
+    } else {
+        writeln!(
+            o,
+            "\nsingular values (of the Jacobian scaled per block of parameters and per kind of observation, so that the rank does not depend on units or weights):"
+        )?;
+        &ident.scaled_singular_values
+    };
+    for (k, s) in decided.iter().enumerate() {
         writeln!(
             o,
             "  {:>3} {:.4e}{}",

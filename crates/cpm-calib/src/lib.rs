@@ -102,7 +102,10 @@ pub use campaign::{
 };
 pub use effects::{Channel, Effect, EffectInput, EffectModel, EffectSettings, KnownEffect};
 pub use error::CalibError;
-pub use identifiability::{analyze, try_analyze, Identifiability, RankOptions};
+pub use identifiability::{
+    analyze, analyze_scaled, try_analyze, try_analyze_scaled, Identifiability, RankOptions,
+    RankScaling,
+};
 pub use identify::{
     identifiability, identification_jacobian, identify, Calibration, IdentifyOptions, Tolerances,
     DOWNWEIGHT_LEVEL, MAX_DOWNWEIGHTED_SHARE, MAX_SET_ASIDE_ROUNDS, SET_ASIDE_SIGMAS,

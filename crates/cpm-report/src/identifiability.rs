@@ -44,6 +44,11 @@ pub struct IdentifiabilityReport {
     pub determined: usize,
     /// Singular values of the scaled Jacobian.
     pub singular_values: Vec<f64>,
+    /// The singular values the rank was decided on when the blocks' columns were scaled to
+    /// the installation errors' median norm (the blocks' units differ): `threshold` is
+    /// `rank_rtol` times the first; absent when the rank was decided on `singular_values`.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub scaled_singular_values: Vec<f64>,
     /// Named blind directions.
     pub blind_directions: Vec<BlindDirection>,
     /// Null-space dimensions no name explains.
@@ -103,6 +108,7 @@ impl IdentifiabilityReport {
             threshold: id.threshold,
             determined: id.num_determined(),
             singular_values: id.singular_values.clone(),
+            scaled_singular_values: id.scaled_singular_values.clone(),
             blind_directions: id
                 .blind_directions
                 .iter()

@@ -77,6 +77,15 @@ pub struct Identifiability {
     pub threshold: f64,
     /// Singular values, descending.
     pub singular_values: Vec<f64>,
+    /// The singular values the rank was decided on when the columns were scaled
+    /// ([`try_analyze_scaled`]: `threshold` is `rank_rtol` times the first of them), descending;
+    /// empty when they were not (the rank is then decided on `singular_values`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scaled_singular_values: Vec<f64>,
+    /// The column factors the rank was decided with ([`RankScaling`]), one per parameter;
+    /// empty when the columns were not scaled.
+    #[serde(skip)]
+    pub rank_column_scale: Vec<f64>,
     /// Right singular vectors, one per column, in the order of `singular_values`.
     #[serde(skip)]
     pub v: DMatrix<f64>,
@@ -424,7 +433,26 @@ pub fn analyze(
     options: &RankOptions,
     patterns: &[Pattern],
 ) -> Identifiability {
-    analyze_with(jacobian, sigma_um, options, patterns, false)
+    analyze_with(
+        jacobian,
+        sigma_um,
+        options,
+        patterns,
+        false,
+        &RankScaling::NONE,
+    )
+    .expect("analyze_with(strict = false) does not fail")
+}
+
+/// [`analyze`] with the rank decided on the scaled Jacobian ([`try_analyze_scaled`]).
+pub fn analyze_scaled(
+    jacobian: &DMatrix<f64>,
+    sigma_um: f64,
+    options: &RankOptions,
+    patterns: &[Pattern],
+    scaling: &RankScaling<'_>,
+) -> Identifiability {
+    analyze_with(jacobian, sigma_um, options, patterns, false, scaling)
         .expect("analyze_with(strict = false) does not fail")
 }
 
@@ -436,8 +464,136 @@ pub fn try_analyze(
     options: &RankOptions,
     patterns: &[Pattern],
 ) -> Result<Identifiability, CalibError> {
-    analyze_with(jacobian, sigma_um, options, patterns, true)
+    analyze_with(
+        jacobian,
+        sigma_um,
+        options,
+        patterns,
+        true,
+        &RankScaling::NONE,
+    )
 }
+
+/// Like [`try_analyze`], with the rank decided on the Jacobian scaled by `scaling`: the
+/// rank, the threshold and the blind patterns are those of `W J D`, so that they do not change
+/// with the unit of a block of parameters (a platform mass in grams or in tonnes, an angle in
+/// urad or in degrees) or with the weight of a kind of observation (an exact instrument beside
+/// a noisy one). The singular values and vectors, the determined parameters and the
+/// Cramér-Rao bounds stay those of `J` (the bounds of determined parameters do not depend on
+/// the scaling), taken to the rank so decided. [`RankScaling::NONE`] is [`try_analyze`]
+/// exactly.
+pub fn try_analyze_scaled(
+    jacobian: &DMatrix<f64>,
+    sigma_um: f64,
+    options: &RankOptions,
+    patterns: &[Pattern],
+    scaling: &RankScaling<'_>,
+) -> Result<Identifiability, CalibError> {
+    analyze_with(jacobian, sigma_um, options, patterns, true, scaling)
+}
+
+/// How the rank is decided scale-free ([`try_analyze_scaled`]): the Jacobian's rows scaled per
+/// group (`row_groups`: one group per observation, its kind) so that every group's RMS row
+/// norm is 1, then its columns scaled per group (`column_groups`: one group per parameter,
+/// group 0 the installation errors, [`MeasurementModel::rank_groups`]) so that every group's
+/// median non-zero column norm is that of group 0. A single group scales nothing; so does a
+/// group 0 without a non-zero column (every installation error held).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RankScaling<'a> {
+    /// One group per parameter; `None`: no column scaling.
+    pub column_groups: Option<&'a [usize]>,
+    /// One group per observation; `None`: no row scaling.
+    pub row_groups: Option<&'a [usize]>,
+}
+
+impl RankScaling<'_> {
+    /// No scaling: the rank of `J` itself.
+    pub const NONE: RankScaling<'static> = RankScaling {
+        column_groups: None,
+        row_groups: None,
+    };
+
+    /// The column factors `D` and the Gram matrix `D J^T W^2 J D` of the scaled Jacobian
+    /// (`J = U S V^T`, `V` square), or `None` when nothing is scaled.
+    fn gram(
+        &self,
+        j: &DMatrix<f64>,
+        sv: &[f64],
+        v: &DMatrix<f64>,
+    ) -> Option<(Vec<f64>, DMatrix<f64>)> {
+        let (m, np) = j.shape();
+        let rows = self
+            .row_groups
+            .filter(|g| g.len() == m && g.iter().any(|x| *x != g[0]));
+        let columns = self.column_groups.filter(|g| g.len() == np);
+        let mut g = match rows {
+            // The Gram matrix of J is that of S V^T.
+            None => {
+                columns?;
+                let b =
+                    DMatrix::from_fn(np, np, |i, k| sv.get(i).copied().unwrap_or(0.0) * v[(k, i)]);
+                b.transpose() * b
+            }
+            Some(groups) => {
+                let ng = groups.iter().copied().max().unwrap_or(0) + 1;
+                let mut grams = vec![DMatrix::<f64>::zeros(np, np); ng];
+                let mut counts = vec![0usize; ng];
+                for (r, &grp) in groups.iter().enumerate() {
+                    let row = j.row(r).transpose();
+                    grams[grp].ger(1.0, &row, &row, 1.0);
+                    counts[grp] += 1;
+                }
+                let mut total = DMatrix::<f64>::zeros(np, np);
+                for (gm, c) in grams.iter().zip(&counts) {
+                    let mean_square = gm.trace() / (*c).max(1) as f64;
+                    if mean_square > 0.0 && mean_square.is_finite() {
+                        total += gm / mean_square;
+                    }
+                }
+                total
+            }
+        };
+        let norms: Vec<f64> = (0..np).map(|k| g[(k, k)].max(0.0).sqrt()).collect();
+        let d = columns
+            .and_then(|c| column_factors(&norms, c))
+            .unwrap_or_else(|| vec![1.0; np]);
+        if rows.is_none() && d.iter().all(|x| *x == 1.0) {
+            return None;
+        }
+        for a in 0..np {
+            for b in 0..np {
+                g[(a, b)] *= d[a] * d[b];
+            }
+        }
+        Some((d, g))
+    }
+}
+
+/// Column factors from the column norms: each group's median non-zero norm brought to group
+/// 0's; `None` when group 0 has no non-zero norm.
+fn column_factors(norms: &[f64], groups: &[usize]) -> Option<Vec<f64>> {
+    let ng = groups.iter().copied().max()? + 1;
+    let mut by_group: Vec<Vec<f64>> = vec![Vec::new(); ng];
+    for (n, g) in norms.iter().zip(groups) {
+        if *n > 0.0 && n.is_finite() {
+            by_group[*g].push(*n);
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied()
+    };
+    let reference = median(&mut by_group[0])?;
+    let factors: Vec<f64> = by_group
+        .iter_mut()
+        .map(|v| median(v).map_or(1.0, |m| reference / m))
+        .collect();
+    Some(groups.iter().map(|g| factors[*g]).collect())
+}
+
+/// Singular values below this fraction of the largest are rounding, whatever a column scaling
+/// says: the rank decided on a scaled Jacobian never counts them.
+const ROUNDING_RTOL: f64 = 1e-13;
 
 fn analyze_with(
     jacobian: &DMatrix<f64>,
@@ -445,6 +601,7 @@ fn analyze_with(
     options: &RankOptions,
     patterns: &[Pattern],
     strict: bool,
+    scaling: &RankScaling<'_>,
 ) -> Result<Identifiability, CalibError> {
     let (m, np) = jacobian.shape();
     // SVD of J (thin). For m < np pad with zero rows so that V is square.
@@ -467,8 +624,28 @@ fn analyze_with(
         Err(_) => (vec![0.0; np], DMatrix::identity(np, np)),
     };
     let smax = sv.first().copied().unwrap_or(0.0);
-    let threshold = options.rank_rtol * smax;
-    let rank = sv.iter().filter(|&&s| s > threshold && s > 0.0).count();
+    let gram = scaling.gram(jacobian, &sv, &v);
+    let (threshold, rank, scaled_singular_values) = match &gram {
+        None => {
+            let threshold = options.rank_rtol * smax;
+            let rank = sv.iter().filter(|&&s| s > threshold && s > 0.0).count();
+            (threshold, rank, Vec::new())
+        }
+        Some((_, g)) => {
+            let mut svs: Vec<f64> = g
+                .clone()
+                .symmetric_eigen()
+                .eigenvalues
+                .iter()
+                .map(|l| l.max(0.0).sqrt())
+                .collect();
+            svs.sort_by(|a, b| b.total_cmp(a));
+            let threshold = options.rank_rtol * svs.first().copied().unwrap_or(0.0);
+            let rank = svs.iter().filter(|&&s| s > threshold && s > 0.0).count();
+            let numerical = sv.iter().filter(|&&s| s > ROUNDING_RTOL * smax).count();
+            (threshold, rank.min(numerical), svs)
+        }
+    };
     let null = v.columns(rank, np - rank).into_owned();
     let null_fraction: Vec<f64> = (0..np).map(|k| null.row(k).norm()).collect();
     let determined: Vec<bool> = null_fraction
@@ -498,13 +675,33 @@ fn analyze_with(
             // Blind: the pattern moves the readings less than the rank threshold does, in
             // every direction of its span.
             let b = DMatrix::from_columns(&basis);
-            // Its largest singular value, by the crate's accurate SVD (no readings: no gain).
-            let jb = jacobian * &b;
-            let gain = if jb.nrows() == 0 {
-                0.0
-            } else {
-                crate::linalg::svd_values_and_v(&jb)
-                    .map_or(f64::INFINITY, |(s, _)| s.first().copied().unwrap_or(0.0))
+            let gain = match &gram {
+                // With the rank decided on the scaled Jacobian, the pattern's gain is measured
+                // there too: its span in the scaled parameters (`D^-1 p`, orthonormal).
+                Some((d, g)) => {
+                    let scaled: Vec<DVector<f64>> = basis
+                        .iter()
+                        .map(|p| DVector::from_fn(np, |k, _| p[k] / d[k]))
+                        .collect();
+                    let bs = DMatrix::from_columns(&orthonormalise(&scaled, None));
+                    let gb = bs.transpose() * g * &bs;
+                    gb.symmetric_eigen()
+                        .eigenvalues
+                        .iter()
+                        .fold(0.0_f64, |a, l| a.max(*l))
+                        .sqrt()
+                }
+                // Its largest singular value, by the crate's accurate SVD (no readings: no
+                // gain).
+                None => {
+                    let jb = jacobian * &b;
+                    if jb.nrows() == 0 {
+                        0.0
+                    } else {
+                        crate::linalg::svd_values_and_v(&jb)
+                            .map_or(f64::INFINITY, |(s, _)| s.first().copied().unwrap_or(0.0))
+                    }
+                }
             };
             if gain > threshold {
                 continue;
@@ -532,6 +729,11 @@ fn analyze_with(
         rank_rtol: options.rank_rtol,
         threshold,
         singular_values: sv,
+        scaled_singular_values,
+        rank_column_scale: match &gram {
+            Some((d, _)) if d.iter().any(|x| *x != 1.0) => d.clone(),
+            _ => Vec::new(),
+        },
         v,
         determined,
         null_fraction,
@@ -562,4 +764,71 @@ pub(crate) fn leverages(j: &DMatrix<f64>, id: &Identifiability) -> Vec<f64> {
         jv.column_mut(c).unscale_mut(id.singular_values[c]);
     }
     jv.row_iter().map(|row| row.norm_squared()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A Jacobian of 20 observations and 6 parameters: the first 10 observations see only
+    /// the first 3 parameters, the others see all 6 (deterministic, well conditioned).
+    fn jacobian() -> DMatrix<f64> {
+        DMatrix::from_fn(20, 6, |r, k| {
+            if r < 10 && k >= 3 {
+                0.0
+            } else {
+                ((r * 7 + k * 13) as f64 * 0.37).sin() + if r % 6 == k { 2.0 } else { 0.0 }
+            }
+        })
+    }
+
+    /// The rank of the data does not change with the unit of a block of parameters or the
+    /// weight of a kind of observation (issue 60 item 3); unscaled, it did.
+    #[test]
+    fn the_rank_does_not_depend_on_units_or_weights() {
+        let o = RankOptions::default();
+        let base = try_analyze(&jacobian(), 1.0, &o, &[]).unwrap();
+        assert_eq!(base.rank, 6);
+        // A block in a unit a million times smaller (a mass in tonnes for kilograms).
+        let mut j = jacobian();
+        for k in 3..6 {
+            j.column_mut(k).scale_mut(1e-6);
+        }
+        assert!(try_analyze(&j, 1.0, &o, &[]).unwrap().rank < 6);
+        let columns = [0, 0, 0, 1, 1, 1];
+        let scaling = RankScaling {
+            column_groups: Some(&columns),
+            row_groups: None,
+        };
+        let id = try_analyze_scaled(&j, 1.0, &o, &[], &scaling).unwrap();
+        assert_eq!(id.rank, 6);
+        assert!(id.determined.iter().all(|d| *d));
+        // The bounds of determined parameters are the unscaled ones, in the block's unit.
+        let b = base.crlb_std_um[4].unwrap() * 1e6;
+        assert!((id.crlb_std_um[4].unwrap() - b).abs() < 1e-6 * b);
+        // An observation kind weighed a hundred million times more (an exact instrument).
+        let mut j = jacobian();
+        for r in 0..10 {
+            j.row_mut(r).scale_mut(1e8);
+        }
+        assert!(try_analyze(&j, 1.0, &o, &[]).unwrap().rank < 6);
+        let rows: Vec<usize> = (0..20).map(|r| usize::from(r >= 10)).collect();
+        let scaling = RankScaling {
+            column_groups: None,
+            row_groups: Some(&rows),
+        };
+        assert_eq!(
+            try_analyze_scaled(&j, 1.0, &o, &[], &scaling).unwrap().rank,
+            6
+        );
+        // One group of each scales nothing: the analysis is the unscaled one, bit for bit.
+        let one = vec![0; 6];
+        let same = RankScaling {
+            column_groups: Some(&one),
+            row_groups: Some(&[0; 20]),
+        };
+        let a = try_analyze_scaled(&jacobian(), 1.0, &o, &[], &same).unwrap();
+        assert_eq!(a.threshold, base.threshold);
+        assert!(a.scaled_singular_values.is_empty() && a.rank_column_scale.is_empty());
+    }
 }

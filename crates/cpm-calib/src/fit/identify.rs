@@ -10,10 +10,10 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use crate::analysis::identifiability::{
-    physical_patterns, try_analyze, Identifiability, RankOptions,
+    physical_patterns, try_analyze_scaled, Identifiability, RankOptions, RankScaling,
 };
 pub use crate::fit::prior::Tolerances;
-use crate::fit::prior::{prior_std, summarize, Determination, PriorSummary};
+use crate::fit::prior::{prior_std, summarize_scaled, Determination, PriorSummary};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, Effect, MeasurementModel};
 
@@ -635,6 +635,31 @@ pub fn identification_jacobian(
     Ok(j)
 }
 
+/// The group of every observation for a rank that does not depend on weights
+/// ([`RankScaling::row_groups`]): its kind of noise, every gauge reading one group (readings
+/// share a unit, and a gauge-only fit is scaled by nothing).
+pub fn kind_groups(campaign: &Campaign) -> Vec<usize> {
+    use crate::fit::noise::Kind;
+    let mut kinds: Vec<Kind> = Vec::new();
+    campaign
+        .observation_kinds()
+        .into_iter()
+        .map(|o| {
+            let kind = match Kind::of(campaign, o) {
+                Kind::Gauge(_) => Kind::Gauge(0),
+                k => k,
+            };
+            match kinds.iter().position(|k| *k == kind) {
+                Some(g) => g,
+                None => {
+                    kinds.push(kind);
+                    kinds.len() - 1
+                }
+            }
+        })
+        .collect()
+}
+
 /// Identifiability of a campaign (or plan skeleton) at the nominal geometry.
 pub fn identifiability(
     model: &MeasurementModel,
@@ -643,7 +668,18 @@ pub fn identifiability(
     options: &RankOptions,
 ) -> Result<Identifiability, CalibError> {
     let j = identification_jacobian(model, campaign, &vec![0.0; model.num_params()])?;
-    try_analyze(&j, sigma_um, options, &physical_patterns(model, campaign))
+    let (columns, rows) = (model.rank_groups(), kind_groups(campaign));
+    let scaling = RankScaling {
+        column_groups: Some(&columns),
+        row_groups: Some(&rows),
+    };
+    try_analyze_scaled(
+        &j,
+        sigma_um,
+        options,
+        &physical_patterns(model, campaign),
+        &scaling,
+    )
 }
 
 impl Calibration {
@@ -833,8 +869,15 @@ fn identify_uncancelled(
         downweighted_share,
     } = end;
     let sigma_um = noise.sigma_um;
-    let mut ident = try_analyze(&jf, sigma_um, &options.rank, &[])?;
-    let prior_summary = w.with_prior.then(|| summarize(&jf, &w.prior, sigma_um));
+    let (columns, rows) = (model.rank_groups(), kind_groups(campaign));
+    let scaling = RankScaling {
+        column_groups: Some(&columns),
+        row_groups: Some(&rows),
+    };
+    let mut ident = try_analyze_scaled(&jf, sigma_um, &options.rank, &[], &scaling)?;
+    let prior_summary = w
+        .with_prior
+        .then(|| summarize_scaled(&jf, &w.prior, sigma_um, Some(&ident.rank_column_scale)));
     let leverages = match noise.prior_leverages {
         Some(h) => h,
         None => crate::analysis::identifiability::leverages(&jf, &ident),
@@ -954,7 +997,12 @@ fn fit_directions(
             j_free.column_mut(k).fill(0.0);
         }
     }
-    let first = try_analyze(&j_free, 1.0, &options.rank, &patterns)?;
+    let (columns, rows) = (model.rank_groups(), kind_groups(campaign));
+    let scaling = RankScaling {
+        column_groups: Some(&columns),
+        row_groups: Some(&rows),
+    };
+    let first = try_analyze_scaled(&j_free, 1.0, &options.rank, &patterns, &scaling)?;
     if first.rank == 0 {
         return Err(CalibError::NoInformation(
             "the identification Jacobian is zero: the readings do not depend on any installation error".into(),

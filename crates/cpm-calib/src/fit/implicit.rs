@@ -17,7 +17,7 @@ use cpm_geometry::Pose;
 use cpm_lm::{LinearSolver, ModelError, Problem, SparseJacobian};
 use nalgebra::{DMatrix, Vector3};
 
-use crate::analysis::identifiability::{analyze, Identifiability, RankOptions};
+use crate::analysis::identifiability::{Identifiability, RankOptions};
 use crate::model::effects::{is_link_effect, link_coefficient, sensor_coefficient, Effect};
 use crate::model::Prepared;
 use crate::{CalibError, Campaign, MeasurementModel};
@@ -564,11 +564,18 @@ pub fn identify_implicit(
             pseudo[(c, rr)] = l * eig.eigenvectors[(rr, c)];
         }
     }
-    let mut ident = analyze(
+    // Gauge readings only: the columns are scaled by unit, the rows not at all.
+    let columns = model.rank_groups();
+    let scaling = crate::RankScaling {
+        column_groups: Some(&columns),
+        row_groups: None,
+    };
+    let mut ident = crate::analyze_scaled(
         &pseudo,
         options.sensor_sigma_um,
         &options.rank,
         &crate::analysis::identifiability::physical_patterns(model, campaign),
+        &scaling,
     );
     ident.num_readings = campaign.readings.len();
     let globals = x[g0..].to_vec();

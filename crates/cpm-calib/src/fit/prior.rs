@@ -439,6 +439,19 @@ impl PriorSummary {
 /// infinite free), weighted Jacobian `j` (um of reference per model unit) and noise
 /// `sigma_um`.
 pub fn summarize(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> PriorSummary {
+    summarize_scaled(j, prior, sigma_um, None)
+}
+
+/// [`summarize`] with the posterior's cut-offs taken on the precision with its parameters
+/// scaled by `column_scale` ([`Identifiability::rank_column_scale`](crate::Identifiability::rank_column_scale), one factor per parameter): what the
+/// posterior leaves undefined then does not depend on the units of a block (a compliance in
+/// um/kN under a platform of 1 g or of 10 t). `None`, or every factor 1, is [`summarize`].
+pub fn summarize_scaled(
+    j: &DMatrix<f64>,
+    prior: &[f64],
+    sigma_um: f64,
+    column_scale: Option<&[f64]>,
+) -> PriorSummary {
     let np = prior.len();
     let free: Vec<usize> = (0..np).filter(|&k| prior[k] > 0.0).collect();
     let nf = free.len();
@@ -451,7 +464,19 @@ pub fn summarize(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> PriorSummary
             h[(a, a)] += 1.0 / (prior[ka] * prior[ka]);
         }
     }
-    let eig = h.clone().symmetric_eigen();
+    // The scaled precision D H D (D = 1 unless scaled): cut-offs are taken on it, and the
+    // covariance is D (D H D)^+ D.
+    let d: Vec<f64> = match column_scale.filter(|d| d.len() == np && d.iter().any(|x| *x != 1.0)) {
+        Some(d) => free.iter().map(|&k| d[k]).collect(),
+        None => vec![1.0; nf],
+    };
+    let scaled = d.iter().any(|x| *x != 1.0);
+    let hs = if scaled {
+        DMatrix::from_fn(nf, nf, |a, b| d[a] * h[(a, b)] * d[b])
+    } else {
+        h.clone()
+    };
+    let eig = hs.clone().symmetric_eigen();
     let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
     let mut cov = DMatrix::zeros(nf, nf);
     for (i, &l) in eig.eigenvalues.iter().enumerate() {
@@ -460,6 +485,14 @@ pub fn summarize(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> PriorSummary
             cov += v * v.transpose() / l;
         }
     }
+    if scaled {
+        for a in 0..nf {
+            for b in 0..nf {
+                cov[(a, b)] *= d[a] * d[b];
+            }
+        }
+    }
+    let h = hs;
     // Which free parameters the posterior leaves undefined (inside the pseudo-inverse's null
     // space): their precision row is (numerically) zero.
     let mut posterior_std = vec![None; np];

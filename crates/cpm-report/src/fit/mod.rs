@@ -1045,11 +1045,16 @@ impl FitReport {
         let id = &self.identifiability;
         s.push_str("## What the data identify\n\n");
         s.push_str(&format!(
-            "Rank {} of {} from {} readings (threshold {} = rtol x s_max); the data alone see {} parameters on their own. Parameters: {} (see \"Estimates\").\n\n",
+            "Rank {} of {} from {} readings (threshold {} = rtol x s_max{}); the data alone see {} parameters on their own. Parameters: {} (see \"Estimates\").\n\n",
             id.rank,
             id.parameters,
             id.observations,
             crate::format::sci(id.threshold, 3),
+            if id.scaled_singular_values.is_empty() {
+                ""
+            } else {
+                ", on the Jacobian scaled per block of parameters and per kind of observation so that the rank does not depend on units or weights"
+            },
             id.determined,
             self.determination.words()
         ));
