@@ -637,9 +637,13 @@ pub fn identification_jacobian(
 
 /// The group of every observation for a rank that does not depend on weights
 /// ([`RankScaling::row_groups`]): its kind of noise, every gauge reading one group (readings
-/// share a unit, and a gauge-only fit is scaled by nothing).
+/// share a unit, and a gauge-only fit is scaled by nothing: empty).
 pub fn kind_groups(campaign: &Campaign) -> Vec<usize> {
     use crate::fit::noise::Kind;
+    // Gauge readings alone are one kind: no list of a group per reading.
+    if campaign.len() == campaign.readings.len() {
+        return Vec::new();
+    }
     let mut kinds: Vec<Kind> = Vec::new();
     campaign
         .observation_kinds()
