@@ -479,3 +479,66 @@ fn the_rank_does_not_depend_on_units_or_weights() {
     let words = determinations(&r);
     assert!(words.iter().all(|w| w == "determined"), "{words:?}");
 }
+
+/// refine's start and final RMS are computed alike (item 10: with a flagged outlier the start
+/// left it out and the final counted it, "RMS 8.334 -> 8.558 um"): both are the RMS over every
+/// observation, so one reading 50 um off (100 sd) among 180 (SIMULATED) is in both, and the
+/// start is calibrate's figure for the same data.
+#[test]
+fn refine_computes_its_start_and_final_rms_alike() {
+    let d = scratch("estimator", "refine-rms");
+    let robot = example("hexapod_66.toml");
+    let clean = d.join("clean.csv");
+    cli::ok(&[
+        "simulate",
+        "--robot",
+        &robot,
+        "--truth",
+        &example("hexapod_66_truth.toml"),
+        "--random",
+        "60",
+        "--noise",
+        "gaussian:0.5",
+        "--seed",
+        "4",
+        "--out",
+        &cli::p(&clean),
+    ]);
+    let text = std::fs::read_to_string(&clean).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let mut f: Vec<String> = lines[20].split(',').map(str::to_string).collect();
+    f[8] = format!("{}", f[8].parse::<f64>().unwrap() + 0.05);
+    lines[20] = f.join(",");
+    let bad = d.join("one-glitch.csv");
+    std::fs::write(&bad, lines.join("\n") + "\n").unwrap();
+    let out = d.join("refined");
+    let o = cpm(&[
+        "refine",
+        "--robot",
+        &robot,
+        "--data",
+        &cli::p(&bad),
+        "--out",
+        &cli::p(&out),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("refine.json")).unwrap()).unwrap();
+    assert!(doc["outliers_before"].as_u64().unwrap_or(0) >= 1, "{doc}");
+    let (start, end) = (
+        doc["initial"]["rms_um"].as_f64().unwrap(),
+        doc["final"]["rms_um"].as_f64().unwrap(),
+    );
+    // With the glitch counted an RMS is about 3.7 um (50 um over sqrt(180)); without, 0.5.
+    assert!(start > 2.0 && end > 2.0, "start {start} um, final {end} um");
+    assert!(
+        (start - end).abs() < 0.2 * start,
+        "start {start} um, final {end} um"
+    );
+    let cal = calibrate_json(Path::new(&robot), &[&bad], &[], &d.join("calibrated"));
+    let first = cal["residual_rms_um"].as_f64().unwrap();
+    assert!(
+        (first - start).abs() <= 1e-9 * first,
+        "calibrate {first} um, refine's start {start} um"
+    );
+}

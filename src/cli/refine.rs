@@ -90,7 +90,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
             if campaign.simulated { "SIMULATED data: " } else { "" },
             r.steps.len(),
             if r.steps.is_empty() { "none".to_string() } else { r.steps.iter().map(|s| s.effect.name()).collect::<Vec<_>>().join(", ") },
-            r.initial_diagnostics.rms_um / scale,
+            r.initial_rms_um / scale,
             cal.residual_rms_um / scale,
             r.final_cv_rms_um / scale,
             if r.unexplained_structure.is_empty() { "none".to_string() } else { r.unexplained_structure.join(", ") }

@@ -14,7 +14,7 @@ fn finite(v: f64) -> Option<f64> {
 /// The residual of the starting model.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Initial {
-    /// Residual RMS, um.
+    /// Residual RMS over every observation, um (as the final one).
     pub rms_um: f64,
     /// The residual passed the whiteness tests.
     pub residual_white: bool,
@@ -234,7 +234,7 @@ impl RefineDoc {
             cpm_version: env!("CARGO_PKG_VERSION").to_string(),
             simulated,
             initial: Initial {
-                rms_um: r.initial_diagnostics.rms_um,
+                rms_um: r.initial_rms_um,
                 residual_white: r.initial_diagnostics.white,
                 significant: r.initial_diagnostics.significant.clone(),
             },
@@ -509,7 +509,7 @@ impl RefineReport {
         }
         if d.outliers_before > 0 {
             s.push_str(&format!(
-                "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations.\n\n",
+                "The first fit flagged {} outlier observation(s) (listed under \"Outliers\") before any effect was chosen: the effects were chosen without them (an effect is also added only when it lowers the cross-validated RMS), and the final model was fitted to all observations. The RMS figures of this report count them, at the start and at the end alike.\n\n",
                 d.outliers_before
             ));
         }

@@ -162,8 +162,12 @@ pub struct Refinement {
     pub model: MeasurementModel,
     /// The final calibration.
     pub calibration: Calibration,
-    /// Diagnostics of the first fit.
+    /// Diagnostics of the first fit (without the outliers it flagged, as the effects are
+    /// chosen).
     pub initial_diagnostics: ResidualDiagnostics,
+    /// The first fit's residual RMS over every observation, um (weighted as that fit weighed
+    /// them): computed as the final fit's [`Calibration::residual_rms_um`] is.
+    pub initial_rms_um: f64,
     /// Diagnostics of the final fit.
     pub final_diagnostics: ResidualDiagnostics,
     /// Final cross-validated RMS, um.
@@ -984,6 +988,7 @@ fn refine_effects(
         model: current,
         calibration: cal,
         initial_diagnostics,
+        initial_rms_um: first.residual_rms_um,
         final_diagnostics: diag,
         final_cv_rms_um: cv,
         unexplained_structure,
