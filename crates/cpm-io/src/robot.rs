@@ -102,6 +102,14 @@ impl Robot {
         };
         robot.known_effects()?;
         robot.declared_effects()?;
+        // The model is built from the description in one place; what that builder refuses
+        // (a known value that is not finite) is refused here, naming the file.
+        robot.try_model().map_err(|e| InputError {
+            file: robot.file.clone(),
+            line: None,
+            field: Some("calibration".to_string()),
+            message: e.to_string(),
+        })?;
         Ok(robot)
     }
 
@@ -298,35 +306,32 @@ impl Robot {
     }
 
     /// The measurement model: this geometry, clearance and load, the known effect values
-    /// and settings of `[calibration]`, and `effects` to estimate.
+    /// and settings of `[calibration]`, the targets and inclinometers
+    /// ([`MeasurementModel::on_table`], the one builder), and `effects` to
+    /// estimate.
     pub fn model(&self, effects: &[Effect]) -> MeasurementModel {
-        let mut m = MeasurementModel::new(self.table.clone());
-        if self.errors_applied {
-            // Checked when the robot was made (from_description).
-            m.design = self.description.joint_table().ok();
-        }
-        m.clearance = self.clearance();
-        m.load = self.platform_load();
+        let mut m = self
+            .try_model()
+            .expect("built once when the robot was made (from_description_among)");
         m.effects = effects.to_vec();
-        m.effect_settings = self.effect_settings();
-        // Checked when the robot was made (from_description).
-        m.known_effects = self.known_effects().unwrap_or_default();
-        m.targets = self
-            .description
-            .targets
-            .iter()
-            .map(|t| cpm_calib::points::PointTarget {
-                name: t.name.clone(),
-                platform_mm: t.platform_mm.into(),
-            })
-            .collect();
-        m.inclinometers = self
-            .description
-            .inclinometers
-            .iter()
-            .map(cpm_calib::tilts::Inclinometer::from_spec)
-            .collect();
         m
+    }
+
+    /// The model of this robot's table and description, by the one builder.
+    fn try_model(&self) -> Result<MeasurementModel, cpm_calib::CalibError> {
+        // The design: the description's joints, when its installation errors were applied
+        // (checked when the robot was made).
+        let design = if self.errors_applied {
+            self.description.joint_table().ok()
+        } else {
+            None
+        };
+        MeasurementModel::on_table(
+            self.table.clone(),
+            design,
+            &self.description,
+            &self.user_effects,
+        )
     }
 
     /// The nominal positions of the platform's targets (`[[target]]`), platform frame, mm.

@@ -181,11 +181,37 @@ impl MeasurementModel {
     pub fn from_description(
         description: &cpm_geometry::RobotDescription,
     ) -> Result<Self, CalibError> {
+        Self::from_description_among(description, &[])
+    }
+
+    /// [`from_description`](Self::from_description) whose `[calibration] known_effects` may
+    /// name the user effects `user` ([`Effect::parse_among`]): the one builder of a model
+    /// from a description (`cpm_io::Robot::model` is this, with the effects to estimate).
+    pub fn from_description_among(
+        description: &cpm_geometry::RobotDescription,
+        user: &[Effect],
+    ) -> Result<Self, CalibError> {
         let nominal = description.joint_table()?;
         let (table, design) = match description.installation_errors()? {
             Some(e) => (e.apply(&nominal)?, Some(nominal)),
             None => (nominal, None),
         };
+        Self::on_table(table, design, description, user)
+    }
+
+    /// The model of the joint table `table` (the design `design`, when it differs: the
+    /// description's joints without its installation errors) with everything else the
+    /// description declares: clearance, load, effect settings, known effects (which may name
+    /// the user effects `user`), targets and inclinometers.
+    /// [`from_description_among`](Self::from_description_among) is this on the description's
+    /// own table; a caller that holds the table (`cpm_io::Robot`, whose table may be edited)
+    /// gives it.
+    pub fn on_table(
+        table: JointTable,
+        design: Option<JointTable>,
+        description: &cpm_geometry::RobotDescription,
+        user: &[Effect],
+    ) -> Result<Self, CalibError> {
         let mut m = Self::with_paper_clearance(table);
         m.design = design;
         m.targets = description
@@ -219,7 +245,7 @@ impl MeasurementModel {
             s.nonlinearity_scale_mm = c.nonlinearity_scale_mm.unwrap_or(s.nonlinearity_scale_mm);
             s.reference_time_s = c.reference_time_s.or(s.reference_time_s);
             for (name, values) in &c.known_effects {
-                let effect = Effect::parse(name).map_err(|why| {
+                let effect = Effect::parse_among(name, user).map_err(|why| {
                     CalibError::invalid(format!("calibration.known_effects.{name}"), why)
                 })?;
                 m.known_effects.push(KnownEffect {
