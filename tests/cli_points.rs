@@ -318,3 +318,57 @@ fn a_set_aside_reflector_glitch_leaves_the_frame_alone() {
     let kept = calibrate_json(&robot, &[&glitch], &["--keep-outliers"], &dir.join("kept"));
     assert!(kept["sigma_um"].as_f64().unwrap() > 10.0 * sa);
 }
+
+/// Tracker poses from two sessions beside a point session (SIMULATED): each tracker file keeps
+/// its own frame when the points bring their unknowns. The model was built again for the
+/// points without the tracker's sessions: one frame shared by both files, and calibrate
+/// refused to write ("the calibrated description does not reproduce the fit ... 4.264303
+/// fitted, 4.232317 read back").
+#[test]
+fn tracker_sessions_keep_their_frames_beside_points() {
+    let dir = scratch("points", "tracker-and-points");
+    let (robot, truth) = robots(&dir, 3);
+    let points = dir.join("points.csv");
+    simulate(&robot, &truth, &points, 40, 5, "0,0,0,0,0,0");
+    let mut data = vec![points];
+    for (seed, frame) in [
+        ("6", "0.5,-0.3,0.2,0.01,0,0.02"),
+        ("7", "-0.4,0.2,0,0,0.02,-0.01"),
+    ] {
+        let path = dir.join(format!("poses_{seed}.csv"));
+        ok(&[
+            "simulate",
+            "--robot",
+            &p(&robot),
+            "--truth",
+            &p(&truth),
+            "--random",
+            "30",
+            "--measure",
+            "poses",
+            "--noise",
+            "gaussian:5",
+            "--seed",
+            seed,
+            "--tracker-frame",
+            frame,
+            "--out",
+            &p(&path),
+        ]);
+        data.push(path);
+    }
+    let data: Vec<&Path> = data.iter().map(PathBuf::as_path).collect();
+    let cal = calibrate_json(&robot, &data, &[], &dir.join("fit"));
+    let frames: Vec<&str> = cal["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|q| q["name"].as_str())
+        .filter(|n| n.starts_with("tracker_frame"))
+        .collect();
+    assert_eq!(frames.len(), 12, "{frames:?}");
+    assert!(
+        frames.iter().any(|n| n.contains("(session 2)")),
+        "{frames:?}"
+    );
+}

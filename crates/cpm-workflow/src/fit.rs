@@ -364,7 +364,7 @@ pub(crate) fn load_inputs_with(
     model.tracker_frame_sessions = tracker_sessions(&merged.campaign);
     // Point targets and inclinometers: their own unknowns (targets, mounts) and each
     // session's frame or levelling are always estimated with the machine.
-    if let Some(m) = crate::load::with_instruments(&robot, &model, &merged.campaign) {
+    if let Some(m) = crate::load::with_instruments(&model, &merged.campaign) {
         model = m;
         progress.note(&crate::load::instruments_note(&model));
     }

@@ -169,7 +169,7 @@ pub fn identifiability_in(
         (spec.skeleton(), "plan".to_string())
     };
     check_cancelled(progress)?;
-    let model = match crate::load::with_instruments(&robot, &model, &campaign) {
+    let model = match crate::load::with_instruments(&model, &campaign) {
         Some(m) => {
             progress.note(&crate::load::instruments_note(&m));
             m

@@ -251,7 +251,6 @@ pub fn out_target(
 /// base's tilt per inclinometer session: `inclinometer_mount`, `base_tilt`), sized for
 /// `campaign`. `None` when the campaign has neither.
 pub fn with_instruments(
-    robot: &Robot,
     model: &MeasurementModel,
     campaign: &crate::calib::Campaign,
 ) -> Option<MeasurementModel> {
@@ -272,7 +271,11 @@ pub fn with_instruments(
             e.push(x);
         }
     }
-    let mut m = robot.model(&e);
+    // The model as given (its tracker sessions included), with the instruments' effects: a
+    // model built again from the robot lost the tracker frame per session of a campaign
+    // with tracker poses beside points or angles.
+    let mut m = model.clone();
+    m.effects = e;
     m.point_sessions = campaign.point_sessions();
     m.tilt_sessions = campaign.tilt_sessions();
     Some(m)
