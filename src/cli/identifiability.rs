@@ -131,7 +131,7 @@ pub fn run(args: &IdentifiabilityArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outc
     } else {
         writeln!(
             o,
-            "\nsingular values (of the Jacobian scaled per block of parameters and per kind of observation, so that the rank does not depend on units or weights):"
+            "\nsingular values (of the Jacobian scaled per unit of parameters and per kind of observation, so that the rank does not depend on units or weights):"
         )?;
         &ident.scaled_singular_values
     };

@@ -495,7 +495,8 @@ pub fn try_analyze_scaled(
 /// How the rank is decided scale-free ([`try_analyze_scaled`]): the Jacobian's rows scaled per
 /// group (`row_groups`: one group per observation, its kind) so that every group's RMS row
 /// norm is 1, then its columns scaled per group (`column_groups`: one group per parameter,
-/// group 0 the installation errors, [`MeasurementModel::rank_groups`]) so that every group's
+/// its unit, group 0 the installation errors' (um), [`MeasurementModel::rank_groups`]) so
+/// that every group's
 /// median non-zero column norm is that of group 0. A single group scales nothing; so does a
 /// group 0 without a non-zero column (every installation error held).
 #[derive(Debug, Clone, Copy, Default)]

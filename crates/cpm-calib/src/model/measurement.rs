@@ -482,35 +482,32 @@ impl MeasurementModel {
     }
 
     /// The group of every parameter for a rank that does not depend on units
-    /// ([`RankScaling::column_groups`](crate::RankScaling::column_groups)): one group per block and unit, group 0 the
-    /// installation errors.
+    /// ([`RankScaling::column_groups`](crate::RankScaling::column_groups)): one group per
+    /// unit, group 0 the installation errors' (um). Parameters of one unit keep their relative
+    /// scale (a link offset beside a joint error, both in um); a block in another unit (a
+    /// compliance in um/kN, whose scale follows the platform's mass) is brought to it.
     ///
     /// ```
     /// use cpm_calib::{Effect, MeasurementModel};
     /// let mut m = MeasurementModel::new(cpm_geometry::JointTable::paper_cubic());
-    /// m.effects = vec![Effect::LinkScale, Effect::TrackerFrame];
+    /// m.effects = vec![Effect::LinkScale, Effect::LinkOffset, Effect::TrackerFrame];
     /// let g = m.rank_groups();
-    /// assert_eq!((g[0], g[35], g[36], g[41]), (0, 0, 1, 1));
-    /// assert_eq!((g[42], g[45]), (2, 3)); // the frame's translations (um), rotations (urad)
+    /// assert_eq!((g[0], g[35], g[36], g[41]), (0, 0, 1, 1)); // um, then ppm
+    /// assert_eq!((g[42], g[48], g[51]), (0, 0, 2)); // offsets and translations um, rotations urad
     /// ```
     pub fn rank_groups(&self) -> Vec<usize> {
         let units = self.parameter_units();
-        let mut keys: Vec<(usize, &str)> = Vec::new();
-        let mut out = Vec::with_capacity(units.len());
-        for (b, block) in self.blocks().iter().enumerate() {
-            for k in block.offset..block.offset + block.len {
-                let key = (b, units[k].as_str());
-                let g = match keys.iter().position(|x| *x == key) {
-                    Some(g) => g,
-                    None => {
-                        keys.push(key);
-                        keys.len() - 1
-                    }
-                };
-                out.push(g);
-            }
-        }
-        out
+        let mut keys: Vec<&str> = vec!["um"];
+        units
+            .iter()
+            .map(|u| match keys.iter().position(|k| *k == u.as_str()) {
+                Some(g) => g,
+                None => {
+                    keys.push(u.as_str());
+                    keys.len() - 1
+                }
+            })
+            .collect()
     }
 
     /// The unit of every parameter (`um`, `ppm`, `urad`, ...), as its name in

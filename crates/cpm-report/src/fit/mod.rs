@@ -1053,7 +1053,7 @@ impl FitReport {
             if id.scaled_singular_values.is_empty() {
                 ""
             } else {
-                ", on the Jacobian scaled per block of parameters and per kind of observation so that the rank does not depend on units or weights"
+                ", on the Jacobian scaled per unit of parameters and per kind of observation so that the rank does not depend on units or weights"
             },
             id.determined,
             self.determination.words()
