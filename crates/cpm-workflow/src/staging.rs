@@ -225,11 +225,20 @@ pub fn stage_residuals(set: &mut OutputSet, dir: &Path, inputs: &Inputs, cal: &C
     );
     // Written as the file is (10^6 rows are 80 MB of text), from the numbers.
     let (robot, merged) = (inputs.robot.clone(), inputs.merged.clone());
+    // One's own instruments' rows in their units.
+    let units: Vec<String> = inputs
+        .model
+        .instruments
+        .iter()
+        .map(|i| i.unit().to_string())
+        .collect();
     set.add_streamed(
         dir.join("residuals.csv"),
         Box::new(move |mut out| {
             out.write_all(crate::report::residuals::RESIDUALS_HEADER.as_bytes())?;
-            crate::report::residuals::write_residual_rows(&mut out, &robot, &merged, &native, 1)
+            crate::report::residuals::write_residual_rows_with(
+                &mut out, &robot, &merged, &native, 1, &units,
+            )
         }),
     );
 }

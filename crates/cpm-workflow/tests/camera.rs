@@ -107,6 +107,24 @@ fn the_camera_is_calibrated_in_memory_named_in_the_reports_and_read_back() {
         assert!(names.contains(&name.as_str()), "{name} in {names:?}");
         assert!(report.contains(&name), "{name} in report.md");
     }
+    // residuals.csv gives the camera's residuals in px, each at its pose.
+    let residuals =
+        String::from_utf8(set.bytes(&out.join("residuals.csv")).unwrap().to_vec()).unwrap();
+    let camera_rows: Vec<&str> = residuals
+        .lines()
+        .filter(|l| l.contains("camera (simulated, in memory)"))
+        .collect();
+    assert_eq!(camera_rows.len(), 120, "two values per measurement");
+    assert!(
+        camera_rows[1].contains("instrument 1 channel 1 value 2 at pose \"\"1\"\""),
+        "{}",
+        camera_rows[1]
+    );
+    assert!(
+        camera_rows.iter().all(|l| l.contains(",px,")),
+        "{}",
+        camera_rows[0]
+    );
     // The installation errors the gauges determine, within their standard deviations.
     for k in 0..36 {
         let (e, s) = (cal.estimate_um[k].unwrap(), cal.std_um[k].unwrap());
