@@ -98,6 +98,23 @@ fn the_camera_with_the_designs_gauges_identifies_the_machine_and_itself() {
         z.iter().any(|(k, _)| *k >= 36),
         "some camera parameter is determined"
     );
+    // That blind direction in words: the camera moved along its axis, its focal length
+    // scaled alike (f / d per unit of distance).
+    let id = identifiability(&model, &data, 1.0, &RankOptions::default()).unwrap();
+    let camera = simulated::camera(&model.nominal);
+    let axis = camera.rotation * nalgebra::Vector3::z();
+    let mut telephoto = nalgebra::DVector::zeros(model.num_params());
+    telephoto.rows_mut(36, 3).copy_from(&axis);
+    telephoto[42] = -camera.focal_px * 1e-3 / 1500.0;
+    let null = id.null_space();
+    assert_eq!(null.ncols(), 1, "one blind direction");
+    let cos = null.column(0).dot(&telephoto.normalize()).abs();
+    assert!(
+        cos > 0.99,
+        "the blind direction is not the telephoto one: cos {cos}"
+    );
+    let worst = z.iter().map(|(_, z)| z.abs()).fold(0.0, f64::max);
+    println!("worst determined parameter: {worst:.2} sd off the truth");
     for (k, z) in z {
         assert!(z.abs() < 4.0, "{}: {z:.2} sd off", names[k]);
     }
@@ -110,12 +127,26 @@ fn the_camera_alone_identifies_what_it_can_see() {
     let (model, data, truth) = simulated(false, 80);
     let id = identifiability(&model, &data, 1.0, &RankOptions::default()).unwrap();
     // One marker seen in two pixel coordinates: some directions of the 43 parameters are
-    // blind (the camera's pose against the machine's base, ...).
+    // blind.
     assert!(
         id.rank < model.num_params() && id.rank > 20,
         "rank {}",
         id.rank
     );
+    // One of them in words: every base joint moved along x, and the camera with them (the
+    // whole machine shifted under a camera that follows it), while one joint alone is seen.
+    let seen = |moved: &[usize]| {
+        let mut v = nalgebra::DVector::zeros(model.num_params());
+        moved.iter().for_each(|&k| v[k] = 1.0);
+        (id.row_space().transpose() * v.normalize()).norm()
+    };
+    let base_and_camera_x = [0, 6, 12, 18, 24, 30, 36];
+    assert!(
+        seen(&base_and_camera_x) < 1e-6,
+        "{}",
+        seen(&base_and_camera_x)
+    );
+    assert!(seen(&[0]) > 0.1, "{}", seen(&[0]));
     let cal = fit_and_print("The camera alone", &model, &data, &truth);
     assert_eq!(cal.combinations.len(), cal.identifiability.rank);
     for (k, z) in determined_z(&cal, &truth) {
