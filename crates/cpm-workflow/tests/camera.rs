@@ -125,6 +125,13 @@ fn the_camera_is_calibrated_in_memory_named_in_the_reports_and_read_back() {
         "{}",
         camera_rows[0]
     );
+    // In px: their RMS is the camera's noise (0.1 px), not a thousand times it.
+    let values: Vec<f64> = camera_rows
+        .iter()
+        .map(|l| l.rsplit(',').next().unwrap().parse().unwrap())
+        .collect();
+    let rms = (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt();
+    assert!((0.05..0.15).contains(&rms), "camera residual RMS {rms} px");
     // The installation errors the gauges determine, within their standard deviations.
     for k in 0..36 {
         let (e, s) = (cal.estimate_um[k].unwrap(), cal.std_um[k].unwrap());
