@@ -16,8 +16,9 @@
 //!
 //! One's own instruments ([`Instrument`], written in code) come with their measurements as
 //! values ([`Source::Instruments`]) to [`calibrate_with_instruments`]; [`calibrated_model`]
-//! reads the `calibrated.toml` it stages back into the model that predicts what the fit did,
-//! and `validate` takes them in [`InMemory::instruments`].
+//! reads the `calibrated.toml` it stages back into the model that predicts what the fit did
+//! (the job checks it so on the campaign in memory before staging it), and `validate` takes
+//! them in [`InMemory::instruments`].
 use std::path::PathBuf;
 use std::sync::Arc;
 
