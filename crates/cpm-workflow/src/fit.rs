@@ -372,7 +372,12 @@ pub(crate) fn load_inputs_with(
         progress.note(&crate::load::instruments_note(&model));
     }
     // One's own instruments: their own block each, always estimated with the machine.
-    if !instruments.is_empty() || !merged.campaign.instrument_measurements.is_empty() {
+    if instruments.is_empty() && !merged.campaign.instrument_measurements.is_empty() {
+        return Err(usage_error(
+            "measurements of one's own instruments are given without the instruments: give them to the job (memory::calibrate_with_instruments)",
+        ));
+    }
+    if !instruments.is_empty() {
         // Named apart: reports and `[calibration.instruments]` know them by name.
         for (k, a) in instruments.iter().enumerate() {
             if instruments[..k].iter().any(|b| b.name() == a.name()) {

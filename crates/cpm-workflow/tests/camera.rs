@@ -204,3 +204,24 @@ fn the_camera_is_calibrated_in_memory_named_in_the_reports_and_read_back() {
         .markdown(false)
         .contains("| camera (`camera (simulated, in memory)`) | 120 | px |"));
 }
+
+#[test]
+fn measurements_without_their_instrument_or_under_one_name_are_refused() {
+    let robot = robot();
+    let (sources, camera, _) = sources(&robot, 0);
+    let out = std::env::temp_dir().join("cpm-camera-test-refused");
+    let options = CalibrateOptions::new("paper cubic (in memory)", Vec::new(), out);
+    let silent = &cpm_workflow::Silent;
+    let e = memory::calibrate(&options, robot.clone(), &sources, silent)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("without the instruments"), "{e}");
+    let twice = [camera.clone(), camera];
+    let e = memory::calibrate_with_instruments(&options, robot, &sources, &twice, silent)
+        .err()
+        .unwrap();
+    assert!(
+        e.to_string().contains("two instruments are named `camera`"),
+        "{e}"
+    );
+}
