@@ -442,6 +442,13 @@ pub struct CalibrationSpec {
     /// by the calibration crate. Default none.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub known_effects: BTreeMap<String, Vec<f64>>,
+    /// `[calibration.instruments]`: the fitted values of one's own instruments' parameters
+    /// (instruments written in code, `cpm_calib::instruments::Instrument`: no description
+    /// declares them), keyed by the instrument's name, its per-instrument parameters in their
+    /// order and units. Written by a calibration with such instruments; a model with the same
+    /// instruments predicts with them. Default none.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub instruments: BTreeMap<String, Vec<f64>>,
     /// `[calibration.tolerances]`: the a-priori tolerance (standard deviation) of each group of
     /// parameters, keyed by group (`installation_errors` in um, an effect's name in the
     /// effect's unit, e.g. `link_scale = 50000` ppm); interpreted by the calibration crate,
@@ -1305,15 +1312,9 @@ fn check_calibration(c: &CalibrationSpec) -> Result<(), Problem> {
             ));
         }
     }
-    for (name, values) in &c.known_effects {
-        let at = |i: usize| {
-            [
-                Key("calibration"),
-                Key("known_effects"),
-                Name(name.clone()),
-                Index(i),
-            ]
-        };
+    let known = c.known_effects.iter().map(|e| ("known_effects", e));
+    for (table, (name, values)) in known.chain(c.instruments.iter().map(|e| ("instruments", e))) {
+        let at = |i: usize| [Key("calibration"), Key(table), Name(name.clone()), Index(i)];
         if values.is_empty() {
             return Err(Problem::new(&at(0)[..3], "has no values"));
         }

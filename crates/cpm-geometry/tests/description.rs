@@ -110,6 +110,9 @@ fn round_trip_with_every_section() {
         ]
         .into_iter()
         .collect(),
+        instruments: [("camera".to_string(), vec![2.0, -1.5, 0.25])]
+            .into_iter()
+            .collect(),
         tolerances: [("link_scale".to_string(), 20_000.0)].into_iter().collect(),
         tolerance_limit: Some(2.5),
         hold: vec!["installation_errors".into()],
@@ -134,6 +137,7 @@ fn round_trip_with_every_section() {
     let back = RobotDescription::from_toml_str(&text, "<round trip>").unwrap();
     assert_eq!(back, d);
     assert!(text.contains("[calibration.known_effects]"), "{text}");
+    assert!(text.contains("[calibration.instruments]"), "{text}");
     assert_eq!(
         back.installation_errors().unwrap().unwrap(),
         InstallationErrors::paper_table2()
@@ -563,13 +567,14 @@ fn documentation_examples_load() {
         .skip(1)
         .map(|b| b.split("```").next().unwrap())
         .collect();
-    assert_eq!(blocks.len(), 5);
-    // In the order of the document: [calibration.known_effects], [pose_map], the
-    // instruments, the paper, the encoder link.
+    assert_eq!(blocks.len(), 6);
+    // In the order of the document: [calibration.known_effects], [calibration.instruments],
+    // [pose_map], the instruments, the paper, the encoder link.
     let known_block = blocks[0];
-    let pose_map_block = blocks[1];
-    let instruments_block = blocks[2];
-    let blocks = &blocks[3..];
+    let own_instruments_block = blocks[1];
+    let pose_map_block = blocks[2];
+    let instruments_block = blocks[3];
+    let blocks = &blocks[4..];
 
     // The [pose_map] example, appended to the paper's description.
     let d = RobotDescription::from_toml_str(&format!("{}\n{pose_map_block}", paper_text()), "doc")
@@ -645,6 +650,11 @@ fn documentation_examples_load() {
     assert_eq!(c.effects, ["backlash"]);
     assert_eq!(c.known_effects["backlash"].len(), 6);
     assert_eq!(c.known_effects["sensor_offset"], [12.5]);
+
+    // The [calibration.instruments] example, appended to the paper's description.
+    let text = format!("{}\n{own_instruments_block}", paper_text());
+    let d = RobotDescription::from_toml_str(&text, "doc").unwrap();
+    assert_eq!(d.calibration.unwrap().instruments["camera"].len(), 7);
 }
 
 /// The messages quoted in `docs/robot-description.md` are the real ones.

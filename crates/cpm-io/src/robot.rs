@@ -511,6 +511,9 @@ pub struct CalibratedNotes {
     pub held: Vec<(Determination, String)>,
     /// Effects written to `[calibration.known_effects]`.
     pub known_effects: Vec<String>,
+    /// One's own instruments whose per-instrument parameters were written to
+    /// `[calibration.instruments]`.
+    pub instruments: Vec<String>,
     /// Effects of the fit that describe a measurement session, not the machine, and are not
     /// written (`tracker_frame`: every session registers its own frame).
     pub session_effects: Vec<String>,
@@ -532,6 +535,9 @@ pub struct CalibratedNotes {
 ///   lengths (and commanded poses) from the logged readings as the fit did; `tracker_frame`
 ///   `point_frame` and `base_tilt` belong to the measurement session and are not written (listed in
 ///   [`CalibratedNotes::session_effects`]);
+/// - one's own instruments' per-instrument parameters go into `[calibration.instruments]`
+///   under the instrument's name (their per-session ones, like a tracker's frame, describe a
+///   session and are not written);
 /// - `[calibration] effects` is set to `declare` when given.
 ///
 /// `determination[k]` says what gives parameter `k` its value
@@ -577,6 +583,19 @@ pub fn calibrated_description(
             Some(cpm_geometry::description::InstallationErrorsSpec::from_errors(&e));
     }
     for b in model.blocks() {
+        if let Some(i) = b.instrument {
+            let instrument = &model.instruments[i];
+            let own = instrument.num_instrument_params().min(b.len);
+            if own > 0 {
+                let values = params[b.offset..b.offset + own].to_vec();
+                d.calibration
+                    .get_or_insert_with(CalibrationSpec::default)
+                    .instruments
+                    .insert(instrument.name().to_string(), values);
+                notes.instruments.push(instrument.name().to_string());
+            }
+            continue;
+        }
         let Some(effect) = b.effect else { continue };
         let values = &params[b.offset..b.offset + b.len];
         for k in 0..b.len {
@@ -749,6 +768,12 @@ pub fn calibrated_toml(
         s.push_str(&format!(
             "# Calibrated effect values in [calibration.known_effects] (applied by every cpm command that reads this file): {}\n",
             notes.known_effects.join(", ")
+        ));
+    }
+    if !notes.instruments.is_empty() {
+        s.push_str(&format!(
+            "# One's own instruments' fitted parameters in [calibration.instruments] (read by a model with the same instruments): {}\n",
+            notes.instruments.join(", ")
         ));
     }
     s.push('\n');

@@ -36,6 +36,20 @@ pub fn write_residual_rows<W: std::io::Write>(
     residuals: &[f64],
     first: usize,
 ) -> std::io::Result<()> {
+    write_residual_rows_with(out, robot, merged, residuals, first, &[])
+}
+
+/// [`write_residual_rows`] of a campaign with measurements of one's own instruments:
+/// `instrument_units` is the unit of each (the model's
+/// [`instruments`](cpm_calib::MeasurementModel::instruments), in order), written in their rows.
+pub fn write_residual_rows_with<W: std::io::Write>(
+    out: &mut W,
+    robot: &Robot,
+    merged: &Merged,
+    residuals: &[f64],
+    first: usize,
+    instrument_units: &[String],
+) -> std::io::Result<()> {
     use rayon::prelude::*;
     let residuals = merged.in_tracker_axes(residuals);
     // Blocks of rows made in parallel, a batch of them at a time (so that at most two
@@ -52,7 +66,7 @@ pub fn write_residual_rows<W: std::io::Write>(
     let make = |batch: &[(usize, &[f64])]| -> Vec<String> {
         batch
             .par_iter()
-            .map(|(start, r)| residual_rows(robot, merged, r, *start, first))
+            .map(|(start, r)| residual_rows(robot, merged, r, *start, first, instrument_units))
             .collect()
     };
     let mut made: Vec<String> = Vec::new();
@@ -75,6 +89,7 @@ fn residual_rows(
     residuals: &[f64],
     start: usize,
     first: usize,
+    instrument_units: &[String],
 ) -> String {
     let c = &merged.campaign;
     let (mut what, mut field) = (String::new(), String::new());
@@ -108,6 +123,11 @@ fn residual_rows(
         let unit = match c.observation_kind(k) {
             cpm_calib::ObservationKind::TrackerOrientation(..)
             | cpm_calib::ObservationKind::Tilt(..) => "urad",
+            cpm_calib::ObservationKind::Instrument(q, _) => c
+                .instrument_measurements
+                .get(q)
+                .and_then(|m| instrument_units.get(m.instrument))
+                .map_or("", String::as_str),
             _ => "um",
         };
         // The row as `tidy_csv` would leave it: the numbering, the line and the unit are

@@ -338,9 +338,45 @@ pub struct ValidateReport {
     pub reference: RobotSummary,
     /// Per group.
     pub groups: Vec<GroupSummary>,
+    /// Per one's own instrument and source of its measurements, each in the instrument's
+    /// unit (absent when none: such instruments are written in code and given to the job).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub instruments: Vec<InstrumentSummary>,
     /// What only the text says: calibrated, reference.
     #[serde(skip)]
     pub text: (RobotText, RobotText),
+}
+
+/// The held-out errors of one's own instrument over the measurements of one source, both
+/// robots, in the instrument's unit.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct InstrumentSummary {
+    /// The instrument's name.
+    pub name: String,
+    /// The source of the measurements.
+    pub file: String,
+    /// The unit of its values (and of the figures).
+    pub unit: String,
+    /// Its values (measured minus predicted, one each).
+    pub count: usize,
+    /// The calibrated robot's RMS and largest absolute error.
+    pub calibrated: (f64, f64),
+    /// The reference robot's RMS and largest absolute error.
+    pub reference: (f64, f64),
+}
+
+impl InstrumentSummary {
+    /// The summary of the errors `calibrated` and `reference` (measured minus predicted).
+    pub fn new(name: &str, file: &str, unit: &str, calibrated: &[f64], reference: &[f64]) -> Self {
+        Self {
+            name: name.to_string(),
+            file: file.to_string(),
+            unit: unit.to_string(),
+            count: calibrated.len(),
+            calibrated: (rms(calibrated), max_abs(calibrated)),
+            reference: (rms(reference), max_abs(reference)),
+        }
+    }
 }
 
 impl ValidateReport {
@@ -378,6 +414,7 @@ impl ValidateReport {
                     reference: ErrorSummary::new(r),
                 })
                 .collect(),
+            instruments: Vec::new(),
             text: (cal_text, ref_text),
         }
     }
@@ -460,6 +497,16 @@ impl ValidateReport {
                     nan(r.orientation_rms_urad),
                     self.text.1.orientation_max_urad,
                 ),
+            );
+        }
+        for i in &self.instruments {
+            row(
+                &mut md,
+                &format!("{} (`{}`)", i.name, i.file),
+                i.count,
+                &i.unit,
+                i.calibrated,
+                i.reference,
             );
         }
         self.session_markdown(&mut md);

@@ -273,18 +273,21 @@ fn load_inputs(args: &FitOptions, progress: &dyn Progress) -> anyhow::Result<Inp
     let read = |robot: &Robot, options: &io::ReadOptions, registration: &RegistrationOptions| {
         crate::load::load_data(data, robot, options, registration)
     };
-    load_inputs_with(args, robot, read, data.clone(), names, progress)
+    load_inputs_with(args, robot, read, data.clone(), names, &[], progress)
 }
 
 /// [`load_inputs`] with the robot given and the data read by `read` (with the read and
 /// registration options of the model); `data_paths` are the files read (empty for data in
-/// memory), `names` what the provenance calls the data.
+/// memory), `names` what the provenance calls the data, `instruments` one's own instruments
+/// (the model's [`instruments`](MeasurementModel::instruments), whose measurements the data
+/// hold).
 pub(crate) fn load_inputs_with(
     args: &FitOptions,
     robot: Robot,
     read: impl FnOnce(&Robot, &io::ReadOptions, &RegistrationOptions) -> anyhow::Result<Merged>,
     data_paths: Vec<PathBuf>,
     names: Vec<String>,
+    instruments: &[std::sync::Arc<dyn crate::calib::instruments::Instrument>],
     progress: &dyn Progress,
 ) -> anyhow::Result<Inputs> {
     // The tracker's noise: the options, else the description's `[calibration]`.
@@ -367,6 +370,31 @@ pub(crate) fn load_inputs_with(
     if let Some(m) = crate::load::with_instruments(&model, &merged.campaign) {
         model = m;
         progress.note(&crate::load::instruments_note(&model));
+    }
+    // One's own instruments: their own block each, always estimated with the machine.
+    if instruments.is_empty() && !merged.campaign.instrument_measurements.is_empty() {
+        return Err(usage_error(
+            "measurements of one's own instruments are given without the instruments: give them to the job (memory::calibrate_with_instruments)",
+        ));
+    }
+    if !instruments.is_empty() {
+        // Named apart: reports and `[calibration.instruments]` know them by name.
+        for (k, a) in instruments.iter().enumerate() {
+            if instruments[..k].iter().any(|b| b.name() == a.name()) {
+                return Err(usage_error(format!(
+                    "two instruments are named `{}`: give each its own name",
+                    a.name()
+                )));
+            }
+        }
+        model.instruments = instruments.to_vec();
+        model.instrument_sessions = merged
+            .campaign
+            .instrument_measurements
+            .iter()
+            .map(|m| m.session + 1)
+            .max()
+            .unwrap_or(0);
     }
     // `thermal_drift` over time counts hours from one origin for the whole fit (every
     // subset refine tests, every file validate reads back): the description's, else the

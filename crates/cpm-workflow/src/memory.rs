@@ -13,13 +13,23 @@
 //! [`InMemory`] live in [`crate::sources`] (re-exported here). The read-back check of `calibrated.toml` predicts gauge readings from the
 //! campaign in memory, whatever their source; other kinds of measurement are read again from
 //! their files, so it is made for them when every source is a file.
+//!
+//! One's own instruments ([`Instrument`], written in code) come with their measurements as
+//! values ([`Source::Instruments`]) to [`calibrate_with_instruments`]; [`calibrated_model`]
+//! reads the `calibrated.toml` it stages back into the model that predicts what the fit did
+//! (the job checks it so on the campaign in memory before staging it), and `validate` takes
+//! them in [`InMemory::instruments`].
 use std::path::PathBuf;
+use std::sync::Arc;
 
+use crate::calib::instruments::Instrument;
 use crate::fit::{CalibrateOptions, Calibrated, FitOptions, Inputs};
 use crate::ingest::RegistrationOptions;
 use crate::io::{ReadOptions, Robot};
 use crate::progress::{check_cancelled, Progress};
-pub use crate::sources::{read_sources, Given, InMemory, ReadData, Source};
+pub use crate::sources::{
+    calibrated_model, read_sources, Given, InMemory, InstrumentRows, ReadData, Source,
+};
 
 /// Loads a fit's inputs from memory: [`FitOptions::load`] with the robot given and the data
 /// read by [`read_sources`] (its `robot` and `data` paths are not used).
@@ -27,6 +37,19 @@ pub fn load(
     options: &FitOptions,
     robot: Robot,
     sources: &[Source],
+    progress: &dyn Progress,
+) -> anyhow::Result<Inputs> {
+    load_with_instruments(options, robot, sources, &[], progress)
+}
+
+/// [`load`] with one's own instruments: the model's
+/// [`instruments`](crate::calib::MeasurementModel::instruments), whose measurements the
+/// sources hold ([`Source::Instruments`]); their sessions are the measurements'.
+pub fn load_with_instruments(
+    options: &FitOptions,
+    robot: Robot,
+    sources: &[Source],
+    instruments: &[Arc<dyn Instrument>],
     progress: &dyn Progress,
 ) -> anyhow::Result<Inputs> {
     options.validate()?;
@@ -47,7 +70,15 @@ pub fn load(
     let read = |robot: &Robot, o: &ReadOptions, r: &RegistrationOptions| {
         read_sources(sources, robot, o, r)
     };
-    let inputs = crate::fit::load_inputs_with(options, robot, read, data_paths, names, progress)?;
+    let inputs = crate::fit::load_inputs_with(
+        options,
+        robot,
+        read,
+        data_paths,
+        names,
+        instruments,
+        progress,
+    )?;
     options.prepare(inputs, progress)
 }
 
@@ -60,9 +91,23 @@ pub fn calibrate(
     sources: &[Source],
     progress: &dyn Progress,
 ) -> anyhow::Result<Calibrated> {
+    calibrate_with_instruments(options, robot, sources, &[], progress)
+}
+
+/// [`calibrate`] with one's own instruments ([`load_with_instruments`]): each brings its block
+/// of parameters, named in the reports by the instrument
+/// ([`Instrument::param_name`], [`Instrument::param_unit`]) and written into
+/// `calibrated.toml`'s `[calibration.instruments]` (its per-instrument parameters).
+pub fn calibrate_with_instruments(
+    options: &CalibrateOptions,
+    robot: Robot,
+    sources: &[Source],
+    instruments: &[Arc<dyn Instrument>],
+    progress: &dyn Progress,
+) -> anyhow::Result<Calibrated> {
     let job = || -> anyhow::Result<Calibrated> {
         check_cancelled(progress)?;
-        let inputs = load(&options.fit, robot, sources, progress)?;
+        let inputs = load_with_instruments(&options.fit, robot, sources, instruments, progress)?;
         check_cancelled(progress)?;
         progress.stage(&format!(
             "fitting {} to {} observations",
@@ -87,7 +132,6 @@ mod tests {
     use super::*;
     use crate::io;
     use crate::io::rows::{GaugeRows, TrackerRows};
-    use std::sync::Arc;
 
     fn ex(f: &str) -> PathBuf {
         PathBuf::from("../../examples").join(f)

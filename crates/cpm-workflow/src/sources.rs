@@ -2,6 +2,8 @@
 //! sources of a campaign ([`Source`]: files, measurements already read, text, values), read
 //! and registered as files are ([`read_sources`]), and what a job takes in place of the
 //! files its options name ([`InMemory`]: with a list of poses as values, [`pose_list`]).
+//! Measurements of one's own instruments ([`crate::calib::instruments`]) come as values only
+//! ([`InstrumentRows`]): no file format holds them.
 //! The jobs on a campaign in memory are [`crate::memory`]'s and each job's `*_in` function.
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -87,6 +89,91 @@ pub enum Source {
     GaugeRows(Arc<GaugeRows>),
     /// Tracker pose measurements as values, to read and register (their `file` names them).
     TrackerRows(Arc<TrackerRows>),
+    /// Measurements of one's own instruments as values, with the poses they were taken at
+    /// (their `file` names them); the instruments are the job's
+    /// ([`memory::calibrate_with_instruments`](crate::memory::calibrate_with_instruments)).
+    Instruments(Arc<InstrumentRows>),
+}
+
+/// Measurements of one's own instruments ([`Instrument`](crate::calib::instruments::Instrument))
+/// held in memory, with the commanded poses they were taken at: a session of the campaign of
+/// their own, after the other sources' poses.
+#[derive(Debug, Clone, Default)]
+pub struct InstrumentRows {
+    /// The name in messages and outputs (it stands for a file).
+    pub file: String,
+    /// The commanded platform poses, base frame.
+    pub poses: Vec<cpm_geometry::Pose>,
+    /// A label per pose in messages and `residuals.csv`; empty: the poses' numbers from 1.
+    pub pose_labels: Vec<String>,
+    /// The measurements: `pose` indexes [`poses`](Self::poses), `instrument` the job's
+    /// instruments, `session` their sessions (from 0, as the instruments' per-session
+    /// parameters count them), values and `sigma` in the instrument's unit.
+    pub measurements: Vec<crate::calib::InstrumentMeasurement>,
+    /// True when the measurements were simulated (every output then says so).
+    pub simulated: bool,
+}
+
+impl InstrumentRows {
+    /// Appends the poses and measurements to `merged`: the poses after its own (a session
+    /// of their own, commanded by the nominal inverse kinematics of `robot` where the others
+    /// log commanded lengths), each named by this source's name and its label.
+    pub(crate) fn append_to(&self, merged: &mut Merged, robot: &Robot) -> anyhow::Result<()> {
+        if !self.pose_labels.is_empty() && self.pose_labels.len() != self.poses.len() {
+            return Err(crate::error::input_error(format!(
+                "{}: {} pose labels for {} poses",
+                self.file,
+                self.pose_labels.len(),
+                self.poses.len()
+            )));
+        }
+        if let Some((k, m)) = self
+            .measurements
+            .iter()
+            .enumerate()
+            .find(|(_, m)| m.pose >= self.poses.len())
+        {
+            return Err(crate::error::input_error(format!(
+                "{}: measurement {} is at pose {} of {} poses",
+                self.file,
+                k + 1,
+                m.pose + 1,
+                self.poses.len()
+            )));
+        }
+        let c = &mut merged.campaign;
+        let base = c.poses.len();
+        if base > 0 && !self.poses.is_empty() {
+            c.session_starts.push(base);
+        }
+        if let Some(l) = c.commanded_lengths_mm.as_mut() {
+            l.extend(
+                self.poses
+                    .iter()
+                    .map(|p| crate::kinematics::inverse_lengths(&robot.table, p)),
+            );
+        }
+        c.poses.extend(self.poses.iter().copied());
+        c.instrument_measurements
+            .extend(
+                self.measurements
+                    .iter()
+                    .map(|m| crate::calib::InstrumentMeasurement {
+                        pose: m.pose + base,
+                        ..m.clone()
+                    }),
+            );
+        c.simulated |= self.simulated;
+        for j in 0..self.poses.len() {
+            let label = self
+                .pose_labels
+                .get(j)
+                .cloned()
+                .unwrap_or_else(|| (j + 1).to_string());
+            merged.pose_origin.push((self.file.clone(), j + 1, label));
+        }
+        Ok(())
+    }
 }
 
 impl Source {
@@ -114,6 +201,12 @@ impl Source {
             Source::Text { text, .. } => Given::Text(text.clone()),
             Source::GaugeRows(rows) => Given::GaugeRows(rows.clone()),
             Source::TrackerRows(rows) => Given::TrackerRows(rows.clone()),
+            Source::Instruments(rows) => {
+                return Err(crate::error::input_error(format!(
+                    "{}: measurements of one's own instruments are not a measurement file (they go to a job with their instruments)",
+                    rows.file
+                )))
+            }
         };
         Ok(given.read(&self.name(), robot, options, registration)?)
     }
@@ -126,6 +219,7 @@ impl Source {
             Source::Text { name, .. } => name.clone(),
             Source::GaugeRows(rows) => rows.file.clone(),
             Source::TrackerRows(rows) => rows.file.clone(),
+            Source::Instruments(rows) => rows.file.clone(),
         }
     }
 }
@@ -147,6 +241,9 @@ pub struct InMemory {
     /// A list of poses as values, for the pose list file the options name (a plan's `plan`,
     /// `compensate`'s `poses`): read with the checks of that file ([`pose_list`]).
     pub poses: Option<Arc<PoseRows>>,
+    /// One's own instruments, whose measurements the data hold ([`Source::Instruments`]):
+    /// `validate` predicts them with each robot's values ([`calibrated_model`]).
+    pub instruments: Vec<Arc<dyn crate::calib::instruments::Instrument>>,
 }
 
 impl InMemory {
@@ -162,6 +259,7 @@ impl InMemory {
             && self.reference.is_none()
             && self.truth.is_none()
             && self.poses.is_none()
+            && self.instruments.is_empty()
     }
 
     /// The robot held, else the one at `path` ([`load_robot`](crate::load::load_robot)).
@@ -202,8 +300,34 @@ pub fn pose_list(
 /// [`load::load_data`](crate::load::load_data) reads them; measurements already read with the
 /// same options are taken as they are, others read again from their
 /// text. Tracker and point sets are registered as [`load::load_data`](crate::load::load_data)
-/// registers files: two or more tracker sets together, whatever their source.
+/// registers files: two or more tracker sets together, whatever their source. Measurements
+/// of one's own instruments ([`Source::Instruments`]) follow the others, a session each.
 pub fn read_sources(
+    sources: &[Source],
+    robot: &Robot,
+    options: &ReadOptions,
+    registration: &RegistrationOptions,
+) -> anyhow::Result<Merged> {
+    let own = |s: &&Source| matches!(s, Source::Instruments(_));
+    if !sources.iter().any(|s| own(&s)) {
+        return read_measurement_sources(sources, robot, options, registration);
+    }
+    let others: Vec<Source> = sources.iter().filter(|s| !own(s)).cloned().collect();
+    let mut merged = if others.is_empty() {
+        io::merge(Vec::new(), robot)
+    } else {
+        read_measurement_sources(&others, robot, options, registration)?
+    };
+    for s in sources {
+        if let Source::Instruments(rows) = s {
+            rows.append_to(&mut merged, robot)?;
+        }
+    }
+    Ok(merged)
+}
+
+/// [`read_sources`] of sources that are all measurement files or their contents.
+fn read_measurement_sources(
     sources: &[Source],
     robot: &Robot,
     options: &ReadOptions,
@@ -233,6 +357,8 @@ pub fn read_sources(
             Source::Text { name, text } => io::read_data(text, name, robot, options)?,
             Source::GaugeRows(rows) => io::rows::read_gauge_rows(rows, robot, options)?,
             Source::TrackerRows(rows) => io::rows::read_tracker_rows(rows, robot, options)?,
+            // `read_sources` appends them apart.
+            s @ Source::Instruments(_) => s.read(robot, options, registration)?,
         };
         files.push(f);
     }
@@ -255,6 +381,55 @@ pub fn read_sources(
         crate::gauges::check_readings(robot, &merged)?;
     }
     Ok(merged)
+}
+
+/// The model of a calibrated description `robot` (the `calibrated.toml` a fit with one's own
+/// `instruments` wrote, read back) with those instruments, and the parameter vector at which it
+/// predicts what that fit predicted: the machine as the description holds it (nothing else
+/// estimated), each instrument's own parameters at the values of `[calibration.instruments]`
+/// under its name (zero, its nominal, when the description has none: a reference robot).
+///
+/// Errors: values of another length than the instrument's parameters; an instrument with
+/// per-session parameters (they describe the fit's sessions and are not written: a held-out
+/// session would need its own fitted).
+pub fn calibrated_model(
+    robot: &Robot,
+    instruments: &[Arc<dyn crate::calib::instruments::Instrument>],
+) -> anyhow::Result<(crate::calib::MeasurementModel, Vec<f64>)> {
+    let mut model = robot.model(&[]);
+    model.instruments = instruments.to_vec();
+    let written = robot
+        .description
+        .calibration
+        .as_ref()
+        .map(|c| &c.instruments);
+    let mut params = vec![0.0; model.num_params()];
+    for b in model.blocks() {
+        let Some(i) = b.instrument else { continue };
+        let instrument = &instruments[i];
+        if instrument.num_session_params() > 0 {
+            return Err(crate::error::input_error(format!(
+                "instrument `{}` has per-session parameters, which a calibrated description does not carry",
+                instrument.name()
+            )));
+        }
+        match written.and_then(|w| w.get(instrument.name())) {
+            Some(v) if v.len() == b.len => {
+                params[b.offset..b.offset + b.len].copy_from_slice(v);
+            }
+            Some(v) => {
+                return Err(crate::error::input_error(format!(
+                    "{}: [calibration.instruments] {} has {} values, the instrument {} parameters",
+                    robot.file,
+                    instrument.name(),
+                    v.len(),
+                    b.len
+                )))
+            }
+            None => {}
+        }
+    }
+    Ok((model, params))
 }
 
 #[cfg(test)]

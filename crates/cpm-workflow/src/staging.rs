@@ -166,11 +166,14 @@ pub fn stage_calibrated(
     // The file must load back.
     // (The user effects the fit modelled are the reader's too: nothing global knows them.)
     let user = crate::load::user_effects_of(&inputs.robot, model);
-    io::Robot::from_toml_among(&text, "calibrated.toml", &user).map_err(|e| {
+    let back = io::Robot::from_toml_among(&text, "calibrated.toml", &user).map_err(|e| {
         trouble(format!(
             "the calibrated description does not load back: {e}"
         ))
     })?;
+    if check && !inputs.merged.campaign.instrument_measurements.is_empty() {
+        instruments_read_back(&back, model, &inputs.merged.campaign, cal)?;
+    }
     // What every reader of the file will predict is what the fit predicted: checked on the
     // fit's own data before anything is written.
     // Gauge readings are predicted from the campaign in memory (read from files or given in
@@ -200,6 +203,53 @@ pub fn stage_calibrated(
     Ok(notes)
 }
 
+/// The read-back check of a fit with one's own instruments, whose measurements no file holds:
+/// the calibrated description `back`, read back with the same instruments
+/// ([`calibrated_model`](crate::sources::calibrated_model)), predicts every observation of the
+/// fit's own campaign as the fit did, within 1e-6 of its noise (at the commands the fit
+/// assumed).
+fn instruments_read_back(
+    back: &Robot,
+    model: &MeasurementModel,
+    campaign: &Campaign,
+    cal: &Calibration,
+) -> anyhow::Result<()> {
+    use crate::calib::model::{predict, Prepared};
+    let (read, params) = crate::sources::calibrated_model(back, &model.instruments)?;
+    let mut c = campaign.clone();
+    model.log_commands(&mut c);
+    let fail = |e: crate::calib::CalibError| trouble(format!("predicting the read-back: {e}"));
+    let fitted = predict(
+        model,
+        &Prepared::new(model, &c).map_err(fail)?,
+        &c,
+        &cal.minimum_norm_um,
+        None,
+    )
+    .map_err(fail)?;
+    let again = predict(
+        &read,
+        &Prepared::new(&read, &c).map_err(fail)?,
+        &c,
+        &params,
+        None,
+    )
+    .map_err(fail)?;
+    let weights = c.observation_weights(cal.sigma_ref_um);
+    let worst = fitted
+        .iter()
+        .zip(&again)
+        .zip(&weights)
+        .map(|((a, b), w)| (a - b).abs() * w / cal.sigma_ref_um)
+        .fold(0.0, f64::max);
+    if !(worst <= 1e-6) {
+        return Err(trouble(format!(
+            "the calibrated description does not reproduce the fit: read back with the same instruments, it predicts an observation {worst:.3e} of its noise away from the fit; nothing was written (please report this)"
+        )));
+    }
+    Ok(())
+}
+
 /// Whether the weighted residual RMS `file` of the fit's own data predicted from the
 /// calibrated description (each session's frame or levelling registered afresh, as `cpm
 /// validate` does) reproduces the fit's `fit`.
@@ -225,11 +275,20 @@ pub fn stage_residuals(set: &mut OutputSet, dir: &Path, inputs: &Inputs, cal: &C
     );
     // Written as the file is (10^6 rows are 80 MB of text), from the numbers.
     let (robot, merged) = (inputs.robot.clone(), inputs.merged.clone());
+    // One's own instruments' rows in their units.
+    let units: Vec<String> = inputs
+        .model
+        .instruments
+        .iter()
+        .map(|i| i.unit().to_string())
+        .collect();
     set.add_streamed(
         dir.join("residuals.csv"),
         Box::new(move |mut out| {
             out.write_all(crate::report::residuals::RESIDUALS_HEADER.as_bytes())?;
-            crate::report::residuals::write_residual_rows(&mut out, &robot, &merged, &native, 1)
+            crate::report::residuals::write_residual_rows_with(
+                &mut out, &robot, &merged, &native, 1, &units,
+            )
         }),
     );
 }

@@ -1076,6 +1076,11 @@ pub fn validate_in(
     check_cancelled(progress)?;
     progress.stage("predicting the held-out measurements");
     let sources = held.sources_or(&options.data);
+    let data_names: Vec<String> = sources.iter().map(Source::name).collect();
+    // One's own instruments' measurements are predicted apart (`instrument_errors`).
+    let (own, sources): (Vec<Source>, Vec<Source>) = sources
+        .into_iter()
+        .partition(|s| matches!(s, Source::Instruments(_)));
     let data = &sources;
     // Each file read once for both robots where the readers can share it.
     let ((mut cal_errors, mut cal_rows), ref_errors) =
@@ -1131,13 +1136,17 @@ pub fn validate_in(
             ref_names.join(", ")
         )));
     }
-    let report = ValidateReport::new(
+    let mut report = ValidateReport::new(
         &robot.file,
         &reference.file,
-        data.iter().map(Source::name).collect(),
+        data_names,
         &cal_errors,
         &ref_errors,
     );
+    report.instruments = instrument_errors(&robot, &reference, &held.instruments, &own)?;
+    report.simulated |= own
+        .iter()
+        .any(|s| matches!(s, Source::Instruments(r) if r.simulated));
     let set = match &options.out {
         Some(dir) => {
             let svg = report.figure().map_err(|e| trouble(e.to_string()))?;
@@ -1160,6 +1169,76 @@ pub fn validate_in(
     };
     check_cancelled(progress)?;
     Ok(Validated { report, set })
+}
+
+/// The held-out errors of one's own instruments (measured minus predicted, in each
+/// instrument's unit), per instrument and source: each robot predicts with its own values of
+/// the instruments' parameters ([`calibrated_model`](crate::sources::calibrated_model)), both
+/// at the commands of the reference's controller (as [`errors_of`] predicts gauge readings).
+fn instrument_errors(
+    robot: &Robot,
+    reference: &Robot,
+    instruments: &[std::sync::Arc<dyn crate::calib::instruments::Instrument>],
+    own: &[Source],
+) -> anyhow::Result<Vec<crate::report::validate::InstrumentSummary>> {
+    if own.is_empty() {
+        return Ok(Vec::new());
+    }
+    if instruments.is_empty() {
+        return Err(usage_error(
+            "measurements of one's own instruments are given without their instruments (InMemory::instruments)",
+        ));
+    }
+    let models = [
+        crate::sources::calibrated_model(robot, instruments)?,
+        crate::sources::calibrated_model(reference, instruments)?,
+    ];
+    let mut out = Vec::new();
+    for s in own {
+        let Source::Instruments(rows) = s else {
+            continue;
+        };
+        let mut merged = crate::io::merge(Vec::new(), reference);
+        rows.append_to(&mut merged, reference)?;
+        let mut c = merged.campaign;
+        let observed = c.observations();
+        let mut errors = Vec::new();
+        for (machine, (model, params)) in [robot, reference].into_iter().zip(&models) {
+            c.commanded_lengths_mm = Some(commanded_lengths(machine, reference, &c.poses));
+            let fail = |e: crate::calib::CalibError| input_error(format!("{}: {e}", rows.file));
+            let prepared = Prepared::new(model, &c).map_err(fail)?;
+            let predicted = predict(model, &prepared, &c, params, None).map_err(fail)?;
+            let e: Vec<f64> = observed
+                .iter()
+                .zip(&predicted)
+                .map(|(o, p)| o - p)
+                .collect();
+            errors.push(e);
+        }
+        // The values of each instrument, in the order of the measurements.
+        for (i, instrument) in instruments.iter().enumerate() {
+            let mut k = c.first_instrument_observation();
+            let (mut cal, mut refer) = (Vec::new(), Vec::new());
+            for m in &c.instrument_measurements {
+                let n = m.values.len();
+                if m.instrument == i {
+                    cal.extend_from_slice(&errors[0][k..k + n]);
+                    refer.extend_from_slice(&errors[1][k..k + n]);
+                }
+                k += n;
+            }
+            if !cal.is_empty() {
+                out.push(crate::report::validate::InstrumentSummary::new(
+                    instrument.name(),
+                    &rows.file,
+                    instrument.unit(),
+                    &cal,
+                    &refer,
+                ));
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// The names of a robot's sensors, in its order.

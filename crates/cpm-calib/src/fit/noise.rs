@@ -220,16 +220,25 @@ pub fn native_residuals(
 }
 
 /// Every observation's residual in its own unit, measured minus predicted (um for lengths,
-/// positions and points, urad for angles; in the fit's axes), from the fit's weighted
-/// residuals `residuals_um` (predicted minus measured, um of the reference `sigma_ref_um`):
-/// what `residuals.csv` writes.
+/// positions and points, urad for angles, the instrument's unit for one's own instruments;
+/// in the fit's axes), from the fit's weighted residuals `residuals_um` (predicted minus
+/// measured, um of the reference `sigma_ref_um`): what `residuals.csv` writes.
 pub fn measured_minus_predicted(
     campaign: &Campaign,
     sigma_ref_um: f64,
     residuals_um: &[f64],
 ) -> Vec<f64> {
     let w = campaign.observation_weights(sigma_ref_um);
-    residuals_um.iter().zip(&w).map(|(r, w)| -r / w).collect()
+    let mut native: Vec<f64> = residuals_um.iter().zip(&w).map(|(r, w)| -r / w).collect();
+    // The weights count one's own instruments' values in thousandths of their unit (as mm
+    // in um): back to the unit.
+    for v in native
+        .iter_mut()
+        .skip(campaign.first_instrument_observation())
+    {
+        *v *= 1e-3;
+    }
+    native
 }
 
 /// The kinds whose estimated noise differs from the assumed one by more than a factor

@@ -234,6 +234,21 @@ pub fn write_observation_origin<'m>(
             .map_or("?", |s| s.name.as_str());
         write_reading_what(what, sensor, label);
         Some((file, line))
+    } else if k >= c.first_instrument_observation() && k < c.len() {
+        // One's own instrument: named by its number (the campaign does not know its name).
+        let cpm_calib::ObservationKind::Instrument(q, a) = c.observation_kind(k) else {
+            return None;
+        };
+        let m = c.instrument_measurements.get(q)?;
+        let (file, line, label) = merged.pose_origin.get(m.pose)?;
+        let _ = write!(
+            what,
+            "instrument {} channel {} value {} at pose {label:?}",
+            m.instrument + 1,
+            m.channel + 1,
+            a + 1
+        );
+        Some((file, *line))
     } else if k >= c.first_tilt_observation() {
         let q = k - c.first_tilt_observation();
         let t = c.tilt_measurements.get(q)?;
