@@ -80,7 +80,7 @@ fn tilt_session() -> (MeasurementModel, Campaign, IdentifyOptions) {
     )
     .expect("data");
     let model =
-        cpm::cli::common::with_instruments(&robot, &model, &merged.campaign).unwrap_or(model);
+        cpm::cli::common::with_instruments(&model, &merged.campaign).unwrap_or(model);
     let options = IdentifyOptions {
         tolerances: robot.tolerances().expect("tolerances"),
         ..IdentifyOptions::default()
