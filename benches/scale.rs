@@ -79,8 +79,7 @@ fn tilt_session() -> (MeasurementModel, Campaign, IdentifyOptions) {
         &cpm::cli::common::registration_options(&model),
     )
     .expect("data");
-    let model =
-        cpm::cli::common::with_instruments(&model, &merged.campaign).unwrap_or(model);
+    let model = cpm::cli::common::with_instruments(&model, &merged.campaign).unwrap_or(model);
     let options = IdentifyOptions {
         tolerances: robot.tolerances().expect("tolerances"),
         ..IdentifyOptions::default()

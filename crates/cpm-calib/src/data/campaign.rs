@@ -352,6 +352,40 @@ impl Campaign {
             .collect()
     }
 
+    /// The group of every observation for a rank that does not depend on weights
+    /// ([`RankScaling::row_groups`](crate::RankScaling::row_groups)): its kind (gauge
+    /// readings, tracker positions, tracker orientations, points, angles, each of one's own
+    /// instruments), every gauge reading one group (readings share a unit); empty for gauge
+    /// readings alone, which are scaled by nothing.
+    pub fn kind_groups(&self) -> Vec<usize> {
+        if self.len() == self.readings.len() {
+            return Vec::new();
+        }
+        let mut kinds: Vec<(u8, usize)> = Vec::new();
+        self.observation_kinds()
+            .into_iter()
+            .map(|o| {
+                let kind = match o {
+                    ObservationKind::Reading(_) => (0, 0),
+                    ObservationKind::TrackerPosition(..) => (1, 0),
+                    ObservationKind::TrackerOrientation(..) => (2, 0),
+                    ObservationKind::Point(..) => (3, 0),
+                    ObservationKind::Tilt(_) => (4, 0),
+                    ObservationKind::Instrument(q, _) => {
+                        (5, self.instrument_measurements[q].instrument)
+                    }
+                };
+                match kinds.iter().position(|k| *k == kind) {
+                    Some(g) => g,
+                    None => {
+                        kinds.push(kind);
+                        kinds.len() - 1
+                    }
+                }
+            })
+            .collect()
+    }
+
     /// What each observation is, in order ([`observation_kind`](Self::observation_kind) of
     /// every one, in one pass).
     pub fn observation_kinds(&self) -> Vec<ObservationKind> {

@@ -635,35 +635,6 @@ pub fn identification_jacobian(
     Ok(j)
 }
 
-/// The group of every observation for a rank that does not depend on weights
-/// ([`RankScaling::row_groups`]): its kind of noise, every gauge reading one group (readings
-/// share a unit, and a gauge-only fit is scaled by nothing: empty).
-pub fn kind_groups(campaign: &Campaign) -> Vec<usize> {
-    use crate::fit::noise::Kind;
-    // Gauge readings alone are one kind: no list of a group per reading.
-    if campaign.len() == campaign.readings.len() {
-        return Vec::new();
-    }
-    let mut kinds: Vec<Kind> = Vec::new();
-    campaign
-        .observation_kinds()
-        .into_iter()
-        .map(|o| {
-            let kind = match Kind::of(campaign, o) {
-                Kind::Gauge(_) => Kind::Gauge(0),
-                k => k,
-            };
-            match kinds.iter().position(|k| *k == kind) {
-                Some(g) => g,
-                None => {
-                    kinds.push(kind);
-                    kinds.len() - 1
-                }
-            }
-        })
-        .collect()
-}
-
 /// Identifiability of a campaign (or plan skeleton) at the nominal geometry.
 pub fn identifiability(
     model: &MeasurementModel,
@@ -672,7 +643,7 @@ pub fn identifiability(
     options: &RankOptions,
 ) -> Result<Identifiability, CalibError> {
     let j = identification_jacobian(model, campaign, &vec![0.0; model.num_params()])?;
-    let (columns, rows) = (model.rank_groups(), kind_groups(campaign));
+    let (columns, rows) = (model.rank_groups(), campaign.kind_groups());
     let scaling = RankScaling {
         column_groups: Some(&columns),
         row_groups: Some(&rows),
@@ -873,7 +844,7 @@ fn identify_uncancelled(
         downweighted_share,
     } = end;
     let sigma_um = noise.sigma_um;
-    let (columns, rows) = (model.rank_groups(), kind_groups(campaign));
+    let (columns, rows) = (model.rank_groups(), campaign.kind_groups());
     let scaling = RankScaling {
         column_groups: Some(&columns),
         row_groups: Some(&rows),
@@ -1001,7 +972,7 @@ fn fit_directions(
             j_free.column_mut(k).fill(0.0);
         }
     }
-    let (columns, rows) = (model.rank_groups(), kind_groups(campaign));
+    let (columns, rows) = (model.rank_groups(), campaign.kind_groups());
     let scaling = RankScaling {
         column_groups: Some(&columns),
         row_groups: Some(&rows),
