@@ -14,6 +14,10 @@
 //! noise `sigma`, the Cramér-Rao covariance of the identifiable part is
 //! `sigma^2 V_r S_r^-2 V_r^T`, and `sigma / s_i` is the standard deviation of the i-th
 //! identifiable combination `v_i^T e`.
+//!
+//! A fit decides the rank scale-free ([`try_analyze_scaled`] with a [`RankScaling`]): on `J`
+//! with each kind of observation and each unit of parameters brought to one scale, so that a
+//! mass written in grams or an exact instrument beside a noisy one does not change it.
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 

@@ -471,12 +471,14 @@ pub fn summarize_scaled(
         None => vec![1.0; nf],
     };
     let scaled = d.iter().any(|x| *x != 1.0);
-    let hs = if scaled {
-        DMatrix::from_fn(nf, nf, |a, b| d[a] * h[(a, b)] * d[b])
-    } else {
-        h.clone()
-    };
-    let eig = hs.clone().symmetric_eigen();
+    if scaled {
+        for a in 0..nf {
+            for b in 0..nf {
+                h[(a, b)] = d[a] * h[(a, b)] * d[b];
+            }
+        }
+    }
+    let eig = h.clone().symmetric_eigen();
     let lmax = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
     let mut cov = DMatrix::zeros(nf, nf);
     for (i, &l) in eig.eigenvalues.iter().enumerate() {
@@ -492,7 +494,6 @@ pub fn summarize_scaled(
             }
         }
     }
-    let h = hs;
     // Which free parameters the posterior leaves undefined (inside the pseudo-inverse's null
     // space): their precision row is (numerically) zero.
     let mut posterior_std = vec![None; np];
