@@ -112,10 +112,7 @@ fn an_empty_row_fits_as_a_dropped_row_and_partial_rows_use_the_rest() {
         calibrate(&dir, "blank", &blank),
         calibrate(&dir, "dropped", &dropped),
     );
-    let (ra, rb) = (
-        a["residual_rms_um"].as_f64().unwrap(),
-        b["residual_rms_um"].as_f64().unwrap(),
-    );
+    let (ra, rb) = (cli::length_rms_um(&a), cli::length_rms_um(&b));
     assert!((ra - rb).abs() <= 1e-9 * rb, "{ra} vs {rb}");
     // The installation errors of the fit's point (base and platform, per link, x y z).
     let flat = |v: &serde_json::Value| -> Vec<f64> {
@@ -151,7 +148,7 @@ fn an_empty_row_fits_as_a_dropped_row_and_partial_rows_use_the_rest() {
     .unwrap();
     let c = calibrate(&dir, "partial", &partial);
     let full = calibrate(&dir, "full", &dir.join("tracker.csv"));
-    let rc = c["residual_rms_um"].as_f64().unwrap();
+    let rc = cli::length_rms_um(&c);
     assert!((rc - 5.0).abs() < 1.0, "{rc}");
     // Fewer observations: 8 orientations (3 each) and 6 positions (the y coordinate, or the
     // whole position where the registration's rotation mixes the coordinates) left out.

@@ -1,5 +1,7 @@
 //! A 6-6 hexapod measured by a tracker: simulated pose measurements with link offsets and
 //! scales, read back, and calibrated with `link_offset` and `link_scale` unknowns.
+#[path = "common/cli.rs"]
+mod cli;
 #[path = "common/ingest.rs"]
 mod ingest;
 
@@ -234,7 +236,7 @@ fn length_readings_and_tracker_poses_calibrate_together() {
     assert_eq!(json["pose_measurements"], 40);
     assert_eq!(json["poses"], 60);
     assert_eq!(json["identifiability"]["rank"], 48);
-    assert!(json["residual_rms_um"].as_f64().unwrap() < 2.0);
+    assert!(cli::length_rms_um(&json) < 2.0);
 }
 
 #[test]
@@ -276,9 +278,11 @@ fn known_tracker_registration_and_link_effects_are_applied_on_both_sides() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let rms = |robot: &Path, name: &str| {
-        calibrate_offsets_and_scales(robot, &[&data], &d.join(name))["residual_rms_um"]
-            .as_f64()
-            .unwrap()
+        cli::length_rms_um(&calibrate_offsets_and_scales(
+            robot,
+            &[&data],
+            &d.join(name),
+        ))
     };
     let with_json = calibrate_offsets_and_scales(&known, &[&data], &d.join("with"));
     // calibration.json says which known values the fit applied.
@@ -291,7 +295,7 @@ fn known_tracker_registration_and_link_effects_are_applied_on_both_sides() {
     assert_eq!(applied, ["backlash", "tracker_frame"]);
     let report = std::fs::read_to_string(d.join("with").join("report.md")).unwrap();
     assert!(report.contains("known backlash, tracker_frame"), "{report}");
-    let with = with_json["residual_rms_um"].as_f64().unwrap();
+    let with = cli::length_rms_um(&with_json);
     let without = rms(&example(), "without");
     eprintln!("tracker data, residual RMS: {with:.3} um with the known registration and backlash, {without:.3} um without");
     assert!(with < 1.3, "with the known values: {with} um");

@@ -6,6 +6,8 @@
 //! The logs are SIMULATED: `cpm simulate --measure poses` writes a log in the base frame,
 //! and this test moves it into another frame with nalgebra (independently of the code under
 //! test) and shifts the readings.
+#[path = "common/cli.rs"]
+mod cli;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -217,7 +219,7 @@ fn tracker_logs_in_another_frame_calibrate_and_refine_without_hand_registration(
         eprintln!("  largest error {worst:.2} sigma");
         check_offsets(reg, 3.0, 0.0);
         // The fit refines both on top, to the tracker noise, and names the gauge freedoms.
-        let rms = v["residual_rms_um"].as_f64().unwrap();
+        let rms = cli::length_rms_um(&v);
         assert!(rms < 15.0, "residual {rms} um");
         assert!(reg["refined_by_fit"]["tracker_frame"].is_array());
         assert!(!reg["refined_by_fit"]["gauge_freedoms"]
@@ -280,7 +282,7 @@ fn a_machine_with_installation_errors_is_registered_up_to_its_gauge() {
     eprintln!("Table 2 errors, quaternion columns (SIMULATED):");
     check_session(&v["registration"]["sessions"][0], &frame, 3.0, 0.5, 0.05);
     check_offsets(&v["registration"], 3.0, 0.5);
-    let rms = v["residual_rms_um"].as_f64().unwrap();
+    let rms = cli::length_rms_um(&v);
     assert!(rms < 15.0, "residual {rms} um");
 }
 
@@ -321,7 +323,7 @@ fn two_sessions_get_their_own_frames() {
         check_session(s, f, 3.0, 0.0, 0.0);
     }
     check_offsets(&v["registration"], 3.0, 0.0);
-    let rms = v["residual_rms_um"].as_f64().unwrap();
+    let rms = cli::length_rms_um(&v);
     assert!(rms < 15.0, "residual {rms} um");
 }
 

@@ -426,7 +426,10 @@ fn the_self_check_holds_on_a_mixed_campaign_with_any_noise() {
     ] {
         let out = dir.join(name);
         let report = calibrate_json(&robot, &[&g, &pt, &t], extra, &out);
-        assert!(report["residual_rms_um"].as_f64().unwrap().is_finite());
+        assert!(report["weighted_rms_in_sigma"]
+            .as_f64()
+            .unwrap()
+            .is_finite());
         assert!(out.join("calibrated.toml").exists(), "{name}");
     }
 }

@@ -79,7 +79,14 @@ fn tilts_round_trip_and_a_held_out_session_re_levelled() {
         &["--sigma-um", &noise, "--orientation-sigma-urad", &noise],
         &cal,
     );
-    let fit = report["residual_rms_um"].as_f64().unwrap();
+    // Angles alone: the residual's RMS is in urad, the inclinometer's kind (calibration.json's
+    // residual_rms_um is null: no figure in um).
+    assert!(
+        report["residual_rms_um"].is_null(),
+        "{}",
+        report["residual_rms_um"]
+    );
+    let fit = cli::kind_rms(&report, "inclinometer angles");
     assert!((fit - NOISE_URAD).abs() < 0.1 * NOISE_URAD, "fit RMS {fit}");
     let calibrated = cal.join("calibrated.toml");
     // The file reproduces the fit on the training sessions (each re-levelled).
@@ -251,8 +258,18 @@ fn a_mixed_campaign_gauges_points_and_tilts_in_one_fit() {
     // the levelling leave free.
     let id = &report["identifiability"];
     assert_eq!(id["rank"], id["parameters"], "{id}");
-    let fit = report["residual_rms_um"].as_f64().unwrap();
-    assert!((fit - 2.0).abs() < 0.4, "{fit}");
+    // Every kind fits to its declared noise: the weighted RMS is about 1 sigma, and each kind's
+    // RMS in its own unit near its noise (calibration.json has no figure in um for the mix).
+    let fit = report["weighted_rms_in_sigma"].as_f64().unwrap();
+    assert!((fit - 1.0).abs() < 0.2, "{fit}");
+    assert!(report["residual_rms_um"].is_null());
+    let points = cli::kind_rms(&report, "point targets");
+    assert!((points - 5.0).abs() < 1.0, "{points} um");
+    let angles = cli::kind_rms(&report, "inclinometer angles");
+    assert!(
+        (angles - NOISE_URAD).abs() < 0.2 * NOISE_URAD,
+        "{angles} urad"
+    );
     // The calibrated file predicts a held-out inclinometer session (re-levelled) to the noise.
     let v = validate_json(&cal.join("calibrated.toml"), &[&held]);
     let c = v["calibrated"]["orientation_rms_urad"].as_f64().unwrap();
@@ -295,4 +312,96 @@ fn exact_angles_flag_no_outlier() {
     // Nor a weighted RMS of 0.871 sigma for a zero residual: the ratio of two roundings.
     let md = std::fs::read_to_string(d.join("cal/report.md")).unwrap();
     assert!(md.contains("the data are fitted exactly"), "{md}");
+}
+
+/// Issue 60 item 10: a weighted figure is never written in um. Angles alone (SIMULATED, 40
+/// poses, 20 urad noise): before, calibration.json's `residual_rms_um` held the weighted
+/// figure (9.836 for residuals of 19.67 urad) and `sigma_um` a noise of no instrument. Now
+/// every figure in um is null, the angles' RMS is in urad and equals the RMS of
+/// residuals.csv, and refine.json writes its figures weighted, in sigma.
+#[test]
+fn weighted_figures_are_never_written_in_um() {
+    let dir = scratch("tilts", "weighted");
+    let (robot, truth) = robots(&dir);
+    let data = dir.join("angles.csv");
+    simulate(&robot, &truth, &data, 40, 8, "0.05,-0.08");
+    let out = dir.join("cal");
+    let summary = json(&ok(&[
+        "calibrate",
+        "--robot",
+        &p(&robot),
+        "--data",
+        &p(&data),
+        "--json",
+        "--out",
+        &p(&out),
+    ]));
+    assert_eq!(summary["residual_weighted"], true, "{summary}");
+    assert!(summary["residual_rms_um"].is_null(), "{summary}");
+    let cal = json(&std::fs::read_to_string(out.join("calibration.json")).unwrap());
+    for key in ["residual_rms_um", "initial_rms_um", "sigma_um"] {
+        assert!(cal[key].is_null(), "{key}: {}", cal[key]);
+    }
+    assert_eq!(cal["residual_weighted"], true);
+    // The angles' RMS, in urad, is the RMS of the residuals the file lists.
+    let csv = std::fs::read_to_string(out.join("residuals.csv")).unwrap();
+    let values: Vec<f64> = csv
+        .lines()
+        .skip(1)
+        .map(|l| {
+            assert!(l.contains(",urad,"), "{l}");
+            l.rsplit(',').next().unwrap().parse().unwrap()
+        })
+        .collect();
+    assert_eq!(values.len(), 80);
+    let rms = (values.iter().map(|v| v * v).sum::<f64>() / values.len() as f64).sqrt();
+    let angles = cli::kind_rms(&cal, "inclinometer angles");
+    assert!(
+        (angles - rms).abs() <= 1e-6 * rms,
+        "{angles} urad vs residuals.csv {rms} urad"
+    );
+    assert!(
+        (angles - NOISE_URAD).abs() < 0.3 * NOISE_URAD,
+        "{angles} urad"
+    );
+    let w = cal["weighted_rms_in_sigma"].as_f64().unwrap();
+    assert!(w.is_finite() && w > 0.0, "{w}");
+    // refine: every RMS of refine.json in sigma, none in um.
+    let refined = dir.join("refined");
+    ok(&[
+        "refine",
+        "--robot",
+        &p(&robot),
+        "--data",
+        &p(&data),
+        "--out",
+        &p(&refined),
+    ]);
+    let doc = json(&std::fs::read_to_string(refined.join("refine.json")).unwrap());
+    assert_eq!(doc["residual_weighted"], true);
+    fn walk(v: &serde_json::Value, found: &mut Vec<String>) {
+        match v {
+            serde_json::Value::Object(m) => {
+                for (k, x) in m {
+                    if k.contains("rms") && k.ends_with("_um") {
+                        assert!(x.is_null(), "{k}: {x}");
+                        let stem = k.strip_suffix("_um").unwrap();
+                        assert!(m.contains_key(&format!("{stem}_in_sigma")), "{k}");
+                        found.push(k.clone());
+                    }
+                    walk(x, found);
+                }
+            }
+            serde_json::Value::Array(a) => a.iter().for_each(|x| walk(x, found)),
+            _ => {}
+        }
+    }
+    let mut found = Vec::new();
+    walk(&doc, &mut found);
+    assert!(found.len() >= 4, "{found:?}");
+    let (start, end) = (
+        doc["initial"]["rms_in_sigma"].as_f64().unwrap(),
+        doc["final"]["rms_in_sigma"].as_f64().unwrap(),
+    );
+    assert!(end <= start * (1.0 + 1e-9) && end > 0.0, "{start} -> {end}");
 }

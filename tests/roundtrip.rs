@@ -98,6 +98,16 @@ fn weighted_rms_um(v: &serde_json::Value, calibrated: &Path) -> f64 {
     ((pos * pos + (ws / wr * rot).powi(2)) / 2.0).sqrt()
 }
 
+/// A tracker fit's residual RMS as [`weighted_rms_um`] weighs a file's, rebuilt from
+/// calibration.json's RMS per kind (its `residual_rms_um` is null for a weighted residual).
+fn tracker_fit_rms_um(j: &serde_json::Value, calibrated: &Path) -> f64 {
+    let desc = cpm::geometry::RobotDescription::load(calibrated).unwrap();
+    let c = desc.calibration.unwrap_or_default();
+    let ws = c.tracker_position_sigma_um.unwrap_or(10.0);
+    let wr = c.tracker_orientation_sigma_urad.unwrap_or(20.0);
+    fit_rms_um(j, 1.0, ws / wr)
+}
+
 /// `calibrate` with `effects` on `data`, then `validate` of its calibrated.toml on the same
 /// data (reference from the file): the file reproduces the fit. Returns (fit, file) RMS.
 fn fit_and_read_back(dir: &Path, robot: &str, data: &Path, effects: &str) -> (f64, f64) {
@@ -177,6 +187,28 @@ fn combined_rms_um(v: &serde_json::Value, wp: f64, wr: f64) -> f64 {
             sum += count * rms * rms;
             n += count;
         }
+    }
+    (sum / n).sqrt()
+}
+
+/// A fit's residual RMS as the fit weighs it, weighted as [`combined_rms_um`] (readings at
+/// 1, tracker positions at `wp`, orientations at `wr`), rebuilt from calibration.json's RMS
+/// per kind in each kind's own unit (`noise_by_kind`): its `residual_rms_um` is null for a
+/// weighted residual, which has no figure in um.
+fn fit_rms_um(j: &serde_json::Value, wp: f64, wr: f64) -> f64 {
+    if let Some(r) = j["residual_rms_um"].as_f64() {
+        return r;
+    }
+    let (mut sum, mut n) = (0.0, 0.0);
+    for k in j["noise_by_kind"].as_array().unwrap() {
+        let used = (k["observations"].as_u64().unwrap() - k["set_aside"].as_u64().unwrap()) as f64;
+        let w = match k["kind"].as_str().unwrap() {
+            "tracker positions" => wp,
+            "tracker orientations" => wr,
+            _ => 1.0,
+        };
+        sum += used * (w * k["rms"].as_f64().unwrap()).powi(2);
+        n += used;
     }
     (sum / n).sqrt()
 }
@@ -452,7 +484,7 @@ fn round_trip_matrix(kind: Kind) -> Vec<String> {
             ok(&args);
             if command == "calibrate" {
                 let j = read_json(&out.join("calibration.json"));
-                (j["residual_rms_um"].as_f64().unwrap(), fitted.clone())
+                (fit_rms_um(&j, wp, wr), fitted.clone())
             } else {
                 let j = read_json(&out.join("refine.json"));
                 let chosen: Vec<&str> = j["final"]["effects"]
@@ -461,7 +493,16 @@ fn round_trip_matrix(kind: Kind) -> Vec<String> {
                     .iter()
                     .map(|e| e.as_str().unwrap())
                     .collect();
-                (j["final"]["rms_um"].as_f64().unwrap(), chosen.join(","))
+                // refine.json's final RMS is null when weighted; the final model's
+                // calibration.json has each kind's.
+                let fit = fit_rms_um(&read_json(&out.join("calibration.json")), wp, wr);
+                if let Some(r) = j["final"]["rms_um"].as_f64() {
+                    assert!(
+                        (r - fit).abs() <= 1e-12 * fit,
+                        "refine.json {r}, calibration.json {fit}"
+                    );
+                }
+                (fit, chosen.join(","))
             }
         };
         for command in ["calibrate", "refine"] {
@@ -749,7 +790,7 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
         &[],
     );
     assert_eq!(fit["simulated"], false);
-    let fit_rms = fit["residual_rms_um"].as_f64().unwrap();
+    let fit_rms = tracker_fit_rms_um(&fit, &cal.join("calibrated.toml"));
     let combined = weighted_rms_um(
         &validate(&cal.join("calibrated.toml"), &first),
         &cal.join("calibrated.toml"),
@@ -808,9 +849,10 @@ fn the_real_session_round_trips_and_improves_a_held_out_block() {
     .unwrap();
     let robot = p(&loaded);
     let effects = "link_offset,link_scale,tracker_frame,compliance,pose_map_z_roll";
-    let fit2 = calibrate(&cal2, &robot, &first, effects, &[])["residual_rms_um"]
-        .as_f64()
-        .unwrap();
+    let fit2 = tracker_fit_rms_um(
+        &calibrate(&cal2, &robot, &first, effects, &[]),
+        &cal2.join("calibrated.toml"),
+    );
     let combined2 = weighted_rms_um(
         &validate(&cal2.join("calibrated.toml"), &first),
         &cal2.join("calibrated.toml"),
@@ -861,10 +903,10 @@ fn tracker_sessions_in_their_own_frames_round_trip() {
     let held = sim("held.csv", "2", "-60,30,10,-2,1,-4");
     let cal = dir.join("cal");
     let sigmas = ["--pose-sigma-um", "10", "--orientation-sigma-urad", "20"];
-    let fit = calibrate(&cal, &robot, &data, "link_offset,tracker_frame", &sigmas)
-        ["residual_rms_um"]
-        .as_f64()
-        .unwrap();
+    let fit = tracker_fit_rms_um(
+        &calibrate(&cal, &robot, &data, "link_offset,tracker_frame", &sigmas),
+        &cal.join("calibrated.toml"),
+    );
     let file = weighted_rms_um(
         &validate(&cal.join("calibrated.toml"), &data),
         &cal.join("calibrated.toml"),
@@ -1927,27 +1969,37 @@ fn refine_on_the_real_session_is_judged_on_data_it_did_not_see() {
         &p(&out),
     ]);
     let r = read_json(&out.join("refine.json"));
+    // Tracker positions (um) beside orientations (urad): every RMS of refine.json is weighted,
+    // in sigma, and its figure in um null.
+    assert_eq!(r["residual_weighted"], true);
+    let sigma = |v: &serde_json::Value, stem: &str| {
+        assert!(v[format!("{stem}_um")].is_null(), "{v}");
+        v[format!("{stem}_in_sigma")].as_f64().unwrap()
+    };
     let steps: Vec<String> = r["steps"]
         .as_array()
         .unwrap()
         .iter()
         .map(|s| {
             format!(
-                "{} ({:.1} -> {:.1} um)",
+                "{} ({:.3} -> {:.3} weighted, in sigma)",
                 s["effect"].as_str().unwrap(),
-                s["cv_rms_before_um"].as_f64().unwrap(),
-                s["cv_rms_after_um"].as_f64().unwrap()
+                sigma(s, "cv_rms_before"),
+                sigma(s, "cv_rms_after")
             )
         })
         .collect();
     let against = &r["against_calibrate"];
     let (cv_cal, cv_ref) = (
-        against["calibrate_cv_rms_um"].as_f64().unwrap(),
-        against["refined_cv_rms_um"].as_f64().unwrap(),
+        sigma(against, "calibrate_cv_rms"),
+        sigma(against, "refined_cv_rms"),
     );
     assert!(cv_ref <= cv_cal, "{against}");
     // The file is the fit.
-    let fit = r["final"]["rms_um"].as_f64().unwrap();
+    let fit = tracker_fit_rms_um(
+        &read_json(&out.join("calibration.json")),
+        &out.join("calibrated.toml"),
+    );
     let file = weighted_rms_um(
         &validate(&out.join("calibrated.toml"), &first),
         &out.join("calibrated.toml"),
@@ -1961,7 +2013,7 @@ fn refine_on_the_real_session_is_judged_on_data_it_did_not_see() {
     let held_cal = validate(&cal.join("calibrated.toml"), &last);
     let get = |v: &serde_json::Value, who: &str, key: &str| v[who][key].as_f64().unwrap();
     println!(
-        "real session, rows 1-72: refine steps {steps:?}; blocked CV {cv_cal:.1} um (calibrate) -> {cv_ref:.1} um (refine); fit {fit:.1} um = file {file:.1} um\nrows 73-108 held out: nominal {:.1} um / link {:.3} mm, calibrate {:.1} um / link {:.3} mm, refine {:.1} um / link {:.3} mm",
+        "real session, rows 1-72: refine steps {steps:?}; blocked CV {cv_cal:.3} (calibrate) -> {cv_ref:.3} (refine), weighted, in sigma; fit {fit:.1} = file {file:.1} (weighted, um of the positions' noise)\nrows 73-108 held out: nominal {:.1} um / link {:.3} mm, calibrate {:.1} um / link {:.3} mm, refine {:.1} um / link {:.3} mm",
         get(&held_ref, "reference", "rms_um"),
         get(&held_ref, "reference", "link_rms_mm"),
         get(&held_cal, "calibrated", "rms_um"),

@@ -379,10 +379,17 @@ class CalibrationResult(_Files):
         self.identifiability = Identifiability(d)
         self.residuals_um: np.ndarray = d["residuals_um"]
         self.outliers: List[int] = list(d["outliers"])
-        self.sigma_um: float = d["sigma_um"]
+        # A residual that mixes kinds weighed differently (angles beside lengths, or lengths
+        # of different noise) has no one unit: its RMS and noise in um are then None, as
+        # calibration.json's null, and the weighted figures are in sigma. Each kind's RMS in
+        # its own unit is calibration.json's noise_by_kind.
+        self.residual_weighted: bool = d["residual_weighted"]
+        self.sigma_um: Optional[float] = d["sigma_um"]
         self.sigma_estimated: bool = d["sigma_estimated"]
-        self.residual_rms_um: float = d["residual_rms_um"]
-        self.initial_rms_um: float = d["initial_rms_um"]
+        self.residual_rms_um: Optional[float] = d["residual_rms_um"]
+        self.initial_rms_um: Optional[float] = d["initial_rms_um"]
+        self.weighted_rms_in_sigma: float = d["weighted_rms_in_sigma"]
+        self.initial_weighted_rms_in_sigma: float = d["initial_weighted_rms_in_sigma"]
         self.simulated: bool = d["simulated"]
         self.converged: bool = d["converged"]
         self.termination: str = d["termination"]
@@ -439,9 +446,11 @@ class CalibrationResult(_Files):
 
     def __repr__(self) -> str:
         sim = "SIMULATED data: " if self.simulated else ""
+        rms = (f"weighted residual RMS {self.weighted_rms_in_sigma:.3f} in sigma"
+               if self.residual_rms_um is None
+               else f"residual RMS {self.residual_rms_um:.3f} um")
         return (f"<CalibrationResult {sim}rank {self.identifiability.rank} of "
-                f"{self.identifiability.num_params}, residual RMS {self.residual_rms_um:.3f} um;"
-                f" {self.termination}>")
+                f"{self.identifiability.num_params}, {rms}; {self.termination}>")
 
 
 def calibrate(

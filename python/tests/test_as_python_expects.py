@@ -193,3 +193,21 @@ def test_errors_name_the_python_keywords(hexapod):
     with pytest.raises(cpm.UsageError) as e:
         cpm.simulate(hexapod, random=12, measure="sound")
     assert "'measure'" in str(e.value) and "--" not in str(e.value), e.value
+
+
+def test_a_weighted_residual_has_no_figure_in_um():
+    """Issue 60 item 10: the real inclinometer session (angles alone, in urad) has no
+    residual RMS or noise in um: they are None, as calibration.json's null; the weighted
+    figure is in sigma and the angles' RMS in urad is calibration.json's noise_by_kind."""
+    import json
+
+    tilt = Path(__file__).resolve().parents[2] / "tests" / "data" / "jugglebot_tilt"
+    r = cpm.calibrate(tilt / "robot.toml", tilt / "session_1.csv")
+    assert r.residual_weighted
+    assert r.residual_rms_um is None and r.initial_rms_um is None and r.sigma_um is None
+    assert 0 < r.weighted_rms_in_sigma < r.initial_weighted_rms_in_sigma
+    assert "in sigma" in repr(r) and " um;" not in repr(r)
+    doc = json.loads(r.files["calibration.json"])
+    assert doc["residual_rms_um"] is None
+    (angles,) = [k for k in doc["noise_by_kind"] if k["kind"] == "inclinometer angles"]
+    assert angles["unit"] == "urad" and angles["rms"] > 0

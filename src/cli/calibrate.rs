@@ -53,7 +53,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let dir = &args.fit.out;
     let written = common::commit_dir(set, dir, &args.fit.input_paths(), "calibrate", ctx)?;
     ctx.finish();
-    for w in warnings(model, &cal)
+    for w in warnings(model, &cal, report.fit.residual_weighted)
         .iter()
         .skip(usize::from(!cal.succeeded()))
     {
@@ -85,7 +85,7 @@ pub fn run(args: &CalibrateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
                 .collect();
             format!(
                 "weighted residual RMS {} in sigma (RMS per kind: {})",
-                if report.fit.residual_rms_um
+                if report.fit.scale.residual_rms
                     < cpm_workflow::calib::diagnostics::NUMERICAL_RESIDUAL_UM
                 {
                     report.fit.weighted_rms_words()

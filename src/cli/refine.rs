@@ -66,7 +66,7 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
     let inputs_paths = args.fit.input_paths();
     let written = common::commit_dir(set, dir, &inputs_paths, "refine", ctx)?;
     ctx.finish();
-    for w in cpm_workflow::fit::warnings(&r.model, cal)
+    for w in cpm_workflow::fit::warnings(&r.model, cal, report.fit.residual_weighted)
         .iter()
         .skip(usize::from(!cal.solver.was_successful()))
     {
@@ -79,8 +79,8 @@ pub fn run(args: &RefineArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> {
         writeln!(ctx.out, "{}", report.doc.to_json()?)?;
     } else {
         // Weighted figures in sigma (as report.md), never in um.
-        let (u, scale) = if report.fit.residual_weighted && report.fit.sigma_um > 0.0 {
-            (" (weighted, in sigma)", report.fit.sigma_um)
+        let (u, scale) = if report.fit.residual_weighted && report.fit.scale.sigma > 0.0 {
+            (" (weighted, in sigma)", report.fit.scale.sigma)
         } else {
             (" um", 1.0)
         };

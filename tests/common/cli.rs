@@ -97,3 +97,42 @@ pub fn calibrate_json(
     ok(&args);
     serde_json::from_str(&std::fs::read_to_string(out.join("calibration.json")).unwrap()).unwrap()
 }
+
+/// A `calibration.json`'s residual RMS in um: `residual_rms_um`, or, when that is `null`
+/// (`residual_weighted`: kinds of different units or noise), the RMS over the observations
+/// of its kinds in um (lengths, points, tracker positions; `noise_by_kind`, each kind's
+/// set-aside observations left out). Panics when no kind is in um.
+pub fn length_rms_um(json: &serde_json::Value) -> f64 {
+    if let Some(r) = json["residual_rms_um"].as_f64() {
+        assert_eq!(
+            json["residual_weighted"], false,
+            "a figure in um beside weighting"
+        );
+        return r;
+    }
+    assert_eq!(json["residual_weighted"], true, "{json}");
+    let (mut ss, mut n) = (0.0, 0.0);
+    for k in json["noise_by_kind"].as_array().unwrap() {
+        if k["unit"] == "um" {
+            let used =
+                (k["observations"].as_u64().unwrap() - k["set_aside"].as_u64().unwrap()) as f64;
+            ss += used * k["rms"].as_f64().unwrap().powi(2);
+            n += used;
+        }
+    }
+    assert!(n > 0.0, "no kind in um: {}", json["noise_by_kind"]);
+    (ss / n).sqrt()
+}
+
+/// The RMS of one kind of observation of a `calibration.json` (`noise_by_kind[].rms`, in
+/// its own unit), by name (`inclinometer angles`, `tracker orientations`, `gauge s1`, ...).
+pub fn kind_rms(json: &serde_json::Value, kind: &str) -> f64 {
+    json["noise_by_kind"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|k| k["kind"] == kind)
+        .unwrap_or_else(|| panic!("no kind {kind}: {}", json["noise_by_kind"]))["rms"]
+        .as_f64()
+        .unwrap()
+}

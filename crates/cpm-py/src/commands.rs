@@ -127,6 +127,11 @@ struct Fit {
     timings: Vec<(String, f64)>,
     /// The job's warnings (the command's `warning:` lines).
     warned: Vec<String>,
+    /// The residual mixes kinds weighed differently (calibration.json's
+    /// `residual_weighted`): its RMS and noise are then said in sigma, never in um.
+    weighted: bool,
+    /// calibration.json's `weighted_rms_in_sigma` and `initial_weighted_rms_in_sigma`.
+    weighted_rms_in_sigma: (f64, f64),
 }
 
 /// Where each observation of a fit came from (file, line, what), told when asked: a list
@@ -225,10 +230,16 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("residuals_um", PyArray1::from_slice(py, &cal.residuals_um))?;
     d.set_item("observation_origin", Bound::new(py, fit.origins)?)?;
     d.set_item("outliers", cal.outliers.clone())?;
-    d.set_item("sigma_um", cal.sigma_um)?;
+    // A residual that mixes kinds weighed differently has no one unit: its figures in um
+    // are None (as calibration.json's null), the weighted ones in sigma.
+    let um = |x: f64| (!fit.weighted).then_some(x);
+    d.set_item("sigma_um", um(cal.sigma_um))?;
     d.set_item("sigma_estimated", cal.sigma_estimated)?;
-    d.set_item("residual_rms_um", cal.residual_rms_um)?;
-    d.set_item("initial_rms_um", cal.initial_rms_um)?;
+    d.set_item("residual_rms_um", um(cal.residual_rms_um))?;
+    d.set_item("initial_rms_um", um(cal.initial_rms_um))?;
+    d.set_item("residual_weighted", fit.weighted)?;
+    d.set_item("weighted_rms_in_sigma", fit.weighted_rms_in_sigma.0)?;
+    d.set_item("initial_weighted_rms_in_sigma", fit.weighted_rms_in_sigma.1)?;
     d.set_item("simulated", cal.simulated)?;
     d.set_item("converged", cal.solver.was_successful())?;
     d.set_item("termination", cal.solver.termination.to_string())?;
@@ -475,6 +486,11 @@ pub fn calibrate_memory<'py>(
         let cpm_workflow::fit::Calibrated { inputs, fitted } = job;
         let stages = fitted.seconds;
         let warnings = fitted.report.fit.warnings.clone();
+        let weighted = fitted.report.fit.residual_weighted;
+        let weighted_rms_in_sigma = (
+            fitted.report.fit.weighted_rms_in_sigma,
+            fitted.report.fit.initial_weighted_rms_in_sigma,
+        );
         let cal = fitted.cal;
         let trouble = if let Some(why) = cal.robust_failure() {
             Some(format!("the fit failed: {why}"))
@@ -560,6 +576,8 @@ pub fn calibrate_memory<'py>(
             origins,
             timings,
             warned: progress.warned(),
+            weighted,
+            weighted_rms_in_sigma,
         })
     })?;
     drop(staged);

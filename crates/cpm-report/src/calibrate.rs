@@ -45,8 +45,12 @@ pub struct CalibrateSummary {
     pub parameters: usize,
     /// Parameters determined on their own.
     pub determined: usize,
-    /// Residual RMS, um.
-    pub residual_rms_um: f64,
+    /// Residual RMS, um; `null` when the residual is weighted (as calibration.json's).
+    pub residual_rms_um: Option<f64>,
+    /// The residual mixes kinds weighed differently (as calibration.json's).
+    pub residual_weighted: bool,
+    /// Weighted residual RMS in sigma (as calibration.json's).
+    pub weighted_rms_in_sigma: f64,
     /// The solver converged.
     pub converged: bool,
     /// Share of observations the robust loss down-weighted.
@@ -79,6 +83,8 @@ impl CalibrateReport {
             parameters: f.identifiability.parameters,
             determined: f.identifiability.determined,
             residual_rms_um: f.residual_rms_um,
+            residual_weighted: f.residual_weighted,
+            weighted_rms_in_sigma: f.weighted_rms_in_sigma,
             converged: f.solver.converged,
             downweighted_share: f.robust.as_ref().map_or(0.0, |r| r.downweighted_share),
             robust_failed: f.robust.as_ref().is_some_and(|r| r.failed),

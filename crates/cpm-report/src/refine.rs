@@ -224,6 +224,46 @@ pub struct RefineDoc {
     /// caller that read the data; absent when none, so a clean campaign's file is unchanged).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub excluded_poses: Vec<crate::fit::ExcludedPoseReport>,
+    /// The residual mixes kinds of observation weighed differently (as calibration.json's
+    /// `residual_weighted`, set by the caller that made the final fit's report): every RMS
+    /// figure `..._um` is then `null`, and written weighted in sigma beside it as
+    /// `..._in_sigma` (each residual over its kind's noise at the final fit's noise scale,
+    /// as report.md says it). A weighted figure in um is no length.
+    pub residual_weighted: bool,
+    /// The final fit's noise scale (um of the reference noise) that the weighted figures are
+    /// divided by; not written.
+    #[serde(skip)]
+    pub noise_scale_um: f64,
+}
+
+/// Whether `key` of refine.json holds a residual RMS in um (`rms_um`, `cv_rms_before_um`,
+/// `calibrate_cv_rms_um`, ...).
+fn is_rms_um(key: &str) -> bool {
+    key.contains("rms") && key.ends_with("_um")
+}
+
+/// Every RMS figure of `v` in um made `null`, and written `..._in_sigma`, divided by `scale`.
+fn weigh_rms_keys(v: &mut serde_json::Value, scale: f64) {
+    match v {
+        serde_json::Value::Object(map) => {
+            let keys: Vec<String> = map.keys().filter(|k| is_rms_um(k)).cloned().collect();
+            for k in keys {
+                let weighted = map[&k].as_f64().map(|x| x / scale);
+                map.insert(k.clone(), serde_json::Value::Null);
+                let stem = k.strip_suffix("_um").unwrap_or(&k);
+                map.insert(format!("{stem}_in_sigma"), serde_json::json!(weighted));
+            }
+            for x in map.values_mut() {
+                weigh_rms_keys(x, scale);
+            }
+        }
+        serde_json::Value::Array(items) => {
+            for x in items {
+                weigh_rms_keys(x, scale);
+            }
+        }
+        _ => {}
+    }
 }
 
 impl RefineDoc {
@@ -342,12 +382,18 @@ impl RefineDoc {
             held_groups: r.held_groups.clone(),
             not_applicable: Vec::new(),
             excluded_poses: Vec::new(),
+            residual_weighted: false,
+            noise_scale_um: cal.sigma_um,
         }
     }
 
     /// `refine.json`, pretty-printed (keys sorted).
     pub fn to_json(&self) -> serde_json::Result<String> {
-        serde_json::to_string_pretty(&serde_json::to_value(self)?)
+        let mut v = serde_json::to_value(self)?;
+        if self.residual_weighted && self.noise_scale_um > 0.0 {
+            weigh_rms_keys(&mut v, self.noise_scale_um);
+        }
+        serde_json::to_string_pretty(&v)
     }
 
     /// The sentence about a last round that added nothing: candidates left out as confounded
@@ -448,7 +494,7 @@ impl RefineReport {
         // weighted, in sigma (each residual over its kind's noise at the final fit's noise
         // scale, as calibration.json's weighted_rms_in_sigma), never in um.
         let weighted = self.fit.residual_weighted;
-        let sigma = self.fit.sigma_um;
+        let sigma = self.fit.scale.sigma;
         let u = if weighted {
             " (weighted, in sigma)"
         } else {

@@ -297,9 +297,11 @@ fn refine_job(
         .iter()
         .map(crate::report::fit::ExcludedPoseReport::from)
         .collect();
-    set.add(dir.join("refine.json"), doc.to_json()?);
     let mut fit = FitReport::new(&inputs.report_inputs(), &r.model, cal, None);
     crate::fit::add_session_warnings(&mut fit, &inputs, &r.model)?;
+    doc.residual_weighted = fit.residual_weighted;
+    doc.noise_scale_um = fit.scale.sigma;
+    set.add(dir.join("refine.json"), doc.to_json()?);
     set.add(dir.join("calibration.json"), fit.to_json()?);
     stage_residuals(&mut set, dir, &inputs, cal);
     let mut figures = stage_figures(&mut set, dir, &inputs.robot, &r.model, campaign, cal)?;

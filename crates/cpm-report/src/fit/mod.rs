@@ -186,16 +186,41 @@ impl From<&cpm_io::ExcludedPose> for ExcludedPoseReport {
 /// `calibration.json`'s `misfit` object.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct MisfitReport {
-    /// The test's figures: chi-square, degrees of freedom, chi-square per degree of freedom,
-    /// p-value, residual RMS and declared noise (um), outliers left out.
-    #[serde(flatten)]
-    pub test: cpm_calib::misfit::Misfit,
+    /// Sum of squared residuals over their declared noise squared.
+    pub chi2: f64,
+    /// Degrees of freedom: observations used minus the rank.
+    pub dof: usize,
+    /// chi2 / dof (1 expected).
+    pub chi2_per_dof: f64,
+    /// Probability of a chi2 this large or larger under the declared noise.
+    pub p_value: f64,
+    /// RMS of the residuals used, um; `None` when the residual is weighted
+    /// ([`FitReport::residual_weighted`]: then `chi2_per_dof` says it, unit-free).
+    pub residual_rms_um: Option<f64>,
+    /// The declared noise, um; `None` when the residual is weighted (each kind's is in
+    /// `noise_by_kind`).
+    pub sigma_um: Option<f64>,
+    /// Observations left out as outliers.
+    pub outliers_left_out: usize,
     /// The test rejects the model.
     pub inconsistent: bool,
     /// The rule.
     pub rule: String,
     /// What it means (when inconsistent).
     pub message: Option<String>,
+}
+
+/// A fit's residual and noise figures as the fit computed them: um, or um of the reference
+/// noise when the residual is weighted ([`FitReport::residual_weighted`]), where only their
+/// ratios (in sigma) mean anything.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FitScale {
+    /// Residual RMS at the solution.
+    pub residual_rms: f64,
+    /// Residual RMS at the start.
+    pub initial_rms: f64,
+    /// The noise every residual is weighted to.
+    pub sigma: f64,
 }
 
 /// One tracker session's registration.
@@ -532,21 +557,30 @@ pub struct FitReport {
     pub determination: DeterminationCounts,
     /// Known values applied in every prediction (the estimates are on top of them).
     pub known_effects: Vec<KnownEffectValues>,
-    /// Residual RMS, um (of the reference noise when `residual_weighted`).
-    pub residual_rms_um: f64,
-    /// Residual RMS at the start, um (of the reference noise when `residual_weighted`).
-    pub initial_rms_um: f64,
+    /// Residual RMS over every observation, um; `None` (`null`) when `residual_weighted`:
+    /// no one unit holds a residual that mixes kinds weighed differently. Each kind's RMS in
+    /// its own unit is then `noise_by_kind[].rms`, the whole residual's
+    /// `weighted_rms_in_sigma`.
+    pub residual_rms_um: Option<f64>,
+    /// Residual RMS at the start, um; `None` when `residual_weighted` (then
+    /// `initial_weighted_rms_in_sigma`).
+    pub initial_rms_um: Option<f64>,
     /// The residual mixes kinds of observation weighed differently (angles beside lengths,
-    /// or lengths of different noise): `residual_rms_um` is then a weighted figure, and each
+    /// or lengths of different noise): its figures are then weighted, in sigma, and each
     /// kind's RMS in its own unit is `noise_by_kind[].rms`.
     pub residual_weighted: bool,
     /// Weighted residual RMS in sigma: each residual over its kind's noise, scaled by the
-    /// fit's noise (`sigma_um`, declared or estimated; about 1 when the noise is as taken).
+    /// fit's noise scale (declared or estimated; about 1 when the noise is as taken).
     pub weighted_rms_in_sigma: f64,
     /// Weighted residual RMS in sigma at the start.
     pub initial_weighted_rms_in_sigma: f64,
-    /// The noise, um (of the reference when `residual_weighted`).
-    pub sigma_um: f64,
+    /// The noise, um; `None` when `residual_weighted` (each kind's is then
+    /// `noise_by_kind[].assumed`, in its own unit).
+    pub sigma_um: Option<f64>,
+    /// The fit's own figures, um, or um of the reference noise when `residual_weighted`
+    /// (not written: a weighted figure in um is no length).
+    #[serde(skip)]
+    pub scale: FitScale,
     /// The noise was estimated from the residual.
     pub sigma_estimated: bool,
     /// The noise estimate leaves the outliers out.
@@ -737,10 +771,17 @@ fn registration(
     })
 }
 
-/// The chi-square test against the declared noise (`None` when the noise was estimated).
-fn misfit_report(cal: &Calibration) -> Option<MisfitReport> {
+/// The chi-square test against the declared noise (`None` when the noise was estimated);
+/// `weighted` as [`FitReport::residual_weighted`].
+fn misfit_report(cal: &Calibration, weighted: bool) -> Option<MisfitReport> {
     misfit(cal).map(|m| MisfitReport {
-        test: m,
+        chi2: m.chi2,
+        dof: m.dof,
+        chi2_per_dof: m.chi2_per_dof,
+        p_value: m.p_value,
+        residual_rms_um: (!weighted).then_some(m.residual_rms_um),
+        sigma_um: (!weighted).then_some(m.sigma_um),
+        outliers_left_out: m.outliers_left_out,
         inconsistent: m.inconsistent(),
         rule: format!(
             "inconsistent when p < {} and chi2/dof > {}",
@@ -749,7 +790,7 @@ fn misfit_report(cal: &Calibration) -> Option<MisfitReport> {
         ),
         message: m
             .inconsistent()
-            .then(|| misfit_message(&m).replace("**", "")),
+            .then(|| misfit_message(&m, weighted).replace("**", "")),
     })
 }
 
@@ -800,7 +841,8 @@ impl FitReport {
         let ni = model.num_installation_params();
         let minimum_norm: Vec<Option<f64>> = cal.minimum_norm_um.iter().map(|v| Some(*v)).collect();
         let kinds = cpm_calib::noise::by_kind(model, campaign, cal);
-        let mut warnings_md = warnings(model, cal);
+        let weighted = cpm_calib::noise::residual_is_weighted(&kinds);
+        let mut warnings_md = warnings(model, cal, weighted);
         warnings_md.extend(noise_warning(&kinds));
         warnings_md.extend(estimated_noise_note(&kinds, cal));
         warnings_md.extend(prior::warning(model, cal));
@@ -836,12 +878,17 @@ impl FitReport {
                     values: k.values.clone(),
                 })
                 .collect(),
-            residual_rms_um: cal.residual_rms_um,
-            initial_rms_um: cal.initial_rms_um,
-            residual_weighted: cpm_calib::noise::residual_is_weighted(&kinds),
+            residual_rms_um: (!weighted).then_some(cal.residual_rms_um),
+            initial_rms_um: (!weighted).then_some(cal.initial_rms_um),
+            residual_weighted: weighted,
             weighted_rms_in_sigma: cal.residual_rms_um / cal.sigma_um,
             initial_weighted_rms_in_sigma: cal.initial_rms_um / cal.sigma_um,
-            sigma_um: cal.sigma_um,
+            sigma_um: (!weighted).then_some(cal.sigma_um),
+            scale: FitScale {
+                residual_rms: cal.residual_rms_um,
+                initial_rms: cal.initial_rms_um,
+                sigma: cal.sigma_um,
+            },
             sigma_estimated: cal.sigma_estimated,
             sigma_excludes_outliers: cal.sigma_excludes_outliers,
             identifiability: IdentifiabilityReport::new(
@@ -865,7 +912,7 @@ impl FitReport {
                 .map(ExcludedPoseReport::from)
                 .collect(),
             registration: registration(inputs.merged, model, cal),
-            misfit: misfit_report(cal),
+            misfit: misfit_report(cal, weighted),
             noise_by_kind: kinds
                 .iter()
                 .map(|k| NoiseKindReport {
@@ -897,7 +944,7 @@ impl FitReport {
     /// rounding), that: an estimated noise is then rounding too, and the ratio of two
     /// roundings (0.871 sigma for a zero residual) says nothing.
     pub fn weighted_rms_words(&self) -> String {
-        if self.residual_rms_um < cpm_calib::analysis::diagnostics::NUMERICAL_RESIDUAL_UM {
+        if self.scale.residual_rms < cpm_calib::analysis::diagnostics::NUMERICAL_RESIDUAL_UM {
             "0 (the data are fitted exactly: the residual is rounding, below 1 pm)".to_string()
         } else {
             sig(self.weighted_rms_in_sigma, 3)
@@ -999,17 +1046,17 @@ impl FitReport {
         } else {
             s.push_str(&format!(
                 "- Residual RMS {} um (at the start {} um); noise {} {} um.\n",
-                sig(self.residual_rms_um, 3),
-                sig(self.initial_rms_um, 3),
+                sig(self.scale.residual_rms, 3),
+                sig(self.scale.initial_rms, 3),
                 if self.sigma_estimated {
                     "estimated from the residual:"
                 } else {
                     "declared:"
                 },
                 if self.sigma_estimated {
-                    sig(self.sigma_um, 3)
+                    sig(self.scale.sigma, 3)
                 } else {
-                    short(self.sigma_um)
+                    short(self.scale.sigma)
                 }
             ));
             if self.noise_by_kind.len() > 1 {
@@ -1273,9 +1320,14 @@ mod tests {
             std,
         };
         let f = FitReport {
-            residual_rms_um: 3.0000000000000004,
-            initial_rms_um: 0.1 + 0.2,
-            sigma_um: 1.0,
+            residual_rms_um: Some(3.0000000000000004),
+            initial_rms_um: Some(0.1 + 0.2),
+            sigma_um: Some(1.0),
+            scale: FitScale {
+                residual_rms: 3.0000000000000004,
+                initial_rms: 0.1 + 0.2,
+                sigma: 1.0,
+            },
             identifiability: IdentifiabilityReport {
                 rank: 3,
                 parameters: 4,

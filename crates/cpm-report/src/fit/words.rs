@@ -64,10 +64,12 @@ pub fn misfit(cal: &Calibration) -> Option<cpm_calib::misfit::Misfit> {
     )
 }
 
-/// What a misfit says, in words.
-pub fn misfit_message(m: &cpm_calib::misfit::Misfit) -> String {
+/// What a misfit says, in words; `weighted` when the residual mixes kinds of observation
+/// weighed differently (`FitReport::residual_weighted`): its RMS is then said in sigma, each
+/// residual over its kind's declared noise, never in um.
+pub fn misfit_message(m: &cpm_calib::misfit::Misfit, weighted: bool) -> String {
     format!(
-        "**The model does not fit the data to the declared noise**: chi2/dof = {:.2} on {} degrees of freedom (p {}), residual RMS {:.3} um against the declared {} um{}. The standard deviations assume the declared noise and are too small. An effect the model lacks (backlash, link offsets or scales, thermal drift, ...) or a noise larger than declared: `cpm refine` tests the effect library on these data.",
+        "**The model does not fit the data to the declared noise**: chi2/dof = {:.2} on {} degrees of freedom (p {}), {}{}. The standard deviations assume the declared noise and are too small. An effect the model lacks (backlash, link offsets or scales, thermal drift, ...) or a noise larger than declared: `cpm refine` tests the effect library on these data.",
         m.chi2_per_dof,
         m.dof,
         if m.p_value < 1e-300 {
@@ -75,8 +77,17 @@ pub fn misfit_message(m: &cpm_calib::misfit::Misfit) -> String {
         } else {
             format!("= {:.1e}", m.p_value)
         },
-        m.residual_rms_um,
-        m.sigma_um,
+        if weighted {
+            format!(
+                "weighted residual RMS {:.3} in sigma (each residual over its kind's declared noise) against 1",
+                m.residual_rms_um / m.sigma_um
+            )
+        } else {
+            format!(
+                "residual RMS {:.3} um against the declared {} um",
+                m.residual_rms_um, m.sigma_um
+            )
+        },
         if m.outliers_left_out > 0 {
             format!(", {} flagged outliers left out", m.outliers_left_out)
         } else {
@@ -86,8 +97,9 @@ pub fn misfit_message(m: &cpm_calib::misfit::Misfit) -> String {
 }
 
 /// What the data did not determine, how the fit ended, and whether the model fits the
-/// declared noise, in a few lines for the top of a report (empty when all is well).
-pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
+/// declared noise, in a few lines for the top of a report (empty when all is well);
+/// `weighted` as [`misfit_message`] takes it.
+pub fn warnings(model: &MeasurementModel, cal: &Calibration, weighted: bool) -> Vec<String> {
     let mut w = Vec::new();
     if let Some(why) = cal.robust_failure() {
         w.push(format!(
@@ -164,13 +176,23 @@ pub fn warnings(model: &MeasurementModel, cal: &Calibration) -> Vec<String> {
         ));
     }
     if let Some(m) = misfit(cal).filter(|m| m.inconsistent()) {
-        w.push(misfit_message(&m));
+        w.push(misfit_message(&m, weighted));
     }
     if let Some(m) = misfit(cal).filter(|m| m.too_small()) {
+        let rms = if weighted {
+            format!(
+                "the weighted residual RMS is {} in sigma (each residual over its kind's declared noise) against 1",
+                crate::format::sig(m.residual_rms_um / m.sigma_um, 3)
+            )
+        } else {
+            format!(
+                "the residual RMS is {} um against the declared noise of {} um",
+                crate::format::sig(m.residual_rms_um, 3),
+                crate::format::sig(m.sigma_um, 3)
+            )
+        };
         w.push(format!(
-            "**Noise smaller than declared**: the residual RMS is {} um against the declared noise of {} um (chi2/dof {} on {} degrees of freedom; a residual this small is improbable under the declared noise). The standard deviations use the declared noise and are about {} times too large; declare the noise the instrument shows, or leave it undeclared for the fit to estimate it.",
-            crate::format::sig(m.residual_rms_um, 3),
-            crate::format::sig(m.sigma_um, 3),
+            "**Noise smaller than declared**: {rms} (chi2/dof {} on {} degrees of freedom; a residual this small is improbable under the declared noise). The standard deviations use the declared noise and are about {} times too large; declare the noise the instrument shows, or leave it undeclared for the fit to estimate it.",
             crate::format::sig(m.chi2_per_dof, 3),
             m.dof,
             crate::format::sig(1.0 / m.chi2_per_dof.max(1e-300).sqrt(), 2)
