@@ -377,7 +377,14 @@ class CalibrationResult(_Files):
         self.minimum_norm_um: np.ndarray = d["minimum_norm_um"]
         self.covariance: np.ndarray = d["covariance"]
         self.identifiability = Identifiability(d)
-        self.residuals_um: np.ndarray = d["residuals_um"]
+        # The fit's residuals, predicted minus measured, um: None when the residual is
+        # weighted (kinds of different units or noise). Every observation's residual in its
+        # own unit, measured minus predicted as residuals.csv, is ``residuals``, with its unit
+        # in ``residual_units`` (``um``, ``urad``, an instrument's own).
+        self.residuals_um: Optional[np.ndarray] = d["residuals_um"]
+        self.residuals: np.ndarray = d["residuals"]
+        self.residual_units: np.ndarray = np.asarray(
+            d["residual_unit_names"] or [""], dtype=str)[d["residual_unit_codes"]]
         self.outliers: List[int] = list(d["outliers"])
         # A residual that mixes kinds weighed differently (angles beside lengths, or lengths
         # of different noise) has no one unit: its RMS and noise in um are then None, as
@@ -431,7 +438,7 @@ class CalibrationResult(_Files):
         return self.text("calibration.json")
 
     def observation_origin(self, k: int) -> Optional[Tuple[str, int, str]]:
-        """Where observation ``k`` (of ``residuals_um``) came from: file, line, what."""
+        """Where observation ``k`` (of ``residuals``) came from: file, line, what."""
         o = self._d["observation_origin"][k]
         return None if o is None else tuple(o)
 

@@ -211,3 +211,20 @@ def test_a_weighted_residual_has_no_figure_in_um():
     assert doc["residual_rms_um"] is None
     (angles,) = [k for k in doc["noise_by_kind"] if k["kind"] == "inclinometer angles"]
     assert angles["unit"] == "urad" and angles["rms"] > 0
+    # The residuals: none in um; each in its own unit, as residuals.csv writes them.
+    assert r.residuals_um is None
+    assert r.residuals.shape == (570,) and set(r.residual_units) == {"urad"}
+    rows = r.files["residuals.csv"].decode().splitlines()[1:]
+    csv = np.array([float(row.rsplit(",", 1)[1]) for row in rows])
+    np.testing.assert_allclose(r.residuals, csv, rtol=1e-8, atol=1e-6)
+    rms = float(np.sqrt(np.mean(r.residuals ** 2)))
+    assert rms == pytest.approx(angles["rms"], rel=1e-9)
+
+
+def test_gauge_residuals_are_in_um_both_ways(hexapod):
+    """A gauge-only fit: residuals_um (predicted minus measured) is the opposite of
+    residuals (measured minus predicted), all in um."""
+    r = cpm.calibrate(hexapod, HEXAPOD_READINGS)
+    assert not r.residual_weighted and r.residual_rms_um is not None
+    assert set(r.residual_units) == {"um"}
+    np.testing.assert_allclose(r.residuals, -r.residuals_um, rtol=1e-12, atol=1e-12)

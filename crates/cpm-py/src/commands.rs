@@ -132,6 +132,40 @@ struct Fit {
     weighted: bool,
     /// calibration.json's `weighted_rms_in_sigma` and `initial_weighted_rms_in_sigma`.
     weighted_rms_in_sigma: (f64, f64),
+    /// Every observation's residual in its own unit, measured minus predicted (as
+    /// residuals.csv), its unit's index into `units`, and the units.
+    native: (Vec<f64>, Vec<u8>, Vec<String>),
+}
+
+/// Every observation's residual as residuals.csv writes it (measured minus predicted, in its
+/// kind's unit), with the index of each one's unit into the list of units.
+fn native_residuals(
+    model: &cpm_calib::MeasurementModel,
+    campaign: &cpm_calib::Campaign,
+    cal: &cpm_calib::Calibration,
+) -> (Vec<f64>, Vec<u8>, Vec<String>) {
+    use cpm_calib::noise::{measured_minus_predicted, Kind};
+    let native = measured_minus_predicted(campaign, cal.sigma_ref_um, &cal.residuals_um);
+    let mut units: Vec<String> = Vec::new();
+    let mut by_kind: std::collections::BTreeMap<Kind, u8> = std::collections::BTreeMap::new();
+    let codes = campaign
+        .observation_kinds()
+        .into_iter()
+        .map(|k| {
+            let kind = Kind::of(campaign, k);
+            *by_kind.entry(kind).or_insert_with(|| {
+                let unit = kind.unit(model);
+                match units.iter().position(|u| *u == unit) {
+                    Some(i) => i as u8,
+                    None => {
+                        units.push(unit);
+                        (units.len() - 1) as u8
+                    }
+                }
+            })
+        })
+        .collect();
+    (native, codes, units)
 }
 
 /// Where each observation of a fit came from (file, line, what), told when asked: a list
@@ -227,12 +261,21 @@ fn fit_dict(py: Python<'_>, fit: Fit) -> PyResult<Bound<'_, PyDict>> {
         id.unexplained_null_dimensions,
     )?;
     d.set_item("identifiability_summary", id.summary())?;
-    d.set_item("residuals_um", PyArray1::from_slice(py, &cal.residuals_um))?;
+    // A residual that mixes kinds weighed differently has no one unit: its figures in um
+    // are None (as calibration.json's null), the weighted ones in sigma. The fit's residuals
+    // (predicted minus measured, um) likewise; every observation's in its own unit always,
+    // as residuals.csv.
+    let um = |x: f64| (!fit.weighted).then_some(x);
+    d.set_item(
+        "residuals_um",
+        (!fit.weighted).then(|| PyArray1::from_slice(py, &cal.residuals_um)),
+    )?;
+    let (native, codes, units) = fit.native;
+    d.set_item("residuals", PyArray1::from_vec(py, native))?;
+    d.set_item("residual_unit_codes", PyArray1::from_vec(py, codes))?;
+    d.set_item("residual_unit_names", units)?;
     d.set_item("observation_origin", Bound::new(py, fit.origins)?)?;
     d.set_item("outliers", cal.outliers.clone())?;
-    // A residual that mixes kinds weighed differently has no one unit: its figures in um
-    // are None (as calibration.json's null), the weighted ones in sigma.
-    let um = |x: f64| (!fit.weighted).then_some(x);
     d.set_item("sigma_um", um(cal.sigma_um))?;
     d.set_item("sigma_estimated", cal.sigma_estimated)?;
     d.set_item("residual_rms_um", um(cal.residual_rms_um))?;
@@ -492,6 +535,7 @@ pub fn calibrate_memory<'py>(
             fitted.report.fit.initial_weighted_rms_in_sigma,
         );
         let cal = fitted.cal;
+        let native = native_residuals(&inputs.model, &inputs.merged.campaign, &cal);
         let trouble = if let Some(why) = cal.robust_failure() {
             Some(format!("the fit failed: {why}"))
         } else if !cal.solver.was_successful() {
@@ -578,6 +622,7 @@ pub fn calibrate_memory<'py>(
             warned: progress.warned(),
             weighted,
             weighted_rms_in_sigma,
+            native,
         })
     })?;
     drop(staged);
