@@ -600,12 +600,13 @@ impl RefineReport {
             s.push_str(&format!("The last round added nothing. {m}\n\n"));
         }
         s.push_str(&format!(
-            "## Final\n\n- Effects: {}\n- RMS {}{u}, cross-validated {}{u}, residual white: {}\n- Unexplained structure: {}\n- Against plain calibration, on the whole campaign with blocked folds (data each fit did not see): {}{u} calibrated, {}{u} refined\n\n",
+            "## Final\n\n- Effects: {}\n- RMS {}{u}, cross-validated {}{u}, residual white: {}\n- Unexplained structure: {}\n- Against plain calibration, on the whole campaign over {} folds (data each fit did not see): {}{u} calibrated, {}{u} refined\n\n",
             self.final_effects,
             w(d.final_.rms_um, 3),
             w(d.final_.cv_rms_um, 3),
             yes_no(d.final_.residual_white),
             if d.final_.unexplained_structure.is_empty() { "none".to_string() } else { d.final_.unexplained_structure.join(", ") },
+            d.against_calibrate.folds,
             w(d.against_calibrate.calibrate_cv_rms_um, 4),
             w(d.against_calibrate.refined_cv_rms_um, 4),
         ));

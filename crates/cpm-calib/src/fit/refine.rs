@@ -317,13 +317,46 @@ fn choose_holds(
 /// Plain calibration (the starting model, as `cpm calibrate` fits it) against the refined
 /// model, both scored by the same blocked cross-validation ([`cross_validated_rms`]: leave
 /// one session out, or contiguous blocks in acquisition order) on the whole campaign, first-fit
-/// outliers included. Refinement is only worth writing when it is not worse.
+/// outliers included. Refinement is only worth writing when it is not worse, and, once it
+/// added an effect, clearly better ([`AgainstCalibrate::within_uncertainty`]).
+///
+/// Once an effect was added, contiguous blocks are at least [`GUARD_MIN_FOLDS`] here,
+/// whatever the rounds used ([`RefineOptions::folds`]): each fit then keeps nine tenths of the
+/// poses, close to the fit that is written. With fewer (`--folds 3` on 18 poses: fits on 12
+/// poses) a model can look better only because the folds' fits are starved, and lose on the
+/// next session.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AgainstCalibrate {
     /// The starting model's cross-validated RMS, um.
     pub calibrate_cv_rms_um: f64,
     /// The refined model's cross-validated RMS, um.
     pub refined_cv_rms_um: f64,
+    /// The folds both were scored on (sessions, positions or contiguous blocks).
+    pub folds: usize,
+    /// The refined model added effects and is not worse, but its gain is within one standard
+    /// error of the difference of the two models' held-out errors
+    /// ([`CvErrors::clearly_worse_than`], the rule each round's choice passed on its own
+    /// folds): the data do not show it predicts better, and it is refused as a worse one is.
+    /// False when no effect was added.
+    pub within_uncertainty: bool,
+}
+
+/// Fewest contiguous blocks of the final guard ([`AgainstCalibrate`]), fewer only when the
+/// campaign has fewer poses (then one pose per fold).
+pub const GUARD_MIN_FOLDS: usize = 10;
+
+/// The folds the final guard scores on: the rounds' own when they leave out sessions or
+/// positions, or are blocks at least [`GUARD_MIN_FOLDS`] many; else that many blocks (at most
+/// one per pose).
+fn guard_folds(campaign: &Campaign, folds: usize) -> Folds {
+    let own = cv_folds(campaign, folds);
+    if own.kind != FoldKind::Blocks || own.count >= GUARD_MIN_FOLDS {
+        return own;
+    }
+    cv_folds(
+        campaign,
+        GUARD_MIN_FOLDS.min(campaign.poses.len()).max(own.count),
+    )
 }
 
 impl AgainstCalibrate {
@@ -337,14 +370,22 @@ impl AgainstCalibrate {
         self.refined_cv_rms_um <= self.calibrate_cv_rms_um * (1.0 + Self::TOLERANCE)
     }
 
-    /// The refusal to state when the refined model is worse (`None` when it is not).
+    /// The refusal to state when the refined model is worse, or better only within the
+    /// uncertainty (`None` when it is clearly better, or refine changed nothing).
     pub fn refusal(&self) -> Option<String> {
-        (!self.not_worse()).then(|| {
-            format!(
-                "the refined model predicts held-out data worse than plain calibration (blocked cross-validated RMS {:.4} um against {:.4} um): use `cpm calibrate`",
-                self.refined_cv_rms_um, self.calibrate_cv_rms_um
-            )
-        })
+        if !self.not_worse() {
+            Some(format!(
+                "the refined model predicts held-out data worse than plain calibration (blocked cross-validated RMS {:.4} um against {:.4} um over {} folds): use `cpm calibrate`",
+                self.refined_cv_rms_um, self.calibrate_cv_rms_um, self.folds
+            ))
+        } else if self.within_uncertainty {
+            Some(format!(
+                "the refined model predicts held-out data better than plain calibration only within the uncertainty of the difference (blocked cross-validated RMS {:.4} um against {:.4} um over {} folds): the data do not show that its effects carry to another session; use `cpm calibrate`",
+                self.refined_cv_rms_um, self.calibrate_cv_rms_um, self.folds
+            ))
+        } else {
+            None
+        }
     }
 }
 
@@ -878,8 +919,28 @@ fn refine_uncancelled(
             prior_noise_um: c.sigma_estimated.then_some(c.sigma_um),
             ..options.identify.clone()
         };
-        r.against_calibrate.calibrate_cv_rms_um =
-            cross_validated_rms(model, campaign, &o, options.folds, &c.minimum_norm_um)?;
+        if r.steps.is_empty() {
+            // Holds alone, each judged clearly better on the rounds' folds: plain calibration
+            // on the same folds.
+            r.against_calibrate.calibrate_cv_rms_um = cross_validated_rms(
+                model,
+                campaign,
+                &o,
+                r.against_calibrate.folds,
+                &c.minimum_norm_um,
+            )?;
+        } else {
+            // The refined model holds what plain calibration fits: never unchanged.
+            r.against_calibrate = against_calibrate_on(
+                (model, &c, &o),
+                &r.model,
+                &r.calibration,
+                false,
+                campaign,
+                options,
+                r.against_calibrate.folds,
+            )?;
+        }
     }
     r.held_groups = held.identify.tolerances.hold.clone();
     r.hold_trials = hold_trials;
@@ -966,21 +1027,29 @@ fn refine_effects(
         identify(&current, full, &opts)?
     };
     // Plain calibration against the refined model on the whole campaign, as a user's next
-    // session would judge them (the rounds above scored the campaign without its outliers).
-    let against_calibrate = if outliers_before.is_empty() {
+    // session would judge them (the rounds above scored the campaign without its outliers, and
+    // perhaps on fewer blocks than the guard's).
+    let against_calibrate = if outliers_before.is_empty() && steps.is_empty() {
         AgainstCalibrate {
             calibrate_cv_rms_um: initial_cv,
             refined_cv_rms_um: cv,
+            folds: cv_folds(full, options.folds).count,
+            within_uncertainty: false,
         }
     } else {
+        let folds = if steps.is_empty() {
+            cv_folds(full, options.folds).count
+        } else {
+            guard_folds(full, options.folds).count
+        };
         against_calibrate_on(
-            model,
-            &first,
+            (model, &first, &cv_options(options, &first)),
             &current,
             &cal,
             steps.is_empty(),
             full,
             options,
+            folds,
         )?
     };
     Ok(Refinement {
@@ -1440,37 +1509,44 @@ fn unexplained_structure(
     u
 }
 
-/// Plain calibration (`model`, its fit `first`) against the refined model (`current`, its
-/// fit `cal`; the same when no step was taken) cross-validated on the whole campaign `full`.
+/// Plain calibration (`plain`: its model, its fit and the options of its folds' fits)
+/// against the refined model (`current`, its fit `cal`; the same when `unchanged`)
+/// cross-validated on the whole campaign `full` over `folds` ([`guard_folds`] once an effect
+/// was added, else the rounds' own).
 fn against_calibrate_on(
-    model: &MeasurementModel,
-    first: &Calibration,
+    plain: (&MeasurementModel, &Calibration, &IdentifyOptions),
     current: &MeasurementModel,
     cal: &Calibration,
-    no_steps: bool,
+    unchanged: bool,
     full: &Campaign,
     options: &RefineOptions,
+    folds: usize,
 ) -> Result<AgainstCalibrate, CalibError> {
-    let calibrate_cv_rms_um = cross_validated_rms(
-        model,
+    let (model, first, first_options) = plain;
+    let before = cross_validated_errors(model, full, first_options, folds, &first.minimum_norm_um)?;
+    if unchanged {
+        return Ok(AgainstCalibrate {
+            calibrate_cv_rms_um: before.rms(),
+            refined_cv_rms_um: before.rms(),
+            folds,
+            within_uncertainty: false,
+        });
+    }
+    let after = cross_validated_errors(
+        current,
         full,
-        &cv_options(options, first),
-        options.folds,
-        &first.minimum_norm_um,
+        &cv_options(options, cal),
+        folds,
+        &cal.minimum_norm_um,
     )?;
+    // Holds alone were each judged clearly better already, on the rounds' folds; an added
+    // effect must show it again here, on the guard's.
+    let effects_added = current.effects.len() > model.effects.len();
     Ok(AgainstCalibrate {
-        calibrate_cv_rms_um,
-        refined_cv_rms_um: if no_steps {
-            calibrate_cv_rms_um
-        } else {
-            cross_validated_rms(
-                current,
-                full,
-                &cv_options(options, cal),
-                options.folds,
-                &cal.minimum_norm_um,
-            )?
-        },
+        calibrate_cv_rms_um: before.rms(),
+        refined_cv_rms_um: after.rms(),
+        folds,
+        within_uncertainty: effects_added && !before.clearly_worse_than(&after),
     })
 }
 
@@ -1651,6 +1727,8 @@ mod tests {
         let worse = AgainstCalibrate {
             calibrate_cv_rms_um: 378.0,
             refined_cv_rms_um: 3330.0,
+            folds: 5,
+            within_uncertainty: false,
         };
         assert!(!worse.not_worse());
         let why = worse.refusal().unwrap();
@@ -1658,12 +1736,27 @@ mod tests {
         let better = AgainstCalibrate {
             calibrate_cv_rms_um: 378.0,
             refined_cv_rms_um: 377.0,
+            folds: 5,
+            within_uncertainty: false,
         };
         assert!(better.not_worse() && better.refusal().is_none());
+        // Not worse, but better only within the uncertainty of the difference: refused too.
+        let unclear = AgainstCalibrate {
+            within_uncertainty: true,
+            folds: 10,
+            ..better
+        };
+        let why = unclear.refusal().unwrap();
+        assert!(
+            why.contains("only within the uncertainty") && why.contains("over 10 folds"),
+            "{why}"
+        );
         // Rounding between two fits of the same model is not "worse".
         let same = AgainstCalibrate {
             calibrate_cv_rms_um: 1.0,
             refined_cv_rms_um: 1.0 + 1e-12,
+            folds: 5,
+            within_uncertainty: false,
         };
         assert!(same.not_worse());
     }
