@@ -146,6 +146,15 @@ fn native_residuals(
 ) -> (Vec<f64>, Vec<u8>, Vec<String>) {
     use cpm_calib::noise::{measured_minus_predicted, Kind};
     let native = measured_minus_predicted(campaign, cal.sigma_ref_um, &cal.residuals_um);
+    if campaign.pose_measurements.is_empty()
+        && campaign.point_measurements.is_empty()
+        && campaign.tilt_measurements.is_empty()
+        && campaign.instrument_measurements.is_empty()
+    {
+        // Gauge readings alone (10^6 of them on the hot path): all in um, no kind to look up.
+        let n = native.len();
+        return (native, vec![0; n], vec!["um".to_string()]);
+    }
     let mut units: Vec<String> = Vec::new();
     let mut by_kind: std::collections::BTreeMap<Kind, u8> = std::collections::BTreeMap::new();
     let codes = campaign
