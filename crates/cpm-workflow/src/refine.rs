@@ -274,7 +274,15 @@ fn refine_job(
     let campaign = &inputs.merged.campaign;
     // Never worse than plain calibration on data the fits did not see: otherwise an error,
     // and nothing written.
-    if let Some(why) = r.against_calibrate.refusal() {
+    if r.against_calibrate.refusal(None).is_some() {
+        // Its figures in sigma when the residual mixes kinds weighed differently.
+        let kinds = crate::calib::noise::by_kind(&r.model, campaign, &r.calibration);
+        let weighted =
+            crate::calib::noise::residual_is_weighted(&kinds).then_some(r.calibration.sigma_um);
+        let why = r
+            .against_calibrate
+            .refusal(weighted)
+            .expect("refused above");
         return Err(trouble(format!("{why}; nothing was written")));
     }
     progress.stage("writing the results");

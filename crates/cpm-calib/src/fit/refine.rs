@@ -371,17 +371,29 @@ impl AgainstCalibrate {
     }
 
     /// The refusal to state when the refined model is worse, or better only within the
-    /// uncertainty (`None` when it is clearly better, or refine changed nothing).
-    pub fn refusal(&self) -> Option<String> {
+    /// uncertainty (`None` when it is clearly better, or refine changed nothing). With
+    /// `weighted_scale_um` (the final fit's noise scale when its residual mixes kinds weighed
+    /// differently) the figures are said weighted, in sigma, never in um.
+    pub fn refusal(&self, weighted_scale_um: Option<f64>) -> Option<String> {
+        let figures = match weighted_scale_um.filter(|s| *s > 0.0) {
+            Some(s) => format!(
+                "blocked cross-validated RMS {:.4} against {:.4}, weighted, in sigma, over {} folds",
+                self.refined_cv_rms_um / s,
+                self.calibrate_cv_rms_um / s,
+                self.folds
+            ),
+            None => format!(
+                "blocked cross-validated RMS {:.4} um against {:.4} um over {} folds",
+                self.refined_cv_rms_um, self.calibrate_cv_rms_um, self.folds
+            ),
+        };
         if !self.not_worse() {
             Some(format!(
-                "the refined model predicts held-out data worse than plain calibration (blocked cross-validated RMS {:.4} um against {:.4} um over {} folds): use `cpm calibrate`",
-                self.refined_cv_rms_um, self.calibrate_cv_rms_um, self.folds
+                "the refined model predicts held-out data worse than plain calibration ({figures}): use `cpm calibrate`"
             ))
         } else if self.within_uncertainty {
             Some(format!(
-                "the refined model predicts held-out data better than plain calibration only within the uncertainty of the difference (blocked cross-validated RMS {:.4} um against {:.4} um over {} folds): the data do not show that its effects carry to another session; use `cpm calibrate`",
-                self.refined_cv_rms_um, self.calibrate_cv_rms_um, self.folds
+                "the refined model predicts held-out data better than plain calibration only within the uncertainty of the difference ({figures}): the data do not show that its effects carry to another session; use `cpm calibrate`"
             ))
         } else {
             None
@@ -1731,7 +1743,7 @@ mod tests {
             within_uncertainty: false,
         };
         assert!(!worse.not_worse());
-        let why = worse.refusal().unwrap();
+        let why = worse.refusal(None).unwrap();
         assert!(why.contains("3330.0000 um against 378.0000 um"), "{why}");
         let better = AgainstCalibrate {
             calibrate_cv_rms_um: 378.0,
@@ -1739,16 +1751,22 @@ mod tests {
             folds: 5,
             within_uncertainty: false,
         };
-        assert!(better.not_worse() && better.refusal().is_none());
+        assert!(better.not_worse() && better.refusal(None).is_none());
         // Not worse, but better only within the uncertainty of the difference: refused too.
         let unclear = AgainstCalibrate {
             within_uncertainty: true,
             folds: 10,
             ..better
         };
-        let why = unclear.refusal().unwrap();
+        let why = unclear.refusal(None).unwrap();
         assert!(
             why.contains("only within the uncertainty") && why.contains("over 10 folds"),
+            "{why}"
+        );
+        // A weighted residual (angles beside lengths): in sigma, never in um.
+        let why = worse.refusal(Some(2.0)).unwrap();
+        assert!(
+            why.contains("1665.0000 against 189.0000, weighted, in sigma") && !why.contains(" um"),
             "{why}"
         );
         // Rounding between two fits of the same model is not "worse".
