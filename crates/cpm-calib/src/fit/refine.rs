@@ -345,18 +345,17 @@ pub struct AgainstCalibrate {
 /// campaign has fewer poses (then one pose per fold).
 pub const GUARD_MIN_FOLDS: usize = 10;
 
-/// The folds the final guard scores on: the rounds' own when they leave out sessions or
-/// positions, or are blocks at least [`GUARD_MIN_FOLDS`] many; else that many blocks (at most
-/// one per pose).
-fn guard_folds(campaign: &Campaign, folds: usize) -> Folds {
+/// How many folds the final guard scores on once an effect was added: as many as the rounds'
+/// own ([`cv_folds`] of the `folds` asked) when they leave out sessions or positions, or are at
+/// least [`GUARD_MIN_FOLDS`] blocks; else that many blocks (at most one per pose). The count
+/// is also what [`cv_folds`] is asked for: blocks are as many as asked, and sessions or
+/// positions ignore it.
+fn guard_folds(campaign: &Campaign, folds: usize) -> usize {
     let own = cv_folds(campaign, folds);
     if own.kind != FoldKind::Blocks || own.count >= GUARD_MIN_FOLDS {
-        return own;
+        return own.count;
     }
-    cv_folds(
-        campaign,
-        GUARD_MIN_FOLDS.min(campaign.poses.len()).max(own.count),
-    )
+    GUARD_MIN_FOLDS.min(campaign.poses.len()).max(own.count)
 }
 
 impl AgainstCalibrate {
@@ -1041,19 +1040,19 @@ fn refine_effects(
     // Plain calibration against the refined model on the whole campaign, as a user's next
     // session would judge them (the rounds above scored the campaign without its outliers, and
     // perhaps on fewer blocks than the guard's).
+    let folds = if steps.is_empty() {
+        cv_folds(full, options.folds).count
+    } else {
+        guard_folds(full, options.folds)
+    };
     let against_calibrate = if outliers_before.is_empty() && steps.is_empty() {
         AgainstCalibrate {
             calibrate_cv_rms_um: initial_cv,
             refined_cv_rms_um: cv,
-            folds: cv_folds(full, options.folds).count,
+            folds,
             within_uncertainty: false,
         }
     } else {
-        let folds = if steps.is_empty() {
-            cv_folds(full, options.folds).count
-        } else {
-            guard_folds(full, options.folds).count
-        };
         against_calibrate_on(
             (model, &first, &cv_options(options, &first)),
             &current,
@@ -1522,9 +1521,11 @@ fn unexplained_structure(
 }
 
 /// Plain calibration (`plain`: its model, its fit and the options of its folds' fits)
-/// against the refined model (`current`, its fit `cal`; the same when `unchanged`)
-/// cross-validated on the whole campaign `full` over `folds` ([`guard_folds`] once an effect
-/// was added, else the rounds' own).
+/// against the refined model (`current`, its fit `cal`, with effects added; the same when
+/// `unchanged`) cross-validated on the whole campaign `full` over `folds` ([`guard_folds`]
+/// once an effect was added, else the rounds' own). Only an added effect can be
+/// `within_uncertainty`: holds alone were each judged clearly better already, and the
+/// callers judge them apart.
 fn against_calibrate_on(
     plain: (&MeasurementModel, &Calibration, &IdentifyOptions),
     current: &MeasurementModel,
@@ -1551,14 +1552,11 @@ fn against_calibrate_on(
         folds,
         &cal.minimum_norm_um,
     )?;
-    // Holds alone were each judged clearly better already, on the rounds' folds; an added
-    // effect must show it again here, on the guard's.
-    let effects_added = current.effects.len() > model.effects.len();
     Ok(AgainstCalibrate {
         calibrate_cv_rms_um: before.rms(),
         refined_cv_rms_um: after.rms(),
         folds,
-        within_uncertainty: effects_added && !before.clearly_worse_than(&after),
+        within_uncertainty: !before.clearly_worse_than(&after),
     })
 }
 
