@@ -20,9 +20,11 @@ command takes its robot as loaded. Pose arrays given as a plan (``plan=`` of
 job in memory too, named ``poses`` and read with the checks of a pose list file (an error's
 ``row`` is the row of the array). A ``truth=`` robot made from text, and the robots of a
 compensation check (``validate(None, ...)``, which reads no measurements: of ``data`` only
-the files are passed on), go as loaded. What still reaches a job as a file in a scratch
-directory: a robot or measurements made in memory given as an option other than these
-(the other options take paths); errors and reports name them by their names (and rows).
+the files are passed on), go as loaded. Nothing is written to a scratch folder: an option
+that takes a file (``truth=`` as a robot read from its file, ``sockets=``, ``commands=``,
+...) gets the path of one, and a robot or measurements held in memory only, given to such an
+option, is a :class:`cpm.UsageError` naming it. Errors and reports name the inputs by their
+names (and rows).
 """
 from __future__ import annotations
 
@@ -38,7 +40,7 @@ import numpy as np
 
 from . import _cpm
 from ._data import Measurements, _Info, _Source, _float_array, _real, as_measurements
-from ._robot import PathLike, Robot, Scratch
+from ._robot import PathLike, Robot
 from .errors import CpmError, InputError, UsageError, _in_keywords, _warn
 
 __all__ = [
@@ -117,13 +119,14 @@ def _row_of(e: InputError, arrays: set) -> InputError:
     return e
 
 
-def _value(key: str, value: Any, scratch: Scratch) -> Any:
+def _value(key: str, value: Any) -> Any:
     """One option's value as the job takes it by name (JSON): robots and measurements as
-    the paths of their files, paths as text, numpy numbers as numbers, lists as lists."""
+    the paths of their files (the ones a job takes in memory are not options), paths as text,
+    numpy numbers as numbers, lists as lists."""
     if isinstance(value, Robot):
-        return value._cli_path(scratch)
+        return value._option_path(key)
     if isinstance(value, Measurements):
-        return value._cli_paths(scratch)
+        return value._option_paths(key)
     if isinstance(value, os.PathLike):
         return os.fspath(value)
     if isinstance(value, np.bool_):
@@ -139,7 +142,7 @@ def _value(key: str, value: Any, scratch: Scratch) -> Any:
     if isinstance(value, (list, tuple, np.ndarray)):
         items: List[Any] = []
         for v in value:
-            v = _value(key, v, scratch)
+            v = _value(key, v)
             items += v if isinstance(v, list) else [v]
         return items
     return value
@@ -152,7 +155,7 @@ def _tolerance_value(v: Any) -> Any:
     return v if np.isfinite(v) else ("inf" if np.isinf(v) else "nan")
 
 
-def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
+def _by_name(options: Dict[str, Any]) -> str:
     """The options of a command by name, as JSON text for the job (None and False left
     out: the command's defaults)."""
     out: Dict[str, Any] = {}
@@ -171,7 +174,7 @@ def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
             value = "on"
         elif key in ("tolerance", "hold", "truth_effect", "data") and isinstance(value, str):
             value = [value]
-        value = _value(key, value, scratch)
+        value = _value(key, value)
         if key in out and isinstance(out[key], list) and isinstance(value, list):
             out[key] += value
         else:
@@ -179,7 +182,7 @@ def _by_name(scratch: Scratch, options: Dict[str, Any]) -> str:
     return json.dumps(out)
 
 
-def _job(command: str, scratch: Scratch, options: Dict[str, Any],
+def _job(command: str, options: Dict[str, Any],
          out: Optional[PathLike] = None, robot: Optional[Robot] = None,
          data: Optional[List[Any]] = None, reference: Optional[Robot] = None,
          poses: Optional[np.ndarray] = None, truth: Optional[Robot] = None) -> Dict[str, Any]:
@@ -190,7 +193,7 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
     1, outputs written) are :class:`cpm.CpmWarning`; errors name the Python keywords."""
     renamed = _renamed(options)
     try:
-        text = _by_name(scratch, options)
+        text = _by_name(options)
     except CpmError as e:
         raise _in_keywords(e, renamed) from None
     target = os.fspath(out) if out is not None else None
@@ -210,9 +213,9 @@ def _job(command: str, scratch: Scratch, options: Dict[str, Any],
     try:
         d = dict(_cpm.job(command, text, target, out is not None, **held))
     except InputError as e:
-        raise _row_of(scratch.fix(e), arrays) from None
+        raise _row_of(e, arrays) from None
     except CpmError as e:
-        raise _in_keywords(scratch.fix(e), renamed) from None
+        raise _in_keywords(e, renamed) from None
     _said(d, renamed)
     d["files"] = dict(d["files"])
     return d
@@ -495,8 +498,7 @@ def calibrate(
     renamed = _renamed(given)
     target = os.fspath(out) if out is not None else None
     try:
-        with Scratch() as scratch:
-            opts = _by_name(scratch, given)
+        opts = _by_name(given)
         d = dict(_cpm.calibrate_memory(r._h, sources, opts, target, out is not None))
     except InputError as e:
         raise _row_of(e, arrays) from None
@@ -543,8 +545,7 @@ def refine(robot: Union[Robot, PathLike], data: Any, *, out: Optional[PathLike] 
     (options by name: ``effects``, ``candidates``, ``max_steps``, ``alpha``, ``folds``,
     ``pose_map_degree``, ``sigma_um``, ``robust``, ...)."""
     r = _robot(robot)
-    with Scratch() as scratch:
-        d = _job("refine", scratch, dict(options), out, robot=r, data=_data(data, r))
+    d = _job("refine", dict(options), out, robot=r, data=_data(data, r))
     return RefineResult(d["files"], d["trouble"],
                         None if out is None else Path(os.path.abspath(out)))
 
@@ -594,20 +595,18 @@ def validate(robot: Optional[Union[Robot, PathLike]],
     (``[calibration] calibrated_from``)."""
     ref = None if reference is None else _robot(reference)
     rob = None if robot is None else _robot(robot)
-    with Scratch() as scratch:
-        reader = rob if rob is not None else ref
-        m = None if data is None else _data(data, reader)
-        if rob is None:
-            # A compensation checked on a simulated machine: the reference and the truth
-            # as loaded; of the measurements (it reads none) only their files.
-            opts: Dict[str, Any] = dict(data=_files_of(m))
-            opts.update(options)
-            truth = _held_truth(opts)
-            d = _job("validate", scratch, opts, out, reference=ref, truth=truth)
-        else:
-            d = _job("validate", scratch, dict(options), out, robot=rob, data=m, reference=ref)
-        doc = scratch.named(json.loads(d["summary"]))
-    return ValidationResult(doc, d["files"])
+    reader = rob if rob is not None else ref
+    m = None if data is None else _data(data, reader)
+    if rob is None:
+        # A compensation checked on a simulated machine: the reference and the truth as
+        # loaded; of the measurements (it reads none) only their files.
+        opts: Dict[str, Any] = dict(data=_files_of(m))
+        opts.update(options)
+        truth = _held_truth(opts)
+        d = _job("validate", opts, out, reference=ref, truth=truth)
+    else:
+        d = _job("validate", dict(options), out, robot=rob, data=m, reference=ref)
+    return ValidationResult(json.loads(d["summary"]), d["files"])
 
 
 class CompensationResult:
@@ -639,11 +638,10 @@ def compensate(robot: Union[Robot, PathLike], poses: Any, *, out: Optional[PathL
     ``temperature_c``, ``from_home``."""
     r = _robot(robot)
     targets = _pose_list(poses)
-    with Scratch() as scratch:
-        if isinstance(targets, str):
-            d = _job("compensate", scratch, dict(poses=targets, **options), out, robot=r)
-        else:
-            d = _job("compensate", scratch, dict(options), out, robot=r, poses=targets)
+    if isinstance(targets, str):
+        d = _job("compensate", dict(poses=targets, **options), out, robot=r)
+    else:
+        d = _job("compensate", dict(options), out, robot=r, poses=targets)
     return CompensationResult(d["text"], json.loads(d["summary"]), r.num_links)
 
 
@@ -683,8 +681,7 @@ def design(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     ``readings``, ``base_sockets``, ``platform_sockets``, ``criterion``, ``stroke_mm``, ...).
     Without ``out`` the design lives in memory (``result.robot`` is read from its text)."""
     r = _robot(robot)
-    with Scratch() as scratch:
-        d = _job("design", scratch, dict(options), out, robot=r)
+    d = _job("design", dict(options), out, robot=r)
     return DesignResult(d["files"], Path(out) if out is not None else None)
 
 
@@ -698,8 +695,7 @@ def simulate(robot: Union[Robot, PathLike], *, out: Optional[PathLike] = None,
     r = _robot(robot)
     plan = _plan(options)
     truth = _held_truth(options)
-    with Scratch() as scratch:
-        d = _job("simulate", scratch, dict(options), out, robot=r, poses=plan, truth=truth)
+    d = _job("simulate", dict(options), out, robot=r, poses=plan, truth=truth)
     if out is not None:
         from ._data import read_measurements
 
@@ -716,10 +712,9 @@ def identifiability(robot: Union[Robot, PathLike], data: Any = None,
     ``random``)."""
     r = _robot(robot)
     plan = _plan(options)
-    with Scratch() as scratch:
-        m = None if data is None else _data(data, r)
-        d = _job("identifiability", scratch, dict(options), robot=r, data=m, poses=plan)
-        return scratch.named(json.loads(d["summary"]))
+    m = None if data is None else _data(data, r)
+    d = _job("identifiability", dict(options), robot=r, data=m, poses=plan)
+    return json.loads(d["summary"])
 
 
 def export(robot: Union[Robot, PathLike], format: str = "linuxcnc", *,
@@ -727,6 +722,5 @@ def export(robot: Union[Robot, PathLike], format: str = "linuxcnc", *,
     """``cpm export``: the joints for a machine controller (LinuxCNC genhexkins HAL text),
     written to ``out`` too when given (options ``units``, ``ini``)."""
     r = _robot(robot)
-    with Scratch() as scratch:
-        d = _job("export", scratch, dict(format=format, **options), out, robot=r)
+    d = _job("export", dict(format=format, **options), out, robot=r)
     return d["text"]

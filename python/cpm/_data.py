@@ -14,7 +14,7 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Union
 import numpy as np
 
 from . import _cpm
-from ._robot import PathLike, Robot, Scratch
+from ._robot import PathLike, Robot
 from .errors import InputError, UsageError, _warn
 
 __all__ = [
@@ -163,16 +163,14 @@ class Measurements:
                 "yaw_deg": p[:, 5], "length_mm": i["lengths_mm"]}))
         return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
-    def _cli_paths(self, scratch: Scratch) -> List[str]:
-        out = []
-        for s in self.sources:
-            if s.path is not None:
-                out.append(s.path)
-            else:
-                base = s.name if s.name.endswith(".csv") else s.name + ".csv"
-                text = s.text if s.text is not None else s.info["handle"].csv()
-                out.append(scratch.write(base, text, s.name, arrays=s.arrays))
-        return out
+    def _option_paths(self, key: str) -> List[str]:
+        """The files these measurements were read from, for an option that takes paths
+        (measurements the job takes in memory go as ``data``)."""
+        held = [s.name for s in self.sources if s.path is None]
+        if held:
+            raise UsageError(f"{key}: the measurements {held} are held in memory only; this "
+                             "option takes the paths of measurement files")
+        return [s.path for s in self.sources if s.path is not None]
 
     def __repr__(self) -> str:
         sim = ", SIMULATED" if self.simulated else ""

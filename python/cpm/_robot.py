@@ -150,84 +150,17 @@ class Robot:
                 pass
         return None
 
-    def _cli_path(self, scratch: "Scratch") -> str:
-        """A file holding this description for a command: the file it was read from when
-        that still holds the same text, else a copy in the scratch directory."""
+    def _option_path(self, key: str) -> str:
+        """The file holding this description, for an option that takes a robot's path (a
+        robot the job takes in memory goes as ``robot``, ``reference`` or ``truth``)."""
+        from .errors import UsageError
+
         p = self._file()
-        if p is not None:
-            return p
-        base = Path(self.file).name or "robot.toml"
-        if not base.endswith(".toml"):
-            base += ".toml"
-        return scratch.write(base, self._h.text, self.file)
+        if p is None:
+            raise UsageError(f"{key}: the robot '{self.file}' is held in memory only; this "
+                             "option takes the path of a robot file")
+        return p
 
     def __repr__(self) -> str:
         return (f"Robot({self.file!r}, {self.num_links} links, "
                 f"sensors {self.sensor_names})")
-
-
-class Scratch:
-    """A scratch directory for the files a command reads or writes, and the names the
-    files stand for (to put back in error messages)."""
-
-    def __init__(self) -> None:
-        import tempfile
-
-        self._dir = tempfile.TemporaryDirectory(prefix="cpm-py-")
-        self.path = Path(self._dir.name)
-        self.names: Dict[str, str] = {}
-        self.array_sources: set = set()
-
-    def write(self, base: str, text: str, stands_for: str, arrays: bool = False) -> str:
-        safe = "".join(c if c.isalnum() or c in "._-" else "_" for c in base) or "file"
-        target = self.path / safe
-        k = 1
-        while target.exists():
-            k += 1
-            target = self.path / f"{k}_{safe}"
-        target.write_text(text, encoding="utf-8")
-        self.names[os.fspath(target)] = stands_for
-        if arrays:
-            self.array_sources.add(stands_for)
-        return os.fspath(target)
-
-    def named(self, value: Any) -> Any:
-        """``value`` (parsed JSON) with every scratch file's path replaced by the name it
-        stands for (a command's report names its inputs)."""
-        if isinstance(value, str):
-            return self.names.get(value, value)
-        if isinstance(value, list):
-            return [self.named(v) for v in value]
-        if isinstance(value, dict):
-            return {k: self.named(v) for k, v in value.items()}
-        return value
-
-    def fix(self, err: BaseException) -> BaseException:
-        """Puts the names the scratch files stand for back into an error."""
-        from .errors import InputError
-
-        msg = str(err)
-        for tmp, name in self.names.items():
-            msg = msg.replace(tmp, name)
-        msg = msg.replace(os.fspath(self.path) + os.sep, "")
-        if isinstance(err, InputError):
-            file = self.names.get(err.file or "", err.file)
-            row = err.row
-            if file in self.array_sources and err.line is not None and err.line >= 2:
-                row = err.line - 2
-            new = InputError(msg, file, err.line, err.field, row)
-            return new
-        try:
-            new_err = type(err)(msg)
-        except Exception:  # pragma: no cover - an exception type with another signature
-            return err
-        return new_err
-
-    def cleanup(self) -> None:
-        self._dir.cleanup()
-
-    def __enter__(self) -> "Scratch":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.cleanup()

@@ -44,3 +44,16 @@ def in_root(monkeypatch):
     """Runs the test in the repository root (files named as the Rust tests name them)."""
     monkeypatch.chdir(ROOT)
     return ROOT
+
+
+def no_temp_folder(mp: pytest.MonkeyPatch) -> None:
+    """Inside ``mp``'s context, any temporary file or folder made from Python (the scratch
+    folders ``cpm`` once wrote robots and measurements to) fails the test."""
+    import tempfile
+
+    def made(*args, **kwargs):
+        raise AssertionError("a temporary file or folder was made")
+
+    for name in ("mkdtemp", "mkstemp", "TemporaryDirectory", "NamedTemporaryFile",
+                 "TemporaryFile", "SpooledTemporaryFile"):
+        mp.setattr(tempfile, name, made)

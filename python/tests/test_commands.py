@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import cpm
+from conftest import no_temp_folder
 
 HEX = "examples/hexapod_66.toml"
 TRUTH = "examples/hexapod_66_truth.toml"
@@ -143,7 +144,6 @@ def _pose_csv(path, poses):
 def test_pose_arrays_go_to_the_jobs_in_memory(in_root, tmp_path, monkeypatch):
     """Issue 36: a plan (simulate, identifiability) and compensate's targets given as arrays
     reach the job in memory (no scratch file is written) and give what their file gives."""
-    from cpm import _robot
 
     poses = cpm.simulate(HEX, random=8, truth=TRUTH, noise="none", seed=2).poses
     f = _pose_csv(tmp_path / "plan.csv", poses)
@@ -152,11 +152,8 @@ def test_pose_arrays_go_to_the_jobs_in_memory(in_root, tmp_path, monkeypatch):
                cpm.identifiability(HEX, plan=f),
                cpm.compensate(TRUTH, f, from_home=True))
 
-    def no_scratch(*args, **kwargs):
-        raise AssertionError("a scratch file was written")
-
     with monkeypatch.context() as mp:
-        mp.setattr(_robot.Scratch, "write", no_scratch)
+        no_temp_folder(mp)
         s = cpm.simulate(text_robot, plan=poses, truth=TRUTH, noise="gaussian:1", seed=3)
         i = cpm.identifiability(text_robot, plan=poses)
         c = cpm.compensate(TRUTH, poses, from_home=True)
@@ -167,6 +164,26 @@ def test_pose_arrays_go_to_the_jobs_in_memory(in_root, tmp_path, monkeypatch):
     assert c.csv == on_file[2].csv.replace(str(f), "poses")
     assert c_robot.csv == c.csv
     np.testing.assert_array_equal(c.readings, on_file[2].readings)
+
+
+def test_nothing_held_in_memory_is_written_for_an_option(in_root, monkeypatch):
+    """Issue 59: no scratch folder. A robot or measurements held in memory only, given to an
+    option that takes a file's path, is a UsageError naming the option (nothing is written
+    to stand for them); the same robot read from its file goes by its path."""
+    text_robot = cpm.Robot.from_text(open(HEX).read(), "hexapod from text")
+    m = cpm.simulate(HEX, random=6, truth=TRUTH, noise="none", seed=2)
+    with monkeypatch.context() as mp:
+        no_temp_folder(mp)
+        with pytest.raises(cpm.UsageError, match="sockets: the robot 'hexapod from text' "
+                                                 "is held in memory only"):
+            cpm.design(HEX, sockets=text_robot)
+        with pytest.raises(cpm.UsageError, match="commands: the measurements "
+                                                 r"\['simulated.csv'\] are held in memory"):
+            cpm.validate(None, HEX, commands=m, truth=TRUTH)
+        # A robot read from its file goes by its path: the file's own error, not ours.
+        with pytest.raises(cpm.CpmError) as e:
+            cpm.design(HEX, sockets=cpm.Robot.from_toml(HEX))
+        assert "held in memory" not in str(e.value)
 
 
 def test_a_bad_pose_array_names_its_row(in_root, tmp_path):
@@ -194,7 +211,6 @@ def test_robots_from_text_go_to_simulate_and_the_compensation_check_in_memory(
     """Issue 36: a ``truth=`` made from text (simulate, a compensation check) and the
     reference of a compensation check reach the job as loaded (no scratch file is written),
     with the results of their files, named by their names."""
-    from cpm import _robot
 
     truth = cpm.Robot.from_text(open(TRUTH).read(), "truth from text")
     ref = cpm.Robot.from_text(open(HEX).read(), "reference from text")
@@ -204,11 +220,8 @@ def test_robots_from_text_go_to_simulate_and_the_compensation_check_in_memory(
                cpm.validate(None, HEX, commands=commands, truth=TRUTH))
     fit = cpm.simulate(HEX, random=6, truth=TRUTH, noise="none", seed=1)
 
-    def no_scratch(*args, **kwargs):
-        raise AssertionError("a scratch file was written")
-
     with monkeypatch.context() as mp:
-        mp.setattr(_robot.Scratch, "write", no_scratch)
+        no_temp_folder(mp)
         s = cpm.simulate(HEX, random=6, truth=truth, noise="gaussian:1", seed=3)
         v = cpm.validate(None, ref, fit, commands=commands, truth=truth)
     np.testing.assert_array_equal(s.lengths_mm, on_file[0].lengths_mm)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import cpm
-from conftest import CUBE, HEXAPOD, HEXAPOD_READINGS, MALFORMED
+from conftest import CUBE, HEXAPOD, HEXAPOD_READINGS, MALFORMED, no_temp_folder
 
 
 @pytest.fixture(scope="module")
@@ -303,15 +303,11 @@ def test_arrays_and_file_agree_to_1e_12(hexapod, readings, monkeypatch):
     poses, sensors, lengths, labels = _arrays(readings)
     m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels,
                            simulated=True)
-    from cpm import _robot
-
-    def no_scratch(*args, **kwargs):
-        raise AssertionError("a scratch file was written")
 
     for effects in (None, ["link_offset"], ["sensor_offset"]):
         a = cpm.calibrate(hexapod, HEXAPOD_READINGS, effects=effects)
         with monkeypatch.context() as mp:
-            mp.setattr(_robot.Scratch, "write", no_scratch)
+            no_temp_folder(mp)
             b = cpm.calibrate(hexapod, m, effects=effects)
         worst = _max_difference(a, b)
         print(f"effects {effects}: largest difference file vs arrays {worst:.3g}")
@@ -351,14 +347,10 @@ def test_refine_and_identifiability_take_arrays_in_memory(hexapod, readings, mon
     m = cpm.gauge_readings(hexapod, poses, sensors, lengths, pose_labels=labels,
                            simulated=True)
     text_robot = cpm.Robot.from_text(HEXAPOD.read_text(), "hexapod from text")
-    from cpm import _robot
-
-    def no_scratch(*args, **kwargs):
-        raise AssertionError("a scratch file was written")
 
     a = cpm.identifiability(HEXAPOD, HEXAPOD_READINGS)
     with monkeypatch.context() as mp:
-        mp.setattr(_robot.Scratch, "write", no_scratch)
+        no_temp_folder(mp)
         b = cpm.identifiability(text_robot, m)
         r = cpm.refine(text_robot, m, max_steps=1)
     np.testing.assert_allclose(b["singular_values"],
@@ -390,13 +382,9 @@ def test_two_tracker_sets_from_arrays_are_registered_together(hexapod, tmp_path,
         arrays.append(cpm.tracker_measurements(hexapod, readings, pose, simulated=True))
         assert arrays[-1].sources[0].text is None
     a = cpm.calibrate(hexapod, [str(f) for f in files])
-    from cpm import _robot
-
-    def no_scratch(*args, **kwargs):
-        raise AssertionError("a scratch file was written")
 
     with monkeypatch.context() as mp:
-        mp.setattr(_robot.Scratch, "write", no_scratch)
+        no_temp_folder(mp)
         b = cpm.calibrate(hexapod, arrays)
     assert len(a.registration["sessions"]) == 2 and len(b.registration["sessions"]) == 2
     np.testing.assert_allclose(b.estimates_um, a.estimates_um, rtol=1e-9, atol=1e-9,
@@ -420,13 +408,9 @@ def test_validate_takes_robots_and_arrays_in_memory(hexapod, tmp_path, monkeypat
                            name="later readings")
     text_robot = cal.calibrated_robot
     assert text_robot.path is None
-    from cpm import _robot
-
-    def no_scratch(*args, **kwargs):
-        raise AssertionError("a scratch file was written")
 
     with monkeypatch.context() as mp:
-        mp.setattr(_robot.Scratch, "write", no_scratch)
+        no_temp_folder(mp)
         in_memory = cpm.validate(text_robot, hexapod, m)
     assert in_memory.calibrated_rms_um == from_files.calibrated_rms_um
     assert in_memory.reference_rms_um == from_files.reference_rms_um
