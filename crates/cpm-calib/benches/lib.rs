@@ -49,6 +49,24 @@ fn prediction(c: &mut Criterion) {
     });
 }
 
+/// The solver's Jacobian of the measurement model ([`cpm_lm::DenseJacobian`] for
+/// [`Predictions`](cpm_calib::model::Predictions)): the rows written into the solver's faer
+/// storage, at the designed campaign (2000 readings x 36 parameters).
+fn solver_jacobian(c: &mut Criterion) {
+    use cpm_lm::DenseJacobian;
+    let (model, data) = designed(125);
+    let mut problem = cpm_calib::model::Predictions::new(&model, &data).expect("prepare");
+    let e = InstallationErrors::paper_table2().to_vec_um();
+    let mut jac = cpm_lm::faer::Mat::<f64>::zeros(data.len(), model.num_params());
+    c.bench_function("solver_jacobian/2000_readings", |b| {
+        b.iter(|| {
+            problem
+                .jacobian(black_box(&e), jac.as_mut())
+                .expect("jacobian")
+        })
+    });
+}
+
 fn identification(c: &mut Criterion) {
     let (model, data) = paper();
     let opts = IdentifyOptions::default();
@@ -228,7 +246,8 @@ impl levenberg_marquardt::LeastSquaresProblem<f64, nalgebra::Dyn, nalgebra::Dyn>
 /// The identification's fit (from the nominal geometry) solved by cpm-lm and by the
 /// `levenberg-marquardt` crate (default options each), on the same residual and Jacobian
 /// code ([`Fit`]): the paper's 36 readings and the designed campaign's 2000. Both solvers
-/// must reach the same cost (relative 1e-6), and cpm-lm the cost [`identify`] reports.
+/// must reach the same cost (relative 1e-6). [`identify`]'s cost is printed beside them, not
+/// compared: its fit weighs a prior and sets outliers aside, which this bare fit does not.
 fn peers(c: &mut Criterion) {
     use levenberg_marquardt::LevenbergMarquardt;
     let (paper_model, paper_data) = paper();
@@ -278,12 +297,6 @@ fn peers(c: &mut Criterion) {
             ours.final_cost,
             theirs.objective_function
         );
-        assert!(
-            close(ours.final_cost, reference.final_cost),
-            "{label}: cpm-lm {} vs identify {}",
-            ours.final_cost,
-            reference.final_cost
-        );
         let mut group = c.benchmark_group(format!("peer/{label}"));
         group.sample_size(samples);
         group.bench_function("cpm-lm", |b| b.iter(|| black_box(cpm(&mut fit))));
@@ -292,5 +305,12 @@ fn peers(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, prediction, identification, formulations, peers);
+criterion_group!(
+    benches,
+    prediction,
+    solver_jacobian,
+    identification,
+    formulations,
+    peers
+);
 criterion_main!(benches);

@@ -234,3 +234,42 @@ fn link_offsets_from_tilts_alone_do_not_run_off() {
     assert!(largest_mm < 1.0, "{largest_mm} mm");
     assert!(cal.solver.was_successful());
 }
+
+/// The solver's Jacobian ([`Predictions`], written row by row straight into the solver's faer
+/// storage) is the model's ([`predict`] into a nalgebra matrix), bit for bit, and every entry
+/// of it is written (the solver's storage starts as NaN): for inclinometer angles and for
+/// gauge readings.
+#[test]
+fn the_solver_jacobian_is_the_models_bit_for_bit() {
+    let same = |m: &MeasurementModel, c: &Campaign, x: &[f64]| {
+        let prepared = Prepared::new(m, c).unwrap();
+        let mut j = nalgebra::DMatrix::zeros(c.len(), m.num_params());
+        predict(m, &prepared, c, x, Some(&mut j)).unwrap();
+        let mut problem = Predictions::new(m, c).unwrap();
+        let mut f = cpm_lm::faer::Mat::<f64>::from_fn(c.len(), m.num_params(), |_, _| f64::NAN);
+        cpm_lm::DenseJacobian::jacobian(&mut problem, x, f.as_mut()).unwrap();
+        for (r, k) in (0..c.len()).flat_map(|r| (0..m.num_params()).map(move |k| (r, k))) {
+            assert_eq!(
+                f[(r, k)].to_bits(),
+                j[(r, k)].to_bits(),
+                "row {r}, parameter {k}"
+            );
+        }
+        assert!(j.iter().any(|v| *v != 0.0));
+    };
+    let m = model(&[Effect::LinkOffset]);
+    same(&m, &skeleton(&m, 12), &truth(&m));
+    let mut gauges = MeasurementModel::new(JointTable::paper_cubic());
+    gauges.nominal.sensors = cpm_calib::paper::designed_sensors();
+    gauges.effects = vec![Effect::SensorOffset, Effect::LinkScale];
+    let poses = random_workspace_poses(&gauges.nominal, 10, 60.0, 10.0, 3.0, 4);
+    let c = Plan {
+        poses,
+        sensors: (0..16).collect(),
+    }
+    .skeleton();
+    let x: Vec<f64> = (0..gauges.num_params())
+        .map(|k| 20.0 * (k as f64 * 0.7).sin())
+        .collect();
+    same(&gauges, &c, &x);
+}

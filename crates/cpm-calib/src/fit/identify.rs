@@ -460,13 +460,28 @@ impl DenseJacobian for Subspace<'_> {
             return Ok(());
         }
         self.evaluate(x)?;
-        let reduced = &self.full_jac * &self.basis * 1e3;
-        for c in 0..reduced.ncols() {
-            for r in 0..reduced.nrows() {
-                jac[(r, c)] = reduced[(r, c)] * self.weights[r];
+        // The fit's directions' Jacobian, 1e3 J B, made by faer straight into the solver's
+        // storage (nalgebra's matrices viewed in place), then weighed row by row.
+        let (m, np, r) = (
+            self.full_jac.nrows(),
+            self.basis.nrows(),
+            self.basis.ncols(),
+        );
+        let full = faer::MatRef::from_column_major_slice(self.full_jac.as_slice(), m, np);
+        let basis = faer::MatRef::from_column_major_slice(self.basis.as_slice(), np, r);
+        faer::linalg::matmul::matmul(
+            jac.as_mut().subrows_mut(0, m),
+            faer::Accum::Replace,
+            full,
+            basis,
+            1e3,
+            faer::Par::Seq,
+        );
+        for c in 0..r {
+            for (row, w) in self.weights.iter().enumerate() {
+                jac[(row, c)] *= w;
             }
         }
-        let m = self.measured_mm.len();
         for (q, &(k, inv)) in self.prior_rows.iter().enumerate() {
             for c in 0..self.basis.ncols() {
                 jac[(m + q, c)] = self.prior_sigma * inv * self.basis[(k, c)];

@@ -346,13 +346,7 @@ impl<'a> Channels<'a> {
         sensor: &Sensor,
         si: usize,
         pose: &Pose,
-        mut row: nalgebra::MatrixViewMut<
-            f64,
-            nalgebra::U1,
-            nalgebra::Dyn,
-            nalgebra::U1,
-            nalgebra::Dyn,
-        >,
+        row: &mut [f64],
     ) -> Result<(), CalibError> {
         let g = cpm_kinematics::sensor_pose_gradient(sensor, pose);
         // The gradient with respect to the pose forward kinematics found.

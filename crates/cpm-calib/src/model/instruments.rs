@@ -93,6 +93,7 @@ use cpm_geometry::Pose;
 use nalgebra::{DMatrix, Vector3};
 
 use crate::model::effects::EffectInput;
+use crate::model::JacobianRows;
 
 mod tracker;
 
@@ -224,31 +225,39 @@ impl Bound<'_> {
 
     /// The measurement's Jacobian rows from `row0` (per unit of the parameters): the pose
     /// derivatives through `dx` (the reached pose's twist per parameter, 6 x np), the
-    /// nuisance derivatives in their blocks' columns.
+    /// nuisance derivatives in their blocks' columns; each row made in `row` (np values,
+    /// the caller's) and written whole into `jac`.
     pub fn rows(
         &self,
         input: &InstrumentInput,
         channel: usize,
         session: usize,
         dx: &DMatrix<f64>,
-        jac: &mut nalgebra::DMatrixViewMut<f64>,
+        jac: &mut dyn JacobianRows,
         row0: usize,
+        row: &mut [f64],
     ) {
-        let rows: Vec<Option<usize>> = (row0..row0 + self.instrument.num_values())
-            .map(Some)
-            .collect();
-        self.rows_at(input, channel, session, dx, jac, &rows);
+        let m = self.instrument.num_values();
+        let rows: [Option<usize>; 8] = std::array::from_fn(|a| (a < m).then_some(row0 + a));
+        if m <= rows.len() {
+            self.rows_at(input, channel, session, dx, jac, &rows[..m], row);
+        } else {
+            let rows: Vec<Option<usize>> = (row0..row0 + m).map(Some).collect();
+            self.rows_at(input, channel, session, dx, jac, &rows, row);
+        }
     }
 
-    /// [`rows`](Self::rows) with value `a` at row `rows[a]`, none where it was not measured.
+    /// [`rows`](Self::rows) with value `a` at row `at[a]`, none where it was not measured.
+    #[allow(clippy::too_many_arguments)]
     pub fn rows_at(
         &self,
         input: &InstrumentInput,
         channel: usize,
         session: usize,
         dx: &DMatrix<f64>,
-        jac: &mut nalgebra::DMatrixViewMut<f64>,
+        jac: &mut dyn JacobianRows,
         at: &[Option<usize>],
+        row: &mut [f64],
     ) {
         let m = self.instrument.num_values();
         let (p, q) = (
@@ -264,47 +273,42 @@ impl Bound<'_> {
             &mut d_pose,
             &mut d_nuisance,
         );
-        if m <= 5 {
-            // Row `a` of `d_pose * dx`, written straight into the Jacobian: a measurement of
-            // one to five values (an angle, a point), where a general product of such thin
-            // matrices spends its time in loop overhead. The sums run in the order of
-            // nalgebra's product for these sizes (column by column): the same bits.
-            for (a, r) in at.iter().enumerate() {
-                let Some(r) = *r else { continue };
+        let rows = (m > 5).then(|| &d_pose * dx);
+        for (a, r) in at.iter().enumerate() {
+            let Some(r) = *r else { continue };
+            if let Some(rows) = &rows {
+                row.iter_mut()
+                    .zip(rows.row(a).iter())
+                    .for_each(|(x, v)| *x = *v);
+            } else {
+                // Row `a` of `d_pose * dx`, made here: a measurement of one to five values
+                // (an angle, a point), where a general product of such thin matrices spends
+                // its time in loop overhead. The sums run in the order of nalgebra's product
+                // for these sizes (column by column): the same bits.
                 let d: [f64; 6] = std::array::from_fn(|k| d_pose[(a, k)]);
                 // `dx` is 6 x np, column-major: its columns are the chunks of six.
                 debug_assert_eq!(dx.nrows(), 6);
-                for (j, x) in dx.as_slice().chunks_exact(6).enumerate() {
-                    let mut s = d[0] * x[0];
-                    s += d[1] * x[1];
-                    s += d[2] * x[2];
-                    s += d[3] * x[3];
-                    s += d[4] * x[4];
-                    s += d[5] * x[5];
-                    jac[(r, j)] = s;
+                for (x, c) in row.iter_mut().zip(dx.as_slice().chunks_exact(6)) {
+                    let mut s = d[0] * c[0];
+                    s += d[1] * c[1];
+                    s += d[2] * c[2];
+                    s += d[3] * c[3];
+                    s += d[4] * c[4];
+                    s += d[5] * c[5];
+                    *x = s;
                 }
             }
-        } else {
-            let rows = &d_pose * dx;
-            for (a, r) in at.iter().enumerate() {
-                if let Some(r) = r {
-                    jac.row_mut(*r).copy_from(&rows.row(a));
+            for c in 0..p + q {
+                let col = if c < p {
+                    self.own.map(|(o, _)| o + c)
+                } else {
+                    self.sessions.map(|(o, _)| o + q * session + c - p)
+                };
+                if let Some(col) = col {
+                    row[col] += d_nuisance[(a, c)];
                 }
             }
-        }
-        for c in 0..p + q {
-            let col = if c < p {
-                self.own.map(|(o, _)| o + c)
-            } else {
-                self.sessions.map(|(o, _)| o + q * session + c - p)
-            };
-            if let Some(col) = col {
-                for (a, r) in at.iter().enumerate() {
-                    if let Some(r) = r {
-                        jac[(*r, col)] += d_nuisance[(a, c)];
-                    }
-                }
-            }
+            jac.set_row(r, row);
         }
     }
 }

@@ -1203,7 +1203,7 @@ impl Prepared {
             };
             let zeros = vec![0.0; model.num_params()];
             let mut jac = DMatrix::zeros(campaign.len(), model.num_params());
-            let y0 = predict_exact(&exact, &prepared, campaign, &zeros, Some(&mut jac))?;
+            let y0 = predict_exact(&exact, &prepared, campaign, &zeros, Some(&mut jac as _))?;
             prepared.first_order = Some((y0, jac));
         }
         Ok(prepared)
@@ -1308,6 +1308,30 @@ fn contexts(
     Ok(out)
 }
 
+/// Storage a prediction writes its Jacobian into (observations x parameters, per unit of
+/// the parameters), row by row, each row whole: a nalgebra matrix, or the solver's own faer
+/// matrix ([`predict_into`]: no matrix in between and no copy after).
+pub trait JacobianRows {
+    /// Writes `row` (one value per parameter) as row `r`.
+    fn set_row(&mut self, r: usize, row: &[f64]);
+}
+
+impl JacobianRows for DMatrix<f64> {
+    fn set_row(&mut self, r: usize, row: &[f64]) {
+        for (c, v) in row.iter().enumerate() {
+            self[(r, c)] = *v;
+        }
+    }
+}
+
+impl JacobianRows for cpm_lm::faer::MatMut<'_, f64> {
+    fn set_row(&mut self, r: usize, row: &[f64]) {
+        for (c, v) in row.iter().enumerate() {
+            self[(r, c)] = *v;
+        }
+    }
+}
+
 /// Predicted readings (mm) for installation errors `errors_um`; fills `jacobian`
 /// (readings x parameters, mm per um) when given.
 pub fn predict(
@@ -1317,12 +1341,36 @@ pub fn predict(
     errors_um: &[f64],
     jacobian: Option<&mut DMatrix<f64>>,
 ) -> Result<Vec<f64>, CalibError> {
+    predict_into(
+        model,
+        prepared,
+        campaign,
+        errors_um,
+        jacobian.map(|j| j as &mut dyn JacobianRows),
+    )
+}
+
+/// [`predict`] with the Jacobian written into `jacobian`'s own storage (the solver's faer
+/// matrix, say), row by row: every observation's row is written whole.
+pub fn predict_into(
+    model: &MeasurementModel,
+    prepared: &Prepared,
+    campaign: &Campaign,
+    errors_um: &[f64],
+    jacobian: Option<&mut dyn JacobianRows>,
+) -> Result<Vec<f64>, CalibError> {
     match (&prepared.first_order, model.kind) {
         (Some((y0, j0)), ModelKind::FirstOrder) => {
             let e = nalgebra::DVector::from_column_slice(errors_um);
             let y = nalgebra::DVector::from_column_slice(y0) + j0 * e;
             if let Some(j) = jacobian {
-                j.copy_from(j0);
+                let mut row = vec![0.0; j0.ncols()];
+                for r in 0..j0.nrows() {
+                    row.iter_mut()
+                        .zip(j0.row(r).iter())
+                        .for_each(|(x, v)| *x = *v);
+                    j.set_row(r, &row);
+                }
             }
             Ok(y.iter().copied().collect())
         }
@@ -1335,7 +1383,7 @@ fn predict_exact(
     prepared: &Prepared,
     campaign: &Campaign,
     params: &[f64],
-    mut jacobian: Option<&mut DMatrix<f64>>,
+    mut jacobian: Option<&mut dyn JacobianRows>,
 ) -> Result<Vec<f64>, CalibError> {
     let np = model.num_params();
     if params.len() != np {
@@ -1355,6 +1403,8 @@ fn predict_exact(
     let channels = Channels::new(model, params);
     let mut y = vec![0.0; campaign.len()];
     let mut at = AtPose::new(n);
+    // One Jacobian row, made here and written whole into the caller's storage.
+    let mut row = vec![0.0; if jacobian.is_some() { np } else { 0 }];
     let input_at = |j: usize| EffectInput {
         context: &prepared.contexts[j],
         commanded: &campaign.poses[j],
@@ -1459,7 +1509,8 @@ fn predict_exact(
             let kin = Kin::new(&table, &fk, &at, j);
             for &k in readings {
                 let si = campaign.readings[k].sensor;
-                channels.reading_row(&kin, &at, &table.sensors[si], si, &pose, jac.row_mut(k))?;
+                channels.reading_row(&kin, &at, &table.sensors[si], si, &pose, &mut row)?;
+                jac.set_row(k, &row);
             }
             if !measurements.is_empty()
                 || !points.is_empty()
@@ -1467,28 +1518,27 @@ fn predict_exact(
                 || !instruments.is_empty()
             {
                 let dx = channels.twist_columns(&kin, &at, np)?;
-                let mut jac = jac.as_view_mut();
                 for &q in tilts {
                     let t = &campaign.tilt_measurements[q];
                     let c = channels.tilt_channel(t);
-                    inclinometers.rows(&seen, c, t.session, &dx, &mut jac, t0 + q);
+                    inclinometers.rows(&seen, c, t.session, &dx, jac, t0 + q, &mut row);
                 }
                 for &q in points {
                     let pm = &campaign.point_measurements[q];
-                    targets.rows(&seen, pm.target, pm.session, &dx, &mut jac, p0 + 3 * q);
+                    targets.rows(&seen, pm.target, pm.session, &dx, jac, p0 + 3 * q, &mut row);
                 }
                 for &q in instruments {
                     let m = &campaign.instrument_measurements[q];
                     let bound = channels.instrument(m.instrument);
                     let o = prepared.instrument_rows[q];
-                    bound.rows(&seen, m.channel, m.session, &dx, &mut jac, o);
+                    bound.rows(&seen, m.channel, m.session, &dx, jac, o, &mut row);
                 }
                 for &q in measurements {
                     let instrument = tracker_of(q);
                     let rows = &prepared.pose_rows[q];
                     channels
                         .tracker(&instrument)
-                        .rows_at(&seen, 0, frame, &dx, &mut jac, rows);
+                        .rows_at(&seen, 0, frame, &dx, jac, rows, &mut row);
                 }
             }
         }
@@ -1630,11 +1680,14 @@ impl cpm_lm::DenseJacobian for Predictions<'_> {
         x: &[f64],
         mut jac: cpm_lm::faer::MatMut<'_, f64>,
     ) -> Result<(), cpm_lm::ModelError> {
-        let mut j = DMatrix::zeros(self.campaign.len(), self.model.num_params());
-        predict(self.model, &self.prepared, self.campaign, x, Some(&mut j))?;
-        for (r, c) in (0..j.nrows()).flat_map(|r| (0..j.ncols()).map(move |c| (r, c))) {
-            jac[(r, c)] = j[(r, c)];
-        }
+        // Straight into the solver's storage.
+        predict_into(
+            self.model,
+            &self.prepared,
+            self.campaign,
+            x,
+            Some(&mut jac as &mut dyn JacobianRows),
+        )?;
         Ok(())
     }
 }
