@@ -84,7 +84,7 @@ pub mod model;
 pub mod paper;
 
 // Every module's path from before the rooms, kept.
-pub use analysis::{accuracy, diagnostics, identifiability, misfit};
+pub use analysis::{accuracy, diagnostics, identifiability, misfit, promise};
 pub use data::{campaign, simulate};
 pub use fit::{identify, implicit, noise, prior, refine, registration, session};
 pub use model::{effects, points, tilts};
