@@ -88,44 +88,90 @@ fn command_columns(text: &str, name: impl Fn(usize) -> String) -> Vec<Vec<f64>> 
         .collect()
 }
 
+/// `n` random targets about `robot_path`'s home (seed `seed`) written to `d/targets.csv`, and
+/// `cpm compensate` of them with `calibrated` into `d/commands.csv` (`--json` when `json`):
+/// the targets, both paths and what the command printed.
+fn compensate_random_targets(
+    d: &Path,
+    robot_path: &str,
+    calibrated: &Path,
+    n: usize,
+    seed: u64,
+    json: bool,
+) -> (Vec<Pose>, PathBuf, PathBuf, String) {
+    let nominal = Robot::load(Path::new(robot_path)).unwrap();
+    let targets =
+        cpm::calib::paper::random_workspace_poses(&nominal.table, n, 40.0, 8.0, 3.0, seed);
+    let targets_path = d.join("targets.csv");
+    std::fs::write(&targets_path, cpm::io::write_pose_list(&targets)).unwrap();
+    let commands = d.join("commands.csv");
+    let mut args = vec![
+        "compensate".to_string(),
+        "--robot".into(),
+        p(calibrated),
+        "--poses".into(),
+        p(&targets_path),
+        "--out".into(),
+        p(&commands),
+    ];
+    if json {
+        args.push("--json".into());
+    }
+    let out = ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    (targets, targets_path, commands, out)
+}
+
+/// `cpm simulate` (60 random poses of `robot_path`'s machine with the errors of
+/// `truth_path`, `noise`, `seed`, no effects) into `data`, then `cpm calibrate` of them (no
+/// effects) into `cal`: its `--json` summary.
+fn simulate_and_calibrate(
+    robot_path: &str,
+    truth_path: &Path,
+    noise: &str,
+    seed: &str,
+    data: &Path,
+    cal: &Path,
+) -> String {
+    ok(&[
+        "simulate",
+        "--robot",
+        robot_path,
+        "--random",
+        "60",
+        "--truth",
+        &p(truth_path),
+        "--noise",
+        noise,
+        "--seed",
+        seed,
+        "--effects",
+        "none",
+        "--out",
+        &p(data),
+    ]);
+    ok(&[
+        "calibrate",
+        "--robot",
+        robot_path,
+        "--data",
+        &p(data),
+        "--effects",
+        "none",
+        "--out",
+        &p(cal),
+        "--json",
+    ])
+}
+
 #[test]
 fn simulate_calibrate_compensate_reduces_the_pose_error() {
     let d = scratch("round-trip");
     let robot_path = example("hexapod_66.toml");
     let truth_path = write_truth(&d);
-    let data = d.join("data.csv");
-    let cal = d.join("cal");
-    ok(&[
-        "simulate",
-        "--robot",
-        &robot_path,
-        "--random",
-        "60",
-        "--truth",
-        &p(&truth_path),
-        "--noise",
-        "gaussian:0.2",
-        "--seed",
-        "5",
-        "--effects",
-        "none",
-        "--out",
-        &p(&data),
-    ]);
+    let (data, cal) = (d.join("data.csv"), d.join("cal"));
+    let out = simulate_and_calibrate(&robot_path, &truth_path, "gaussian:0.2", "5", &data, &cal);
     let text = std::fs::read_to_string(&data).unwrap();
     assert!(text.starts_with("# simulated by cpm"));
-    let out = ok(&[
-        "calibrate",
-        "--robot",
-        &robot_path,
-        "--data",
-        &p(&data),
-        "--effects",
-        "none",
-        "--out",
-        &p(&cal),
-        "--json",
-    ]);
     let summary: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(summary["simulated"], true);
     assert_eq!(summary["rank"], 36);
@@ -153,21 +199,9 @@ fn simulate_calibrate_compensate_reduces_the_pose_error() {
     assert!(report.contains("SIMULATED"));
 
     // Targets away from the calibration poses.
-    let nominal = Robot::load(Path::new(&robot_path)).unwrap();
     let truth = Robot::load(&truth_path).unwrap();
-    let targets = cpm::calib::paper::random_workspace_poses(&nominal.table, 20, 40.0, 8.0, 3.0, 99);
-    let targets_path = d.join("targets.csv");
-    std::fs::write(&targets_path, cpm::io::write_pose_list(&targets)).unwrap();
-    let commands = d.join("commands.csv");
-    ok(&[
-        "compensate",
-        "--robot",
-        &p(&cal.join("calibrated.toml")),
-        "--poses",
-        &p(&targets_path),
-        "--out",
-        &p(&commands),
-    ]);
+    let (targets, targets_path, commands, _) =
+        compensate_random_targets(&d, &robot_path, &cal.join("calibrated.toml"), 20, 99, false);
     let calibrated = read_commands(&std::fs::read_to_string(&commands).unwrap());
     assert_eq!(calibrated.len(), 20);
     // The nominal commands, through the same command for comparison.
@@ -1487,4 +1521,91 @@ fn simulate_json_summary_counts_what_the_file_holds() {
     assert_eq!(v["poses"], back.campaign.poses.len());
     assert!(back.campaign.readings.len() >= 20, "{v}");
     assert_eq!(v["pose_measurements"], 0);
+}
+
+/// Issue 63 item 4: what a compensation can promise. `calibrate` writes the covariance of the
+/// machine's parameters into `calibrated.toml` (its standard deviations those of
+/// calibration.json), and `compensate` turns it into the pose error it predicts at each
+/// target, with the worst target's ISO 9283 bands; the true machine's error after
+/// compensation (SIMULATED, reached by its own forward kinematics) lies within them. A
+/// description without a calibration promises nothing (`null`).
+#[test]
+fn compensate_promises_a_band_from_the_calibrations_covariance() {
+    let d = scratch("promise");
+    let robot_path = example("hexapod_66.toml");
+    let truth_path = write_truth(&d);
+    let (data, cal) = (d.join("data.csv"), d.join("cal"));
+    simulate_and_calibrate(&robot_path, &truth_path, "gaussian:1", "7", &data, &cal);
+    // The covariance written is the fit's: its deviations are calibration.json's posterior
+    // ones (the fit's prior is in it).
+    let calibrated = Robot::load(&cal.join("calibrated.toml")).unwrap();
+    let covariance = calibrated.covariance().unwrap().expect("a covariance");
+    let json = read_json(&cal.join("calibration.json"));
+    let params = json["prior"]["parameters"].as_array().unwrap();
+    assert_eq!(covariance.covariance.nrows(), params.len());
+    let mut compared = 0;
+    for (k, q) in params.iter().enumerate() {
+        let (ours, theirs) = (
+            covariance.covariance[(k, k)].sqrt(),
+            q["posterior_std"].as_f64().unwrap(),
+        );
+        assert!(
+            (ours - theirs).abs() <= 1e-5 * theirs,
+            "{}: {ours} vs {theirs}",
+            q["name"]
+        );
+        compared += 1;
+    }
+    assert!(compared > 0);
+    // The promise, per target and over the targets.
+    let truth = Robot::load(&truth_path).unwrap();
+    let (targets, targets_path, commands, out) =
+        compensate_random_targets(&d, &robot_path, &cal.join("calibrated.toml"), 12, 31, true);
+    let summary: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let promise = &summary["predicted_error"];
+    assert_eq!(promise["level"], 0.95);
+    let per_target = promise["targets"].as_array().unwrap();
+    assert_eq!(per_target.len(), 12);
+    let worst_p = promise["worst_target"]["ap_p_um"].as_f64().unwrap();
+    for t in per_target {
+        let band = t["position_95_um"].as_f64().unwrap();
+        let std: Vec<f64> = t["position_std_um"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        // The ellipsoid's largest semi-axis is at least 2.8 times every axis' deviation.
+        assert!(std.iter().all(|s| *s > 0.0 && band >= 2.79 * s), "{t}");
+        assert!(band <= worst_p);
+    }
+    let text = std::fs::read_to_string(&commands).unwrap();
+    assert!(text
+        .lines()
+        .next()
+        .unwrap()
+        .contains("predicted pose error, worst target, 95 %"));
+    let after = reached_error_um(&truth, &[0.0; 6], &targets, &read_commands(&text));
+    println!("SIMULATED: true position error after compensation {after:.3} um RMS; promised at most {worst_p:.3} um (95 %, worst target)");
+    assert!(
+        after > 0.0 && after <= worst_p,
+        "error {after} um, band {worst_p} um"
+    );
+    assert!(
+        worst_p < 20.0 * after,
+        "an informative band: {worst_p} um for {after} um"
+    );
+    // Without a calibration: no promise.
+    let out = ok(&[
+        "compensate",
+        "--robot",
+        &robot_path,
+        "--poses",
+        &p(&targets_path),
+        "--out",
+        &p(&d.join("nominal.csv")),
+        "--json",
+    ]);
+    let summary: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(summary["predicted_error"].is_null());
 }

@@ -683,6 +683,13 @@ const CASES: &[Case] = &[
         "unknown effect `wobble`",
     ),
     case(
+        "robot_covariance_size.toml",
+        Toml,
+        Some(79),
+        Some("calibration.covariance.std"),
+        "35 values for 36 parameters",
+    ),
+    case(
         "robot_known_effect_count.toml",
         Toml,
         Some(79),

@@ -627,6 +627,15 @@ class CompensationResult:
 
         return pd.read_csv(io.StringIO(self.csv), comment="#")
 
+    @property
+    def predicted_error(self) -> Optional[Dict[str, Any]]:
+        """The pose error predicted after compensation from the calibration's covariance
+        (``--json``'s ``predicted_error``: per target ``position_std_um``,
+        ``orientation_std_urad``, ``position_95_um``, ``orientation_95_urad``; the worst
+        target's ISO 9283 bands in ``worst_target``); None when the robot carries no
+        covariance (no accuracy is promised)."""
+        return self.summary.get("predicted_error")
+
     def __repr__(self) -> str:
         return f"<CompensationResult {len(self.readings)} targets>"
 

@@ -91,6 +91,13 @@ def test_compensate_equals_the_command(in_root, tmp_path, cpm_bin):
     np.testing.assert_allclose(c2.readings, c.readings, rtol=0, atol=1e-9)
     with pytest.raises(cpm.UsageError, match=r"poses has shape"):
         cpm.compensate(robot, c.targets[:, :5])
+    # What the commands promise (issue 63 item 4): the calibration's covariance turned into
+    # each target's band; the nominal robot promises nothing.
+    promise = c.predicted_error
+    assert promise is not None and len(promise["targets"]) == len(c.targets)
+    worst = promise["worst_target"]["ap_p_um"]
+    assert worst == max(t["position_95_um"] for t in promise["targets"]) > 0
+    assert cpm.compensate(HEX, c.targets).predicted_error is None
 
 
 def test_compensation_checked_on_the_simulated_truth(in_root, tmp_path):

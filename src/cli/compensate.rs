@@ -79,6 +79,9 @@ pub fn run(args: &CompensateArgs, ctx: &mut Ctx<'_>) -> anyhow::Result<Outcome> 
     for w in job.warnings() {
         ctx.note(w);
     }
+    if let Some(p) = &job.predicted {
+        ctx.note(p.line());
+    }
     match &args.out {
         Some(out) => {
             if common::write_out("--out", out, &options.inputs(), &job.csv, ctx)? == Target::Stdout

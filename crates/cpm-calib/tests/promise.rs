@@ -113,13 +113,13 @@ fn the_stated_95_percent_band_covers_the_true_error_95_percent_of_the_time() {
     );
 }
 
-/// The band of a fit that does not determine every parameter: the covariance's diagonal is
-/// the fit's own standard deviations where they exist, and zero along what the data cannot
-/// see (no number there is measured).
+/// The covariance is the fit's own: under the default prior its diagonal is the posterior
+/// standard deviations the fit reports (every parameter it reports one for); without a prior
+/// it is the fit's Cramér-Rao bounds, and zero along what the data cannot see (no number
+/// there is measured). The paper's design: one sensor on a circle, rank below 36.
 #[test]
 fn the_covariance_is_the_fits_own_and_blind_directions_carry_none() {
     let m = machine();
-    // The paper's design: one sensor on a circle, rank well below 36.
     let plan = Plan {
         poses: cpm_calib::campaign::paper_circle(&m.nominal.home),
         sensors: vec![0],
@@ -131,14 +131,48 @@ fn the_covariance_is_the_fits_own_and_blind_directions_carry_none() {
         seed: 3,
     };
     let data = simulate(&m, &truth, &plan, &sim).unwrap();
+    // Under the default prior: the posterior the fit summarises.
     let options = IdentifyOptions {
         sigma_um: Some(SIGMA_UM),
+        ..IdentifyOptions::default()
+    };
+    let cal = identify(&m, &data, &options).unwrap();
+    let prior = cal.prior.as_ref().expect("the default fit has a prior");
+    let c = parameter_covariance(&m, &data, &cal).unwrap();
+    let close = |a: &nalgebra::DMatrix<f64>, b: &nalgebra::DMatrix<f64>| {
+        (a - b).abs().max() <= 1e-9 * b.abs().max()
+    };
+    // The fit forms the same covariance itself (what calibrate writes).
+    assert!(close(&cal.covariance, &c), "the fit's covariance differs");
+    let mut compared = 0;
+    for k in 0..36 {
+        if let Some(std) = prior.posterior_std[k] {
+            let ours = c[(k, k)].sqrt();
+            assert!(
+                (ours - std).abs() <= 1e-9 * std.max(1.0),
+                "parameter {k}: {ours} vs {std}"
+            );
+            compared += 1;
+        }
+    }
+    assert_eq!(
+        compared, 36,
+        "every parameter is bounded by the data or its tolerance"
+    );
+    // Without a prior: the Cramer-Rao bounds, and nothing along the blind directions.
+    let options = IdentifyOptions {
+        sigma_um: Some(SIGMA_UM),
+        tolerances: cpm_calib::prior::Tolerances::none(),
         ..IdentifyOptions::default()
     };
     let cal = identify(&m, &data, &options).unwrap();
     let rank = cal.identifiability.rank;
     assert!(rank < 36, "rank {rank}");
     let c = parameter_covariance(&m, &data, &cal).unwrap();
+    assert!(
+        close(&cal.covariance, &c),
+        "the fit's covariance differs (no prior)"
+    );
     for k in 0..36 {
         if let Some(std) = cal.std_um[k] {
             let ours = c[(k, k)].sqrt();
@@ -148,7 +182,6 @@ fn the_covariance_is_the_fits_own_and_blind_directions_carry_none() {
             );
         }
     }
-    // Zero variance along every blind direction of the fit.
     let null = cal.identifiability.null_space();
     assert_eq!(null.ncols(), 36 - rank);
     for q in 0..null.ncols() {

@@ -491,6 +491,34 @@ pub struct CalibrationSpec {
     /// description (compensation commands, controller files) says so. Default false.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub simulated: bool,
+    /// `[calibration.covariance]`: the covariance of the calibrated machine's parameters
+    /// (written by `cpm calibrate` and `cpm refine`): what `cpm compensate` turns into the
+    /// pose error it predicts at each target. Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covariance: Option<CovarianceSpec>,
+}
+
+/// `[calibration.covariance]`: the covariance of a calibration's machine parameters (the
+/// installation errors, then the parameters of `effects`, in the calibration crate's order),
+/// about the calibrated values; the session's own parameters (tracker frames, base tilts)
+/// are left out.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CovarianceSpec {
+    /// The effects whose parameters follow the installation errors, in order. Default none.
+    #[serde(default)]
+    pub effects: Vec<String>,
+    /// The parameters' names, as the reports name them (each with its unit).
+    pub parameters: Vec<String>,
+    /// The standard deviation of each parameter, in its unit (um for an installation error).
+    pub std: Vec<f64>,
+    /// The correlation matrix, row by row (1 on the diagonal; the covariance of parameters `a`
+    /// and `b` is `std[a] std[b] correlation[a][b]`).
+    pub correlation: Vec<Vec<f64>>,
+    /// What neither the data nor a tolerance bounded (blind directions, in words): the
+    /// covariance says nothing of them. Default none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unbounded: Vec<String>,
 }
 
 /// `[installation_errors_um]`: joint displacements, um, one row `[dx, dy, dz]` per link.

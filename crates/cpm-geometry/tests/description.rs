@@ -121,6 +121,13 @@ fn round_trip_with_every_section() {
         calibrated_from: Some("../robot.toml".into()),
         calibrated_from_fnv1a64: Some("0123456789abcdef".into()),
         simulated: true,
+        covariance: Some(cpm_geometry::description::CovarianceSpec {
+            effects: vec!["link_offset".into()],
+            parameters: vec!["a [um]".into(), "b [um]".into()],
+            std: vec![1.5, 0.25],
+            correlation: vec![vec![1.0, -0.3], vec![-0.3, 1.0]],
+            unbounded: vec!["b [um]".into()],
+        }),
     });
     d.installation_errors_um = Some(InstallationErrorsSpec::from_errors(
         &InstallationErrors::paper_table2(),

@@ -102,6 +102,7 @@ impl Robot {
         };
         robot.known_effects()?;
         robot.declared_effects()?;
+        robot.covariance()?;
         // The model is built from the description in one place; what that builder refuses
         // (a known value that is not finite) is refused here, naming the file.
         robot.try_model().map_err(|e| InputError {
@@ -206,6 +207,97 @@ impl Robot {
             });
         }
         Ok(out)
+    }
+
+    /// `[calibration.covariance]`, checked: the model whose parameters it is of (this robot's
+    /// with the effects it names, every parameter at its calibrated value), the covariance
+    /// (model units squared) and what it does not bound; `None` when the description has
+    /// none. Errors name the field.
+    pub fn covariance(&self) -> Result<Option<Covariance>, InputError> {
+        let Some(spec) = self
+            .description
+            .calibration
+            .as_ref()
+            .and_then(|c| c.covariance.as_ref())
+        else {
+            return Ok(None);
+        };
+        let err = |field: &str, message: String| InputError {
+            file: self.file.clone(),
+            line: None,
+            field: Some(format!("calibration.covariance.{field}")),
+            message,
+        };
+        let effects = spec
+            .effects
+            .iter()
+            .enumerate()
+            .map(|(k, n)| {
+                Effect::parse_among(n, &self.user_effects)
+                    .map_err(|m| err(&format!("effects[{}]", k + 1), m))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let model = self.model(&effects);
+        let names = model.parameter_names();
+        if spec.parameters != names {
+            let at = names
+                .iter()
+                .zip(&spec.parameters)
+                .position(|(a, b)| a != b)
+                .unwrap_or(names.len().min(spec.parameters.len()));
+            return Err(err(
+                "parameters",
+                format!(
+                    "{} parameters, not those of this robot with effects {:?} ({}; the first to differ is number {})",
+                    spec.parameters.len(),
+                    spec.effects,
+                    names.len(),
+                    at + 1
+                ),
+            ));
+        }
+        let np = names.len();
+        if spec.std.len() != np {
+            return Err(err(
+                "std",
+                format!("{} values for {np} parameters", spec.std.len()),
+            ));
+        }
+        if let Some(k) = spec.std.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+            return Err(err(
+                &format!("std[{}]", k + 1),
+                format!("{}: not a standard deviation (finite, >= 0)", spec.std[k]),
+            ));
+        }
+        if spec.correlation.len() != np {
+            return Err(err(
+                "correlation",
+                format!("{} rows for {np} parameters", spec.correlation.len()),
+            ));
+        }
+        let mut c = nalgebra::DMatrix::zeros(np, np);
+        for (a, row) in spec.correlation.iter().enumerate() {
+            if row.len() != np {
+                return Err(err(
+                    &format!("correlation[{}]", a + 1),
+                    format!("{} values for {np} parameters", row.len()),
+                ));
+            }
+            for (b, r) in row.iter().enumerate() {
+                if !(r.is_finite() && r.abs() <= 1.0) {
+                    return Err(err(
+                        &format!("correlation[{}][{}]", a + 1, b + 1),
+                        format!("{r}: not a correlation (between -1 and 1)"),
+                    ));
+                }
+                c[(a, b)] = spec.std[a] * spec.std[b] * r;
+            }
+        }
+        Ok(Some(Covariance {
+            model,
+            covariance: c,
+            unbounded: spec.unbounded.clone(),
+        }))
     }
 
     /// The effect settings of `[calibration]` (screw lead, reference temperature,
@@ -359,7 +451,8 @@ impl Robot {
 }
 
 /// Adds the line to an error about `[calibration]`'s effects: the quoted name in `effects`
-/// (`names`, as declared) or the `name = [...]` entry of `[calibration.known_effects]`.
+/// (`names`, as declared), the `name = [...]` entry of `[calibration.known_effects]`, or the
+/// key of `[calibration.covariance]` the field names.
 fn locate_effect_error(text: &str, names: &[String], mut e: InputError) -> InputError {
     let field = e.field.clone().unwrap_or_default();
     let line_after = |header: &str, hit: &dyn Fn(&str) -> bool| {
@@ -372,7 +465,14 @@ fn locate_effect_error(text: &str, names: &[String], mut e: InputError) -> Input
             .find(|(_, l)| hit(l))
             .map(|(i, _)| i + 1)
     };
-    if let Some(name) = field.strip_prefix("calibration.known_effects.") {
+    if let Some(rest) = field.strip_prefix("calibration.covariance.") {
+        let key = rest.split('[').next().unwrap_or(rest);
+        e.line = line_after("[calibration.covariance]", &|l: &str| {
+            l.trim_start()
+                .strip_prefix(key)
+                .is_some_and(|r| r.trim_start().starts_with('='))
+        });
+    } else if let Some(name) = field.strip_prefix("calibration.known_effects.") {
         e.line = line_after("[calibration.known_effects]", &|l: &str| {
             l.trim_start()
                 .strip_prefix(name)
@@ -714,6 +814,18 @@ pub fn folded_reading_model(robot: &Robot, i: usize) -> (f64, f64) {
     let (o, s) = (value(Effect::LinkOffset), value(Effect::LinkScale));
     let f = 1.0 + s * 1e-6;
     (link.length_at_zero_mm * f + o * 1e-3, link.mm_per_unit * f)
+}
+
+/// A calibration's `[calibration.covariance]` as a model and a matrix ([`Robot::covariance`]).
+#[derive(Debug, Clone)]
+pub struct Covariance {
+    /// The robot's model with the effects the covariance covers (parameters at zero: the
+    /// calibrated values).
+    pub model: MeasurementModel,
+    /// The covariance of its parameters, model units squared.
+    pub covariance: nalgebra::DMatrix<f64>,
+    /// What neither the data nor a tolerance bounded (parameter names): no band holds them.
+    pub unbounded: Vec<String>,
 }
 
 /// The calibrated description as TOML text, with a comment header that says where it came

@@ -35,7 +35,7 @@ use crate::calib::MeasurementModel;
 use crate::error::{trouble, usage_error};
 use crate::io::{self, campaign::check_reachable, PoseRow, ReadOptions};
 use crate::progress::{check_cancelled, Progress};
-use crate::report::commands::CompensateSummary;
+use crate::report::commands::{CompensateSummary, PredictedError, TargetError};
 
 /// The options of `cpm compensate`. [`CompensateOptions::new`] gives the defaults.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -118,6 +118,9 @@ pub struct Compensated {
     pub outside: Vec<String>,
     /// What the calibration left undetermined (`[calibration] undetermined`).
     pub undetermined: Vec<String>,
+    /// The pose error predicted after compensation at each target, from the description's
+    /// `[calibration.covariance]` ([`predicted_error`]); `None` when it carries none.
+    pub predicted: Option<PredictedError>,
     /// What the calibration's data could not see, in words.
     pub blind: Vec<String>,
     /// The commands file (CSV).
@@ -159,6 +162,7 @@ impl Compensated {
                 .collect(),
             out: out.display().to_string(),
             outside_pose_map_range: self.outside.clone(),
+            predicted_error: self.predicted.clone(),
             robot: self.robot.file.clone(),
             targets: self.targets.len(),
             undetermined: self.undetermined.clone(),
@@ -243,15 +247,21 @@ pub fn compensate_in(
         .filter(|t| outside_pose_map_range(&robot, &t.pose))
         .map(|t| t.label.clone())
         .collect();
+    let predicted = predicted_error(&robot, &targets)?;
     let note = format!(
-        "{}robot {}, targets {}; readings to command (length = length_at_zero_mm + mm_per_unit * reading)",
+        "{}robot {}, targets {}; readings to command (length = length_at_zero_mm + mm_per_unit * reading){}",
         if crate::load::simulated(&robot) {
             "SIMULATED calibration (fitted to simulated data), "
         } else {
             ""
         },
         robot.file,
-        file
+        file,
+        predicted.as_ref().map_or(String::new(), |p| format!(
+            "; predicted pose error, worst target, 95 %: position {:.3} um, orientation {:.3} urad",
+            p.worst_target.ap_p_um,
+            p.targets.iter().map(|t| t.orientation_95_urad).fold(0.0, f64::max)
+        ))
     );
     let csv =
         crate::report::format::tidy_csv(&io::write_commands(&targets, &readings, &lengths, &note));
@@ -270,9 +280,48 @@ pub fn compensate_in(
         readings,
         outside,
         undetermined,
+        predicted,
         blind,
         csv,
     })
+}
+
+/// The pose error predicted after compensation at each of `targets`, from `robot`'s
+/// `[calibration.covariance]` ([`crate::calib::promise`]): per target the standard deviations
+/// and 95 % bands, and the worst of each ISO 9283 term; `None` without a covariance.
+pub fn predicted_error(
+    robot: &io::Robot,
+    targets: &[PoseRow],
+) -> anyhow::Result<Option<PredictedError>> {
+    let Some(c) = robot.covariance()? else {
+        return Ok(None);
+    };
+    let zeros = vec![0.0; c.model.num_params()];
+    let poses: Vec<_> = targets.iter().map(|t| t.pose).collect();
+    let bands =
+        crate::calib::promise::predicted_pose_error(&c.model, &zeros, &c.covariance, &poses)
+            .map_err(|e| {
+                trouble(format!(
+                    "the pose error predicted from {}'s covariance: {e}",
+                    robot.file
+                ))
+            })?;
+    let per_target = targets
+        .iter()
+        .zip(&bands)
+        .map(|(t, b)| TargetError {
+            orientation_std_urad: b.orientation_std_urad().into(),
+            orientation_95_urad: b.orientation_95_urad(),
+            pose: t.label.clone(),
+            position_std_um: b.position_std_um().into(),
+            position_95_um: b.position_95_um(),
+        })
+        .collect();
+    Ok(Some(PredictedError::of(
+        per_target,
+        c.unbounded,
+        crate::calib::promise::Z_95,
+    )))
 }
 
 /// Fixed-point iterations of the commanded lengths against the known link effects.

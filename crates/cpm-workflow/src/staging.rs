@@ -115,6 +115,8 @@ pub fn stage_calibrated(
         if model.effects.contains(&drift) || model.known_effects.iter().any(|k| k.effect == drift) {
             c.reference_time_s = model.effect_settings.reference_time_s;
         }
+        // The covariance of the machine's parameters: what compensate promises from.
+        c.covariance = covariance_spec(model, cal);
         // The tracker noise the fit weighed its sessions with: held-out sessions are
         // registered with the same weights.
         if !inputs.merged.campaign.pose_measurements.is_empty() {
@@ -305,4 +307,75 @@ pub fn provenance_lines(p: &Provenance, simulated: bool, command: &str) -> Vec<S
         v.push("SIMULATED data: this calibration is of a simulated machine.".into());
     }
     v
+}
+
+/// `[calibration.covariance]` of a fit: the covariance of the machine's parameters (the
+/// installation errors and every effect's but the sessions' and instruments' own: tracker,
+/// marker and point frames, targets, inclinometer mounts, base tilts) as standard deviations
+/// (six significant digits) and correlations (six decimals); `None` when the fit formed none (the implicit formulation).
+pub fn covariance_spec(
+    model: &MeasurementModel,
+    cal: &Calibration,
+) -> Option<crate::geometry::description::CovarianceSpec> {
+    use crate::calib::Effect;
+    let np = model.num_params();
+    if cal.covariance.shape() != (np, np) {
+        return None;
+    }
+    let mut keep: Vec<usize> = (0..model.num_installation_params()).collect();
+    let mut effects = Vec::new();
+    for b in model.blocks().into_iter().skip(1) {
+        let Some(e) = b.effect else { continue };
+        let session_or_instrument = matches!(
+            e,
+            Effect::TrackerFrame
+                | Effect::MarkerFrame
+                | Effect::TargetPosition
+                | Effect::PointFrame
+                | Effect::InclinometerMount
+                | Effect::BaseTilt
+        );
+        if !session_or_instrument && b.len > 0 {
+            effects.push(e.name().to_string());
+            keep.extend(b.offset..b.offset + b.len);
+        }
+    }
+    let names = model.parameter_names();
+    let c = &cal.covariance;
+    let std: Vec<f64> = keep.iter().map(|&k| c[(k, k)].max(0.0).sqrt()).collect();
+    // Six significant digits for a deviation, six decimals for a correlation.
+    let six = |v: f64| format!("{v:.5e}").parse::<f64>().unwrap_or(v);
+    let correlation: Vec<Vec<f64>> = keep
+        .iter()
+        .enumerate()
+        .map(|(a, &ka)| {
+            keep.iter()
+                .enumerate()
+                .map(|(b, &kb)| {
+                    if a == b {
+                        1.0
+                    } else if std[a] > 0.0 && std[b] > 0.0 {
+                        let r = (c[(ka, kb)] / (std[a] * std[b])).clamp(-1.0, 1.0);
+                        (r * 1e6).round() / 1e6
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    // What nothing bounds: the blind parameters (neither the data nor a tolerance determine
+    // them; the covariance holds only their determined part).
+    let unbounded = keep
+        .iter()
+        .filter(|&&k| cal.determination(k) == crate::calib::Determination::Blind)
+        .map(|&k| names[k].clone())
+        .collect();
+    Some(crate::geometry::description::CovarianceSpec {
+        effects,
+        parameters: keep.iter().map(|&k| names[k].clone()).collect(),
+        std: std.iter().map(|v| six(*v)).collect(),
+        correlation,
+        unbounded,
+    })
 }

@@ -6,10 +6,12 @@
 //! settles elsewhere: to first order the twist from target to reached pose (position mm,
 //! rotation rad, base frame, as [`Pose::difference`]) is `G d`, with `G` the reached pose's
 //! derivative with respect to the parameters at the commanded lengths (the measurement model's
-//! own Jacobian of a 6-D pose measurement). Over the fit's noise `d` has the covariance `C` of
-//! the parameters the data determine ([`parameter_covariance`]), so the twist has `G C G^T`
-//! ([`predicted_pose_error`]). Blind directions carry no covariance here: the data say
-//! nothing of them, and the compensation cannot correct them (name them beside the band).
+//! own Jacobian of a 6-D pose measurement). `d` has the covariance `C` of the fitted
+//! parameters ([`parameter_covariance`]: the posterior under the fit's prior, where a
+//! direction the data see less well than its tolerance carries that tolerance), so the twist
+//! has `G C G^T` ([`predicted_pose_error`]). Blind free directions carry no covariance: no
+//! number about them is known, and the compensation cannot correct them (name them beside the
+//! band).
 //!
 //! The bands are those of a Gaussian: per component `z sigma`, and for the position (and the
 //! orientation) the ellipsoid `t^T P^-1 t <= chi2_3(0.95)`, whose largest semi-axis is the
@@ -32,9 +34,11 @@
 //! let options = IdentifyOptions { sigma_um: Some(2.0), ..Default::default() };
 //! let cal = identify(&model, &data, &options).unwrap();
 //! let c = parameter_covariance(&model, &data, &cal).unwrap();
-//! // Its diagonal is the fit's own standard deviations.
-//! let std = cal.std_um[0].unwrap();
-//! assert!((c[(0, 0)].sqrt() - std).abs() < 1e-6 * std);
+//! // The fit formed it too, and its diagonal is the fit's own (posterior, under the default
+//! // prior) standard deviations.
+//! assert_eq!(c, cal.covariance);
+//! let std = cal.prior.as_ref().unwrap().posterior_std[0].unwrap();
+//! assert!((c[(0, 0)].sqrt() - std).abs() < 1e-9 * std);
 //! let target = model.nominal.home;
 //! let p = predicted_pose_error(&model, &cal.minimum_norm_um, &c, &[target]).unwrap();
 //! assert!(p[0].position_95_um() > 0.0 && p[0].position_95_um() < 100.0);
@@ -55,12 +59,18 @@ pub const CHI2_3_95: f64 = 7.814_727_903_251_178;
 /// The two-sided 95 % quantile of the standard normal (a component's band).
 pub const Z_95: f64 = 1.959_963_984_540_054;
 
-/// The covariance of the fitted parameters (model units squared: um^2, ppm^2, ...), over the
-/// subspace the data determine: `sigma^2 (J^T W J)^+` at the solution, with the fit's weights
-/// (the observations it set aside at weight zero), its noise `sigma_um` and its rank. For the
-/// parameters the data determine on their own its diagonal is the square of
-/// [`Calibration::std_um`]. Blind directions get zero variance: no number about them is
-/// measured.
+/// The covariance of the fitted parameters (model units squared: um^2, ppm^2, ...) at the
+/// solution, with the fit's weights (the observations it set aside at weight zero) and its
+/// noise `sigma_um`:
+/// - under a prior ([`Calibration::prior`]), the posterior `(J^T W J / sigma^2 +
+///   diag(1 / t^2))^+` over the unheld parameters, as the fit's summary takes it: its diagonal
+///   is the square of [`PriorSummary::posterior_std`](crate::prior::PriorSummary::posterior_std),
+///   a direction held by its tolerance carries that tolerance, a held parameter none;
+/// - without one, `sigma^2 (J^T W J)^+` over the fit's rank: its diagonal is the square of
+///   [`Calibration::std_um`] where the data determine a parameter on its own.
+///
+/// What neither the data nor a tolerance bounds (a blind free direction) gets zero variance:
+/// no number about it is measured, and a promise must name it beside the band.
 pub fn parameter_covariance(
     model: &MeasurementModel,
     campaign: &Campaign,
@@ -84,13 +94,49 @@ pub fn parameter_covariance(
         let mut row = j.row_mut(r);
         row *= 1e3 * wr;
     }
-    let (s, v) = crate::linalg::svd_values_and_v(&j)?;
-    let rank = cal.identifiability.rank.min(s.len());
+    let prior =
+        (cal.prior.is_some() && cal.prior_std.len() == np).then_some(cal.prior_std.as_slice());
+    if let Some(prior) = prior {
+        for (k, p) in prior.iter().enumerate() {
+            if *p == 0.0 {
+                j.column_mut(k).fill(0.0);
+            }
+        }
+    }
+    covariance_of(&j, prior, cal.sigma_um, &cal.identifiability)
+}
+
+/// The covariance of a fit's parameters from its weighted Jacobian `j` (um of the reference per
+/// unit; held parameters' columns zero), its prior (standard deviation per parameter: 0 held,
+/// infinite free; `None` for a fit without one), its noise `sigma_um` and its identifiability
+/// at the solution (the rank, and the column scale the prior's cut-offs are taken with).
+pub(crate) fn covariance_of(
+    j: &DMatrix<f64>,
+    prior: Option<&[f64]>,
+    sigma_um: f64,
+    ident: &crate::Identifiability,
+) -> Result<DMatrix<f64>, CalibError> {
+    let np = j.ncols();
+    if let Some(prior) = prior {
+        let scale = &ident.rank_column_scale;
+        return Ok(crate::prior::posterior_covariance(
+            j,
+            prior,
+            sigma_um,
+            (scale.len() == np).then_some(scale.as_slice()),
+        ));
+    }
+    // sigma^2 (J^T J)^+ over the fit's rank, from the eigenpairs of J^T J (np x np: no
+    // decomposition of the tall Jacobian).
+    let eig = (j.transpose() * j).symmetric_eigen();
+    let mut order: Vec<usize> = (0..np).collect();
+    order.sort_by(|a, b| eig.eigenvalues[*b].total_cmp(&eig.eigenvalues[*a]));
     let mut c = DMatrix::zeros(np, np);
-    for i in 0..rank {
-        if s[i] > 0.0 {
-            let vi = v.column(i);
-            c += (vi * vi.transpose()) * (cal.sigma_um / s[i]).powi(2);
+    for &i in order.iter().take(ident.rank.min(np)) {
+        let l = eig.eigenvalues[i];
+        if l > 0.0 {
+            let v = eig.eigenvectors.column(i);
+            c += (v * v.transpose()) * (sigma_um * sigma_um / l);
         }
     }
     Ok(c)

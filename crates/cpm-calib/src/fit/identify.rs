@@ -161,6 +161,12 @@ pub struct Calibration {
     /// True when the 6-D tracker poses were fitted in leg space
     /// ([`IdentifyOptions::leg_space`]); the residuals here are in pose space either way.
     pub leg_space: bool,
+    /// The covariance of the parameters at the solution (model units squared; parameters x
+    /// parameters), as [`crate::promise::parameter_covariance`] defines it: under a prior the
+    /// posterior the summary reports, without one the Cramér-Rao covariance over the fit's
+    /// rank; zero along what neither the data nor a tolerance bounds. Empty (0 x 0) when the
+    /// fit did not form it (the implicit formulation).
+    pub covariance: DMatrix<f64>,
 }
 
 /// The weight `rho'(r^2)` below which a robust loss is said to down-weight an observation.
@@ -894,7 +900,14 @@ fn identify_uncancelled(
         })
         .collect();
     let combinations = combinations(&ident, &e_hat);
+    let covariance = crate::promise::covariance_of(
+        &jf,
+        w.with_prior.then_some(w.prior.as_slice()),
+        sigma_um,
+        &ident,
+    )?;
     Ok(Calibration {
+        covariance,
         simulated: campaign.simulated,
         estimate_um,
         std_um,

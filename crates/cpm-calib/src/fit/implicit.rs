@@ -718,5 +718,7 @@ pub fn identify_implicit_calibration(
         held_at_limit: Vec::new(),
         tolerance_limit: f64::INFINITY,
         leg_space: false,
+        // Not formed at scale: a compensation from it promises no band.
+        covariance: nalgebra::DMatrix::zeros(0, 0),
     })
 }

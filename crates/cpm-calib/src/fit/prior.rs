@@ -442,16 +442,23 @@ pub fn summarize(j: &DMatrix<f64>, prior: &[f64], sigma_um: f64) -> PriorSummary
     summarize_scaled(j, prior, sigma_um, None)
 }
 
-/// [`summarize`] with the posterior's cut-offs taken on the precision with its parameters
-/// scaled by `column_scale` ([`Identifiability::rank_column_scale`](crate::Identifiability::rank_column_scale), one factor per parameter): what the
-/// posterior leaves undefined then does not depend on the units of a block (a compliance in
-/// um/kN under a platform of 1 g or of 10 t). `None`, or every factor 1, is [`summarize`].
-pub fn summarize_scaled(
+/// The posterior of a fit under a prior, over its unheld parameters `free`: the data's
+/// precision `g = J^T J / sigma^2`, the (column-scaled) precision `h` with the prior's rows,
+/// its largest eigenvalue `lmax`, and the covariance `cov` (the pseudo-inverse).
+struct Posterior {
+    free: Vec<usize>,
+    g: DMatrix<f64>,
+    h: DMatrix<f64>,
+    lmax: f64,
+    cov: DMatrix<f64>,
+}
+
+fn posterior(
     j: &DMatrix<f64>,
     prior: &[f64],
     sigma_um: f64,
     column_scale: Option<&[f64]>,
-) -> PriorSummary {
+) -> Posterior {
     let np = prior.len();
     let free: Vec<usize> = (0..np).filter(|&k| prior[k] > 0.0).collect();
     let nf = free.len();
@@ -494,6 +501,55 @@ pub fn summarize_scaled(
             }
         }
     }
+    Posterior {
+        free,
+        g,
+        h,
+        lmax,
+        cov,
+    }
+}
+
+/// The posterior covariance of every parameter (model units squared) of a fit under the prior
+/// `prior` (standard deviation per parameter: 0 held, infinite free) with the weighted
+/// Jacobian `j` (um of the reference per unit) and noise `sigma_um`, its cut-offs taken as
+/// [`summarize_scaled`] takes them: `(J^T J / sigma^2 + diag(1 / t^2))^+` over the unheld
+/// parameters; held parameters and what neither the data nor a tolerance bounds carry none.
+pub fn posterior_covariance(
+    j: &DMatrix<f64>,
+    prior: &[f64],
+    sigma_um: f64,
+    column_scale: Option<&[f64]>,
+) -> DMatrix<f64> {
+    let np = prior.len();
+    let p = posterior(j, prior, sigma_um, column_scale);
+    let mut out = DMatrix::zeros(np, np);
+    for (a, &ka) in p.free.iter().enumerate() {
+        for (b, &kb) in p.free.iter().enumerate() {
+            out[(ka, kb)] = p.cov[(a, b)];
+        }
+    }
+    out
+}
+
+/// [`summarize`] with the posterior's cut-offs taken on the precision with its parameters
+/// scaled by `column_scale` ([`Identifiability::rank_column_scale`](crate::Identifiability::rank_column_scale), one factor per parameter): what the
+/// posterior leaves undefined then does not depend on the units of a block (a compliance in
+/// um/kN under a platform of 1 g or of 10 t). `None`, or every factor 1, is [`summarize`].
+pub fn summarize_scaled(
+    j: &DMatrix<f64>,
+    prior: &[f64],
+    sigma_um: f64,
+    column_scale: Option<&[f64]>,
+) -> PriorSummary {
+    let np = prior.len();
+    let Posterior {
+        free,
+        g,
+        h,
+        lmax,
+        cov,
+    } = posterior(j, prior, sigma_um, column_scale);
     // Which free parameters the posterior leaves undefined (inside the pseudo-inverse's null
     // space): their precision row is (numerically) zero.
     let mut posterior_std = vec![None; np];
