@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import cpm
-from conftest import no_temp_folder
+from conftest import HEXAPOD, HEXAPOD_READINGS, no_temp_folder
 
 HEX = "examples/hexapod_66.toml"
 TRUTH = "examples/hexapod_66_truth.toml"
@@ -171,6 +171,24 @@ def test_pose_arrays_go_to_the_jobs_in_memory(in_root, tmp_path, monkeypatch):
     assert c.csv == on_file[2].csv.replace(str(f), "poses")
     assert c_robot.csv == c.csv
     np.testing.assert_array_equal(c.readings, on_file[2].readings)
+
+
+def test_a_job_without_out_makes_no_folder(tmp_path, monkeypatch):
+    """Issue 59: a job without ``out`` makes nothing anywhere, not even an empty staging
+    folder (the binding once made one in the temporary directory and removed it): with the
+    temporary directory gone, calibrate, refine, validate and design still run, and the
+    calibrated robot records where it came from, absolute."""
+    gone = tmp_path / "gone"
+    monkeypatch.setenv("TMPDIR", str(gone))
+    cal = cpm.calibrate(HEXAPOD, HEXAPOD_READINGS)
+    assert f'calibrated_from = "{HEXAPOD.resolve()}"' in cal.text("calibrated.toml")
+    r = cpm.refine(HEXAPOD, HEXAPOD_READINGS, max_steps=1)
+    assert "calibrated.toml" in r.files
+    v = cpm.validate(cal.calibrated_robot, HEXAPOD, HEXAPOD_READINGS)
+    assert v.calibrated_rms_um <= v.reference_rms_um
+    d = cpm.design(HEXAPOD, readings=200, candidates=100)
+    assert "design.json" in d.files
+    assert not gone.exists()
 
 
 def test_nothing_held_in_memory_is_written_for_an_option(in_root, monkeypatch):

@@ -439,7 +439,8 @@ pub fn calibrated_from_at(text: &str, here: Option<PathBuf>, there: Option<PathB
 }
 
 /// Staged outputs (nothing written) as they are handed to Python: `calibrated.toml` records
-/// its origin absolute, since the staging folder `dir` it was recorded from is removed.
+/// its origin absolute, since the staging name `dir` it was recorded from is no folder
+/// ([`staging_name`]).
 pub fn unstaged(files: &mut [(String, Vec<u8>)], dir: &Path) {
     for (name, bytes) in files.iter_mut() {
         if name == "calibrated.toml" {
@@ -450,32 +451,21 @@ pub fn unstaged(files: &mut [(String, Vec<u8>)], dir: &Path) {
     }
 }
 
-/// A directory for outputs that are only staged: its name is in `calibrated.toml` (where the
-/// robot lies relative to it), as a scratch directory's was. Made empty, removed after.
-pub struct Unwritten(pub PathBuf);
-
-impl Unwritten {
-    /// A new empty directory under the system's temporary directory.
-    pub fn new() -> std::io::Result<Unwritten> {
-        use std::sync::atomic::{AtomicUsize, Ordering};
-        static COUNT: AtomicUsize = AtomicUsize::new(0);
-        let nanos = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.subsec_nanos());
-        let dir = std::env::temp_dir().join(format!(
-            "cpm-py-{}-{}-{nanos}",
-            std::process::id(),
-            COUNT.fetch_add(1, Ordering::Relaxed)
-        ));
-        std::fs::create_dir(&dir)?;
-        Ok(Unwritten(dir))
-    }
-}
-
-impl Drop for Unwritten {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir(&self.0);
-    }
+/// Where outputs that are only staged are named, never made: a path in the system's
+/// temporary directory that no directory takes (their names, and `calibrated.toml`'s
+/// `calibrated_from` before [`unstaged`] makes it absolute, are relative to it). Nothing is
+/// created there: a job without `out` writes nothing anywhere.
+pub fn staging_name(what: &str) -> PathBuf {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static COUNT: AtomicUsize = AtomicUsize::new(0);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    std::env::temp_dir().join(format!(
+        "cpm-py-{}-{}-{nanos}-{what}",
+        std::process::id(),
+        COUNT.fetch_add(1, Ordering::Relaxed)
+    ))
 }
 
 /// The measurements for a job on `robot`: read ones as read ([`crate::data::PyData`]),
@@ -513,15 +503,9 @@ pub fn calibrate_memory<'py>(
         return Err(crate::errors::usage(py, "data: no measurements"));
     }
     let sources = sources_of(robot, &data)?;
-    let staged = match out {
-        Some(_) => None,
-        None => Some(Unwritten::new().map_err(|e| {
-            crate::errors::to_py(py, &anyhow::Error::new(e).context("a scratch directory"))
-        })?),
-    };
-    let dir = match &staged {
-        Some(s) => s.0.join("cal"),
-        None => out.clone().unwrap_or_default(),
+    let dir = match &out {
+        Some(d) => d.clone(),
+        None => staging_name("cal"),
     };
     let defaults = cpm_workflow::fit::CalibrateOptions::new(PathBuf::new(), Vec::new(), &dir);
     let mut options = by_name(py, "calibrate", &defaults, options)?;
@@ -634,6 +618,5 @@ pub fn calibrate_memory<'py>(
             native,
         })
     })?;
-    drop(staged);
     fit_dict(py, r.map_err(|e| crate::errors::to_py(py, &e))?)
 }

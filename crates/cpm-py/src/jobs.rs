@@ -18,7 +18,7 @@ use cpm_workflow::{validate, Progress};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
-use crate::commands::{by_name, Cancel, Unwritten};
+use crate::commands::{by_name, staging_name, Cancel};
 
 /// What a job gave back (plain data, built on the worker thread).
 #[derive(Default)]
@@ -39,22 +39,13 @@ struct Ran {
     warned: Vec<String>,
 }
 
-/// Where a job stages its outputs: `out` when given (and committed there when asked),
-/// else a directory made for the job and removed after (its name appears in reports where
-/// the output directory does, as a scratch directory's did).
-fn out_dir(
-    py: Python<'_>,
-    out: Option<&Path>,
-    name: &str,
-) -> PyResult<(PathBuf, Option<Unwritten>)> {
+/// Where a job stages its outputs: `out` when given (and committed there when asked), else a
+/// name in the temporary directory that no directory takes ([`staging_name`]: nothing is
+/// made there); true when only staged.
+fn out_dir(out: Option<&Path>, name: &str) -> (PathBuf, bool) {
     match out {
-        Some(d) => Ok((d.to_path_buf(), None)),
-        None => {
-            let u = Unwritten::new().map_err(|e| {
-                crate::errors::to_py(py, &anyhow::Error::new(e).context("a scratch directory"))
-            })?;
-            Ok((u.0.join(name), Some(u)))
-        }
+        Some(d) => (d.to_path_buf(), false),
+        None => (staging_name(name), true),
     }
 }
 
@@ -167,53 +158,45 @@ pub fn job<'py>(
             held.data = Some(crate::commands::sources_of(r, d)?);
         }
     }
-    let (r, staged) = match command {
+    let r = match command {
         "validate" => {
-            let (dir, staged) = out_dir(py, out.as_deref(), "validation")?;
+            let (dir, _) = out_dir(out.as_deref(), "validation");
             let mut o = by_name(py, command, &validate::ValidateOptions::default(), options)?;
             o.out = Some(dir.clone());
             // The files of robots held in memory, when they have one (an output may not
             // replace them).
             o.robot = o.robot.or(robot_path);
             o.reference = o.reference.or(reference_path);
-            (
-                run(py, move |a, p| run_validate(&o, held, &dir, commit, a, p))?,
-                staged,
-            )
+            run(py, move |a, p| run_validate(&o, held, &dir, commit, a, p))?
         }
         "refine" => {
-            let (dir, staged) = out_dir(py, out.as_deref(), "refined")?;
+            let (dir, staged_only) = out_dir(out.as_deref(), "refined");
             let d = refine::RefineOptions::new(PathBuf::new(), Vec::new(), &dir);
             let mut o = by_name(py, command, &d, options)?;
             o.fit.out = dir.clone();
-            let staged_only = staged.is_some();
-            let r = run(py, move |a, p| {
+            run(py, move |a, p| {
                 run_refine(&o, held, robot_path, &dir, commit, a, p).map(|mut r| {
                     // Staged only: calibrated.toml records its origin absolute (the
-                    // staging folder it was recorded from is removed).
+                    // staging name it was recorded from is no folder).
                     if staged_only {
                         crate::commands::unstaged(&mut r.files, &dir);
                     }
                     r
                 })
-            })?;
-            (r, staged)
+            })?
         }
         "design" => {
-            let (dir, staged) = out_dir(py, out.as_deref(), "design")?;
+            let (dir, _) = out_dir(out.as_deref(), "design");
             let d = design::DesignJobOptions::new(PathBuf::new(), &dir);
             let mut o = by_name(py, command, &d, options)?;
             o.out = dir.clone();
             given_robot(&mut o.robot, &robot_path);
-            (
-                run(py, move |a, p| run_design(&o, held, &dir, commit, a, p))?,
-                staged,
-            )
+            run(py, move |a, p| run_design(&o, held, &dir, commit, a, p))?
         }
         "identifiability" => {
             let d = identifiability::IdentifiabilityOptions::new(PathBuf::new());
             let o = by_name(py, command, &d, options)?;
-            (run(py, move |_, p| run_identifiability(&o, held, p))?, None)
+            run(py, move |_, p| run_identifiability(&o, held, p))?
         }
         "simulate" => {
             let mut o = by_name(
@@ -224,14 +207,14 @@ pub fn job<'py>(
             )?;
             o.out = out.clone().filter(|_| commit);
             given_robot(&mut o.robot, &robot_path);
-            (run(py, move |a, p| run_simulate(&o, held, a, p))?, None)
+            run(py, move |a, p| run_simulate(&o, held, a, p))?
         }
         "compensate" => {
             let d = compensate::CompensateOptions::new(PathBuf::new(), PathBuf::new());
             let mut o = by_name(py, command, &d, options)?;
             o.out = out.clone().filter(|_| commit);
             given_robot(&mut o.robot, &robot_path);
-            (run(py, move |a, p| run_compensate(&o, held, a, p))?, None)
+            run(py, move |a, p| run_compensate(&o, held, a, p))?
         }
         "export" => {
             let mut o = by_name(
@@ -242,7 +225,7 @@ pub fn job<'py>(
             )?;
             o.out = out.clone().filter(|_| commit);
             given_robot(&mut o.robot, &robot_path);
-            (run(py, move |a, p| run_export(&o, held, a, p))?, None)
+            run(py, move |a, p| run_export(&o, held, a, p))?
         }
         other => {
             return Err(crate::errors::usage(
@@ -251,7 +234,6 @@ pub fn job<'py>(
             ))
         }
     };
-    drop(staged);
     let d = PyDict::new(py);
     d.set_item("summary", r.summary)?;
     d.set_item("trouble", r.trouble)?;
