@@ -141,6 +141,14 @@ impl PredictedError {
         }
     }
 
+    /// The worst target's orientation band (largest semi-axis of its 95 % ellipsoid), urad.
+    pub fn worst_orientation_95_urad(&self) -> f64 {
+        self.targets
+            .iter()
+            .map(|t| t.orientation_95_urad)
+            .fold(0.0, f64::max)
+    }
+
     /// The one line a user reads: the worst target's position and orientation bands.
     pub fn line(&self) -> String {
         let w = &self.worst_target;
@@ -148,10 +156,7 @@ impl PredictedError {
             "predicted pose error after compensation, worst of {} targets (95 %, from the calibration's covariance): position {:.3} um (ISO 9283 AP_p), orientation {:.3} urad (AP_a {:.3}, AP_b {:.3}, AP_c {:.3} urad)",
             self.targets.len(),
             w.ap_p_um,
-            self.targets
-                .iter()
-                .map(|t| t.orientation_95_urad)
-                .fold(0.0, f64::max),
+            self.worst_orientation_95_urad(),
             w.ap_a_urad,
             w.ap_b_urad,
             w.ap_c_urad

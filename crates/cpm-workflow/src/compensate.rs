@@ -260,7 +260,7 @@ pub fn compensate_in(
         predicted.as_ref().map_or(String::new(), |p| format!(
             "; predicted pose error, worst target, 95 %: position {:.3} um, orientation {:.3} urad",
             p.worst_target.ap_p_um,
-            p.targets.iter().map(|t| t.orientation_95_urad).fold(0.0, f64::max)
+            p.worst_orientation_95_urad()
         ))
     );
     let csv =

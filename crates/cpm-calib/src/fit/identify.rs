@@ -13,7 +13,7 @@ use crate::analysis::identifiability::{
     physical_patterns, try_analyze_scaled, Identifiability, RankOptions, RankScaling,
 };
 pub use crate::fit::prior::Tolerances;
-use crate::fit::prior::{prior_std, summarize_scaled, Determination, PriorSummary};
+use crate::fit::prior::{prior_std, summarize_with_covariance, Determination, PriorSummary};
 use crate::model::{predict, Prepared};
 use crate::{CalibError, Campaign, Effect, MeasurementModel};
 
@@ -871,9 +871,14 @@ fn identify_uncancelled(
         row_groups: Some(&rows),
     };
     let mut ident = try_analyze_scaled(&jf, sigma_um, &options.rank, &[], &scaling)?;
-    let prior_summary = w
-        .with_prior
-        .then(|| summarize_scaled(&jf, &w.prior, sigma_um, Some(&ident.rank_column_scale)));
+    // Under a prior its summary and the parameters' covariance come from one posterior.
+    let (prior_summary, prior_covariance) = if w.with_prior {
+        let (summary, c) =
+            summarize_with_covariance(&jf, &w.prior, sigma_um, Some(&ident.rank_column_scale));
+        (Some(summary), Some(c))
+    } else {
+        (None, None)
+    };
     let leverages = match noise.prior_leverages {
         Some(h) => h,
         None => crate::analysis::identifiability::leverages(&jf, &ident),
@@ -900,12 +905,10 @@ fn identify_uncancelled(
         })
         .collect();
     let combinations = combinations(&ident, &e_hat);
-    let covariance = crate::promise::covariance_of(
-        &jf,
-        w.with_prior.then_some(w.prior.as_slice()),
-        sigma_um,
-        &ident,
-    )?;
+    let covariance = match prior_covariance {
+        Some(c) => c,
+        None => crate::promise::covariance_of(&jf, None, sigma_um, &ident)?,
+    };
     Ok(Calibration {
         covariance,
         simulated: campaign.simulated,

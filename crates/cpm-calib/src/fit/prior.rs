@@ -453,6 +453,20 @@ struct Posterior {
     cov: DMatrix<f64>,
 }
 
+impl Posterior {
+    /// The covariance of all `np` parameters: `cov` in the unheld ones' places, zero
+    /// elsewhere.
+    fn full(&self, np: usize) -> DMatrix<f64> {
+        let mut out = DMatrix::zeros(np, np);
+        for (a, &ka) in self.free.iter().enumerate() {
+            for (b, &kb) in self.free.iter().enumerate() {
+                out[(ka, kb)] = self.cov[(a, b)];
+            }
+        }
+        out
+    }
+}
+
 fn posterior(
     j: &DMatrix<f64>,
     prior: &[f64],
@@ -521,15 +535,7 @@ pub fn posterior_covariance(
     sigma_um: f64,
     column_scale: Option<&[f64]>,
 ) -> DMatrix<f64> {
-    let np = prior.len();
-    let p = posterior(j, prior, sigma_um, column_scale);
-    let mut out = DMatrix::zeros(np, np);
-    for (a, &ka) in p.free.iter().enumerate() {
-        for (b, &kb) in p.free.iter().enumerate() {
-            out[(ka, kb)] = p.cov[(a, b)];
-        }
-    }
-    out
+    posterior(j, prior, sigma_um, column_scale).full(prior.len())
 }
 
 /// [`summarize`] with the posterior's cut-offs taken on the precision with its parameters
@@ -542,14 +548,27 @@ pub fn summarize_scaled(
     sigma_um: f64,
     column_scale: Option<&[f64]>,
 ) -> PriorSummary {
+    summarize_with_covariance(j, prior, sigma_um, column_scale).0
+}
+
+/// [`summarize_scaled`] and the posterior covariance of every parameter
+/// ([`posterior_covariance`]) from one decomposition of the precision.
+pub fn summarize_with_covariance(
+    j: &DMatrix<f64>,
+    prior: &[f64],
+    sigma_um: f64,
+    column_scale: Option<&[f64]>,
+) -> (PriorSummary, DMatrix<f64>) {
     let np = prior.len();
+    let p = posterior(j, prior, sigma_um, column_scale);
+    let full = p.full(np);
     let Posterior {
         free,
         g,
         h,
         lmax,
         cov,
-    } = posterior(j, prior, sigma_um, column_scale);
+    } = p;
     // Which free parameters the posterior leaves undefined (inside the pseudo-inverse's null
     // space): their precision row is (numerically) zero.
     let mut posterior_std = vec![None; np];
@@ -639,7 +658,7 @@ pub fn summarize_scaled(
         .iter()
         .filter(|&&k| posterior_std[k].is_some())
         .count();
-    PriorSummary {
+    let summary = PriorSummary {
         prior_std: prior.iter().map(|p| p.is_finite().then_some(*p)).collect(),
         posterior_std,
         data_share,
@@ -647,7 +666,8 @@ pub fn summarize_scaled(
         determined_dimensions,
         effective_params: effective,
         sigma_um,
-    }
+    };
+    (summary, full)
 }
 
 /// The leverage of each observation under the prior: the diagonal of the regularised hat
